@@ -1,0 +1,253 @@
+// SPDX-License-Identifier: MIT
+#include "core/phantoms.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <atomic>
+#include <cmath>
+#include <numbers>
+
+#include "core/rng.h"
+
+namespace voxlight::core {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+
+/// Partial-volume coverage of a voxel of size h whose centre is at signed distance d (negative inside).
+double coverage(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
+/// Ramp for the exact-optics phantoms: linear over ±h around the surface, so that all 8 corners of any cell the
+/// surface crosses (at most √3/2·h away) lie on the linear part and the trilinear 0.5-level set is the surface.
+double exactRamp(double d, double h) { return std::clamp(0.5 - 0.5 * d / h, 0.0, 1.0); }
+
+double sdEllipsoid(const glm::dvec3& p, const glm::dvec3& c, const glm::dvec3& r) {
+    // First-order distance to an ellipsoid: exact on the surface, good to a voxel near it (all that coverage needs).
+    const glm::dvec3 q = (p - c) / r;
+    const double k0 = glm::length(q);
+    const double k1 = glm::length(q / r);
+    return k1 > 0.0 ? k0 * (k0 - 1.0) / k1 : -std::min(r.x, std::min(r.y, r.z));
+}
+double sdEllipse2(double x, double y, double rx, double ry) {
+    const double qx = x / rx, qy = y / ry;
+    const double k0 = std::sqrt(qx * qx + qy * qy);
+    const double k1 = std::sqrt(qx * qx / (rx * rx) + qy * qy / (ry * ry));
+    return k1 > 0.0 ? k0 * (k0 - 1.0) / k1 : -std::min(rx, ry);
+}
+double sdBox(const glm::dvec3& p, const glm::dvec3& lo, const glm::dvec3& hi) {
+    const glm::dvec3 c = 0.5 * (lo + hi), e = 0.5 * (hi - lo);
+    const glm::dvec3 q = glm::abs(p - c) - e;
+    return glm::length(glm::max(q, 0.0)) + std::min(std::max(q.x, std::max(q.y, q.z)), 0.0);
+}
+double sdSphere(const glm::dvec3& p, const glm::dvec3& c, double r) { return glm::length(p - c) - r; }
+double sdTorusZ(const glm::dvec3& p, const glm::dvec3& c, double major, double minor) {
+    const glm::dvec3 q = p - c;
+    const double rho = std::sqrt(q.x * q.x + q.y * q.y) - major;
+    return std::sqrt(rho * rho + q.z * q.z) - minor;
+}
+/// Capped cylinder along z.
+double sdCylinderZ(const glm::dvec3& p, double cx, double cy, double r, double z0, double z1) {
+    const double dr = std::hypot(p.x - cx, p.y - cy) - r;
+    const double dz = std::max(z0 - p.z, p.z - z1);
+    return std::min(std::max(dr, dz), 0.0) + std::hypot(std::max(dr, 0.0), std::max(dz, 0.0));
+}
+
+Geometry cubeGeometry(int n, double fovMm, const PhantomOptions& o) {
+    Geometry g;
+    g.dims = glm::ivec3(n);
+    g.spacing = o.spacing.x > 0 ? o.spacing : glm::dvec3(fovMm / n);
+    g.origin = -0.5 * glm::dvec3(n - 1) * g.spacing;  // volume centred on the world origin
+    g.direction = glm::dmat3(1.0);
+    return g;
+}
+
+/// Fills a volume slice by slice in parallel: f(world position) → stored value.
+template <class T, class F>
+void fill(Volume& vol, const std::string& stage, const Progress& progress, F&& f) {
+    const Geometry& g = vol.geometry();
+    T* out = vol.dataAs<T>();
+    std::atomic<int> done{0};
+    tbb::parallel_for(0, g.dims.z, [&](int k) {
+        progress.checkCancel();
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i)
+                out[vol.linearIndex(i, j, k)] = f(g.indexToWorld(glm::dvec3(i, j, k)), i, j, k);
+        const int d = ++done;
+        if (d % 16 == 0) progress.report(stage, double(d) / g.dims.z);
+    });
+    progress.report(stage, 1.0);
+}
+
+constexpr double kKronanderFov = 128.0;
+constexpr double kPlateTop = -28.0, kPlateBottom = -40.0;
+
+Volume makeKronander(int n, const PhantomOptions& o, const Progress& progress) {
+    Volume v(cubeGeometry(n, kKronanderFov, o), VoxelType::UInt8);
+    v.modality = Modality::Synthetic;
+    v.description = "phantom kronander: sphere and torus on a flat plate";
+    const double h = minComponent(v.geometry().spacing);
+    const glm::dvec3 sphereC(-28.0, 0.0, kPlateTop + 22.0);
+    const glm::dvec3 torusC(30.0, 0.0, kPlateTop + 8.0);
+    fill<std::uint8_t>(v, "phantom", progress, [&](const glm::dvec3& p, int, int, int) {
+        double d = sdBox(p, {-56.0, -56.0, kPlateBottom}, {56.0, 56.0, kPlateTop});
+        d = std::min(d, sdSphere(p, sphereC, 22.0));
+        d = std::min(d, sdTorusZ(p, torusC, 20.0, 8.0));
+        return std::uint8_t(std::lround(255.0 * coverage(d, h)));
+    });
+    return v;
+}
+
+constexpr double kTorsoFov = 400.0;
+
+/// HU of the torso phantom at world point p (mm, LPS: +x left, +y posterior, +z superior), voxel size h.
+double torsoHU(const glm::dvec3& p, double h) {
+    double hu = -1000.0;  // air
+    auto paint = [&](double d, double value) {
+        if (d < 0.5 * h) hu += coverage(d, h) * (value - hu);
+    };
+    const double zTop = 190.0, zBottom = -190.0;
+    const double zCap = std::max(p.z - zTop, zBottom - p.z);  // body is a capped elliptic cylinder
+    auto body = [&](double rx, double ry) { return std::max(sdEllipse2(p.x, p.y, rx, ry), zCap); };
+    const double dSkin = body(170.0, 120.0);
+    if (dSkin > 0.5 * h) return hu;
+    paint(dSkin, 30.0);                         // skin
+    paint(body(167.0, 117.0), -100.0);          // subcutaneous fat
+    paint(body(150.0, 102.0), 50.0);            // muscle / soft tissue
+    // Ribs: elliptic tubes inside the muscle wall, upper half, open anteriorly (costal cartilage left out).
+    if (p.z > -40.0 && p.z < 170.0) {
+        const double ang = std::atan2(p.y, p.x);  // +y posterior
+        const bool besideSternum = std::abs(std::abs(ang) - kPi / 2) < 0.35 && p.y < 0;
+        if (!besideSternum) {
+            const double ring = sdEllipse2(p.x, p.y, 138.0, 92.0);
+            for (double zr = -25.0; zr < 170.0; zr += 24.0) {
+                const double zc = zr + 12.0 * std::sin(ang);  // ribs slope downward anteriorly
+                paint(std::hypot(ring, p.z - zc) - 5.5, 700.0);
+            }
+        }
+    }
+    // Lungs (upper half), with a faint parenchyma texture added by the noise below.
+    paint(sdEllipsoid(p, {-72.0, -5.0, 85.0}, {58.0, 78.0, 105.0}), -850.0);
+    paint(sdEllipsoid(p, {72.0, -5.0, 85.0}, {55.0, 78.0, 105.0}), -850.0);
+    // Heart (myocardium with contrast-enhanced blood pool).
+    paint(sdEllipsoid(p, {22.0, -38.0, 35.0}, {62.0, 52.0, 55.0}), 45.0);
+    paint(sdEllipsoid(p, {22.0, -38.0, 35.0}, {48.0, 38.0, 42.0}), 180.0);
+    // Liver (patient right = −x), kidneys, spleen.
+    paint(sdEllipsoid(p, {-62.0, -10.0, -55.0}, {82.0, 75.0, 62.0}), 60.0);
+    paint(sdEllipsoid(p, {-58.0, 60.0, -115.0}, {25.0, 22.0, 45.0}), 35.0);
+    paint(sdEllipsoid(p, {58.0, 60.0, -110.0}, {25.0, 22.0, 45.0}), 35.0);
+    paint(sdEllipsoid(p, {78.0, 30.0, -45.0}, {35.0, 45.0, 40.0}), 45.0);
+    // Vertebral column: bodies (cortical shell, cancellous core), discs, spinous processes.
+    const double spineX = 0.0, spineY = 78.0;
+    for (double zc = -180.0; zc < 190.0; zc += 30.0) {
+        paint(sdCylinderZ(p, spineX, spineY, 21.0, zc, zc + 25.0), 950.0);
+        paint(sdCylinderZ(p, spineX, spineY, 18.5, zc + 2.5, zc + 22.5), 260.0);
+        paint(sdCylinderZ(p, spineX, spineY, 21.0, zc + 25.0, zc + 30.0), 90.0);  // disc
+        paint(sdBox(p, {spineX - 5.0, spineY + 22.0, zc + 3.0}, {spineX + 5.0, spineY + 52.0, zc + 20.0}),
+              800.0);
+        paint(sdBox(p, {spineX - 32.0, spineY + 14.0, zc + 6.0}, {spineX + 32.0, spineY + 22.0, zc + 16.0}),
+              800.0);  // transverse processes
+    }
+    // Descending aorta: contrast-filled lumen beside the spine, wall, and a braided nitinol/steel stent.
+    const double ax = 24.0, ay = 46.0, aR = 12.0;
+    const double dAorta = sdCylinderZ(p, ax, ay, aR + 1.5, zBottom + 10.0, zTop - 10.0);
+    paint(dAorta, 40.0);
+    paint(sdCylinderZ(p, ax, ay, aR, zBottom + 10.0, zTop - 10.0), 320.0);
+    if (dAorta < 2.0 && p.z > -80.0 && p.z < 20.0) {
+        // Two families of 6 helices (pitch 60 mm, opposite hands) at radius 11.5 mm, wire radius 0.9 mm.
+        const double R = 11.5, pitch = 60.0, wire = 0.9;
+        const double rho = std::hypot(p.x - ax, p.y - ay), phi = std::atan2(p.y - ay, p.x - ax);
+        const double sinA = pitch / std::hypot(pitch, 2.0 * kPi * R);  // wire vs circumferential direction
+        double d = 1e9;
+        for (int hand = -1; hand <= 1; hand += 2)
+            for (int w = 0; w < 6; ++w) {
+                double dphi = phi - (hand * 2.0 * kPi * p.z / pitch + w * kPi / 3.0);
+                dphi = std::remainder(dphi, 2.0 * kPi);
+                d = std::min(d, std::hypot(rho - R, R * dphi * sinA) - wire);
+            }
+        paint(d, 3000.0);
+    }
+    return hu;
+}
+
+Volume makeTorso(int n, const PhantomOptions& o, const Progress& progress) {
+    Volume v(cubeGeometry(n, kTorsoFov, o), VoxelType::Int16);
+    v.modality = Modality::CT;
+    v.mapping.unit = "HU";
+    v.description = "phantom torso: CT-like chest/abdomen with stented aorta";
+    const double h = minComponent(v.geometry().spacing);
+    fill<std::int16_t>(v, "phantom", progress, [&](const glm::dvec3& p, int i, int j, int k) {
+        double hu = torsoHU(p, h);
+        if (hu > -990.0) {
+            // Quantum noise, ~10 HU: sum of two uniforms (triangular), counter-based so thread count cannot matter.
+            const std::uint64_t key = (std::uint64_t(k) << 40) ^ (std::uint64_t(j) << 20) ^ std::uint64_t(i);
+            CounterRng rng(key, o.seed);
+            hu += 12.0 * (rng.uniform() + rng.uniform() - 1.0);
+        }
+        return std::int16_t(std::lround(std::clamp(hu, -1024.0, 3071.0)));
+    });
+    return v;
+}
+
+Volume makeSphere(int n, const PhantomOptions& o, const Progress& progress) {
+    Volume v(cubeGeometry(n, double(n), o), VoxelType::Float32);
+    v.modality = Modality::Synthetic;
+    v.description = "phantom sphere: homogeneous, value 1 inside";
+    const SphereFacts s = spherePhantomFacts(v.geometry());
+    const double h = minComponent(v.geometry().spacing);
+    fill<float>(v, "phantom", progress, [&](const glm::dvec3& p, int, int, int) {
+        return float(exactRamp(glm::length(p - s.centre) - s.radius, h));
+    });
+    return v;
+}
+
+Volume makeSlab(int n, const PhantomOptions& o, const Progress& progress) {
+    Volume v(cubeGeometry(n, double(n), o), VoxelType::Float32);
+    v.modality = Modality::Synthetic;
+    v.description = "phantom slab: homogeneous, value 1 for |z - zc| < extent/4";
+    const SlabFacts s = slabPhantomFacts(v.geometry());
+    const double hz = v.geometry().spacing.z, zc = 0.5 * (s.zMin + s.zMax), half = 0.5 * (s.zMax - s.zMin);
+    fill<float>(v, "phantom", progress, [&](const glm::dvec3& p, int, int, int) {
+        return float(exactRamp(std::abs(p.z - zc) - half, hz));
+    });
+    return v;
+}
+
+}  // namespace
+
+SphereFacts spherePhantomFacts(const Geometry& g) {
+    const auto b = g.worldBounds();
+    return {0.5 * (b[0] + b[1]), 0.35 * minComponent(b[1] - b[0])};
+}
+
+SlabFacts slabPhantomFacts(const Geometry& g) {
+    const auto b = g.worldBounds();
+    const double zc = 0.5 * (b[0].z + b[1].z), q = 0.25 * (b[1].z - b[0].z);
+    return {zc - q, zc + q};
+}
+
+std::vector<std::pair<std::string, std::string>> phantomCatalog() {
+    return {{"kronander", "sphere and torus on a perfectly flat plate (Kronander 2012 corner case), uint8, 128^3"},
+            {"torso", "CT-like torso in HU with stented aorta, spine, ribs, lungs, int16, 256^3"},
+            {"sphere", "homogeneous sphere (value 1) for exact optics tests, float32, 64^3"},
+            {"slab", "homogeneous slab (value 1) for exact optics tests, float32, 64^3"}};
+}
+
+Volume makePhantom(const std::string& name, const PhantomOptions& options, const Progress& progress) {
+    auto sizeOr = [&](int def) {
+        const int n = options.size > 0 ? options.size : def;
+        if (n < 8 || n > 1024)
+            throw InputError("phantom " + name, "size", "must be between 8 and 1024, got " + std::to_string(n),
+                             "pass --size N with 8 <= N <= 1024");
+        return n;
+    };
+    if (name == "kronander") return makeKronander(sizeOr(128), options, progress);
+    if (name == "torso") return makeTorso(sizeOr(256), options, progress);
+    if (name == "sphere") return makeSphere(sizeOr(64), options, progress);
+    if (name == "slab") return makeSlab(sizeOr(64), options, progress);
+    std::string names;
+    for (const auto& [n, d] : phantomCatalog()) names += (names.empty() ? "" : ", ") + n;
+    throw InputError("phantom", "name", "unknown phantom '" + name + "'", "choose one of: " + names);
+}
+
+}  // namespace voxlight::core

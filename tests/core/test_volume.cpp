@@ -1,0 +1,108 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/volume.h"
+
+using namespace voxlight;
+using core::Geometry;
+using core::Volume;
+using core::VoxelType;
+
+namespace {
+// Trilinear interpolation reproduces any trilinear function exactly; float rounding of products of values < 1e3.
+constexpr float kTrilinearTol = 1e-3f;
+
+Geometry rotatedGeometry() {
+    Geometry g;
+    g.dims = {7, 5, 4};
+    g.spacing = {0.5, 0.75, 2.0};
+    g.origin = {10.0, -20.0, 5.0};
+    // 30° about z, then the k axis pointing inferior: a proper orthonormal frame with det −1 is allowed too.
+    const double c = std::cos(M_PI / 6), s = std::sin(M_PI / 6);
+    g.direction = glm::dmat3(glm::dvec3(c, s, 0), glm::dvec3(-s, c, 0), glm::dvec3(0, 0, -1));
+    return g;
+}
+}  // namespace
+
+TEST(Geometry, IndexWorldRoundTrip) {
+    const Geometry g = rotatedGeometry();
+    for (const glm::dvec3 ijk : {glm::dvec3(0, 0, 0), glm::dvec3(6, 4, 3), glm::dvec3(1.25, 3.5, 2.75)}) {
+        const glm::dvec3 back = g.worldToIndex(g.indexToWorld(ijk));
+        EXPECT_NEAR(glm::length(back - ijk), 0.0, 1e-12);
+    }
+    // Voxel (1,0,0) lies spacing.x along the first direction column.
+    const glm::dvec3 d = g.indexToWorld({1, 0, 0}) - g.origin;
+    EXPECT_NEAR(d.x, 0.5 * std::cos(M_PI / 6), 1e-12);
+    EXPECT_NEAR(d.y, 0.5 * std::sin(M_PI / 6), 1e-12);
+    EXPECT_EQ(g.orientationCode(), "LPI");
+}
+
+TEST(Volume, TrilinearIsExactOnTrilinearFunctionsForEveryType) {
+    auto f = [](double x, double y, double z) { return 3.0 + 2.0 * x + 1.0 * y + 4.0 * z + 1.0 * x * y * z; };
+    for (VoxelType t : {VoxelType::UInt8, VoxelType::Int16, VoxelType::UInt16, VoxelType::Float32}) {
+        Geometry g;
+        g.dims = {5, 4, 3};
+        Volume v(g, t);
+        v.mapping.slope = 2.0;
+        v.mapping.intercept = -7.0;
+        v.visit([&](const auto& view) {
+            using T = std::remove_cv_t<std::remove_pointer_t<decltype(view.data)>>;
+            T* p = const_cast<T*>(view.data);
+            for (int k = 0; k < 3; ++k)
+                for (int j = 0; j < 4; ++j)
+                    for (int i = 0; i < 5; ++i) p[v.linearIndex(i, j, k)] = T(f(i, j, k));
+        });
+        for (const glm::dvec3 q : {glm::dvec3(0.5, 0.5, 0.5), glm::dvec3(3.25, 2.75, 1.5), glm::dvec3(4, 3, 2)}) {
+            EXPECT_NEAR(v.sampleIndex(q), 2.0 * f(q.x, q.y, q.z) - 7.0, kTrilinearTol)
+                << core::toString(t) << " at " << q.x << "," << q.y << "," << q.z;
+        }
+        // Outside the grid: edge extension (clamped), never garbage.
+        EXPECT_NEAR(v.sampleIndex({-3, -3, -3}), 2.0 * f(0, 0, 0) - 7.0, kTrilinearTol);
+        EXPECT_NEAR(v.sampleIndex({99, 99, 99}), 2.0 * f(4, 3, 2) - 7.0, kTrilinearTol);
+        const auto range = v.physicalRange();
+        EXPECT_DOUBLE_EQ(range[0], 2.0 * f(0, 0, 0) - 7.0);
+        EXPECT_DOUBLE_EQ(range[1], 2.0 * f(4, 3, 2) - 7.0);
+    }
+}
+
+TEST(Volume, SingleVoxelAxesSampleWithoutReadingOutOfBounds) {
+    Geometry g;
+    g.dims = {1, 1, 1};
+    Volume v(g, VoxelType::Float32);
+    v.dataAs<float>()[0] = 42.f;
+    EXPECT_EQ(v.sampleIndex({0.3, -1, 5}), 42.f);
+}
+
+TEST(Volume, AbsurdSizesAreRefusedBeforeAllocation) {
+    Geometry g;
+    g.dims = {core::kMaxDim + 1, 1, 1};
+    EXPECT_THROW(Volume(g, VoxelType::UInt8), InputError);
+    g.dims = {16384, 16384, 16};
+    EXPECT_THROW(Volume(g, VoxelType::UInt8), InputError);
+    g.dims = {0, 1, 1};
+    EXPECT_THROW(Volume(g, VoxelType::UInt8), InputError);
+}
+
+TEST(Volume, NonFiniteVoxelsAreCountedAndIgnoredByRange) {
+    Geometry g;
+    g.dims = {4, 1, 1};
+    Volume v(g, VoxelType::Float32);
+    float* p = v.dataAs<float>();
+    p[0] = 1.f;
+    p[1] = NAN;
+    p[2] = INFINITY;
+    p[3] = -2.f;
+    EXPECT_EQ(v.countNonFinite(), 2u);
+    const auto r = v.physicalRange();
+    EXPECT_EQ(r[0], -2.0);
+    EXPECT_EQ(r[1], 1.0);
+}
+
+TEST(Volume, MemoryOfLargeCtIsItsVoxelsOnly) {
+    // 512×512×880 int16 must fit in well under 2 GiB: storage is exactly 2 bytes per voxel.
+    Geometry g;
+    g.dims = {512, 512, 880};
+    EXPECT_EQ(g.voxelCount() * core::voxelBytes(VoxelType::Int16), 461373440u);
+}
