@@ -10,7 +10,7 @@ packages=(
   libtbb-dev libeigen3-dev nlohmann-json3-dev libcli11-dev libimgui-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev
   xvfb xauth mesa-utils libgl1-mesa-dri libgl-dev libegl-dev
-  python3-numpy python3-matplotlib python3-vtk9 python3-nibabel
+  python3-numpy python3-matplotlib python3-vtk9 python3-nibabel mricron-data
 )
 
 missing=()

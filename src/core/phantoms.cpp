@@ -16,14 +16,17 @@ namespace {
 
 constexpr double kPi = std::numbers::pi;
 
-/// Partial-volume coverage of a voxel of size h whose centre is at signed distance d (negative inside).
+/// Partial-volume coverage of a voxel of size h whose centre is at signed distance d (negative
+/// inside).
 double coverage(double d, double h) { return std::clamp(0.5 - d / h, 0.0, 1.0); }
-/// Ramp for the exact-optics phantoms: linear over ±h around the surface, so that all 8 corners of any cell the
-/// surface crosses (at most √3/2·h away) lie on the linear part and the trilinear 0.5-level set is the surface.
+/// Ramp for the exact-optics phantoms: linear over ±h around the surface, so that all 8 corners of
+/// any cell the surface crosses (at most √3/2·h away) lie on the linear part and the trilinear
+/// 0.5-level set is the surface.
 double exactRamp(double d, double h) { return std::clamp(0.5 - 0.5 * d / h, 0.0, 1.0); }
 
 double sdEllipsoid(const glm::dvec3& p, const glm::dvec3& c, const glm::dvec3& r) {
-    // First-order distance to an ellipsoid: exact on the surface, good to a voxel near it (all that coverage needs).
+    // First-order distance to an ellipsoid: exact on the surface, good to a voxel near it (all that
+    // coverage needs).
     const glm::dvec3 q = (p - c) / r;
     const double k0 = glm::length(q);
     const double k1 = glm::length(q / r);
@@ -40,7 +43,9 @@ double sdBox(const glm::dvec3& p, const glm::dvec3& lo, const glm::dvec3& hi) {
     const glm::dvec3 q = glm::abs(p - c) - e;
     return glm::length(glm::max(q, 0.0)) + std::min(std::max(q.x, std::max(q.y, q.z)), 0.0);
 }
-double sdSphere(const glm::dvec3& p, const glm::dvec3& c, double r) { return glm::length(p - c) - r; }
+double sdSphere(const glm::dvec3& p, const glm::dvec3& c, double r) {
+    return glm::length(p - c) - r;
+}
 double sdTorusZ(const glm::dvec3& p, const glm::dvec3& c, double major, double minor) {
     const glm::dvec3 q = p - c;
     const double rho = std::sqrt(q.x * q.x + q.y * q.y) - major;
@@ -100,7 +105,8 @@ Volume makeKronander(int n, const PhantomOptions& o, const Progress& progress) {
 
 constexpr double kTorsoFov = 400.0;
 
-/// HU of the torso phantom at world point p (mm, LPS: +x left, +y posterior, +z superior), voxel size h.
+/// HU of the torso phantom at world point p (mm, LPS: +x left, +y posterior, +z superior), voxel
+/// size h.
 double torsoHU(const glm::dvec3& p, double h) {
     double hu = -1000.0;  // air
     auto paint = [&](double d, double value) {
@@ -111,10 +117,11 @@ double torsoHU(const glm::dvec3& p, double h) {
     auto body = [&](double rx, double ry) { return std::max(sdEllipse2(p.x, p.y, rx, ry), zCap); };
     const double dSkin = body(170.0, 120.0);
     if (dSkin > 0.5 * h) return hu;
-    paint(dSkin, 30.0);                         // skin
-    paint(body(167.0, 117.0), -100.0);          // subcutaneous fat
-    paint(body(150.0, 102.0), 50.0);            // muscle / soft tissue
-    // Ribs: elliptic tubes inside the muscle wall, upper half, open anteriorly (costal cartilage left out).
+    paint(dSkin, 30.0);                 // skin
+    paint(body(167.0, 117.0), -100.0);  // subcutaneous fat
+    paint(body(150.0, 102.0), 50.0);    // muscle / soft tissue
+    // Ribs: elliptic tubes inside the muscle wall, upper half, open anteriorly (costal cartilage
+    // left out).
     if (p.z > -40.0 && p.z < 170.0) {
         const double ang = std::atan2(p.y, p.x);  // +y posterior
         const bool besideSternum = std::abs(std::abs(ang) - kPi / 2) < 0.35 && p.y < 0;
@@ -143,21 +150,26 @@ double torsoHU(const glm::dvec3& p, double h) {
         paint(sdCylinderZ(p, spineX, spineY, 21.0, zc, zc + 25.0), 950.0);
         paint(sdCylinderZ(p, spineX, spineY, 18.5, zc + 2.5, zc + 22.5), 260.0);
         paint(sdCylinderZ(p, spineX, spineY, 21.0, zc + 25.0, zc + 30.0), 90.0);  // disc
-        paint(sdBox(p, {spineX - 5.0, spineY + 22.0, zc + 3.0}, {spineX + 5.0, spineY + 52.0, zc + 20.0}),
+        paint(sdBox(p, {spineX - 5.0, spineY + 22.0, zc + 3.0},
+                    {spineX + 5.0, spineY + 52.0, zc + 20.0}),
               800.0);
-        paint(sdBox(p, {spineX - 32.0, spineY + 14.0, zc + 6.0}, {spineX + 32.0, spineY + 22.0, zc + 16.0}),
+        paint(sdBox(p, {spineX - 32.0, spineY + 14.0, zc + 6.0},
+                    {spineX + 32.0, spineY + 22.0, zc + 16.0}),
               800.0);  // transverse processes
     }
-    // Descending aorta: contrast-filled lumen beside the spine, wall, and a braided nitinol/steel stent.
+    // Descending aorta: contrast-filled lumen beside the spine, wall, and a braided nitinol/steel
+    // stent.
     const double ax = 24.0, ay = 46.0, aR = 12.0;
     const double dAorta = sdCylinderZ(p, ax, ay, aR + 1.5, zBottom + 10.0, zTop - 10.0);
     paint(dAorta, 40.0);
     paint(sdCylinderZ(p, ax, ay, aR, zBottom + 10.0, zTop - 10.0), 320.0);
     if (dAorta < 2.0 && p.z > -80.0 && p.z < 20.0) {
-        // Two families of 6 helices (pitch 60 mm, opposite hands) at radius 11.5 mm, wire radius 0.9 mm.
+        // Two families of 6 helices (pitch 60 mm, opposite hands) at radius 11.5 mm, wire radius
+        // 0.9 mm.
         const double R = 11.5, pitch = 60.0, wire = 0.9;
         const double rho = std::hypot(p.x - ax, p.y - ay), phi = std::atan2(p.y - ay, p.x - ax);
-        const double sinA = pitch / std::hypot(pitch, 2.0 * kPi * R);  // wire vs circumferential direction
+        const double sinA =
+            pitch / std::hypot(pitch, 2.0 * kPi * R);  // wire vs circumferential direction
         double d = 1e9;
         for (int hand = -1; hand <= 1; hand += 2)
             for (int w = 0; w < 6; ++w) {
@@ -179,8 +191,10 @@ Volume makeTorso(int n, const PhantomOptions& o, const Progress& progress) {
     fill<std::int16_t>(v, "phantom", progress, [&](const glm::dvec3& p, int i, int j, int k) {
         double hu = torsoHU(p, h);
         if (hu > -990.0) {
-            // Quantum noise, ~10 HU: sum of two uniforms (triangular), counter-based so thread count cannot matter.
-            const std::uint64_t key = (std::uint64_t(k) << 40) ^ (std::uint64_t(j) << 20) ^ std::uint64_t(i);
+            // Quantum noise, ~10 HU: sum of two uniforms (triangular), counter-based so thread
+            // count cannot matter.
+            const std::uint64_t key =
+                (std::uint64_t(k) << 40) ^ (std::uint64_t(j) << 20) ^ std::uint64_t(i);
             CounterRng rng(key, o.seed);
             hu += 12.0 * (rng.uniform() + rng.uniform() - 1.0);
         }
@@ -206,7 +220,8 @@ Volume makeSlab(int n, const PhantomOptions& o, const Progress& progress) {
     v.modality = Modality::Synthetic;
     v.description = "phantom slab: homogeneous, value 1 for |z - zc| < extent/4";
     const SlabFacts s = slabPhantomFacts(v.geometry());
-    const double hz = v.geometry().spacing.z, zc = 0.5 * (s.zMin + s.zMax), half = 0.5 * (s.zMax - s.zMin);
+    const double hz = v.geometry().spacing.z, zc = 0.5 * (s.zMin + s.zMax),
+                 half = 0.5 * (s.zMax - s.zMin);
     fill<float>(v, "phantom", progress, [&](const glm::dvec3& p, int, int, int) {
         return float(exactRamp(std::abs(p.z - zc) - half, hz));
     });
@@ -227,17 +242,31 @@ SlabFacts slabPhantomFacts(const Geometry& g) {
 }
 
 std::vector<std::pair<std::string, std::string>> phantomCatalog() {
-    return {{"kronander", "sphere and torus on a perfectly flat plate (Kronander 2012 corner case), uint8, 128^3"},
-            {"torso", "CT-like torso in HU with stented aorta, spine, ribs, lungs, int16, 256^3"},
-            {"sphere", "homogeneous sphere (value 1) for exact optics tests, float32, 64^3"},
-            {"slab", "homogeneous slab (value 1) for exact optics tests, float32, 64^3"}};
+    return {
+        {"kronander",
+         "sphere and torus on a perfectly flat plate (Kronander 2012 corner case), uint8, 128^3"},
+        {"torso", "CT-like torso in HU with stented aorta, spine, ribs, lungs, int16, 256^3"},
+        {"sphere", "homogeneous sphere (value 1) for exact optics tests, float32, 64^3"},
+        {"slab", "homogeneous slab (value 1) for exact optics tests, float32, 64^3"}};
 }
 
-Volume makePhantom(const std::string& name, const PhantomOptions& options, const Progress& progress) {
+Volume makePhantomImpl(const std::string& name, const PhantomOptions& options,
+                       const Progress& progress);
+
+Volume makePhantom(const std::string& name, const PhantomOptions& options,
+                   const Progress& progress) {
+    Volume v = makePhantomImpl(name, options, progress);
+    v.format = "phantom";
+    return v;
+}
+
+Volume makePhantomImpl(const std::string& name, const PhantomOptions& options,
+                       const Progress& progress) {
     auto sizeOr = [&](int def) {
         const int n = options.size > 0 ? options.size : def;
         if (n < 8 || n > 1024)
-            throw InputError("phantom " + name, "size", "must be between 8 and 1024, got " + std::to_string(n),
+            throw InputError("phantom " + name, "size",
+                             "must be between 8 and 1024, got " + std::to_string(n),
                              "pass --size N with 8 <= N <= 1024");
         return n;
     };
@@ -247,7 +276,8 @@ Volume makePhantom(const std::string& name, const PhantomOptions& options, const
     if (name == "slab") return makeSlab(sizeOr(64), options, progress);
     std::string names;
     for (const auto& [n, d] : phantomCatalog()) names += (names.empty() ? "" : ", ") + n;
-    throw InputError("phantom", "name", "unknown phantom '" + name + "'", "choose one of: " + names);
+    throw InputError("phantom", "name", "unknown phantom '" + name + "'",
+                     "choose one of: " + names);
 }
 
 }  // namespace voxlight::core

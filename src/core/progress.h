@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // Progress reporting and cancellation for long algorithms (> ~1 s).
-// Algorithms take a `const Progress&` and call `step(fraction)`, which throws CancelledError when the cancel flag is
-// raised. The CLI's sink draws a bar on a TTY and prints plain lines otherwise; tests pass Progress::none().
+// Algorithms take a `const Progress&` and call `step(fraction)`, which throws CancelledError when
+// the cancel flag is raised. The CLI's sink draws a bar on a TTY and prints plain lines otherwise;
+// tests pass Progress::none().
 #include <atomic>
 #include <functional>
 #include <string>
@@ -12,10 +13,11 @@
 namespace voxlight::core {
 
 class Progress {
-public:
+  public:
     using Sink = std::function<void(const std::string& stage, double fraction)>;
     Progress() = default;
-    Progress(Sink sink, const std::atomic<bool>* cancel) : sink_(std::move(sink)), cancel_(cancel) {}
+    Progress(Sink sink, const std::atomic<bool>* cancel)
+        : sink_(std::move(sink)), cancel_(cancel) {}
     static const Progress& none();
 
     /// Report `fraction` ∈ [0,1] of `stage`; throws CancelledError if cancellation was requested.
@@ -28,7 +30,7 @@ public:
     }
     bool cancelled() const { return cancel_ && cancel_->load(std::memory_order_relaxed); }
 
-private:
+  private:
     Sink sink_;
     const std::atomic<bool>* cancel_ = nullptr;
 };

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Counter-based random numbers: a value is a pure function of (key..., seed), so results never depend on thread
-// count or scheduling. Hash: a 64-bit finaliser chain (SplitMix64 / Stafford "Mix13") over the packed counters.
+// Counter-based random numbers: a value is a pure function of (key..., seed), so results never
+// depend on thread count or scheduling. Hash: a 64-bit finaliser chain (SplitMix64 / Stafford
+// "Mix13") over the packed counters.
 #include <cstdint>
 
 namespace voxlight::core {
@@ -25,18 +26,21 @@ constexpr std::uint64_t hashCounters(std::uint64_t a, std::uint64_t b = 0, std::
 /// Uniform float in [0, 1) from the top 24 bits of a hash.
 constexpr float toUnitFloat(std::uint64_t h) { return float(h >> 40) * (1.0f / 16777216.0f); }
 /// Uniform double in [0, 1) from the top 53 bits of a hash.
-constexpr double toUnitDouble(std::uint64_t h) { return double(h >> 11) * (1.0 / 9007199254740992.0); }
+constexpr double toUnitDouble(std::uint64_t h) {
+    return double(h >> 11) * (1.0 / 9007199254740992.0);
+}
 
-/// A small stream generator seeded from counters, for loops that need many numbers per key (e.g. per pixel).
+/// A small stream generator seeded from counters, for loops that need many numbers per key (e.g.
+/// per pixel).
 class CounterRng {
-public:
+  public:
     constexpr explicit CounterRng(std::uint64_t key, std::uint64_t seed = 0)
         : state_(hashCounters(key, 0, 0, seed)) {}
     constexpr std::uint64_t next() { return mix64(state_ += 0x9e3779b97f4a7c15ULL); }
     constexpr float uniform() { return toUnitFloat(next()); }
     constexpr double uniformDouble() { return toUnitDouble(next()); }
 
-private:
+  private:
     std::uint64_t state_;
 };
 

@@ -13,30 +13,41 @@ namespace voxlight::core {
 
 std::string_view toString(VoxelType t) {
     switch (t) {
-        case VoxelType::UInt8: return "uint8";
-        case VoxelType::Int16: return "int16";
-        case VoxelType::UInt16: return "uint16";
-        case VoxelType::Float32: return "float32";
+        case VoxelType::UInt8:
+            return "uint8";
+        case VoxelType::Int16:
+            return "int16";
+        case VoxelType::UInt16:
+            return "uint16";
+        case VoxelType::Float32:
+            return "float32";
     }
     return "?";
 }
 
 std::size_t voxelBytes(VoxelType t) {
     switch (t) {
-        case VoxelType::UInt8: return 1;
+        case VoxelType::UInt8:
+            return 1;
         case VoxelType::Int16:
-        case VoxelType::UInt16: return 2;
-        case VoxelType::Float32: return 4;
+        case VoxelType::UInt16:
+            return 2;
+        case VoxelType::Float32:
+            return 4;
     }
     return 0;
 }
 
 std::string_view toString(Modality m) {
     switch (m) {
-        case Modality::Unknown: return "unknown";
-        case Modality::CT: return "CT";
-        case Modality::MR: return "MR";
-        case Modality::Synthetic: return "synthetic";
+        case Modality::Unknown:
+            return "unknown";
+        case Modality::CT:
+            return "CT";
+        case Modality::MR:
+            return "MR";
+        case Modality::Synthetic:
+            return "synthetic";
     }
     return "?";
 }
@@ -45,7 +56,8 @@ std::array<glm::dvec3, 2> Geometry::worldBounds() const {
     glm::dvec3 lo(std::numeric_limits<double>::max()), hi(-std::numeric_limits<double>::max());
     const glm::dvec3 last = glm::dvec3(glm::max(dims - 1, glm::ivec3(0)));
     for (int c = 0; c < 8; ++c) {
-        const glm::dvec3 ijk((c & 1) ? last.x : 0.0, (c & 2) ? last.y : 0.0, (c & 4) ? last.z : 0.0);
+        const glm::dvec3 ijk((c & 1) ? last.x : 0.0, (c & 2) ? last.y : 0.0,
+                             (c & 4) ? last.z : 0.0);
         const glm::dvec3 p = indexToWorld(ijk);
         lo = glm::min(lo, p);
         hi = glm::max(hi, p);
@@ -76,9 +88,9 @@ void Geometry::validate() const {
 }
 
 std::ostream& operator<<(std::ostream& os, const Geometry& g) {
-    os << g.dims.x << "x" << g.dims.y << "x" << g.dims.z << " voxels, spacing " << g.spacing.x << "x"
-       << g.spacing.y << "x" << g.spacing.z << " mm, origin (" << g.origin.x << ", " << g.origin.y << ", "
-       << g.origin.z << ") mm, orientation " << g.orientationCode();
+    os << g.dims.x << "x" << g.dims.y << "x" << g.dims.z << " voxels, spacing " << g.spacing.x
+       << "x" << g.spacing.y << "x" << g.spacing.z << " mm, origin (" << g.origin.x << ", "
+       << g.origin.y << ", " << g.origin.z << ") mm, orientation " << g.orientationCode();
     return os;
 }
 
@@ -87,8 +99,9 @@ Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), 
     if (d.x < 1 || d.y < 1 || d.z < 1 || d.x > kMaxDim || d.y > kMaxDim || d.z > kMaxDim ||
         geometry.voxelCount() > kMaxVoxels) {
         std::ostringstream os;
-        os << "volume size " << d.x << "x" << d.y << "x" << d.z << " is outside the supported range (1.."
-           << kMaxDim << " per axis, at most " << kMaxVoxels << " voxels)";
+        os << "volume size " << d.x << "x" << d.y << "x" << d.z
+           << " is outside the supported range (1.." << kMaxDim << " per axis, at most "
+           << kMaxVoxels << " voxels)";
         throw InputError("", "dims", os.str(), "crop or downsample the volume");
     }
     geometry_.validate();
@@ -129,7 +142,9 @@ std::array<double, 2> Volume::physicalRange() const {
                 }
                 return acc;
             },
-            [](Range a, Range b) { return Range{std::min(a[0], b[0]), std::max(a[1], b[1])}; });
+            [](Range a, Range b) {
+                return Range{std::min(a[0], b[0]), std::max(a[1], b[1])};
+            });
         if (stored[0] > stored[1]) return Range{0.0, 0.0};  // no finite voxel
         const double a = mapping.apply(stored[0]), b = mapping.apply(stored[1]);
         return Range{std::min(a, b), std::max(a, b)};

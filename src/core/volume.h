@@ -3,15 +3,18 @@
 // A scalar volume on a regular grid, in patient LPS millimetres.
 //
 // Geometry (ITK/DICOM convention): voxel (i,j,k) has its *centre* at
-//     world = origin + D · (ijk ⊙ spacing)          [mm, LPS: +x patient left, +y posterior, +z superior]
-// where D is the 3×3 direction matrix whose columns are the unit directions of the i, j, k axes. D must be
-// orthonormal (det ±1); readers reject sheared grids (gantry tilt) with a clear message.
-// Index space is continuous: sampling at (1.5, 0, 0) interpolates between voxels 1 and 2. Samples outside
-// [0, n−1] clamp to the edge voxel (edge extension).
+//     world = origin + D · (ijk ⊙ spacing)          [mm, LPS: +x patient left, +y posterior, +z
+//     superior]
+// where D is the 3×3 direction matrix whose columns are the unit directions of the i, j, k axes. D
+// must be orthonormal (det ±1); readers reject sheared grids (gantry tilt) with a clear message.
+// Index space is continuous: sampling at (1.5, 0, 0) interpolates between voxels 1 and 2. Samples
+// outside [0, n−1] clamp to the edge voxel (edge extension).
 //
-// Values: voxels are stored in their native type (uint8, int16, uint16, float32). The *physical* value (HU for CT) is
+// Values: voxels are stored in their native type (uint8, int16, uint16, float32). The *physical*
+// value (HU for CT) is
 //     physical = slope · stored + intercept
-// and every sampler returns physical values as float. Storage is x-fastest: index = i + nx·(j + ny·k).
+// and every sampler returns physical values as float. Storage is x-fastest: index = i + nx·(j +
+// ny·k).
 #include <algorithm>
 #include <array>
 #include <cstddef>
@@ -34,18 +37,27 @@ std::size_t voxelBytes(VoxelType t);
 template <class T>
 constexpr VoxelType voxelTypeOf();
 template <>
-constexpr VoxelType voxelTypeOf<std::uint8_t>() { return VoxelType::UInt8; }
+constexpr VoxelType voxelTypeOf<std::uint8_t>() {
+    return VoxelType::UInt8;
+}
 template <>
-constexpr VoxelType voxelTypeOf<std::int16_t>() { return VoxelType::Int16; }
+constexpr VoxelType voxelTypeOf<std::int16_t>() {
+    return VoxelType::Int16;
+}
 template <>
-constexpr VoxelType voxelTypeOf<std::uint16_t>() { return VoxelType::UInt16; }
+constexpr VoxelType voxelTypeOf<std::uint16_t>() {
+    return VoxelType::UInt16;
+}
 template <>
-constexpr VoxelType voxelTypeOf<float>() { return VoxelType::Float32; }
+constexpr VoxelType voxelTypeOf<float>() {
+    return VoxelType::Float32;
+}
 
 enum class Modality : std::uint8_t { Unknown, CT, MR, Synthetic };
 std::string_view toString(Modality m);
 
-/// Largest volume voxlight accepts (voxels). 2^31 int16 voxels = 4 GiB, beyond this machine class's sensible use.
+/// Largest volume voxlight accepts (voxels). 2^31 int16 voxels = 4 GiB, beyond this machine class's
+/// sensible use.
 inline constexpr std::uint64_t kMaxVoxels = std::uint64_t(1) << 31;
 /// Largest size along one axis.
 inline constexpr int kMaxDim = 16384;
@@ -55,14 +67,16 @@ inline double maxComponent(const glm::dvec3& v) { return std::max(v.x, std::max(
 
 struct Geometry {
     glm::ivec3 dims{0};
-    glm::dvec3 spacing{1.0};        ///< mm between voxel centres along i, j, k (> 0)
-    glm::dvec3 origin{0.0};         ///< world position of voxel (0,0,0)'s centre, mm
-    glm::dmat3 direction{1.0};      ///< columns: unit world directions of the i, j, k axes
+    glm::dvec3 spacing{1.0};    ///< mm between voxel centres along i, j, k (> 0)
+    glm::dvec3 origin{0.0};     ///< world position of voxel (0,0,0)'s centre, mm
+    glm::dmat3 direction{1.0};  ///< columns: unit world directions of the i, j, k axes
 
     std::uint64_t voxelCount() const {
         return std::uint64_t(dims.x) * std::uint64_t(dims.y) * std::uint64_t(dims.z);
     }
-    glm::dvec3 indexToWorld(const glm::dvec3& ijk) const { return origin + direction * (ijk * spacing); }
+    glm::dvec3 indexToWorld(const glm::dvec3& ijk) const {
+        return origin + direction * (ijk * spacing);
+    }
     /// Inverse of indexToWorld (direction is orthonormal, so its inverse is its transpose).
     glm::dvec3 worldToIndex(const glm::dvec3& p) const {
         return (glm::transpose(direction) * (p - origin)) / spacing;
@@ -71,7 +85,8 @@ struct Geometry {
     glm::dvec3 extent() const { return glm::dvec3(glm::max(dims - 1, glm::ivec3(0))) * spacing; }
     /// Axis-aligned world bounding box of the voxel centres: {min, max}.
     std::array<glm::dvec3, 2> worldBounds() const;
-    /// Direction in words, e.g. "RAS"-style code of the axes as patient-orientation letters ("LPS" = identity).
+    /// Direction in words, e.g. "RAS"-style code of the axes as patient-orientation letters ("LPS"
+    /// = identity).
     std::string orientationCode() const;
     /// Throws InternalError unless dims ≥ 1, spacing > 0 and finite, direction orthonormal.
     void validate() const;
@@ -97,7 +112,8 @@ struct VolumeView {
     float stored(int i, int j, int k) const { return float(data[i + sy * j + sz * k]); }
     float at(int i, int j, int k) const { return slope * stored(i, j, k) + intercept; }
 
-    /// Trilinear interpolation of the physical value at continuous index (x, y, z), clamped to the grid.
+    /// Trilinear interpolation of the physical value at continuous index (x, y, z), clamped to the
+    /// grid.
     float sample(float x, float y, float z) const {
         x = std::min(std::max(x, 0.f), float(nx - 1));
         y = std::min(std::max(y, 0.f), float(ny - 1));
@@ -121,10 +137,11 @@ struct VolumeView {
 
 /// Owning scalar volume. Move-only (volumes are large).
 class Volume {
-public:
+  public:
     Volume() = default;
-    /// Allocates a zero-filled volume. Throws InputError if the size is absurd (> kMaxVoxels or an axis > kMaxDim):
-    /// callers that read files check first and name the file; this is the last line of defence.
+    /// Allocates a zero-filled volume. Throws InputError if the size is absurd (> kMaxVoxels or an
+    /// axis > kMaxDim): callers that read files check first and name the file; this is the last
+    /// line of defence.
     Volume(const Geometry& geometry, VoxelType type);
     Volume(Volume&&) noexcept = default;
     Volume& operator=(Volume&&) noexcept = default;
@@ -142,6 +159,7 @@ public:
     ValueMapping mapping;
     Modality modality = Modality::Unknown;
     std::string description;  ///< free text: series description, phantom name, file name
+    std::string format;       ///< where it came from: "NIfTI", "DICOM series", "phantom", ...
 
     void* data() { return data_.get(); }
     const void* data() const { return data_.get(); }
@@ -156,7 +174,9 @@ public:
         return reinterpret_cast<const T*>(data_.get());
     }
     std::size_t linearIndex(int i, int j, int k) const {
-        return std::size_t(i) + std::size_t(geometry_.dims.x) * (std::size_t(j) + std::size_t(geometry_.dims.y) * std::size_t(k));
+        return std::size_t(i) +
+               std::size_t(geometry_.dims.x) *
+                   (std::size_t(j) + std::size_t(geometry_.dims.y) * std::size_t(k));
     }
 
     template <class T>
@@ -171,14 +191,19 @@ public:
         return v;
     }
 
-    /// Calls f(VolumeView<T>) with the view of the native type: the way to write a type-generic hot loop.
+    /// Calls f(VolumeView<T>) with the view of the native type: the way to write a type-generic hot
+    /// loop.
     template <class F>
     decltype(auto) visit(F&& f) const {
         switch (type_) {
-            case VoxelType::UInt8: return f(view<std::uint8_t>());
-            case VoxelType::Int16: return f(view<std::int16_t>());
-            case VoxelType::UInt16: return f(view<std::uint16_t>());
-            case VoxelType::Float32: return f(view<float>());
+            case VoxelType::UInt8:
+                return f(view<std::uint8_t>());
+            case VoxelType::Int16:
+                return f(view<std::int16_t>());
+            case VoxelType::UInt16:
+                return f(view<std::uint16_t>());
+            case VoxelType::Float32:
+                return f(view<float>());
         }
         throw InternalError("unknown voxel type");
     }
@@ -195,7 +220,7 @@ public:
     /// Number of NaN/Inf voxels (float volumes only; 0 otherwise).
     std::uint64_t countNonFinite() const;
 
-private:
+  private:
     Geometry geometry_;
     VoxelType type_ = VoxelType::UInt8;
     std::unique_ptr<std::byte[]> data_;

@@ -52,9 +52,12 @@ BrickGrid BrickGrid::build(const core::Volume& volume, const core::Progress& pro
                             if (!std::isfinite(x)) continue;
                             s.min = std::min(s.min, x);
                             s.max = std::max(s.max, x);
-                            if (i <= last.x && j <= last.y && k <= last.z) ++s.histogram[g.binOf(x)];
+                            if (i <= last.x && j <= last.y && k <= last.z)
+                                ++s.histogram[g.binOf(x)];
                         }
-                g.bricks_[std::size_t(bx) + std::size_t(g.counts_.x) * (std::size_t(by) + std::size_t(g.counts_.y) * bz)] = s;
+                g.bricks_[std::size_t(bx) + std::size_t(g.counts_.x) *
+                                                (std::size_t(by) + std::size_t(g.counts_.y) * bz)] =
+                    s;
             }
             const int d = ++done;
             if (d % 64 == 0) progress.report("bricks", double(d) / (slabs * g.counts_.y));

@@ -38,8 +38,9 @@ TEST(Phantoms, SphereLevelSetIsTheAnalyticSphere) {
     o.size = 48;
     const core::Volume v = core::makePhantom("sphere", o);
     const auto s = core::spherePhantomFacts(v.geometry());
-    // Along any ray from the centre, the 0.5 crossing of the trilinear field is at the radius (within the curvature
-    // error of a linear ramp across one voxel, well below 0.05 voxel at this radius).
+    // Along any ray from the centre, the 0.5 crossing of the trilinear field is at the radius
+    // (within the curvature error of a linear ramp across one voxel, well below 0.05 voxel at this
+    // radius).
     constexpr double kLevelSetTolVoxels = 0.05;
     for (const glm::dvec3 dir : {glm::dvec3(1, 0, 0), glm::normalize(glm::dvec3(1, 1, 0)),
                                  glm::normalize(glm::dvec3(1, -2, 3))}) {
@@ -56,12 +57,14 @@ TEST(Phantoms, KronanderPlateIsPerfectlyFlat) {
     core::PhantomOptions o;
     o.size = 64;
     const core::Volume v = core::makePhantom("kronander", o);
-    // Every voxel of a z-slice inside the plate's footprint, away from sphere and torus, has the same value.
+    // Every voxel of a z-slice inside the plate's footprint, away from sphere and torus, has the
+    // same value.
     const auto* p = v.dataAs<std::uint8_t>();
     for (int k = 0; k < 64; ++k) {
         const std::uint8_t ref = p[v.linearIndex(4, 4, k)];
         for (int j = 4; j < 60; ++j)
-            for (int i = 4; i < 6; ++i) ASSERT_EQ(p[v.linearIndex(i, j, k)], ref) << i << "," << j << "," << k;
+            for (int i = 4; i < 6; ++i)
+                ASSERT_EQ(p[v.linearIndex(i, j, k)], ref) << i << "," << j << "," << k;
     }
 }
 

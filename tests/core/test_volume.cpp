@@ -11,7 +11,8 @@ using core::Volume;
 using core::VoxelType;
 
 namespace {
-// Trilinear interpolation reproduces any trilinear function exactly; float rounding of products of values < 1e3.
+// Trilinear interpolation reproduces any trilinear function exactly; float rounding of products of
+// values < 1e3.
 constexpr float kTrilinearTol = 1e-3f;
 
 Geometry rotatedGeometry() {
@@ -19,7 +20,8 @@ Geometry rotatedGeometry() {
     g.dims = {7, 5, 4};
     g.spacing = {0.5, 0.75, 2.0};
     g.origin = {10.0, -20.0, 5.0};
-    // 30° about z, then the k axis pointing inferior: a proper orthonormal frame with det −1 is allowed too.
+    // 30° about z, then the k axis pointing inferior: a proper orthonormal frame with det −1 is
+    // allowed too.
     const double c = std::cos(M_PI / 6), s = std::sin(M_PI / 6);
     g.direction = glm::dmat3(glm::dvec3(c, s, 0), glm::dvec3(-s, c, 0), glm::dvec3(0, 0, -1));
     return g;
@@ -28,7 +30,8 @@ Geometry rotatedGeometry() {
 
 TEST(Geometry, IndexWorldRoundTrip) {
     const Geometry g = rotatedGeometry();
-    for (const glm::dvec3 ijk : {glm::dvec3(0, 0, 0), glm::dvec3(6, 4, 3), glm::dvec3(1.25, 3.5, 2.75)}) {
+    for (const glm::dvec3 ijk :
+         {glm::dvec3(0, 0, 0), glm::dvec3(6, 4, 3), glm::dvec3(1.25, 3.5, 2.75)}) {
         const glm::dvec3 back = g.worldToIndex(g.indexToWorld(ijk));
         EXPECT_NEAR(glm::length(back - ijk), 0.0, 1e-12);
     }
@@ -40,8 +43,11 @@ TEST(Geometry, IndexWorldRoundTrip) {
 }
 
 TEST(Volume, TrilinearIsExactOnTrilinearFunctionsForEveryType) {
-    auto f = [](double x, double y, double z) { return 3.0 + 2.0 * x + 1.0 * y + 4.0 * z + 1.0 * x * y * z; };
-    for (VoxelType t : {VoxelType::UInt8, VoxelType::Int16, VoxelType::UInt16, VoxelType::Float32}) {
+    auto f = [](double x, double y, double z) {
+        return 3.0 + 2.0 * x + 1.0 * y + 4.0 * z + 1.0 * x * y * z;
+    };
+    for (VoxelType t :
+         {VoxelType::UInt8, VoxelType::Int16, VoxelType::UInt16, VoxelType::Float32}) {
         Geometry g;
         g.dims = {5, 4, 3};
         Volume v(g, t);
@@ -54,7 +60,8 @@ TEST(Volume, TrilinearIsExactOnTrilinearFunctionsForEveryType) {
                 for (int j = 0; j < 4; ++j)
                     for (int i = 0; i < 5; ++i) p[v.linearIndex(i, j, k)] = T(f(i, j, k));
         });
-        for (const glm::dvec3 q : {glm::dvec3(0.5, 0.5, 0.5), glm::dvec3(3.25, 2.75, 1.5), glm::dvec3(4, 3, 2)}) {
+        for (const glm::dvec3 q :
+             {glm::dvec3(0.5, 0.5, 0.5), glm::dvec3(3.25, 2.75, 1.5), glm::dvec3(4, 3, 2)}) {
             EXPECT_NEAR(v.sampleIndex(q), 2.0 * f(q.x, q.y, q.z) - 7.0, kTrilinearTol)
                 << core::toString(t) << " at " << q.x << "," << q.y << "," << q.z;
         }

@@ -1,21 +1,24 @@
 // SPDX-License-Identifier: MIT
 #include "support/test_support.h"
 
+#include <unistd.h>
+
 #include <atomic>
 #include <cstdlib>
 #include <random>
-#include <unistd.h>
 
 namespace voxlight::test {
 
 TempDir::TempDir() {
     static std::atomic<int> counter{0};
     const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    std::string name = info ? std::string(info->test_suite_name()) + "." + info->name() : "voxlight";
+    std::string name =
+        info ? std::string(info->test_suite_name()) + "." + info->name() : "voxlight";
     for (char& c : name)
         if (c == '/') c = '_';
-    path_ = std::filesystem::temp_directory_path() /
-            ("voxlight-test-" + std::to_string(::getpid()) + "-" + std::to_string(counter++) + "-" + name);
+    path_ =
+        std::filesystem::temp_directory_path() / ("voxlight-test-" + std::to_string(::getpid()) +
+                                                  "-" + std::to_string(counter++) + "-" + name);
     std::filesystem::create_directories(path_);
 }
 

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Helpers shared by the test executables: temporary directories, shared-data lookup with a clear skip.
+// Helpers shared by the test executables: temporary directories, shared-data lookup with a clear
+// skip.
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -9,9 +10,10 @@
 
 namespace voxlight::test {
 
-/// A fresh directory under the system temp dir, removed when the object dies. Tests never write to the source tree.
+/// A fresh directory under the system temp dir, removed when the object dies. Tests never write to
+/// the source tree.
 class TempDir {
-public:
+  public:
     TempDir();
     ~TempDir();
     TempDir(const TempDir&) = delete;
@@ -19,11 +21,12 @@ public:
     const std::filesystem::path& path() const { return path_; }
     std::filesystem::path operator/(const std::string& name) const { return path_ / name; }
 
-private:
+  private:
     std::filesystem::path path_;
 };
 
-/// The project source directory (from VOXLIGHT_SOURCE_DIR, set by CTest; falls back to the current directory).
+/// The project source directory (from VOXLIGHT_SOURCE_DIR, set by CTest; falls back to the current
+/// directory).
 std::filesystem::path sourceDir();
 
 /// Path of a file under ../shared/datasets relative to the project root, or nullopt if absent.
@@ -31,15 +34,18 @@ std::optional<std::filesystem::path> sharedDataset(const std::string& relative);
 
 }  // namespace voxlight::test
 
-/// Skips the current test with a clear message when a shared dataset is missing; else binds `var` to its path.
-#define VL_REQUIRE_SHARED(var, relative)                                                                  \
-    auto var##_opt = ::voxlight::test::sharedDataset(relative);                                           \
-    if (!var##_opt) GTEST_SKIP() << "shared dataset ../shared/datasets/" << (relative)                    \
-                                 << " is absent on this machine; this test needs it (see MANIFEST.md)"; \
+/// Skips the current test with a clear message when a shared dataset is missing; else binds `var`
+/// to its path.
+#define VL_REQUIRE_SHARED(var, relative)                                                    \
+    auto var##_opt = ::voxlight::test::sharedDataset(relative);                             \
+    if (!var##_opt)                                                                         \
+        GTEST_SKIP() << "shared dataset ../shared/datasets/" << (relative)                  \
+                     << " is absent on this machine; this test needs it (see MANIFEST.md)"; \
     const std::filesystem::path var = *var##_opt
 
 /// Same for an absolute system path (e.g. Debian's mricron-data templates).
-#define VL_REQUIRE_FILE(var, absolute)                                                                    \
-    if (!std::filesystem::exists(absolute))                                                               \
-        GTEST_SKIP() << (absolute) << " is absent; install Debian's package that ships it (tools/setup.sh)"; \
+#define VL_REQUIRE_FILE(var, absolute)                                                         \
+    if (!std::filesystem::exists(absolute))                                                    \
+        GTEST_SKIP() << (absolute)                                                             \
+                     << " is absent; install Debian's package that ships it (tools/setup.sh)"; \
     const std::filesystem::path var = (absolute)

@@ -1,0 +1,37 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// What every voxlight subcommand shares: progress display, Ctrl-C cancellation, exit codes.
+//   0 success · 1 internal error (a bug: please report) · 2 bad input (one line on stderr) · 130
+//   cancelled (Ctrl-C)
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <functional>
+#include <string>
+
+#include "core/progress.h"
+
+namespace voxlight::app {
+
+inline constexpr int kExitOk = 0, kExitInternal = 1, kExitBadInput = 2, kExitCancelled = 130;
+
+/// Cancel flag raised by SIGINT/SIGTERM (installed by installSignalHandlers()).
+std::atomic<bool>& cancelFlag();
+void installSignalHandlers();
+
+/// Progress sink for the terminal: a redrawn bar when stderr is a TTY, plain lines every 10%
+/// otherwise; silent when `quiet`.
+core::Progress terminalProgress(bool quiet);
+
+/// Runs a subcommand body, mapping exceptions to one line on stderr and the exit codes above.
+int runGuarded(const std::function<int()>& body);
+
+/// Subcommand registration: each adds itself to the app and sets `run` when chosen.
+struct Command {
+    CLI::App* sub = nullptr;
+    std::function<int()> run;
+};
+Command addInfoCommand(CLI::App& app);
+Command addPhantomCommand(CLI::App& app);
+Command addSceneCommand(CLI::App& app);
+
+}  // namespace voxlight::app

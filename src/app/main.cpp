@@ -1,0 +1,31 @@
+// SPDX-License-Identifier: MIT
+// voxlight: medical direct volume rendering with realistic illumination. Thin main: subcommands
+// live beside it.
+#include <iostream>
+
+#include "app/cli_support.h"
+
+int main(int argc, char** argv) {
+    using namespace voxlight::app;
+    installSignalHandlers();
+    CLI::App app{"voxlight: medical direct volume rendering with realistic illumination"};
+    app.require_subcommand(1);
+    app.set_version_flag("--version", "voxlight 0.1.0");
+    std::vector<Command> commands = {addInfoCommand(app), addPhantomCommand(app),
+                                     addSceneCommand(app)};
+    try {
+        app.parse(argc, argv);
+    } catch (const CLI::CallForHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForAllHelp& e) {
+        return app.exit(e);
+    } catch (const CLI::CallForVersion& e) {
+        return app.exit(e);
+    } catch (const CLI::ParseError& e) {
+        std::cerr << "voxlight: error: " << e.what() << " (see voxlight --help)\n";
+        return kExitBadInput;
+    }
+    for (auto& c : commands)
+        if (c.sub->parsed()) return runGuarded(c.run);
+    return kExitBadInput;
+}

@@ -1,0 +1,53 @@
+// SPDX-License-Identifier: MIT
+#include "app/volume_options.h"
+
+namespace voxlight::app {
+
+std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
+    auto o = std::make_shared<VolumeOptions>();
+    auto* g = sub.add_option_group("reading", "How to read the volume");
+    g->add_option("--dims", o->dims, "Raw file: voxels per axis X,Y,Z")
+        ->delimiter(',')
+        ->expected(3);
+    g->add_option("--type", o->type, "Raw file: voxel type")
+        ->check(CLI::IsMember({"uint8", "int16", "uint16", "float32"}));
+    g->add_option("--spacing", o->spacing, "Raw file: spacing X,Y,Z in mm")
+        ->delimiter(',')
+        ->expected(3);
+    g->add_flag("--big-endian", o->bigEndian, "Raw file: big-endian voxels");
+    g->add_option("--header-bytes", o->headerBytes, "Raw file: bytes to skip before the data");
+    g->add_option("--series", o->series,
+                  "DICOM: SeriesInstanceUID to read when a folder holds several");
+    g->add_option("--nonfinite", o->nonFinite,
+                  "NaN/Inf voxels: reject (default) or replace by the minimum")
+        ->check(CLI::IsMember({"reject", "min"}));
+    return o;
+}
+
+io::ReadOptions VolumeOptions::readOptions() const {
+    io::ReadOptions r;
+    r.dicomSeriesUid = series;
+    r.nonFinite =
+        nonFinite == "min" ? io::NonFinitePolicy::ReplaceWithMin : io::NonFinitePolicy::Reject;
+    const bool anyRaw =
+        !dims.empty() || !type.empty() || !spacing.empty() || headerBytes > 0 || bigEndian;
+    if (anyRaw) {
+        if (dims.size() != 3 || type.empty())
+            throw InputError("command line", "--dims/--type",
+                             "a raw file needs both --dims X,Y,Z and --type",
+                             "e.g. --dims 256,256,128 --type int16 --spacing 0.5,0.5,1");
+        io::RawLayout l;
+        l.dims = {dims[0], dims[1], dims[2]};
+        l.type = type == "uint8"    ? core::VoxelType::UInt8
+                 : type == "int16"  ? core::VoxelType::Int16
+                 : type == "uint16" ? core::VoxelType::UInt16
+                                    : core::VoxelType::Float32;
+        if (spacing.size() == 3) l.spacing = {spacing[0], spacing[1], spacing[2]};
+        l.bigEndian = bigEndian;
+        l.headerBytes = headerBytes;
+        r.raw = l;
+    }
+    return r;
+}
+
+}  // namespace voxlight::app

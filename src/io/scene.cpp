@@ -1,0 +1,444 @@
+// SPDX-License-Identifier: MIT
+#include "io/scene.h"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <set>
+
+namespace voxlight::io {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+
+std::string typeName(const json& j) {
+    switch (j.type()) {
+        case json::value_t::null:
+            return "null";
+        case json::value_t::boolean:
+            return "a boolean";
+        case json::value_t::string:
+            return "a string";
+        case json::value_t::array:
+            return "an array";
+        case json::value_t::object:
+            return "an object";
+        case json::value_t::number_integer:
+        case json::value_t::number_unsigned:
+        case json::value_t::number_float:
+            return "a number";
+        default:
+            return "an unsupported value";
+    }
+}
+
+std::string shortDump(const json& j) {
+    std::string s = j.dump();
+    return s.size() > 40 ? s.substr(0, 37) + "..." : s;
+}
+
+/// Levenshtein distance, for "did you mean" suggestions.
+std::size_t editDistance(const std::string& a, const std::string& b) {
+    std::vector<std::size_t> prev(b.size() + 1), cur(b.size() + 1);
+    for (std::size_t j = 0; j <= b.size(); ++j) prev[j] = j;
+    for (std::size_t i = 1; i <= a.size(); ++i) {
+        cur[0] = i;
+        for (std::size_t j = 1; j <= b.size(); ++j)
+            cur[j] = std::min(
+                {prev[j] + 1, cur[j - 1] + 1, prev[j - 1] + (a[i - 1] == b[j - 1] ? 0 : 1)});
+        std::swap(prev, cur);
+    }
+    return prev[b.size()];
+}
+
+std::string joinList(const std::vector<std::string>& items) {
+    std::string s;
+    for (const auto& i : items) s += (s.empty() ? "" : ", ") + i;
+    return s;
+}
+
+/// A JSON value with its dotted key path, for typed access with precise errors.
+class Field {
+  public:
+    Field(const json& j, std::string path, const std::string& source)
+        : j_(j), path_(std::move(path)), source_(source) {}
+
+    const json& raw() const { return j_; }
+    const std::string& path() const { return path_; }
+    [[noreturn]] void fail(const std::string& problem, const std::string& fix = {}) const {
+        throw InputError(source_, path_, problem, fix);
+    }
+    bool isObject() const { return j_.is_object(); }
+    bool isString() const { return j_.is_string(); }
+    bool isArray() const { return j_.is_array(); }
+
+    void expectObject() const {
+        if (!j_.is_object()) fail("must be an object, got " + typeName(j_) + " " + shortDump(j_));
+    }
+    /// Rejects keys not in `allowed`, suggesting the nearest one.
+    void allowOnly(const std::vector<std::string>& allowed) const {
+        expectObject();
+        for (auto it = j_.begin(); it != j_.end(); ++it) {
+            if (std::find(allowed.begin(), allowed.end(), it.key()) != allowed.end()) continue;
+            std::string best;
+            std::size_t bestD = 3;
+            for (const auto& a : allowed)
+                if (std::size_t d = editDistance(it.key(), a); d < bestD) best = a, bestD = d;
+            throw InputError(source_, child(it.key()).path_, "unknown key",
+                             best.empty() ? "allowed keys: " + joinList(allowed)
+                                          : "did you mean '" + best + "'?");
+        }
+    }
+    bool has(const std::string& key) const { return j_.is_object() && j_.contains(key); }
+    Field child(const std::string& key) const {
+        static const json null;
+        return Field(has(key) ? j_.at(key) : null, path_.empty() ? key : path_ + "." + key,
+                     source_);
+    }
+    Field at(std::size_t i) const {
+        return Field(j_.at(i), path_ + "[" + std::to_string(i) + "]", source_);
+    }
+    std::size_t size() const { return j_.size(); }
+
+    double number(double lo = -HUGE_VAL, double hi = HUGE_VAL) const {
+        if (!j_.is_number()) fail("must be a number, got " + typeName(j_) + " " + shortDump(j_));
+        const double v = j_.get<double>();
+        if (!std::isfinite(v) || v < lo || v > hi) {
+            std::ostringstream os;
+            os << "must be in [" << lo << ", " << hi << "], got " << v;
+            fail(os.str());
+        }
+        return v;
+    }
+    int integer(int lo, int hi) const {
+        if (!j_.is_number_integer() && !j_.is_number_unsigned())
+            fail("must be an integer, got " + typeName(j_) + " " + shortDump(j_));
+        const long long v = j_.get<long long>();
+        if (v < lo || v > hi)
+            fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                 "], got " + std::to_string(v));
+        return int(v);
+    }
+    std::string string() const {
+        if (!j_.is_string()) fail("must be a string, got " + typeName(j_) + " " + shortDump(j_));
+        return j_.get<std::string>();
+    }
+    std::string oneOf(const std::vector<std::string>& allowed) const {
+        const std::string s = string();
+        if (std::find(allowed.begin(), allowed.end(), s) == allowed.end())
+            fail("'" + s + "' is not allowed", "choose one of: " + joinList(allowed));
+        return s;
+    }
+    glm::dvec3 vec3(double lo = -HUGE_VAL, double hi = HUGE_VAL) const {
+        if (!j_.is_array() || j_.size() != 3)
+            fail("must be an array of 3 numbers, got " + typeName(j_) + " " + shortDump(j_));
+        glm::dvec3 v;
+        for (int i = 0; i < 3; ++i) v[i] = at(std::size_t(i)).number(lo, hi);
+        return v;
+    }
+    glm::dvec3 unitVec3() const {
+        const glm::dvec3 v = vec3();
+        const double len = glm::length(v);
+        if (!(len > 1e-12)) fail("must be a non-zero direction, got [0, 0, 0]");
+        return v / len;
+    }
+
+    // Optional accessors: keep the default when the key is absent.
+    void get(const std::string& k, double& out, double lo = -HUGE_VAL, double hi = HUGE_VAL) const {
+        if (has(k)) out = child(k).number(lo, hi);
+    }
+    void get(const std::string& k, int& out, int lo, int hi) const {
+        if (has(k)) out = child(k).integer(lo, hi);
+    }
+    void get(const std::string& k, glm::dvec3& out, double lo = -HUGE_VAL,
+             double hi = HUGE_VAL) const {
+        if (has(k)) out = child(k).vec3(lo, hi);
+    }
+    void getDirection(const std::string& k, glm::dvec3& out) const {
+        if (has(k)) out = child(k).unitVec3();
+    }
+    void get(const std::string& k, std::string& out,
+             const std::vector<std::string>& allowed) const {
+        if (has(k)) out = child(k).oneOf(allowed);
+    }
+
+  private:
+    const json& j_;
+    std::string path_;
+    const std::string& source_;
+};
+
+constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
+
+fs::path resolvePath(const std::string& p, const fs::path& baseDir) {
+    const fs::path path(p);
+    return path.is_absolute() ? path : baseDir / path;
+}
+
+VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
+    VolumeSource v;
+    if (f.raw().is_null())
+        f.fail("is required", "add \"volume\": \"path/to/volume\" or {\"phantom\": \"torso\"}");
+    if (f.isString()) {
+        v.path = resolvePath(f.string(), baseDir);
+        return v;
+    }
+    f.allowOnly({"path", "phantom", "size", "series", "nonfinite"});
+    if (f.has("path") == f.has("phantom")) f.fail("needs exactly one of 'path' or 'phantom'");
+    if (f.has("path")) v.path = resolvePath(f.child("path").string(), baseDir);
+    if (f.has("phantom")) v.phantom = f.child("phantom").string();
+    f.get("size", v.phantomSize, 8, 1024);
+    if (f.has("series")) v.readOptions.dicomSeriesUid = f.child("series").string();
+    if (f.has("nonfinite"))
+        v.readOptions.nonFinite = f.child("nonfinite").oneOf({"reject", "min"}) == "min"
+                                      ? NonFinitePolicy::ReplaceWithMin
+                                      : NonFinitePolicy::Reject;
+    return v;
+}
+
+TransferFunctionDesc parseTransferFunction(const Field& f) {
+    TransferFunctionDesc tf;
+    if (f.raw().is_null()) return tf;  // renderer picks a default for the modality
+    if (f.isString()) {
+        tf.preset = f.string();
+        return tf;
+    }
+    f.allowOnly({"preset", "points", "extinction_scale"});
+    if (f.has("preset") == f.has("points")) f.fail("needs exactly one of 'preset' or 'points'");
+    if (f.has("preset")) tf.preset = f.child("preset").string();
+    f.get("extinction_scale", tf.extinctionScale, 0.0, 1e6);
+    if (f.has("points")) {
+        const Field pts = f.child("points");
+        if (!pts.isArray() || pts.size() < 1)
+            pts.fail("must be a non-empty array of control points");
+        for (std::size_t i = 0; i < pts.size(); ++i) {
+            const Field p = pts.at(i);
+            p.allowOnly({"value", "color", "extinction", "emission"});
+            TransferFunctionPoint tp;
+            if (!p.has("value")) p.fail("needs a 'value'");
+            tp.value = p.child("value").number();
+            p.get("color", tp.color, 0.0, 1.0);
+            p.get("extinction", tp.extinction, 0.0, 1e6);
+            p.get("emission", tp.emission, 0.0, 1e9);
+            if (!tf.points.empty() && !(tp.value > tf.points.back().value)) {
+                std::ostringstream os;
+                os << "must be strictly increasing; got " << tp.value << " after "
+                   << tf.points.back().value;
+                p.child("value").fail(os.str(), "sort the points by value");
+            }
+            tf.points.push_back(tp);
+        }
+    }
+    return tf;
+}
+
+CameraDesc parseCamera(const Field& f) {
+    CameraDesc c;
+    if (f.raw().is_null()) return c;
+    f.allowOnly({"projection", "azimuth", "elevation", "roll", "distance", "fov_y", "ortho_height",
+                 "target", "eye", "up"});
+    f.get("projection", c.projection, {"perspective", "orthographic"});
+    f.get("azimuth", c.azimuthDeg, -360.0, 360.0);
+    f.get("elevation", c.elevationDeg, -90.0, 90.0);
+    f.get("roll", c.rollDeg, -360.0, 360.0);
+    f.get("distance", c.distance, 0.0, kMaxCoord);
+    f.get("fov_y", c.fovYDeg, 1.0, 170.0);
+    f.get("ortho_height", c.orthoHeight, 0.0, kMaxCoord);
+    if (f.has("target")) c.target = f.child("target").vec3(-kMaxCoord, kMaxCoord);
+    if (f.has("eye")) c.eye = f.child("eye").vec3(-kMaxCoord, kMaxCoord);
+    f.getDirection("up", c.up);
+    if (c.eye && c.target && glm::length(*c.eye - *c.target) < 1e-9)
+        f.child("eye").fail("coincides with the target", "move the eye away from the target");
+    return c;
+}
+
+LightDesc parseLight(const Field& f, const fs::path& baseDir) {
+    f.expectObject();
+    LightDesc l;
+    if (!f.has("type")) f.fail("needs a 'type'", "one of: directional, point, area, environment");
+    l.type = f.child("type").oneOf({"directional", "point", "area", "environment"});
+    std::vector<std::string> allowed = {"type", "color", "intensity"};
+    if (l.type == "directional") allowed.insert(allowed.end(), {"direction"});
+    if (l.type == "point") allowed.insert(allowed.end(), {"position", "min_distance"});
+    if (l.type == "area")
+        allowed.insert(allowed.end(), {"shape", "position", "normal", "radius", "size"});
+    if (l.type == "environment") allowed.insert(allowed.end(), {"path", "rotation", "layout"});
+    f.allowOnly(allowed);
+    f.get("color", l.color, 0.0, 1e9);
+    f.get("intensity", l.intensity, 0.0, 1e12);
+    f.getDirection("direction", l.direction);
+    f.get("position", l.position, -kMaxCoord, kMaxCoord);
+    f.get("min_distance", l.minDistance, 1e-6, kMaxCoord);
+    f.get("shape", l.shape, {"sphere", "rect", "disk"});
+    f.getDirection("normal", l.normal);
+    f.get("radius", l.radius, 1e-6, kMaxCoord);
+    if (f.has("size")) {
+        const Field s = f.child("size");
+        if (!s.isArray() || s.size() != 2) s.fail("must be [width, height] in mm");
+        l.size = {s.at(0).number(1e-6, kMaxCoord), s.at(1).number(1e-6, kMaxCoord)};
+    }
+    if (l.type == "environment") {
+        if (!f.has("path")) f.fail("needs a 'path' to an .hdr or .exr environment map");
+        l.path = resolvePath(f.child("path").string(), baseDir);
+    }
+    f.get("rotation", l.rotationDeg, -360.0, 360.0);
+    f.get("layout", l.layout, {"equirect", "probe"});
+    return l;
+}
+
+}  // namespace
+
+const std::vector<std::string>& knownMethods() {
+    static const std::vector<std::string> m = {
+        "emission-absorption", "gradient", "mip",  "minip",    "iso", "sh-local",
+        "sh-global",           "ritschel", "pvrt", "pathtrace"};
+    return m;
+}
+
+const std::vector<std::string>& knownEffects() {
+    static const std::vector<std::string> e = {"local_shadows",       "global_shadows",
+                                               "multiple_scattering", "specular",
+                                               "depth_of_field",      "ambient_occlusion"};
+    return e;
+}
+
+void applyOverride(json& doc, const std::string& assignment) {
+    const auto eq = assignment.find('=');
+    if (eq == std::string::npos || eq == 0)
+        throw InputError("--set", assignment, "is not of the form key=value",
+                         "e.g. --set camera.azimuth=45");
+    const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
+    json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
+    if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
+    json* node = &doc;
+    std::size_t start = 0;
+    while (true) {
+        const auto dot = key.find('.', start);
+        const std::string part =
+            key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+        if (part.empty())
+            throw InputError("--set", key, "has an empty path component",
+                             "e.g. lights.0.intensity=2");
+        const bool isIndex = std::all_of(part.begin(), part.end(), ::isdigit);
+        if (isIndex && node->is_array()) {
+            const std::size_t i = std::stoul(part);
+            if (i >= node->size())
+                throw InputError("--set", key,
+                                 "index " + part + " is past the end (size " +
+                                     std::to_string(node->size()) + ")");
+            node = &(*node)[i];
+        } else {
+            if (node->is_null()) *node = json::object();
+            if (!node->is_object())
+                throw InputError(
+                    "--set", key,
+                    "'" + part + "' descends into " + typeName(*node) + ", not an object");
+            node = &(*node)[part];
+        }
+        if (dot == std::string::npos) break;
+        start = dot + 1;
+    }
+    *node = value;
+}
+
+Scene parseScene(const json& doc, const std::string& source, const fs::path& baseDir) {
+    Scene s;
+    s.source = source;
+    s.document = doc;
+    const Field root(doc, "", s.source);
+    root.allowOnly({"volume", "transfer_function", "camera", "lights", "clip_planes", "crop_box",
+                    "method", "image", "render", "effects", "description"});
+    s.volume = parseVolume(root.child("volume"), baseDir);
+    s.transferFunction = parseTransferFunction(root.child("transfer_function"));
+    s.camera = parseCamera(root.child("camera"));
+    if (root.has("lights")) {
+        const Field ls = root.child("lights");
+        if (!ls.isArray()) ls.fail("must be an array of lights");
+        for (std::size_t i = 0; i < ls.size(); ++i)
+            s.lights.push_back(parseLight(ls.at(i), baseDir));
+    }
+    if (root.has("clip_planes")) {
+        const Field cs = root.child("clip_planes");
+        if (!cs.isArray()) cs.fail("must be an array of {point, normal}");
+        for (std::size_t i = 0; i < cs.size(); ++i) {
+            const Field c = cs.at(i);
+            c.allowOnly({"point", "normal"});
+            ClipPlaneDesc p;
+            c.get("point", p.point, -kMaxCoord, kMaxCoord);
+            if (!c.has("normal")) c.fail("needs a 'normal'");
+            p.normal = c.child("normal").unitVec3();
+            s.clipPlanes.push_back(p);
+        }
+    }
+    if (root.has("crop_box")) {
+        const Field c = root.child("crop_box");
+        c.allowOnly({"min", "max"});
+        if (!c.has("min") || !c.has("max")) c.fail("needs 'min' and 'max' corners in mm");
+        CropBoxDesc b{c.child("min").vec3(-kMaxCoord, kMaxCoord),
+                      c.child("max").vec3(-kMaxCoord, kMaxCoord)};
+        for (int a = 0; a < 3; ++a)
+            if (!(b.min[a] < b.max[a])) c.child("min").fail("must be below 'max' on every axis");
+        s.cropBox = b;
+    }
+    if (root.has("method")) {
+        const Field m = root.child("method");
+        if (m.isString()) {
+            s.method.name = m.oneOf(knownMethods());
+        } else {
+            m.allowOnly({"name", "params"});
+            if (!m.has("name")) m.fail("needs a 'name'", "one of: " + joinList(knownMethods()));
+            s.method.name = m.child("name").oneOf(knownMethods());
+            if (m.has("params")) {
+                m.child("params").expectObject();
+                s.method.params = m.child("params").raw();
+            }
+        }
+    }
+    if (root.has("image")) {
+        const Field im = root.child("image");
+        im.allowOnly({"width", "height", "background", "exposure"});
+        im.get("width", s.image.width, 1, 16384);
+        im.get("height", s.image.height, 1, 16384);
+        im.get("background", s.image.background, 0.0, 1e9);
+        im.get("exposure", s.image.exposureStops, -30.0, 30.0);
+    }
+    if (root.has("render")) {
+        const Field r = root.child("render");
+        r.allowOnly({"step", "seed", "threads"});
+        r.get("step", s.render.stepVoxels, 0.01, 16.0);
+        int seed = 1;
+        r.get("seed", seed, 0, 2147483647);
+        s.render.seed = std::uint64_t(seed);
+        r.get("threads", s.render.threads, 0, 1024);
+    }
+    if (root.has("effects")) {
+        const Field e = root.child("effects");
+        if (!e.isArray()) e.fail("must be an array of effect names", "e.g. [\"local_shadows\"]");
+        for (std::size_t i = 0; i < e.size(); ++i)
+            s.effects.push_back(e.at(i).oneOf(knownEffects()));
+    }
+    return s;
+}
+
+Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
+    std::ifstream in(path);
+    if (!in) throw InputError(path.string(), "", "cannot be opened", "check the path");
+    json doc;
+    try {
+        doc = json::parse(in);
+    } catch (const json::parse_error& e) {
+        std::string what = e.what();
+        const auto p = what.find("parse error");
+        throw InputError(path.string(), "",
+                         "is not valid JSON: " + (p == std::string::npos ? what : what.substr(p)),
+                         "fix the syntax at the byte shown");
+    }
+    for (const auto& o : overrides) applyOverride(doc, o);
+    fs::path base = path.parent_path();
+    if (base.empty()) base = ".";
+    return parseScene(doc, path.string(), base);
+}
+
+}  // namespace voxlight::io

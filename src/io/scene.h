@@ -1,0 +1,153 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The scene file (JSON): what to render and how. One document drives `voxlight render`, `iso`,
+// `sweep`, `replay` and the viewer. Parsing is strict: an unknown key, a wrong type or a value out
+// of range is an InputError naming the dotted key path ("camera.fov_y"), what was found and what is
+// allowed. `--set key=value` overrides any key before validation (value parsed as JSON when it
+// parses, else taken as a string; arrays indexed by number: lights.0.color).
+//
+// Schema (every key optional except volume; defaults in the structs below):
+// {
+//   "volume": "ct.nii.gz" | {"path": "dicom/", "series": "1.2.3", "nonfinite": "reject"|"min"}
+//             | {"phantom": "torso", "size": 128},
+//   "transfer_function": "ct-bone" | {"preset": "ct-bone", "extinction_scale": 1.0}
+//             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0, "emission":
+//             [r,g,b]}, ...]},
+//   "camera": {"projection": "perspective"|"orthographic", "azimuth": deg, "elevation": deg,
+//   "distance": mm (0 = fit),
+//              "fov_y": deg, "ortho_height": mm (0 = fit), "target": [x,y,z] mm, "eye": [x,y,z],
+//              "up": [x,y,z], "roll": deg},
+//   "lights": [{"type": "directional", "direction": [x,y,z] (travel direction), "color": [r,g,b],
+//   "intensity": W/m²},
+//              {"type": "point", "position": [x,y,z], "color": ..., "intensity": W/sr,
+//              "min_distance": mm},
+//              {"type": "area", "shape": "sphere"|"rect"|"disk", "position": ..., "normal": ...,
+//              "radius": mm,
+//               "size": [w,h]},
+//              {"type": "environment", "path": "sky.hdr", "intensity": 1, "rotation": [x,y,z] deg,
+//               "layout": "equirect"|"probe"}],
+//   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z]}]   (keeps the side the normal points to,
+//   as VTK), "crop_box": {"min": [x,y,z], "max": [x,y,z]}             (world mm), "method":
+//   "gradient" | {"name": "gradient", "params": {...}}, "image": {"width": 512, "height": 512,
+//   "background": [r,g,b], "exposure": 0.0 (stops)}, "render": {"step": 0.5 (voxels), "seed": 1,
+//   "threads": 0 (0 = all)}, "effects": ["shadows", ...]
+// }
+// Units: mm, degrees in the file (radians in code after conversion), colours linear RGB.
+#include <filesystem>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "io/volume_io.h"
+
+namespace voxlight::io {
+
+struct VolumeSource {
+    std::filesystem::path
+        path;             ///< resolved against the scene file's directory; empty when a phantom
+    std::string phantom;  ///< phantom name; empty when a path
+    int phantomSize = 0;  ///< 0 = phantom default
+    ReadOptions readOptions;
+};
+
+struct TransferFunctionPoint {
+    double value = 0.0;        ///< physical value (HU for CT)
+    glm::dvec3 color{1.0};     ///< albedo, 0..1
+    double extinction = 0.0;   ///< σt, 1/mm, ≥ 0
+    glm::dvec3 emission{0.0};  ///< emitted radiance, linear RGB, ≥ 0
+};
+
+struct TransferFunctionDesc {
+    std::string preset;  ///< non-empty: a named preset (optics/ knows the list)
+    std::vector<TransferFunctionPoint>
+        points;                    ///< non-empty: explicit points, strictly increasing value
+    double extinctionScale = 1.0;  ///< multiplies σt (density slider)
+};
+
+struct CameraDesc {
+    std::string projection = "perspective";  ///< "perspective" | "orthographic"
+    double azimuthDeg = 30.0, elevationDeg = 20.0, rollDeg = 0.0;
+    double distance = 0.0;             ///< mm from target; 0 = fit the volume in view
+    double fovYDeg = 30.0;             ///< perspective vertical field of view
+    double orthoHeight = 0.0;          ///< orthographic view height, mm; 0 = fit
+    std::optional<glm::dvec3> target;  ///< default: volume centre
+    std::optional<glm::dvec3> eye;  ///< set → explicit look-at (azimuth/elevation/distance ignored)
+    glm::dvec3 up{0.0, 0.0, 1.0};  ///< LPS +z = superior
+};
+
+struct LightDesc {
+    std::string type;  ///< "directional" | "point" | "area" | "environment"
+    glm::dvec3 color{1.0};
+    double intensity = 1.0;
+    glm::dvec3 direction{0.0, 0.0, -1.0};  ///< directional: direction the light travels
+    glm::dvec3 position{0.0};              ///< point / area centre
+    double minDistance = 1.0;              ///< point: mm, clamps 1/d² near the light
+    std::string shape = "sphere";          ///< area
+    glm::dvec3 normal{0.0, 0.0, -1.0};     ///< area (rect/disk)
+    double radius = 10.0;                  ///< area sphere/disk
+    glm::dvec2 size{20.0, 20.0};           ///< area rect
+    std::filesystem::path path;            ///< environment map
+    glm::dvec3 rotationDeg{0.0};           ///< environment rotation (x, y, z Euler, degrees)
+    std::string layout = "equirect";       ///< environment: "equirect" | "probe"
+};
+
+struct ClipPlaneDesc {
+    glm::dvec3 point{0.0};
+    glm::dvec3 normal{0.0, 0.0, 1.0};  ///< unit; the kept half-space is dot(x − point, normal) ≥ 0
+};
+
+struct CropBoxDesc {
+    glm::dvec3 min{0.0}, max{0.0};
+};
+
+struct MethodDesc {
+    std::string name = "gradient";
+    nlohmann::json params = nlohmann::json::object();
+};
+
+struct ImageDesc {
+    int width = 512, height = 512;
+    glm::dvec3 background{0.0};
+    double exposureStops = 0.0;
+};
+
+struct RenderSettings {
+    double stepVoxels = 0.5;  ///< ray-marching step in units of the smallest voxel spacing
+    std::uint64_t seed = 1;
+    int threads = 0;  ///< 0 = all hardware threads
+};
+
+struct Scene {
+    std::string source;  ///< file name used in error messages
+    VolumeSource volume;
+    TransferFunctionDesc transferFunction;
+    CameraDesc camera;
+    std::vector<LightDesc> lights;
+    std::vector<ClipPlaneDesc> clipPlanes;
+    std::optional<CropBoxDesc> cropBox;
+    MethodDesc method;
+    ImageDesc image;
+    RenderSettings render;
+    std::vector<std::string> effects;
+    nlohmann::json document;  ///< the validated document after overrides (echoed into stats)
+};
+
+/// Method names the scene accepts (whether this build implements each is the renderer's business).
+const std::vector<std::string>& knownMethods();
+/// Effect names the scene accepts.
+const std::vector<std::string>& knownEffects();
+
+/// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
+/// override.
+void applyOverride(nlohmann::json& doc, const std::string& assignment);
+
+/// Validates and converts a document. `source` names it in errors; relative paths resolve against
+/// `baseDir`.
+Scene parseScene(const nlohmann::json& doc, const std::string& source,
+                 const std::filesystem::path& baseDir);
+
+/// Reads a scene file, applies overrides in order, validates.
+Scene loadScene(const std::filesystem::path& path, const std::vector<std::string>& overrides = {});
+
+}  // namespace voxlight::io

@@ -1,0 +1,749 @@
+// SPDX-License-Identifier: MIT
+#include "io/volume_io.h"
+
+#include <unistd.h>
+#include <vtkCommand.h>
+#include <vtkDataArray.h>
+#include <vtkImageData.h>
+#include <vtkInformation.h>
+#include <vtkMatrix3x3.h>
+#include <vtkMatrix4x4.h>
+#include <vtkMetaImageReader.h>
+#include <vtkMetaImageWriter.h>
+#include <vtkNIFTIImageHeader.h>
+#include <vtkNIFTIImageReader.h>
+#include <vtkNIFTIImageWriter.h>
+#include <vtkNew.h>
+#include <vtkNrrdReader.h>
+#include <vtkObjectFactory.h>
+#include <vtkOutputWindow.h>
+#include <vtkPointData.h>
+#include <vtkSmartPointer.h>
+#include <vtkStreamingDemandDrivenPipeline.h>
+#include <vtkType.h>
+#include <vtkXMLImageDataReader.h>
+#include <vtkXMLImageDataWriter.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+#include <fstream>
+#include <functional>
+#include <limits>
+#include <mutex>
+#include <sstream>
+
+#include "io/dicom_series.h"
+
+namespace voxlight::io {
+
+namespace fs = std::filesystem;
+using core::Geometry;
+using core::Volume;
+using core::VoxelType;
+
+namespace {
+
+// ---------------------------------------------------------------------------------------------------------------
+// VTK diagnostics: VTK reports problems through vtkErrorMacro → an observer or the global output
+// window. We route both into a per-read list so that a reader's complaint becomes one InputError
+// instead of text on stderr.
+
+class CaptureOutputWindow : public vtkOutputWindow {
+  public:
+    static CaptureOutputWindow* New();
+    vtkTypeMacro(CaptureOutputWindow, vtkOutputWindow);
+    void DisplayText(const char* text) override {
+        std::lock_guard<std::mutex> lock(mutex_);
+        if (text) messages_.emplace_back(text);
+    }
+    std::vector<std::string> take() {
+        std::lock_guard<std::mutex> lock(mutex_);
+        return std::exchange(messages_, {});
+    }
+
+  private:
+    std::mutex mutex_;
+    std::vector<std::string> messages_;
+};
+vtkStandardNewMacro(CaptureOutputWindow);
+
+CaptureOutputWindow& captureWindow() {
+    static vtkSmartPointer<CaptureOutputWindow> w = [] {
+        auto p = vtkSmartPointer<CaptureOutputWindow>::New();
+        vtkOutputWindow::SetInstance(p);
+        return p;
+    }();
+    return *w;
+}
+
+class ErrorObserver : public vtkCommand {
+  public:
+    static ErrorObserver* New() { return new ErrorObserver; }
+    void Execute(vtkObject*, unsigned long event, void* data) override {
+        if (event == vtkCommand::ErrorEvent && data)
+            errors.emplace_back(static_cast<const char*>(data));
+    }
+    std::vector<std::string> errors;
+};
+
+/// First line of a VTK message without the "ERROR: In file, line N / vtkClass (0x...): " preamble.
+std::string cleanVtkMessage(std::string m) {
+    const auto pos = m.find("): ");
+    if (pos != std::string::npos && m.find("ERROR: In") != std::string::npos) m = m.substr(pos + 3);
+    while (!m.empty() && (m.back() == '\n' || m.back() == ' ')) m.pop_back();
+    std::replace(m.begin(), m.end(), '\n', ' ');
+    return m;
+}
+
+/// Runs `update`, turning any VTK error into an InputError for `path`.
+void runVtkChecked(vtkAlgorithm* alg, const fs::path& path, const std::string& what,
+                   const std::function<void()>& update) {
+    captureWindow().take();
+    vtkNew<ErrorObserver> obs;
+    const unsigned long tag = alg->AddObserver(vtkCommand::ErrorEvent, obs);
+    update();
+    alg->RemoveObserver(tag);
+    std::vector<std::string> errs = obs->errors;
+    for (auto& m : captureWindow().take())
+        if (m.find("ERROR") != std::string::npos) errs.push_back(m);
+    if (!errs.empty() || alg->GetErrorCode() != 0) {
+        std::string msg = errs.empty() ? std::string("VTK reported error code ") +
+                                             std::to_string(alg->GetErrorCode())
+                                       : cleanVtkMessage(errs.front());
+        throw InputError(path.string(), what, "could not be read: " + msg,
+                         "check that the file is complete and not corrupt");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Size checks before any allocation.
+
+void checkExtent(const int ext[6], int components, const fs::path& path) {
+    std::ostringstream dims;
+    std::uint64_t voxels = 1;
+    bool bad = false;
+    for (int a = 0; a < 3; ++a) {
+        const long long n = (long long)ext[2 * a + 1] - ext[2 * a] + 1;
+        dims << (a ? "x" : "") << n;
+        if (n < 1 || n > core::kMaxDim) bad = true;
+        if (!bad) voxels *= std::uint64_t(n);
+    }
+    if (bad || voxels > core::kMaxVoxels)
+        throw InputError(path.string(), "dims",
+                         "declares " + dims.str() + " voxels, outside the supported range (1.." +
+                             std::to_string(core::kMaxDim) + " per axis, at most " +
+                             std::to_string(core::kMaxVoxels) + " voxels)",
+                         "the header is corrupt or the volume must be cropped/downsampled first");
+    if (components != 1)
+        throw InputError(path.string(), "components",
+                         "has " + std::to_string(components) +
+                             " components per voxel; voxlight renders scalar volumes",
+                         "extract one channel first");
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// vtkImageData → Volume, converting types that voxlight does not store natively.
+
+template <class Src, class Dst>
+void convertCopy(const Src* src, Dst* dst, std::size_t n) {
+    for (std::size_t i = 0; i < n; ++i) dst[i] = Dst(src[i]);
+}
+
+Volume fromImageData(vtkImageData* img, const fs::path& path, Geometry g) {
+    int ext[6];
+    img->GetExtent(ext);
+    vtkDataArray* scalars = img->GetPointData()->GetScalars();
+    if (!scalars && img->GetPointData()->GetNumberOfArrays() > 0)
+        scalars = img->GetPointData()->GetArray(0);
+    if (!scalars)
+        throw InputError(path.string(), "scalars", "holds no point data array",
+                         "is this an image file?");
+    checkExtent(ext, scalars->GetNumberOfComponents(), path);
+    g.dims = {ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1};
+    const std::size_t n = std::size_t(g.voxelCount());
+    if (std::size_t(scalars->GetNumberOfTuples()) != n)
+        throw InputError(path.string(), "data",
+                         "holds " + std::to_string(scalars->GetNumberOfTuples()) + " values for " +
+                             std::to_string(n) + " voxels",
+                         "the file is truncated or inconsistent");
+
+    const int vt = scalars->GetDataType();
+    auto make = [&](VoxelType t) { return Volume(g, t); };
+    switch (vt) {
+        case VTK_UNSIGNED_CHAR: {
+            Volume v = make(VoxelType::UInt8);
+            std::memcpy(v.data(), scalars->GetVoidPointer(0), n);
+            return v;
+        }
+        case VTK_SHORT: {
+            Volume v = make(VoxelType::Int16);
+            std::memcpy(v.data(), scalars->GetVoidPointer(0), n * 2);
+            return v;
+        }
+        case VTK_UNSIGNED_SHORT: {
+            Volume v = make(VoxelType::UInt16);
+            std::memcpy(v.data(), scalars->GetVoidPointer(0), n * 2);
+            return v;
+        }
+        case VTK_FLOAT: {
+            Volume v = make(VoxelType::Float32);
+            std::memcpy(v.data(), scalars->GetVoidPointer(0), n * 4);
+            return v;
+        }
+        case VTK_CHAR:
+        case VTK_SIGNED_CHAR: {
+            Volume v = make(VoxelType::Int16);
+            convertCopy(static_cast<const signed char*>(scalars->GetVoidPointer(0)),
+                        v.dataAs<std::int16_t>(), n);
+            return v;
+        }
+        default:
+            break;
+    }
+    // Wider types: keep integers exact in int16/uint16 when their range allows, else float32.
+    double range[2];
+    scalars->GetRange(range, 0);
+    const bool integral = vt == VTK_INT || vt == VTK_UNSIGNED_INT || vt == VTK_LONG ||
+                          vt == VTK_UNSIGNED_LONG || vt == VTK_LONG_LONG ||
+                          vt == VTK_UNSIGNED_LONG_LONG || vt == VTK_ID_TYPE;
+    if (!integral && vt != VTK_DOUBLE)
+        throw InputError(
+            path.string(), "type",
+            std::string("voxel type ") + scalars->GetDataTypeAsString() + " is not supported",
+            "convert to int16, uint16 or float32");
+    VoxelType target = VoxelType::Float32;
+    if (integral && range[0] >= -32768 && range[1] <= 32767)
+        target = VoxelType::Int16;
+    else if (integral && range[0] >= 0 && range[1] <= 65535)
+        target = VoxelType::UInt16;
+    Volume v = make(target);
+    for (std::size_t i = 0; i < n; ++i) {
+        const double x = scalars->GetComponent(vtkIdType(i), 0);
+        switch (target) {
+            case VoxelType::Int16:
+                v.dataAs<std::int16_t>()[i] = std::int16_t(x);
+                break;
+            case VoxelType::UInt16:
+                v.dataAs<std::uint16_t>()[i] = std::uint16_t(x);
+                break;
+            default:
+                v.dataAs<float>()[i] = float(x);
+                break;
+        }
+    }
+    return v;
+}
+
+/// Orthonormal check of a direction matrix read from a file (sheared or degenerate → InputError).
+void checkDirection(const glm::dmat3& d, const fs::path& path, const std::string& field) {
+    constexpr double kOrthoTol =
+        1e-3;  // headers store cosines to ~6 digits; shear of 0.06° still passes
+    const glm::dmat3 g = glm::transpose(d) * d;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            if (!std::isfinite(g[c][r]) || std::abs(g[c][r] - (r == c ? 1.0 : 0.0)) > kOrthoTol)
+                throw InputError(path.string(), field,
+                                 "describes a sheared or degenerate grid (axes not orthonormal), "
+                                 "e.g. gantry tilt",
+                                 "reslice the volume to an orthogonal grid first");
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Readers.
+
+struct Reader {
+    std::string name;
+    std::vector<std::string> extensions;  // lower case, with dot; ".nii.gz" matches before ".gz"
+    std::function<bool(const fs::path&)> canRead;
+    std::function<Volume(const fs::path&, const ReadOptions&, const core::Progress&)> read;
+};
+
+std::string lowerName(const fs::path& p) {
+    std::string s = p.filename().string();
+    std::transform(s.begin(), s.end(), s.begin(),
+                   [](unsigned char c) { return char(std::tolower(c)); });
+    return s;
+}
+bool hasExtension(const fs::path& p, const std::vector<std::string>& exts) {
+    const std::string s = lowerName(p);
+    for (const auto& e : exts)
+        if (s.size() > e.size() && s.compare(s.size() - e.size(), e.size(), e) == 0) return true;
+    return false;
+}
+
+Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    vtkNew<vtkNIFTIImageReader> r;
+    r->SetFileName(path.c_str());
+    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    int ext[6];
+    r->GetDataExtent(ext);
+    checkExtent(ext, r->GetNumberOfScalarComponents(), path);
+    progress.report("read", 0.0);
+    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    vtkImageData* img = r->GetOutput();
+
+    // NIfTI world (RAS) = M · (vtkOrigin + ijk ⊙ spacing); M from sform (preferred, as nibabel) or
+    // qform.
+    vtkNIFTIImageHeader* h = r->GetNIFTIHeader();
+    vtkMatrix4x4* m = nullptr;
+    if (h->GetSFormCode() > 0)
+        m = r->GetSFormMatrix();
+    else if (h->GetQFormCode() > 0)
+        m = r->GetQFormMatrix();
+    Geometry g;
+    double sp[3], org[3];
+    img->GetSpacing(sp);
+    img->GetOrigin(org);
+    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
+    if (m) {
+        glm::dmat3 rot;
+        glm::dvec3 t;
+        for (int c = 0; c < 3; ++c) {
+            for (int rr = 0; rr < 3; ++rr) rot[c][rr] = m->GetElement(rr, c);
+            t[c] = m->GetElement(c, 3);
+        }
+        const glm::dmat3 rasToLps(glm::dvec3(-1, 0, 0), glm::dvec3(0, -1, 0), glm::dvec3(0, 0, 1));
+        // VTK folds the scale into spacing; normalise columns in case the matrix carries any
+        // residual scale.
+        glm::dmat3 d = rasToLps * rot;
+        for (int c = 0; c < 3; ++c) {
+            const double len = glm::length(d[c]);
+            if (len > 0) d[c] /= len;
+            if (sp[c] < 0) d[c] = -d[c];
+        }
+        checkDirection(d, path, h->GetSFormCode() > 0 ? "sform" : "qform");
+        g.direction = d;
+        g.origin = rasToLps * (rot * glm::dvec3(org[0], org[1], org[2]) + t);
+    } else {
+        g.origin = glm::dvec3(org[0], org[1], org[2]);
+    }
+    Volume v = fromImageData(img, path, g);
+    const double slope = r->GetRescaleSlope(), inter = r->GetRescaleIntercept();
+    if (std::isfinite(slope) && slope != 0.0) {
+        v.mapping.slope = slope;
+        v.mapping.intercept = std::isfinite(inter) ? inter : 0.0;
+    }
+    std::string descrip = h->GetDescrip() ? h->GetDescrip() : "";
+    v.description = descrip.empty() ? path.filename().string() : descrip;
+    return v;
+}
+
+template <class VtkReader>
+Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r) {
+    r->SetFileName(path.c_str());
+    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    int ext[6];
+    r->GetDataExtent(ext);
+    checkExtent(ext, r->GetNumberOfScalarComponents(), path);
+    progress.report("read", 0.0);
+    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    vtkImageData* img = r->GetOutput();
+    Geometry g;
+    double sp[3], org[3];
+    img->GetSpacing(sp);
+    img->GetOrigin(org);
+    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
+    g.origin = glm::dvec3(org[0], org[1], org[2]);
+    Volume v = fromImageData(img, path, g);
+    v.description = path.filename().string();
+    return v;
+}
+
+/// MetaImage header "Key = Value" pairs (only to validate the raw data file's length before VTK
+/// reads it).
+std::string metaHeaderValue(const fs::path& path, const std::string& key) {
+    std::ifstream in(path, std::ios::binary);
+    std::string line;
+    for (int n = 0; n < 64 && std::getline(in, line); ++n) {
+        const auto eq = line.find('=');
+        if (eq == std::string::npos) continue;
+        std::string k = line.substr(0, eq), val = line.substr(eq + 1);
+        auto trim = [](std::string& s) {
+            s.erase(0, s.find_first_not_of(" \t\r"));
+            s.erase(s.find_last_not_of(" \t\r") + 1);
+        };
+        trim(k);
+        trim(val);
+        if (k == key) return val;
+        if (k == "ElementDataFile") break;  // last header key; binary data may follow
+    }
+    return {};
+}
+
+Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    vtkNew<vtkMetaImageReader> r;
+    r->SetFileName(path.c_str());
+    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    int ext[6];
+    r->GetDataExtent(ext);
+    checkExtent(ext, r->GetNumberOfScalarComponents(), path);
+    // MetaIO reports a short raw file on std::cerr only, so check the length of uncompressed data
+    // ourselves.
+    const std::string compressed = metaHeaderValue(path, "CompressedData");
+    const std::string dataFile = metaHeaderValue(path, "ElementDataFile");
+    if (compressed != "True" && compressed != "true" && !dataFile.empty() && dataFile != "LOCAL" &&
+        dataFile != "LIST" && dataFile.find('%') == std::string::npos) {
+        const fs::path raw = path.parent_path() / dataFile;
+        const std::uint64_t need =
+            std::uint64_t(ext[1] - ext[0] + 1) * (ext[3] - ext[2] + 1) * (ext[5] - ext[4] + 1) *
+            std::uint64_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType())) *
+            std::uint64_t(r->GetNumberOfScalarComponents());
+        std::error_code ec;
+        const auto have = fs::file_size(raw, ec);
+        if (ec)
+            throw InputError(path.string(), "ElementDataFile",
+                             "names '" + dataFile + "', which cannot be opened",
+                             "put the data file beside the header");
+        if (have < need)
+            throw InputError(raw.string(), "data",
+                             "is " + std::to_string(have) + " bytes but the header " +
+                                 path.filename().string() + " needs " + std::to_string(need),
+                             "the raw file is truncated; copy it again");
+    }
+    Volume v = readSimpleVtk(path, progress, r.Get());
+    // MetaImage stores TransformMatrix (row-major direction cosines) — VTK 9.1's reader ignores it.
+    const std::string tm = metaHeaderValue(path, "TransformMatrix");
+    if (!tm.empty()) {
+        std::istringstream is(tm);
+        double e[9];
+        int n = 0;
+        while (n < 9 && is >> e[n]) ++n;
+        if (n == 9) {
+            glm::dmat3 d;
+            for (int c = 0; c < 3; ++c)
+                for (int rr = 0; rr < 3; ++rr)
+                    d[c][rr] = e[3 * c + rr];  // MetaIO: row c = axis c's direction
+            checkDirection(d, path, "TransformMatrix");
+            v.geometry().direction = d;
+        }
+    }
+    const std::string modality = metaHeaderValue(path, "Modality");
+    if (modality == "MET_MOD_CT") v.modality = core::Modality::CT;
+    if (modality == "MET_MOD_MR") v.modality = core::Modality::MR;
+    return v;
+}
+
+Volume readNrrd(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    vtkNew<vtkNrrdReader> r;
+    return readSimpleVtk(path, progress, r.Get());
+}
+
+Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    vtkNew<vtkXMLImageDataReader> r;
+    r->SetFileName(path.c_str());
+    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    int ext[6];
+    r->GetOutputInformation(0)->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), ext);
+    checkExtent(ext, 1, path);
+    progress.report("read", 0.0);
+    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    vtkImageData* img = r->GetOutput();
+    Geometry g;
+    double sp[3], org[3];
+    img->GetSpacing(sp);
+    img->GetOrigin(org);
+    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
+    g.origin = glm::dvec3(org[0], org[1], org[2]);
+    const double* d = img->GetDirectionMatrix()->GetData();  // row-major
+    for (int c = 0; c < 3; ++c)
+        for (int rr = 0; rr < 3; ++rr) g.direction[c][rr] = d[3 * rr + c];
+    checkDirection(g.direction, path, "Direction");
+    Volume v = fromImageData(img, path, g);
+    v.description = path.filename().string();
+    return v;
+}
+
+Volume readRaw(const fs::path& path, const RawLayout& layout) {
+    Geometry g;
+    g.dims = layout.dims;
+    g.spacing = layout.spacing;
+    const int ext[6] = {0, layout.dims.x - 1, 0, layout.dims.y - 1, 0, layout.dims.z - 1};
+    checkExtent(ext, 1, path);
+    for (int a = 0; a < 3; ++a)
+        if (!(layout.spacing[a] > 0) || !std::isfinite(layout.spacing[a]))
+            throw InputError(path.string(), "spacing", "must be positive and finite",
+                             "pass --spacing X,Y,Z in mm");
+    const std::uint64_t need = g.voxelCount() * core::voxelBytes(layout.type);
+    std::error_code ec;
+    const auto have = fs::file_size(path, ec);
+    if (ec) throw InputError(path.string(), "file", "cannot be opened", "check the path");
+    if (have < layout.headerBytes + need)
+        throw InputError(path.string(), "data",
+                         "is " + std::to_string(have) + " bytes but " +
+                             std::to_string(layout.headerBytes) + " header bytes + " +
+                             std::to_string(need) + " data bytes are needed for the stated layout",
+                         "check --dims, --type and --header-bytes");
+    Volume v(g, layout.type);
+    std::ifstream in(path, std::ios::binary);
+    in.seekg(std::streamoff(layout.headerBytes));
+    in.read(static_cast<char*>(v.data()), std::streamsize(need));
+    if (!in)
+        throw InputError(path.string(), "data", "could not be read completely", "check the file");
+    const std::size_t bytes = core::voxelBytes(layout.type);
+    const bool hostBig = std::endian::native == std::endian::big;
+    if (bytes > 1 && layout.bigEndian != hostBig) {
+        auto* p = static_cast<unsigned char*>(v.data());
+        for (std::size_t i = 0; i < std::size_t(g.voxelCount()); ++i)
+            std::reverse(p + i * bytes, p + (i + 1) * bytes);
+    }
+    v.description = path.filename().string();
+    return v;
+}
+
+const std::vector<Reader>& registry() {
+    static const std::vector<Reader> readers = {
+        {"NIfTI",
+         {".nii", ".nii.gz", ".hdr", ".img", ".img.gz"},
+         [](const fs::path& p) {
+             vtkNew<vtkNIFTIImageReader> r;
+             return r->CanReadFile(p.c_str()) > 0;
+         },
+         readNifti},
+        {"NRRD",
+         {".nrrd", ".nhdr"},
+         [](const fs::path& p) {
+             vtkNew<vtkNrrdReader> r;
+             return r->CanReadFile(p.c_str()) > 0;
+         },
+         readNrrd},
+        {"MetaImage",
+         {".mhd", ".mha"},
+         [](const fs::path& p) {
+             vtkNew<vtkMetaImageReader> r;
+             return r->CanReadFile(p.c_str()) > 0;
+         },
+         readMeta},
+        {"VTK XML image",
+         {".vti"},
+         [](const fs::path& p) {
+             vtkNew<vtkXMLImageDataReader> r;
+             return r->CanReadFile(p.c_str()) > 0;
+         },
+         readVti},
+        {"DICOM series",
+         {".dcm", ".ima", ""},
+         [](const fs::path& p) { return detail::looksLikeDicom(p); },
+         [](const fs::path& p, const ReadOptions& o, const core::Progress& pr) {
+             return detail::readDicomSeries(p, o, pr);
+         }},
+    };
+    return readers;
+}
+
+void applyNonFinitePolicy(Volume& v, const fs::path& path, NonFinitePolicy policy) {
+    const std::uint64_t bad = v.countNonFinite();
+    if (bad == 0) return;
+    if (policy == NonFinitePolicy::Reject)
+        throw InputError(path.string(), "voxels",
+                         std::to_string(bad) + " of " + std::to_string(v.voxelCount()) +
+                             " voxels are NaN or Inf",
+                         "pass --nonfinite=min to replace them by the lowest finite value");
+    const float lo = float((v.mapping.slope >= 0 ? v.physicalRange()[0] : v.physicalRange()[1]) -
+                           v.mapping.intercept) /
+                     float(v.mapping.slope);
+    float* p = v.dataAs<float>();
+    for (std::size_t i = 0; i < std::size_t(v.voxelCount()); ++i)
+        if (!std::isfinite(p[i])) p[i] = lo;
+}
+
+}  // namespace
+
+std::vector<std::string> supportedVolumeFormats() {
+    std::vector<std::string> out;
+    for (const auto& r : registry()) {
+        std::string s = r.name + " (";
+        bool first = true;
+        for (const auto& e : r.extensions) {
+            if (e.empty()) continue;
+            s += (first ? "" : ", ") + e;
+            first = false;
+        }
+        if (r.name == "DICOM series") s += ", or a directory";
+        out.push_back(s + ")");
+    }
+    out.push_back("raw (any file, with --dims/--type/--spacing)");
+    return out;
+}
+
+Volume readVolume(const fs::path& path, const ReadOptions& options,
+                  const core::Progress& progress) {
+    std::error_code ec;
+    if (!fs::exists(path, ec))
+        throw InputError(path.string(), "path", "does not exist",
+                         "check the path (relative to the current directory)");
+    Volume v;
+    if (options.raw) {
+        if (fs::is_directory(path))
+            throw InputError(path.string(), "path", "is a directory, not a raw file");
+        v = readRaw(path, *options.raw);
+        v.format = "raw";
+    } else if (fs::is_directory(path)) {
+        if (!detail::looksLikeDicom(path))
+            throw InputError(path.string(), "path", "is a directory without DICOM files",
+                             "pass a volume file, or a folder holding one DICOM series");
+        v = detail::readDicomSeries(path, options, progress);
+        v.format = "DICOM series";
+    } else {
+        // Readers whose extension matches first, then content sniffing (DICOM files often have no
+        // extension).
+        std::vector<const Reader*> order;
+        for (const auto& r : registry())
+            if (hasExtension(path, r.extensions)) order.push_back(&r);
+        for (const auto& r : registry())
+            if (std::find(order.begin(), order.end(), &r) == order.end()) order.push_back(&r);
+        std::string tried;
+        const Reader* chosen = nullptr;
+        for (const Reader* r : order) {
+            captureWindow().take();
+            const bool ok = r->canRead(path);
+            captureWindow().take();
+            if (ok) {
+                chosen = r;
+                break;
+            }
+            tried += (tried.empty() ? "" : ", ") + r->name;
+        }
+        if (!chosen)
+            throw InputError(
+                path.string(), "format", "is not a volume voxlight can read (tried " + tried + ")",
+                "use NIfTI, NRRD, MetaImage, VTI, a DICOM folder, or raw with --dims/--type");
+        v = chosen->read(path, options, progress);
+        v.format = chosen->name;
+    }
+    applyNonFinitePolicy(v, path, options.nonFinite);
+    v.geometry().validate();
+    return v;
+}
+
+// ---------------------------------------------------------------------------------------------------------------
+// Writing.
+
+namespace {
+int vtkTypeOf(VoxelType t) {
+    switch (t) {
+        case VoxelType::UInt8:
+            return VTK_UNSIGNED_CHAR;
+        case VoxelType::Int16:
+            return VTK_SHORT;
+        case VoxelType::UInt16:
+            return VTK_UNSIGNED_SHORT;
+        case VoxelType::Float32:
+            return VTK_FLOAT;
+    }
+    return VTK_FLOAT;
+}
+
+vtkSmartPointer<vtkImageData> toImageData(const Volume& v) {
+    auto img = vtkSmartPointer<vtkImageData>::New();
+    const Geometry& g = v.geometry();
+    img->SetDimensions(g.dims.x, g.dims.y, g.dims.z);
+    img->SetSpacing(g.spacing.x, g.spacing.y, g.spacing.z);
+    img->SetOrigin(g.origin.x, g.origin.y, g.origin.z);
+    double d[9];
+    for (int rr = 0; rr < 3; ++rr)
+        for (int c = 0; c < 3; ++c) d[3 * rr + c] = g.direction[c][rr];
+    img->SetDirectionMatrix(d);
+    vtkSmartPointer<vtkDataArray> arr;
+    arr.TakeReference(vtkDataArray::CreateDataArray(vtkTypeOf(v.type())));
+    arr->SetNumberOfComponents(1);
+    // Zero-copy: VTK reads our buffer (save=1: VTK must not free it).
+    arr->SetVoidArray(const_cast<void*>(v.data()), vtkIdType(v.voxelCount()), 1);
+    arr->SetName("scalars");
+    img->GetPointData()->SetScalars(arr);
+    return img;
+}
+
+bool isIdentity(const glm::dmat3& d) {
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r)
+            if (std::abs(d[c][r] - (r == c ? 1.0 : 0.0)) > 1e-9) return false;
+    return true;
+}
+}  // namespace
+
+void writeVolume(const Volume& v, const fs::path& path) {
+    const std::string name = lowerName(path);
+    auto endsWith = [&](const std::string& e) {
+        return name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0;
+    };
+    std::string ext;
+    for (const char* e : {".nii.gz", ".nii", ".vti", ".mha"})
+        if (endsWith(e)) {
+            ext = e;
+            break;
+        }
+    if (ext.empty())
+        throw InputError(path.string(), "extension", "is not a volume format voxlight writes",
+                         "use .nii.gz, .nii, .vti or .mha");
+    const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
+    if (!fs::is_directory(dir))
+        throw InputError(path.string(), "path", "its directory does not exist",
+                         "create the directory first");
+    // Same directory (same file system) so the final rename is atomic; keep the extension for VTK's
+    // writer choice.
+    const fs::path tmp =
+        dir / (".voxlight-tmp-" + std::to_string(::getpid()) + "-" + path.filename().string());
+    vtkSmartPointer<vtkImageData> img = toImageData(v);
+    vtkSmartPointer<vtkImageWriter> dummy;
+    captureWindow().take();
+    auto fail = [&](const std::string& why) {
+        std::error_code ec;
+        fs::remove(tmp, ec);
+        throw InputError(path.string(), "write", why, "check free disk space and permissions");
+    };
+    if (ext == ".nii" || ext == ".nii.gz") {
+        vtkNew<vtkNIFTIImageWriter> w;
+        w->SetInputData(img);
+        w->SetFileName(tmp.c_str());
+        // LPS → RAS for NIfTI's sform/qform; VTK writes the matrix as given, origin folded in
+        // below.
+        vtkNew<vtkMatrix4x4> m;
+        const glm::dmat3 lpsToRas(glm::dvec3(-1, 0, 0), glm::dvec3(0, -1, 0), glm::dvec3(0, 0, 1));
+        const glm::dmat3 d = lpsToRas * v.geometry().direction;
+        const glm::dvec3 o = lpsToRas * v.geometry().origin;
+        for (int r = 0; r < 3; ++r) {
+            for (int c = 0; c < 3; ++c) m->SetElement(r, c, d[c][r]);
+            m->SetElement(r, 3, o[r]);
+        }
+        img->SetOrigin(0, 0, 0);
+        img->SetDirectionMatrix(1, 0, 0, 0, 1, 0, 0, 0, 1);
+        w->SetQFormMatrix(m);
+        w->SetSFormMatrix(m);
+        w->SetRescaleSlope(v.mapping.slope);
+        w->SetRescaleIntercept(v.mapping.intercept);
+        w->SetDescription(v.description.substr(0, 79).c_str());
+        w->Write();
+        if (w->GetErrorCode() != 0) fail("VTK NIfTI writer failed");
+    } else if (ext == ".vti") {
+        if (v.mapping.slope != 1.0 || v.mapping.intercept != 0.0)
+            throw InputError(path.string(), "extension",
+                             ".vti cannot store a rescale slope/intercept",
+                             "write .nii.gz instead");
+        vtkNew<vtkXMLImageDataWriter> w;
+        w->SetInputData(img);
+        w->SetFileName(tmp.c_str());
+        w->SetDataModeToAppended();
+        w->SetCompressorTypeToZLib();
+        if (w->Write() != 1) fail("VTK XML writer failed");
+    } else {
+        if (!isIdentity(v.geometry().direction) || v.mapping.slope != 1.0 ||
+            v.mapping.intercept != 0.0)
+            throw InputError(path.string(), "extension",
+                             ".mha output keeps neither orientation nor rescale in VTK 9.1",
+                             "write .nii.gz instead");
+        vtkNew<vtkMetaImageWriter> w;
+        w->SetInputData(img);
+        w->SetFileName(tmp.c_str());
+        w->SetCompression(true);
+        w->Write();
+        if (w->GetErrorCode() != 0) fail("VTK MetaImage writer failed");
+    }
+    for (auto& m : captureWindow().take())
+        if (m.find("ERROR") != std::string::npos) fail(cleanVtkMessage(m));
+    std::error_code ec;
+    fs::rename(tmp, path, ec);
+    if (ec) fail("rename from temporary file failed: " + ec.message());
+}
+
+}  // namespace voxlight::io
