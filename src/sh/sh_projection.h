@@ -1,0 +1,80 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Projection of spherical functions onto the SH basis of sh_basis.h: c_i = ∫ f(ω) Y_i(ω) dω,
+// approximated by a weighted sum Σ_k w_k f(ω_k) Y_i(ω_k) (w_k in steradians). Sums are accumulated
+// in double (ARCHITECTURE §3).
+//
+// * ShProjector: an accumulator — add(direction, weight·value) one sample at a time (area lights,
+// cube maps, any
+//   custom quadrature). Evaluates each direction with the unrolled path for L ≤ 4.
+// * projectSamples / projectSamplesRgb: values given at the directions of a SphereSamples set.
+// * projectFunction: a callable f(const glm::dvec3&) → double or glm::dvec3, sampled at a set.
+// * projectEquirect: a latitude–longitude grid of RGB values, separable fast path (O(W·H·L +
+// H·(L+1)²) instead of
+//   O(W·H·(L+1)²)), exactly equal to the pixel-centre midpoint rule with exact per-row pixel solid
+//   angles.
+#include <glm/glm.hpp>
+#include <span>
+#include <type_traits>
+#include <vector>
+
+#include "sh/sh_basis.h"
+#include "sh/sphere_samples.h"
+
+namespace voxlight::sh {
+
+/// Accumulates Σ w f Y_i(ω) for RGB values. Not thread-safe; use one per thread and merge().
+class ShProjector {
+  public:
+    explicit ShProjector(int maxBand);
+    int maxBand() const { return band_; }
+    /// Adds weightedValue · Y_i(unitDir) to every coefficient (weightedValue = f(ω) · solid angle).
+    void add(const glm::dvec3& unitDir, const glm::dvec3& weightedValue);
+    void merge(const ShProjector& other);
+    std::vector<glm::vec3> coefficientsRgb() const;
+    /// The red channel only (for scalar projections where r = g = b).
+    std::vector<float> coefficients() const;
+
+  private:
+    int band_;
+    std::vector<glm::dvec3> sum_;
+};
+
+std::vector<float> projectSamples(int maxBand, const SphereSamples& samples,
+                                  std::span<const float> values);
+std::vector<glm::vec3> projectSamplesRgb(int maxBand, const SphereSamples& samples,
+                                         std::span<const glm::vec3> values);
+
+/// Projects a callable f(const glm::dvec3& unitDir) returning double (→ scalar coefficients) onto
+/// bands 0..L.
+template <class F>
+std::vector<double> projectFunction(int maxBand, const SphereSamples& samples, F&& f) {
+    checkBand(maxBand);
+    const int n = shCount(maxBand);
+    std::vector<double> c(n, 0.0), y(n);
+    for (std::size_t k = 0; k < samples.size(); ++k) {
+        evalShUnitDouble(maxBand, samples.directions[k], y);
+        const double v = samples.weights[k] * double(f(samples.directions[k]));
+        for (int i = 0; i < n; ++i) c[i] += v * y[i];
+    }
+    return c;
+}
+
+/// Latitude–longitude layout of an RGB grid for projectEquirect: row r covers θ ∈ [π r/H, π
+/// (r+1)/H] (row 0 at θ = 0, the +z pole); column c is centred on φ = phi0 + phiStep · (c + ½)
+/// (phiStep may be negative; |phiStep|·W must be 2π).
+struct EquirectLayout {
+    int width = 0, height = 0;
+    double phi0 = 0.0;
+    double phiStep = 0.0;
+};
+
+/// Projects `rgb` (row-major, width·height entries, layout above) onto bands 0..L: the midpoint
+/// rule with the exact solid angle |phiStep|·(cos θ_r − cos θ_{r+1}) of each pixel.
+std::vector<glm::vec3> projectEquirect(int maxBand, const EquirectLayout& layout,
+                                       std::span<const glm::vec3> rgb);
+
+/// Convenience: coefficient vectors of one channel of an RGB vector.
+std::vector<float> channel(std::span<const glm::vec3> rgb, int c);
+
+}  // namespace voxlight::sh

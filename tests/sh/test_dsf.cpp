@@ -1,0 +1,207 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdio>
+#include <numbers>
+#include <vector>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "sh/dsf.h"
+#include "sh/sh_basis.h"
+
+using namespace voxlight;
+using namespace voxlight::sh;
+
+namespace {
+constexpr double kPi = std::numbers::pi;
+
+glm::dvec3 randomDirection(core::CounterRng& rng) {
+    const double z = 1 - 2 * rng.uniformDouble(), phi = 2 * kPi * rng.uniformDouble();
+    const double r = std::sqrt(1 - z * z);
+    return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
+const Dsf& dsf642() {
+    static const Dsf d(642);
+    return d;
+}
+
+// Zhang's synthetic high-frequency "checkerboard" environment: 22.5° checks in (θ, φ), values 1 and
+// 0.05.
+std::vector<glm::vec3> checkerboard(const EquirectLayout& layout) {
+    std::vector<glm::vec3> img(std::size_t(layout.width) * layout.height);
+    for (int r = 0; r < layout.height; ++r)
+        for (int c = 0; c < layout.width; ++c) {
+            const int i = int(8.0 * (r + 0.5) / layout.height),
+                      j = int(16.0 * (c + 0.5) / layout.width);
+            img[std::size_t(r) * layout.width + c] = glm::vec3((i + j) % 2 ? 1.0f : 0.05f);
+        }
+    return img;
+}
+}  // namespace
+
+TEST(Dsf, CountsAndKernelRadius) {
+    for (int n : {42, 162, 642}) {
+        const Dsf d(n);
+        EXPECT_EQ(d.size(), n);
+        EXPECT_NEAR(d.kernelRadius(), minimumSeparation(d.directions()), 1e-12);
+        double sum = 0;
+        for (double a : d.basisSolidAngles()) {
+            EXPECT_GT(a, 0.0);
+            sum += a;
+        }
+        EXPECT_NEAR(sum, 4 * kPi,
+                    1e-9);  // partition of unity integrated by an exact-sum quadrature
+    }
+    EXPECT_THROW(Dsf(100), InputError);
+}
+
+TEST(Dsf, InterpolatesAtItsDirections) {
+    const Dsf& d = dsf642();
+    std::vector<float> s(d.size());
+    core::CounterRng rng(1);
+    for (float& v : s) v = rng.uniform();
+    for (int k = 0; k < d.size(); ++k)
+        ASSERT_NEAR(d.evaluate(s, d.directions()[k]), s[k], 1e-6) << k;
+}
+
+TEST(Dsf, LocalLookupEqualsBruteForceKernel) {
+    const Dsf& d = dsf642();
+    const double h = d.kernelRadius();
+    core::CounterRng rng(2);
+    int idx[Dsf::kMaxSupport];
+    double w[Dsf::kMaxSupport];
+    for (int t = 0; t < 3000; ++t) {
+        const glm::dvec3 x = randomDirection(rng);
+        std::vector<double> ref(d.size(), 0.0);
+        double sum = 0;
+        for (int k = 0; k < d.size(); ++k) {
+            const double th = std::acos(std::clamp(glm::dot(x, d.directions()[k]), -1.0, 1.0));
+            if (th < h) sum += ref[k] = std::pow(h * h - th * th, 3);
+        }
+        ASSERT_GT(sum, 0.0) << "a direction with no DSF direction within h";
+        const int n = d.weights(x, idx, w);
+        double got = 0;
+        int nonzero = 0;
+        for (double r : ref) nonzero += r > 0;
+        ASSERT_EQ(n, nonzero);
+        for (int j = 0; j < n; ++j) {
+            ASSERT_NEAR(w[j], ref[idx[j]] / sum, 1e-12);
+            got += w[j];
+        }
+        ASSERT_NEAR(got, 1.0, 1e-12);
+    }
+}
+
+TEST(Dsf, DirectionalLightIsABarycentricBlend) {
+    const Dsf& d = dsf642();
+    core::CounterRng rng(3);
+    for (int t = 0; t < 500; ++t) {
+        const glm::dvec3 x = randomDirection(rng);
+        int idx[3];
+        double b[3];
+        d.barycentric(x, idx, b);
+        // Σ b_k ω_k is the ray's hit on the triangle's plane: parallel to x.
+        glm::dvec3 p(0.0);
+        for (int i = 0; i < 3; ++i) {
+            ASSERT_GE(b[i], 0.0);
+            p += b[i] * d.directions()[idx[i]];
+        }
+        ASSERT_NEAR(b[0] + b[1] + b[2], 1.0, 1e-12);
+        ASSERT_GT(glm::dot(glm::normalize(p), x), 1.0 - 1e-12);
+        // Irradiance is conserved: Σ A_k s_k = E.
+        std::vector<glm::vec3> s(d.size(), glm::vec3(0.0f));
+        d.addDirectional(s, x, glm::vec3(3.0f, 2.0f, 1.0f));
+        const glm::dvec3 e = d.integrate(s);
+        ASSERT_NEAR(e.x, 3.0, 1e-5);
+        ASSERT_NEAR(e.z, 1.0, 1e-5);
+    }
+    // At a DSF direction the light lands on that direction alone.
+    int idx[3];
+    double b[3];
+    d.barycentric(d.directions()[17], idx, b);
+    for (int i = 0; i < 3; ++i)
+        if (idx[i] == 17) {
+            EXPECT_NEAR(b[i], 1.0, 1e-9);
+        }
+}
+
+TEST(Dsf, PrefilteredSamplingOfSmoothAndConstantMaps) {
+    const Dsf& d = dsf642();
+    constexpr int kW = 256, kH = 128;
+    const EquirectLayout layout{kW, kH, 0.0, 2 * kPi / kW};
+    std::vector<glm::vec3> img(kW * kH, glm::vec3(0.7f));
+    for (const auto& v : d.sampleEquirect(layout, img)) ASSERT_NEAR(v.x, 0.7f, 1e-5);
+    // A linear function f = 1 + ω·a: the Gaussian mean of a linear function over a symmetric window
+    // is (1 + cos-shrink · ω_k·a); with σ = h/3 ≈ 0.03 rad the shrink 1 − σ² ≈ 0.999.
+    const glm::dvec3 a(0.3, 0.2, -0.5);
+    for (int r = 0; r < kH; ++r)
+        for (int c = 0; c < kW; ++c) {
+            const glm::dvec3 w =
+                sphericalToDirection(kPi * (r + 0.5) / kH, 2 * kPi * (c + 0.5) / kW);
+            img[r * kW + c] = glm::vec3(float(1.0 + glm::dot(w, a)));
+        }
+    const auto s = d.sampleEquirect(layout, img);
+    for (int k = 0; k < d.size(); ++k)
+        ASSERT_NEAR(s[k].x, 1.0 + glm::dot(d.directions()[k], a), 5e-3) << k;
+}
+
+// Zhang et al. 2013 Fig. 7 on their synthetic checkerboard: DSF vs SH with a similar coefficient
+// count. Prints the table (run the test binary, or ctest -V). What reproduces, and is asserted: DSF
+// beats SH once SH is windowed (Hanning) so that it does not ring negative — the form SH lighting
+// must take — and DSF error falls with n. What does not reproduce: plain SH truncation has the
+// *lower* L2 error here. That is forced by mathematics: SH truncation is the orthogonal
+// (L2-optimal) projection onto its span, while DSF coefficients are prefiltered samples, not a
+// projection. The paper's plain-SH numbers cannot be matched without changing the metric; we assert
+// the true relation instead (so a regression in either basis shows up) and keep the numbers
+// visible.
+TEST(Dsf, Fig7DsfBeatsShOnHighFrequencyEnvironment) {
+    constexpr int kW = 512, kH = 256;
+    const EquirectLayout layout{kW, kH, 0.0, 2 * kPi / kW};
+    const auto img = checkerboard(layout);
+    const int counts[] = {42, 162, 642};
+    const auto rows = compareDsfWithSh(layout, img, counts);
+    std::printf(
+        "\nZhang 2013 Fig. 7 (synthetic checkerboard, 22.5° checks, %dx%d): relative L2 error\n",
+        kW, kH);
+    std::printf("  DSF n | DSF error | SH L | SH coeffs | SH error | SH+Hanning error\n");
+    for (const auto& r : rows)
+        std::printf("  %5d | %8.2f%% | %4d | %9d | %7.2f%% | %7.2f%%\n", r.dsfCount,
+                    100 * r.dsfError, r.shBand, r.shCount, 100 * r.shError, 100 * r.shHanningError);
+    // At n = 42 the 22.5° checks are beyond both bases (both keep little more than the mean, errors
+    // equal to 0.01 %), so the comparison is asserted for 162 and 642 only.
+    for (const auto& r : rows) {
+        if (r.dsfCount < 162) continue;
+        EXPECT_LT(r.dsfError, r.shHanningError)
+            << "DSF " << r.dsfCount << " vs windowed SH band " << r.shBand;
+        EXPECT_GT(r.dsfError, r.shError)
+            << "plain SH truncation is L2-optimal in its span; if DSF wins now, "
+               "update the comment above and the report";
+        RecordProperty("dsf" + std::to_string(r.dsfCount) + "_error", std::to_string(r.dsfError));
+        RecordProperty("sh" + std::to_string(r.shCount) + "_error", std::to_string(r.shError));
+    }
+    // More directions → smaller error (Zhang Fig. 6).
+    EXPECT_LT(rows[2].dsfError, rows[1].dsfError);
+    EXPECT_LT(rows[1].dsfError, rows[0].dsfError);
+}
+
+TEST(Dsf, ReconstructionOfNonNegativeLightStaysNonNegative) {
+    // Weights are ≥ 0 and prefiltering averages, so a non-negative environment never reconstructs
+    // negative — unlike truncated SH (checked on the same checkerboard at band 24).
+    constexpr int kW = 256, kH = 128;
+    const EquirectLayout layout{kW, kH, 0.0, 2 * kPi / kW};
+    const auto img = checkerboard(layout);
+    const auto s = dsf642().sampleEquirect(layout, img);
+    const auto c = projectEquirect(24, layout, img);
+    const auto red = channel(c, 0);
+    const SphereSamples test = fibonacciSamples(5000);
+    double dsfMin = INFINITY, shMin = INFINITY;
+    for (const auto& d : test.directions) {
+        dsfMin = std::min(dsfMin, double(dsf642().evaluateRgb(s, d).x));
+        shMin = std::min(shMin, double(shReconstruct(red, glm::vec3(d))));
+    }
+    EXPECT_GE(dsfMin, 0.05 - 1e-6);  // the checkerboard's dark value
+    EXPECT_LT(shMin, 0.0);
+}
