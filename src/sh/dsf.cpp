@@ -186,7 +186,8 @@ void Dsf::addDirectional(std::span<glm::vec3> s, const glm::dvec3& towardLight,
 }
 
 std::vector<glm::vec3> Dsf::sampleEquirect(const EquirectLayout& layout,
-                                           std::span<const glm::vec3> rgb, double sigma) const {
+                                           std::span<const glm::vec3> rgb, double sigma,
+                                           const glm::dmat3& mapFromWorld) const {
     const int w = layout.width, h = layout.height;
     if (w <= 0 || h <= 0)
         throw InputError("dsf", "equirect size", "grid is empty",
@@ -209,7 +210,7 @@ std::vector<glm::vec3> Dsf::sampleEquirect(const EquirectLayout& layout,
     }
     std::vector<glm::vec3> s(dirs_.size());
     for (int k = 0; k < size(); ++k) {
-        const glm::dvec3 d = dirs_[k];
+        const glm::dvec3 d = glm::normalize(mapFromWorld * dirs_[k]);
         const double theta = std::acos(std::clamp(d.z, -1.0, 1.0));
         const double phi = std::atan2(d.y, d.x);
         const int r0 = std::max(0, int(std::floor((theta - cutoff) / kPi * h)));
@@ -247,6 +248,35 @@ std::vector<glm::vec3> Dsf::sampleEquirect(const EquirectLayout& layout,
         // A grid coarser than the filter: fall back to the nearest pixel centre.
         s[k] = glm::vec3(wsum > 0 ? acc / wsum : nearest);
     }
+    return s;
+}
+
+std::vector<glm::vec3> Dsf::projectEquirect(const EquirectLayout& layout,
+                                            std::span<const glm::vec3> rgb,
+                                            const glm::dmat3& mapFromWorld) const {
+    const int w = layout.width, h = layout.height;
+    if (w <= 0 || h <= 0)
+        throw InputError("dsf", "equirect size", "grid is empty",
+                         "give a non-empty latitude–longitude image");
+    VL_CHECK_EQ(rgb.size(), std::size_t(w) * std::size_t(h));
+    const glm::dmat3 worldFromMap = glm::transpose(mapFromWorld);
+    std::vector<glm::dvec3> acc(dirs_.size(), glm::dvec3(0.0));
+    int idx[kMaxSupport];
+    double wt[kMaxSupport];
+    for (int r = 0; r < h; ++r) {
+        const double t0 = kPi * r / h, t1 = kPi * (r + 1) / h;
+        const double omega = std::abs(layout.phiStep) * (std::cos(t0) - std::cos(t1));
+        for (int c = 0; c < w; ++c) {
+            const glm::dvec3 v = glm::dvec3(rgb[std::size_t(r) * w + c]) * omega;
+            const glm::dvec3 d =
+                worldFromMap *
+                sphericalToDirection(0.5 * (t0 + t1), layout.phi0 + layout.phiStep * (c + 0.5));
+            const int n = weights(d, idx, wt);
+            for (int j = 0; j < n; ++j) acc[idx[j]] += v * wt[j];
+        }
+    }
+    std::vector<glm::vec3> s(dirs_.size());
+    for (int k = 0; k < size(); ++k) s[k] = glm::vec3(acc[k] / area_[k]);
     return s;
 }
 
@@ -299,6 +329,9 @@ std::vector<DsfShComparisonRow> compareDsfWithSh(const EquirectLayout& layout,
         const Dsf dsf(n);
         const auto s = dsf.sampleEquirect(layout, rgb);
         row.dsfError = relError([&](std::size_t p) { return dsf.evaluateRgb(s, dir[p]); });
+        const auto sp = dsf.projectEquirect(layout, rgb);
+        row.dsfProjectedError =
+            relError([&](std::size_t p) { return dsf.evaluateRgb(sp, dir[p]); });
 
         int band = 0;
         for (int l = 0; l <= kMaxBand; ++l)

@@ -75,8 +75,20 @@ class Dsf {
     }
     /// s_k = Gaussian-weighted mean of an equirect grid (sh_projection.h layout) around ω_k,
     /// weights exp(−θ²/2σ²)·pixel solid angle, truncated at 3σ. σ ≤ 0 means h/3.
+    /// `mapFromWorld` rotates the DSF directions into the grid's frame first (an environment map
+    /// rotated by R is sampled with mapFromWorld = Rᵀ): the DSF way to rotate lighting (Zhang
+    /// §5.1).
     std::vector<glm::vec3> sampleEquirect(const EquirectLayout& layout,
-                                          std::span<const glm::vec3> rgb, double sigma = 0.0) const;
+                                          std::span<const glm::vec3> rgb, double sigma = 0.0,
+                                          const glm::dmat3& mapFromWorld = glm::dmat3(1.0)) const;
+
+    /// Energy-conserving alternative to sampleEquirect: s_k = (1/A_k) Σ_p L_p Ω_p w̄_k(ω_p) — each
+    /// pixel is split among the basis functions covering it, so Σ_k A_k s_k = Σ_p L_p Ω_p exactly
+    /// (a small sun between directions keeps its power, and rotating it does not make the total
+    /// flicker). `mapFromWorld` as above.
+    std::vector<glm::vec3> projectEquirect(const EquirectLayout& layout,
+                                           std::span<const glm::vec3> rgb,
+                                           const glm::dmat3& mapFromWorld = glm::dmat3(1.0)) const;
 
     /// ∫ S dω = Σ A_k s_k.
     glm::dvec3 integrate(std::span<const glm::vec3> s) const;
@@ -107,6 +119,8 @@ struct DsfShComparisonRow {
     int shCount = 0;
     double shError = 0;         ///< plain truncation
     double shHanningError = 0;  ///< with the Hanning window
+    double dsfProjectedError =
+        0;  ///< DSF with the energy-conserving projectEquirect instead of sampling
 };
 
 /// Reconstructs an equirect environment with DSF of each count (prefiltered sampling) and with SH

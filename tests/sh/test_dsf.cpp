@@ -166,10 +166,12 @@ TEST(Dsf, Fig7DsfBeatsShOnHighFrequencyEnvironment) {
     std::printf(
         "\nZhang 2013 Fig. 7 (synthetic checkerboard, 22.5° checks, %dx%d): relative L2 error\n",
         kW, kH);
-    std::printf("  DSF n | DSF error | SH L | SH coeffs | SH error | SH+Hanning error\n");
+    std::printf(
+        "  DSF n | DSF error | DSF energy-cons. | SH L | SH coeffs | SH error | SH+Hanning\n");
     for (const auto& r : rows)
-        std::printf("  %5d | %8.2f%% | %4d | %9d | %7.2f%% | %7.2f%%\n", r.dsfCount,
-                    100 * r.dsfError, r.shBand, r.shCount, 100 * r.shError, 100 * r.shHanningError);
+        std::printf("  %5d | %8.2f%% | %15.2f%% | %4d | %9d | %7.2f%% | %9.2f%%\n", r.dsfCount,
+                    100 * r.dsfError, 100 * r.dsfProjectedError, r.shBand, r.shCount,
+                    100 * r.shError, 100 * r.shHanningError);
     // At n = 42 the 22.5° checks are beyond both bases (both keep little more than the mean, errors
     // equal to 0.01 %), so the comparison is asserted for 162 and 642 only.
     for (const auto& r : rows) {

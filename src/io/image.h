@@ -1,0 +1,52 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Float RGBA images and their files (OpenImageIO). Used by environment maps and by the renderer's
+// output.
+//
+// ImageRGBA: width × height pixels, 4 floats each (R, G, B, A interleaved), row 0 = top of the
+// picture. Values are linear radiance for HDR formats (.hdr, .exr, .pfm, float TIFF). For 8/16-bit
+// formats (.png, .jpg …) readImage returns the stored values scaled to 0..1 with no colour-space
+// conversion (display-encoded, usually sRGB) — ImageReadInfo::floatingPoint tells the caller which
+// case it got.
+//
+// readImage: any format OpenImageIO reads. 1 channel → (v, v, v, 1); 2 → (v, v, v, a); 3 → (r, g,
+// b, 1); ≥ 4 → the first four. Missing file, unreadable/corrupt data or zero size → InputError
+// naming the file and what to do. writeImage: format by extension. .exr → linear float (or half,
+// WriteOptions) RGBA; .hdr → RGBE (alpha dropped); .png/.jpg/.tif/.bmp → 8-bit, the caller provides
+// display values in 0..1 which are clamped and rounded (NaN/Inf → InputError, as they would
+// otherwise silently become 0 or 255). The file is written to a temporary name in the same
+// directory and renamed, so a crash never leaves a half-written file.
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace voxlight::io {
+
+struct ImageRGBA {
+    int width = 0, height = 0;
+    std::vector<float> pixels;  ///< RGBA interleaved, linear, row 0 = top; size = 4·width·height
+
+    ImageRGBA() = default;
+    ImageRGBA(int w, int h) : width(w), height(h), pixels(std::size_t(4) * w * h, 0.0f) {}
+    float* at(int x, int y) { return pixels.data() + 4 * (std::size_t(y) * width + x); }
+    const float* at(int x, int y) const { return pixels.data() + 4 * (std::size_t(y) * width + x); }
+};
+
+/// What the file held before promotion to float RGBA.
+struct ImageReadInfo {
+    int channels = 0;            ///< channels in the file
+    bool floatingPoint = false;  ///< half/float/double pixels (HDR) rather than integers
+    std::string format;          ///< OpenImageIO's format name, e.g. "openexr", "hdr", "png"
+};
+
+ImageRGBA readImage(const std::filesystem::path& path);
+ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info);
+
+struct ImageWriteOptions {
+    bool exrHalf = false;  ///< .exr: 16-bit half instead of 32-bit float
+};
+void writeImage(const ImageRGBA& image, const std::filesystem::path& path);
+void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
+                const ImageWriteOptions& options);
+
+}  // namespace voxlight::io

@@ -1,0 +1,178 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <numbers>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "lights/area_light.h"
+#include "lights/light.h"
+#include "sh/sh_basis.h"
+#include "sh/sh_projection.h"
+
+using namespace voxlight;
+using namespace voxlight::lights;
+
+namespace {
+constexpr double kPi = std::numbers::pi;
+const double kSqrt4Pi = std::sqrt(4.0 * kPi);
+
+const sh::Dsf& dsf162() {
+    static const sh::Dsf d(162);
+    return d;
+}
+
+// Solid angle of triangle (a, b, c) seen from x (Van Oosterom & Strackee).
+double triangleSolidAngle(const glm::dvec3& x, glm::dvec3 a, glm::dvec3 b, glm::dvec3 c) {
+    a = glm::normalize(a - x), b = glm::normalize(b - x), c = glm::normalize(c - x);
+    return 2.0 * std::atan2(std::abs(glm::dot(a, glm::cross(b, c))),
+                            1.0 + glm::dot(a, b) + glm::dot(b, c) + glm::dot(c, a));
+}
+
+// Monte-Carlo check of a light's sampler: E[value/pdf] = ∫ L dω = Le·Ω, and pdf() agrees with
+// sample().
+void checkSampler(const Light& light, const glm::dvec3& x, double expectedIntegral, double le) {
+    constexpr int kN = 40000;
+    double sum = 0, sum2 = 0;
+    for (int i = 0; i < kN; ++i) {
+        core::CounterRng rng(i, 99);
+        const LightSample s = light.sample(x, {rng.uniform(), rng.uniform()});
+        double v = 0;
+        if (s.pdf > 0) {
+            v = s.value.x / s.pdf;
+            ASSERT_NEAR(light.pdf(x, s.wi), s.pdf, 2e-3 * s.pdf) << light.toString();
+            ASSERT_NEAR(light.radiance(x, s.wi).x, le, 1e-6) << light.toString();
+        }
+        sum += v, sum2 += v * v;
+    }
+    const double mean = sum / kN, sigma = std::sqrt(std::max(0.0, sum2 / kN - mean * mean) / kN);
+    // 5σ of the estimator plus 0.1 % for float pdfs.
+    EXPECT_NEAR(mean, expectedIntegral, 5 * sigma + 1e-3 * expectedIntegral) << light.toString();
+}
+}  // namespace
+
+TEST(DirectionalLight, ShAndDsfCoefficients) {
+    const glm::vec3 dir = glm::normalize(glm::vec3(1, -2, 0.5f));
+    const DirectionalLight l({2.0f, 1.0f, 0.5f}, dir * 7.0f);  // not normalised on input
+    const auto c = l.shCoefficients({0, 0, 0}, 4);
+    std::vector<double> y(25);
+    sh::evalShUnitDouble(4, glm::dvec3(dir), y);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, 2.0 * y[i], 1e-6);
+    const auto s = l.dsfCoefficients({0, 0, 0}, dsf162());
+    const glm::dvec3 e = dsf162().integrate(s);
+    EXPECT_NEAR(e.x, 2.0, 1e-5);
+    EXPECT_NEAR(e.z, 0.5, 1e-5);
+    const LightSample ls = l.sample({1, 2, 3}, {0.5f, 0.5f});
+    EXPECT_TRUE(ls.delta);
+    EXPECT_NEAR(glm::dot(ls.wi, dir), 1.0f, 1e-6f);
+}
+
+TEST(DirectionalLight, BadInput) {
+    EXPECT_THROW(DirectionalLight({1, 1, 1}, {0, 0, 0}), InputError);
+    EXPECT_THROW(DirectionalLight({1, -1, 1}, {0, 0, 1}), InputError);
+    EXPECT_THROW(DirectionalLight({1, NAN, 1}, {0, 0, 1}), InputError);
+    try {
+        DirectionalLight({1, 1, 1}, {0, 0, 0});
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "direction");
+    }
+}
+
+TEST(PointLight, InverseSquareWithMinimumDistanceClamp) {
+    const PointLight l({100.0f, 100.0f, 100.0f}, {10, 0, 0}, 2.0);
+    EXPECT_NEAR(l.irradianceAt({0, 0, 0}).x, 1.0, 1e-6);
+    EXPECT_NEAR(l.irradianceAt({9, 0, 0}).x, 25.0, 1e-5);   // d = 1 < 2: clamped to 100/4
+    EXPECT_NEAR(l.irradianceAt({10, 0, 0}).x, 25.0, 1e-5);  // at the light: finite
+    const LightSample s = l.sample({10, 0, 0}, {0.1f, 0.2f});
+    EXPECT_EQ(s.pdf, 0.0f);  // no direction at the light
+    const LightSample far = l.sample({0, 0, 0}, {0.1f, 0.2f});
+    EXPECT_NEAR(far.distance, 10.0f, 1e-5f);
+    EXPECT_NEAR(far.wi.x, 1.0f, 1e-6f);
+    EXPECT_THROW(PointLight({1, 1, 1}, {0, 0, 0}, 0.0), InputError);
+    EXPECT_THROW(PointLight({1, 1, 1}, {NAN, 0, 0}), InputError);
+}
+
+TEST(PointLight, ShIsFiniteAndContinuousThroughTheLight) {
+    const PointLight l({100.0f, 100.0f, 100.0f}, {0, 0, 0}, 2.0);
+    // At the light: isotropic, only DC, ∫ L dω = E.
+    const auto at = l.shCoefficients({0, 0, 0}, 4);
+    EXPECT_NEAR(at[0].x * kSqrt4Pi, 25.0, 1e-4);
+    for (int i = 1; i < 25; ++i) EXPECT_EQ(at[i].x, 0.0f);
+    // Continuity at d = minDistance and at d → 0.
+    const auto inside = l.shCoefficients({0, 0, 1.999999}, 4),
+               outside = l.shCoefficients({0, 0, 2.000001}, 4);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(inside[i].x, outside[i].x, 1e-4) << i;
+    const auto near0 = l.shCoefficients({0, 1e-7, 0}, 4);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(near0[i].x, at[i].x, 1e-4) << i;
+    // ∫ L dω = E everywhere, in SH and in DSF.
+    for (double d : {0.0, 0.5, 1.5, 3.0}) {
+        const glm::dvec3 x(d, 0, 0);
+        EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, l.irradianceAt(x).x, 1e-3);
+        EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, l.irradianceAt(x).x,
+                    1e-3);
+    }
+    // Far away it is a directional light.
+    const glm::dvec3 x(0, 0, -30);
+    const DirectionalLight dl(l.irradianceAt(x), {0, 0, 1});
+    const auto a = l.shCoefficients(x, 4), b = dl.shCoefficients(x, 4);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(a[i].x, b[i].x, 1e-6);
+}
+
+TEST(SphereLight, ShClosedFormMatchesQuadratureAndSolidAngle) {
+    const SphereLight l({3.0f, 3.0f, 3.0f}, {0, 0, 10}, 4.0);
+    const glm::dvec3 x(1, 2, -3);
+    const double omega = l.solidAngle(x);
+    const double d = glm::length(glm::dvec3(-1, -2, 13));
+    EXPECT_NEAR(omega, 2 * kPi * (1 - std::sqrt(1 - 16.0 / (d * d))), 1e-12);
+    const auto c = l.shCoefficients(x, 8);
+    EXPECT_NEAR(c[0].x, 3.0 * omega / kSqrt4Pi, 1e-6);
+    // Brute force: project the radiance seen along each direction (indicator of the cone; its edge
+    // limits the quadrature to ~1e-3 of c_0 with 600 Gauss–Legendre nodes).
+    const auto q = sh::gaussLegendreSamples(600);
+    const auto ref = sh::projectFunction(
+        8, q, [&](const glm::dvec3& w) { return l.radiance(x, glm::vec3(w)).x; });
+    for (int i = 0; i < 81; ++i) EXPECT_NEAR(c[i].x, ref[i], 2e-3 * c[0].x) << i;
+    // DSF keeps the power.
+    EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, 3.0 * omega,
+                1e-3 * 3.0 * omega);
+    checkSampler(l, x, 3.0 * omega, 3.0);
+    // Inside: radiance from everywhere.
+    EXPECT_NEAR(l.shCoefficients({0, 0, 9}, 2)[0].x, 3.0 * kSqrt4Pi, 1e-5);
+    checkSampler(l, {0, 0, 9}, 3.0 * 4 * kPi, 3.0);
+    EXPECT_THROW(SphereLight({1, 1, 1}, {0, 0, 0}, -1.0), InputError);
+}
+
+TEST(RectLight, SolidAngleSamplingAndSh) {
+    const glm::dvec3 p0(-5, -5, 20), eu(10, 0, 0), ev(0, 10, 0);
+    // cross(eu, ev) = +z: emits upward; flip so it faces the origin below.
+    const RectLight l({2.0f, 2.0f, 2.0f}, p0 + ev, eu, -ev);
+    const glm::dvec3 x(1, -2, 0);
+    const double omega = triangleSolidAngle(x, p0, p0 + eu, p0 + eu + ev) +
+                         triangleSolidAngle(x, p0, p0 + eu + ev, p0 + ev);
+    const auto c = l.shCoefficients(x, 4);
+    EXPECT_NEAR(c[0].x * kSqrt4Pi, 2.0 * omega, 2e-3 * 2.0 * omega);  // 32² midpoint cells
+    const auto q = sh::gaussLegendreSamples(400);
+    const auto ref = sh::projectFunction(
+        4, q, [&](const glm::dvec3& w) { return l.radiance(x, glm::vec3(w)).x; });
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, ref[i], 5e-3 * c[0].x) << i;
+    checkSampler(l, x, 2.0 * omega, 2.0);
+    // Behind the emitter: nothing.
+    EXPECT_EQ(l.sample({0, 0, 30}, {0.5f, 0.5f}).pdf, 0.0f);
+    EXPECT_EQ(l.shCoefficients({0, 0, 30}, 2)[0].x, 0.0f);
+    EXPECT_THROW(RectLight({1, 1, 1}, p0, eu, eu), InputError);
+    EXPECT_THROW(RectLight({1, 1, 1}, p0, eu, glm::dvec3(1, 1, 0)), InputError);
+}
+
+TEST(DiskLight, OnAxisSolidAngleSamplingAndDsf) {
+    const DiskLight l({1.5f, 1.5f, 1.5f}, {0, 0, 8}, {0, 0, -1}, 6.0);
+    const glm::dvec3 x(0, 0, 0);
+    const double omega = 2 * kPi * (1 - 8.0 / std::sqrt(64.0 + 36.0));
+    EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, 1.5 * omega, 3e-3 * 1.5 * omega);
+    EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, 1.5 * omega,
+                3e-3 * 1.5 * omega);
+    checkSampler(l, x, 1.5 * omega, 1.5);
+    // Off axis: against the emitter quadrature's own ∫ L dω (independent of the sampler).
+    const glm::dvec3 y(3, 1, 2);
+    checkSampler(l, y, l.shCoefficients(y, 0)[0].x * kSqrt4Pi, 1.5);
+}
