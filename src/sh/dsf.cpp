@@ -74,10 +74,13 @@ Dsf::Dsf(int directionCount) {
             for (int cj = 0; cj <= 1; ++cj)
                 radius = std::max(
                     radius, angleBetween(centre, faceDirection(face, uv(i + ci), uv(j + cj))));
+        // angle < a ⇔ cos(angle) > cos(a) for a ≤ π: compare dot products, no acos per pair.
+        const double cosDir = std::cos(std::min(kPi, h_ + radius + kSlack));
         for (int k = 0; k < size(); ++k)
-            if (angleBetween(centre, dirs_[k]) < h_ + radius + kSlack) dirList_.push_back(k);
+            if (glm::dot(centre, dirs_[k]) > cosDir) dirList_.push_back(k);
         for (std::size_t t = 0; t < tris_.size(); ++t)
-            if (angleBetween(centre, triCentre[t]) < triRadius[t] + radius + kSlack)
+            if (glm::dot(centre, triCentre[t]) >
+                std::cos(std::min(kPi, triRadius[t] + radius + kSlack)))
                 triList_.push_back(int(t));
         dirStart_[cell + 1] = int(dirList_.size());
         triStart_[cell + 1] = int(triList_.size());
