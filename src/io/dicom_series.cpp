@@ -1,0 +1,1033 @@
+// SPDX-License-Identifier: MIT
+#include "io/dicom_series.h"
+
+// GDCM stays in this translation unit: its headers clash with OpenImageIO's (see BUILD-NOTES.md).
+#include <gdcmImage.h>
+#include <gdcmImageReader.h>
+#include <gdcmPixelFormat.h>
+#include <gdcmScanner.h>
+#include <gdcmTag.h>
+#include <gdcmTrace.h>
+
+#include <algorithm>
+#include <array>
+#include <cctype>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <limits>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <sstream>
+#include <system_error>
+#include <vector>
+
+namespace voxlight::io::detail {
+namespace {
+
+namespace fs = std::filesystem;
+
+// --- Tolerances
+// -------------------------------------------------------------------------------------------------
+/// Image Orientation (Patient) cosines must be unit length and orthogonal to this accuracy. DS
+/// values carry up to 16 characters, so honest rounding stays below 1e-6; beyond 1e-3 the tag is
+/// corrupt, not rounded.
+constexpr double kCosineTol = 1e-3;
+/// Two slices belong to the same orientation if every cosine agrees to this; scanners write the
+/// same IOP string to every slice of a series, while a 3-plane localizer differs by O(1).
+constexpr double kOrientationMatchTol = 1e-4;
+/// Pixel Spacing must agree across slices to this relative accuracy (rounding of DS strings only).
+constexpr double kPixelSpacingMatchRel = 1e-4;
+/// Slices whose positions along the normal differ by less than this (mm) are at the same place: no
+/// CT/MR slice spacing comes near 1 µm, and positions are written with ≥ 3 decimals.
+constexpr double kDuplicateTolMm = 1e-3;
+/// A slice may sit at most this fraction of the slice spacing off the uniform grid through the
+/// first and last slice. Covers positions rounded to 0.1 mm (DS written with one decimal) for
+/// slices ≥ 1 mm; a tenth of a slice is below what trilinear sampling can show. Beyond it the
+/// spacing is variable and voxlight would need to resample.
+constexpr double kMaxGridOffset = 0.1;
+/// A gap within this of an integer multiple k ≥ 2 of the typical spacing is reported as k−1 missing
+/// slices rather than as variable spacing (missing files is the common cause of such gaps).
+constexpr double kMissingSliceRatioTol = 0.15;
+/// Slice positions may drift sideways (perpendicular to the normal) by at most this fraction of the
+/// finest pixel spacing over the whole series; more is a sheared grid (gantry tilt) that a Volume
+/// (orthonormal D) cannot hold.
+constexpr double kMaxShearPixels = 0.2;
+/// looksLikeDicom() opens at most this many files of a directory (cheap probe; non-DICOM files such
+/// as LICENSE.txt may come first in directory order).
+constexpr int kProbeFiles = 16;
+/// Rescale slope/intercept count as identical across slices to this relative accuracy.
+constexpr double kRescaleMatchRel = 1e-9;
+
+/// Selects the group of files without a Series Instance UID (anonymised data often blanks it).
+constexpr const char* kNoUidSelector = "none";
+
+// --- DICOM tags read by the header scan
+// -------------------------------------------------------------------------
+const gdcm::Tag kTagModality(0x0008, 0x0060);
+const gdcm::Tag kTagSeriesDescription(0x0008, 0x103e);
+const gdcm::Tag kTagSliceThickness(0x0018, 0x0050);
+const gdcm::Tag kTagSeriesUid(0x0020, 0x000e);
+const gdcm::Tag kTagInstanceNumber(0x0020, 0x0013);
+const gdcm::Tag kTagPosition(0x0020, 0x0032);
+const gdcm::Tag kTagOrientation(0x0020, 0x0037);
+const gdcm::Tag kTagSamplesPerPixel(0x0028, 0x0002);
+const gdcm::Tag kTagNumberOfFrames(0x0028, 0x0008);
+const gdcm::Tag kTagRows(0x0028, 0x0010);
+const gdcm::Tag kTagColumns(0x0028, 0x0011);
+const gdcm::Tag kTagPixelSpacing(0x0028, 0x0030);
+const gdcm::Tag kTagBitsAllocated(0x0028, 0x0100);
+const gdcm::Tag kTagPixelRepresentation(0x0028, 0x0103);
+const gdcm::Tag kTagRescaleIntercept(0x0028, 0x1052);
+const gdcm::Tag kTagRescaleSlope(0x0028, 0x1053);
+
+/// GDCM reports problems by returning false and printing to std::cerr; voxlight reports them as
+/// InputError, so the printing is switched off once (the flags are process-wide).
+void silenceGdcm() {
+    static std::once_flag once;
+    std::call_once(once, [] {
+        gdcm::Trace::DebugOff();
+        gdcm::Trace::WarningOff();
+        gdcm::Trace::ErrorOff();
+    });
+}
+
+std::string str(const fs::path& p) { return p.string(); }
+
+std::string trim(std::string_view s) {
+    const auto isPad = [](char c) {
+        return c == ' ' || c == '\0' || c == '\t' || c == '\r' || c == '\n';
+    };
+    while (!s.empty() && isPad(s.front())) s.remove_prefix(1);
+    while (!s.empty() && isPad(s.back())) s.remove_suffix(1);
+    return std::string(s);
+}
+
+std::string formatNumber(double v, int precision = 6) {
+    std::ostringstream os;
+    os.precision(precision);
+    os << v;
+    return os.str();
+}
+
+std::string formatPoint(const glm::dvec3& p) {
+    return "(" + formatNumber(p.x, 8) + ", " + formatNumber(p.y, 8) + ", " + formatNumber(p.z, 8) +
+           ")";
+}
+
+/// Parses a DS/IS multi-value string ("1\0\0\0\1\0") into numbers; throws InputError naming the
+/// file and tag.
+std::vector<double> parseNumbers(const std::string& value, const fs::path& file,
+                                 const char* field) {
+    std::vector<double> out;
+    std::size_t start = 0;
+    while (start <= value.size()) {
+        std::size_t end = value.find('\\', start);
+        if (end == std::string::npos) end = value.size();
+        std::string item = trim(std::string_view(value).substr(start, end - start));
+        if (!item.empty() && item.front() == '+') item.erase(0, 1);
+        double v = 0.0;
+        const auto [ptr, ec] = std::from_chars(item.data(), item.data() + item.size(), v);
+        if (item.empty() || ec != std::errc() || ptr != item.data() + item.size() ||
+            !std::isfinite(v))
+            throw InputError(str(file), field,
+                             "value \"" + value + "\" is not a list of finite numbers",
+                             "the file is damaged; re-export the series from the PACS or scanner");
+        out.push_back(v);
+        start = end + 1;
+    }
+    return out;
+}
+
+/// Header fields of one slice file, as read by the scan.
+struct SliceHeader {
+    fs::path file;
+    std::string seriesUid, description, modality;
+    int rows = 0, columns = 0, bitsAllocated = 0, pixelRepresentation = 0, samplesPerPixel = 1,
+        frames = 1;
+    bool hasPosition = false, hasOrientation = false, hasPixelSpacing = false;
+    glm::dvec3 position{0.0};
+    std::array<double, 6> orientation{};
+    glm::dvec2 pixelSpacing{1.0};  ///< DICOM order: [row spacing (Δj), column spacing (Δi)]
+    double sliceThickness = 0.0;
+    double slope = 1.0, intercept = 0.0;
+    double along = 0.0;  ///< position projected on the slice normal (mm), filled when sorting
+};
+
+/// Cheap probe of one file: "DICM" at byte 128 (Part 10 file), or — for old files without a
+/// preamble — a first element in group 0x0002 or 0x0008 (little endian), which is how a bare DICOM
+/// data set starts.
+bool looksLikeDicomFile(const fs::path& file, bool* hasPreamble = nullptr) {
+    std::ifstream in(file, std::ios::binary);
+    if (!in) return false;
+    std::array<unsigned char, 132> head{};
+    in.read(reinterpret_cast<char*>(head.data()), head.size());
+    const std::streamsize n = in.gcount();
+    if (n >= 132 && std::memcmp(head.data() + 128, "DICM", 4) == 0) {
+        if (hasPreamble) *hasPreamble = true;
+        return true;
+    }
+    if (hasPreamble) *hasPreamble = false;
+    if (n < 8) return false;
+    const unsigned group = head[0] | (head[1] << 8);
+    const unsigned element = head[2] | (head[3] << 8);
+    return (group == 0x0002 || group == 0x0008) && element < 0x0100;
+}
+
+/// Step 0: framing check. Debian's GDCM is built with assertions on and *aborts the process*
+/// (assert(is.good())) on a file cut short inside its header, and silently accepts one cut inside
+/// the pixel data. So before GDCM sees a file, walk its data elements — tag and length only, no
+/// values interpreted except the transfer syntax — and refuse a file whose elements run past its
+/// end. Anything the walk cannot follow (deflated data sets, UN sequences, odd VRs) is left to GDCM
+/// rather than refused.
+class FramingCheck {
+  public:
+    /// Throws InputError naming the file and the element that runs past its end; silent when the
+    /// framing is complete or cannot be followed.
+    static void check(const fs::path& file) {
+        FramingCheck c(file);
+        const std::string cut = c.ok_ ? c.run() : std::string("cannot be opened");
+        if (!cut.empty())
+            throw InputError(str(file), c.field_, "is truncated or damaged: " + cut,
+                             "copy the series again, or remove this file from the folder");
+    }
+
+  private:
+    static constexpr std::uint32_t kUndefinedLength = 0xffffffffu;
+
+    explicit FramingCheck(const fs::path& file) : in_(file, std::ios::binary) {
+        std::error_code ec;
+        size_ = fs::file_size(file, ec);
+        ok_ = bool(in_) && !ec;
+    }
+
+    bool read(void* dst, std::size_t n) {
+        in_.read(static_cast<char*>(dst), std::streamsize(n));
+        return std::size_t(in_.gcount()) == n;
+    }
+    std::uint16_t u16(const unsigned char* p) const {
+        return bigEndian_ ? std::uint16_t(p[0] << 8 | p[1]) : std::uint16_t(p[0] | p[1] << 8);
+    }
+    std::uint32_t u32(const unsigned char* p) const {
+        return bigEndian_ ? std::uint32_t(p[0]) << 24 | std::uint32_t(p[1]) << 16 |
+                                std::uint32_t(p[2]) << 8 | p[3]
+                          : std::uint32_t(p[3]) << 24 | std::uint32_t(p[2]) << 16 |
+                                std::uint32_t(p[1]) << 8 | p[0];
+    }
+    static std::string tagName(std::uint16_t g, std::uint16_t e) {
+        char buf[16];
+        std::snprintf(buf, sizeof buf, "(%04X,%04X)", unsigned(g), unsigned(e));
+        return buf;
+    }
+    std::string cutShort(std::uint16_t g, std::uint16_t e, std::uint64_t need, std::uint64_t at) {
+        field_ = g == 0x7fe0 && e == 0x0010 ? std::string("PixelData") : tagName(g, e);
+        return "element " + tagName(g, e) + " needs " + std::to_string(need) + " bytes at offset " +
+               std::to_string(at) + " but the file is only " + std::to_string(size_) +
+               " bytes long";
+    }
+
+    std::string run() {
+        // File meta information (Part 10): "DICM" at 128, then group 0002 in explicit VR little
+        // endian.
+        std::uint64_t pos = 0;
+        char magic[4] = {};
+        in_.seekg(128);
+        const bool part10 = size_ >= 132 && read(magic, 4) && std::memcmp(magic, "DICM", 4) == 0;
+        std::string syntax;
+        if (part10) {
+            pos = 132;
+            while (true) {
+                unsigned char h[8];
+                in_.seekg(std::streamoff(pos));
+                if (pos + 8 > size_ || !read(h, 8)) return "the file ends inside its meta header";
+                if (u16(h) != 0x0002) break;
+                std::uint32_t len = 0;
+                std::uint64_t head = 8;
+                if (longLength(h[4], h[5])) {
+                    unsigned char l[4];
+                    if (pos + 12 > size_ || !read(l, 4))
+                        return "the file ends inside its meta header";
+                    len = u32(l), head = 12;
+                } else {
+                    len = u16(h + 6);
+                }
+                if (len == kUndefinedLength || pos + head + len > size_)
+                    return cutShort(0x0002, u16(h + 2), len, pos + head);
+                if (u16(h + 2) == 0x0010 && len < 128) {  // Transfer Syntax UID
+                    syntax.resize(len);
+                    if (!read(syntax.data(), len)) return "the file ends inside its meta header";
+                    syntax = trim(syntax);
+                }
+                pos += head + len;
+            }
+        }
+        // Data set encoding from the transfer syntax; bare data sets: guess from the first
+        // element's VR bytes.
+        if (syntax == "1.2.840.10008.1.2.1.99")
+            return {};  // deflated: GDCM inflates, nothing to walk
+        bigEndian_ = syntax == "1.2.840.10008.1.2.2";
+        if (part10) {
+            explicitVr_ = syntax != "1.2.840.10008.1.2";
+        } else {
+            unsigned char h[6];
+            in_.seekg(0);
+            explicitVr_ = read(h, 6) && std::isupper(h[4]) && std::isupper(h[5]);
+        }
+        return walk(pos);
+    }
+
+    static bool isVr(unsigned char a, unsigned char b) {
+        return std::isupper(a) && std::isupper(b);
+    }
+    static bool longLength(unsigned char a, unsigned char b) {
+        static const char* kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
+                                      "SV", "UC", "UN", "UR", "UT", "UV"};
+        for (const char* v : kLong)
+            if (a == v[0] && b == v[1]) return true;
+        return false;
+    }
+
+    /// Walks elements from `pos` to the end of the file; items and undefined-length sequences are
+    /// entered, defined-length values skipped after checking that they fit.
+    std::string walk(std::uint64_t pos) {
+        while (pos < size_) {
+            unsigned char h[12];
+            in_.clear();
+            in_.seekg(std::streamoff(pos));
+            if (pos + 8 > size_ || !read(h, 8))
+                return "the file ends inside an element header at offset " + std::to_string(pos);
+            const std::uint16_t g = u16(h), e = u16(h + 2);
+            std::uint32_t len = 0;
+            std::uint64_t head = 8;
+            if (g == 0xfffe || !explicitVr_) {
+                len = u32(h + 4);  // items, delimiters and implicit VR: 4-byte length
+            } else if (!isVr(h[4], h[5])) {
+                return {};  // not followable (e.g. a VR switch): leave it to GDCM
+            } else if (longLength(h[4], h[5])) {
+                if (pos + 12 > size_ || !read(h + 8, 4))
+                    return "the file ends inside element " + tagName(g, e);
+                len = u32(h + 8), head = 12;
+                if (len == kUndefinedLength && h[4] == 'U' && h[5] == 'N')
+                    return {};  // implicit inside
+            } else {
+                len = u16(h + 6);
+            }
+            pos += head;
+            // Undefined length (sequence, item, encapsulated pixel data): enter it, and expect its
+            // delimiter. Defined-length items are skipped whole, since inside encapsulated pixel
+            // data they hold compressed bytes, not elements.
+            if (g == 0xfffe && (e == 0xe00d || e == 0xe0dd)) {
+                if (!open_.empty()) open_.pop_back();
+                continue;
+            }
+            if (len == kUndefinedLength) {
+                open_.push_back({g, e, pos});
+                continue;
+            }
+            if (pos + len > size_) return cutShort(g, e, len, pos);
+            pos += len;
+        }
+        if (!open_.empty()) {
+            const OpenElement& o = open_.front();
+            field_ = o.group == 0x7fe0 && o.element == 0x0010 ? std::string("PixelData")
+                                                              : tagName(o.group, o.element);
+            return "the file ends inside element " + tagName(o.group, o.element) +
+                   " (undefined length, opened at offset " + std::to_string(o.offset) +
+                   ", never closed by its delimiter)";
+        }
+        return {};
+    }
+
+    std::ifstream in_;
+    std::uint64_t size_ = 0;
+    bool ok_ = false, bigEndian_ = false, explicitVr_ = true;
+    std::string field_;  ///< the element cut short, for InputError::field
+    struct OpenElement {
+        std::uint16_t group, element;
+        std::uint64_t offset;
+    };
+    std::vector<OpenElement> open_;  ///< undefined-length sequences and items not yet delimited
+};
+
+std::vector<fs::path> listFiles(const fs::path& dir) {
+    std::vector<fs::path> files;
+    std::error_code ec;
+    for (fs::directory_iterator it(dir, ec), end; !ec && it != end; it.increment(ec)) {
+        std::error_code fec;
+        if (it->is_regular_file(fec)) files.push_back(it->path());
+    }
+    if (ec)
+        throw InputError(str(dir), "", "cannot list the folder: " + ec.message(),
+                         "check that it exists and is readable");
+    std::sort(files.begin(), files.end());
+    return files;
+}
+
+/// Step 1: header scan of the candidate files with gdcm::Scanner (reads only the tags up to
+/// (0028,1053), never the pixel data). Files that look like DICOM but cannot be parsed are
+/// reported, not skipped: they are usually truncated slices of the series.
+std::vector<SliceHeader> scanHeaders(const std::vector<fs::path>& candidates) {
+    gdcm::Scanner scanner;
+    for (const gdcm::Tag& t :
+         {kTagModality, kTagSeriesDescription, kTagSliceThickness, kTagSeriesUid,
+          kTagInstanceNumber, kTagPosition, kTagOrientation, kTagSamplesPerPixel,
+          kTagNumberOfFrames, kTagRows, kTagColumns, kTagPixelSpacing, kTagBitsAllocated,
+          kTagPixelRepresentation, kTagRescaleIntercept, kTagRescaleSlope})
+        scanner.AddTag(t);
+    std::vector<std::string> names;
+    names.reserve(candidates.size());
+    for (const auto& f : candidates) names.push_back(f.string());
+    try {
+        scanner.Scan(names);
+    } catch (const std::exception& e) {
+        throw InputError(str(candidates.front().parent_path()), "",
+                         std::string("GDCM failed while scanning "
+                                     "the DICOM headers: ") +
+                             e.what(),
+                         "remove damaged files from the folder");
+    }
+
+    std::vector<SliceHeader> headers;
+    for (const auto& f : candidates) {
+        const std::string name = f.string();
+        if (!scanner.IsKey(name.c_str()))
+            throw InputError(str(f), "",
+                             "the file looks like DICOM but GDCM cannot parse its header "
+                             "(truncated or damaged file)",
+                             "remove it from the folder or copy the series again");
+        const auto& m = scanner.GetMapping(name.c_str());
+        const auto get = [&](const gdcm::Tag& t) -> std::optional<std::string> {
+            const auto it = m.find(t);
+            if (it == m.end() || !it->second) return std::nullopt;
+            return trim(it->second);
+        };
+        const auto getInt = [&](const gdcm::Tag& t, const char* field, int fallback) {
+            const auto v = get(t);
+            if (!v || v->empty()) return fallback;
+            const auto nums = parseNumbers(*v, f, field);
+            if (nums.size() != 1 || nums[0] != std::floor(nums[0]) || std::abs(nums[0]) > 1e9)
+                throw InputError(str(f), field, "value \"" + *v + "\" is not an integer",
+                                 "the file is damaged; re-export the series");
+            return int(nums[0]);
+        };
+
+        SliceHeader h;
+        h.file = f;
+        h.rows = getInt(kTagRows, "Rows", 0);
+        h.columns = getInt(kTagColumns, "Columns", 0);
+        // Objects without an image matrix (DICOMDIR, structured reports, presentation states) are
+        // not slices.
+        if (h.rows == 0 && h.columns == 0) continue;
+        h.seriesUid = get(kTagSeriesUid).value_or("");
+        h.description = get(kTagSeriesDescription).value_or("");
+        h.modality = get(kTagModality).value_or("");
+        h.bitsAllocated = getInt(kTagBitsAllocated, "BitsAllocated", 0);
+        h.pixelRepresentation = getInt(kTagPixelRepresentation, "PixelRepresentation", 0);
+        h.samplesPerPixel = getInt(kTagSamplesPerPixel, "SamplesPerPixel", 1);
+        h.frames = getInt(kTagNumberOfFrames, "NumberOfFrames", 1);
+        if (auto v = get(kTagPosition); v && !v->empty()) {
+            const auto p = parseNumbers(*v, f, "ImagePositionPatient");
+            if (p.size() != 3)
+                throw InputError(
+                    str(f), "ImagePositionPatient",
+                    "has " + std::to_string(p.size()) + " values \"" + *v + "\", expected 3",
+                    "the file is damaged; re-export the series");
+            h.position = {p[0], p[1], p[2]};
+            h.hasPosition = true;
+        }
+        if (auto v = get(kTagOrientation); v && !v->empty()) {
+            const auto o = parseNumbers(*v, f, "ImageOrientationPatient");
+            if (o.size() != 6)
+                throw InputError(
+                    str(f), "ImageOrientationPatient",
+                    "has " + std::to_string(o.size()) + " values \"" + *v + "\", expected 6",
+                    "the file is damaged; re-export the series");
+            std::copy(o.begin(), o.end(), h.orientation.begin());
+            h.hasOrientation = true;
+        }
+        if (auto v = get(kTagPixelSpacing); v && !v->empty()) {
+            const auto s = parseNumbers(*v, f, "PixelSpacing");
+            if (s.size() != 2 || !(s[0] > 0.0) || !(s[1] > 0.0))
+                throw InputError(
+                    str(f), "PixelSpacing",
+                    "\"" + *v + "\" is not two positive numbers (row\\column spacing, mm)",
+                    "the file is damaged; re-export the series");
+            h.pixelSpacing = {s[0], s[1]};
+            h.hasPixelSpacing = true;
+        }
+        if (auto v = get(kTagSliceThickness); v && !v->empty()) {
+            const auto t = parseNumbers(*v, f, "SliceThickness");
+            if (t.size() == 1 && t[0] > 0.0) h.sliceThickness = t[0];
+        }
+        if (auto v = get(kTagRescaleSlope); v && !v->empty()) {
+            const auto s = parseNumbers(*v, f, "RescaleSlope");
+            if (s.size() != 1 || s[0] == 0.0)
+                throw InputError(str(f), "RescaleSlope",
+                                 "\"" + *v + "\" is not one non-zero number",
+                                 "the file is damaged; re-export the series");
+            h.slope = s[0];
+        }
+        if (auto v = get(kTagRescaleIntercept); v && !v->empty()) {
+            const auto s = parseNumbers(*v, f, "RescaleIntercept");
+            if (s.size() != 1)
+                throw InputError(str(f), "RescaleIntercept", "\"" + *v + "\" is not one number",
+                                 "the file is damaged; re-export the series");
+            h.intercept = s[0];
+        }
+        headers.push_back(std::move(h));
+    }
+    return headers;
+}
+
+std::string uidLabel(const std::string& uid) {
+    return uid.empty() ? std::string("<no SeriesInstanceUID>") : uid;
+}
+
+/// "UID "description" (N slices)" for each series, for the mixed-series and unknown-UID messages.
+std::string listSeries(const std::map<std::string, std::vector<SliceHeader>>& groups) {
+    std::string out;
+    for (const auto& [uid, slices] : groups) {
+        if (!out.empty()) out += "; ";
+        out += uidLabel(uid) + " \"" + slices.front().description + "\" (" +
+               std::to_string(slices.size()) + (slices.size() == 1 ? " slice" : " slices");
+        if (uid.empty()) out += std::string(", select with --series ") + kNoUidSelector;
+        out += ")";
+    }
+    return out;
+}
+
+bool nearlyEqual(double a, double b, double rel) {
+    return std::abs(a - b) <= rel * std::max({1.0, std::abs(a), std::abs(b)});
+}
+
+std::string orientationString(const std::array<double, 6>& o) {
+    std::string s;
+    for (int i = 0; i < 6; ++i) s += (i ? "\\" : "") + formatNumber(o[i], 8);
+    return s;
+}
+
+/// Step 3: every slice must share the first slice's matrix, pixel type, orientation and pixel
+/// spacing.
+void checkConsistency(const std::vector<SliceHeader>& slices) {
+    const SliceHeader& ref = slices.front();
+    const auto differ = [&](const SliceHeader& h, const char* field, const std::string& mine,
+                            const std::string& theirs) {
+        return InputError(
+            str(h.file), field,
+            "is " + mine + " but " + theirs + " in " + ref.file.filename().string() +
+                " of the same series",
+            "all slices of a series must share it; remove the odd file or choose another series");
+    };
+    for (const SliceHeader& h : slices) {
+        if (h.rows != ref.rows)
+            throw differ(h, "Rows", std::to_string(h.rows), std::to_string(ref.rows));
+        if (h.columns != ref.columns)
+            throw differ(h, "Columns", std::to_string(h.columns), std::to_string(ref.columns));
+        if (h.bitsAllocated != ref.bitsAllocated)
+            throw differ(h, "BitsAllocated", std::to_string(h.bitsAllocated),
+                         std::to_string(ref.bitsAllocated));
+        if (h.pixelRepresentation != ref.pixelRepresentation)
+            throw differ(h, "PixelRepresentation", std::to_string(h.pixelRepresentation),
+                         std::to_string(ref.pixelRepresentation));
+        if (h.samplesPerPixel != ref.samplesPerPixel)
+            throw differ(h, "SamplesPerPixel", std::to_string(h.samplesPerPixel),
+                         std::to_string(ref.samplesPerPixel));
+        if (h.hasOrientation != ref.hasOrientation || h.hasPosition != ref.hasPosition)
+            throw InputError(str(h.file),
+                             h.hasOrientation ? "ImagePositionPatient" : "ImageOrientationPatient",
+                             "is present in some slices of the series and absent in others",
+                             "the series is damaged; re-export it");
+        for (int i = 0; i < 6; ++i)
+            if (std::abs(h.orientation[i] - ref.orientation[i]) > kOrientationMatchTol)
+                throw InputError(
+                    str(h.file), "ImageOrientationPatient",
+                    "is " + orientationString(h.orientation) + " but " +
+                        orientationString(ref.orientation) + " in " + ref.file.filename().string() +
+                        ": the series mixes slice orientations (e.g. a 3-plane localizer)",
+                    "choose a series whose slices share one orientation");
+        if (h.hasPixelSpacing != ref.hasPixelSpacing ||
+            !nearlyEqual(h.pixelSpacing[0], ref.pixelSpacing[0], kPixelSpacingMatchRel) ||
+            !nearlyEqual(h.pixelSpacing[1], ref.pixelSpacing[1], kPixelSpacingMatchRel))
+            throw differ(
+                h, "PixelSpacing",
+                formatNumber(h.pixelSpacing[0]) + "\\" + formatNumber(h.pixelSpacing[1]),
+                formatNumber(ref.pixelSpacing[0]) + "\\" + formatNumber(ref.pixelSpacing[1]));
+    }
+}
+
+/// Orthonormal slice axes from Image Orientation (Patient): i = row cosine, j = column cosine, n =
+/// i × j.
+struct SliceAxes {
+    glm::dvec3 i, j, n;
+};
+
+SliceAxes sliceAxes(const SliceHeader& h) {
+    const glm::dvec3 r(h.orientation[0], h.orientation[1], h.orientation[2]);
+    const glm::dvec3 c(h.orientation[3], h.orientation[4], h.orientation[5]);
+    if (std::abs(glm::length(r) - 1.0) > kCosineTol ||
+        std::abs(glm::length(c) - 1.0) > kCosineTol || std::abs(glm::dot(r, c)) > kCosineTol)
+        throw InputError(
+            str(h.file), "ImageOrientationPatient",
+            orientationString(h.orientation) +
+                " is not two orthogonal unit vectors (row and column direction cosines)",
+            "the file is damaged; re-export the series");
+    // Re-orthonormalise (Gram–Schmidt) so that rounding in the DS strings cannot make D
+    // non-orthonormal.
+    SliceAxes a;
+    a.i = glm::normalize(r);
+    a.j = glm::normalize(c - glm::dot(c, a.i) * a.i);
+    a.n = glm::cross(a.i, a.j);
+    return a;
+}
+
+/// Step 4: sort by position along the normal and check that the positions form a uniform, unsheared
+/// stack. Returns the slice spacing (mm).
+double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& axes,
+                             const fs::path& source) {
+    const std::string src = str(source);
+    for (auto& h : slices) h.along = glm::dot(axes.n, h.position);
+    std::stable_sort(slices.begin(), slices.end(),
+                     [](const SliceHeader& a, const SliceHeader& b) { return a.along < b.along; });
+    const std::size_t n = slices.size();
+    const auto where = [](const SliceHeader& h) {
+        return formatPoint(h.position) + " [" + h.file.filename().string() + "]";
+    };
+
+    // Duplicate positions: two acquisitions (echoes, phases) or the same slice twice.
+    for (std::size_t s = 0; s + 1 < n; ++s)
+        if (slices[s + 1].along - slices[s].along < kDuplicateTolMm)
+            throw InputError(
+                src, "ImagePositionPatient",
+                "two slices are at the same position " + formatPoint(slices[s].position) + ": " +
+                    slices[s].file.filename().string() + " and " +
+                    slices[s + 1].file.filename().string(),
+                "the folder holds several acquisitions at the same positions (echoes, phases, or "
+                "the same series copied twice); put each in its own folder");
+
+    // Gantry tilt: positions must move along the normal; measure the sideways drift from the first
+    // slice.
+    double maxDrift = 0.0, driftAngle = 0.0, driftAlong = 0.0;
+    for (std::size_t s = 1; s < n; ++s) {
+        const glm::dvec3 v = slices[s].position - slices[0].position;
+        const double along = glm::dot(v, axes.n);
+        const double drift = glm::length(v - along * axes.n);
+        if (drift > maxDrift) {
+            maxDrift = drift;
+            driftAlong = along;
+            driftAngle = std::atan2(drift, std::abs(along)) * 180.0 / 3.14159265358979323846;
+        }
+    }
+    const double finestPixel = std::min(slices[0].pixelSpacing[0], slices[0].pixelSpacing[1]);
+    if (maxDrift > kMaxShearPixels * finestPixel)
+        throw InputError(
+            src, "ImagePositionPatient",
+            "gantry tilt of " + formatNumber(driftAngle, 3) +
+                " degrees is not supported; the slice positions drift " +
+                formatNumber(maxDrift, 4) + " mm sideways over " +
+                formatNumber(std::abs(driftAlong), 4) +
+                " mm instead of following the slice normal (tolerance " +
+                formatNumber(kMaxShearPixels) + " pixel)",
+            "reslice the series to an orthogonal grid first, e.g. convert it with dcm2niix "
+            "(which corrects gantry tilt) and load the NIfTI");
+
+    if (n < 2) return 0.0;
+
+    // Missing slices: a gap close to k ≥ 2 times the typical (median) spacing.
+    std::vector<double> gaps(n - 1);
+    for (std::size_t s = 0; s + 1 < n; ++s) gaps[s] = slices[s + 1].along - slices[s].along;
+    std::vector<double> sorted = gaps;
+    std::nth_element(sorted.begin(), sorted.begin() + sorted.size() / 2, sorted.end());
+    const double typical = sorted[sorted.size() / 2];
+    for (std::size_t s = 0; s + 1 < n; ++s) {
+        const double ratio = gaps[s] / typical;
+        const double k = std::round(ratio);
+        if (k >= 2.0 && std::abs(ratio - k) < kMissingSliceRatioTol) {
+            const int missing = int(k) - 1;
+            throw InputError(
+                src, "ImagePositionPatient",
+                "missing slice" + std::string(missing > 1 ? "s" : "") + ": the gap between " +
+                    where(slices[s]) + " and " + where(slices[s + 1]) + " is " +
+                    formatNumber(gaps[s], 4) + " mm, " + formatNumber(k) +
+                    " times the typical spacing of " + formatNumber(typical, 4) + " mm (" +
+                    std::to_string(missing) + " slice" + (missing > 1 ? "s" : "") + " missing)",
+                "copy the complete series; voxlight does not interpolate missing slices");
+        }
+    }
+
+    // Variable spacing: every slice must sit on the uniform grid through the first and last slice.
+    const double spacing = (slices[n - 1].along - slices[0].along) / double(n - 1);
+    double worst = 0.0;
+    std::size_t worstSlice = 0;
+    for (std::size_t s = 0; s < n; ++s) {
+        const double off = std::abs(slices[s].along - (slices[0].along + double(s) * spacing));
+        if (off > worst) worst = off, worstSlice = s;
+    }
+    if (worst > kMaxGridOffset * spacing) {
+        const auto [lo, hi] = std::minmax_element(gaps.begin(), gaps.end());
+        throw InputError(
+            src, "ImagePositionPatient",
+            "variable slice spacing: gaps between slices range from " + formatNumber(*lo, 4) +
+                " to " + formatNumber(*hi, 4) + " mm; the slice at " + where(slices[worstSlice]) +
+                " is " + formatNumber(worst, 3) + " mm off a uniform grid of " +
+                formatNumber(spacing, 5) + " mm (tolerance " + formatNumber(kMaxGridOffset * 100) +
+                " % of the spacing)",
+            "voxlight does not resample yet; resample the series to uniform spacing (e.g. "
+            "convert with dcm2niix and resample the NIfTI) or load a part with uniform spacing");
+    }
+    return spacing;
+}
+
+/// Stored pixel type of the series and the voxel type voxlight keeps it in.
+struct PixelPlan {
+    gdcm::PixelFormat::ScalarType decoded;
+    core::VoxelType stored;
+    bool perSliceRescale = false;  ///< slices differ in rescale: store physical values as float32
+};
+
+PixelPlan planPixels(const std::vector<SliceHeader>& slices) {
+    const SliceHeader& ref = slices.front();
+    const bool isSigned = ref.pixelRepresentation == 1;
+    PixelPlan plan{};
+    switch (ref.bitsAllocated) {
+        case 8:
+            plan.decoded = isSigned ? gdcm::PixelFormat::INT8 : gdcm::PixelFormat::UINT8;
+            plan.stored = isSigned ? core::VoxelType::Int16 : core::VoxelType::UInt8;
+            break;
+        case 16:
+            plan.decoded = isSigned ? gdcm::PixelFormat::INT16 : gdcm::PixelFormat::UINT16;
+            plan.stored = isSigned ? core::VoxelType::Int16 : core::VoxelType::UInt16;
+            break;
+        case 32:
+            plan.decoded = isSigned ? gdcm::PixelFormat::INT32 : gdcm::PixelFormat::UINT32;
+            plan.stored = core::VoxelType::Float32;
+            break;
+        default:
+            throw InputError(
+                str(ref.file), "BitsAllocated",
+                std::to_string(ref.bitsAllocated) + " bits per pixel is not supported (8, 16, 32)",
+                "convert the series to a standard pixel format, e.g. with gdcmconv --raw");
+    }
+    for (const SliceHeader& h : slices)
+        if (!nearlyEqual(h.slope, ref.slope, kRescaleMatchRel) ||
+            !nearlyEqual(h.intercept, ref.intercept, kRescaleMatchRel))
+            plan.perSliceRescale = true;
+    if (plan.perSliceRescale) plan.stored = core::VoxelType::Float32;
+    return plan;
+}
+
+template <class Src, class Dst>
+void convertSlice(const char* in, Dst* out, std::size_t count, double slope, double intercept,
+                  bool applyRescale) {
+    const Src* src = reinterpret_cast<const Src*>(in);
+    for (std::size_t i = 0; i < count; ++i) {
+        Src v;
+        std::memcpy(&v, src + i, sizeof(Src));  // the scratch buffer carries no alignment promise
+        out[i] = applyRescale ? Dst(slope * double(v) + intercept) : Dst(v);
+    }
+}
+
+/// Step 6: decode one slice with gdcm::ImageReader (raw, RLE, JPEG, JPEG-LS, JPEG 2000) into `dst`.
+void readSlicePixels(const SliceHeader& h, const PixelPlan& plan, core::Volume& volume, int k,
+                     std::vector<char>& scratch) {
+    const std::string src = str(h.file);
+    gdcm::ImageReader reader;
+    reader.SetFileName(src.c_str());
+    bool ok = false;
+    try {
+        ok = reader.Read();
+    } catch (const std::exception& e) {
+        throw InputError(src, "PixelData",
+                         std::string("GDCM failed to read the image: ") + e.what(),
+                         "the file is damaged or truncated; copy the series again");
+    }
+    if (!ok)
+        throw InputError(
+            src, "PixelData",
+            "GDCM cannot read the image (truncated or damaged file, or an unsupported encoding)",
+            "copy the series again, or decompress it with gdcmconv --raw");
+    const gdcm::Image& image = reader.GetImage();
+    const unsigned nd = image.GetNumberOfDimensions();
+    if (image.GetColumns() != unsigned(h.columns) || image.GetRows() != unsigned(h.rows) ||
+        (nd >= 3 && image.GetDimension(2) != 1))
+        throw InputError(src, "PixelData",
+                         "the decoded image is " + std::to_string(image.GetColumns()) + "x" +
+                             std::to_string(image.GetRows()) + " but the header says " +
+                             std::to_string(h.columns) + "x" + std::to_string(h.rows),
+                         "the file is damaged; re-export the series");
+    const gdcm::PixelFormat& pf = image.GetPixelFormat();
+    if (pf.GetSamplesPerPixel() != 1 || pf.GetScalarType() != plan.decoded)
+        throw InputError(
+            src, "PixelData",
+            std::string("decodes to pixel format ") + pf.GetScalarTypeAsString() + " with " +
+                std::to_string(pf.GetSamplesPerPixel()) + " sample(s), expected " +
+                gdcm::PixelFormat(plan.decoded).GetScalarTypeAsString() + " grey values",
+            "decompress the series with gdcmconv --raw and check it in a DICOM viewer");
+
+    const std::size_t count = std::size_t(h.rows) * std::size_t(h.columns);
+    const std::size_t bytes = count * pf.GetPixelSize();
+    if (image.GetBufferLength() != bytes)
+        throw InputError(src, "PixelData",
+                         "holds " + std::to_string(image.GetBufferLength()) + " bytes, expected " +
+                             std::to_string(bytes),
+                         "the file is damaged or truncated; copy the series again");
+
+    // Decode straight into the volume when the types agree; otherwise through one reused slice
+    // buffer.
+    const std::size_t offset = volume.linearIndex(0, 0, k);
+    const bool direct = !plan.perSliceRescale &&
+                        core::voxelBytes(volume.type()) == pf.GetPixelSize() &&
+                        plan.stored != core::VoxelType::Float32;
+    char* target =
+        direct ? static_cast<char*>(volume.data()) + offset * pf.GetPixelSize() : nullptr;
+    if (!direct) {
+        scratch.resize(bytes);
+        target = scratch.data();
+    }
+    bool decoded = false;
+    try {
+        decoded = image.GetBuffer(target);
+    } catch (const std::exception& e) {
+        throw InputError(src, "PixelData",
+                         std::string("GDCM failed to decode the pixels: ") + e.what(),
+                         "the file is damaged or truncated; copy the series again");
+    }
+    if (!decoded)
+        throw InputError(src, "PixelData",
+                         "GDCM cannot decode the pixel data (truncated or damaged file)",
+                         "copy the series again, or decompress it with gdcmconv --raw");
+    if (direct) return;
+
+    const bool rescale = plan.perSliceRescale;
+    switch (volume.type()) {
+        case core::VoxelType::Int16:  // int8 widened
+            convertSlice<std::int8_t>(target, volume.dataAs<std::int16_t>() + offset, count, 1.0,
+                                      0.0, false);
+            break;
+        case core::VoxelType::Float32: {
+            float* out = volume.dataAs<float>() + offset;
+            switch (plan.decoded) {
+                case gdcm::PixelFormat::UINT8:
+                    convertSlice<std::uint8_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                case gdcm::PixelFormat::INT8:
+                    convertSlice<std::int8_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                case gdcm::PixelFormat::UINT16:
+                    convertSlice<std::uint16_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                case gdcm::PixelFormat::INT16:
+                    convertSlice<std::int16_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                case gdcm::PixelFormat::UINT32:
+                    convertSlice<std::uint32_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                case gdcm::PixelFormat::INT32:
+                    convertSlice<std::int32_t>(target, out, count, h.slope, h.intercept, rescale);
+                    break;
+                default:
+                    throw InternalError("unexpected DICOM scalar type");
+            }
+            break;
+        }
+        default:
+            throw InternalError("unexpected DICOM conversion");
+    }
+}
+
+}  // namespace
+
+bool looksLikeDicom(const std::filesystem::path& path) {
+    std::error_code ec;
+    if (fs::is_regular_file(path, ec)) return looksLikeDicomFile(path);
+    if (!fs::is_directory(path, ec)) return false;
+    int probed = 0;
+    for (fs::directory_iterator it(path, ec), end; !ec && it != end && probed < kProbeFiles;
+         it.increment(ec)) {
+        std::error_code fec;
+        if (!it->is_regular_file(fec)) continue;
+        ++probed;
+        if (looksLikeDicomFile(it->path())) return true;
+    }
+    return false;
+}
+
+core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOptions& options,
+                             const core::Progress& progress) {
+    silenceGdcm();
+    progress.report("dicom", 0.0);
+
+    // Step 1: the folder and its candidate files (a cheap DICM/first-tag probe drops LICENSE.txt
+    // and the like).
+    std::error_code ec;
+    const bool isDir = fs::is_directory(path, ec);
+    if (!isDir && !fs::is_regular_file(path, ec))
+        throw InputError(str(path), "", "does not exist or is not a file or folder",
+                         "check the path of the DICOM folder");
+    if (!isDir && !looksLikeDicomFile(path))
+        throw InputError(
+            str(path), "",
+            "is not a DICOM file (no \"DICM\" marker at byte 128 and no DICOM data set at its "
+            "start)",
+            "give the folder of a DICOM series, or a file in one of voxlight's formats");
+    const fs::path dir =
+        isDir ? path : (path.has_parent_path() ? path.parent_path() : fs::path("."));
+    std::vector<fs::path> candidates;
+    std::size_t skipped = 0;
+    for (const auto& f : listFiles(dir)) {
+        if (looksLikeDicomFile(f))
+            candidates.push_back(f);
+        else
+            ++skipped;
+    }
+    if (candidates.empty())
+        throw InputError(str(dir), "",
+                         skipped == 0 ? std::string("holds no DICOM files (the folder is empty)")
+                                      : "holds no DICOM files (" + std::to_string(skipped) +
+                                            " other file" + (skipped == 1 ? "" : "s") + " ignored)",
+                         "point to the folder that holds the slices of one series");
+    // Step 1b: refuse truncated files before GDCM reads them (it asserts on some; see
+    // FramingCheck).
+    for (const auto& f : candidates) FramingCheck::check(f);
+    progress.checkCancel();
+
+    // Step 2: scan headers and group by Series Instance UID; pick the series.
+    std::vector<SliceHeader> headers = scanHeaders(candidates);
+    if (headers.empty())
+        throw InputError(str(dir), "Rows",
+                         "holds DICOM files but no images (" + std::to_string(candidates.size()) +
+                             " DICOM object(s) without an image matrix, e.g. DICOMDIR or reports)",
+                         "point to the folder that holds the image slices");
+    std::map<std::string, std::vector<SliceHeader>> groups;
+    std::string pathUid;
+    bool pathUidKnown = false;
+    for (auto& h : headers) {
+        if (!isDir && fs::equivalent(h.file, path, ec)) pathUid = h.seriesUid, pathUidKnown = true;
+        groups[h.seriesUid].push_back(std::move(h));
+    }
+    headers.clear();
+    std::string chosen;
+    if (!options.dicomSeriesUid.empty()) {
+        chosen = options.dicomSeriesUid == kNoUidSelector ? std::string() : options.dicomSeriesUid;
+        if (!groups.count(chosen))
+            throw InputError(str(dir), "SeriesInstanceUID",
+                             "series " + options.dicomSeriesUid +
+                                 " is not in the folder, which holds " +
+                                 std::to_string(groups.size()) + " series: " + listSeries(groups),
+                             "choose one of the listed UIDs with --series UID");
+    } else if (pathUidKnown) {
+        chosen = pathUid;  // a file was given: read the series it belongs to
+    } else if (!isDir) {
+        throw InputError(str(path), "Rows", "is a DICOM object without an image matrix",
+                         "give the folder of an image series");
+    } else if (groups.size() > 1) {
+        throw InputError(
+            str(dir), "SeriesInstanceUID",
+            "the folder holds " + std::to_string(groups.size()) + " series: " + listSeries(groups),
+            "choose one with --series UID");
+    } else {
+        chosen = groups.begin()->first;
+    }
+    std::vector<SliceHeader> slices = std::move(groups[chosen]);
+    groups.clear();
+
+    // Step 3: the slices must agree on matrix, pixel type, orientation and spacing; one frame each.
+    const SliceHeader& first = slices.front();
+    if (first.frames > 1)
+        throw InputError(str(first.file), "NumberOfFrames",
+                         "multi-frame DICOM (" + std::to_string(first.frames) +
+                             " frames in one file) is not supported yet",
+                         "convert it to a NIfTI file (e.g. with dcm2niix) and load that");
+    if (first.samplesPerPixel != 1)
+        throw InputError(
+            str(first.file), "SamplesPerPixel",
+            "colour images (" + std::to_string(first.samplesPerPixel) +
+                " samples per pixel) are not supported; voxlight renders scalar volumes",
+            "choose a greyscale CT or MR series");
+    if (first.rows < 1 || first.columns < 1)
+        throw InputError(str(first.file), "Rows", "the image matrix is empty",
+                         "choose another series");
+    if (!first.hasPosition || !first.hasOrientation)
+        throw InputError(
+            str(first.file), first.hasPosition ? "ImageOrientationPatient" : "ImagePositionPatient",
+            "is missing, so the slice cannot be placed in patient space (not a cross-sectional "
+            "image, e.g. a secondary capture or projection radiograph)",
+            "choose a CT or MR series with Image Position/Orientation (Patient)");
+    checkConsistency(slices);
+    const SliceAxes axes = sliceAxes(slices.front());
+
+    // Step 4: sort along the normal; spacing from positions (not SliceThickness), checked for
+    // uniformity.
+    const fs::path source = isDir ? path : dir;
+    double sliceSpacing = sortAndCheckPositions(slices, axes, source);
+    std::vector<std::string> notes;
+    if (slices.size() == 1) {
+        if (slices[0].sliceThickness > 0.0) {
+            sliceSpacing = slices[0].sliceThickness;
+            notes.push_back("single slice; slice spacing taken from SliceThickness " +
+                            formatNumber(sliceSpacing) + " mm");
+        } else {
+            sliceSpacing = 1.0;
+            notes.push_back("single slice without SliceThickness; slice spacing assumed 1 mm");
+        }
+    }
+    if (!slices[0].hasPixelSpacing) notes.push_back("PixelSpacing absent; assumed 1 mm");
+
+    // Step 5: geometry (origin = first slice after sorting; D = [row cosine, column cosine,
+    // normal]) and size check before allocating. DICOM Pixel Spacing is [row spacing, column
+    // spacing] = [Δj, Δi].
+    core::Geometry g;
+    g.dims = {slices[0].columns, slices[0].rows,
+              int(std::min<std::size_t>(slices.size(), INT32_MAX))};
+    g.spacing = {slices[0].pixelSpacing[1], slices[0].pixelSpacing[0], sliceSpacing};
+    g.origin = slices[0].position;
+    g.direction = glm::dmat3(axes.i, axes.j, axes.n);
+    if (g.dims.x > core::kMaxDim || g.dims.y > core::kMaxDim ||
+        slices.size() > std::size_t(core::kMaxDim) || g.voxelCount() > core::kMaxVoxels)
+        throw InputError(str(source), "Rows",
+                         "the series is " + std::to_string(g.dims.x) + "x" +
+                             std::to_string(g.dims.y) + "x" + std::to_string(slices.size()) +
+                             " voxels, beyond voxlight's limit (" + std::to_string(core::kMaxDim) +
+                             " per axis, " + std::to_string(core::kMaxVoxels) + " voxels)",
+                         "load a part of the series or downsample it");
+
+    const PixelPlan plan = planPixels(slices);
+    core::Volume volume(g, plan.stored);
+
+    // Step 6: decode slice by slice into the volume (one decoded slice alive at a time).
+    std::vector<char> scratch;
+    for (std::size_t s = 0; s < slices.size(); ++s) {
+        readSlicePixels(slices[s], plan, volume, int(s), scratch);
+        progress.report("dicom", double(s + 1) / double(slices.size()));
+    }
+
+    // Step 7: value mapping, modality, description.
+    const SliceHeader& ref = slices.front();
+    if (plan.perSliceRescale) {
+        volume.mapping.slope = 1.0;
+        volume.mapping.intercept = 0.0;
+        notes.push_back(
+            "rescale slope/intercept differ per slice; stored as float32 physical values");
+    } else {
+        volume.mapping.slope = ref.slope;
+        volume.mapping.intercept = ref.intercept;
+    }
+    if (ref.modality == "CT") {
+        volume.modality = core::Modality::CT;
+        volume.mapping.unit = "HU";
+    } else if (ref.modality == "MR") {
+        volume.modality = core::Modality::MR;
+    }
+    volume.description = ref.description.empty() ? dir.filename().string() : ref.description;
+    if (!notes.empty()) {
+        volume.description += " (";
+        for (std::size_t i = 0; i < notes.size(); ++i)
+            volume.description += (i ? "; " : "") + notes[i];
+        volume.description += ")";
+    }
+    return volume;
+}
+
+}  // namespace voxlight::io::detail
