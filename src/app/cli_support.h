@@ -33,5 +33,6 @@ struct Command {
 Command addInfoCommand(CLI::App& app);
 Command addPhantomCommand(CLI::App& app);
 Command addSceneCommand(CLI::App& app);
+Command addRenderCommand(CLI::App& app);
 
 }  // namespace voxlight::app

@@ -12,7 +12,7 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.set_version_flag("--version", "voxlight 0.1.0");
     std::vector<Command> commands = {addInfoCommand(app), addPhantomCommand(app),
-                                     addSceneCommand(app)};
+                                     addSceneCommand(app), addRenderCommand(app)};
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {

@@ -205,10 +205,18 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
         tf.preset = f.string();
         return tf;
     }
-    f.allowOnly({"preset", "points", "extinction_scale"});
+    f.allowOnly({"preset", "points", "extinction_scale", "window"});
     if (f.has("preset") == f.has("points")) f.fail("needs exactly one of 'preset' or 'points'");
     if (f.has("preset")) tf.preset = f.child("preset").string();
     f.get("extinction_scale", tf.extinctionScale, 0.0, 1e6);
+    if (f.has("window")) {
+        const Field w = f.child("window");
+        w.allowOnly({"level", "width"});
+        if (!w.has("level") || !w.has("width"))
+            w.fail("needs 'level' and 'width'", "e.g. {\"level\": 400, \"width\": 1500}");
+        tf.window = glm::dvec2(w.child("level").number(-1e9, 1e9),
+                               w.child("width").number(1e-9, 1e9));
+    }
     if (f.has("points")) {
         const Field pts = f.child("points");
         if (!pts.isArray() || pts.size() < 1)

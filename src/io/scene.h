@@ -12,7 +12,7 @@
 //             | {"phantom": "torso", "size": 128},
 //   "transfer_function": "ct-bone" | {"preset": "ct-bone", "extinction_scale": 1.0}
 //             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0, "emission":
-//             [r,g,b]}, ...]},
+//             [r,g,b]}, ...]},   (either form may add "window": {"level": L, "width": W})
 //   "camera": {"projection": "perspective"|"orthographic", "azimuth": deg, "elevation": deg,
 //   "distance": mm (0 = fit),
 //              "fov_y": deg, "ortho_height": mm (0 = fit), "target": [x,y,z] mm, "eye": [x,y,z],
@@ -63,6 +63,9 @@ struct TransferFunctionDesc {
     std::vector<TransferFunctionPoint>
         points;                    ///< non-empty: explicit points, strictly increasing value
     double extinctionScale = 1.0;  ///< multiplies σt (density slider)
+    /// Window/level {level, width} (physical units): remaps the TF's value axis so that its
+    /// reference window becomes this one; MIP/MinIP grey ramp. Unset = the TF's own window.
+    std::optional<glm::dvec2> window;
 };
 
 struct CameraDesc {

@@ -1,0 +1,128 @@
+// SPDX-License-Identifier: MIT
+#include "optics/presets.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+
+namespace voxlight::optics {
+
+const std::vector<PresetInfo>& presetCatalog() {
+    static const std::vector<PresetInfo> c = {
+        {"ct-bone", "CT skeleton: ivory bone, soft tissue transparent", false},
+        {"ct-angio", "CT angiography: contrast vessels red, bone ivory, metal silver", false},
+        {"ct-soft-tissue", "CT soft tissue: skin/fat faint, muscle and organs pink-red", false},
+        {"ct-lung", "CT lung: translucent parenchyma cast", false},
+        {"mr-t1-brain", "MR T1 head/brain surface (relative to the volume's range)", true},
+        {"generic", "grey ramp over the volume's robust range (relative)", true},
+        {"phantom-step", "sigma_t 0.02/mm above 0.5 (exact-optics sphere/slab phantoms)", false},
+    };
+    return c;
+}
+
+std::array<float, 2> robustRange(const core::Volume& volume, float loFraction, float hiFraction) {
+    constexpr std::uint64_t kTargetSamples = 1u << 20;
+    const std::uint64_t n = volume.voxelCount();
+    // An odd stride avoids aliasing with the x/y extents (which are usually even).
+    const std::uint64_t stride = std::max<std::uint64_t>(1, (n / kTargetSamples) | 1);
+    std::vector<float> values;
+    values.reserve(std::size_t(n / stride + 1));
+    volume.visit([&](const auto& v) {
+        for (std::uint64_t i = 0; i < n; i += stride) {
+            const float x = v.slope * float(v.data[i]) + v.intercept;
+            if (std::isfinite(x)) values.push_back(x);
+        }
+    });
+    if (values.empty()) return {0.f, 1.f};
+    auto quantile = [&](float q) {
+        const std::size_t k = std::min(values.size() - 1, std::size_t(q * (values.size() - 1)));
+        std::nth_element(values.begin(), values.begin() + std::ptrdiff_t(k), values.end());
+        return values[k];
+    };
+    float lo = quantile(loFraction), hi = quantile(hiFraction);
+    if (!(hi > lo)) hi = lo + 1.f;
+    return {lo, hi};
+}
+
+namespace {
+TfPoint pt(float value, float sigma, glm::vec3 color) { return {value, color, sigma, {0, 0, 0}}; }
+
+TransferFunction absolutePreset(const std::string& name) {
+    const glm::vec3 ivory(0.93f, 0.85f, 0.70f), bright(0.97f, 0.94f, 0.86f);
+    if (name == "ct-bone")
+        return TransferFunction({pt(-1024, 0, ivory), pt(140, 0, {0.70f, 0.42f, 0.30f}),
+                                 pt(250, 0.25f, {0.85f, 0.65f, 0.48f}), pt(450, 1.2f, ivory),
+                                 pt(1000, 3.f, bright), pt(3071, 3.f, bright)},
+                                {500, 2000}, name);
+    if (name == "ct-angio") {
+        const glm::vec3 red(0.80f, 0.10f, 0.07f), metal(0.80f, 0.84f, 0.92f);
+        return TransferFunction({pt(-1024, 0, red), pt(110, 0, red), pt(200, 0.35f, red),
+                                 pt(380, 0.9f, {0.85f, 0.22f, 0.14f}), pt(520, 1.2f, ivory),
+                                 pt(1150, 3.f, bright), pt(1500, 6.f, metal), pt(3071, 6.f, metal)},
+                                {400, 1400}, name);
+    }
+    if (name == "ct-soft-tissue") {
+        const glm::vec3 fat(0.90f, 0.78f, 0.45f), muscle(0.78f, 0.30f, 0.24f);
+        return TransferFunction(
+            {pt(-1024, 0, fat), pt(-160, 0, fat), pt(-90, 0.004f, fat), pt(-30, 0.001f, fat),
+             pt(20, 0.02f, muscle), pt(80, 0.06f, {0.86f, 0.42f, 0.36f}),
+             pt(220, 0.15f, {0.92f, 0.82f, 0.72f}), pt(600, 1.f, bright), pt(3071, 1.f, bright)},
+            {40, 400}, name);
+    }
+    if (name == "ct-lung") {
+        const glm::vec3 pink(0.92f, 0.62f, 0.58f);
+        return TransferFunction(
+            {pt(-1024, 0, pink), pt(-950, 0, pink), pt(-850, 0.008f, pink),
+             pt(-700, 0.04f, {0.95f, 0.70f, 0.66f}), pt(-450, 0.10f, {0.95f, 0.78f, 0.74f}),
+             pt(-250, 0, pink), pt(3071, 0, pink)},
+            {-600, 1500}, name);
+    }
+    if (name == "phantom-step")
+        return TransferFunction(
+            {pt(0.f, 0, {0.9f, 0.9f, 0.9f}), pt(0.499f, 0, {0.9f, 0.9f, 0.9f}),
+             pt(0.501f, 0.02f, {0.9f, 0.9f, 0.9f}), pt(1.f, 0.02f, {0.9f, 0.9f, 0.9f})},
+            {0.5f, 1.f}, name);
+    return {};
+}
+
+TransferFunction relativePreset(const std::string& name) {
+    if (name == "mr-t1-brain")
+        return TransferFunction(
+            {pt(0, 0, {0.55f, 0.40f, 0.35f}), pt(0.14f, 0, {0.60f, 0.45f, 0.40f}),
+             pt(0.26f, 0.06f, {0.80f, 0.62f, 0.55f}), pt(0.45f, 0.35f, {0.90f, 0.80f, 0.74f}),
+             pt(0.75f, 0.7f, {0.96f, 0.92f, 0.86f}), pt(1, 0.8f, {0.98f, 0.96f, 0.92f})},
+            {0.5f, 1.f}, name);
+    if (name == "generic")
+        return TransferFunction({pt(0, 0, glm::vec3(0.85f)), pt(0.25f, 0, glm::vec3(0.85f)),
+                                 pt(0.5f, 0.5f, glm::vec3(0.9f)), pt(1, 1.f, glm::vec3(0.95f))},
+                                {0.5f, 1.f}, name);
+    return {};
+}
+
+std::string presetList() {
+    std::string s;
+    for (const auto& p : presetCatalog()) s += (s.empty() ? "" : ", ") + p.name;
+    return s;
+}
+}  // namespace
+
+TransferFunction makePreset(const std::string& name, const std::array<float, 2>& robust) {
+    const auto& cat = presetCatalog();
+    const auto it =
+        std::find_if(cat.begin(), cat.end(), [&](const PresetInfo& p) { return p.name == name; });
+    if (it == cat.end())
+        throw InputError("scene", "transfer_function.preset", "'" + name + "' is not a preset",
+                         "choose one of: " + presetList());
+    if (!it->relative) return absolutePreset(name);
+    const float lo = robust[0], hi = robust[1] > robust[0] ? robust[1] : robust[0] + 1.f;
+    return relativePreset(name).withWindow({0.5f * (lo + hi), hi - lo});
+}
+
+std::string defaultPresetName(const core::Volume& volume) {
+    if (volume.modality == core::Modality::CT && volume.mapping.unit == "HU") return "ct-bone";
+    if (volume.modality == core::Modality::MR) return "mr-t1-brain";
+    return "generic";
+}
+
+}  // namespace voxlight::optics

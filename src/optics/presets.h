@@ -1,0 +1,43 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Named transfer-function presets, chosen so that the phantoms and the real volumes in
+// ../shared/datasets look like what a radiologist expects (colours are linear-RGB albedos,
+// extinctions in 1/mm, values in HU for the CT presets):
+//   ct-bone         skeleton: ivory bone, soft tissue transparent                (L 500,  W 2000)
+//   ct-angio        contrast vessels red, bone ivory, metal (stents, clips) silver (L 400,  W 1400)
+//   ct-soft-tissue  skin/fat faint, muscle and organs red-pink, bone white         (L 40,   W 400)
+//   ct-lung         lung parenchyma as a translucent pink cast, airways            (L −600, W 1500)
+//   mr-t1-brain     T1 head/brain surface; *relative*: authored on [0, 1] = the volume's robust
+//                   range (1st–99.5th percentile), because MR intensities have no absolute unit
+//   generic         relative grey ramp for anything else (phantoms, unknown modality)
+//   phantom-step    σt = 0.02/mm above 0.5, 0 below: the exact-optics sphere/slab phantoms
+#include <array>
+#include <string>
+#include <vector>
+
+#include "core/volume.h"
+#include "optics/transfer_function.h"
+
+namespace voxlight::optics {
+
+struct PresetInfo {
+    std::string name;
+    std::string description;
+    bool relative = false;  ///< authored on [0,1] of the volume's robust range
+};
+const std::vector<PresetInfo>& presetCatalog();
+
+/// Value range holding all but the tails of a volume's (finite) values: {q(loFraction),
+/// q(hiFraction)} estimated from a strided subsample of ≈ 1 M voxels (deterministic).
+std::array<float, 2> robustRange(const core::Volume& volume, float loFraction = 0.01f,
+                                 float hiFraction = 0.995f);
+
+/// Builds a preset. Relative presets are mapped onto `robust` (see robustRange). Throws InputError
+/// (field "transfer_function.preset") naming the presets on an unknown name.
+TransferFunction makePreset(const std::string& name, const std::array<float, 2>& robust = {0, 1});
+
+/// The preset used when a scene names none: ct-bone for CT in HU, mr-t1-brain for MR, generic
+/// otherwise.
+std::string defaultPresetName(const core::Volume& volume);
+
+}  // namespace voxlight::optics

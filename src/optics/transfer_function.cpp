@@ -1,0 +1,238 @@
+// SPDX-License-Identifier: MIT
+#include "optics/transfer_function.h"
+
+#include <algorithm>
+#include <cmath>
+#include <ostream>
+#include <sstream>
+
+#include "core/error.h"
+
+namespace voxlight::optics {
+
+std::ostream& operator<<(std::ostream& os, const TfPoint& p) {
+    return os << "{value " << p.value << ", color (" << p.color.r << ", " << p.color.g << ", "
+              << p.color.b << "), extinction " << p.extinction << "/mm}";
+}
+
+std::ostream& operator<<(std::ostream& os, const TransferFunction& tf) {
+    os << "TransferFunction '" << tf.name() << "' window L" << tf.window().level << " W"
+       << tf.window().width << " [";
+    for (const auto& p : tf.points()) os << p << " ";
+    return os << "]";
+}
+
+namespace {
+bool finite3(const glm::vec3& v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+}  // namespace
+
+TransferFunction::TransferFunction(std::vector<TfPoint> points, Window window, std::string name)
+    : points_(std::move(points)), window_(window), name_(std::move(name)) {
+    const std::string src = "transfer function '" + name_ + "'";
+    if (points_.empty())
+        throw InputError(src, "points", "is empty", "give at least one control point");
+    for (std::size_t i = 0; i < points_.size(); ++i) {
+        const TfPoint& p = points_[i];
+        const std::string field = "points[" + std::to_string(i) + "]";
+        std::ostringstream os;
+        os << p;
+        if (!std::isfinite(p.value)) throw InputError(src, field + ".value", "is not finite");
+        if (i > 0 && !(p.value > points_[i - 1].value))
+            throw InputError(src, field + ".value",
+                             "must be strictly increasing; got " + std::to_string(p.value) +
+                                 " after " + std::to_string(points_[i - 1].value),
+                             "sort the points by value");
+        if (!finite3(p.color) || glm::any(glm::lessThan(p.color, glm::vec3(0.f))) ||
+            glm::any(glm::greaterThan(p.color, glm::vec3(1.f))))
+            throw InputError(src, field + ".color", "must be in [0, 1], got " + os.str());
+        if (!std::isfinite(p.extinction) || p.extinction < 0.f)
+            throw InputError(src, field + ".extinction",
+                             "must be finite and >= 0, got " + os.str());
+        if (!finite3(p.emission) || glm::any(glm::lessThan(p.emission, glm::vec3(0.f))))
+            throw InputError(src, field + ".emission", "must be finite and >= 0");
+    }
+    if (!(window_.width > 0.f) || !std::isfinite(window_.width) || !std::isfinite(window_.level))
+        throw InputError(src, "window", "width must be finite and > 0, level finite");
+}
+
+TfSample TransferFunction::eval(float value) const {
+    const auto toSample = [](const TfPoint& p) {
+        return TfSample{p.extinction, p.color, p.emission};
+    };
+    if (!(value > points_.front().value)) return toSample(points_.front());  // NaN → low end
+    if (value >= points_.back().value) return toSample(points_.back());
+    const auto it = std::upper_bound(points_.begin(), points_.end(), value,
+                                     [](float v, const TfPoint& p) { return v < p.value; });
+    const TfPoint& b = *it;
+    const TfPoint& a = *(it - 1);
+    const float f = (value - a.value) / (b.value - a.value);
+    TfSample s;
+    s.extinction = a.extinction + f * (b.extinction - a.extinction);
+    s.albedo = a.color + f * (b.color - a.color);
+    s.emission = a.emission + f * (b.emission - a.emission);
+    return s;
+}
+
+float TransferFunction::maxExtinction(float lo, float hi) const {
+    if (lo > hi) std::swap(lo, hi);
+    float m = std::max(eval(lo).extinction, eval(hi).extinction);
+    for (const auto& p : points_)
+        if (p.value > lo && p.value < hi) m = std::max(m, p.extinction);
+    return m;
+}
+
+float TransferFunction::maxExtinction() const {
+    float m = 0.f;
+    for (const auto& p : points_) m = std::max(m, p.extinction);
+    return m;
+}
+
+TransferFunction TransferFunction::scaledExtinction(float scale) const {
+    VL_CHECK(scale >= 0.f && std::isfinite(scale));
+    TransferFunction t = *this;
+    for (auto& p : t.points_) p.extinction *= scale;
+    return t;
+}
+
+TransferFunction TransferFunction::withWindow(const Window& w) const {
+    if (!(w.width > 0.f) || !std::isfinite(w.width) || !std::isfinite(w.level))
+        throw InputError("transfer function '" + name_ + "'", "window",
+                         "width must be finite and > 0, level finite",
+                         "e.g. \"window\": {\"level\": 400, \"width\": 1500}");
+    TransferFunction t = *this;
+    const float k = w.width / window_.width;
+    for (auto& p : t.points_) p.value = w.level + (p.value - window_.level) * k;
+    t.window_ = w;
+    return t;
+}
+
+float TransferFunction::surfaceValue() const {
+    const float half = 0.5f * maxExtinction();
+    if (!(half > 0.f)) return window_.level;
+    if (points_.front().extinction >= half) return points_.front().value;
+    for (std::size_t i = 1; i < points_.size(); ++i) {
+        const TfPoint &a = points_[i - 1], &b = points_[i];
+        if (b.extinction >= half)
+            return a.value +
+                   (half - a.extinction) / (b.extinction - a.extinction) * (b.value - a.value);
+    }
+    return points_.back().value;
+}
+
+// ---------------------------------------------------------------------------------------------
+TfTable::TfTable(const TransferFunction& tf) {
+    lo_ = tf.points().front().value;
+    hi_ = tf.points().back().value;
+    if (!(hi_ > lo_)) hi_ = lo_ + 1.f;  // single point: constant TF; any width works
+    cell_ = (double(hi_) - double(lo_)) / kTableCells;
+    invCell_ = float(1.0 / cell_);
+    const std::size_t n = kTableCells + 1;
+    nodes_.resize(n);
+    sigma_.resize(n);
+    weighted_.resize(n);
+    cumSigma_.resize(n);
+    cumWeighted_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        const TfSample s = tf.eval(float(double(lo_) + cell_ * double(i)));
+        nodes_[i] = {s.extinction, s.albedo, s.emission};
+        sigma_[i] = s.extinction;
+        for (int c = 0; c < 3; ++c) {
+            weighted_[i][c] = s.extinction * s.albedo[c];
+            weighted_[i][3 + c] = s.extinction * (1.f - s.albedo[c]) * s.emission[c];
+        }
+    }
+    // Cumulative integrals of the linearly interpolated table (the trapezoid rule is exact).
+    cumSigma_[0] = 0.0;
+    cumWeighted_[0].fill(0.0);
+    for (std::size_t i = 1; i < n; ++i) {
+        cumSigma_[i] = cumSigma_[i - 1] + 0.5 * cell_ * (double(sigma_[i - 1]) + sigma_[i]);
+        for (int c = 0; c < 6; ++c)
+            cumWeighted_[i][c] = cumWeighted_[i - 1][c] +
+                                 0.5 * cell_ * (double(weighted_[i - 1][c]) + weighted_[i][c]);
+    }
+    // Transparent ends, for the O(1) rejection of segments that see no extinction at all.
+    std::size_t first = 0, last = n - 1;
+    while (first < n && sigma_[first] <= 0.f) ++first;
+    while (last > 0 && sigma_[last] <= 0.f) --last;
+    if (first == n) {  // transparent everywhere
+        zeroBelow_ = INFINITY;
+        zeroAbove_ = -INFINITY;
+    } else {
+        zeroBelow_ = first == 0 ? -INFINITY : float(double(lo_) + cell_ * double(first - 1));
+        zeroAbove_ = last == n - 1 ? INFINITY : float(double(lo_) + cell_ * double(last + 1));
+    }
+}
+
+double TfTable::cumulativeSigma(double value, int& cell, double& x) const {
+    const double u = (value - double(lo_)) / cell_;
+    if (!(u > 0.0)) {  // below the range (or NaN): constant extension of the first node
+        cell = -1;
+        x = std::isnan(u) ? 0.0 : u * cell_;
+        return double(sigma_.front()) * x;
+    }
+    if (u >= kTableCells) {
+        cell = kTableCells;
+        x = (u - kTableCells) * cell_;
+        return cumSigma_.back() + double(sigma_.back()) * x;
+    }
+    cell = int(u);
+    x = (u - cell) * cell_;
+    const double a = sigma_[std::size_t(cell)], b = sigma_[std::size_t(cell) + 1];
+    // ∫_0^x (a + (b − a) t / h) dt = a·x + (b − a)·x² / (2h): exact inside the linear cell.
+    return cumSigma_[std::size_t(cell)] + a * x + (b - a) * x * x / (2.0 * cell_);
+}
+
+void TfTable::cumulativeWeighted(double value, int cell, double x, double out[6]) const {
+    if (cell < 0) {
+        for (int c = 0; c < 6; ++c) out[c] = double(weighted_.front()[c]) * x;
+        return;
+    }
+    if (cell >= kTableCells) {
+        for (int c = 0; c < 6; ++c)
+            out[c] = cumWeighted_.back()[c] + double(weighted_.back()[c]) * x;
+        return;
+    }
+    const auto& a = weighted_[std::size_t(cell)];
+    const auto& b = weighted_[std::size_t(cell) + 1];
+    const auto& base = cumWeighted_[std::size_t(cell)];
+    const double q = x * x / (2.0 * cell_);
+    for (int c = 0; c < 6; ++c) out[c] = base[c] + a[c] * x + (double(b[c]) - a[c]) * q;
+}
+
+TfTable::Segment TfTable::midpoint(float sf, float sb) const {
+    const TfSample s = lookup(0.5f * (sf + sb));
+    Segment g;
+    g.meanExtinction = s.extinction;
+    g.albedo = s.albedo;
+    g.emission = (glm::vec3(1.f) - s.albedo) * s.emission;
+    return g;
+}
+
+TfTable::Segment TfTable::segment(float sf, float sb) const {
+    // Both ends in a transparent tail: nothing to integrate (the common case, O(1)).
+    if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
+    // Below a hundredth of a cell the integrand is linear to float precision: point-sample.
+    constexpr float kPointSampleFraction = 1e-2f;
+    if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction)) return midpoint(sf, sb);
+    int ca, cb;
+    double xa, xb;
+    const double ia = cumulativeSigma(sf, ca, xa), ib = cumulativeSigma(sb, cb, xb);
+    const double inv = 1.0 / (double(sb) - double(sf));
+    const double sigma = (ib - ia) * inv;
+    Segment g;
+    if (!(sigma > 0.0)) return g;
+    g.meanExtinction = float(sigma);
+    double wa[6], wb[6];
+    cumulativeWeighted(sf, ca, xa, wa);
+    cumulativeWeighted(sb, cb, xb, wb);
+    const double w = 1.0 / (ib - ia);
+    for (int c = 0; c < 3; ++c) {
+        g.albedo[c] = float(std::clamp((wb[c] - wa[c]) * w, 0.0, 1.0));
+        g.emission[c] = float(std::max((wb[3 + c] - wa[3 + c]) * w, 0.0));
+    }
+    return g;
+}
+
+}  // namespace voxlight::optics

@@ -1,0 +1,162 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Transfer functions: physical value (HU for CT) → optical properties, following the one optical
+// model of ARCHITECTURE.md §1:
+//   σt(s)        extinction, 1/mm (≥ 0); a step of length Δ mm has opacity α = 1 − exp(−σt·Δ)
+//   a(s)         single-scattering albedo, linear RGB in [0, 1] (the "colour" of a tissue)
+//   e(s)         emitted radiance, linear RGB (≥ 0), weighted by (1 − a) in the source term
+// Every property is piecewise linear between control points (strictly increasing value) and
+// constant beyond the first and last point.
+//
+// Window/level remaps the value axis: a TF is authored for a reference window [level0 ± width0/2]
+// and `withWindow(level, width)` stretches/shifts every control point so that the reference window
+// lands on the new one (extinctions and colours are unchanged). MIP/MinIP use the window as their
+// grey ramp.
+//
+// Fast evaluation (TfTable): the TF is resampled on kTableCells equal cells over
+// [firstPoint, lastPoint] and evaluated by linear interpolation. Pre-integration (Engel, Kraus &
+// Ertl 2001, "High-quality pre-integrated volume rendering using hardware-accelerated pixel
+// shading"; here in the "no self-attenuation of colour inside a segment" variant, which is exact
+// for opacity): along a segment of length Δ whose value varies linearly from sf to sb,
+//   τ = Δ · mean_{[sf,sb]} σt            (exact optical depth under linear interpolation)
+//   A = mean(σt·a) / mean(σt)             (extinction-weighted albedo)
+//   E = mean(σt·(1−a)·e) / mean(σt)       (extinction-weighted emission term)
+// and the means come from cumulative integrals (double precision, exact quadratic inside a cell),
+// so a TF that steps sharply between two samples still contributes its exact share. Because the
+// tables are independent of Δ, partial segments (clip planes, jittered starts) are exact too.
+#include <array>
+#include <glm/glm.hpp>
+#include <iosfwd>
+#include <string>
+#include <vector>
+
+namespace voxlight::optics {
+
+struct TfPoint {
+    float value = 0.f;        ///< physical value (HU for CT)
+    glm::vec3 color{1.f};     ///< albedo, 0..1
+    float extinction = 0.f;   ///< σt, 1/mm
+    glm::vec3 emission{0.f};  ///< linear RGB radiance
+};
+std::ostream& operator<<(std::ostream& os, const TfPoint& p);
+
+/// Optical properties at one value.
+struct TfSample {
+    float extinction = 0.f;
+    glm::vec3 albedo{0.f};
+    glm::vec3 emission{0.f};
+};
+
+struct Window {
+    float level = 0.f;  ///< centre, physical units
+    float width = 1.f;  ///< > 0
+    float lo() const { return level - 0.5f * width; }
+    float hi() const { return level + 0.5f * width; }
+};
+
+class TransferFunction {
+  public:
+    TransferFunction() = default;
+    /// Throws InputError(source "transfer function", field "points") unless there is ≥ 1 point,
+    /// values strictly increasing and finite, colours in [0,1], extinction and emission ≥ 0 and
+    /// finite. `window` is the reference window (for MIP/MinIP grey and for withWindow).
+    TransferFunction(std::vector<TfPoint> points, Window window, std::string name = "custom");
+
+    const std::vector<TfPoint>& points() const { return points_; }
+    const Window& window() const { return window_; }
+    const std::string& name() const { return name_; }
+
+    /// Exact piecewise-linear evaluation (binary search; slow path, reference for tests).
+    TfSample eval(float value) const;
+    /// Largest σt over [lo, hi] (exact: max over the end values and the control points inside).
+    float maxExtinction(float lo, float hi) const;
+    /// True when σt = 0 on all of [lo, hi].
+    bool transparentOver(float lo, float hi) const { return maxExtinction(lo, hi) <= 0.f; }
+    /// Largest σt anywhere.
+    float maxExtinction() const;
+
+    /// Copy with every σt multiplied by `scale` (≥ 0, the density slider).
+    TransferFunction scaledExtinction(float scale) const;
+    /// Copy remapped so that the reference window becomes `w` (see header comment).
+    TransferFunction withWindow(const Window& w) const;
+
+    /// Value where σt first reaches half of its maximum (the natural isovalue of a surface TF), or
+    /// the window level when σt is 0 everywhere.
+    float surfaceValue() const;
+
+  private:
+    std::vector<TfPoint> points_;
+    Window window_;
+    std::string name_ = "custom";
+};
+std::ostream& operator<<(std::ostream& os, const TransferFunction& tf);
+
+/// Resampled TF for the per-sample loop, with pre-integration tables. Built once per render.
+class TfTable {
+  public:
+    /// Cells across the TF's point range. 4096 cells over a CT preset's ≈ 3000 HU is < 1 HU per
+    /// cell; the pre-integrated lookup is exact for any TF whose breakpoints fall on cell edges and
+    /// within a cell's width of exact otherwise.
+    static constexpr int kTableCells = 4096;
+
+    explicit TfTable(const TransferFunction& tf);
+
+    /// Linear interpolation of the resampled TF; values outside the range (and NaN, mapped to the
+    /// low end) clamp.
+    TfSample lookup(float value) const {
+        float u = (value - lo_) * invCell_;
+        u = u > 0.f ? u : 0.f;  // also maps NaN to the low end
+        u = u < float(kTableCells) ? u : float(kTableCells);
+        int i = int(u);
+        i = i < kTableCells ? i : kTableCells - 1;
+        const float f = u - float(i);
+        const Node& a = nodes_[std::size_t(i)];
+        const Node& b = nodes_[std::size_t(i) + 1];
+        TfSample s;
+        s.extinction = a.sigma + f * (b.sigma - a.sigma);
+        s.albedo = a.albedo + f * (b.albedo - a.albedo);
+        s.emission = a.emission + f * (b.emission - a.emission);
+        return s;
+    }
+    float extinction(float value) const { return lookup(value).extinction; }
+
+    /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.
+    struct Segment {
+        float meanExtinction = 0.f;  ///< mean σt over the segment, 1/mm (τ = Δ · meanExtinction)
+        glm::vec3 albedo{0.f};       ///< extinction-weighted albedo
+        glm::vec3 emission{0.f};     ///< extinction-weighted (1 − a)·e
+    };
+    Segment segment(float sf, float sb) const;
+    /// Point-sampled version of segment() at the midpoint value (the fine-stepping reference).
+    Segment midpoint(float sf, float sb) const;
+
+    /// Width of one table cell in value units: classification of value ranges is widened by this
+    /// much, because linear interpolation of the table can leak σt up to one cell past a
+    /// breakpoint.
+    float cellWidth() const { return 1.f / invCell_; }
+    float lo() const { return lo_; }
+    float hi() const { return hi_; }
+
+  private:
+    struct Node {
+        float sigma;
+        glm::vec3 albedo;
+        glm::vec3 emission;
+    };
+    /// Cumulative integral from lo_ of σt at a value (exact for the linearly interpolated table,
+    /// linear extension outside the range); `cell`/`x` return where it was evaluated.
+    double cumulativeSigma(double value, int& cell, double& x) const;
+    /// Same for the six weighted integrands σt·a and σt·(1−a)·e at the same position.
+    void cumulativeWeighted(double value, int cell, double x, double out[6]) const;
+
+    float lo_ = 0.f, hi_ = 1.f, invCell_ = 1.f;
+    double cell_ = 1.0;
+    float zeroBelow_ = 0.f, zeroAbove_ = 0.f;  // σt = 0 on (−∞, zeroBelow_] and [zeroAbove_, ∞)
+    std::vector<Node> nodes_;                  // kTableCells + 1
+    std::vector<float> sigma_;                 // integrand σt at nodes
+    std::vector<std::array<float, 6>> weighted_;  // σt·a, σt·(1−a)·e at nodes
+    std::vector<double> cumSigma_;                // cumulative integrals at nodes
+    std::vector<std::array<double, 6>> cumWeighted_;
+};
+
+}  // namespace voxlight::optics

@@ -1,0 +1,79 @@
+// SPDX-License-Identifier: MIT
+#include "render/camera.h"
+
+#include <cmath>
+#include <ostream>
+
+#include "core/error.h"
+
+namespace voxlight::render {
+
+namespace {
+constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+}
+
+Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
+               int width, int height)
+    : projection_(spec.projection), width_(width), height_(height) {
+    if (width < 1 || height < 1)
+        throw InputError("scene", "image.width", "image size must be at least 1x1");
+    const glm::dvec3 centre = 0.5 * (boundsMin + boundsMax);
+    const double radius = std::max(0.5 * glm::length(boundsMax - boundsMin), 1e-3);
+    const glm::dvec3 target = spec.target.value_or(centre);
+    fovY_ = spec.fovYDeg * kDegToRad;
+    tanHalf_ = std::tan(0.5 * fovY_);
+    const double aspect = double(width) / double(height);
+    // Fit: the bounding sphere fills the smaller image dimension.
+    const double fitTan = tanHalf_ * std::min(1.0, aspect);
+    const double fitDistance = radius / std::sin(std::atan(fitTan)) * 1.02;
+    glm::dvec3 up = spec.up;
+    if (spec.eye) {
+        eye_ = *spec.eye;
+    } else {
+        const double az = spec.azimuthDeg * kDegToRad, el = spec.elevationDeg * kDegToRad;
+        const glm::dvec3 dir(std::sin(az) * std::cos(el), -std::cos(az) * std::cos(el),
+                             std::sin(el));
+        const double d = spec.distance > 0.0 ? spec.distance : fitDistance;
+        eye_ = target + d * dir;
+    }
+    forward_ = glm::normalize(target - eye_);
+    // Looking straight along `up` (elevation ±90°): use posterior/anterior as the image's up.
+    if (std::abs(glm::dot(glm::normalize(up), forward_)) > 0.999)
+        up = glm::dvec3(0.0, forward_.z > 0 ? 1.0 : -1.0, 0.0);
+    right_ = glm::normalize(glm::cross(forward_, up));
+    up_ = glm::cross(right_, forward_);
+    if (spec.rollDeg != 0.0) {
+        const double r = spec.rollDeg * kDegToRad, c = std::cos(r), s = std::sin(r);
+        const glm::dvec3 r2 = c * right_ + s * up_, u2 = -s * right_ + c * up_;
+        right_ = r2;
+        up_ = u2;
+    }
+    orthoHeight_ =
+        spec.orthoHeight > 0.0 ? spec.orthoHeight : 2.04 * radius / std::min(1.0, aspect);
+}
+
+Ray Camera::generate(int x, int y) const {
+    const double sx = (2.0 * (x + 0.5) / width_ - 1.0);   // −1 left … +1 right
+    const double sy = (1.0 - 2.0 * (y + 0.5) / height_);  // +1 top … −1 bottom
+    const double aspect = double(width_) / double(height_);
+    Ray r;
+    if (projection_ == Projection::Perspective) {
+        r.origin = eye_;
+        r.direction =
+            glm::normalize(forward_ + (sx * tanHalf_ * aspect) * right_ + (sy * tanHalf_) * up_);
+    } else {
+        const double h = 0.5 * orthoHeight_;
+        r.origin = eye_ + (sx * h * aspect) * right_ + (sy * h) * up_;
+        r.direction = forward_;
+    }
+    return r;
+}
+
+std::ostream& operator<<(std::ostream& os, const Camera& c) {
+    return os << "Camera{" << (c.projection() == Projection::Perspective ? "perspective" : "ortho")
+              << " eye (" << c.eye().x << ", " << c.eye().y << ", " << c.eye().z << ") forward ("
+              << c.forward().x << ", " << c.forward().y << ", " << c.forward().z << ") "
+              << c.width() << "x" << c.height() << "}";
+}
+
+}  // namespace voxlight::render

@@ -1,0 +1,62 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Pinhole (perspective) and orthographic cameras in world millimetres (patient LPS).
+//
+// Orbit parameters: the eye sits at target + distance · (sin az · cos el, −cos az · cos el, sin
+// el), so azimuth 0, elevation 0 looks from the patient's front (anterior, −y) toward posterior
+// with superior (+z) up and the patient's left on the image's right (the radiological anterior
+// view); azimuth 90° looks from the patient's left. Positive roll turns the image
+// counter-clockwise. Explicit look-at (eye, target, up) is used when `eye` is set. Pixel (x, y) has
+// its centre at (x + 0.5, y + 0.5); row 0 is the top of the image.
+#include <glm/glm.hpp>
+#include <iosfwd>
+#include <optional>
+
+namespace voxlight::render {
+
+enum class Projection { Perspective, Orthographic };
+
+struct CameraSpec {
+    Projection projection = Projection::Perspective;
+    double azimuthDeg = 30.0, elevationDeg = 20.0, rollDeg = 0.0;
+    double distance = 0.0;             ///< mm from the target; 0 = fit the bounding sphere in view
+    double fovYDeg = 30.0;             ///< perspective: vertical field of view, (0, 180)
+    double orthoHeight = 0.0;          ///< orthographic: view height in mm; 0 = fit
+    std::optional<glm::dvec3> target;  ///< default: centre of the bounds
+    std::optional<glm::dvec3> eye;     ///< set → look-at
+    glm::dvec3 up{0.0, 0.0, 1.0};
+};
+
+struct Ray {
+    glm::dvec3 origin;
+    glm::dvec3 direction;  ///< unit
+};
+
+class Camera {
+  public:
+    /// Frames `spec` around the world-space box [boundsMin, boundsMax] (used for fitting and the
+    /// default target). Throws InputError (field "image.width") on a size < 1.
+    Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
+           int width, int height);
+
+    Ray generate(int x, int y) const;
+    int width() const { return width_; }
+    int height() const { return height_; }
+    const glm::dvec3& eye() const { return eye_; }
+    const glm::dvec3& forward() const { return forward_; }
+    const glm::dvec3& right() const { return right_; }
+    const glm::dvec3& up() const { return up_; }
+    Projection projection() const { return projection_; }
+    /// Perspective: vertical field of view in radians. Orthographic: view height in mm.
+    double fovY() const { return fovY_; }
+    double orthoHeight() const { return orthoHeight_; }
+
+  private:
+    Projection projection_;
+    glm::dvec3 eye_, forward_, right_, up_;
+    double fovY_ = 0.5, tanHalf_ = 0.27, orthoHeight_ = 1.0;
+    int width_ = 1, height_ = 1;
+};
+std::ostream& operator<<(std::ostream& os, const Camera& c);
+
+}  // namespace voxlight::render

@@ -1,0 +1,253 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The templated per-ray marchers behind RayCaster (include only from .cpp files of render/ and of
+// shading models that reuse the traversal). Everything here is inlined into tile loops that were
+// dispatched once on the voxel type (View) and the shader type (Shader).
+#include <cmath>
+
+#include "render/ray_caster.h"
+
+namespace voxlight::render::detail {
+
+/// Sample points of a ray: t_0 = tNear, t_i = tNear + (j + i − 1)·Δ clamped to tFar, last = tFar.
+struct SampleLattice {
+    float tNear, tFar, step, jitter;
+    std::int64_t last;
+    SampleLattice(const RaySegment& r, float stepMm)
+        : tNear(r.tNear), tFar(r.tFar), step(stepMm), jitter(r.jitter) {
+        last = 1 + std::int64_t(std::ceil((tFar - tNear) / step - jitter));
+        if (last < 1) last = 1;
+    }
+    float t(std::int64_t i) const {
+        if (i <= 0) return tNear;
+        const float t = tNear + (jitter + float(i - 1)) * step;
+        return i >= last || t > tFar ? tFar : t;
+    }
+    /// Largest i with t(i) ≤ x.
+    std::int64_t before(float x) const {
+        if (x < tNear + jitter * step) return 0;
+        const std::int64_t i = 1 + std::int64_t(std::floor((x - tNear) / step - jitter));
+        return i < last ? (i > 0 ? i : 0) : last;
+    }
+    /// Smallest i with t(i) ≥ x.
+    std::int64_t after(float x) const {
+        const std::int64_t i = before(x);
+        return i < last && t(i) < x ? i + 1 : i;
+    }
+};
+
+template <class View>
+inline float sampleAt(const View& v, const RaySegment& r, float t) {
+    const glm::vec3 p = r.originIndex + t * r.dirIndex;
+    return v.sample(p.x, p.y, p.z);
+}
+
+/// World gradient (value/mm) by central differences of the trilinear field at index position p.
+template <class View>
+inline glm::vec3 gradientAt(const View& v, const glm::vec3& p, const glm::mat3& m) {
+    const glm::vec3 d(v.sample(p.x + 1.f, p.y, p.z) - v.sample(p.x - 1.f, p.y, p.z),
+                      v.sample(p.x, p.y + 1.f, p.z) - v.sample(p.x, p.y - 1.f, p.z),
+                      v.sample(p.x, p.y, p.z + 1.f) - v.sample(p.x, p.y, p.z - 1.f));
+    return m * d;
+}
+
+/// Shading normal facing the eye: the gradient normal, blended toward `fallback` where the gradient
+/// is weak (weight |g| / weak, clamped to 1).
+inline glm::vec3 shadingNormal(const glm::vec3& g, const glm::vec3& fallback,
+                               const glm::vec3& toEye, float weak) {
+    const float len = glm::length(g);
+    glm::vec3 n = fallback;
+    if (len > 0.f && std::isfinite(len)) {
+        const float w = len >= weak ? 1.f : len / weak;
+        n = w * (-g / len) + (1.f - w) * fallback;
+        const float l2 = glm::length(n);
+        n = l2 > 1e-6f ? n / l2 : fallback;
+    }
+    return glm::dot(n, toEye) < 0.f ? -n : n;
+}
+
+struct RayResult {
+    glm::vec3 radiance{0.f};
+    float transmittance = 1.f;
+    std::uint64_t samples = 0;
+    bool terminated = false;
+};
+
+/// Calls f(i0, i1) for the lattice index ranges that cover the non-empty intervals of the ray
+/// (or the whole ray without skipping), in order and without overlap; f returns false to stop.
+template <class F>
+inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const SampleLattice& lat,
+                               F&& f) {
+    if (!c.options().emptySpaceSkipping) {
+        f(std::int64_t(0), lat.last);
+        return;
+    }
+    grid::RayIntervalIterator it(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar);
+    grid::RayInterval iv;
+    while (it.next(iv)) {
+        if (iv.empty()) continue;
+        if (!f(lat.before(iv.t0), lat.after(iv.t1))) return;
+    }
+}
+
+/// Front-to-back compositing of the optical model with shader S.
+template <class View, class S>
+RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const S& shader) {
+    RayResult out;
+    const SampleLattice lat(r, c.stepMm());
+    const optics::TfTable& table = c.table();
+    const bool preint = c.options().preintegrated;
+    const float termination = c.options().earlyTermination ? kTerminationTransmittance : 0.f;
+    const float band = kClipFaceBandVoxels * c.stepMm() / c.options().stepVoxels;
+    const glm::vec3 toEye = -r.dirWorld;
+    const glm::mat3& gm = c.gradientMatrix();
+    const float weak = c.weakGradient();
+    std::int64_t iPrev = -1;
+    float sPrev = 0.f, tPrev = 0.f;
+    float T = 1.f;
+    glm::vec3 L(0.f);
+    forEachActiveRange(c, r, lat, [&](std::int64_t i0, std::int64_t i1) {
+        if (iPrev < i0) {
+            tPrev = lat.t(i0);
+            sPrev = sampleAt(v, r, tPrev);
+            ++out.samples;
+            iPrev = i0;
+        }
+        for (std::int64_t i = iPrev + 1; i <= i1; ++i) {
+            const float t = lat.t(i);
+            const glm::vec3 p = r.originIndex + t * r.dirIndex;
+            const float s = v.sample(p.x, p.y, p.z);
+            ++out.samples;
+            const float dt = t - tPrev;
+            const optics::TfTable::Segment seg =
+                preint ? table.segment(sPrev, s) : table.midpoint(sPrev, s);
+            sPrev = s;
+            tPrev = t;
+            iPrev = i;
+            const float tau = seg.meanExtinction * dt;
+            if (!(tau > 0.f)) continue;
+            const float alpha = 1.f - std::exp(-tau);
+            ShadeInput in;
+            in.position = r.originWorld + t * r.dirWorld;
+            in.toEye = toEye;
+            in.value = s;
+            in.normal = toEye;
+            if constexpr (S::kNeedsNormal) {
+                const glm::vec3 g = gradientAt(v, p, gm);
+                out.samples += 6;
+                const bool cutFace = r.clipEntry && (t - r.tNear) < band;
+                in.normal = shadingNormal(g, cutFace ? r.entryNormal : toEye, toEye, weak);
+            }
+            const Scatter sc = shader.scatter(in);
+            L += (T * alpha) * (seg.emission + seg.albedo * sc.diffuse + sc.specular);
+            T *= 1.f - alpha;
+            if (T < termination) {
+                out.terminated = true;
+                return false;
+            }
+        }
+        return true;
+    });
+    out.radiance = L;
+    out.transmittance = T;
+    return out;
+}
+
+/// Maximum (kMax) or minimum intensity along the ray; NaN samples are ignored. Returns false when
+/// no finite sample was seen.
+template <bool kMax, class View>
+bool marchExtremum(const RayCaster& c, const View& v, const RaySegment& r, float& result,
+                   std::uint64_t& samples) {
+    const SampleLattice lat(r, c.stepMm());
+    float m = kMax ? -INFINITY : INFINITY;
+    bool any = false;
+    auto visit = [&](std::int64_t i0, std::int64_t i1) {
+        for (std::int64_t i = i0; i <= i1; ++i) {
+            const float s = sampleAt(v, r, lat.t(i));
+            ++samples;
+            if (kMax ? s > m : s < m) m = s, any = true;
+        }
+    };
+    if (!c.options().emptySpaceSkipping) {
+        visit(0, lat.last);
+    } else {
+        // Skip bricks that cannot beat the current extremum.
+        grid::RayIntervalIterator it(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar,
+                                     /*mergeNonEmpty=*/false);
+        grid::RayInterval iv;
+        std::int64_t done = -1;
+        while (it.next(iv)) {
+            if (any && (kMax ? iv.valueMax <= m : iv.valueMin >= m)) continue;
+            const std::int64_t i0 = std::max(lat.before(iv.t0), done + 1), i1 = lat.after(iv.t1);
+            if (i1 < i0) continue;
+            visit(i0, i1);
+            done = i1;
+        }
+    }
+    result = m;
+    return any;
+}
+
+struct IsoHit {
+    float t = 0.f;
+    glm::vec3 normal{0.f};  ///< facing the eye
+};
+
+/// First crossing of the isovalue (Ritschel's DIR): lattice search, then bisection on the
+/// trilinear field. A ray that enters through a clip plane inside the object hits the cap.
+template <class View>
+bool marchIso(const RayCaster& c, const View& v, const RaySegment& r, IsoHit& hit,
+              std::uint64_t& samples) {
+    constexpr int kBisections = 12;  // 2^-12 of a step: far below a voxel
+    const float iso = c.isoValue();
+    const SampleLattice lat(r, c.stepMm());
+    const glm::vec3 toEye = -r.dirWorld;
+    // A ray that enters through a clip plane inside the object hits the cap (checked before the
+    // skipping, because a brick entirely inside the object holds no crossing).
+    const float f0 = sampleAt(v, r, r.tNear) - iso;
+    ++samples;
+    if (r.clipEntry && f0 >= 0.f) {
+        hit.t = r.tNear;
+        hit.normal = r.entryNormal;
+        return true;
+    }
+    std::int64_t iPrev = -1;
+    float fPrev = 0.f, tPrev = 0.f;
+    bool found = false;
+    forEachActiveRange(c, r, lat, [&](std::int64_t i0, std::int64_t i1) {
+        if (iPrev < i0) {
+            tPrev = lat.t(i0);
+            fPrev = sampleAt(v, r, tPrev) - iso;
+            ++samples;
+            iPrev = i0;
+        }
+        for (std::int64_t i = iPrev + 1; i <= i1; ++i) {
+            const float t = lat.t(i);
+            const float f = sampleAt(v, r, t) - iso;
+            ++samples;
+            if ((f >= 0.f) != (fPrev >= 0.f)) {
+                float a = tPrev, b = t;
+                const bool risingAtB = f >= 0.f;
+                for (int k = 0; k < kBisections; ++k) {
+                    const float m = 0.5f * (a + b);
+                    ((sampleAt(v, r, m) - iso >= 0.f) == risingAtB ? b : a) = m;
+                }
+                samples += kBisections;
+                hit.t = 0.5f * (a + b);
+                const glm::vec3 p = r.originIndex + hit.t * r.dirIndex;
+                const glm::vec3 g = gradientAt(v, p, c.gradientMatrix());
+                samples += 6;
+                hit.normal = shadingNormal(g, toEye, toEye, 0.f);
+                found = true;
+                return false;
+            }
+            fPrev = f;
+            tPrev = t;
+            iPrev = i;
+        }
+        return true;
+    });
+    return found;
+}
+
+}  // namespace voxlight::render::detail

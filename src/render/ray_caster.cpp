@@ -1,0 +1,332 @@
+// SPDX-License-Identifier: MIT
+#include "render/ray_caster.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+
+#include "core/rng.h"
+#include "render/dvr_march.h"
+#include "render/tonemap.h"
+
+namespace voxlight::render {
+
+std::string toString(Mode m) {
+    switch (m) {
+        case Mode::EmissionAbsorption:
+            return "emission-absorption";
+        case Mode::Gradient:
+            return "gradient";
+        case Mode::Mip:
+            return "mip";
+        case Mode::MinIp:
+            return "minip";
+        case Mode::Isosurface:
+            return "iso";
+    }
+    return "?";
+}
+
+RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
+                     const optics::TransferFunction& tf, RenderOptions options)
+    : volume_(&volume), tf_(&tf), options_(std::move(options)) {
+    VL_CHECK(!volume.empty());
+    if (!(options_.stepVoxels > 0.f) || !std::isfinite(options_.stepVoxels))
+        throw InputError("scene", "render.step", "must be a finite number > 0 (voxels)");
+    if (options_.tileSize < 1) options_.tileSize = 16;
+    const core::Geometry& g = volume.geometry();
+    stepMm_ = float(options_.stepVoxels * core::minComponent(g.spacing));
+    table_ = std::make_shared<optics::TfTable>(tf);
+    for (int a = 0; a < 3; ++a)
+        gradientMatrix_[a] = glm::vec3(g.direction[a]) / float(2.0 * g.spacing[a]);
+    weakGradient_ = kWeakGradientFraction * tf.window().width;
+    isoValue_ = options_.isoValue.value_or(tf.surfaceValue());
+    if (!std::isfinite(isoValue_))
+        throw InputError("scene", "method.params.iso_value", "must be finite");
+
+    // Which bricks can be skipped in this mode.
+    const float widen = table_->cellWidth();  // table interpolation leaks σt up to one cell
+    switch (options_.mode) {
+        case Mode::EmissionAbsorption:
+        case Mode::Gradient:
+            majorants_ = grid::BrickMajorants::build(
+                grid, [&](float lo, float hi) { return tf.maxExtinction(lo - widen, hi + widen); });
+            break;
+        case Mode::Mip:
+        case Mode::MinIp:
+            majorants_ = grid::BrickMajorants::build(grid, [](float, float) { return 1.f; });
+            break;
+        case Mode::Isosurface:
+            majorants_ = grid::BrickMajorants::build(grid, [&](float lo, float hi) {
+                return lo <= isoValue_ && isoValue_ <= hi ? 1.f : 0.f;
+            });
+            break;
+    }
+}
+
+RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
+    const Ray ray = camera.generate(x, y);
+    const core::Geometry& g = volume_->geometry();
+    RaySegment r;
+    r.originWorld = glm::vec3(ray.origin);
+    r.dirWorld = glm::vec3(ray.direction);
+    const glm::dvec3 oi = g.worldToIndex(ray.origin);
+    const glm::dvec3 di = (glm::transpose(g.direction) * ray.direction) / g.spacing;
+    r.originIndex = glm::vec3(oi);
+    r.dirIndex = glm::vec3(di);
+    double tn = 0.0, tf = std::numeric_limits<double>::infinity();
+    // Volume box in index space: the voxel centres [0, n − 1] (a single slice gets ±0.5).
+    for (int a = 0; a < 3; ++a) {
+        const int n = g.dims[a];
+        const double lo = n > 1 ? 0.0 : -0.5, hi = n > 1 ? double(n - 1) : 0.5;
+        if (std::abs(di[a]) < 1e-300) {
+            if (oi[a] < lo || oi[a] > hi) tf = -1.0;
+            continue;
+        }
+        double t1 = (lo - oi[a]) / di[a], t2 = (hi - oi[a]) / di[a];
+        if (t1 > t2) std::swap(t1, t2);
+        tn = std::max(tn, t1);
+        tf = std::min(tf, t2);
+    }
+    // Clip planes: keep dot(x − p, n) ≥ 0.
+    for (const ClipPlane& c : options_.clipPlanes) {
+        const double a = glm::dot(ray.origin - c.point, c.normal);
+        const double b = glm::dot(ray.direction, c.normal);
+        if (std::abs(b) < 1e-12) {
+            if (a < 0.0) tf = -1.0;
+            continue;
+        }
+        const double t = -a / b;
+        if (b > 0.0) {
+            if (t > tn) {
+                tn = t;
+                r.clipEntry = true;
+                r.entryNormal = -glm::vec3(c.normal);
+            }
+        } else {
+            tf = std::min(tf, t);
+        }
+    }
+    if (options_.cropBox) {
+        const CropBox& box = *options_.cropBox;
+        for (int a = 0; a < 3; ++a) {
+            const double d = ray.direction[a];
+            if (std::abs(d) < 1e-12) {
+                if (ray.origin[a] < box.min[a] || ray.origin[a] > box.max[a]) tf = -1.0;
+                continue;
+            }
+            double t1 = (box.min[a] - ray.origin[a]) / d, t2 = (box.max[a] - ray.origin[a]) / d;
+            if (t1 > t2) std::swap(t1, t2);
+            if (t1 > tn) {
+                tn = t1;
+                r.clipEntry = true;
+                r.entryNormal = glm::vec3(0.f);
+                r.entryNormal[a] = d > 0 ? -1.f : 1.f;
+            }
+            tf = std::min(tf, t2);
+        }
+    }
+    r.tNear = float(tn);
+    r.tFar = float(tf);
+    if (!(r.tFar > r.tNear)) r.tFar = r.tNear;  // miss
+    r.jitter = options_.jitter
+                   ? core::toUnitFloat(core::hashCounters(
+                         std::uint64_t(y) * std::uint64_t(camera.width()) + std::uint64_t(x), 0, 0,
+                         options_.seed))
+                   : 0.f;
+    return r;
+}
+
+namespace {
+
+void writeMiss(float* px, const glm::vec3& bg) {
+    px[0] = bg.r, px[1] = bg.g, px[2] = bg.b, px[3] = 0.f;
+}
+
+/// Guards the "never NaN pixels" promise at the last possible point.
+float finiteOr0(float v) { return std::isfinite(v) ? v : 0.f; }
+
+template <class Shader>
+class DvrModel final : public ShadingModel {
+  public:
+    DvrModel(std::string name, Shader shader)
+        : name_(std::move(name)), shader_(std::move(shader)) {}
+    std::string name() const override { return name_; }
+    void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
+                    io::ImageRGBA& film, RenderStats& stats) const override {
+        const glm::vec3 bg = c.options().background;
+        c.volume().visit([&](const auto& view) {
+            for (int y = y0; y < y1; ++y)
+                for (int x = x0; x < x1; ++x) {
+                    float* px = film.at(x, y);
+                    const RaySegment r = c.setupRay(cam, x, y);
+                    if (!r.hit()) {
+                        writeMiss(px, bg);
+                        continue;
+                    }
+                    const detail::RayResult res = detail::marchDvr(c, view, r, shader_);
+                    const float T = res.transmittance;
+                    for (int k = 0; k < 3; ++k) px[k] = finiteOr0(res.radiance[k] + T * bg[k]);
+                    px[3] = finiteOr0(1.f - T);
+                    ++stats.rays;
+                    stats.samples += res.samples;
+                    stats.terminatedEarly += res.terminated ? 1 : 0;
+                }
+        });
+    }
+
+  private:
+    std::string name_;
+    Shader shader_;
+};
+
+template <bool kMax>
+class ExtremumModel final : public ShadingModel {
+  public:
+    std::string name() const override { return kMax ? "mip" : "minip"; }
+    void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
+                    io::ImageRGBA& film, RenderStats& stats) const override {
+        const glm::vec3 bg = c.options().background;
+        const optics::Window w = c.transferFunction().window();
+        c.volume().visit([&](const auto& view) {
+            for (int y = y0; y < y1; ++y)
+                for (int x = x0; x < x1; ++x) {
+                    float* px = film.at(x, y);
+                    const RaySegment r = c.setupRay(cam, x, y);
+                    float m = 0.f;
+                    if (!r.hit() || !detail::marchExtremum<kMax>(c, view, r, m, stats.samples)) {
+                        writeMiss(px, bg);
+                        continue;
+                    }
+                    ++stats.rays;
+                    // Grey through the window, as displayed (the film is linear, so decode).
+                    const float grey = srgbToLinear(std::clamp((m - w.lo()) / w.width, 0.f, 1.f));
+                    px[0] = px[1] = px[2] = finiteOr0(grey);
+                    px[3] = 1.f;
+                }
+        });
+    }
+};
+
+class IsoModel final : public ShadingModel {
+  public:
+    explicit IsoModel(BlinnPhongShader shader) : shader_(std::move(shader)) {}
+    std::string name() const override { return "iso"; }
+    void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
+                    io::ImageRGBA& film, RenderStats& stats) const override {
+        const glm::vec3 bg = c.options().background;
+        const glm::vec3 albedo = c.transferFunction().eval(c.isoValue()).albedo;
+        c.volume().visit([&](const auto& view) {
+            for (int y = y0; y < y1; ++y)
+                for (int x = x0; x < x1; ++x) {
+                    float* px = film.at(x, y);
+                    const RaySegment r = c.setupRay(cam, x, y);
+                    detail::IsoHit hit;
+                    if (!r.hit() || !detail::marchIso(c, view, r, hit, stats.samples)) {
+                        writeMiss(px, bg);
+                        continue;
+                    }
+                    ++stats.rays;
+                    ShadeInput in;
+                    in.position = r.originWorld + hit.t * r.dirWorld;
+                    in.toEye = -r.dirWorld;
+                    in.normal = hit.normal;
+                    in.value = c.isoValue();
+                    const Scatter s = shader_.scatter(in);
+                    for (int k = 0; k < 3; ++k) px[k] = finiteOr0(albedo[k] * s.diffuse[k]);
+                    px[3] = 1.f;
+                }
+        });
+    }
+
+  private:
+    BlinnPhongShader shader_;
+};
+
+}  // namespace
+
+std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera) {
+    const RenderOptions& o = caster.options();
+    BlinnPhongShader bp;
+    bp.params = o.blinnPhong;
+    bp.lights = o.lights;
+    if (bp.lights.empty()) {
+        Light head;
+        head.direction = glm::normalize(
+            glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
+        bp.lights.push_back(head);
+    }
+    switch (o.mode) {
+        case Mode::EmissionAbsorption:
+            return std::make_unique<DvrModel<EmissionAbsorptionShader>>(
+                "emission-absorption", EmissionAbsorptionShader{o.ambient});
+        case Mode::Gradient:
+            return std::make_unique<DvrModel<BlinnPhongShader>>("gradient", bp);
+        case Mode::Mip:
+            return std::make_unique<ExtremumModel<true>>();
+        case Mode::MinIp:
+            return std::make_unique<ExtremumModel<false>>();
+        case Mode::Isosurface:
+            bp.params.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
+            return std::make_unique<IsoModel>(bp);
+    }
+    throw InternalError("unknown render mode");
+}
+
+io::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& progress,
+                                RenderStats* stats) const {
+    const auto model = makeBuiltinModel(*this, camera);
+    return render(camera, *model, progress, stats);
+}
+
+io::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
+                                const core::Progress& progress, RenderStats* stats) const {
+    const int W = camera.width(), H = camera.height();
+    if (std::uint64_t(W) * std::uint64_t(H) > kMaxPixels)
+        throw InputError("scene", "image.width",
+                         "image of " + std::to_string(W) + "x" + std::to_string(H) +
+                             " pixels is larger than the renderer's limit (" +
+                             std::to_string(kMaxPixels) + " pixels)",
+                         "render a smaller image");
+    io::ImageRGBA film(W, H);
+    const int ts = options_.tileSize;
+    const int tilesX = (W + ts - 1) / ts, tilesY = (H + ts - 1) / ts;
+    const int tiles = tilesX * tilesY;
+    RenderStats total;
+    total.bricksTotal = majorants_.size();
+    total.bricksNonEmpty = majorants_.nonEmptyCount();
+    std::mutex statsMutex;
+    tbb::task_arena arena(options_.threads > 0 ? options_.threads : tbb::task_arena::automatic);
+    // Waves of tiles, so that progress is reported (and cancellation checked) from this thread.
+    constexpr int kWaves = 20;
+    const int perWave = std::max(1, (tiles + kWaves - 1) / kWaves);
+    for (int begin = 0; begin < tiles; begin += perWave) {
+        progress.report("render", double(begin) / tiles);
+        const int end = std::min(tiles, begin + perWave);
+        arena.execute([&] {
+            tbb::parallel_for(tbb::blocked_range<int>(begin, end, 1),
+                              [&](const tbb::blocked_range<int>& range) {
+                                  RenderStats local;
+                                  for (int t = range.begin(); t < range.end(); ++t) {
+                                      const int x0 = (t % tilesX) * ts, y0 = (t / tilesX) * ts;
+                                      model.renderTile(*this, camera, x0, y0, std::min(W, x0 + ts),
+                                                       std::min(H, y0 + ts), film, local);
+                                  }
+                                  std::lock_guard lock(statsMutex);
+                                  total.rays += local.rays;
+                                  total.samples += local.samples;
+                                  total.terminatedEarly += local.terminatedEarly;
+                              });
+        });
+    }
+    progress.report("render", 1.0);
+    if (stats) *stats = total;
+    return film;
+}
+
+}  // namespace voxlight::render

@@ -1,0 +1,165 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The CPU ray caster: front-to-back compositing of the optical model of ARCHITECTURE.md §1 along
+// camera rays through a scalar volume, with empty-space skipping on the brick grid, early ray
+// termination, jittered (deterministic per pixel) ray starts, clip planes and a crop box, and
+// oneTBB tiles. Every pixel is a pure function of (scene, pixel, seed): images are identical for
+// any thread count.
+//
+// Modes:
+//   EmissionAbsorption  σt / albedo / emission from the TF, uniform unit illumination, no
+//   visibility Gradient            gradient Blinn–Phong, directional and point lights (the clinical
+//   baseline) Mip / MinIp         maximum / minimum value along the ray, shown as grey through the
+//   window Isosurface          direct isosurface (Ritschel's DIR): first crossing of the isovalue
+//   along the
+//                       ray, refined by bisection, Lambertian with the TF albedo at the isovalue
+//
+// Sampling: the step is Δ = stepVoxels · (smallest voxel spacing) mm. Sample points along a ray
+// are t_0 = tNear (exactly on the entry plane/box), then tNear + (j + k)·Δ with the per-pixel
+// jitter j ∈ [0, 1), and finally tFar (exactly on the exit) — partial end segments are integrated
+// with their true length, so there is no staircase at clip planes. A segment between two samples
+// has opacity α = 1 − exp(−τ) with τ = Δ_segment · mean σt (pre-integrated over the two values, or
+// the midpoint value when pre-integration is off).
+//
+// Clipping: the kept region is the intersection of the half-spaces dot(x − p, n) ≥ 0 and the crop
+// box. Where a ray enters through a clip plane or crop face, samples within kClipFaceBandVoxels of
+// the entry are shaded with the plane's normal where the gradient is weak (the cut face of a
+// homogeneous organ), as clinical viewers do.
+//
+// Output: io::ImageRGBA with *linear* radiance + T·background in RGB and coverage 1 − T in alpha.
+// Non-finite voxels never produce non-finite pixels (NaN samples act as the TF's lowest value).
+#include <cstdint>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/volume.h"
+#include "grid/brick_grid.h"
+#include "grid/brick_traversal.h"
+#include "io/image.h"
+#include "optics/transfer_function.h"
+#include "render/camera.h"
+#include "render/shading.h"
+
+namespace voxlight::render {
+
+enum class Mode { EmissionAbsorption, Gradient, Mip, MinIp, Isosurface };
+std::string toString(Mode m);
+
+struct ClipPlane {
+    glm::dvec3 point{0.0};
+    glm::dvec3 normal{0.0, 0.0, 1.0};  ///< unit; keeps dot(x − point, normal) ≥ 0
+};
+struct CropBox {
+    glm::dvec3 min{0.0}, max{0.0};  ///< world mm, axis-aligned
+};
+
+/// Transmittance below which a ray stops: what is behind contributes < 0.1 % (below one 8-bit
+/// display level).
+inline constexpr float kTerminationTransmittance = 1e-3f;
+/// Depth (in units of the smallest voxel spacing) behind a clip entry where the plane normal
+/// replaces a weak gradient.
+inline constexpr float kClipFaceBandVoxels = 2.f;
+/// A gradient weaker than this fraction of the TF window width per mm counts as "weak": its
+/// normal is blended toward the fallback (plane normal at a cut face, else the view direction).
+inline constexpr float kWeakGradientFraction = 0.01f;
+/// Largest image the renderer accepts (pixels): 16384 × 8192 RGBA float is 2 GiB.
+inline constexpr std::uint64_t kMaxPixels = std::uint64_t(16384) * 8192;
+
+struct RenderOptions {
+    Mode mode = Mode::Gradient;
+    float stepVoxels = 0.5f;    ///< step in units of the smallest voxel spacing, > 0
+    bool preintegrated = true;  ///< pre-integrated segments (else midpoint point sampling)
+    bool emptySpaceSkipping = true;
+    bool earlyTermination = true;
+    bool jitter = true;  ///< per-pixel deterministic start offset
+    std::uint64_t seed = 1;
+    int threads = 0;            ///< 0 = all hardware threads
+    glm::vec3 background{0.f};  ///< linear RGB behind the volume
+    std::vector<ClipPlane> clipPlanes;
+    std::optional<CropBox> cropBox;
+    std::vector<Light> lights;      ///< Gradient/Isosurface; empty = one headlight
+    BlinnPhongParams blinnPhong;    ///< Gradient (Isosurface uses ambient + diffuse only)
+    float ambient = 1.f;            ///< EmissionAbsorption: uniform illumination
+    std::optional<float> isoValue;  ///< Isosurface: physical value; default TF surfaceValue()
+    int tileSize = 16;              ///< pixels per tile side
+};
+
+struct RenderStats {
+    std::uint64_t rays = 0;             ///< rays that hit the (clipped) volume
+    std::uint64_t samples = 0;          ///< volume samples taken (incl. gradient taps)
+    std::uint64_t terminatedEarly = 0;  ///< rays stopped by early termination
+    std::size_t bricksTotal = 0, bricksNonEmpty = 0;  ///< under the current TF / mode
+};
+
+class RayCaster;
+
+/// The per-tile seam between traversal and shading: one virtual call per tile, concrete shader
+/// types inside (see shading.h). The built-in modes are ShadingModels too.
+class ShadingModel {
+  public:
+    virtual ~ShadingModel() = default;
+    virtual std::string name() const = 0;
+    /// Renders pixels [x0, x1) × [y0, y1) into `film`. Called concurrently for disjoint tiles.
+    virtual void renderTile(const RayCaster& caster, const Camera& camera, int x0, int y0, int x1,
+                            int y1, io::ImageRGBA& film, RenderStats& stats) const = 0;
+};
+
+/// Ray set-up shared by every model: the clipped parametric range of one camera ray.
+struct RaySegment {
+    glm::vec3 originWorld, dirWorld;  ///< world mm (float copies for the hot loop)
+    glm::vec3 originIndex, dirIndex;  ///< continuous index space, per mm of t
+    float tNear = 0.f, tFar = 0.f;    ///< mm along the ray
+    float jitter = 0.f;               ///< ∈ [0, 1)
+    bool clipEntry = false;           ///< entered through a clip plane or crop face
+    glm::vec3 entryNormal{0.f};       ///< outward normal of that face (facing the eye)
+    bool hit() const { return tFar > tNear; }
+};
+
+class RayCaster {
+  public:
+    /// Prepares TF tables and brick majorants for `options.mode`. The volume, grid and TF must
+    /// outlive the caster. Throws InputError on bad options (step ≤ 0, ...).
+    RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
+              const optics::TransferFunction& tf, RenderOptions options);
+
+    /// Renders with the built-in model of options().mode.
+    io::ImageRGBA render(const Camera& camera,
+                         const core::Progress& progress = core::Progress::none(),
+                         RenderStats* stats = nullptr) const;
+    /// Renders with any shading model (later issues plug theirs in here).
+    io::ImageRGBA render(const Camera& camera, const ShadingModel& model,
+                         const core::Progress& progress = core::Progress::none(),
+                         RenderStats* stats = nullptr) const;
+
+    /// The clipped range of the camera ray through pixel (x, y).
+    RaySegment setupRay(const Camera& camera, int x, int y) const;
+
+    const core::Volume& volume() const { return *volume_; }
+    const optics::TransferFunction& transferFunction() const { return *tf_; }
+    const optics::TfTable& table() const { return *table_; }
+    const grid::BrickMajorants& majorants() const { return majorants_; }
+    const RenderOptions& options() const { return options_; }
+    float stepMm() const { return stepMm_; }
+    float isoValue() const { return isoValue_; }
+    /// Gradient (value/mm, world) from central differences = gradientMatrix · (Δi, Δj, Δk).
+    const glm::mat3& gradientMatrix() const { return gradientMatrix_; }
+    float weakGradient() const { return weakGradient_; }
+
+  private:
+    const core::Volume* volume_;
+    const optics::TransferFunction* tf_;
+    std::shared_ptr<optics::TfTable> table_;
+    grid::BrickMajorants majorants_;
+    RenderOptions options_;
+    float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
+    glm::mat3 gradientMatrix_{1.f};
+};
+
+/// Built-in shading model of options().mode; with no lights given, Gradient/Isosurface get one
+/// directional light from just above-left of the camera (a head light, as clinical viewers use).
+std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera);
+
+}  // namespace voxlight::render

@@ -1,0 +1,94 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Shading models: what a volume sample scatters toward the eye. The seam is small on purpose:
+// a shader is a concrete struct the ray marcher is *templated* on (no virtual call or
+// std::function per sample); the runtime choice happens once per tile through ShadingModel
+// (ray_caster.h). Later methods (SH visibility, PVRT radiance, ...) add a shader struct with the
+// same two members and reuse the traversal unchanged:
+//
+//   static constexpr bool kNeedsNormal;        // marcher computes the gradient normal if true
+//   Scatter scatter(const ShadeInput&) const;   // in-scattered radiance factors at the sample
+//
+// The optical model (ARCHITECTURE.md §1): a segment with opacity α, extinction-weighted albedo A
+// and emission term E adds  T · α · (E + A ⊙ diffuse + specular)  to the pixel, where
+// (diffuse, specular) = scatter(...). `diffuse` is the in-scattered radiance that the albedo
+// filters (∫ p · L_light · V dω for the exact model); `specular` is added unfiltered.
+#include <glm/glm.hpp>
+#include <vector>
+
+namespace voxlight::render {
+
+struct Light {
+    enum class Type { Directional, Point };
+    Type type = Type::Directional;
+    glm::vec3 direction{0.f, 0.f, -1.f};  ///< directional: unit direction the light *travels*
+    glm::vec3 position{0.f};              ///< point: world mm
+    glm::vec3 radiance{1.f};              ///< colour × intensity (directional: irradiance; point:
+                                          ///< intensity, falls off as 1/d² with d in mm)
+    float minDistance = 1.f;              ///< point: clamps 1/d² near the light, mm
+};
+
+struct ShadeInput {
+    glm::vec3 position;  ///< world mm
+    glm::vec3 toEye;     ///< unit, from the sample toward the eye
+    glm::vec3 normal;    ///< unit shading normal facing the eye (valid when kNeedsNormal)
+    float value;         ///< physical value at the sample
+};
+
+struct Scatter {
+    glm::vec3 diffuse{0.f};
+    glm::vec3 specular{0.f};
+};
+
+/// Emission–absorption with uniform unit illumination and no visibility: every sample scatters
+/// `ambient` (the classic "unshaded" DVR; colour = TF albedo).
+struct EmissionAbsorptionShader {
+    static constexpr bool kNeedsNormal = false;
+    float ambient = 1.f;
+    Scatter scatter(const ShadeInput&) const { return {glm::vec3(ambient), glm::vec3(0.f)}; }
+};
+
+struct BlinnPhongParams {
+    float ambient = 0.25f;   ///< fraction of unit illumination reaching every sample
+    float diffuse = 0.75f;   ///< Lambert weight
+    float specular = 0.25f;  ///< Blinn–Phong weight (white, not filtered by the albedo)
+    float shininess = 24.f;  ///< Blinn–Phong exponent
+};
+
+/// Gradient Blinn–Phong with directional and point lights, no visibility (the clinical baseline,
+/// Kronander et al. 2012 Fig. 1a "local diffuse shading"). Two-sided: the marcher hands over a
+/// normal that faces the eye.
+struct BlinnPhongShader {
+    static constexpr bool kNeedsNormal = true;
+    BlinnPhongParams params;
+    std::vector<Light> lights;
+
+    Scatter scatter(const ShadeInput& in) const {
+        Scatter s;
+        s.diffuse = glm::vec3(params.ambient);
+        for (const Light& l : lights) {
+            glm::vec3 toLight, e = l.radiance;
+            if (l.type == Light::Type::Directional) {
+                toLight = -l.direction;
+            } else {
+                const glm::vec3 d = l.position - in.position;
+                const float dist = glm::length(d);
+                toLight = dist > 0.f ? d / dist : in.normal;
+                const float r = dist > l.minDistance ? dist : l.minDistance;
+                e /= r * r;
+            }
+            const float ndl = glm::dot(in.normal, toLight);
+            if (ndl <= 0.f) continue;
+            s.diffuse += (params.diffuse * ndl) * e;
+            if (params.specular > 0.f) {
+                const glm::vec3 h = glm::normalize(toLight + in.toEye);
+                const float ndh = glm::dot(in.normal, h);
+                if (ndh > 0.f)
+                    s.specular += (params.specular * std::pow(ndh, params.shininess)) * e;
+            }
+        }
+        return s;
+    }
+};
+
+}  // namespace voxlight::render
