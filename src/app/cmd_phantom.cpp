@@ -36,6 +36,7 @@ Command addPhantomCommand(CLI::App& app) {
         if (name->empty() || out->empty())
             throw InputError("command line", "phantom", "needs a NAME and -o FILE",
                              "e.g. voxlight phantom torso -o torso.nii.gz (see --list)");
+        io::checkVolumeOutputPath(*out);  // fail before the work, not after
         core::PhantomOptions o;
         o.size = *size;
         o.seed = *seed;

@@ -77,14 +77,25 @@ CaptureOutputWindow& captureWindow() {
     return *w;
 }
 
-class ErrorObserver : public vtkCommand {
+/// Collects a reader's errors, forwards its progress and aborts it when the user cancels.
+class ReaderObserver : public vtkCommand {
   public:
-    static ErrorObserver* New() { return new ErrorObserver; }
-    void Execute(vtkObject*, unsigned long event, void* data) override {
+    static ReaderObserver* New() { return new ReaderObserver; }
+    void Execute(vtkObject* caller, unsigned long event, void* data) override {
         if (event == vtkCommand::ErrorEvent && data)
             errors.emplace_back(static_cast<const char*>(data));
+        if (event == vtkCommand::ProgressEvent && data && progress) {
+            if (progress->cancelled()) {
+                cancelled = true;
+                if (auto* alg = vtkAlgorithm::SafeDownCast(caller)) alg->SetAbortExecute(1);
+                return;
+            }
+            progress->report("read", *static_cast<double*>(data));
+        }
     }
     std::vector<std::string> errors;
+    const core::Progress* progress = nullptr;
+    bool cancelled = false;
 };
 
 /// First line of a VTK message without the "ERROR: In file, line N / vtkClass (0x...): " preamble.
@@ -98,12 +109,17 @@ std::string cleanVtkMessage(std::string m) {
 
 /// Runs `update`, turning any VTK error into an InputError for `path`.
 void runVtkChecked(vtkAlgorithm* alg, const fs::path& path, const std::string& what,
-                   const std::function<void()>& update) {
+                   const std::function<void()>& update,
+                   const core::Progress& progress = core::Progress::none()) {
     captureWindow().take();
-    vtkNew<ErrorObserver> obs;
+    vtkNew<ReaderObserver> obs;
+    obs->progress = &progress;
     const unsigned long tag = alg->AddObserver(vtkCommand::ErrorEvent, obs);
+    const unsigned long tagP = alg->AddObserver(vtkCommand::ProgressEvent, obs);
     update();
     alg->RemoveObserver(tag);
+    alg->RemoveObserver(tagP);
+    if (obs->cancelled) throw CancelledError();
     std::vector<std::string> errs = obs->errors;
     for (auto& m : captureWindow().take())
         if (m.find("ERROR") != std::string::npos) errs.push_back(m);
@@ -279,8 +295,8 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     int ext[6];
     r->GetDataExtent(ext);
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
-    progress.report("read", 0.0);
-    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    runVtkChecked(
+        r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
 
     // NIfTI world (RAS) = M · (vtkOrigin + ijk ⊙ spacing); M from sform (preferred, as nibabel) or
@@ -336,8 +352,8 @@ Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkRe
     int ext[6];
     r->GetDataExtent(ext);
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
-    progress.report("read", 0.0);
-    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    runVtkChecked(
+        r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
     Geometry g;
     double sp[3], org[3];
@@ -436,8 +452,8 @@ Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& p
     int ext[6];
     r->GetOutputInformation(0)->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), ext);
     checkExtent(ext, 1, path);
-    progress.report("read", 0.0);
-    runVtkChecked(r, path, "data", [&] { r->Update(); });
+    runVtkChecked(
+        r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
     Geometry g;
     double sp[3], org[3];
@@ -662,24 +678,36 @@ bool isIdentity(const glm::dmat3& d) {
 }
 }  // namespace
 
-void writeVolume(const Volume& v, const fs::path& path) {
+namespace {
+/// The output format's extension (".nii.gz", ".nii", ".vti", ".mha"), or an InputError.
+std::string outputExtension(const fs::path& path) {
     const std::string name = lowerName(path);
-    auto endsWith = [&](const std::string& e) {
-        return name.size() > e.size() && name.compare(name.size() - e.size(), e.size(), e) == 0;
-    };
-    std::string ext;
-    for (const char* e : {".nii.gz", ".nii", ".vti", ".mha"})
-        if (endsWith(e)) {
-            ext = e;
-            break;
-        }
-    if (ext.empty())
-        throw InputError(path.string(), "extension", "is not a volume format voxlight writes",
-                         "use .nii.gz, .nii, .vti or .mha");
+    for (const char* e : {".nii.gz", ".nii", ".vti", ".mha"}) {
+        const std::string ext = e;
+        if (name.size() > ext.size() &&
+            name.compare(name.size() - ext.size(), ext.size(), ext) == 0)
+            return ext;
+    }
+    throw InputError(path.string(), "extension", "is not a volume format voxlight writes",
+                     "use .nii.gz, .nii, .vti or .mha");
+}
+fs::path outputDirectory(const fs::path& path) {
     const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
     if (!fs::is_directory(dir))
         throw InputError(path.string(), "path", "its directory does not exist",
                          "create the directory first");
+    return dir;
+}
+}  // namespace
+
+void checkVolumeOutputPath(const fs::path& path) {
+    outputExtension(path);
+    outputDirectory(path);
+}
+
+void writeVolume(const Volume& v, const fs::path& path) {
+    const std::string ext = outputExtension(path);
+    const fs::path dir = outputDirectory(path);
     // Same directory (same file system) so the final rename is atomic; keep the extension for VTK's
     // writer choice.
     const fs::path tmp =

@@ -56,6 +56,10 @@ core::Volume readVolume(const std::filesystem::path& path, const ReadOptions& op
 /// half-written file.
 void writeVolume(const core::Volume& volume, const std::filesystem::path& path);
 
+/// Throws the InputError writeVolume would throw for this path's extension or missing directory, so
+/// that commands can fail before long work.
+void checkVolumeOutputPath(const std::filesystem::path& path);
+
 /// "NIfTI (.nii, .nii.gz)" etc., for help texts.
 std::vector<std::string> supportedVolumeFormats();
 

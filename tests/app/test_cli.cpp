@@ -1,0 +1,92 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "io/volume_io.h"
+#include "support/test_support.h"
+
+using namespace voxlight;
+namespace fs = std::filesystem;
+
+namespace {
+struct Result {
+    int code;
+    std::string out, err;
+};
+
+Result run(const std::string& args, const fs::path& dir) {
+    const fs::path errFile = dir / "stderr.txt";
+    const std::string cmd =
+        std::string(VOXLIGHT_BINARY) + " " + args + " 2>'" + errFile.string() + "'";
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    std::string out;
+    std::array<char, 4096> buf;
+    while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
+    const int status = ::pclose(pipe);
+    std::ifstream ef(errFile);
+    std::string err((std::istreambuf_iterator<char>(ef)), {});
+    fs::remove(errFile);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
+}
+
+std::size_t lineCount(const std::string& s) {
+    return std::size_t(std::count(s.begin(), s.end(), '\n'));
+}
+}  // namespace
+
+TEST(Cli, PhantomThenInfoJson) {
+    test::TempDir tmp;
+    const Result p =
+        run("phantom torso --size 32 -q -o '" + (tmp / "t.nii.gz").string() + "'", tmp.path());
+    ASSERT_EQ(p.code, 0) << p.err;
+    const Result i = run("info --json '" + (tmp / "t.nii.gz").string() + "'", tmp.path());
+    ASSERT_EQ(i.code, 0) << i.err;
+    const auto j = nlohmann::json::parse(i.out);
+    EXPECT_EQ(j["dims"], nlohmann::json({32, 32, 32}));
+    EXPECT_EQ(j["type"], "int16");
+    EXPECT_LE(j["range"][0].get<double>(), -1000.0);
+}
+
+TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
+    test::TempDir tmp;
+    {
+        std::ofstream(tmp / "junk.nii") << "not a nifti";
+        std::ofstream(tmp / "scene.json") << R"({"volume": "x.nii", "camera": {"fov_y": "wide"}})";
+    }
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"info '" + (tmp / "junk.nii").string() + "'", "junk.nii"},
+        {"info '" + (tmp / "missing.nii").string() + "'", "does not exist"},
+        {"phantom nosuch -o '" + (tmp / "x.nii.gz").string() + "'", "unknown phantom"},
+        {"phantom torso --size 3 -o '" + (tmp / "x.nii.gz").string() + "'", "size"},
+        {"phantom torso -o '" + (tmp / "x.bmp").string() + "'", ".nii.gz"},
+        {"scene '" + (tmp / "scene.json").string() + "'", "camera.fov_y"},
+        {"scene '" + (tmp / "scene.json").string() + "' --set camera.fov_y=30 --set image.width=-3",
+         "image.width"},
+        {"info --dims 1,2 '" + (tmp / "junk.nii").string() + "'", "--dims"},
+        {"frobnicate", "frobnicate"},
+    };
+    for (const auto& [args, word] : cases) {
+        const Result r = run(args, tmp.path());
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << args << "\n" << r.err;
+        EXPECT_NE(r.err.find(word), std::string::npos) << args << "\n" << r.err;
+    }
+    // Nothing half-written.
+    EXPECT_FALSE(fs::exists(tmp / "x.nii.gz"));
+    EXPECT_FALSE(fs::exists(tmp / "x.bmp"));
+}
+
+TEST(Cli, SceneOverridesAreValidated) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json")
+        << R"({"volume": {"phantom": "torso"}, "camera": {"fov_y": "wide"}})";
+    const Result r =
+        run("scene '" + (tmp / "scene.json").string() + "' --set camera.fov_y=35", tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(nlohmann::json::parse(r.out)["camera"]["fov_y"], 35);
+}

@@ -1,0 +1,139 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+
+#include <fstream>
+
+#include "io/scene.h"
+#include "support/test_support.h"
+
+using namespace voxlight;
+using nlohmann::json;
+
+namespace {
+io::Scene parse(const json& j) { return io::parseScene(j, "scene.json", "/data"); }
+
+/// Expects parse to fail with a message naming `key` and containing `words`.
+void expectBad(const json& j, const std::string& key, const std::vector<std::string>& words = {}) {
+    try {
+        (void)parse(j);
+        ADD_FAILURE() << "accepted: " << j.dump();
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.source(), "scene.json");
+        EXPECT_EQ(e.field(), key) << e.what();
+        for (const auto& w : words)
+            EXPECT_NE(std::string(e.what()).find(w), std::string::npos) << e.what();
+    }
+}
+}  // namespace
+
+TEST(Scene, FullDocumentParses) {
+    const json j = json::parse(R"({
+      "volume": {"phantom": "torso", "size": 64},
+      "transfer_function": {"points": [{"value": -1000, "extinction": 0},
+                                       {"value": 300, "color": [1, 0.5, 0.4], "extinction": 0.2}]},
+      "camera": {"projection": "orthographic", "azimuth": 45, "elevation": 10, "fov_y": 25},
+      "lights": [{"type": "directional", "direction": [0, 0, -2], "intensity": 3},
+                 {"type": "point", "position": [0, 0, 100], "min_distance": 2},
+                 {"type": "environment", "path": "env/sky.hdr", "rotation": [0, 0, 90]}],
+      "clip_planes": [{"point": [0, 0, 0], "normal": [0, 0, 5]}],
+      "crop_box": {"min": [-10, -10, -10], "max": [10, 10, 10]},
+      "method": {"name": "sh-local", "params": {"rays": 64}},
+      "image": {"width": 320, "height": 200},
+      "render": {"step": 0.25, "seed": 7},
+      "effects": ["local_shadows"]
+    })");
+    const io::Scene s = parse(j);
+    EXPECT_EQ(s.volume.phantom, "torso");
+    EXPECT_EQ(s.volume.phantomSize, 64);
+    ASSERT_EQ(s.transferFunction.points.size(), 2u);
+    EXPECT_DOUBLE_EQ(s.transferFunction.points[1].extinction, 0.2);
+    EXPECT_EQ(s.camera.projection, "orthographic");
+    ASSERT_EQ(s.lights.size(), 3u);
+    EXPECT_DOUBLE_EQ(s.lights[0].direction.z, -1.0);  // normalised
+    EXPECT_EQ(s.lights[2].path, std::filesystem::path("/data/env/sky.hdr"));
+    EXPECT_DOUBLE_EQ(s.clipPlanes[0].normal.z, 1.0);
+    EXPECT_EQ(s.method.name, "sh-local");
+    EXPECT_EQ(s.method.params["rays"], 64);
+    EXPECT_EQ(s.image.width, 320);
+    EXPECT_EQ(s.render.seed, 7u);
+}
+
+TEST(Scene, RelativeVolumePathResolvesAgainstSceneDirectory) {
+    const io::Scene s = parse(json::parse(R"({"volume": "ct/head.nii.gz"})"));
+    EXPECT_EQ(s.volume.path, std::filesystem::path("/data/ct/head.nii.gz"));
+}
+
+TEST(Scene, ErrorsNameTheKeyPath) {
+    expectBad(json::object(), "volume", {"required"});
+    expectBad(json::parse(R"({"volume": "a.nii", "camera": {"fov_y": "wide"}})"), "camera.fov_y",
+              {"must be a number", "string"});
+    expectBad(json::parse(R"({"volume": "a.nii", "camera": {"fovy": 30}})"), "camera.fovy",
+              {"did you mean 'fov_y'"});
+    expectBad(json::parse(R"({"volume": "a.nii", "image": {"width": 0}})"), "image.width",
+              {"[1, 16384]"});
+    expectBad(json::parse(R"({"volume": "a.nii", "image": {"width": 1e9}})"), "image.width");
+    expectBad(json::parse(R"({"volume": "a.nii", "lights": [{"type": "laser"}]})"),
+              "lights[0].type", {"directional"});
+    expectBad(
+        json::parse(
+            R"({"volume": "a.nii", "lights": [{"type": "directional", "direction": [0, 0, 0]}]})"),
+        "lights[0].direction", {"non-zero"});
+    expectBad(json::parse(
+                  R"({"volume": "a.nii", "lights": [{"type": "point", "direction": [0, 0, 1]}]})"),
+              "lights[0].direction", {"unknown key"});
+    expectBad(
+        json::parse(
+            R"({"volume": "a.nii", "transfer_function": {"points": [{"value": 300}, {"value": 100}]}})"),
+        "transfer_function.points[1].value", {"strictly increasing", "100 after 300"});
+    expectBad(
+        json::parse(
+            R"({"volume": "a.nii", "transfer_function": {"points": [{"value": 0, "color": [2, 0, 0]}]}})"),
+        "transfer_function.points[0].color[0]", {"[0, 1]"});
+    expectBad(json::parse(R"({"volume": "a.nii", "method": "raytrace"})"), "method", {"pathtrace"});
+    expectBad(json::parse(R"({"volume": "a.nii", "clip_planes": {"normal": [0, 0, 1]}})"),
+              "clip_planes", {"array"});
+    expectBad(
+        json::parse(R"({"volume": "a.nii", "crop_box": {"min": [0, 0, 0], "max": [1, -1, 1]}})"),
+        "crop_box.min", {"below"});
+    expectBad(json::parse(R"({"volume": {"path": "a.nii", "phantom": "torso"}})"), "volume",
+              {"exactly one"});
+    expectBad(json::parse(R"({"volume": "a.nii", "effects": ["bloom"]})"), "effects[0]");
+}
+
+TEST(Scene, OverridesApplyBeforeValidation) {
+    json j = json::parse(R"({"volume": "a.nii", "lights": [{"type": "directional"}]})");
+    io::applyOverride(j, "camera.azimuth=45");
+    io::applyOverride(j, "method.name=mip");
+    io::applyOverride(j, "method.params.rays=64");
+    io::applyOverride(j, "lights.0.intensity=2.5");
+    io::applyOverride(j, "lights.0.color=[1,0.5,0]");
+    const io::Scene s = parse(j);
+    EXPECT_DOUBLE_EQ(s.camera.azimuthDeg, 45.0);
+    EXPECT_EQ(s.method.name, "mip");
+    EXPECT_EQ(s.method.params["rays"], 64);
+    EXPECT_DOUBLE_EQ(s.lights[0].intensity, 2.5);
+    EXPECT_DOUBLE_EQ(s.lights[0].color.y, 0.5);
+    // A bad override is caught by the same validation, naming the key.
+    io::applyOverride(j, "camera.azimuth=left");
+    expectBad(j, "camera.azimuth", {"must be a number"});
+    EXPECT_THROW(io::applyOverride(j, "noequals"), InputError);
+    EXPECT_THROW(io::applyOverride(j, "lights.7.intensity=1"), InputError);
+    EXPECT_THROW(io::applyOverride(j, "a..b=1"), InputError);
+    EXPECT_THROW(io::applyOverride(j, "camera.azimuth.x=1"), InputError);
+}
+
+TEST(Scene, MalformedJsonFileNamesTheFile) {
+    test::TempDir tmp;
+    {
+        std::ofstream f(tmp / "s.json");
+        f << "{\"volume\": \"a.nii\",, }";
+    }
+    try {
+        (void)io::loadScene(tmp / "s.json");
+        ADD_FAILURE();
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("s.json"), std::string::npos);
+        EXPECT_NE(std::string(e.what()).find("not valid JSON"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(io::loadScene(tmp / "missing.json"), InputError);
+}
