@@ -109,7 +109,9 @@ TransferFunction TransferFunction::withWindow(const Window& w) const {
 }
 
 float TransferFunction::surfaceValue() const {
-    const float half = 0.5f * maxExtinction();
+    // A tenth of the maximum: where a surface TF's ramp starts to become visible, which is where
+    // clinicians put a threshold (e.g. ≈ 260 HU for ct-bone).
+    const float half = 0.1f * maxExtinction();
     if (!(half > 0.f)) return window_.level;
     if (points_.front().extinction >= half) return points_.front().value;
     for (std::size_t i = 1; i < points_.size(); ++i) {

@@ -80,8 +80,8 @@ class TransferFunction {
     /// Copy remapped so that the reference window becomes `w` (see header comment).
     TransferFunction withWindow(const Window& w) const;
 
-    /// Value where σt first reaches half of its maximum (the natural isovalue of a surface TF), or
-    /// the window level when σt is 0 everywhere.
+    /// Value where σt first reaches a tenth of its maximum (the natural isovalue of a surface TF:
+    /// where its ramp becomes visible), or the window level when σt is 0 everywhere.
     float surfaceValue() const;
 
   private:

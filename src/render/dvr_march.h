@@ -90,66 +90,111 @@ inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const Sa
     }
 }
 
+/// Segments longer than one voxel (coarse steps) may see a strongly non-linear value profile
+/// (a sharp edge between two samples). Such a segment is split at its midpoint when the midpoint
+/// value departs from the linear prediction by more than this fraction of the TF's value range,
+/// up to kMaxRefinement times, so that edges land where the trilinear field puts them.
+inline constexpr float kLinearityFraction = 0.01f;
+inline constexpr int kMaxRefinement = 4;
+
+template <class View, class S>
+struct DvrMarcher {
+    const RayCaster& c;
+    const View& v;
+    const RaySegment& r;
+    const S& shader;
+    const optics::TfTable& table;
+    bool preint;
+    float band, weak, voxelsPerMm, linearityTol;
+    glm::vec3 toEye;
+    float T = 1.f;
+    glm::vec3 L{0.f};
+    std::uint64_t samples = 0;
+
+    DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
+        : c(c_), v(v_), r(r_), shader(s_), table(c_.table()) {
+        preint = c.options().preintegrated;
+        band = kClipFaceBandVoxels * c.stepMm() / c.options().stepVoxels;
+        weak = c.weakGradient();
+        voxelsPerMm = glm::length(r.dirIndex);
+        linearityTol = kLinearityFraction * (table.hi() - table.lo());
+        toEye = -r.dirWorld;
+    }
+
+    float sample(float t) {
+        ++samples;
+        return sampleAt(v, r, t);
+    }
+
+    /// Composites the segment (t0, s0) → (t1, s1); shading at its back end.
+    void segment(float t0, float s0, float t1, float s1, int depth) {
+        const float dt = t1 - t0;
+        if (preint && depth < kMaxRefinement && dt * voxelsPerMm > 1.f) {
+            const float sMid = sample(0.5f * (t0 + t1));
+            if (std::abs(sMid - 0.5f * (s0 + s1)) > linearityTol &&
+                table.segment(std::min({s0, s1, sMid}), std::max({s0, s1, sMid})).meanExtinction >
+                    0.f) {
+                const float tMid = 0.5f * (t0 + t1);
+                segment(t0, s0, tMid, sMid, depth + 1);
+                segment(tMid, sMid, t1, s1, depth + 1);
+                return;
+            }
+        }
+        const optics::TfTable::Segment seg =
+            preint ? table.segment(s0, s1) : table.midpoint(s0, s1);
+        const float tau = seg.meanExtinction * dt;
+        if (!(tau > 0.f)) return;
+        const float alpha = 1.f - std::exp(-tau);
+        ShadeInput in;
+        in.position = r.originWorld + t1 * r.dirWorld;
+        in.toEye = toEye;
+        in.value = s1;
+        in.normal = toEye;
+        if constexpr (S::kNeedsNormal) {
+            const glm::vec3 p = r.originIndex + t1 * r.dirIndex;
+            const glm::vec3 g = gradientAt(v, p, c.gradientMatrix());
+            samples += 6;
+            const bool cutFace = r.clipEntry && (t1 - r.tNear) < band;
+            in.normal = shadingNormal(g, cutFace ? r.entryNormal : toEye, toEye, weak);
+        }
+        const Scatter sc = shader.scatter(in);
+        L += (T * alpha) * (seg.emission + seg.albedo * sc.diffuse + sc.specular);
+        T *= 1.f - alpha;
+    }
+};
+
 /// Front-to-back compositing of the optical model with shader S.
 template <class View, class S>
 RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const S& shader) {
     RayResult out;
     const SampleLattice lat(r, c.stepMm());
-    const optics::TfTable& table = c.table();
-    const bool preint = c.options().preintegrated;
     const float termination = c.options().earlyTermination ? kTerminationTransmittance : 0.f;
-    const float band = kClipFaceBandVoxels * c.stepMm() / c.options().stepVoxels;
-    const glm::vec3 toEye = -r.dirWorld;
-    const glm::mat3& gm = c.gradientMatrix();
-    const float weak = c.weakGradient();
+    DvrMarcher<View, S> m(c, v, r, shader);
     std::int64_t iPrev = -1;
     float sPrev = 0.f, tPrev = 0.f;
-    float T = 1.f;
-    glm::vec3 L(0.f);
     forEachActiveRange(c, r, lat, [&](std::int64_t i0, std::int64_t i1) {
         if (iPrev < i0) {
             tPrev = lat.t(i0);
-            sPrev = sampleAt(v, r, tPrev);
-            ++out.samples;
+            sPrev = m.sample(tPrev);
             iPrev = i0;
         }
         for (std::int64_t i = iPrev + 1; i <= i1; ++i) {
             const float t = lat.t(i);
-            const glm::vec3 p = r.originIndex + t * r.dirIndex;
-            const float s = v.sample(p.x, p.y, p.z);
-            ++out.samples;
-            const float dt = t - tPrev;
-            const optics::TfTable::Segment seg =
-                preint ? table.segment(sPrev, s) : table.midpoint(sPrev, s);
+            const float s = m.sample(t);
+            m.segment(tPrev, sPrev, t, s, 0);
             sPrev = s;
             tPrev = t;
             iPrev = i;
-            const float tau = seg.meanExtinction * dt;
-            if (!(tau > 0.f)) continue;
-            const float alpha = 1.f - std::exp(-tau);
-            ShadeInput in;
-            in.position = r.originWorld + t * r.dirWorld;
-            in.toEye = toEye;
-            in.value = s;
-            in.normal = toEye;
-            if constexpr (S::kNeedsNormal) {
-                const glm::vec3 g = gradientAt(v, p, gm);
-                out.samples += 6;
-                const bool cutFace = r.clipEntry && (t - r.tNear) < band;
-                in.normal = shadingNormal(g, cutFace ? r.entryNormal : toEye, toEye, weak);
-            }
-            const Scatter sc = shader.scatter(in);
-            L += (T * alpha) * (seg.emission + seg.albedo * sc.diffuse + sc.specular);
-            T *= 1.f - alpha;
-            if (T < termination) {
+            if (m.T < termination) {
                 out.terminated = true;
                 return false;
             }
         }
         return true;
     });
-    out.radiance = L;
-    out.transmittance = T;
+    out.radiance = m.L;
+    out.transmittance = m.T;
+    out.samples = m.samples;
     return out;
 }
 
@@ -206,9 +251,11 @@ bool marchIso(const RayCaster& c, const View& v, const RaySegment& r, IsoHit& hi
     // skipping, because a brick entirely inside the object holds no crossing).
     const float f0 = sampleAt(v, r, r.tNear) - iso;
     ++samples;
-    if (r.clipEntry && f0 >= 0.f) {
+    // The volume's own boundary closes the surface too (a ray from outside that enters above the
+    // isovalue sees that face); a camera inside the object looks for the way out instead.
+    if (f0 >= 0.f && (r.clipEntry || r.tNear > 0.f)) {
         hit.t = r.tNear;
-        hit.normal = r.entryNormal;
+        hit.normal = r.clipEntry ? r.entryNormal : -r.dirWorld;
         return true;
     }
     std::int64_t iPrev = -1;

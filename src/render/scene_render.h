@@ -15,7 +15,7 @@
 //                         early_termination, jitter (booleans)
 //   emission-absorption:  ambient
 //   gradient:             ambient, diffuse, specular, shininess
-//   iso:                  iso_value (physical; default where the TF reaches half its max σt),
+//   iso:                  iso_value (physical; default where the TF reaches 1/10 of its max σt),
 //                         ambient, diffuse
 //   mip, minip:           (window from the TF)
 // Lights: directional and point (radiance = color × intensity); other types are an InputError for

@@ -23,8 +23,7 @@ io::ImageRGBA toDisplay(const io::ImageRGBA& linear, float exposureStops) {
     const float k = std::exp2(exposureStops);
     for (std::size_t i = 0; i < linear.pixels.size(); i += 4) {
         for (int c = 0; c < 3; ++c) out.pixels[i + c] = linearToSrgb(k * linear.pixels[i + c]);
-        const float a = linear.pixels[i + 3];
-        out.pixels[i + 3] = std::isfinite(a) ? std::clamp(a, 0.f, 1.f) : 0.f;
+        out.pixels[i + 3] = 1.f;
     }
     return out;
 }

@@ -1,0 +1,139 @@
+// SPDX-License-Identifier: MIT
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/phantoms.h"
+#include "optics/presets.h"
+#include "optics/transfer_function.h"
+
+using namespace voxlight;
+using optics::TfPoint;
+using optics::TransferFunction;
+
+namespace {
+TfPoint pt(float v, float sigma, glm::vec3 c = glm::vec3(0.5f), glm::vec3 e = glm::vec3(0.f)) {
+    return {v, c, sigma, e};
+}
+/// A TF that steps from 0 to σ within 0.002 at 0.5 (sharp: the aliasing case).
+TransferFunction stepTf(float sigma) {
+    return TransferFunction({pt(0, 0, {1, 0, 0}), pt(0.499f, 0, {1, 0, 0}),
+                             pt(0.501f, sigma, {0, 1, 0}), pt(1, sigma, {0, 1, 0})},
+                            {0.5f, 1.f});
+}
+// Reference integrals by brute-force midpoint quadrature of the exact TF.
+constexpr int kQuadratureSteps = 200000;
+// Tolerances: the table has 4096 cells; its interpolation differs from the exact TF by < 1 cell at
+// breakpoints, i.e. a relative error ≈ 1/4096 of the range on a step of unit height.
+constexpr double kTableTol = 2e-3;
+// σt·a is quadratic where both vary inside one table cell; the table interpolates it linearly, so a
+// segment shorter than a cell inside a colour+opacity ramp sees up to ~1 % albedo error.
+constexpr double kAlbedoTol = 1e-2;
+}  // namespace
+
+TEST(TransferFunction, PiecewiseLinearEvaluationAndClampedEnds) {
+    const TransferFunction tf({pt(0, 0), pt(100, 1, {1, 1, 1}), pt(200, 3)}, {100, 200});
+    EXPECT_FLOAT_EQ(tf.eval(-50).extinction, 0.f);
+    EXPECT_FLOAT_EQ(tf.eval(50).extinction, 0.5f);
+    EXPECT_FLOAT_EQ(tf.eval(150).extinction, 2.f);
+    EXPECT_FLOAT_EQ(tf.eval(1e9f).extinction, 3.f);
+    EXPECT_FLOAT_EQ(tf.eval(NAN).extinction, 0.f);  // NaN acts as the lowest value
+    EXPECT_FLOAT_EQ(tf.maxExtinction(0, 120), 1.4f);
+    EXPECT_FLOAT_EQ(tf.maxExtinction(10, 110), 1.2f);
+    EXPECT_TRUE(tf.transparentOver(-100, 0));
+    EXPECT_FALSE(tf.transparentOver(-100, 0.1f));
+    EXPECT_NEAR(tf.surfaceValue(), 30.f, 1e-3);  // σt = 0.3 = max/10
+}
+
+TEST(TransferFunction, RejectsBadPointsWithTheField) {
+    auto bad = [](std::vector<TfPoint> p) { TransferFunction t(std::move(p), {0, 1}); };
+    EXPECT_THROW(bad({}), InputError);
+    EXPECT_THROW(bad({pt(1, 0), pt(1, 0)}), InputError);  // not strictly increasing
+    EXPECT_THROW(bad({pt(0, -1)}), InputError);
+    EXPECT_THROW(bad({pt(0, NAN)}), InputError);
+    EXPECT_THROW(bad({pt(0, 1, {2, 0, 0})}), InputError);
+    try {
+        bad({pt(5, 0), pt(3, 0)});
+        FAIL();
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "points[1].value");
+    }
+}
+
+TEST(TransferFunction, WindowLevelRemapsTheValueAxis) {
+    const TransferFunction tf({pt(0, 0), pt(100, 1)}, {50, 100});
+    const TransferFunction w = tf.withWindow({500, 200});
+    EXPECT_FLOAT_EQ(w.points()[0].value, 400.f);
+    EXPECT_FLOAT_EQ(w.points()[1].value, 600.f);
+    EXPECT_FLOAT_EQ(w.eval(500).extinction, 0.5f);
+    EXPECT_THROW(tf.withWindow({0, 0}), InputError);
+    EXPECT_FLOAT_EQ(tf.scaledExtinction(3).eval(100).extinction, 3.f);
+}
+
+TEST(TfTable, LookupMatchesExactEvaluation) {
+    const TransferFunction tf = optics::makePreset("ct-angio");
+    const optics::TfTable table(tf);
+    for (float v = -1100; v < 3200; v += 7.3f) {
+        const auto a = tf.eval(v), b = table.lookup(v);
+        EXPECT_NEAR(a.extinction, b.extinction, 6.f * 2.f * table.cellWidth() / 30.f) << v;
+        EXPECT_NEAR(a.albedo.r, b.albedo.r, 0.02f) << v;
+    }
+    EXPECT_FLOAT_EQ(table.lookup(NAN).extinction, table.lookup(-1e9f).extinction);
+}
+
+TEST(TfTable, PreintegratedSegmentIsTheExactMeanOverTheValueRange) {
+    // For values varying linearly from sf to sb, mean σt = (1/(sb−sf)) ∫ σt(s) ds. Check against
+    // brute-force quadrature of the exact TF, across a sharp step, both directions, and tails.
+    const TransferFunction tf = stepTf(2.f);
+    const optics::TfTable table(tf);
+    const float pairs[][2] = {{0.2f, 0.9f}, {0.9f, 0.2f}, {0.45f, 0.55f}, {0.5f, 0.5001f},
+                              {-3.f, 0.6f}, {0.8f, 4.f},  {0.1f, 0.3f}};
+    for (const auto& p : pairs) {
+        double sum = 0, sumG = 0;
+        for (int i = 0; i < kQuadratureSteps; ++i) {
+            const float s = p[0] + (p[1] - p[0]) * (float(i) + 0.5f) / kQuadratureSteps;
+            const auto e = tf.eval(s);
+            sum += e.extinction;
+            sumG += e.extinction * e.albedo.g;
+        }
+        const double mean = sum / kQuadratureSteps;
+        const auto seg = table.segment(p[0], p[1]);
+        EXPECT_NEAR(seg.meanExtinction, mean, kTableTol * 2.0) << p[0] << " → " << p[1];
+        if (mean > 0) EXPECT_NEAR(seg.albedo.g, sumG / sum, kAlbedoTol) << p[0];
+    }
+    // Transparent TF: nothing anywhere, no NaN.
+    const optics::TfTable empty(TransferFunction({pt(0, 0), pt(1, 0)}, {0.5f, 1}));
+    EXPECT_EQ(empty.segment(0.2f, 0.8f).meanExtinction, 0.f);
+    EXPECT_EQ(empty.segment(NAN, 0.8f).meanExtinction, 0.f);
+}
+
+TEST(Presets, EveryPresetBuildsAndRelativeOnesFollowTheRange) {
+    for (const auto& p : optics::presetCatalog()) {
+        const TransferFunction tf = optics::makePreset(p.name, {100.f, 500.f});
+        EXPECT_GT(tf.maxExtinction(), 0.f) << p.name;
+        if (p.relative) {
+            EXPECT_FLOAT_EQ(tf.window().level, 300.f) << p.name;
+            EXPECT_FLOAT_EQ(tf.window().width, 400.f) << p.name;
+            EXPECT_GE(tf.points().front().value, 99.f);
+        }
+    }
+    EXPECT_THROW(optics::makePreset("ct-bones"), InputError);
+    // CT bone: soft tissue (40 HU) transparent, cortical bone (1000 HU) opaque within a mm.
+    const TransferFunction bone = optics::makePreset("ct-bone");
+    EXPECT_EQ(bone.eval(40).extinction, 0.f);
+    EXPECT_GT(1 - std::exp(-bone.eval(1000).extinction * 1.f), 0.9f);
+    // CT angio: contrast lumen (300 HU) red, metal (3000 HU) grey-white.
+    const TransferFunction angio = optics::makePreset("ct-angio");
+    EXPECT_GT(angio.eval(300).albedo.r, 2 * angio.eval(300).albedo.g);
+    EXPECT_GT(angio.eval(3000).albedo.b, 0.8f);
+}
+
+TEST(Presets, RobustRangeOfTheTorsoCoversAirToBone) {
+    core::PhantomOptions o;
+    o.size = 32;
+    const core::Volume v = core::makePhantom("torso", o);
+    const auto r = optics::robustRange(v);
+    EXPECT_LT(r[0], -900.f);
+    EXPECT_GT(r[1], 40.f);
+    EXPECT_EQ(optics::defaultPresetName(v), "ct-bone");
+}

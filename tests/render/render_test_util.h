@@ -1,0 +1,50 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Small helpers shared by the renderer tests.
+#include <cmath>
+
+#include "core/phantoms.h"
+#include "grid/brick_grid.h"
+#include "optics/transfer_function.h"
+#include "render/ray_caster.h"
+
+namespace voxlight::test {
+
+inline optics::TfPoint tfPoint(float v, float sigma, glm::vec3 c = glm::vec3(0.9f)) {
+    return {v, c, sigma, glm::vec3(0.f)};
+}
+
+/// σt = sigma above 0.5 and 0 below, stepping within ±0.001 (the phantoms' 0.5-level set is the
+/// exact sphere/slab, so the exact optical depth is sigma × geometric length).
+inline optics::TransferFunction stepTf(float sigma) {
+    return optics::TransferFunction(
+        {tfPoint(0, 0), tfPoint(0.499f, 0), tfPoint(0.501f, sigma), tfPoint(1, sigma)}, {0.5f, 1.f},
+        "step");
+}
+
+inline render::Camera orthoCamera(const core::Volume& v, double azimuth, double elevation,
+                                  double height, int pixels) {
+    render::CameraSpec s;
+    s.projection = render::Projection::Orthographic;
+    s.azimuthDeg = azimuth;
+    s.elevationDeg = elevation;
+    s.orthoHeight = height;
+    const auto b = v.geometry().worldBounds();
+    return render::Camera(s, b[0], b[1], pixels, pixels);
+}
+
+inline io::ImageRGBA renderWith(const core::Volume& v, const optics::TransferFunction& tf,
+                                const render::Camera& cam, const render::RenderOptions& o,
+                                render::RenderStats* stats = nullptr) {
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const render::RayCaster caster(v, g, tf, o);
+    return caster.render(cam, core::Progress::none(), stats);
+}
+
+inline bool allFinite(const io::ImageRGBA& img) {
+    for (float x : img.pixels)
+        if (!std::isfinite(x)) return false;
+    return true;
+}
+
+}  // namespace voxlight::test

@@ -1,0 +1,112 @@
+// SPDX-License-Identifier: MIT
+// Bad input gives a defined image or a clear error, never NaN pixels.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <limits>
+
+#include "render_test_util.h"
+
+using namespace voxlight;
+using namespace voxlight::test;
+
+namespace {
+const render::Mode kAllModes[] = {render::Mode::EmissionAbsorption, render::Mode::Gradient,
+                                  render::Mode::Mip, render::Mode::MinIp, render::Mode::Isosurface};
+
+render::Camera defaultCamera(const core::Volume& v, int w, int h) {
+    const auto b = v.geometry().worldBounds();
+    return render::Camera(render::CameraSpec{}, b[0], b[1], w, h);
+}
+}  // namespace
+
+TEST(Robustness, NonFiniteVoxelsNeverGiveNonFinitePixels) {
+    core::PhantomOptions po;
+    po.size = 32;
+    core::Volume v = core::makePhantom("sphere", po);
+    float* d = v.dataAs<float>();
+    const float bad[] = {std::numeric_limits<float>::quiet_NaN(),
+                         std::numeric_limits<float>::infinity(),
+                         -std::numeric_limits<float>::infinity()};
+    for (std::size_t i = 0; i < v.voxelCount(); i += 37) d[i] = bad[(i / 37) % 3];
+    const render::Camera cam = defaultCamera(v, 32, 32);
+    for (render::Mode m : kAllModes) {
+        render::RenderOptions o;
+        o.mode = m;
+        const io::ImageRGBA img = renderWith(v, stepTf(0.5f), cam, o);
+        EXPECT_TRUE(allFinite(img)) << render::toString(m);
+    }
+}
+
+TEST(Robustness, TransparentTfGivesTheBackgroundAndOpaqueTfAFiniteImage) {
+    core::PhantomOptions po;
+    po.size = 32;
+    const core::Volume v = core::makePhantom("sphere", po);
+    const render::Camera cam = defaultCamera(v, 24, 24);
+    render::RenderOptions o;
+    o.background = {0.2f, 0.3f, 0.4f};
+    const optics::TransferFunction empty({tfPoint(0, 0), tfPoint(1, 0)}, {0.5f, 1});
+    const io::ImageRGBA e = renderWith(v, empty, cam, o);
+    for (int y = 0; y < 24; ++y)
+        for (int x = 0; x < 24; ++x) {
+            EXPECT_EQ(e.at(x, y)[2], 0.4f);
+            EXPECT_EQ(e.at(x, y)[3], 0.f);
+        }
+    const optics::TransferFunction opaque({tfPoint(0, 1e6f), tfPoint(1, 1e6f)}, {0.5f, 1});
+    for (render::Mode m : kAllModes) {
+        o.mode = m;
+        const io::ImageRGBA img = renderWith(v, opaque, cam, o);
+        EXPECT_TRUE(allFinite(img)) << render::toString(m);
+        EXPECT_EQ(img.at(12, 12)[3], 1.f) << render::toString(m);
+    }
+}
+
+TEST(Robustness, CameraInsideTheVolumeRendersFromInside) {
+    core::PhantomOptions po;
+    po.size = 40;
+    const core::Volume v = core::makePhantom("torso", po);
+    render::CameraSpec s;
+    s.eye = glm::dvec3(0, -20, 0);    // inside the body
+    s.target = glm::dvec3(0, 80, 0);  // looking at the spine
+    s.fovYDeg = 90;
+    const auto b = v.geometry().worldBounds();
+    const render::Camera cam(s, b[0], b[1], 24, 24);
+    render::RenderOptions o;
+    const auto bone = optics::TransferFunction(
+        {tfPoint(150, 0), tfPoint(400, 1.f), tfPoint(1000, 3.f)}, {500, 1000});
+    const io::ImageRGBA img = renderWith(v, bone, cam, o);
+    EXPECT_TRUE(allFinite(img));
+    EXPECT_GT(img.at(12, 12)[3], 0.9f) << "the vertebra ahead is opaque";
+}
+
+TEST(Robustness, AbsurdImageSizesAndStepsAreClearErrors) {
+    core::PhantomOptions po;
+    po.size = 16;
+    const core::Volume v = core::makePhantom("sphere", po);
+    const auto b = v.geometry().worldBounds();
+    EXPECT_THROW(render::Camera(render::CameraSpec{}, b[0], b[1], 0, 10), InputError);
+    const render::Camera huge(render::CameraSpec{}, b[0], b[1], 16384, 16384);
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const auto tf = stepTf(1);
+    const render::RayCaster caster(v, g, tf, render::RenderOptions{});
+    EXPECT_THROW(caster.render(huge), InputError);
+    render::RenderOptions bad;
+    bad.stepVoxels = 0;
+    EXPECT_THROW(render::RayCaster(v, g, tf, bad), InputError);
+    bad.stepVoxels = NAN;
+    EXPECT_THROW(render::RayCaster(v, g, tf, bad), InputError);
+}
+
+TEST(Robustness, DegenerateSingleSliceVolumeRenders) {
+    core::Geometry geom;
+    geom.dims = {16, 16, 1};
+    core::Volume v(geom, core::VoxelType::UInt8);
+    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const render::Camera cam = defaultCamera(v, 16, 16);
+    const optics::TransferFunction tf({tfPoint(0, 0), tfPoint(255, 1.f)}, {128, 256});
+    for (render::Mode m : kAllModes) {
+        render::RenderOptions o;
+        o.mode = m;
+        EXPECT_TRUE(allFinite(renderWith(v, tf, cam, o))) << render::toString(m);
+    }
+}

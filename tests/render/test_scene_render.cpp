@@ -1,0 +1,70 @@
+// SPDX-License-Identifier: MIT
+// Scene → render driver: options from the scene, strict method params, stats JSON.
+#include <gtest/gtest.h>
+
+#include "core/phantoms.h"
+#include "io/scene.h"
+#include "render/scene_render.h"
+
+using namespace voxlight;
+using nlohmann::json;
+
+namespace {
+io::Scene scene(json doc) { return io::parseScene(doc, "test.json", "."); }
+json base() {
+    return {{"volume", {{"phantom", "sphere"}, {"size", 24}}},
+            {"transfer_function", "phantom-step"},
+            {"image", {{"width", 16}, {"height", 12}}}};
+}
+}  // namespace
+
+TEST(SceneRender, RendersAndReportsStagesAndParameters) {
+    json d = base();
+    d["method"] = {{"name", "gradient"}, {"params", {{"specular", 0.5}}}};
+    d["clip_planes"] = json::array({{{"point", {0, 0, 0}}, {"normal", {0, 0, 1}}}});
+    const auto r = render::renderScene(scene(d));
+    EXPECT_EQ(r.film.width, 16);
+    EXPECT_EQ(r.film.height, 12);
+    const json s = render::statsJson(r, 1.0);
+    ASSERT_TRUE(s["stages"].is_array());
+    for (const auto& st : s["stages"]) {
+        EXPECT_TRUE(st.contains("name") && st.contains("ran") && st.contains("reason") &&
+                    st.contains("seconds"));
+    }
+    EXPECT_EQ(s["method"]["params"]["specular"], 0.5);
+    EXPECT_EQ(s["method"]["params"]["shininess"], 24.0);  // defaults are reported as used
+    EXPECT_GT(s["peak_rss_mb"].get<double>(), 0.0);
+    EXPECT_EQ(s["total_seconds"], 1.0);
+}
+
+TEST(SceneRender, RejectsUnknownParamsUnimplementedMethodsAndUnsupportedLights) {
+    json d = base();
+    d["method"] = {{"name", "gradient"}, {"params", {{"shinyness", 3}}}};
+    try {
+        render::buildRenderOptions(scene(d));
+        FAIL();
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.shinyness");
+    }
+    d = base();
+    d["method"] = "pathtrace";
+    EXPECT_THROW(render::buildRenderOptions(scene(d)), InputError);
+    d = base();
+    d["lights"] = json::array({{{"type", "area"}}});
+    EXPECT_THROW(render::buildRenderOptions(scene(d)), InputError);
+    d = base();
+    d["transfer_function"] = "no-such-preset";
+    EXPECT_THROW(render::renderScene(scene(d)), InputError);
+}
+
+TEST(SceneRender, WindowRemapsPresetsAndSetsMipGrey) {
+    json d = base();
+    d["volume"] = {{"phantom", "torso"}, {"size", 24}};
+    d["transfer_function"] = {{"preset", "ct-bone"}, {"window", {{"level", 600}, {"width", 1000}}}};
+    core::PhantomOptions o;
+    o.size = 24;
+    const core::Volume v = core::makePhantom("torso", o);
+    const auto tf = render::buildTransferFunction(scene(d), v);
+    EXPECT_FLOAT_EQ(tf.window().level, 600.f);
+    EXPECT_FLOAT_EQ(tf.points().back().value, 600.f + (3071.f - 500.f) / 2.f);
+}
