@@ -244,6 +244,8 @@ class FramingCheck {
                 in_.seekg(std::streamoff(pos));
                 if (pos + 8 > size_ || !read(h, 8)) return "the file ends inside its meta header";
                 if (u16(h) != 0x0002) break;
+                // GDCM asserts on an invalid VR in the meta header, which is always explicit.
+                if (!isVr(h[4], h[5])) return badVr(0x0002, u16(h + 2), h + 4);
                 std::uint32_t len = 0;
                 std::uint64_t head = 8;
                 if (longLength(h[4], h[5])) {
@@ -279,8 +281,26 @@ class FramingCheck {
         return walk(pos);
     }
 
+    /// One of the 34 value representations of PS3.5 Table 6.2-1.
     static bool isVr(unsigned char a, unsigned char b) {
-        return std::isupper(a) && std::isupper(b);
+        static const char* kVrs[] = {"AE", "AS", "AT", "CS", "DA", "DS", "DT", "FD", "FL",
+                                     "IS", "LO", "LT", "OB", "OD", "OF", "OL", "OV", "OW",
+                                     "PN", "SH", "SL", "SQ", "SS", "ST", "SV", "TM", "UC",
+                                     "UI", "UL", "UN", "UR", "US", "UT", "UV"};
+        for (const char* v : kVrs)
+            if (a == v[0] && b == v[1]) return true;
+        return false;
+    }
+    std::string badVr(std::uint16_t g, std::uint16_t e, const unsigned char* vr) {
+        field_ = tagName(g, e);
+        std::string shown;
+        for (int i = 0; i < 2; ++i) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, std::isprint(vr[i]) ? "%c" : "\\x%02X", vr[i]);
+            shown += buf;
+        }
+        return "element " + tagName(g, e) + " has the invalid value representation \"" + shown +
+               "\" (explicit VR data must name one of DICOM's VRs)";
     }
     static bool longLength(unsigned char a, unsigned char b) {
         static const char* kLong[] = {"OB", "OD", "OF", "OL", "OV", "OW", "SQ",
@@ -290,66 +310,154 @@ class FramingCheck {
         return false;
     }
 
-    /// Walks elements from `pos` to the end of the file; items and undefined-length sequences are
-    /// entered, defined-length values skipped after checking that they fit.
-    std::string walk(std::uint64_t pos) {
-        while (pos < size_) {
+    /// Outcome of walking a part: complete, cut short / overrunning (a message), or not followable
+    /// here.
+    struct Result {
+        bool followable = true;
+        std::string problem;  ///< non-empty: truncated or damaged
+        bool stop() const { return !followable || !problem.empty(); }
+    };
+    static Result unfollowable() { return {false, {}}; }
+    Result damaged(std::uint16_t g, std::uint16_t e, std::uint64_t need, std::uint64_t at,
+                   std::uint64_t end) {
+        if (end == size_) return {true, cutShort(g, e, need, at)};
+        field_ = tagName(g, e);
+        return {true, "element " + tagName(g, e) + " declares " + std::to_string(need) +
+                          " bytes at offset " + std::to_string(at) +
+                          ", beyond the end of its enclosing item at offset " +
+                          std::to_string(end)};
+    }
+    Result neverClosed(std::uint16_t g, std::uint16_t e, std::uint64_t opened) {
+        field_ = g == 0x7fe0 && e == 0x0010 ? std::string("PixelData") : tagName(g, e);
+        return {true, "the file ends inside element " + tagName(g, e) +
+                          " (undefined length, opened at offset " + std::to_string(opened) +
+                          ", never closed by its delimiter)"};
+    }
+    /// Reads an 8-byte element or item header at `pos`; false if it does not fit before `end`.
+    bool header(std::uint64_t pos, std::uint64_t end, unsigned char* h) {
+        in_.clear();
+        in_.seekg(std::streamoff(pos));
+        return pos + 8 <= end && read(h, 8);
+    }
+    static constexpr int kMaxNesting = 32;  ///< deeper nesting than any real data set: give up
+
+    /// Walks the elements of a data set in [pos, end). With `delimited` (an undefined-length item)
+    /// it ends at its item delimiter. Sequences are entered (explicit VR, or undefined length);
+    /// other values are skipped after checking that they fit inside `end`.
+    Result walkDataSet(std::uint64_t& pos, std::uint64_t end, bool delimited, int depth) {
+        if (depth > kMaxNesting) return unfollowable();
+        while (pos < end) {
             unsigned char h[12];
-            in_.clear();
-            in_.seekg(std::streamoff(pos));
-            if (pos + 8 > size_ || !read(h, 8))
-                return "the file ends inside an element header at offset " + std::to_string(pos);
+            if (!header(pos, end, h))
+                return {true,
+                        "the file ends inside an element header at offset " + std::to_string(pos)};
             const std::uint16_t g = u16(h), e = u16(h + 2);
+            if (g == 0xfffe) {
+                pos += 8;
+                if (e == 0xe00d && delimited) return {};
+                if (e == 0xe00d) continue;  // stray item delimiter: harmless
+                // An item or sequence delimiter where an element belongs: GDCM asserts on it.
+                field_ = tagName(g, e);
+                return {true, "item tag " + tagName(g, e) + " at offset " +
+                                  std::to_string(pos - 8) + " where a data element belongs"};
+            }
             std::uint32_t len = 0;
             std::uint64_t head = 8;
-            if (g == 0xfffe || !explicitVr_) {
-                len = u32(h + 4);  // items, delimiters and implicit VR: 4-byte length
+            bool sequence = false;
+            if (!explicitVr_) {
+                len = u32(h + 4);
+                sequence = len == kUndefinedLength;  // implicit: only undefined lengths are known
             } else if (!isVr(h[4], h[5])) {
-                return {};  // not followable (e.g. a VR switch): leave it to GDCM
+                // Invalid VR in explicit data: GDCM either guesses or asserts; refuse the file.
+                return {true, badVr(g, e, h + 4)};
             } else if (longLength(h[4], h[5])) {
-                if (pos + 12 > size_ || !read(h + 8, 4))
-                    return "the file ends inside element " + tagName(g, e);
+                if (pos + 12 > end || !read(h + 8, 4))
+                    return {true, "the file ends inside element " + tagName(g, e)};
                 len = u32(h + 8), head = 12;
-                if (len == kUndefinedLength && h[4] == 'U' && h[5] == 'N')
-                    return {};  // implicit inside
+                if (h[4] == 'U' && h[5] == 'N' && len == kUndefinedLength) return unfollowable();
+                sequence = h[4] == 'S' && h[5] == 'Q';
             } else {
                 len = u16(h + 6);
             }
+            const std::uint64_t start = pos;
             pos += head;
-            // Undefined length (sequence, item, encapsulated pixel data): enter it, and expect its
-            // delimiter. Defined-length items are skipped whole, since inside encapsulated pixel
-            // data they hold compressed bytes, not elements.
-            if (g == 0xfffe && (e == 0xe00d || e == 0xe0dd)) {
-                if (!open_.empty()) open_.pop_back();
-                continue;
-            }
+            Result r;
             if (len == kUndefinedLength) {
-                open_.push_back({g, e, pos});
+                r = sequence ? walkItems(pos, end, true, depth + 1) : walkFragments(pos, end);
+                if (r.problem == "open") r = neverClosed(g, e, start);
+            } else if (pos + len > end) {
+                return damaged(g, e, len, pos, end);
+            } else if (sequence) {
+                std::uint64_t sub = pos;
+                r = walkItems(sub, pos + len, false, depth + 1);
+                pos += len;
+            } else {
+                pos += len;
+            }
+            if (r.stop()) return r;
+        }
+        return delimited ? Result{true, "open"} : Result{};
+    }
+
+    /// Items of a sequence in [pos, end); with `delimited`, up to the sequence delimiter.
+    Result walkItems(std::uint64_t& pos, std::uint64_t end, bool delimited, int depth) {
+        while (pos < end) {
+            unsigned char h[8];
+            if (!header(pos, end, h))
+                return {true,
+                        "the file ends inside an item header at offset " + std::to_string(pos)};
+            const std::uint16_t g = u16(h), e = u16(h + 2);
+            const std::uint32_t len = u32(h + 4);
+            pos += 8;
+            if (g != 0xfffe) return unfollowable();
+            if (e == 0xe0dd) {
+                if (delimited) return {};
                 continue;
             }
-            if (pos + len > size_) return cutShort(g, e, len, pos);
+            if (e != 0xe000) return unfollowable();
+            Result r;
+            if (len == kUndefinedLength) {
+                r = walkDataSet(pos, end, true, depth + 1);
+                if (r.problem == "open") r = neverClosed(g, e, pos);
+            } else if (pos + len > end) {
+                return damaged(g, e, len, pos, end);
+            } else {
+                std::uint64_t sub = pos;
+                r = walkDataSet(sub, pos + len, false, depth + 1);
+                pos += len;
+            }
+            if (r.stop()) return r;
+        }
+        return delimited ? Result{true, "open"} : Result{};
+    }
+
+    /// Fragments of encapsulated pixel data (items holding compressed bytes) up to the delimiter.
+    Result walkFragments(std::uint64_t& pos, std::uint64_t end) {
+        while (pos < end) {
+            unsigned char h[8];
+            if (!header(pos, end, h))
+                return {true,
+                        "the file ends inside a fragment header at offset " + std::to_string(pos)};
+            const std::uint16_t g = u16(h), e = u16(h + 2);
+            const std::uint32_t len = u32(h + 4);
+            pos += 8;
+            if (g == 0xfffe && e == 0xe0dd) return {};
+            if (g != 0xfffe || e != 0xe000 || len == kUndefinedLength) return unfollowable();
+            if (pos + len > end) return damaged(0x7fe0, 0x0010, len, pos, end);
             pos += len;
         }
-        if (!open_.empty()) {
-            const OpenElement& o = open_.front();
-            field_ = o.group == 0x7fe0 && o.element == 0x0010 ? std::string("PixelData")
-                                                              : tagName(o.group, o.element);
-            return "the file ends inside element " + tagName(o.group, o.element) +
-                   " (undefined length, opened at offset " + std::to_string(o.offset) +
-                   ", never closed by its delimiter)";
-        }
-        return {};
+        return {true, "open"};
+    }
+
+    std::string walk(std::uint64_t pos) {
+        const Result r = walkDataSet(pos, size_, false, 0);
+        return r.followable ? r.problem : std::string();
     }
 
     std::ifstream in_;
     std::uint64_t size_ = 0;
     bool ok_ = false, bigEndian_ = false, explicitVr_ = true;
     std::string field_;  ///< the element cut short, for InputError::field
-    struct OpenElement {
-        std::uint16_t group, element;
-        std::uint64_t offset;
-    };
-    std::vector<OpenElement> open_;  ///< undefined-length sequences and items not yet delimited
 };
 
 std::vector<fs::path> listFiles(const fs::path& dir) {
