@@ -22,6 +22,17 @@ int main(int argc, char** argv) {
     } catch (const CLI::CallForVersion& e) {
         return app.exit(e);
     } catch (const CLI::ParseError& e) {
+        std::string names;
+        bool known = false;
+        for (const auto* s : app.get_subcommands({})) {
+            names += (names.empty() ? "" : ", ") + s->get_name();
+            known = known || (argc > 1 && s->get_name() == argv[1]);
+        }
+        if (argc > 1 && argv[1][0] != '-' && !known) {
+            std::cerr << "voxlight: error: unknown command '" << argv[1]
+                      << "' (choose one of: " << names << ")\n";
+            return kExitBadInput;
+        }
         std::cerr << "voxlight: error: " << e.what() << " (see voxlight --help)\n";
         return kExitBadInput;
     }

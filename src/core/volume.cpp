@@ -94,7 +94,8 @@ std::ostream& operator<<(std::ostream& os, const Geometry& g) {
     return os;
 }
 
-Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), type_(type) {
+namespace {
+void checkVolumeSize(const Geometry& geometry) {
     const glm::ivec3 d = geometry.dims;
     if (d.x < 1 || d.y < 1 || d.z < 1 || d.x > kMaxDim || d.y > kMaxDim || d.z > kMaxDim ||
         geometry.voxelCount() > kMaxVoxels) {
@@ -104,8 +105,21 @@ Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), 
            << kMaxVoxels << " voxels)";
         throw InputError("", "dims", os.str(), "crop or downsample the volume");
     }
+}
+}  // namespace
+
+Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), type_(type) {
+    checkVolumeSize(geometry);
     geometry_.validate();
-    data_ = std::make_unique<std::byte[]>(sizeBytes());  // value-initialised: zero
+    data_ = std::shared_ptr<std::byte>(new std::byte[sizeBytes()](),
+                                       std::default_delete<std::byte[]>());
+}
+
+Volume::Volume(const Geometry& geometry, VoxelType type, std::shared_ptr<std::byte> storage)
+    : geometry_(geometry), type_(type), data_(std::move(storage)) {
+    checkVolumeSize(geometry);
+    geometry_.validate();
+    VL_CHECK(data_ != nullptr);
 }
 
 float Volume::at(int i, int j, int k) const {

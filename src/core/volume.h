@@ -143,6 +143,9 @@ class Volume {
     /// axis > kMaxDim): callers that read files check first and name the file; this is the last
     /// line of defence.
     Volume(const Geometry& geometry, VoxelType type);
+    /// Adopts an existing buffer of voxelCount·voxelBytes(type) bytes without copying (e.g. a file
+    /// reader's array); `storage`'s deleter releases it. Same size checks as above.
+    Volume(const Geometry& geometry, VoxelType type, std::shared_ptr<std::byte> storage);
     Volume(Volume&&) noexcept = default;
     Volume& operator=(Volume&&) noexcept = default;
     Volume(const Volume&) = delete;
@@ -223,7 +226,7 @@ class Volume {
   private:
     Geometry geometry_;
     VoxelType type_ = VoxelType::UInt8;
-    std::unique_ptr<std::byte[]> data_;
+    std::shared_ptr<std::byte> data_;  ///< owned buffer, or an adopted one (e.g. a reader's array)
 };
 
 }  // namespace voxlight::core
