@@ -17,7 +17,8 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
     g->add_flag("--big-endian", o->bigEndian, "Raw file: big-endian voxels");
     g->add_option("--header-bytes", o->headerBytes, "Raw file: bytes to skip before the data");
     g->add_option("--series", o->series,
-                  "DICOM: SeriesInstanceUID to read when a folder holds several");
+                  "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
+                  "files without one)");
     g->add_option("--nonfinite", o->nonFinite,
                   "NaN/Inf voxels: reject (default) or replace by the minimum")
         ->check(CLI::IsMember({"reject", "min"}));

@@ -32,6 +32,11 @@ double sdEllipsoid(const glm::dvec3& p, const glm::dvec3& c, const glm::dvec3& r
     const double k1 = glm::length(q / r);
     return k1 > 0.0 ? k0 * (k0 - 1.0) / k1 : -std::min(r.x, std::min(r.y, r.z));
 }
+/// True when p is farther than `margin` outside the ellipsoid's bounding box (cheap rejection).
+bool outsideBox(const glm::dvec3& p, const glm::dvec3& c, const glm::dvec3& r, double margin) {
+    const glm::dvec3 d = glm::abs(p - c) - r;
+    return d.x > margin || d.y > margin || d.z > margin;
+}
 double sdEllipse2(double x, double y, double rx, double ry) {
     const double qx = x / rx, qy = y / ry;
     const double k0 = std::sqrt(qx * qx + qy * qy);
@@ -112,6 +117,9 @@ double torsoHU(const glm::dvec3& p, double h) {
     auto paint = [&](double d, double value) {
         if (d < 0.5 * h) hu += coverage(d, h) * (value - hu);
     };
+    auto paintEllipsoid = [&](const glm::dvec3& c, const glm::dvec3& r, double value) {
+        if (!outsideBox(p, c, r, h)) paint(sdEllipsoid(p, c, r), value);
+    };
     const double zTop = 190.0, zBottom = -190.0;
     const double zCap = std::max(p.z - zTop, zBottom - p.z);  // body is a capped elliptic cylinder
     auto body = [&](double rx, double ry) { return std::max(sdEllipse2(p.x, p.y, rx, ry), zCap); };
@@ -127,26 +135,32 @@ double torsoHU(const glm::dvec3& p, double h) {
         const bool besideSternum = std::abs(std::abs(ang) - kPi / 2) < 0.35 && p.y < 0;
         if (!besideSternum) {
             const double ring = sdEllipse2(p.x, p.y, 138.0, 92.0);
-            for (double zr = -25.0; zr < 170.0; zr += 24.0) {
+            for (double zr = -25.0; std::abs(ring) < 5.5 + h && zr < 170.0; zr += 24.0) {
                 const double zc = zr + 12.0 * std::sin(ang);  // ribs slope downward anteriorly
                 paint(std::hypot(ring, p.z - zc) - 5.5, 700.0);
             }
         }
     }
     // Lungs (upper half), with a faint parenchyma texture added by the noise below.
-    paint(sdEllipsoid(p, {-72.0, -5.0, 85.0}, {58.0, 78.0, 105.0}), -850.0);
-    paint(sdEllipsoid(p, {72.0, -5.0, 85.0}, {55.0, 78.0, 105.0}), -850.0);
+    paintEllipsoid({-72.0, -5.0, 85.0}, {58.0, 78.0, 105.0}, -850.0);
+    paintEllipsoid({72.0, -5.0, 85.0}, {55.0, 78.0, 105.0}, -850.0);
     // Heart (myocardium with contrast-enhanced blood pool).
-    paint(sdEllipsoid(p, {22.0, -38.0, 35.0}, {62.0, 52.0, 55.0}), 45.0);
-    paint(sdEllipsoid(p, {22.0, -38.0, 35.0}, {48.0, 38.0, 42.0}), 180.0);
+    paintEllipsoid({22.0, -38.0, 35.0}, {62.0, 52.0, 55.0}, 45.0);
+    paintEllipsoid({22.0, -38.0, 35.0}, {48.0, 38.0, 42.0}, 180.0);
     // Liver (patient right = −x), kidneys, spleen.
-    paint(sdEllipsoid(p, {-62.0, -10.0, -55.0}, {82.0, 75.0, 62.0}), 60.0);
-    paint(sdEllipsoid(p, {-58.0, 60.0, -115.0}, {25.0, 22.0, 45.0}), 35.0);
-    paint(sdEllipsoid(p, {58.0, 60.0, -110.0}, {25.0, 22.0, 45.0}), 35.0);
-    paint(sdEllipsoid(p, {78.0, 30.0, -45.0}, {35.0, 45.0, 40.0}), 45.0);
+    paintEllipsoid({-62.0, -10.0, -55.0}, {82.0, 75.0, 62.0}, 60.0);
+    paintEllipsoid({-58.0, 60.0, -115.0}, {25.0, 22.0, 45.0}, 35.0);
+    paintEllipsoid({58.0, 60.0, -110.0}, {25.0, 22.0, 45.0}, 35.0);
+    paintEllipsoid({78.0, 30.0, -45.0}, {35.0, 45.0, 40.0}, 45.0);
     // Vertebral column: bodies (cortical shell, cancellous core), discs, spinous processes.
     const double spineX = 0.0, spineY = 78.0;
-    for (double zc = -180.0; zc < 190.0; zc += 30.0) {
+    // Only the vertebrae within reach of p (each spans 30 mm of z; processes reach 52 mm behind the
+    // body axis).
+    const bool nearSpine =
+        std::abs(p.x - spineX) < 32.0 + h && p.y > spineY - 21.0 - h && p.y < spineY + 52.0 + h;
+    const double zFirst =
+        std::max(-180.0, -180.0 + 30.0 * std::floor((p.z - h + 180.0) / 30.0) - 30.0);
+    for (double zc = zFirst; nearSpine && zc < 190.0 && zc <= p.z + h; zc += 30.0) {
         paint(sdCylinderZ(p, spineX, spineY, 21.0, zc, zc + 25.0), 950.0);
         paint(sdCylinderZ(p, spineX, spineY, 18.5, zc + 2.5, zc + 22.5), 260.0);
         paint(sdCylinderZ(p, spineX, spineY, 21.0, zc + 25.0, zc + 30.0), 90.0);  // disc
