@@ -57,8 +57,10 @@ TransferFunction absolutePreset(const std::string& name) {
                                 {500, 2000}, name);
     if (name == "ct-angio") {
         const glm::vec3 red(0.80f, 0.10f, 0.07f), metal(0.80f, 0.84f, 0.92f);
+        // Lumen red up to ≈ 330 HU, bone ivory from ≈ 430 HU (cortex at 3 mm voxels is often
+        // only 400–700 HU), metal silver above 1500 HU.
         return TransferFunction({pt(-1024, 0, red), pt(110, 0, red), pt(200, 0.35f, red),
-                                 pt(380, 0.9f, {0.85f, 0.22f, 0.14f}), pt(520, 1.2f, ivory),
+                                 pt(330, 0.9f, {0.85f, 0.24f, 0.15f}), pt(430, 1.2f, ivory),
                                  pt(1150, 3.f, bright), pt(1500, 6.f, metal), pt(3071, 6.f, metal)},
                                 {400, 1400}, name);
     }
@@ -72,10 +74,13 @@ TransferFunction absolutePreset(const std::string& name) {
     }
     if (name == "ct-lung") {
         const glm::vec3 pink(0.92f, 0.62f, 0.58f);
+        // Parenchyma (≈ −850 HU) only: starts above −900 HU so that air outside the body (−1000 ±
+        // noise, up to ≈ −930 HU in the shared abdomen CT) stays clear, and ends at −550 HU because
+        // every air/tissue boundary passes through this range by partial volume (a shell whose
+        // opacity grows with ∫σt over the range).
         return TransferFunction(
-            {pt(-1024, 0, pink), pt(-950, 0, pink), pt(-850, 0.008f, pink),
-             pt(-700, 0.04f, {0.95f, 0.70f, 0.66f}), pt(-450, 0.10f, {0.95f, 0.78f, 0.74f}),
-             pt(-250, 0, pink), pt(3071, 0, pink)},
+            {pt(-1024, 0, pink), pt(-900, 0, pink), pt(-850, 0.02f, pink),
+             pt(-700, 0.04f, {0.95f, 0.72f, 0.68f}), pt(-550, 0, pink), pt(3071, 0, pink)},
             {-600, 1500}, name);
     }
     if (name == "phantom-step")
@@ -90,8 +95,8 @@ TransferFunction relativePreset(const std::string& name) {
     if (name == "mr-t1-brain")
         return TransferFunction(
             {pt(0, 0, {0.55f, 0.40f, 0.35f}), pt(0.14f, 0, {0.60f, 0.45f, 0.40f}),
-             pt(0.26f, 0.06f, {0.80f, 0.62f, 0.55f}), pt(0.45f, 0.35f, {0.90f, 0.80f, 0.74f}),
-             pt(0.75f, 0.7f, {0.96f, 0.92f, 0.86f}), pt(1, 0.8f, {0.98f, 0.96f, 0.92f})},
+             pt(0.26f, 0.06f, {0.78f, 0.56f, 0.47f}), pt(0.45f, 0.35f, {0.84f, 0.68f, 0.60f}),
+             pt(0.75f, 0.7f, {0.90f, 0.82f, 0.76f}), pt(1, 0.8f, {0.98f, 0.96f, 0.92f})},
             {0.5f, 1.f}, name);
     if (name == "generic")
         return TransferFunction({pt(0, 0, glm::vec3(0.85f)), pt(0.25f, 0, glm::vec3(0.85f)),

@@ -3,6 +3,7 @@
 // The templated per-ray marchers behind RayCaster (include only from .cpp files of render/ and of
 // shading models that reuse the traversal). Everything here is inlined into tile loops that were
 // dispatched once on the voxel type (View) and the shader type (Shader).
+#include <algorithm>
 #include <cmath>
 
 #include "render/ray_caster.h"
@@ -36,18 +37,42 @@ struct SampleLattice {
     }
 };
 
+/// Trilinear sample of the physical value at continuous index p: the same arithmetic as
+/// core::VolumeView::sample (so results are identical), forced inline for the per-sample loop.
 template <class View>
-inline float sampleAt(const View& v, const RaySegment& r, float t) {
+[[gnu::always_inline]] inline float trilinear(const View& v, float x, float y, float z) {
+    x = std::min(std::max(x, 0.f), float(v.nx - 1));
+    y = std::min(std::max(y, 0.f), float(v.ny - 1));
+    z = std::min(std::max(z, 0.f), float(v.nz - 1));
+    const int i = std::min(int(x), v.nx - 2 < 0 ? 0 : v.nx - 2);
+    const int j = std::min(int(y), v.ny - 2 < 0 ? 0 : v.ny - 2);
+    const int k = std::min(int(z), v.nz - 2 < 0 ? 0 : v.nz - 2);
+    const float fx = x - float(i), fy = y - float(j), fz = z - float(k);
+    const int di = v.nx > 1 ? 1 : 0;
+    const std::size_t dj = v.ny > 1 ? v.sy : 0, dk = v.nz > 1 ? v.sz : 0;
+    const auto* p = v.data + i + v.sy * j + v.sz * k;
+    const float c00 = float(p[0]) + fx * (float(p[di]) - float(p[0]));
+    const float c10 = float(p[dj]) + fx * (float(p[dj + di]) - float(p[dj]));
+    const float c01 = float(p[dk]) + fx * (float(p[dk + di]) - float(p[dk]));
+    const float c11 = float(p[dk + dj]) + fx * (float(p[dk + dj + di]) - float(p[dk + dj]));
+    const float c0 = c00 + fy * (c10 - c00);
+    const float c1 = c01 + fy * (c11 - c01);
+    return v.slope * (c0 + fz * (c1 - c0)) + v.intercept;
+}
+
+template <class View>
+[[gnu::always_inline]] inline float sampleAt(const View& v, const RaySegment& r, float t) {
     const glm::vec3 p = r.originIndex + t * r.dirIndex;
-    return v.sample(p.x, p.y, p.z);
+    return trilinear(v, p.x, p.y, p.z);
 }
 
 /// World gradient (value/mm) by central differences of the trilinear field at index position p.
 template <class View>
-inline glm::vec3 gradientAt(const View& v, const glm::vec3& p, const glm::mat3& m) {
-    const glm::vec3 d(v.sample(p.x + 1.f, p.y, p.z) - v.sample(p.x - 1.f, p.y, p.z),
-                      v.sample(p.x, p.y + 1.f, p.z) - v.sample(p.x, p.y - 1.f, p.z),
-                      v.sample(p.x, p.y, p.z + 1.f) - v.sample(p.x, p.y, p.z - 1.f));
+[[gnu::always_inline]] inline glm::vec3 gradientAt(const View& v, const glm::vec3& p,
+                                                   const glm::mat3& m) {
+    const glm::vec3 d(trilinear(v, p.x + 1.f, p.y, p.z) - trilinear(v, p.x - 1.f, p.y, p.z),
+                      trilinear(v, p.x, p.y + 1.f, p.z) - trilinear(v, p.x, p.y - 1.f, p.z),
+                      trilinear(v, p.x, p.y, p.z + 1.f) - trilinear(v, p.x, p.y, p.z - 1.f));
     return m * d;
 }
 

@@ -258,7 +258,12 @@ SceneRenderResult renderScene(const io::Scene& scene, const core::Progress& prog
                              {"modality", std::string(core::toString(volume.modality))}};
     res.details["camera"] = {
         {"eye", {camera.eye().x, camera.eye().y, camera.eye().z}},
-        {"forward", {camera.forward().x, camera.forward().y, camera.forward().z}}};
+        {"forward", {camera.forward().x, camera.forward().y, camera.forward().z}},
+        {"up", {camera.up().x, camera.up().y, camera.up().z}},
+        {"projection",
+         camera.projection() == Projection::Perspective ? "perspective" : "orthographic"},
+        {"fov_y_deg", camera.fovY() * 180.0 / 3.14159265358979323846},
+        {"ortho_height_mm", camera.orthoHeight()}};
     res.details["render"] = {{"step_voxels", options.stepVoxels},
                              {"step_mm", caster.stepMm()},
                              {"seed", options.seed},

@@ -1,0 +1,132 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: MIT
+"""voxlight's gradient ray caster vs VTK's vtkFixedPointVolumeRayCastMapper with shading, in one run.
+
+Same volume file (the 256^3 torso phantom written as .vti, and ../shared/datasets/ct/bonsai.vti), same
+transfer function (voxlight's, exported through --stats: colour points, and opacity per mm
+1 - exp(-sigma_t * 1 mm) with ScalarOpacityUnitDistance 1 mm), same camera (eye, forward, up, fov),
+same sample distance, 512x512, Blinn-Phong ambient/diffuse/specular/power alike, all cores.
+Prints per-frame seconds (median of the steady-state frames) for both and the ratio voxlight/VTK.
+
+    xvfb-run -a /usr/bin/python3 tools/bench_render_vs_vtk.py [--build build] [--frames 5]
+"""
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+
+import vtk
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def voxlight_frames(exe, scene, frames, workdir):
+    """Renders `frames` times; returns (render seconds list, stats of the last run)."""
+    times, stats = [], None
+    for i in range(frames):
+        st = os.path.join(workdir, "stats.json")
+        subprocess.run([exe, "render", scene, "-o", os.path.join(workdir, "voxlight.png"), "--stats", st,
+                        "-q"], check=True)
+        stats = json.load(open(st))
+        times += [s["seconds"] for s in stats["stages"] if s["name"] == "render"]
+    return times, stats
+
+
+def vtk_frames(volume_path, stats, frames, out_png):
+    reader = vtk.vtkXMLImageDataReader()
+    reader.SetFileName(volume_path)
+    reader.Update()
+    tf = stats["transfer_function"]
+    color = vtk.vtkColorTransferFunction()
+    opacity = vtk.vtkPiecewiseFunction()
+    for p in tf["points"]:
+        color.AddRGBPoint(p["value"], *p["color"])
+        opacity.AddPoint(p["value"], 1.0 - __import__("math").exp(-p["extinction"] * 1.0))
+    prop = vtk.vtkVolumeProperty()
+    prop.SetColor(color)
+    prop.SetScalarOpacity(opacity)
+    prop.SetScalarOpacityUnitDistance(1.0)
+    prop.SetInterpolationTypeToLinear()
+    prop.ShadeOn()
+    params = stats["method"]["params"]
+    prop.SetAmbient(params["ambient"])
+    prop.SetDiffuse(params["diffuse"])
+    prop.SetSpecular(params["specular"])
+    prop.SetSpecularPower(params["shininess"])
+    mapper = vtk.vtkFixedPointVolumeRayCastMapper()
+    mapper.SetInputConnection(reader.GetOutputPort())
+    mapper.SetAutoAdjustSampleDistances(0)
+    mapper.SetSampleDistance(stats["render"]["step_mm"])
+    mapper.SetImageSampleDistance(1.0)
+    volume = vtk.vtkVolume()
+    volume.SetMapper(mapper)
+    volume.SetProperty(prop)
+    ren = vtk.vtkRenderer()
+    ren.AddVolume(volume)
+    ren.SetBackground(0, 0, 0)
+    win = vtk.vtkRenderWindow()
+    win.SetOffScreenRendering(1)
+    win.AddRenderer(ren)
+    win.SetSize(512, 512)
+    cam = ren.GetActiveCamera()
+    c = stats["camera"]
+    eye, fwd = c["eye"], c["forward"]
+    dist = 1000.0
+    cam.SetPosition(*eye)
+    cam.SetFocalPoint(*[eye[i] + dist * fwd[i] for i in range(3)])
+    cam.SetViewUp(*c["up"])
+    cam.SetViewAngle(c["fov_y_deg"])
+    ren.ResetCameraClippingRange()
+    times = []
+    for i in range(frames + 1):  # the first frame also encodes normals: reported separately
+        t0 = time.perf_counter()
+        win.Render()
+        times.append(time.perf_counter() - t0)
+    w2i = vtk.vtkWindowToImageFilter()
+    w2i.SetInput(win)
+    w2i.Update()
+    png = vtk.vtkPNGWriter()
+    png.SetFileName(out_png)
+    png.SetInputConnection(w2i.GetOutputPort())
+    png.Write()
+    return times
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--build", default=os.path.join(ROOT, "build"))
+    ap.add_argument("--frames", type=int, default=5)
+    ap.add_argument("--out", default=None, help="keep images here (default: a temp dir)")
+    args = ap.parse_args()
+    exe = os.path.join(args.build, "voxlight")
+    work = args.out or tempfile.mkdtemp(prefix="voxlight-vs-vtk-")
+    os.makedirs(work, exist_ok=True)
+    torso = os.path.join(work, "torso256.vti")
+    if not os.path.exists(torso):
+        subprocess.run([exe, "phantom", "torso", "-o", torso, "-q"], check=True)
+    cases = [("torso 256^3 (ct-bone)", torso, "ct-bone")]
+    bonsai = os.path.join(ROOT, "..", "shared", "datasets", "ct", "bonsai.vti")
+    if os.path.exists(bonsai):
+        cases.append(("bonsai CT 256^3 (generic)", os.path.abspath(bonsai), "generic"))
+    else:
+        print("note: ../shared/datasets/ct/bonsai.vti absent, real-CT case skipped", file=sys.stderr)
+    print(f"{'case':28s} {'voxlight s/frame':>17s} {'VTK s/frame':>12s} {'ratio':>6s} {'VTK 1st frame':>14s}")
+    for name, path, preset in cases:
+        scene = os.path.join(work, f"scene-{preset}.json")
+        json.dump({"volume": path, "transfer_function": preset, "method": "gradient",
+                   "camera": {"azimuth": 30, "elevation": 20},
+                   "image": {"width": 512, "height": 512}}, open(scene, "w"))
+        vt, stats = voxlight_frames(exe, scene, args.frames, work)
+        os.replace(os.path.join(work, "voxlight.png"), os.path.join(work, f"voxlight-{preset}.png"))
+        kt = vtk_frames(path, stats, args.frames, os.path.join(work, f"vtk-{preset}.png"))
+        v, k = statistics.median(vt), statistics.median(kt[1:])
+        print(f"{name:28s} {v:17.3f} {k:12.3f} {v / k:6.2f} {kt[0]:14.3f}")
+    print(f"images in {work}")
+
+
+if __name__ == "__main__":
+    main()
