@@ -3,6 +3,7 @@
 
 #include <unistd.h>
 
+#include <chrono>
 #include <csignal>
 #include <cstdio>
 #include <iostream>
@@ -32,18 +33,26 @@ core::Progress terminalProgress(bool quiet) {
     struct State {
         std::mutex m;
         std::string stage;
+        std::chrono::steady_clock::time_point start;
         int lastTenth = -1;
         int lastPercent = -1;
     };
+    // Work that finishes within kQuietSeconds shows nothing: progress is for long work, and a quick
+    // failure stays one line on stderr.
+    constexpr double kQuietSeconds = 1.0;
     auto state = std::make_shared<State>();
     return core::Progress(
         [state, tty](const std::string& stage, double f) {
             std::lock_guard<std::mutex> lock(state->m);
+            const auto now = std::chrono::steady_clock::now();
             if (stage != state->stage) {
-                if (tty && !state->stage.empty()) std::fputc('\n', stderr);
+                if (tty && state->lastPercent >= 0 && state->lastPercent < 100)
+                    std::fputc('\n', stderr);
                 state->stage = stage;
+                state->start = now;
                 state->lastTenth = state->lastPercent = -1;
             }
+            if (std::chrono::duration<double>(now - state->start).count() < kQuietSeconds) return;
             const int percent = int(f * 100.0 + 0.5);
             if (tty) {
                 if (percent == state->lastPercent) return;
@@ -51,10 +60,7 @@ core::Progress terminalProgress(bool quiet) {
                 const int filled = percent * 30 / 100;
                 std::fprintf(stderr, "\r%-12s [%.*s%*s] %3d%%", stage.c_str(), filled,
                              "##############################", 30 - filled, "", percent);
-                if (percent >= 100) {
-                    std::fputc('\n', stderr);
-                    state->stage.clear();
-                }
+                if (percent >= 100) std::fputc('\n', stderr);
             } else {
                 const int tenth = int(f * 10.0);
                 if (tenth == state->lastTenth) return;

@@ -6,6 +6,7 @@
 #include <vtkDataArray.h>
 #include <vtkImageData.h>
 #include <vtkInformation.h>
+#include <vtkLogger.h>
 #include <vtkMatrix3x3.h>
 #include <vtkMatrix4x4.h>
 #include <vtkMetaImageReader.h>
@@ -72,6 +73,9 @@ CaptureOutputWindow& captureWindow() {
     static vtkSmartPointer<CaptureOutputWindow> w = [] {
         auto p = vtkSmartPointer<CaptureOutputWindow>::New();
         vtkOutputWindow::SetInstance(p);
+        // vtkExecutive also logs pipeline failures through vtkLogger straight to stderr; the
+        // reader's own error (captured above) is the message users need.
+        vtkLogger::SetStderrVerbosity(vtkLogger::VERBOSITY_OFF);
         return p;
     }();
     return *w;
@@ -154,6 +158,11 @@ void checkExtent(const int ext[6], int components, const fs::path& path) {
         if (n < 1 || n > core::kMaxDim) bad = true;
         if (!bad) voxels *= std::uint64_t(n);
     }
+    if (bad && dims.str().find('-') != std::string::npos)
+        throw InputError(path.string(), "dims",
+                         "declares invalid dimensions (the reader made " + dims.str() +
+                             " of them: a size is missing, zero or too large to represent)",
+                         "the header is corrupt; check its sizes/dims field");
     if (bad || voxels > core::kMaxVoxels)
         throw InputError(path.string(), "dims",
                          "declares " + dims.str() + " voxels, outside the supported range (1.." +

@@ -58,7 +58,13 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         std::ofstream(tmp / "junk.nii") << "not a nifti";
         std::ofstream(tmp / "scene.json") << R"({"volume": "x.nii", "camera": {"fov_y": "wide"}})";
     }
+    // A truncated .nii.gz: VTK's pipeline logs its own failure to stderr unless silenced.
+    ASSERT_EQ(
+        run("phantom torso --size 40 -q -o '" + (tmp / "t.nii.gz").string() + "'", tmp.path()).code,
+        0);
+    fs::resize_file(tmp / "t.nii.gz", fs::file_size(tmp / "t.nii.gz") / 2);
     const std::vector<std::pair<std::string, std::string>> cases = {
+        {"info '" + (tmp / "t.nii.gz").string() + "'", "truncated"},
         {"info '" + (tmp / "junk.nii").string() + "'", "junk.nii"},
         {"info '" + (tmp / "missing.nii").string() + "'", "does not exist"},
         {"phantom nosuch -o '" + (tmp / "x.nii.gz").string() + "'", "unknown phantom"},
