@@ -111,6 +111,9 @@ LightSample PointLight::sample(const glm::dvec3& x, const glm::vec2&) const {
 }
 
 std::vector<glm::vec3> PointLight::shCoefficients(const glm::dvec3& x, int maxBand) const {
+    // Checked here, not only in deltaSh: at the light (directional == 0) deltaSh is skipped and
+    // c[0] below would index an empty vector for a negative band.
+    sh::checkBand(maxBand, "light", "sh bands");
     const glm::vec3 e = irradianceAt(x);
     const double d = glm::length(p_ - x);
     const double directional = std::min(1.0, d / rmin_);

@@ -91,6 +91,9 @@ TEST(PointLight, InverseSquareWithMinimumDistanceClamp) {
     EXPECT_NEAR(far.wi.x, 1.0f, 1e-6f);
     EXPECT_THROW(PointLight({1, 1, 1}, {0, 0, 0}, 0.0), InputError);
     EXPECT_THROW(PointLight({1, 1, 1}, {NAN, 0, 0}), InputError);
+    // A bad band is an InputError also at the light itself (where no delta direction exists).
+    EXPECT_THROW(l.shCoefficients({10, 0, 0}, -1), InputError);
+    EXPECT_THROW(l.shCoefficients({0, 0, 0}, sh::kMaxBand + 1), InputError);
 }
 
 TEST(PointLight, ShIsFiniteAndContinuousThroughTheLight) {
