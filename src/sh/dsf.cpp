@@ -263,19 +263,34 @@ std::vector<glm::vec3> Dsf::projectEquirect(const EquirectLayout& layout,
                          "give a non-empty latitude–longitude image");
     VL_CHECK_EQ(rgb.size(), std::size_t(w) * std::size_t(h));
     const glm::dmat3 worldFromMap = glm::transpose(mapFromWorld);
+    // Split every pixel into sub × sub cells (exact sub-cell solid angles) so that the pixel
+    // quadrature Σ_p Ω_p w̄_k(ω_p) reproduces A_k = ∫ w̄_k dω. Without it a map whose pixels are not
+    // small against the kernel radius h gives a *constant* environment non-constant coefficients
+    // (256×128 map, n = 2562: up to 15 % off). Each cell's radiance still goes entirely to the
+    // basis functions (Σ_k w̄_k = 1), so energy stays conserved exactly.
+    const double pixelAngle = std::max(kPi / h, std::abs(layout.phiStep));
+    const int sub = std::clamp(int(std::ceil(pixelAngle * kProjectionCellsPerKernel / h_)), 1,
+                               kMaxProjectionSubdivision);
     std::vector<glm::dvec3> acc(dirs_.size(), glm::dvec3(0.0));
     int idx[kMaxSupport];
     double wt[kMaxSupport];
     for (int r = 0; r < h; ++r) {
-        const double t0 = kPi * r / h, t1 = kPi * (r + 1) / h;
-        const double omega = std::abs(layout.phiStep) * (std::cos(t0) - std::cos(t1));
-        for (int c = 0; c < w; ++c) {
-            const glm::dvec3 v = glm::dvec3(rgb[std::size_t(r) * w + c]) * omega;
-            const glm::dvec3 d =
-                worldFromMap *
-                sphericalToDirection(0.5 * (t0 + t1), layout.phi0 + layout.phiStep * (c + 0.5));
-            const int n = weights(d, idx, wt);
-            for (int j = 0; j < n; ++j) acc[idx[j]] += v * wt[j];
+        for (int sr = 0; sr < sub; ++sr) {
+            const double t0 = kPi * (r + double(sr) / sub) / h,
+                         t1 = kPi * (r + double(sr + 1) / sub) / h;
+            const double omega = std::abs(layout.phiStep) / sub * (std::cos(t0) - std::cos(t1));
+            for (int c = 0; c < w; ++c) {
+                const glm::dvec3 v = glm::dvec3(rgb[std::size_t(r) * w + c]) * omega;
+                if (v == glm::dvec3(0.0)) continue;
+                for (int sc = 0; sc < sub; ++sc) {
+                    const glm::dvec3 d =
+                        worldFromMap *
+                        sphericalToDirection(0.5 * (t0 + t1),
+                                             layout.phi0 + layout.phiStep * (c + (sc + 0.5) / sub));
+                    const int n = weights(d, idx, wt);
+                    for (int j = 0; j < n; ++j) acc[idx[j]] += v * wt[j];
+                }
+            }
         }
     }
     std::vector<glm::vec3> s(dirs_.size());

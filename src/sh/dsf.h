@@ -85,10 +85,17 @@ class Dsf {
     /// Energy-conserving alternative to sampleEquirect: s_k = (1/A_k) Σ_p L_p Ω_p w̄_k(ω_p) — each
     /// pixel is split among the basis functions covering it, so Σ_k A_k s_k = Σ_p L_p Ω_p exactly
     /// (a small sun between directions keeps its power, and rotating it does not make the total
-    /// flicker). `mapFromWorld` as above.
+    /// flicker). Pixels coarse against h are split into sub-cells (kProjectionCellsPerKernel), so a
+    /// constant map gives constant coefficients to ~1e-3 at any grid resolution. `mapFromWorld` as
+    /// above.
     std::vector<glm::vec3> projectEquirect(const EquirectLayout& layout,
                                            std::span<const glm::vec3> rgb,
                                            const glm::dmat3& mapFromWorld = glm::dmat3(1.0)) const;
+
+    /// projectEquirect splits pixels so that the kernel radius h spans at least this many cells
+    /// (at most kMaxProjectionSubdivision² cells per pixel): pixel quadrature of A_k to ~1e-3.
+    static constexpr int kProjectionCellsPerKernel = 16;
+    static constexpr int kMaxProjectionSubdivision = 16;
 
     /// ∫ S dω = Σ A_k s_k.
     glm::dvec3 integrate(std::span<const glm::vec3> s) const;
