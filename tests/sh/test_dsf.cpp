@@ -189,11 +189,78 @@ TEST(Dsf, PrefilteredSamplingOfSmoothAndConstantMaps) {
 // count. Prints the table (run the test binary, or ctest -V). What reproduces, and is asserted: DSF
 // beats SH once SH is windowed (Hanning) so that it does not ring negative — the form SH lighting
 // must take — and DSF error falls with n. What does not reproduce: plain SH truncation has the
-// *lower* L2 error here. That is forced by mathematics: SH truncation is the orthogonal
-// (L2-optimal) projection onto its span, while DSF coefficients are prefiltered samples, not a
-// projection. The paper's plain-SH numbers cannot be matched without changing the metric; we assert
-// the true relation instead (so a regression in either basis shows up) and keep the numbers
-// visible.
+// *lower* L2 error here. Note that "SH truncation is L2-optimal" alone does not decide this — it is
+// optimal only within the SH span, and DSF spans a different space of similar dimension. The test
+// therefore also computes the L2-optimal DSF coefficients (least squares on the same pixels, by
+// conjugate gradients): even those lose to plain SH (measured 59.0 % vs 55.0 % at n = 162, 44.9 %
+// vs 41.6 % at n = 642), so no choice of DSF coefficients reproduces the paper's plain-SH claim on
+// this map; the paper's numbers cannot be matched without changing the metric.
+namespace {
+// Least-squares fit of DSF coefficients to one channel of the grid: min Σ_p Ω_p (S(ω_p) − f_p)².
+// Returns the relative L2 error of the fit (same metric as compareDsfWithSh).
+double l2OptimalDsfError(const Dsf& d, const EquirectLayout& layout,
+                         const std::vector<glm::vec3>& img) {
+    struct Pixel {
+        int n;
+        int idx[Dsf::kMaxSupport];
+        double w[Dsf::kMaxSupport];
+        double omega, f;
+    };
+    std::vector<Pixel> px;
+    double norm = 0;
+    for (int r = 0; r < layout.height; ++r) {
+        const double t0 = kPi * r / layout.height, t1 = kPi * (r + 1) / layout.height;
+        for (int c = 0; c < layout.width; ++c) {
+            Pixel p;
+            p.omega = std::abs(layout.phiStep) * (std::cos(t0) - std::cos(t1));
+            p.f = img[std::size_t(r) * layout.width + c].x;
+            p.n = d.weights(
+                sphericalToDirection(0.5 * (t0 + t1), layout.phi0 + layout.phiStep * (c + 0.5)),
+                p.idx, p.w);
+            norm += p.omega * p.f * p.f;
+            px.push_back(p);
+        }
+    }
+    const int n = d.size();
+    auto applyGram = [&](const std::vector<double>& x, std::vector<double>& y) {
+        std::fill(y.begin(), y.end(), 0.0);
+        for (const Pixel& p : px) {
+            double v = 0;
+            for (int j = 0; j < p.n; ++j) v += p.w[j] * x[p.idx[j]];
+            for (int j = 0; j < p.n; ++j) y[p.idx[j]] += p.omega * p.w[j] * v;
+        }
+    };
+    std::vector<double> x(n, 0.0), r(n, 0.0), q(n), ap(n);
+    for (const Pixel& p : px)
+        for (int j = 0; j < p.n; ++j) r[p.idx[j]] += p.omega * p.f * p.w[j];
+    std::vector<double> dir = r;
+    double rr = 0;
+    for (double v : r) rr += v * v;
+    const double rr0 = rr;
+    for (int it = 0; it < 2000 && rr > 1e-24 * rr0; ++it) {
+        applyGram(dir, ap);
+        double pap = 0;
+        for (int k = 0; k < n; ++k) pap += dir[k] * ap[k];
+        const double alpha = rr / pap;
+        double rrNew = 0;
+        for (int k = 0; k < n; ++k) {
+            x[k] += alpha * dir[k];
+            r[k] -= alpha * ap[k];
+            rrNew += r[k] * r[k];
+        }
+        for (int k = 0; k < n; ++k) dir[k] = r[k] + rrNew / rr * dir[k];
+        rr = rrNew;
+    }
+    double e = 0;
+    for (const Pixel& p : px) {
+        double v = 0;
+        for (int j = 0; j < p.n; ++j) v += p.w[j] * x[p.idx[j]];
+        e += p.omega * (v - p.f) * (v - p.f);
+    }
+    return std::sqrt(e / norm);
+}
+}  // namespace
+
 TEST(Dsf, Fig7DsfBeatsShOnHighFrequencyEnvironment) {
     constexpr int kW = 512, kH = 256;
     const EquirectLayout layout{kW, kH, 0.0, 2 * kPi / kW};
@@ -216,8 +283,13 @@ TEST(Dsf, Fig7DsfBeatsShOnHighFrequencyEnvironment) {
         EXPECT_LT(r.dsfError, r.shHanningError)
             << "DSF " << r.dsfCount << " vs windowed SH band " << r.shBand;
         EXPECT_GT(r.dsfError, r.shError)
-            << "plain SH truncation is L2-optimal in its span; if DSF wins now, "
-               "update the comment above and the report";
+            << "plain SH beat DSF so far; if DSF wins now, update the comment above and the report";
+        // The best any DSF coefficients can do on this map (grey: the red channel is the error).
+        const double optimal = l2OptimalDsfError(Dsf(r.dsfCount), layout, img);
+        std::printf("  DSF n = %d, L2-optimal coefficients: %.2f%%\n", r.dsfCount, 100 * optimal);
+        EXPECT_LE(optimal, r.dsfError * (1 + 1e-9)) << "least squares must not lose to sampling";
+        EXPECT_GT(optimal, r.shError) << "DSF (even L2-optimal) now beats plain SH: update the "
+                                         "comment above and the report";
         RecordProperty("dsf" + std::to_string(r.dsfCount) + "_error", std::to_string(r.dsfError));
         RecordProperty("sh" + std::to_string(r.shCount) + "_error", std::to_string(r.shError));
     }
