@@ -64,8 +64,11 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
                          "image is " + std::to_string(w) + "×" + std::to_string(h) +
                              ", larger than the 2^28-pixel limit",
                          "downsample the image");
-    std::vector<float> raw(std::size_t(w) * h * nc);
-    if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, raw.data()))
+    // Only the channels used below are decoded: a many-channel EXR (AOVs, layers) would otherwise
+    // allocate nc floats per pixel, up to 2^28 · nc.
+    const int used = std::min(nc, 4);
+    std::vector<float> raw(std::size_t(w) * h * used);
+    if (!in->read_image(0, 0, 0, used, OIIO::TypeDesc::FLOAT, raw.data()))
         throw InputError(file, "pixels",
                          "pixel data cannot be decoded: " + oiioError(in->geterror()),
                          "the file is probably truncated or corrupt; re-export it");
@@ -73,7 +76,7 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
 
     ImageRGBA img(w, h);
     for (std::size_t p = 0; p < std::size_t(w) * h; ++p) {
-        const float* s = &raw[p * nc];
+        const float* s = &raw[p * used];
         float* d = &img.pixels[p * 4];
         if (nc <= 2) {
             d[0] = d[1] = d[2] = s[0];

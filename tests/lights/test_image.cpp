@@ -107,6 +107,25 @@ TEST(Image, GreyAndGreyAlphaArePromoted) {
     }
 }
 
+TEST(Image, ManyChannelsKeepTheFirstFour) {
+    test::TempDir tmp;
+    const auto path = (tmp / "layers.exr").string();
+    constexpr int kChannels = 7;
+    auto out = OIIO::ImageOutput::create(path);
+    ASSERT_TRUE(out);
+    OIIO::ImageSpec spec(3, 2, kChannels, OIIO::TypeDesc::FLOAT);
+    std::vector<float> data(3 * 2 * kChannels);
+    for (std::size_t i = 0; i < data.size(); ++i) data[i] = float(i);
+    ASSERT_TRUE(out->open(path, spec) && out->write_image(OIIO::TypeDesc::FLOAT, data.data()) &&
+                out->close());
+    io::ImageReadInfo info;
+    const auto img = io::readImage(path, info);
+    EXPECT_EQ(info.channels, kChannels);
+    for (int p = 0; p < 6; ++p)
+        for (int c = 0; c < 4; ++c)
+            EXPECT_EQ(img.pixels[4 * p + c], data[p * kChannels + c]) << p << "," << c;
+}
+
 TEST(Image, BadFilesNameTheFile) {
     test::TempDir tmp;
     try {
