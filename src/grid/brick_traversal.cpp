@@ -15,21 +15,22 @@ RayIntervalIterator::RayIntervalIterator(const BrickMajorants& majorants,
     done_ = !(tMax > tMin) || majorants.size() == 0;
     if (done_) return;
     const glm::vec3 p = originIndex + tMin * directionIndex;
+    const int size = majorants.cellSize();
     const float kInf = std::numeric_limits<float>::infinity();
     for (int a = 0; a < 3; ++a) {
         const int n = majorants.counts()[a];
-        int c = int(std::floor(p[a] / float(kBrickSize)));
+        int c = int(std::floor(p[a] / float(size)));
         c = std::clamp(c, 0, n - 1);
         cell_[a] = c;
         const float d = directionIndex[a];
         if (d > 0.f) {
             step_[a] = 1;
-            tNext_[a] = tMin + (float(kBrickSize * (c + 1)) - p[a]) / d;
-            tDelta_[a] = float(kBrickSize) / d;
+            tNext_[a] = tMin + (float(size * (c + 1)) - p[a]) / d;
+            tDelta_[a] = float(size) / d;
         } else if (d < 0.f) {
             step_[a] = -1;
-            tNext_[a] = tMin + (float(kBrickSize * c) - p[a]) / d;
-            tDelta_[a] = -float(kBrickSize) / d;
+            tNext_[a] = tMin + (float(size * c) - p[a]) / d;
+            tDelta_[a] = -float(size) / d;
         } else {
             step_[a] = 0;
             tNext_[a] = kInf;

@@ -10,7 +10,8 @@
 // p(t) = origin + t·direction, with t in whatever unit the caller uses (the renderer uses world
 // mm, so direction is "index units per mm"). A sample at p lies in the trilinear cell floor(p),
 // which brick floor(p)/16 bounds (BrickGrid includes the apron voxel), so brick b covers
-// [16·b, 16·b + 16) on each axis; positions outside the grid clamp to the edge bricks.
+// [16·b, 16·b + 16) on each axis; positions outside the grid clamp to the edge bricks. The same
+// holds for finer majorant cells of any size (BrickMajorants::fromCells).
 #include <cstdint>
 #include <vector>
 
@@ -40,7 +41,25 @@ class BrickMajorants {
         }
         return m;
     }
+    /// A majorant grid of cells of `cellSize` voxels (same apron rule as the bricks), e.g. finer
+    /// cells computed inside the non-empty bricks. Sizes must agree (counts = ceil(dims / size)).
+    static BrickMajorants fromCells(const glm::ivec3& counts, int cellSize,
+                                    std::vector<float> majorants,
+                                    std::vector<std::array<float, 2>> ranges) {
+        VL_CHECK_EQ(majorants.size(), ranges.size());
+        VL_CHECK_EQ(majorants.size(), std::size_t(counts.x) * counts.y * counts.z);
+        VL_CHECK_GE(cellSize, 1);
+        BrickMajorants m;
+        m.counts_ = counts;
+        m.cellSize_ = cellSize;
+        m.majorant_ = std::move(majorants);
+        m.range_ = std::move(ranges);
+        for (float v : m.majorant_) m.nonEmpty_ += v > 0.f ? 1 : 0;
+        return m;
+    }
     const glm::ivec3& counts() const { return counts_; }
+    /// Voxels per cell side (kBrickSize for BrickGrid-based majorants).
+    int cellSize() const { return cellSize_; }
     std::size_t index(int bx, int by, int bz) const {
         return std::size_t(bx) + std::size_t(counts_.x) *
                                      (std::size_t(by) + std::size_t(counts_.y) * std::size_t(bz));
@@ -52,6 +71,7 @@ class BrickMajorants {
 
   private:
     glm::ivec3 counts_{0};
+    int cellSize_ = kBrickSize;
     std::vector<float> majorant_;
     std::vector<std::array<float, 2>> range_;
     std::size_t nonEmpty_ = 0;

@@ -212,9 +212,7 @@ TfTable::Segment TfTable::midpoint(float sf, float sb) const {
     return g;
 }
 
-TfTable::Segment TfTable::segment(float sf, float sb) const {
-    // Both ends in a transparent tail: nothing to integrate (the common case, O(1)).
-    if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
+TfTable::Segment TfTable::segmentSlow(float sf, float sb) const {
     // Below a hundredth of a cell the integrand is linear to float precision: point-sample.
     constexpr float kPointSampleFraction = 1e-2f;
     if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction)) return midpoint(sf, sb);

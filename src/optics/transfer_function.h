@@ -24,6 +24,7 @@
 // and the means come from cumulative integrals (double precision, exact quadratic inside a cell),
 // so a TF that steps sharply between two samples still contributes its exact share. Because the
 // tables are independent of Δ, partial segments (clip planes, jittered starts) are exact too.
+#include <algorithm>
 #include <array>
 #include <glm/glm.hpp>
 #include <iosfwd>
@@ -126,7 +127,15 @@ class TfTable {
         glm::vec3 albedo{0.f};       ///< extinction-weighted albedo
         glm::vec3 emission{0.f};     ///< extinction-weighted (1 − a)·e
     };
-    Segment segment(float sf, float sb) const;
+    Segment segment(float sf, float sb) const {
+        // Both ends in a transparent tail: nothing to integrate (the common case, inline).
+        if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
+        return segmentSlow(sf, sb);
+    }
+    /// True when segment(sf, sb) is certainly transparent (cheap test).
+    bool transparentSegment(float sf, float sb) const {
+        return std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_;
+    }
     /// Point-sampled version of segment() at the midpoint value (the fine-stepping reference).
     Segment midpoint(float sf, float sb) const;
 
@@ -138,6 +147,7 @@ class TfTable {
     float hi() const { return hi_; }
 
   private:
+    Segment segmentSlow(float sf, float sb) const;
     struct Node {
         float sigma;
         glm::vec3 albedo;

@@ -76,6 +76,17 @@ template <class View>
     return m * d;
 }
 
+/// World gradient by forward differences from the known value s0 at p (3 taps instead of 6; the
+/// estimate belongs to p + half a voxel, which shading does not notice at clinical zoom).
+template <class View>
+[[gnu::always_inline]] inline glm::vec3 forwardGradientAt(const View& v, const glm::vec3& p,
+                                                          float s0, const glm::mat3& m) {
+    const glm::vec3 d(trilinear(v, p.x + 1.f, p.y, p.z) - s0,
+                      trilinear(v, p.x, p.y + 1.f, p.z) - s0,
+                      trilinear(v, p.x, p.y, p.z + 1.f) - s0);
+    return m * (2.f * d);  // m holds 1 / (2·spacing)
+}
+
 /// Shading normal facing the eye: the gradient normal, blended toward `fallback` where the gradient
 /// is weak (weight |g| / weak, clamped to 1).
 inline glm::vec3 shadingNormal(const glm::vec3& g, const glm::vec3& fallback,
@@ -152,9 +163,15 @@ struct DvrMarcher {
     }
 
     /// Composites the segment (t0, s0) → (t1, s1); shading at its back end.
-    void segment(float t0, float s0, float t1, float s1, int depth) {
+    [[gnu::always_inline]] void segment(float t0, float s0, float t1, float s1, int depth) {
+        if (preint && table.transparentSegment(s0, s1) && depth == 0 && !refinable(t1 - t0)) return;
+        segmentFull(t0, s0, t1, s1, depth);
+    }
+    bool refinable(float dt) const { return dt * voxelsPerMm > 1.f; }
+
+    void segmentFull(float t0, float s0, float t1, float s1, int depth) {
         const float dt = t1 - t0;
-        if (preint && depth < kMaxRefinement && dt * voxelsPerMm > 1.f) {
+        if (preint && depth < kMaxRefinement && refinable(dt)) {
             const float sMid = sample(0.5f * (t0 + t1));
             if (std::abs(sMid - 0.5f * (s0 + s1)) > linearityTol &&
                 table.segment(std::min({s0, s1, sMid}), std::max({s0, s1, sMid})).meanExtinction >
@@ -177,8 +194,14 @@ struct DvrMarcher {
         in.normal = toEye;
         if constexpr (S::kNeedsNormal) {
             const glm::vec3 p = r.originIndex + t1 * r.dirIndex;
-            const glm::vec3 g = gradientAt(v, p, c.gradientMatrix());
-            samples += 6;
+            glm::vec3 g;
+            if (c.options().centralDifferences) {
+                g = gradientAt(v, p, c.gradientMatrix());
+                samples += 6;
+            } else {
+                g = forwardGradientAt(v, p, s1, c.gradientMatrix());
+                samples += 3;
+            }
             const bool cutFace = r.clipEntry && (t1 - r.tNear) < band;
             in.normal = shadingNormal(g, cutFace ? r.entryNormal : toEye, toEye, weak);
         }

@@ -32,6 +32,50 @@ std::string toString(Mode m) {
     return "?";
 }
 
+namespace {
+/// Finer majorant cells inside the non-empty bricks of `coarse` (empty bricks stay empty).
+template <class F>
+grid::BrickMajorants refineMajorants(const core::Volume& volume, const grid::BrickMajorants& coarse,
+                                     F&& classify) {
+    static_assert(grid::kBrickSize % kSkipCellVoxels == 0);
+    constexpr int kRatio = grid::kBrickSize / kSkipCellVoxels;
+    const glm::ivec3 dims = volume.dims();
+    const glm::ivec3 counts = (dims + kSkipCellVoxels - 1) / kSkipCellVoxels;
+    const std::size_t n = std::size_t(counts.x) * counts.y * counts.z;
+    std::vector<float> maj(n, 0.f);
+    std::vector<std::array<float, 2>> ranges(n);
+    volume.visit([&](const auto& v) {
+        tbb::parallel_for(0, counts.z, [&](int cz) {
+            for (int cy = 0; cy < counts.y; ++cy)
+                for (int cx = 0; cx < counts.x; ++cx) {
+                    const std::size_t i =
+                        std::size_t(cx) + std::size_t(counts.x) * (cy + std::size_t(counts.y) * cz);
+                    const std::size_t b = coarse.index(cx / kRatio, cy / kRatio, cz / kRatio);
+                    ranges[i] = coarse.valueRange(b);
+                    if (!(coarse.majorant(b) > 0.f)) continue;
+                    const glm::ivec3 first = glm::ivec3(cx, cy, cz) * kSkipCellVoxels;
+                    const glm::ivec3 last = glm::min(first + kSkipCellVoxels, dims - 1);  // apron
+                    float lo = INFINITY, hi = -INFINITY;
+                    for (int k = first.z; k <= last.z; ++k)
+                        for (int j = first.y; j <= last.y; ++j)
+                            for (int x = first.x; x <= last.x; ++x) {
+                                const float val = v.at(x, j, k);
+                                if (!std::isfinite(val)) continue;
+                                lo = std::min(lo, val);
+                                hi = std::max(hi, val);
+                            }
+                    if (!(lo <= hi)) continue;  // only non-finite voxels
+                    ranges[i] = {lo, hi};
+                    const float m = float(classify(lo, hi));
+                    maj[i] = m > 0.f ? m : 0.f;
+                }
+        });
+    });
+    return grid::BrickMajorants::fromCells(counts, kSkipCellVoxels, std::move(maj),
+                                           std::move(ranges));
+}
+}  // namespace
+
 RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
                      const optics::TransferFunction& tf, RenderOptions options)
     : volume_(&volume), tf_(&tf), options_(std::move(options)) {
@@ -49,23 +93,30 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     if (!std::isfinite(isoValue_))
         throw InputError("scene", "method.params.iso_value", "must be finite");
 
-    // Which bricks can be skipped in this mode.
+    // Which bricks can be skipped in this mode, refined to kSkipCellVoxels³ cells.
     const float widen = table_->cellWidth();  // table interpolation leaks σt up to one cell
     switch (options_.mode) {
         case Mode::EmissionAbsorption:
-        case Mode::Gradient:
-            majorants_ = grid::BrickMajorants::build(
-                grid, [&](float lo, float hi) { return tf.maxExtinction(lo - widen, hi + widen); });
+        case Mode::Gradient: {
+            auto classify = [&](float lo, float hi) {
+                return tf.maxExtinction(lo - widen, hi + widen);
+            };
+            majorants_ =
+                refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
             break;
+        }
         case Mode::Mip:
         case Mode::MinIp:
             majorants_ = grid::BrickMajorants::build(grid, [](float, float) { return 1.f; });
             break;
-        case Mode::Isosurface:
-            majorants_ = grid::BrickMajorants::build(grid, [&](float lo, float hi) {
+        case Mode::Isosurface: {
+            auto classify = [&](float lo, float hi) {
                 return lo <= isoValue_ && isoValue_ <= hi ? 1.f : 0.f;
-            });
+            };
+            majorants_ =
+                refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
             break;
+        }
     }
 }
 

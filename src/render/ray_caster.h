@@ -65,6 +65,10 @@ inline constexpr float kClipFaceBandVoxels = 2.f;
 /// A gradient weaker than this fraction of the TF window width per mm counts as "weak": its
 /// normal is blended toward the fallback (plane normal at a cut face, else the view direction).
 inline constexpr float kWeakGradientFraction = 0.01f;
+/// Side (voxels) of the majorant cells the ray caster skips with: the 16³ bricks are refined to
+/// 8³ cells inside the bricks the TF does not make transparent (a scan of those bricks only), so
+/// thin structures (ribs, vessels) do not force sampling of the soft tissue around them.
+inline constexpr int kSkipCellVoxels = 8;
 /// Largest image the renderer accepts (pixels): 16384 × 8192 RGBA float is 2 GiB.
 inline constexpr std::uint64_t kMaxPixels = std::uint64_t(16384) * 8192;
 
@@ -80,9 +84,11 @@ struct RenderOptions {
     glm::vec3 background{0.f};  ///< linear RGB behind the volume
     std::vector<ClipPlane> clipPlanes;
     std::optional<CropBox> cropBox;
-    std::vector<Light> lights;      ///< Gradient/Isosurface; empty = one headlight
-    BlinnPhongParams blinnPhong;    ///< Gradient (Isosurface uses ambient + diffuse only)
-    float ambient = 1.f;            ///< EmissionAbsorption: uniform illumination
+    std::vector<Light> lights;    ///< Gradient/Isosurface; empty = one headlight
+    BlinnPhongParams blinnPhong;  ///< Gradient (Isosurface uses ambient + diffuse only)
+    float ambient = 1.f;          ///< EmissionAbsorption: uniform illumination
+    /// Gradient normals by central differences (6 taps) or forward differences (3 taps, faster).
+    bool centralDifferences = true;
     std::optional<float> isoValue;  ///< Isosurface: physical value; default TF surfaceValue()
     int tileSize = 16;              ///< pixels per tile side
 };

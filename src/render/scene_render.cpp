@@ -144,7 +144,8 @@ RenderOptions buildRenderOptions(const io::Scene& scene, json* usedOut) {
                                         "early_termination", "jitter"};
     if (m == "emission-absorption") allowed.push_back("ambient");
     if (m == "gradient")
-        allowed.insert(allowed.end(), {"ambient", "diffuse", "specular", "shininess"});
+        allowed.insert(allowed.end(),
+                       {"ambient", "diffuse", "specular", "shininess", "central_differences"});
     if (m == "iso") allowed.insert(allowed.end(), {"iso_value", "ambient", "diffuse"});
     Params p(scene, allowed);
     o.mode = m == "emission-absorption" ? Mode::EmissionAbsorption
@@ -165,6 +166,7 @@ RenderOptions buildRenderOptions(const io::Scene& scene, json* usedOut) {
     if (m == "gradient") {
         o.blinnPhong.specular = float(p.number("specular", o.blinnPhong.specular, 0.0, 1e6));
         o.blinnPhong.shininess = float(p.number("shininess", o.blinnPhong.shininess, 1.0, 1e4));
+        o.centralDifferences = p.boolean("central_differences", o.centralDifferences);
     }
     if (m == "iso" && p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
     o.seed = scene.render.seed;

@@ -14,7 +14,8 @@
 //   empty_space_skipping,
 //                         early_termination, jitter (booleans)
 //   emission-absorption:  ambient
-//   gradient:             ambient, diffuse, specular, shininess
+//   gradient:             ambient, diffuse, specular, shininess, central_differences (true: 6-tap
+//                         gradients; false: 3-tap forward differences, faster)
 //   iso:                  iso_value (physical; default where the TF reaches 1/10 of its max σt),
 //                         ambient, diffuse
 //   mip, minip:           (window from the TF)

@@ -79,3 +79,29 @@ TEST(RayIntervals, EmptyRangeYieldsNothing) {
     grid::RayInterval iv;
     EXPECT_FALSE(it.next(iv));
 }
+
+TEST(RayIntervals, FinerCellsFromCellsFollowTheirOwnCellSize) {
+    // 4³ cells over a 10³ grid: cell c covers [4c, 4c + 4); only cell (1, 1, 1) is non-empty.
+    const glm::ivec3 counts(3);
+    std::vector<float> maj(27, 0.f);
+    std::vector<std::array<float, 2>> ranges(27, {0.f, 0.f});
+    maj[1 + 3 * (1 + 3 * 1)] = 2.f;
+    const auto m = grid::BrickMajorants::fromCells(counts, 4, maj, ranges);
+    EXPECT_EQ(m.cellSize(), 4);
+    EXPECT_EQ(m.nonEmptyCount(), 1u);
+    // A ray along x through y = z = 5 (cells y = z = 1): empty [0,4), full [4,8), empty [8,9].
+    grid::RayIntervalIterator it(m, glm::vec3(0, 5, 5), glm::vec3(1, 0, 0), 0.f, 9.f);
+    grid::RayInterval iv;
+    ASSERT_TRUE(it.next(iv));
+    EXPECT_TRUE(iv.empty());
+    EXPECT_NEAR(iv.t1, 4.f, kTTol);
+    ASSERT_TRUE(it.next(iv));
+    EXPECT_FALSE(iv.empty());
+    EXPECT_NEAR(iv.t0, 4.f, kTTol);
+    EXPECT_NEAR(iv.t1, 8.f, kTTol);
+    EXPECT_EQ(iv.maxExtinction, 2.f);
+    ASSERT_TRUE(it.next(iv));
+    EXPECT_TRUE(iv.empty());
+    EXPECT_NEAR(iv.t1, 9.f, kTTol);
+    EXPECT_FALSE(it.next(iv));
+}
