@@ -520,36 +520,22 @@ Volume readRaw(const fs::path& path, const RawLayout& layout) {
     return v;
 }
 
+/// The "is this my format?" check of a VTK reader class.
+template <class VtkReader>
+bool vtkCanRead(const fs::path& p) {
+    vtkNew<VtkReader> r;
+    return r->CanReadFile(p.c_str()) > 0;
+}
+
 const std::vector<Reader>& registry() {
     static const std::vector<Reader> readers = {
         {"NIfTI",
          {".nii", ".nii.gz", ".hdr", ".img", ".img.gz"},
-         [](const fs::path& p) {
-             vtkNew<vtkNIFTIImageReader> r;
-             return r->CanReadFile(p.c_str()) > 0;
-         },
+         vtkCanRead<vtkNIFTIImageReader>,
          readNifti},
-        {"NRRD",
-         {".nrrd", ".nhdr"},
-         [](const fs::path& p) {
-             vtkNew<vtkNrrdReader> r;
-             return r->CanReadFile(p.c_str()) > 0;
-         },
-         readNrrd},
-        {"MetaImage",
-         {".mhd", ".mha"},
-         [](const fs::path& p) {
-             vtkNew<vtkMetaImageReader> r;
-             return r->CanReadFile(p.c_str()) > 0;
-         },
-         readMeta},
-        {"VTK XML image",
-         {".vti"},
-         [](const fs::path& p) {
-             vtkNew<vtkXMLImageDataReader> r;
-             return r->CanReadFile(p.c_str()) > 0;
-         },
-         readVti},
+        {"NRRD", {".nrrd", ".nhdr"}, vtkCanRead<vtkNrrdReader>, readNrrd},
+        {"MetaImage", {".mhd", ".mha"}, vtkCanRead<vtkMetaImageReader>, readMeta},
+        {"VTK XML image", {".vti"}, vtkCanRead<vtkXMLImageDataReader>, readVti},
         {"DICOM series",
          {".dcm", ".ima", ""},
          [](const fs::path& p) { return detail::looksLikeDicom(p); },
