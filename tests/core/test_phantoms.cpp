@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
+#include <tbb/global_control.h>
 
 #include <cstring>
 
@@ -73,4 +74,17 @@ TEST(Phantoms, BadNameOrSizeIsAnInputError) {
     core::PhantomOptions o;
     o.size = 4;
     EXPECT_THROW(core::makePhantom("torso", o), InputError);
+}
+
+TEST(Phantoms, IdenticalForAnyThreadCount) {
+    core::PhantomOptions o;
+    o.size = 40;
+    auto build = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism,
+                                  std::size_t(threads));
+        return core::makePhantom("torso", o);
+    };
+    const core::Volume one = build(1), two = build(2), four = build(4);
+    EXPECT_EQ(std::memcmp(one.data(), two.data(), one.sizeBytes()), 0);
+    EXPECT_EQ(std::memcmp(one.data(), four.data(), one.sizeBytes()), 0);
 }
