@@ -218,9 +218,29 @@ std::vector<glm::vec3> EnvironmentLight::shCoefficients(const glm::dvec3&, int m
 
 std::vector<glm::vec3> EnvironmentLight::dsfCoefficients(const glm::dvec3&,
                                                          const sh::Dsf& dsf) const {
-    auto s = dsf.projectEquirect(layout(), rgb_, glm::transpose(rotation_));
+    // Look up (or make) the projection for this DSF size and the current rotation; the lock is
+    // held while projecting so concurrent first calls do the work once.
+    std::vector<glm::vec3> s;
+    {
+        const std::lock_guard lock(dsfCache_->mutex);
+        auto& entries = dsfCache_->entries;
+        auto it = std::find_if(entries.begin(), entries.end(),
+                               [&](const DsfCache::Entry& e) { return e.size == dsf.size(); });
+        if (it == entries.end()) it = entries.insert(entries.end(), {dsf.size(), {}, {}});
+        if (it->coefficients.empty() || it->rotation != rotation_) {
+            it->coefficients = dsf.projectEquirect(layout(), rgb_, glm::transpose(rotation_));
+            it->rotation = rotation_;
+            ++dsfCache_->projections;
+        }
+        s = it->coefficients;
+    }
     for (auto& v : s) v *= scale_;
     return s;
+}
+
+std::size_t EnvironmentLight::dsfProjectionCount() const {
+    const std::lock_guard lock(dsfCache_->mutex);
+    return dsfCache_->projections;
 }
 
 std::string EnvironmentLight::toString() const {

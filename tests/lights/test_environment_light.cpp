@@ -4,6 +4,7 @@
 #include <cmath>
 #include <fstream>
 #include <numbers>
+#include <type_traits>
 
 #include "core/error.h"
 #include "core/rng.h"
@@ -162,6 +163,46 @@ TEST(EnvironmentLight, DsfCoefficientsFollowTheRotation) {
     RecordProperty("dsf_rotation_error", std::to_string(worst));
     EXPECT_LT(worst, kSmoothDsfTol);
     EXPECT_GT(worstInverse, 20 * kSmoothDsfTol);  // the test can tell the two directions apart
+}
+
+TEST(EnvironmentLight, DsfProjectionIsCachedPerSizeAndRotation) {
+    static_assert(std::is_nothrow_move_constructible_v<EnvironmentLight> &&
+                  std::is_nothrow_move_assignable_v<EnvironmentLight>);
+    const auto img = randomEquirect(64, 32, 7);
+    const glm::dmat3 r1 = rotationZyz(0.3, 1.1, -0.8), r2 = rotationZyz(1.0, 0.2, 0.5);
+    EnvironmentLight env(img, {.rotation = r1}, "cached");
+    const sh::Dsf dsf(162), coarse(42);
+    EXPECT_EQ(env.dsfProjectionCount(), 0u);
+    const auto first = env.dsfCoefficients({0, 0, 0}, dsf);
+    EXPECT_EQ(env.dsfProjectionCount(), 1u);
+    // Another point, same light: served from the cache, bit-identical.
+    EXPECT_EQ(env.dsfCoefficients({5, -3, 2}, dsf), first);
+    EXPECT_EQ(env.dsfProjectionCount(), 1u);
+    // The scale is applied after the cache: no re-projection.
+    env.setScale(2.0f);
+    const auto scaled = env.dsfCoefficients({}, dsf);
+    EXPECT_EQ(env.dsfProjectionCount(), 1u);
+    for (int k = 0; k < dsf.size(); ++k) EXPECT_EQ(scaled[k], 2.0f * first[k]) << k;
+    // Each DSF size has its own entry.
+    EXPECT_EQ(env.dsfCoefficients({}, coarse).size(), 42u);
+    EXPECT_EQ(env.dsfProjectionCount(), 2u);
+    EXPECT_EQ(env.dsfCoefficients({}, dsf), scaled);
+    EXPECT_EQ(env.dsfProjectionCount(), 2u);
+    // A new rotation invalidates the entry; the result is that of a light made with it.
+    env.setRotation(r2);
+    const auto rotated = env.dsfCoefficients({}, dsf);
+    EXPECT_EQ(env.dsfProjectionCount(), 3u);
+    EXPECT_NE(rotated, scaled);
+    const EnvironmentLight fresh(img, {.rotation = r2, .scale = 2.0f}, "fresh");
+    EXPECT_EQ(rotated, fresh.dsfCoefficients({}, dsf));
+    // Setting the same rotation again keeps the entry.
+    env.setRotation(r2);
+    EXPECT_EQ(env.dsfCoefficients({}, dsf), rotated);
+    EXPECT_EQ(env.dsfProjectionCount(), 3u);
+    // A moved-to light keeps its cache.
+    const EnvironmentLight moved = std::move(env);
+    EXPECT_EQ(moved.dsfCoefficients({}, dsf), rotated);
+    EXPECT_EQ(moved.dsfProjectionCount(), 3u);
 }
 
 TEST(EnvironmentLight, ImportanceSamplingIsExact) {
