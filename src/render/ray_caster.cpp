@@ -301,6 +301,31 @@ class IsoModel final : public ShadingModel {
 
 }  // namespace
 
+std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster) {
+    const core::Geometry& g = caster.volume().geometry();
+    const grid::BrickMajorants& m = caster.majorants();
+    if (m.nonEmptyCount() == 0 || m.nonEmptyCount() == m.size()) return g.worldBounds();
+    glm::ivec3 lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+    for (int z = 0; z < m.counts().z; ++z)
+        for (int y = 0; y < m.counts().y; ++y)
+            for (int x = 0; x < m.counts().x; ++x)
+                if (m.majorant(m.index(x, y, z)) > 0.f) {
+                    lo = glm::min(lo, glm::ivec3(x, y, z));
+                    hi = glm::max(hi, glm::ivec3(x, y, z));
+                }
+    const glm::dvec3 first = glm::dvec3(lo * m.cellSize());
+    const glm::dvec3 last = glm::min(glm::dvec3((hi + 1) * m.cellSize()), glm::dvec3(g.dims - 1));
+    glm::dvec3 bmin(INFINITY), bmax(-INFINITY);
+    for (int c = 0; c < 8; ++c) {
+        const glm::dvec3 ijk((c & 1) ? last.x : first.x, (c & 2) ? last.y : first.y,
+                             (c & 4) ? last.z : first.z);
+        const glm::dvec3 w = g.indexToWorld(ijk);
+        bmin = glm::min(bmin, w);
+        bmax = glm::max(bmax, w);
+    }
+    return {bmin, bmax};
+}
+
 std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera) {
     const RenderOptions& o = caster.options();
     BlinnPhongShader bp;

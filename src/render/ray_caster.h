@@ -164,6 +164,11 @@ class RayCaster {
     glm::mat3 gradientMatrix_{1.f};
 };
 
+/// World-space axis-aligned bounds of what the caster can see (the non-empty skip cells; the
+/// whole volume when nothing or everything is skippable): cameras fit this, so a TF that shows
+/// only the skeleton frames the skeleton rather than the air around the patient.
+std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster);
+
 /// Built-in shading model of options().mode; with no lights given, Gradient/Isosurface get one
 /// directional light from just above-left of the camera (a head light, as clinical viewers use).
 std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera);

@@ -235,12 +235,11 @@ SceneRenderResult renderScene(const io::Scene& scene, const core::Progress& prog
 
     sw.restart();
     const optics::TransferFunction tf = buildTransferFunction(scene, volume);
-    Camera camera = [&] {
-        const auto b = volume.geometry().worldBounds();
-        return Camera(buildCameraSpec(scene.camera), b[0], b[1], scene.image.width,
-                      scene.image.height);
-    }();
     const RayCaster caster(volume, grid, tf, options);
+    // Fit the camera to what the TF shows (clinical viewers frame the anatomy, not the air).
+    const auto bounds = visibleWorldBounds(caster);
+    const Camera camera(buildCameraSpec(scene.camera), bounds[0], bounds[1], scene.image.width,
+                        scene.image.height);
     res.stages.push_back({"transfer_function", true,
                           "'" + tf.name() + "', " +
                               std::to_string(caster.majorants().nonEmptyCount()) + " of " +

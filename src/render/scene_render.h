@@ -19,6 +19,8 @@
 //   iso:                  iso_value (physical; default where the TF reaches 1/10 of its max σt),
 //                         ambient, diffuse
 //   mip, minip:           (window from the TF)
+// Camera: fitting (distance/ortho_height 0) and the default target use the bounds of what the TF
+// makes visible (visibleWorldBounds), not the whole volume.
 // Lights: directional and point (radiance = color × intensity); other types are an InputError for
 // these methods.
 #include <nlohmann/json.hpp>
