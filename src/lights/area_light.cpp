@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "lights/area_light.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <sstream>
@@ -99,13 +101,12 @@ glm::vec3 SphereLight::radiance(const glm::dvec3& x, const glm::vec3& wi) const 
     return pdf(x, wi) > 0 ? le_ : glm::vec3(0.0f);
 }
 
-std::vector<glm::vec3> SphereLight::shCoefficients(const glm::dvec3& x, int maxBand) const {
-    sh::checkBand(maxBand, "light", "sh bands");
+void SphereLight::writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const {
     double cosA, omc;
     cone(x, cosA, omc);
     // Zonal coefficients of the cap indicator (radiance 1) about +z, then aligned with the axis
     // toward the centre.
-    std::vector<double> z(maxBand + 1);
+    std::array<double, sh::kMaxBand + 1> z;
     for (int l = 0; l <= maxBand; ++l) {
         const double integral =
             l == 0 ? omc
@@ -113,13 +114,13 @@ std::vector<glm::vec3> SphereLight::shCoefficients(const glm::dvec3& x, int maxB
         z[l] = 2.0 * kPi * std::sqrt((2.0 * l + 1.0) / (4.0 * kPi)) * integral;
     }
     const glm::dvec3 axis = glm::length(c_ - x) > 0 ? c_ - x : glm::dvec3(0, 0, 1);
-    const auto unit = sh::zonalToAxis(z, axis);
-    std::vector<glm::vec3> c(unit.size());
-    for (std::size_t i = 0; i < c.size(); ++i) c[i] = le_ * unit[i];
-    return c;
+    std::array<float, sh::kMaxCoeffs> unit;
+    sh::zonalToAxis(std::span<const double>(z.data(), maxBand + 1), axis, unit);
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = le_ * unit[i];
 }
 
-std::vector<glm::vec3> SphereLight::dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const {
+void SphereLight::writeDsf(const glm::dvec3& x, const sh::Dsf& dsf,
+                           std::span<glm::vec3> out) const {
     double cosA, omc;
     cone(x, cosA, omc);
     glm::dvec3 w = c_ - x;
@@ -130,17 +131,16 @@ std::vector<glm::vec3> SphereLight::dsfCoefficients(const glm::dvec3& x, const s
     // source.
     constexpr int kRings = 16, kSectors = 32;
     const double cellOmega = 2.0 * kPi * omc / (kRings * kSectors);
-    std::vector<glm::vec3> s(dsf.size(), glm::vec3(0.0f));
+    std::fill(out.begin(), out.end(), glm::vec3(0.0f));
     for (int i = 0; i < kRings; ++i) {
         const double cosT = 1.0 - (i + 0.5) / kRings * omc;
         const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
         for (int j = 0; j < kSectors; ++j) {
             const double phi = 2.0 * kPi * (j + 0.5) / kSectors;
             const glm::dvec3 wi = cosT * w + sinT * (std::cos(phi) * t1 + std::sin(phi) * t2);
-            dsf.addDirectional(s, glm::normalize(wi), le_ * float(cellOmega));
+            dsf.addDirectional(out, glm::normalize(wi), le_ * float(cellOmega));
         }
     }
-    return s;
 }
 
 std::string SphereLight::toString() const {
@@ -215,16 +215,22 @@ void PlanarLight::quadrature(const glm::dvec3& x, Add&& add) const {
         }
 }
 
-std::vector<glm::vec3> PlanarLight::shCoefficients(const glm::dvec3& x, int maxBand) const {
-    sh::ShProjector p(maxBand);
-    quadrature(x, [&](const glm::dvec3& wi, const glm::vec3& e) { p.add(wi, glm::dvec3(e)); });
-    return p.coefficientsRgb();
+void PlanarLight::writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const {
+    // Double sums on the stack (no allocation per voxel).
+    std::array<glm::dvec3, sh::kMaxCoeffs> sum;
+    const std::span<glm::dvec3> acc(sum.data(), out.size());
+    std::fill(acc.begin(), acc.end(), glm::dvec3(0.0));
+    quadrature(x, [&](const glm::dvec3& wi, const glm::vec3& e) {
+        sh::addShSample(maxBand, wi, glm::dvec3(e), acc);
+    });
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = glm::vec3(acc[i]);
 }
 
-std::vector<glm::vec3> PlanarLight::dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const {
-    std::vector<glm::vec3> s(dsf.size(), glm::vec3(0.0f));
-    quadrature(x, [&](const glm::dvec3& wi, const glm::vec3& e) { dsf.addDirectional(s, wi, e); });
-    return s;
+void PlanarLight::writeDsf(const glm::dvec3& x, const sh::Dsf& dsf,
+                           std::span<glm::vec3> out) const {
+    std::fill(out.begin(), out.end(), glm::vec3(0.0f));
+    quadrature(x,
+               [&](const glm::dvec3& wi, const glm::vec3& e) { dsf.addDirectional(out, wi, e); });
 }
 
 RectLight::RectLight(const glm::vec3& radiance, const glm::dvec3& corner, const glm::dvec3& edgeU,

@@ -33,11 +33,11 @@ class SphereLight final : public Light {
     LightSample sample(const glm::dvec3& x, const glm::vec2& u) const override;
     float pdf(const glm::dvec3& x, const glm::vec3& wi) const override;
     glm::vec3 radiance(const glm::dvec3& x, const glm::vec3& wi) const override;
-    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const override;
-    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const override;
     std::string toString() const override;
 
   private:
+    void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const override;
+    void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const override;
     // cos α and 1 − cos α (computed without cancellation) of the cone seen from x; inside → (−1,
     // 2).
     void cone(const glm::dvec3& x, double& cosAlpha, double& oneMinusCos) const;
@@ -54,8 +54,6 @@ class PlanarLight : public Light {
     LightSample sample(const glm::dvec3& x, const glm::vec2& u) const override;
     float pdf(const glm::dvec3& x, const glm::vec3& wi) const override;
     glm::vec3 radiance(const glm::dvec3& x, const glm::vec3& wi) const override;
-    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const override;
-    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const override;
 
     double area() const { return area_; }
     const glm::dvec3& normal() const { return n_; }
@@ -74,6 +72,8 @@ class PlanarLight : public Light {
     double hit(const glm::dvec3& x, const glm::dvec3& wi) const;
     template <class Add>
     void quadrature(const glm::dvec3& x, Add&& add) const;
+    void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const override;
+    void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const override;
 
     glm::vec3 le_;
     glm::dvec3 n_;

@@ -202,40 +202,31 @@ float EnvironmentLight::pdf(const glm::dvec3&, const glm::vec3& wi) const {
     return float(luminance(rgb_[pixelOf(d)]) / lumIntegral_);
 }
 
-std::vector<glm::vec3> EnvironmentLight::shCoefficients(const glm::dvec3&, int maxBand) const {
-    sh::checkBand(maxBand, source_.c_str(), "sh bands");
-    std::vector<glm::vec3> c;
+void EnvironmentLight::writeSh(const glm::dvec3&, int maxBand, std::span<glm::vec3> out) const {
     if (maxBand <= kShCacheBand) {
-        c.assign(shWorld_.begin(), shWorld_.begin() + sh::shCount(maxBand));
+        std::copy_n(shWorld_.begin(), out.size(), out.begin());
     } else {
         const auto mapFrame = sh::projectEquirect(maxBand, layout(), rgb_);
-        c.resize(mapFrame.size());
-        sh::ShRotation(rotation_, maxBand).applyRgb(mapFrame, c);
+        sh::ShRotation(rotation_, maxBand).applyRgb(mapFrame, out);
     }
-    for (auto& v : c) v *= scale_;
-    return c;
+    for (auto& v : out) v *= scale_;
 }
 
-std::vector<glm::vec3> EnvironmentLight::dsfCoefficients(const glm::dvec3&,
-                                                         const sh::Dsf& dsf) const {
+void EnvironmentLight::writeDsf(const glm::dvec3&, const sh::Dsf& dsf,
+                                std::span<glm::vec3> out) const {
     // Look up (or make) the projection for this DSF size and the current rotation; the lock is
     // held while projecting so concurrent first calls do the work once.
-    std::vector<glm::vec3> s;
-    {
-        const std::lock_guard lock(dsfCache_->mutex);
-        auto& entries = dsfCache_->entries;
-        auto it = std::find_if(entries.begin(), entries.end(),
-                               [&](const DsfCache::Entry& e) { return e.size == dsf.size(); });
-        if (it == entries.end()) it = entries.insert(entries.end(), {dsf.size(), {}, {}});
-        if (it->coefficients.empty() || it->rotation != rotation_) {
-            it->coefficients = dsf.projectEquirect(layout(), rgb_, glm::transpose(rotation_));
-            it->rotation = rotation_;
-            ++dsfCache_->projections;
-        }
-        s = it->coefficients;
+    const std::lock_guard lock(dsfCache_->mutex);
+    auto& entries = dsfCache_->entries;
+    auto it = std::find_if(entries.begin(), entries.end(),
+                           [&](const DsfCache::Entry& e) { return e.size == dsf.size(); });
+    if (it == entries.end()) it = entries.insert(entries.end(), {dsf.size(), {}, {}});
+    if (it->coefficients.empty() || it->rotation != rotation_) {
+        it->coefficients = dsf.projectEquirect(layout(), rgb_, glm::transpose(rotation_));
+        it->rotation = rotation_;
+        ++dsfCache_->projections;
     }
-    for (auto& v : s) v *= scale_;
-    return s;
+    for (std::size_t k = 0; k < out.size(); ++k) out[k] = scale_ * it->coefficients[k];
 }
 
 std::size_t EnvironmentLight::dsfProjectionCount() const {

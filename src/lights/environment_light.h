@@ -81,14 +81,17 @@ class EnvironmentLight final : public Light {
     glm::vec3 radiance(const glm::dvec3& x, const glm::vec3& wi) const override {
         return lookup(wi);
     }
-    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const override;
-    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const override;
     std::string toString() const override;
 
     /// How many times dsfCoefficients projected the map (cache misses): for tests and profiling.
     std::size_t dsfProjectionCount() const;
 
+  protected:
+    const char* errorSource() const override { return source_.c_str(); }
+
   private:
+    void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const override;
+    void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const override;
     int pixelOf(const glm::dvec3& mapDir) const;
     void buildSampling();
 

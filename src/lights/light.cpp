@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "lights/light.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <sstream>
@@ -17,15 +19,40 @@ std::string vecString(const glm::dvec3& v) {
     return os.str();
 }
 
-std::vector<glm::vec3> deltaSh(const glm::vec3& e, const glm::dvec3& dir, int maxBand) {
-    sh::checkBand(maxBand, "light", "sh bands");
-    std::vector<double> y(sh::shCount(maxBand));
+// out[i] = E · Y_i(dir), i < shCount(maxBand) (band already checked), without allocating.
+void deltaSh(const glm::vec3& e, const glm::dvec3& dir, int maxBand, std::span<glm::vec3> out) {
+    std::array<double, sh::kMaxCoeffs> y;
     sh::evalShUnitDouble(maxBand, dir, y);
-    std::vector<glm::vec3> c(y.size());
-    for (std::size_t i = 0; i < y.size(); ++i) c[i] = e * float(y[i]);
-    return c;
+    for (int i = 0; i < sh::shCount(maxBand); ++i) out[i] = e * float(y[i]);
 }
 }  // namespace
+
+// ---- Light: the public overloads check, then call the implementation ---------------------------
+
+void Light::shCoefficients(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const {
+    sh::checkBand(maxBand, errorSource(), "sh bands");
+    VL_CHECK_EQ(out.size(), std::size_t(sh::shCount(maxBand)));
+    writeSh(x, maxBand, out);
+}
+
+std::vector<glm::vec3> Light::shCoefficients(const glm::dvec3& x, int maxBand) const {
+    sh::checkBand(maxBand, errorSource(), "sh bands");
+    std::vector<glm::vec3> c(sh::shCount(maxBand));
+    writeSh(x, maxBand, c);
+    return c;
+}
+
+void Light::dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf,
+                            std::span<glm::vec3> out) const {
+    VL_CHECK_EQ(out.size(), std::size_t(dsf.size()));
+    writeDsf(x, dsf, out);
+}
+
+std::vector<glm::vec3> Light::dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const {
+    std::vector<glm::vec3> s(dsf.size());
+    writeDsf(x, dsf, s);
+    return s;
+}
 
 void checkRadiometric(const glm::vec3& v, const char* field) {
     for (int c = 0; c < 3; ++c)
@@ -65,15 +92,14 @@ LightSample DirectionalLight::sample(const glm::dvec3&, const glm::vec2&) const 
     return s;
 }
 
-std::vector<glm::vec3> DirectionalLight::shCoefficients(const glm::dvec3&, int maxBand) const {
-    return deltaSh(e_, glm::dvec3(dir_), maxBand);
+void DirectionalLight::writeSh(const glm::dvec3&, int maxBand, std::span<glm::vec3> out) const {
+    deltaSh(e_, glm::dvec3(dir_), maxBand, out);
 }
 
-std::vector<glm::vec3> DirectionalLight::dsfCoefficients(const glm::dvec3&,
-                                                         const sh::Dsf& dsf) const {
-    std::vector<glm::vec3> s(dsf.size(), glm::vec3(0.0f));
-    dsf.addDirectional(s, glm::dvec3(dir_), e_);
-    return s;
+void DirectionalLight::writeDsf(const glm::dvec3&, const sh::Dsf& dsf,
+                                std::span<glm::vec3> out) const {
+    std::fill(out.begin(), out.end(), glm::vec3(0.0f));
+    dsf.addDirectional(out, glm::dvec3(dir_), e_);
 }
 
 std::string DirectionalLight::toString() const {
@@ -110,28 +136,24 @@ LightSample PointLight::sample(const glm::dvec3& x, const glm::vec2&) const {
     return s;
 }
 
-std::vector<glm::vec3> PointLight::shCoefficients(const glm::dvec3& x, int maxBand) const {
-    // Checked here, not only in deltaSh: at the light (directional == 0) deltaSh is skipped and
-    // c[0] below would index an empty vector for a negative band.
-    sh::checkBand(maxBand, "light", "sh bands");
+void PointLight::writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const {
     const glm::vec3 e = irradianceAt(x);
     const double d = glm::length(p_ - x);
     const double directional = std::min(1.0, d / rmin_);
-    std::vector<glm::vec3> c = directional > 0
-                                   ? deltaSh(e * float(directional), (p_ - x) / d, maxBand)
-                                   : std::vector<glm::vec3>(sh::shCount(maxBand), glm::vec3(0.0f));
+    if (directional > 0)
+        deltaSh(e * float(directional), (p_ - x) / d, maxBand, out);
+    else
+        std::fill(out.begin(), out.end(), glm::vec3(0.0f));
     // Uniform part: radiance E/(4π) everywhere projects to c_0 = E/(4π)·√(4π) = E/√(4π).
-    c[0] += e * float((1.0 - directional) / std::sqrt(4.0 * std::numbers::pi));
-    return c;
+    out[0] += e * float((1.0 - directional) / std::sqrt(4.0 * std::numbers::pi));
 }
 
-std::vector<glm::vec3> PointLight::dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const {
+void PointLight::writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const {
     const glm::vec3 e = irradianceAt(x);
     const double d = glm::length(p_ - x);
     const double directional = std::min(1.0, d / rmin_);
-    std::vector<glm::vec3> s(dsf.size(), e * float((1.0 - directional) / (4.0 * std::numbers::pi)));
-    if (directional > 0) dsf.addDirectional(s, (p_ - x) / d, e * float(directional));
-    return s;
+    std::fill(out.begin(), out.end(), e * float((1.0 - directional) / (4.0 * std::numbers::pi)));
+    if (directional > 0) dsf.addDirectional(out, (p_ - x) / d, e * float(directional));
 }
 
 std::string PointLight::toString() const {

@@ -16,6 +16,7 @@
 #include <glm/glm.hpp>
 #include <limits>
 #include <memory>
+#include <span>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -50,12 +51,29 @@ class Light {
     virtual float pdf(const glm::dvec3& x, const glm::vec3& wi) const = 0;
     /// Radiance arriving at x from direction wi (0 for delta lights or if the light is not hit).
     virtual glm::vec3 radiance(const glm::dvec3& x, const glm::vec3& wi) const = 0;
-    /// SH coefficients of the incident radiance at x, bands 0..maxBand.
-    virtual std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const = 0;
-    /// DSF coefficients of the incident radiance at x.
-    virtual std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x,
-                                                   const sh::Dsf& dsf) const = 0;
+    /// SH coefficients of the incident radiance at x, bands 0..maxBand, written to `out`, which
+    /// must hold exactly shCount(maxBand) entries (VL_CHECK). Allocation-free for the directional,
+    /// point and area lights (per-voxel use); a bad band → InputError.
+    void shCoefficients(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const;
+    /// The same as a new vector (allocates; for setup code and tests).
+    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const;
+    /// DSF coefficients of the incident radiance at x, written to `out` (exactly dsf.size()
+    /// entries, VL_CHECK). Allocation-free for the directional, point and area lights.
+    void dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const;
+    /// The same as a new vector (allocates).
+    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const;
     virtual std::string toString() const = 0;
+
+  protected:
+    /// Names the light in the InputError for a bad band.
+    virtual const char* errorSource() const { return "light"; }
+
+  private:
+    // Implementations behind the public overloads: the band is valid and `out` has the right size;
+    // every entry must be overwritten.
+    virtual void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const = 0;
+    virtual void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf,
+                          std::span<glm::vec3> out) const = 0;
 };
 
 /// Distant light from a fixed direction. E = irradiance on a surface facing the light.
@@ -72,11 +90,11 @@ class DirectionalLight final : public Light {
     glm::vec3 radiance(const glm::dvec3&, const glm::vec3&) const override {
         return glm::vec3(0.0f);
     }
-    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const override;
-    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const override;
     std::string toString() const override;
 
   private:
+    void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const override;
+    void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const override;
     glm::vec3 e_, dir_;
 };
 
@@ -102,11 +120,11 @@ class PointLight final : public Light {
     glm::vec3 radiance(const glm::dvec3&, const glm::vec3&) const override {
         return glm::vec3(0.0f);
     }
-    std::vector<glm::vec3> shCoefficients(const glm::dvec3& x, int maxBand) const override;
-    std::vector<glm::vec3> dsfCoefficients(const glm::dvec3& x, const sh::Dsf& dsf) const override;
     std::string toString() const override;
 
   private:
+    void writeSh(const glm::dvec3& x, int maxBand, std::span<glm::vec3> out) const override;
+    void writeDsf(const glm::dvec3& x, const sh::Dsf& dsf, std::span<glm::vec3> out) const override;
     glm::vec3 i_;
     glm::dvec3 p_;
     double rmin_;

@@ -40,11 +40,18 @@ ShProjector::ShProjector(int maxBand) : band_(maxBand) {
     sum_.assign(shCount(maxBand), glm::dvec3(0.0));
 }
 
-void ShProjector::add(const glm::dvec3& unitDir, const glm::dvec3& weightedValue) {
+void addShSample(int maxBand, const glm::dvec3& unitDir, const glm::dvec3& weightedValue,
+                 std::span<glm::dvec3> sum) {
+    VL_CHECK(maxBand >= 0 && maxBand <= kMaxBand);
+    const int n = shCount(maxBand);
+    VL_CHECK_GE(sum.size(), std::size_t(n));
     std::array<float, kMaxCoeffs> y;
-    evalFast(band_, glm::vec3(unitDir), y.data());
-    const int n = shCount(band_);
-    for (int i = 0; i < n; ++i) sum_[i] += weightedValue * double(y[i]);
+    evalFast(maxBand, glm::vec3(unitDir), y.data());
+    for (int i = 0; i < n; ++i) sum[i] += weightedValue * double(y[i]);
+}
+
+void ShProjector::add(const glm::dvec3& unitDir, const glm::dvec3& weightedValue) {
+    addShSample(band_, unitDir, weightedValue, sum_);
 }
 
 void ShProjector::merge(const ShProjector& other) {

@@ -40,6 +40,12 @@ class ShProjector {
     std::vector<glm::dvec3> sum_;
 };
 
+/// The allocation-free core of ShProjector::add, for callers that keep their own sums (per-voxel
+/// light projection): sum[i] += weightedValue · Y_i(unitDir) for i < shCount(maxBand) (sum.size()
+/// must be at least that; maxBand is not re-validated beyond VL_CHECK).
+void addShSample(int maxBand, const glm::dvec3& unitDir, const glm::dvec3& weightedValue,
+                 std::span<glm::dvec3> sum);
+
 std::vector<float> projectSamples(int maxBand, const SphereSamples& samples,
                                   std::span<const float> values);
 std::vector<glm::vec3> projectSamplesRgb(int maxBand, const SphereSamples& samples,

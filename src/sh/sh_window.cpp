@@ -2,6 +2,7 @@
 #include "sh/sh_window.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <numbers>
 #include <string>
@@ -166,15 +167,22 @@ std::vector<double> clampedCosineZonal(int maxBand) {
 std::vector<float> zonalToAxis(std::span<const double> zonal, const glm::dvec3& axis) {
     const int bands = int(zonal.size()) - 1;
     checkBand(bands);
-    const glm::dvec3 a = normalizeDirection(axis, "sh", "zonal axis");
-    std::vector<double> y(shCount(bands));
-    evalShUnitDouble(bands, a, y);
     std::vector<float> c(shCount(bands));
+    zonalToAxis(zonal, axis, c);
+    return c;
+}
+
+void zonalToAxis(std::span<const double> zonal, const glm::dvec3& axis, std::span<float> out) {
+    const int bands = int(zonal.size()) - 1;
+    checkBand(bands);
+    VL_CHECK_GE(out.size(), std::size_t(shCount(bands)));
+    const glm::dvec3 a = normalizeDirection(axis, "sh", "zonal axis");
+    std::array<double, kMaxCoeffs> y;
+    evalShUnitDouble(bands, a, y);
     for (int l = 0; l <= bands; ++l) {
         const double k = zonal[l] * std::sqrt(4.0 * kPi / (2.0 * l + 1.0));
-        for (int m = -l; m <= l; ++m) c[shIndex(l, m)] = float(k * y[shIndex(l, m)]);
+        for (int m = -l; m <= l; ++m) out[shIndex(l, m)] = float(k * y[shIndex(l, m)]);
     }
-    return c;
 }
 
 void convolveZonal(std::span<float> coeffs, std::span<const double> zonal) {

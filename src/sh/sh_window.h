@@ -58,6 +58,9 @@ std::vector<double> clampedCosineConvolution(int maxBand);
 /// Coefficients (size (L+1)²) of the zonal function with coefficients z about +z, re-aligned to
 /// unit axis `axis`.
 std::vector<float> zonalToAxis(std::span<const double> zonal, const glm::dvec3& axis);
+/// Allocation-free form: writes the shCount(zonal.size() − 1) coefficients to `out` (at least that
+/// many entries).
+void zonalToAxis(std::span<const double> zonal, const glm::dvec3& axis, std::span<float> out);
 /// In place: f_lm ← √(4π/(2l+1)) z_l f_lm.
 void convolveZonal(std::span<float> coeffs, std::span<const double> zonal);
 void convolveZonalRgb(std::span<glm::vec3> coeffs, std::span<const double> zonal);

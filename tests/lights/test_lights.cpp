@@ -1,7 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
 
+#include <array>
+#include <atomic>
 #include <cmath>
+#include <cstdlib>
+#include <new>
 #include <numbers>
 
 #include "core/error.h"
@@ -13,6 +17,19 @@
 
 using namespace voxlight;
 using namespace voxlight::lights;
+
+// Counts every heap allocation of this test program, so the span overloads can be shown not to
+// allocate.
+namespace {
+std::atomic<long> gAllocations{0};
+}
+void* operator new(std::size_t n) {
+    ++gAllocations;
+    if (void* p = std::malloc(n ? n : 1)) return p;
+    throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 namespace {
 constexpr double kPi = std::numbers::pi;
@@ -178,4 +195,37 @@ TEST(DiskLight, OnAxisSolidAngleSamplingAndDsf) {
     // Off axis: against the emitter quadrature's own ∫ L dω (independent of the sampler).
     const glm::dvec3 y(3, 1, 2);
     checkSampler(l, y, l.shCoefficients(y, 0)[0].x * kSqrt4Pi, 1.5);
+}
+
+TEST(Light, SpanOverloadsMatchVectorsAndDoNotAllocate) {
+    const DirectionalLight dir({2.0f, 1.0f, 0.5f}, {1, -2, 0.5f});
+    const PointLight point({100.0f, 50.0f, 10.0f}, {3, 0, 1}, 2.0);
+    const SphereLight sphere({3.0f, 3.0f, 3.0f}, {0, 0, 10}, 4.0);
+    RectLight rect({2.0f, 2.0f, 2.0f}, {-5, 5, 20}, {10, 0, 0}, {0, -10, 0});
+    rect.setQuadratureResolution(8);
+    const DiskLight disk({1.5f, 1.5f, 1.5f}, {0, 0, 8}, {0, 0, -1}, 6.0);
+    const Light* lights[] = {&dir, &point, &sphere, &rect, &disk};
+    const sh::Dsf& dsf = dsf162();
+    std::array<glm::vec3, sh::shCount(6)> sh;
+    std::vector<glm::vec3> s(dsf.size());
+    // Points off the light, inside the point light's clamp and at its position.
+    for (const glm::dvec3 x : {glm::dvec3(1, 2, -3), glm::dvec3(3, 0.5, 1), glm::dvec3(3, 0, 1)})
+        for (const Light* l : lights) {
+            const long before = gAllocations.load();
+            l->shCoefficients(x, 6, sh);
+            l->dsfCoefficients(x, dsf, s);
+            EXPECT_EQ(gAllocations.load(), before) << l->toString();
+            // Bit-identical to the allocating wrappers.
+            EXPECT_EQ(l->shCoefficients(x, 6), std::vector<glm::vec3>(sh.begin(), sh.end()))
+                << l->toString();
+            EXPECT_EQ(l->dsfCoefficients(x, dsf), s) << l->toString();
+        }
+    // The counter sees allocations: the vector wrapper is one.
+    const long before = gAllocations.load();
+    EXPECT_EQ(dir.shCoefficients({}, 2).size(), 9u);
+    EXPECT_GT(gAllocations.load(), before);
+    // A span of the wrong size is a programming error (always checked); a bad band is user input.
+    EXPECT_THROW(dir.shCoefficients({}, 5, sh), InternalError);
+    EXPECT_THROW(dir.dsfCoefficients({}, dsf, std::span(s).first(10)), InternalError);
+    EXPECT_THROW(dir.shCoefficients({}, -1, std::span(sh).first(0)), InputError);
 }
