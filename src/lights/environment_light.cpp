@@ -125,7 +125,8 @@ sh::EquirectLayout EnvironmentLight::layout() const { return {w_, h_, kPi, -2.0 
 
 void EnvironmentLight::setRotation(const glm::dmat3& worldFromMap) {
     sh::checkRotation(worldFromMap, source_.c_str(), "rotation");
-    rotation_ = worldFromMap;
+    // Stored orthonormalised: lookup() and pdf() use the transpose as the inverse.
+    rotation_ = sh::orthonormalizeRotation(worldFromMap);
     // The SH rotation is built once per rotation change (the cache) and applied to the stored
     // projection.
     shWorld_.resize(shMap_.size());

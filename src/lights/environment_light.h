@@ -42,7 +42,7 @@ std::string_view toString(EnvironmentLayout l);
 
 struct EnvironmentOptions {
     EnvironmentLayout layout = EnvironmentLayout::Equirect;
-    glm::dmat3 rotation{1.0};  ///< world-from-map, a proper rotation
+    glm::dmat3 rotation{1.0};  ///< world-from-map, a proper rotation (see setRotation)
     float scale = 1.0f;        ///< radiance multiplier, ≥ 0
 };
 
@@ -55,6 +55,8 @@ class EnvironmentLight final : public Light {
     EnvironmentLight(const io::ImageRGBA& image, const EnvironmentOptions& options,
                      std::string source = "image");
 
+    /// InputError unless a rotation within sh::checkRotation's tolerance; stored orthonormalised
+    /// (rotation() returns the nearest exact rotation).
     void setRotation(const glm::dmat3& worldFromMap);
     void setScale(float scale);
     const glm::dmat3& rotation() const { return rotation_; }

@@ -34,15 +34,43 @@ void checkRotation(const glm::dmat3& r, const char* source, const char* field) {
     }
 }
 
-ShRotation::ShRotation(const glm::dmat3& r, int maxBand) : band_(maxBand), r_(r) {
+namespace {
+double orthonormalityError(const glm::dmat3& r) {
+    const glm::dmat3 rtr = glm::transpose(r) * r;
+    double err = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) err = std::max(err, std::abs(rtr[i][j] - (i == j ? 1.0 : 0.0)));
+    return err;
+}
+}  // namespace
+
+glm::dmat3 orthonormalizeRotation(const glm::dmat3& r) {
+    VL_CHECK(glm::determinant(r) > 0);
+    // Already a rotation to rounding: keep the caller's matrix bit for bit.
+    if (orthonormalityError(r) <= kRotationRoundingTol) return r;
+    glm::dmat3 q = r;
+    for (int step = 0; step < 8; ++step) {
+        const glm::dmat3 next = 0.5 * (q + glm::transpose(glm::inverse(q)));
+        double change = 0;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) change = std::max(change, std::abs(next[i][j] - q[i][j]));
+        if (change == 0) break;  // already orthonormal to the last bit (exact rotations stay put)
+        q = next;
+        if (change < 1e-15) break;
+    }
+    return q;
+}
+
+ShRotation::ShRotation(const glm::dmat3& r, int maxBand) : band_(maxBand) {
     checkBand(maxBand, "sh", "rotation band");
     checkRotation(r);
+    r_ = orthonormalizeRotation(r);
     blocks_.assign(offset(maxBand + 1), 0.0);
     at(0, 0, 0) = 1.0;
     if (maxBand == 0) return;
     // Band 1: R with rows/columns in (y, z, x) order. glm is column-major: r[col][row].
     for (int m = -1; m <= 1; ++m)
-        for (int n = -1; n <= 1; ++n) at(1, m, n) = r[kAxisOfM[n + 1]][kAxisOfM[m + 1]];
+        for (int n = -1; n <= 1; ++n) at(1, m, n) = r_[kAxisOfM[n + 1]][kAxisOfM[m + 1]];
 
     // Ivanic–Ruedenberg recursion for bands 2..L (Table 2 of the 1998 erratum; Wyman 2006 Table 3).
     for (int l = 2; l <= maxBand; ++l) {
@@ -135,9 +163,10 @@ void ShRotation::applyRgb(std::span<const glm::vec3> in, std::span<glm::vec3> ou
 }
 
 const ShRotation& CachedShRotation::get(const glm::dmat3& r, int maxBand) {
-    if (cached_.empty() || cached_.front().maxBand() != maxBand || cached_.front().matrix() != r) {
+    if (cached_.empty() || cached_.front().maxBand() != maxBand || key_ != r) {
         cached_.clear();
         cached_.emplace_back(r, maxBand);
+        key_ = r;
     }
     return cached_.front();
 }

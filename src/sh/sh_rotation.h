@@ -23,15 +23,29 @@
 namespace voxlight::sh {
 
 /// InputError unless `r` is a proper rotation (RᵀR = I within 1e-4, det = +1) — e.g. a scene's
-/// light rotation.
+/// light rotation. The tolerance admits matrices typed with a few digits or composed in float; such
+/// a near-rotation must not be used as is (its transpose is not its inverse): store
+/// orthonormalizeRotation(r).
 void checkRotation(const glm::dmat3& r, const char* source = "sh", const char* field = "rotation");
+
+/// The rotation nearest to `r` in the Frobenius norm (the orthogonal factor of the polar
+/// decomposition r = Q·S), by the Newton iteration Q ← (Q + Q⁻ᵀ)/2 (Higham 1986), which converges
+/// quadratically from a matrix accepted by checkRotation: |QᵀQ − I| ~ 1e-16 after ≤ 4 steps. A
+/// matrix already orthonormal to kRotationRoundingTol is returned unchanged (bit for bit).
+/// Precondition: r passes checkRotation (VL_CHECK on det > 0).
+glm::dmat3 orthonormalizeRotation(const glm::dmat3& r);
+/// max |RᵀR − I| up to which orthonormalizeRotation keeps a matrix as given: a few ulps of the sums
+/// of three products (rotations built from cos/sin in double reach ~1e-15).
+inline constexpr double kRotationRoundingTol = 1e-14;
 
 class ShRotation {
   public:
-    /// Builds blocks for bands 0..maxBand (≤ kMaxBand). InputError if `r` is not a rotation.
+    /// Builds blocks for bands 0..maxBand (≤ kMaxBand). InputError if `r` is not a rotation; a
+    /// near-rotation accepted by checkRotation is orthonormalised first (orthonormalizeRotation).
     ShRotation(const glm::dmat3& r, int maxBand);
 
     int maxBand() const { return band_; }
+    /// The (orthonormalised) rotation the blocks were built from.
     const glm::dmat3& matrix() const { return r_; }
 
     /// out = R · in for the first in.size() coefficients (any (L'+1)² with L' ≤ maxBand); in and
@@ -57,13 +71,14 @@ class ShRotation {
 };
 
 /// Keeps the ShRotation of the last rotation asked for; rebuilds only when the matrix or the band
-/// changes.
+/// changes. Keyed on the matrix as given (ShRotation::matrix() is its orthonormalised form).
 class CachedShRotation {
   public:
     const ShRotation& get(const glm::dmat3& r, int maxBand);
 
   private:
     std::vector<ShRotation> cached_;  // zero or one element
+    glm::dmat3 key_{1.0};             // the matrix cached_ was built from
 };
 
 /// Rotation by `angle` radians about +z (counter-clockwise seen from +z): out_lm for g(ω) =

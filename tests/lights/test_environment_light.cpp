@@ -205,6 +205,20 @@ TEST(EnvironmentLight, DsfProjectionIsCachedPerSizeAndRotation) {
     EXPECT_EQ(moved.dsfProjectionCount(), 3u);
 }
 
+TEST(EnvironmentLight, NearRotationIsStoredOrthonormal) {
+    // lookup() and pdf() invert the rotation by its transpose, so the stored matrix must be
+    // orthonormal to rounding (sums of three products ~1e-16), not only to checkRotation's 1e-4.
+    constexpr double kOrthonormalTol = 1e-14;
+    glm::dmat3 skewed = rotationZyz(0.3, 1.1, -0.8);
+    skewed[0][2] += 4e-5, skewed[1][0] -= 3e-5;
+    const EnvironmentLight env(randomEquirect(64, 32, 9), {.rotation = skewed}, "skewed");
+    EXPECT_EQ(env.rotation(), sh::orthonormalizeRotation(skewed));
+    const glm::dmat3 rtr = glm::transpose(env.rotation()) * env.rotation();
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) EXPECT_NEAR(rtr[i][j], i == j, kOrthonormalTol) << i << j;
+    EXPECT_NEAR(glm::determinant(env.rotation()), 1.0, kOrthonormalTol);
+}
+
 TEST(EnvironmentLight, ImportanceSamplingIsExact) {
     // Grey map: value/pdf = Σ lum Ω for every sample (zero variance), and pixel frequencies follow
     // lum·Ω.

@@ -195,6 +195,55 @@ TEST(ShRotation, CacheRebuildsOnlyOnChange) {
     EXPECT_EQ(cache.get(a, 6).maxBand(), 6);
 }
 
+TEST(ShRotation, NearRotationIsOrthonormalised) {
+    // Newton's polar iteration converges to rounding: entries of QᵀQ − I are sums of three
+    // products of entries ≤ 1, ~1e-16 each.
+    constexpr double kOrthonormalTol = 1e-14;
+    // Per-band orthogonality of blocks built from an exact rotation at L = 8 (measured ~1e-15);
+    // from the unrepaired near-rotation below it would be ~1e-4.
+    constexpr double kBlockOrthoTol = 1e-12;
+    auto orthoError = [](const glm::dmat3& m) {
+        const glm::dmat3 mtm = glm::transpose(m) * m;
+        double e = 0;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) e = std::max(e, std::abs(mtm[i][j] - (i == j)));
+        return e;
+    };
+    auto maxAbs = [](const glm::dmat3& m) {
+        double e = 0;
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) e = std::max(e, std::abs(m[i][j]));
+        return e;
+    };
+    const glm::dmat3 exact = eulerZyz(0.4, 1.2, -0.7);
+    glm::dmat3 skewed = exact;  // e.g. a matrix typed with five digits
+    skewed[0][1] += 3e-5, skewed[2][0] -= 2e-5, skewed[1][1] *= 1 + 2e-5;
+    ASSERT_NO_THROW(checkRotation(skewed));
+    ASSERT_GT(orthoError(skewed), 1e-5);  // the input really is off
+    const glm::dmat3 q = orthonormalizeRotation(skewed);
+    EXPECT_LT(orthoError(q), kOrthonormalTol);
+    EXPECT_NEAR(glm::determinant(q), 1.0, kOrthonormalTol);
+    // The polar factor: S = Qᵀ·skewed is symmetric, and Q is no farther from the input than the
+    // exact rotation it was perturbed from.
+    const glm::dmat3 sym = glm::transpose(q) * skewed;
+    EXPECT_LT(maxAbs(sym - glm::transpose(sym)), kOrthonormalTol);
+    EXPECT_LE(maxAbs(q - skewed), maxAbs(exact - skewed));
+    // A rotation orthonormal to rounding is kept bit for bit.
+    EXPECT_EQ(orthonormalizeRotation(exact), exact);
+    // ShRotation builds from the orthonormalised matrix: blocks orthogonal to rounding.
+    const ShRotation rot(skewed, 8);
+    EXPECT_EQ(rot.matrix(), q);
+    double worst = 0;
+    for (int l = 1; l <= 8; ++l)
+        for (int m = -l; m <= l; ++m)
+            for (int n = -l; n <= l; ++n) {
+                double s = 0;
+                for (int j = -l; j <= l; ++j) s += rot.element(l, m, j) * rot.element(l, n, j);
+                worst = std::max(worst, std::abs(s - (m == n)));
+            }
+    EXPECT_LT(worst, kBlockOrthoTol);
+}
+
 TEST(ShRotation, RejectsNonRotations) {
     EXPECT_THROW(ShRotation(glm::dmat3(2.0), 2), InputError);
     glm::dmat3 mirror(1.0);
