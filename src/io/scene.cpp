@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <map>
 #include <set>
 
 namespace voxlight::io {
@@ -214,8 +215,8 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
         w.allowOnly({"level", "width"});
         if (!w.has("level") || !w.has("width"))
             w.fail("needs 'level' and 'width'", "e.g. {\"level\": 400, \"width\": 1500}");
-        tf.window = glm::dvec2(w.child("level").number(-1e9, 1e9),
-                               w.child("width").number(1e-9, 1e9));
+        tf.window =
+            glm::dvec2(w.child("level").number(-1e9, 1e9), w.child("width").number(1e-9, 1e9));
     }
     if (f.has("points")) {
         const Field pts = f.child("points");
@@ -339,6 +340,15 @@ void applyOverride(json& doc, const std::string& assignment) {
             node = &(*node)[i];
         } else {
             if (node->is_null()) *node = json::object();
+            // Shorthand forms expand so their keys can be overridden: "method": "mip" ≡ {"name":
+            // "mip"}, etc.
+            if (node->is_string() && node != &doc) {
+                static const std::map<std::string, std::string> kShorthandKey = {
+                    {"method", "name"}, {"volume", "path"}, {"transfer_function", "preset"}};
+                const std::string parentKey = key.substr(0, start == 0 ? 0 : start - 1);
+                if (const auto it = kShorthandKey.find(parentKey); it != kShorthandKey.end())
+                    *node = json{{it->second, *node}};
+            }
             if (!node->is_object())
                 throw InputError(
                     "--set", key,

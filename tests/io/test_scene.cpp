@@ -137,3 +137,20 @@ TEST(Scene, MalformedJsonFileNamesTheFile) {
     }
     EXPECT_THROW(io::loadScene(tmp / "missing.json"), InputError);
 }
+
+TEST(Scene, OverridesReachIntoShorthandForms) {
+    json j =
+        json::parse(R"({"volume": "a.nii", "method": "gradient", "transfer_function": "ct-bone"})");
+    io::applyOverride(j, "method.name=mip");
+    io::applyOverride(j, "transfer_function.extinction_scale=2");
+    io::applyOverride(j, "volume.nonfinite=min");
+    const io::Scene s = parse(j);
+    EXPECT_EQ(s.method.name, "mip");
+    EXPECT_EQ(s.transferFunction.preset, "ct-bone");
+    EXPECT_DOUBLE_EQ(s.transferFunction.extinctionScale, 2.0);
+    EXPECT_EQ(s.volume.path, std::filesystem::path("/data/a.nii"));
+    EXPECT_EQ(s.volume.readOptions.nonFinite, io::NonFinitePolicy::ReplaceWithMin);
+    // Other strings are not objects: descending into them stays an error.
+    json k = json::parse(R"({"volume": "a.nii", "camera": {"projection": "perspective"}})");
+    EXPECT_THROW(io::applyOverride(k, "camera.projection.x=1"), InputError);
+}
