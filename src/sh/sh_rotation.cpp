@@ -167,6 +167,7 @@ const ShRotation& CachedShRotation::get(const glm::dmat3& r, int maxBand) {
         cached_.clear();
         cached_.emplace_back(r, maxBand);
         key_ = r;
+        ++builds_;
     }
     return cached_.front();
 }

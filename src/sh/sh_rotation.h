@@ -75,10 +75,13 @@ class ShRotation {
 class CachedShRotation {
   public:
     const ShRotation& get(const glm::dmat3& r, int maxBand);
+    /// How many ShRotations get() has built (cache misses): for tests and profiling.
+    std::size_t builds() const { return builds_; }
 
   private:
     std::vector<ShRotation> cached_;  // zero or one element
-    glm::dmat3 key_{1.0};             // the matrix cached_ was built from
+    std::size_t builds_ = 0;
+    glm::dmat3 key_{1.0};  // the matrix cached_ was built from
 };
 
 /// Rotation by `angle` radians about +z (counter-clockwise seen from +z): out_lm for g(ω) =

@@ -185,14 +185,39 @@ TEST(ShRotation, HighBandsStayOrthogonal) {
 }
 
 TEST(ShRotation, CacheRebuildsOnlyOnChange) {
+    // Addresses cannot show a rebuild (clear() + emplace_back reuses the slot): count builds, and
+    // check the blocks belong to the rotation asked for.
     CachedShRotation cache;
-    const glm::dmat3 a = eulerZyz(0.1, 0.2, 0.3);
-    const ShRotation* first = &cache.get(a, 4);
-    EXPECT_EQ(&cache.get(a, 4), first);
-    EXPECT_EQ(cache.get(a, 4).matrix(), a);
-    const auto& other = cache.get(eulerZyz(0.1, 0.2, 0.4), 4);
-    EXPECT_NE(other.matrix(), a);
-    EXPECT_EQ(cache.get(a, 6).maxBand(), 6);
+    const glm::dmat3 a = eulerZyz(0.1, 0.2, 0.3), b = eulerZyz(0.1, 0.2, 0.4);
+    auto expectBuiltFrom = [](const ShRotation& rot, const glm::dmat3& r, int band) {
+        const ShRotation fresh(r, band);
+        EXPECT_EQ(rot.maxBand(), band);
+        EXPECT_EQ(rot.matrix(), r);
+        for (int l = 0; l <= band; ++l)
+            for (int m = -l; m <= l; ++m)
+                for (int n = -l; n <= l; ++n)
+                    ASSERT_EQ(rot.element(l, m, n), fresh.element(l, m, n)) << l << m << n;
+    };
+    EXPECT_EQ(cache.builds(), 0u);
+    expectBuiltFrom(cache.get(a, 4), a, 4);
+    EXPECT_EQ(cache.builds(), 1u);
+    const glm::dmat3 aCopy = a;  // equal matrix, another object: no rebuild
+    expectBuiltFrom(cache.get(aCopy, 4), a, 4);
+    EXPECT_EQ(cache.builds(), 1u);
+    expectBuiltFrom(cache.get(b, 4), b, 4);  // another rotation: rebuilt, different blocks
+    EXPECT_EQ(cache.builds(), 2u);
+    EXPECT_NE(cache.get(b, 4).element(2, 1, -2), ShRotation(a, 4).element(2, 1, -2));
+    EXPECT_EQ(cache.builds(), 2u);
+    expectBuiltFrom(cache.get(b, 6), b, 6);  // another band: rebuilt
+    EXPECT_EQ(cache.builds(), 3u);
+    expectBuiltFrom(cache.get(a, 6), a, 6);
+    EXPECT_EQ(cache.builds(), 4u);
+    // A near-rotation is keyed as given (its matrix() is orthonormalised): asked twice, built once.
+    glm::dmat3 skewed = a;
+    skewed[1][2] += 2e-5;
+    cache.get(skewed, 6);
+    cache.get(skewed, 6);
+    EXPECT_EQ(cache.builds(), 5u);
 }
 
 TEST(ShRotation, NearRotationIsOrthonormalised) {
