@@ -51,16 +51,23 @@ std::vector<float> projectSamples(int maxBand, const SphereSamples& samples,
 std::vector<glm::vec3> projectSamplesRgb(int maxBand, const SphereSamples& samples,
                                          std::span<const glm::vec3> values);
 
-/// Projects a callable f(const glm::dvec3& unitDir) returning double (→ scalar coefficients) onto
-/// bands 0..L.
+/// Projects a callable f(const glm::dvec3& unitDir) onto bands 0..L with the set's weights. f may
+/// return a scalar (double, float → std::vector<double>) or RGB (glm::dvec3, glm::vec3 →
+/// std::vector<glm::dvec3>, each channel projected like the scalar case).
 template <class F>
-std::vector<double> projectFunction(int maxBand, const SphereSamples& samples, F&& f) {
+auto projectFunction(int maxBand, const SphereSamples& samples, F&& f) {
+    using R = std::remove_cvref_t<std::invoke_result_t<F&, const glm::dvec3&>>;
+    constexpr bool kRgb = std::is_same_v<R, glm::dvec3> || std::is_same_v<R, glm::vec3>;
+    static_assert(kRgb || std::is_arithmetic_v<R>,
+                  "projectFunction: f must return a scalar, glm::dvec3 or glm::vec3");
+    using T = std::conditional_t<kRgb, glm::dvec3, double>;
     checkBand(maxBand);
     const int n = shCount(maxBand);
-    std::vector<double> c(n, 0.0), y(n);
+    std::vector<T> c(n, T(0.0));
+    std::vector<double> y(n);
     for (std::size_t k = 0; k < samples.size(); ++k) {
         evalShUnitDouble(maxBand, samples.directions[k], y);
-        const double v = samples.weights[k] * double(f(samples.directions[k]));
+        const T v = samples.weights[k] * T(f(samples.directions[k]));
         for (int i = 0; i < n; ++i) c[i] += v * y[i];
     }
     return c;

@@ -20,6 +20,11 @@ constexpr double kPi = std::numbers::pi;
 constexpr double kExactProjectionTol = 1e-6;
 // The bar for env projection against per-pixel brute force.
 constexpr double kEnvRelTol = 1e-4;
+// Gauss–Legendre is exact for the band-limited products here; what is left is double rounding of
+// ~10² terms of size ≤ ~10 (measured ~1e-14).
+constexpr double kExactQuadratureTol = 1e-12;
+// Sample values rounded to float (relative 6e-8) summed over the set: coefficients of size ≤ ~1.
+constexpr double kFloatSampleTol = 1e-5;
 
 std::vector<double> randomCoefficients(int band, std::uint64_t seed) {
     std::vector<double> c(shCount(band));
@@ -35,14 +40,40 @@ TEST(ShProjection, BandLimitedFunctionIsRecoveredExactly) {
     const SphereSamples q = gaussLegendreSamples(kL + 1);  // degree 2L ≤ 2(L+1)−1
     const auto c =
         projectFunction(kL, q, [&](const glm::dvec3& d) { return shReconstructDouble(truth, d); });
-    for (int i = 0; i < shCount(kL); ++i) EXPECT_NEAR(c[i], truth[i], 1e-12) << i;
+    for (int i = 0; i < shCount(kL); ++i) EXPECT_NEAR(c[i], truth[i], kExactQuadratureTol) << i;
 
     std::vector<float> values(q.size());
     for (std::size_t k = 0; k < q.size(); ++k)
         values[k] = float(shReconstructDouble(truth, q.directions[k]));
     const auto cf = projectSamples(kL, q, values);
-    for (int i = 0; i < shCount(kL); ++i)
-        EXPECT_NEAR(cf[i], truth[i], 1e-5) << i;  // float sample values
+    for (int i = 0; i < shCount(kL); ++i) EXPECT_NEAR(cf[i], truth[i], kFloatSampleTol) << i;
+}
+
+TEST(ShProjection, CallableMayReturnRgb) {
+    // Three band-limited channels through the dvec3 (and vec3) path: each channel equals the scalar
+    // projection bit for bit (same double arithmetic per component) and recovers its truth.
+    constexpr int kL = 6;
+    const std::vector<double> truth[3] = {randomCoefficients(kL, 11), randomCoefficients(kL, 12),
+                                          randomCoefficients(kL, 13)};
+    const SphereSamples q = gaussLegendreSamples(kL + 1);
+    auto channelF = [&](int ch) {
+        return [&, ch](const glm::dvec3& d) { return shReconstructDouble(truth[ch], d); };
+    };
+    const std::vector<glm::dvec3> rgb = projectFunction(kL, q, [&](const glm::dvec3& d) {
+        return glm::dvec3(channelF(0)(d), channelF(1)(d), channelF(2)(d));
+    });
+    ASSERT_EQ(rgb.size(), std::size_t(shCount(kL)));
+    for (int ch = 0; ch < 3; ++ch) {
+        const std::vector<double> scalar = projectFunction(kL, q, channelF(ch));
+        for (int i = 0; i < shCount(kL); ++i) {
+            EXPECT_EQ(rgb[i][ch], scalar[i]) << "channel " << ch << " i=" << i;
+            EXPECT_NEAR(rgb[i][ch], truth[ch][i], kExactQuadratureTol) << ch << " " << i;
+        }
+    }
+    // A float vec3 callable is widened to double.
+    const std::vector<glm::dvec3> f3 =
+        projectFunction(kL, q, [&](const glm::dvec3& d) { return glm::vec3(channelF(0)(d)); });
+    for (int i = 0; i < shCount(kL); ++i) EXPECT_NEAR(f3[i].y, truth[0][i], kFloatSampleTol) << i;
 }
 
 TEST(ShProjection, DeltaProjectionReconstructsThePeak) {
