@@ -22,6 +22,23 @@ constexpr double kPi = std::numbers::pi;
 // The bar: env projection vs brute force over all pixels, relative to the largest
 // coefficient.
 constexpr double kEnvRelTol = 1e-4;
+// The same texel times the scale 2.5 in float: values ≤ 10, ulp ≤ 1e-6.
+constexpr double kScaledLookupTol = 1e-5;
+// Cached-rotation SH vs rotating the plain light's SH: float coefficients of size ≤ ~10 through
+// the same blocks, scaled before vs after.
+constexpr double kRotatedShTol = 1e-4;
+// Energy-conserving DSF projection: Σ A_k s_k = Σ_p L_p Ω_p exactly up to float rounding.
+constexpr double kEnergyRelTol = 1e-5;
+// Importance sampling of a grey map: value/pdf = Σ lum Ω exactly in double; float value and pdf
+// (and pdf() recomputed through the float wi) round at ~1e-7.
+constexpr double kSampleWeightRelTol = 1e-4;
+constexpr double kPdfRelTol = 1e-6;
+// Pixel hit counts within 5σ of the binomial, plus one count for tiny expectations.
+constexpr double kHitSigmas = 5.0;
+// A missing or inverted rotation must be off by this many times the smooth-map tolerance.
+constexpr double kInverseSeparation = 20.0;
+// Nearest equirect texel of a bilinear resample of a 256² probe: ≈ 1° steps of a gradient 0.6/rad.
+constexpr double kProbeLookupTol = 0.03;
 
 io::ImageRGBA randomEquirect(int w, int h, std::uint64_t seed) {
     io::ImageRGBA img(w, h);
@@ -108,13 +125,14 @@ TEST(EnvironmentLight, RotationAndScale) {
         const glm::dvec3 d = sh::sphericalToDirection(std::acos(1 - 2 * rng.uniformDouble()),
                                                       2 * kPi * rng.uniformDouble());
         ASSERT_NEAR(rotated.lookup(glm::vec3(opt.rotation * d)).x,
-                    2.5f * plain.lookup(glm::vec3(d)).x, 1e-5);
+                    2.5f * plain.lookup(glm::vec3(d)).x, kScaledLookupTol);
     }
     // SH of the rotated light = rotated SH of the plain light (the cached rotation) = brute force.
     const auto a = rotated.shCoefficients({}, 6), b = plain.shCoefficients({}, 6);
     std::vector<glm::vec3> br(b.size());
     sh::ShRotation(opt.rotation, 6).applyRgb(b, br);
-    for (std::size_t i = 0; i < a.size(); ++i) EXPECT_NEAR(a[i].x, 2.5f * br[i].x, 1e-4) << i;
+    for (std::size_t i = 0; i < a.size(); ++i)
+        EXPECT_NEAR(a[i].x, 2.5f * br[i].x, kRotatedShTol) << i;
     expectShMatchesBruteForce(rotated, 8);
     // Bands above the cache are projected on demand.
     expectShMatchesBruteForce(rotated, 10);
@@ -122,8 +140,8 @@ TEST(EnvironmentLight, RotationAndScale) {
     const sh::Dsf dsf(162);
     const glm::dvec3 ia = dsf.integrate(rotated.dsfCoefficients({}, dsf)),
                      ib = dsf.integrate(plain.dsfCoefficients({}, dsf));
-    EXPECT_NEAR(ia.x, 2.5 * ib.x, 1e-5 * ia.x);  // energy-conserving: exact up to float rounding
-    EXPECT_NEAR(ia.x, a[0].x * std::sqrt(4 * kPi), 1e-5 * ia.x);
+    EXPECT_NEAR(ia.x, 2.5 * ib.x, kEnergyRelTol * ia.x);
+    EXPECT_NEAR(ia.x, a[0].x * std::sqrt(4 * kPi), kEnergyRelTol * ia.x);
     EXPECT_THROW(EnvironmentLight(img, EnvironmentOptions{.scale = -1.0f}, "x"), InputError);
     EXPECT_THROW(EnvironmentLight(img, EnvironmentOptions{.rotation = glm::dmat3(2.0)}, "x"),
                  InputError);
@@ -162,7 +180,8 @@ TEST(EnvironmentLight, DsfCoefficientsFollowTheRotation) {
     }
     RecordProperty("dsf_rotation_error", std::to_string(worst));
     EXPECT_LT(worst, kSmoothDsfTol);
-    EXPECT_GT(worstInverse, 20 * kSmoothDsfTol);  // the test can tell the two directions apart
+    EXPECT_GT(worstInverse,
+              kInverseSeparation * kSmoothDsfTol);  // the test can tell the two directions apart
 }
 
 TEST(EnvironmentLight, DsfProjectionIsCachedPerSizeAndRotation) {
@@ -244,8 +263,8 @@ TEST(EnvironmentLight, ImportanceSamplingIsExact) {
         core::CounterRng r(i, 8);
         const LightSample s = env.sample({}, {r.uniform(), r.uniform()});
         ASSERT_GT(s.pdf, 0.0f);
-        ASSERT_NEAR(s.value.x / s.pdf, integral, 1e-4 * integral);
-        ASSERT_NEAR(env.pdf({}, s.wi), s.pdf, 1e-6 * s.pdf);
+        ASSERT_NEAR(s.value.x / s.pdf, integral, kSampleWeightRelTol * integral);
+        ASSERT_NEAR(env.pdf({}, s.wi), s.pdf, kPdfRelTol * s.pdf);
         // Which pixel (map frame) was hit.
         const glm::dvec3 m = glm::transpose(env.rotation()) * glm::dvec3(s.wi);
         const int row = std::min(kH - 1, int(std::acos(std::clamp(m.z, -1.0, 1.0)) / kPi * kH));
@@ -255,8 +274,7 @@ TEST(EnvironmentLight, ImportanceSamplingIsExact) {
     }
     for (int p = 0; p < kW * kH; ++p) {
         const double expected = kN * prob[p] / integral;
-        EXPECT_NEAR(hits[p], expected, 5 * std::sqrt(expected) + 1)
-            << "pixel " << p;  // 5σ binomial
+        EXPECT_NEAR(hits[p], expected, kHitSigmas * std::sqrt(expected) + 1) << "pixel " << p;
     }
 }
 
@@ -286,9 +304,8 @@ TEST(EnvironmentLight, AngularProbeLayout) {
                                                       2 * kPi * rng.uniformDouble());
         if (d.x < -0.95)
             continue;  // the back pole is one ring of the probe: resolution there is poor
-        // Nearest equirect texel of a bilinear resample of a 256² probe: ≈ 1° steps of a gradient
-        // 0.6/rad.
-        ASSERT_NEAR(env.lookup(glm::vec3(d)).x, f(d), 0.03) << d.x << "," << d.y << "," << d.z;
+        ASSERT_NEAR(env.lookup(glm::vec3(d)).x, f(d), kProbeLookupTol)
+            << d.x << "," << d.y << "," << d.z;
     }
     EXPECT_THROW(EnvironmentLight(randomEquirect(64, 32, 1),
                                   {.layout = EnvironmentLayout::AngularProbe}, "x"),
@@ -356,7 +373,7 @@ TEST(EnvironmentLight, RealHdrProbeProjection) {
     const sh::Dsf dsf(642);
     const glm::dvec3 p = dsf.integrate(env.dsfCoefficients({}, dsf));
     const auto c = env.shCoefficients({}, 0);
-    EXPECT_NEAR(p.y, c[0].y * std::sqrt(4 * kPi), 1e-5 * p.y);
+    EXPECT_NEAR(p.y, c[0].y * std::sqrt(4 * kPi), kEnergyRelTol * p.y);
 }
 
 TEST(EnvironmentLight, RealExrProbeLoads) {

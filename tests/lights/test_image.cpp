@@ -13,6 +13,14 @@
 using namespace voxlight;
 
 namespace {
+// Half float: 11-bit significand, rounding ≤ 2⁻¹¹ ≈ 4.9e-4 relative; plus an absolute floor for the
+// ramp's values near 0.
+constexpr double kHalfRelTol = 1e-3;
+constexpr double kHalfAbsTol = 1e-4;
+// RGBE: 8-bit mantissas sharing one exponent, so each channel is within 1/128 of the largest.
+constexpr float kRgbeRelTol = 1.0f / 100.0f;
+// PNG: one 8-bit quantisation step.
+constexpr float kPngStep = 1.0f / 255.0f;
 io::ImageRGBA ramp(int w, int h) {
     io::ImageRGBA img(w, h);
     for (int y = 0; y < h; ++y)
@@ -50,18 +58,18 @@ TEST(Image, ExrHalfAndHdrAreWithinTheirPrecision) {
     io::writeImage(img, tmp / "h.exr", {.exrHalf = true});
     const auto h = io::readImage(tmp / "h.exr");
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
-        EXPECT_NEAR(h.pixels[i], img.pixels[i], 1e-3 * std::abs(img.pixels[i]) + 1e-4)
-            << i;  // 11-bit mantissa
+        EXPECT_NEAR(h.pixels[i], img.pixels[i], kHalfRelTol * std::abs(img.pixels[i]) + kHalfAbsTol)
+            << i;
     io::ImageRGBA pos = img;
     for (float& v : pos.pixels) v = std::abs(v);
     io::writeImage(pos, tmp / "r.hdr");
     const auto r = io::readImage(tmp / "r.hdr");
     for (int y = 0; y < 5; ++y)
         for (int x = 0; x < 9; ++x)
-            for (int c = 0; c < 3;
-                 ++c)  // RGBE: 8-bit mantissa shared by the channels (≤ 1/128 of the max)
-                EXPECT_NEAR(r.at(x, y)[c], pos.at(x, y)[c],
-                            std::max({pos.at(x, y)[0], pos.at(x, y)[1], pos.at(x, y)[2]}) / 100.0f);
+            for (int c = 0; c < 3; ++c)
+                EXPECT_NEAR(
+                    r.at(x, y)[c], pos.at(x, y)[c],
+                    std::max({pos.at(x, y)[0], pos.at(x, y)[1], pos.at(x, y)[2]}) * kRgbeRelTol);
     EXPECT_EQ(r.at(0, 0)[3], 1.0f);  // alpha promoted
 }
 
@@ -79,9 +87,9 @@ TEST(Image, PngClampsAndQuantises) {
     const auto back = io::readImage(tmp / "q.png", info);
     EXPECT_FALSE(info.floatingPoint);
     EXPECT_EQ(back.at(0, 0)[0], 0.0f);
-    EXPECT_NEAR(back.at(1, 0)[0], 128.0f / 255.0f, 1.0f / 255.0f);
+    EXPECT_NEAR(back.at(1, 0)[0], 128.0f / 255.0f, kPngStep);
     EXPECT_EQ(back.at(2, 0)[0], 1.0f);
-    EXPECT_NEAR(back.at(3, 0)[0], 64.0f / 255.0f, 1.0f / 255.0f);
+    EXPECT_NEAR(back.at(3, 0)[0], 64.0f / 255.0f, kPngStep);
     img.at(1, 0)[2] = NAN;
     EXPECT_THROW(io::writeImage(img, tmp / "nan.png"), InputError);
     EXPECT_FALSE(std::filesystem::exists(tmp / "nan.png"));

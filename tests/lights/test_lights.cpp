@@ -34,6 +34,38 @@ void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 namespace {
 constexpr double kPi = std::numbers::pi;
 const double kSqrt4Pi = std::sqrt(4.0 * kPi);
+// Float rounding of values ≈ 1 (ulp 1.2e-7) and ≈ 10–30 (ulp ≤ 1.9e-6): exact formulas in float.
+constexpr double kUnitValueTol = 1e-6;
+constexpr double kTensValueTol = 1e-5;
+// Double closed forms (solid angle of a cone): a few ulps.
+constexpr double kDoubleTol = 1e-12;
+// Float SH/DSF coefficients (E·Y_i, size ≤ ~3) computed two ways.
+constexpr double kFloatCoeffTol = 1e-6;
+// Σ A_k s_k = E holds exactly for the barycentric blend; float coefficients summed over 162.
+constexpr double kFloatIntegralTol = 1e-5;
+// Point light near its clamp (E = 25): c_0·√(4π) in float, and the coefficient change across a
+// 2e-6 mm step at d = minDistance or from d = 1e-7 to 0 (continuous blend, slope ~E/minDistance).
+constexpr double kPointDcTol = 1e-4;
+constexpr double kPointContinuityTol = 1e-4;
+// ∫ L dω = E at every distance is exact in both bases; float coefficients of E ≤ 25.
+constexpr double kPointPowerTol = 1e-3;
+// Sampler checks: pdf() recomputes the density from the float wi (cone / plane hit of a rounded
+// direction); radiance() returns Le itself.
+constexpr double kPdfRelTol = 2e-3;
+constexpr double kRadianceTol = 1e-6;
+// Monte-Carlo mean within 5σ of the estimator, plus 0.1 % for the float pdfs.
+constexpr double kSamplerSigmas = 5.0;
+constexpr double kSamplerRelBias = 1e-3;
+// Sphere light: the 600-node reference's cone-edge error is ~1e-3 of c_0; the DSF's 16×32 cone
+// cells each keep their power, so only float sums remain.
+constexpr double kConeEdgeRelTol = 2e-3;
+constexpr double kSphereDsfPowerRelTol = 1e-3;
+// Planar lights: 32² midpoint cells of the emitter (c_0 of the rectangle), plus the 400-node
+// reference's error at the emitter's edges (higher rectangle coefficients); the disk's polar cells
+// are coarsest at the rim.
+constexpr double kRectMidpointRelTol = 2e-3;
+constexpr double kRectShRelTol = 5e-3;
+constexpr double kDiskQuadratureRelTol = 3e-3;
 
 const sh::Dsf& dsf162() {
     static const sh::Dsf d(162);
@@ -58,14 +90,15 @@ void checkSampler(const Light& light, const glm::dvec3& x, double expectedIntegr
         double v = 0;
         if (s.pdf > 0) {
             v = s.value.x / s.pdf;
-            ASSERT_NEAR(light.pdf(x, s.wi), s.pdf, 2e-3 * s.pdf) << light.toString();
-            ASSERT_NEAR(light.radiance(x, s.wi).x, le, 1e-6) << light.toString();
+            ASSERT_NEAR(light.pdf(x, s.wi), s.pdf, kPdfRelTol * s.pdf) << light.toString();
+            ASSERT_NEAR(light.radiance(x, s.wi).x, le, kRadianceTol) << light.toString();
         }
         sum += v, sum2 += v * v;
     }
     const double mean = sum / kN, sigma = std::sqrt(std::max(0.0, sum2 / kN - mean * mean) / kN);
     // 5σ of the estimator plus 0.1 % for float pdfs.
-    EXPECT_NEAR(mean, expectedIntegral, 5 * sigma + 1e-3 * expectedIntegral) << light.toString();
+    EXPECT_NEAR(mean, expectedIntegral, kSamplerSigmas * sigma + kSamplerRelBias * expectedIntegral)
+        << light.toString();
 }
 }  // namespace
 
@@ -75,14 +108,14 @@ TEST(DirectionalLight, ShAndDsfCoefficients) {
     const auto c = l.shCoefficients({0, 0, 0}, 4);
     std::vector<double> y(25);
     sh::evalShUnitDouble(4, glm::dvec3(dir), y);
-    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, 2.0 * y[i], 1e-6);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, 2.0 * y[i], kFloatCoeffTol);
     const auto s = l.dsfCoefficients({0, 0, 0}, dsf162());
     const glm::dvec3 e = dsf162().integrate(s);
-    EXPECT_NEAR(e.x, 2.0, 1e-5);
-    EXPECT_NEAR(e.z, 0.5, 1e-5);
+    EXPECT_NEAR(e.x, 2.0, kFloatIntegralTol);
+    EXPECT_NEAR(e.z, 0.5, kFloatIntegralTol);
     const LightSample ls = l.sample({1, 2, 3}, {0.5f, 0.5f});
     EXPECT_TRUE(ls.delta);
-    EXPECT_NEAR(glm::dot(ls.wi, dir), 1.0f, 1e-6f);
+    EXPECT_NEAR(glm::dot(ls.wi, dir), 1.0f, float(kUnitValueTol));
 }
 
 TEST(DirectionalLight, BadInput) {
@@ -98,14 +131,14 @@ TEST(DirectionalLight, BadInput) {
 
 TEST(PointLight, InverseSquareWithMinimumDistanceClamp) {
     const PointLight l({100.0f, 100.0f, 100.0f}, {10, 0, 0}, 2.0);
-    EXPECT_NEAR(l.irradianceAt({0, 0, 0}).x, 1.0, 1e-6);
-    EXPECT_NEAR(l.irradianceAt({9, 0, 0}).x, 25.0, 1e-5);   // d = 1 < 2: clamped to 100/4
-    EXPECT_NEAR(l.irradianceAt({10, 0, 0}).x, 25.0, 1e-5);  // at the light: finite
+    EXPECT_NEAR(l.irradianceAt({0, 0, 0}).x, 1.0, kUnitValueTol);
+    EXPECT_NEAR(l.irradianceAt({9, 0, 0}).x, 25.0, kTensValueTol);   // d = 1 < 2: clamped to 100/4
+    EXPECT_NEAR(l.irradianceAt({10, 0, 0}).x, 25.0, kTensValueTol);  // at the light: finite
     const LightSample s = l.sample({10, 0, 0}, {0.1f, 0.2f});
     EXPECT_EQ(s.pdf, 0.0f);  // no direction at the light
     const LightSample far = l.sample({0, 0, 0}, {0.1f, 0.2f});
-    EXPECT_NEAR(far.distance, 10.0f, 1e-5f);
-    EXPECT_NEAR(far.wi.x, 1.0f, 1e-6f);
+    EXPECT_NEAR(far.distance, 10.0f, float(kTensValueTol));
+    EXPECT_NEAR(far.wi.x, 1.0f, float(kUnitValueTol));
     EXPECT_THROW(PointLight({1, 1, 1}, {0, 0, 0}, 0.0), InputError);
     EXPECT_THROW(PointLight({1, 1, 1}, {NAN, 0, 0}), InputError);
     // A bad band is an InputError also at the light itself (where no delta direction exists).
@@ -117,26 +150,26 @@ TEST(PointLight, ShIsFiniteAndContinuousThroughTheLight) {
     const PointLight l({100.0f, 100.0f, 100.0f}, {0, 0, 0}, 2.0);
     // At the light: isotropic, only DC, ∫ L dω = E.
     const auto at = l.shCoefficients({0, 0, 0}, 4);
-    EXPECT_NEAR(at[0].x * kSqrt4Pi, 25.0, 1e-4);
+    EXPECT_NEAR(at[0].x * kSqrt4Pi, 25.0, kPointDcTol);
     for (int i = 1; i < 25; ++i) EXPECT_EQ(at[i].x, 0.0f);
     // Continuity at d = minDistance and at d → 0.
     const auto inside = l.shCoefficients({0, 0, 1.999999}, 4),
                outside = l.shCoefficients({0, 0, 2.000001}, 4);
-    for (int i = 0; i < 25; ++i) EXPECT_NEAR(inside[i].x, outside[i].x, 1e-4) << i;
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(inside[i].x, outside[i].x, kPointContinuityTol) << i;
     const auto near0 = l.shCoefficients({0, 1e-7, 0}, 4);
-    for (int i = 0; i < 25; ++i) EXPECT_NEAR(near0[i].x, at[i].x, 1e-4) << i;
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(near0[i].x, at[i].x, kPointContinuityTol) << i;
     // ∫ L dω = E everywhere, in SH and in DSF.
     for (double d : {0.0, 0.5, 1.5, 3.0}) {
         const glm::dvec3 x(d, 0, 0);
-        EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, l.irradianceAt(x).x, 1e-3);
+        EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, l.irradianceAt(x).x, kPointPowerTol);
         EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, l.irradianceAt(x).x,
-                    1e-3);
+                    kPointPowerTol);
     }
     // Far away it is a directional light.
     const glm::dvec3 x(0, 0, -30);
     const DirectionalLight dl(l.irradianceAt(x), {0, 0, 1});
     const auto a = l.shCoefficients(x, 4), b = dl.shCoefficients(x, 4);
-    for (int i = 0; i < 25; ++i) EXPECT_NEAR(a[i].x, b[i].x, 1e-6);
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(a[i].x, b[i].x, kFloatCoeffTol);
 }
 
 TEST(SphereLight, ShClosedFormMatchesQuadratureAndSolidAngle) {
@@ -144,21 +177,21 @@ TEST(SphereLight, ShClosedFormMatchesQuadratureAndSolidAngle) {
     const glm::dvec3 x(1, 2, -3);
     const double omega = l.solidAngle(x);
     const double d = glm::length(glm::dvec3(-1, -2, 13));
-    EXPECT_NEAR(omega, 2 * kPi * (1 - std::sqrt(1 - 16.0 / (d * d))), 1e-12);
+    EXPECT_NEAR(omega, 2 * kPi * (1 - std::sqrt(1 - 16.0 / (d * d))), kDoubleTol);
     const auto c = l.shCoefficients(x, 8);
-    EXPECT_NEAR(c[0].x, 3.0 * omega / kSqrt4Pi, 1e-6);
+    EXPECT_NEAR(c[0].x, 3.0 * omega / kSqrt4Pi, kFloatCoeffTol);
     // Brute force: project the radiance seen along each direction (indicator of the cone; its edge
     // limits the quadrature to ~1e-3 of c_0 with 600 Gauss–Legendre nodes).
     const auto q = sh::gaussLegendreSamples(600);
     const auto ref = sh::projectFunction(
         8, q, [&](const glm::dvec3& w) { return l.radiance(x, glm::vec3(w)).x; });
-    for (int i = 0; i < 81; ++i) EXPECT_NEAR(c[i].x, ref[i], 2e-3 * c[0].x) << i;
+    for (int i = 0; i < 81; ++i) EXPECT_NEAR(c[i].x, ref[i], kConeEdgeRelTol * c[0].x) << i;
     // DSF keeps the power.
     EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, 3.0 * omega,
-                1e-3 * 3.0 * omega);
+                kSphereDsfPowerRelTol * 3.0 * omega);
     checkSampler(l, x, 3.0 * omega, 3.0);
     // Inside: radiance from everywhere.
-    EXPECT_NEAR(l.shCoefficients({0, 0, 9}, 2)[0].x, 3.0 * kSqrt4Pi, 1e-5);
+    EXPECT_NEAR(l.shCoefficients({0, 0, 9}, 2)[0].x, 3.0 * kSqrt4Pi, kTensValueTol);
     checkSampler(l, {0, 0, 9}, 3.0 * 4 * kPi, 3.0);
     EXPECT_THROW(SphereLight({1, 1, 1}, {0, 0, 0}, -1.0), InputError);
 }
@@ -171,11 +204,11 @@ TEST(RectLight, SolidAngleSamplingAndSh) {
     const double omega = triangleSolidAngle(x, p0, p0 + eu, p0 + eu + ev) +
                          triangleSolidAngle(x, p0, p0 + eu + ev, p0 + ev);
     const auto c = l.shCoefficients(x, 4);
-    EXPECT_NEAR(c[0].x * kSqrt4Pi, 2.0 * omega, 2e-3 * 2.0 * omega);  // 32² midpoint cells
+    EXPECT_NEAR(c[0].x * kSqrt4Pi, 2.0 * omega, kRectMidpointRelTol * 2.0 * omega);
     const auto q = sh::gaussLegendreSamples(400);
     const auto ref = sh::projectFunction(
         4, q, [&](const glm::dvec3& w) { return l.radiance(x, glm::vec3(w)).x; });
-    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, ref[i], 5e-3 * c[0].x) << i;
+    for (int i = 0; i < 25; ++i) EXPECT_NEAR(c[i].x, ref[i], kRectShRelTol * c[0].x) << i;
     checkSampler(l, x, 2.0 * omega, 2.0);
     // Behind the emitter: nothing.
     EXPECT_EQ(l.sample({0, 0, 30}, {0.5f, 0.5f}).pdf, 0.0f);
@@ -188,9 +221,10 @@ TEST(DiskLight, OnAxisSolidAngleSamplingAndDsf) {
     const DiskLight l({1.5f, 1.5f, 1.5f}, {0, 0, 8}, {0, 0, -1}, 6.0);
     const glm::dvec3 x(0, 0, 0);
     const double omega = 2 * kPi * (1 - 8.0 / std::sqrt(64.0 + 36.0));
-    EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, 1.5 * omega, 3e-3 * 1.5 * omega);
+    EXPECT_NEAR(l.shCoefficients(x, 2)[0].x * kSqrt4Pi, 1.5 * omega,
+                kDiskQuadratureRelTol * 1.5 * omega);
     EXPECT_NEAR(dsf162().integrate(l.dsfCoefficients(x, dsf162())).x, 1.5 * omega,
-                3e-3 * 1.5 * omega);
+                kDiskQuadratureRelTol * 1.5 * omega);
     checkSampler(l, x, 1.5 * omega, 1.5);
     // Off axis: against the emitter quadrature's own ∫ L dω (independent of the sampler).
     const glm::dvec3 y(3, 1, 2);

@@ -16,6 +16,27 @@ using namespace voxlight::sh;
 
 namespace {
 constexpr double kPi = std::numbers::pi;
+// Exact geometric identities (kernel radius = minimum separation, normalised weights, barycentric
+// sums, a point on its own triangle) computed in double: a few ulps.
+constexpr double kDoubleExactTol = 1e-12;
+// Σ A_k = 4π: the basis solid angles come from a quadrature whose weights sum exactly, so only the
+// accumulated rounding of ~10⁵ terms remains.
+constexpr double kSolidAngleSumTol = 1e-9;
+// Barycentric weight of a vertex at the vertex itself: double, but through the triangle search.
+constexpr double kVertexWeightTol = 1e-9;
+// Integrals of float coefficients (relative 6e-8 each) over ≤ 2562 directions, values ≤ ~10.
+constexpr double kFloatIntegralTol = 1e-5;
+// Gaussian-weighted mean of a constant 0.7 map: normalised weights, float output.
+constexpr double kConstantMeanTol = 1e-5;
+// S(ω_k) = s_k for float coefficients in [0, 1): float rounding of the weighted sum.
+constexpr float kFloatInterpolationTol = 1e-6f;
+// Gaussian prefilter (σ = h/3 ≈ 0.03 rad) of a linear function: the window shrink 1 − σ²/… and its
+// truncation at 3σ leave ≲ 2e-3 at |a| ≈ 0.6; a wrong sample position is off by ~h·|a| ≈ 0.04.
+constexpr double kPrefilterLinearTol = 5e-3;
+// Relative slack for "least squares cannot lose to sampling": rounding of both error sums only.
+constexpr double kLeastSquaresSlack = 1e-9;
+// The checkerboard's dark value 0.05 as seen through float coefficients.
+constexpr double kFloatValueTol = 1e-6;
 
 glm::dvec3 randomDirection(core::CounterRng& rng) {
     const double z = 1 - 2 * rng.uniformDouble(), phi = 2 * kPi * rng.uniformDouble();
@@ -46,14 +67,13 @@ TEST(Dsf, CountsAndKernelRadius) {
     for (int n : {42, 162, 642}) {
         const Dsf d(n);
         EXPECT_EQ(d.size(), n);
-        EXPECT_NEAR(d.kernelRadius(), minimumSeparation(d.directions()), 1e-12);
+        EXPECT_NEAR(d.kernelRadius(), minimumSeparation(d.directions()), kDoubleExactTol);
         double sum = 0;
         for (double a : d.basisSolidAngles()) {
             EXPECT_GT(a, 0.0);
             sum += a;
         }
-        EXPECT_NEAR(sum, 4 * kPi,
-                    1e-9);  // partition of unity integrated by an exact-sum quadrature
+        EXPECT_NEAR(sum, 4 * kPi, kSolidAngleSumTol);
     }
     EXPECT_THROW(Dsf(100), InputError);
 }
@@ -91,7 +111,7 @@ TEST(Dsf, EnergyConservingProjectionOfAConstantMapIsConstant) {
         const auto s = d.projectEquirect(layout, img, glm::dmat3(1.0));
         for (int k = 0; k < n; ++k) ASSERT_NEAR(s[k].x, 0.7, 0.7 * kConstantTol) << "n=" << n;
         // Energy conservation is kept exactly: Σ A_k s_k = Σ_p L_p Ω_p = 0.7 · 4π.
-        EXPECT_NEAR(d.integrate(s).x, 0.7 * 4 * kPi, 1e-5) << "n=" << n;
+        EXPECT_NEAR(d.integrate(s).x, 0.7 * 4 * kPi, kFloatIntegralTol) << "n=" << n;
     }
 }
 
@@ -101,7 +121,7 @@ TEST(Dsf, InterpolatesAtItsDirections) {
     core::CounterRng rng(1);
     for (float& v : s) v = rng.uniform();
     for (int k = 0; k < d.size(); ++k)
-        ASSERT_NEAR(d.evaluate(s, d.directions()[k]), s[k], 1e-6) << k;
+        ASSERT_NEAR(d.evaluate(s, d.directions()[k]), s[k], kFloatInterpolationTol) << k;
 }
 
 TEST(Dsf, LocalLookupEqualsBruteForceKernel) {
@@ -125,10 +145,10 @@ TEST(Dsf, LocalLookupEqualsBruteForceKernel) {
         for (double r : ref) nonzero += r > 0;
         ASSERT_EQ(n, nonzero);
         for (int j = 0; j < n; ++j) {
-            ASSERT_NEAR(w[j], ref[idx[j]] / sum, 1e-12);
+            ASSERT_NEAR(w[j], ref[idx[j]] / sum, kDoubleExactTol);
             got += w[j];
         }
-        ASSERT_NEAR(got, 1.0, 1e-12);
+        ASSERT_NEAR(got, 1.0, kDoubleExactTol);
     }
 }
 
@@ -146,14 +166,14 @@ TEST(Dsf, DirectionalLightIsABarycentricBlend) {
             ASSERT_GE(b[i], 0.0);
             p += b[i] * d.directions()[idx[i]];
         }
-        ASSERT_NEAR(b[0] + b[1] + b[2], 1.0, 1e-12);
-        ASSERT_GT(glm::dot(glm::normalize(p), x), 1.0 - 1e-12);
+        ASSERT_NEAR(b[0] + b[1] + b[2], 1.0, kDoubleExactTol);
+        ASSERT_GT(glm::dot(glm::normalize(p), x), 1.0 - kDoubleExactTol);
         // Irradiance is conserved: Σ A_k s_k = E.
         std::vector<glm::vec3> s(d.size(), glm::vec3(0.0f));
         d.addDirectional(s, x, glm::vec3(3.0f, 2.0f, 1.0f));
         const glm::dvec3 e = d.integrate(s);
-        ASSERT_NEAR(e.x, 3.0, 1e-5);
-        ASSERT_NEAR(e.z, 1.0, 1e-5);
+        ASSERT_NEAR(e.x, 3.0, kFloatIntegralTol);
+        ASSERT_NEAR(e.z, 1.0, kFloatIntegralTol);
     }
     // At a DSF direction the light lands on that direction alone.
     int idx[3];
@@ -161,7 +181,7 @@ TEST(Dsf, DirectionalLightIsABarycentricBlend) {
     d.barycentric(d.directions()[17], idx, b);
     for (int i = 0; i < 3; ++i)
         if (idx[i] == 17) {
-            EXPECT_NEAR(b[i], 1.0, 1e-9);
+            EXPECT_NEAR(b[i], 1.0, kVertexWeightTol);
         }
 }
 
@@ -170,7 +190,7 @@ TEST(Dsf, PrefilteredSamplingOfSmoothAndConstantMaps) {
     constexpr int kW = 256, kH = 128;
     const EquirectLayout layout{kW, kH, 0.0, 2 * kPi / kW};
     std::vector<glm::vec3> img(kW * kH, glm::vec3(0.7f));
-    for (const auto& v : d.sampleEquirect(layout, img)) ASSERT_NEAR(v.x, 0.7f, 1e-5);
+    for (const auto& v : d.sampleEquirect(layout, img)) ASSERT_NEAR(v.x, 0.7f, kConstantMeanTol);
     // A linear function f = 1 + ω·a: the Gaussian mean of a linear function over a symmetric window
     // is (1 + cos-shrink · ω_k·a); with σ = h/3 ≈ 0.03 rad the shrink 1 − σ² ≈ 0.999.
     const glm::dvec3 a(0.3, 0.2, -0.5);
@@ -182,7 +202,7 @@ TEST(Dsf, PrefilteredSamplingOfSmoothAndConstantMaps) {
         }
     const auto s = d.sampleEquirect(layout, img);
     for (int k = 0; k < d.size(); ++k)
-        ASSERT_NEAR(s[k].x, 1.0 + glm::dot(d.directions()[k], a), 5e-3) << k;
+        ASSERT_NEAR(s[k].x, 1.0 + glm::dot(d.directions()[k], a), kPrefilterLinearTol) << k;
 }
 
 // Zhang et al. 2013 Fig. 7 on their synthetic checkerboard: DSF vs SH with a similar coefficient
@@ -287,7 +307,8 @@ TEST(Dsf, Fig7DsfBeatsShOnHighFrequencyEnvironment) {
         // The best any DSF coefficients can do on this map (grey: the red channel is the error).
         const double optimal = l2OptimalDsfError(Dsf(r.dsfCount), layout, img);
         std::printf("  DSF n = %d, L2-optimal coefficients: %.2f%%\n", r.dsfCount, 100 * optimal);
-        EXPECT_LE(optimal, r.dsfError * (1 + 1e-9)) << "least squares must not lose to sampling";
+        EXPECT_LE(optimal, r.dsfError * (1 + kLeastSquaresSlack))
+            << "least squares must not lose to sampling";
         EXPECT_GT(optimal, r.shError) << "DSF (even L2-optimal) now beats plain SH: update the "
                                          "comment above and the report";
         RecordProperty("dsf" + std::to_string(r.dsfCount) + "_error", std::to_string(r.dsfError));
@@ -313,6 +334,6 @@ TEST(Dsf, ReconstructionOfNonNegativeLightStaysNonNegative) {
         dsfMin = std::min(dsfMin, double(dsf642().evaluateRgb(s, d).x));
         shMin = std::min(shMin, double(shReconstruct(red, glm::vec3(d))));
     }
-    EXPECT_GE(dsfMin, 0.05 - 1e-6);  // the checkerboard's dark value
+    EXPECT_GE(dsfMin, 0.05 - kFloatValueTol);  // the checkerboard's dark value
     EXPECT_LT(shMin, 0.0);
 }

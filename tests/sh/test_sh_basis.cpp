@@ -24,6 +24,19 @@ constexpr double kDoubleEvalTol = 1e-11;
 // The bar for orthonormality by quadrature (the Gauss–Legendre rule used is exact up to
 // rounding).
 constexpr double kOrthoTol = 1e-6;
+// Float recurrence at L = 8 against double: values ≤ 3, ~10 float operations each.
+constexpr double kFloatVsDoubleTol = 1e-5;
+// Double recurrence against std::sph_legendre (both double, L ≤ 8): a few ulps of values ≤ 3.
+constexpr double kStdLegendreTol = 1e-12;
+// Poles: relative error per band of the zonal recurrence, growing ~linearly with l.
+constexpr double kPoleRelTolPerBand = 1e-13;
+// Addition theorem up to kMaxBand = 32: sums of 65 products, std::legendre's own rounding at l
+// = 32.
+constexpr double kAdditionTheoremTol = 1e-11;
+// Y_1 of an unnormalised float direction after normalisation in float.
+constexpr double kFloatY1Tol = 1e-6;
+// Float reconstruction Σ c_i Y_i over 49 terms of size ≤ ~1.
+constexpr double kFloatReconstructTol = 1e-5;
 
 glm::dvec3 randomDirection(std::uint64_t i, std::uint64_t seed = 1) {
     core::CounterRng rng(i, seed);
@@ -95,7 +108,7 @@ TEST(ShBasis, FloatRecurrenceMatchesDouble) {
         evalShUnit(8, glm::vec3(d), yf);
         evalShUnitDouble(8, d, yd);
         for (int i = 0; i < shCount(8); ++i)
-            ASSERT_NEAR(yf[i], yd[i], 1e-5) << i;  // float, L = 8 values ≤ 3
+            ASSERT_NEAR(yf[i], yd[i], kFloatVsDoubleTol) << i;  // float, L = 8 values ≤ 3
     }
 }
 
@@ -108,11 +121,11 @@ TEST(ShBasis, CondonShortleyPhaseIsExcluded) {
             const glm::dvec3 d = sphericalToDirection(theta, 0.0);
             std::vector<double> y(shCount(8));
             evalShUnitDouble(8, d, y);
-            EXPECT_NEAR(y[shIndex(l, 0)], std::sph_legendre(l, 0, theta), 1e-12);
+            EXPECT_NEAR(y[shIndex(l, 0)], std::sph_legendre(l, 0, theta), kStdLegendreTol);
             for (int m = 1; m <= l; ++m) {
                 const double ref =
                     std::numbers::sqrt2 * ((m % 2) ? -1.0 : 1.0) * std::sph_legendre(l, m, theta);
-                EXPECT_NEAR(y[shIndex(l, m)], ref, 1e-12) << "l=" << l << " m=" << m;
+                EXPECT_NEAR(y[shIndex(l, m)], ref, kStdLegendreTol) << "l=" << l << " m=" << m;
             }
         }
     }
@@ -140,7 +153,8 @@ TEST(ShBasis, ExactAtThePoles) {
         for (int l = 0; l <= kMaxBand; ++l) {
             const double expected =
                 std::sqrt((2.0 * l + 1.0) / (4.0 * kPi)) * ((s < 0 && l % 2) ? -1.0 : 1.0);
-            EXPECT_NEAR(y[shIndex(l, 0)], expected, 1e-13 * std::abs(expected) * (l + 1));
+            EXPECT_NEAR(y[shIndex(l, 0)], expected,
+                        kPoleRelTolPerBand * std::abs(expected) * (l + 1));
             for (int m = 1; m <= l; ++m) {
                 EXPECT_EQ(y[shIndex(l, m)], 0.0);
                 EXPECT_EQ(y[shIndex(l, -m)], 0.0);
@@ -159,7 +173,8 @@ TEST(ShBasis, AdditionTheorem) {
         for (int l = 0; l <= kMaxBand; ++l) {
             double s = 0;
             for (int m = -l; m <= l; ++m) s += ya[shIndex(l, m)] * yb[shIndex(l, m)];
-            EXPECT_NEAR(s, (2.0 * l + 1.0) / (4.0 * kPi) * std::legendre(l, glm::dot(a, b)), 1e-11)
+            EXPECT_NEAR(s, (2.0 * l + 1.0) / (4.0 * kPi) * std::legendre(l, glm::dot(a, b)),
+                        kAdditionTheoremTol)
                 << l;
         }
     }
@@ -222,9 +237,9 @@ TEST(ShBasis, BadDirectionsAreInputErrors) {
     }
     // Not normalised, even tiny: fine.
     evalSh(4, {0, 0, 1e-30f}, y);
-    EXPECT_NEAR(y[2], std::sqrt(3.0 / (4.0 * kPi)), 1e-6);
+    EXPECT_NEAR(y[2], std::sqrt(3.0 / (4.0 * kPi)), kFloatY1Tol);
     evalSh(4, {0, 5, 0}, y);
-    EXPECT_NEAR(y[1], std::sqrt(3.0 / (4.0 * kPi)), 1e-6);
+    EXPECT_NEAR(y[1], std::sqrt(3.0 / (4.0 * kPi)), kFloatY1Tol);
 }
 
 TEST(ShBasis, ReconstructIsDotWithBasis) {
@@ -234,5 +249,5 @@ TEST(ShBasis, ReconstructIsDotWithBasis) {
     double ref = 0;
     for (int l = 0; l <= 6; ++l)
         for (int m = -l; m <= l; ++m) ref += c[shIndex(l, m)] * evalShSlow(l, m, d);
-    EXPECT_NEAR(shReconstruct(c, glm::vec3(d)), ref, 1e-5);
+    EXPECT_NEAR(shReconstruct(c, glm::vec3(d)), ref, kFloatReconstructTol);
 }

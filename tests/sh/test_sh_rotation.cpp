@@ -20,6 +20,14 @@ constexpr double kPi = std::numbers::pi;
 // 8).
 constexpr double kOrthogonalityTol = 1e-5;
 constexpr double kPointwiseTol = 1e-4;
+// Float coefficients of size ≤ 1 through one or two rotations of L = 8 (≤ 17-term sums).
+constexpr double kFloatRotationTol = 1e-5;
+// Band 1 is R itself: float rounding of entries of size ≤ ~2.
+constexpr double kBandOneTol = 1e-6;
+// Double rotation vs double projection of a band-limited function (exact Gauss–Legendre).
+constexpr double kDoubleRotationTol = 1e-10;
+// Orthogonality at kMaxBand = 32: the recursion's double rounding grows with l (measured ~1e-12).
+constexpr double kHighBandOrthoTol = 1e-9;
 
 glm::dmat3 axisAngle(glm::dvec3 axis, double angle) {
     axis = glm::normalize(axis);
@@ -128,10 +136,10 @@ TEST(ShRotation, ComposesAndInverts) {
     rb.apply(f, x);
     ra.apply(x, x);  // in place
     rab.apply(f, y);
-    for (std::size_t i = 0; i < f.size(); ++i) EXPECT_NEAR(x[i], y[i], 1e-5) << i;
+    for (std::size_t i = 0; i < f.size(); ++i) EXPECT_NEAR(x[i], y[i], kFloatRotationTol) << i;
     ra.apply(f, x);
     rinv.apply(x, y);
-    for (std::size_t i = 0; i < f.size(); ++i) EXPECT_NEAR(y[i], f[i], 1e-5) << i;
+    for (std::size_t i = 0; i < f.size(); ++i) EXPECT_NEAR(y[i], f[i], kFloatRotationTol) << i;
 }
 
 TEST(ShRotation, BandOneIsThePermutedMatrix) {
@@ -142,9 +150,9 @@ TEST(ShRotation, BandOneIsThePermutedMatrix) {
     std::vector<float> f = {0, float(k * a.y), float(k * a.z), float(k * a.x)}, g(4);
     ShRotation(r, 1).apply(f, g);
     const glm::dvec3 ra = r * a;
-    EXPECT_NEAR(g[1], k * ra.y, 1e-6);
-    EXPECT_NEAR(g[2], k * ra.z, 1e-6);
-    EXPECT_NEAR(g[3], k * ra.x, 1e-6);
+    EXPECT_NEAR(g[1], k * ra.y, kBandOneTol);
+    EXPECT_NEAR(g[2], k * ra.z, kBandOneTol);
+    EXPECT_NEAR(g[3], k * ra.x, kBandOneTol);
 }
 
 TEST(ShRotation, ZFastPathMatchesGeneral) {
@@ -154,7 +162,7 @@ TEST(ShRotation, ZFastPathMatchesGeneral) {
         ShRotation(axisAngle({0, 0, 1}, angle), 8).apply(f, a);
         rotateZ(angle, b, b);  // in place
         for (std::size_t i = 0; i < f.size(); ++i)
-            EXPECT_NEAR(a[i], b[i], 1e-5) << i << " angle " << angle;
+            EXPECT_NEAR(a[i], b[i], kFloatRotationTol) << i << " angle " << angle;
     }
 }
 
@@ -168,7 +176,8 @@ TEST(ShRotation, RotateThenProjectEqualsProjectRotated) {
         6, q, [&](const glm::dvec3& w) { return shReconstructDouble(fd, glm::transpose(r) * w); });
     std::vector<double> rotated(fd.size());
     ShRotation(r, 6).apply(std::span<const double>(fd), std::span<double>(rotated));
-    for (std::size_t i = 0; i < fd.size(); ++i) EXPECT_NEAR(direct[i], rotated[i], 1e-10) << i;
+    for (std::size_t i = 0; i < fd.size(); ++i)
+        EXPECT_NEAR(direct[i], rotated[i], kDoubleRotationTol) << i;
 }
 
 TEST(ShRotation, HighBandsStayOrthogonal) {
@@ -181,7 +190,7 @@ TEST(ShRotation, HighBandsStayOrthogonal) {
                 for (int j = -l; j <= l; ++j) s += rot.element(l, m, j) * rot.element(l, n, j);
                 worst = std::max(worst, std::abs(s - (m == n)));
             }
-    EXPECT_LT(worst, 1e-9);
+    EXPECT_LT(worst, kHighBandOrthoTol);
 }
 
 TEST(ShRotation, CacheRebuildsOnlyOnChange) {
@@ -244,7 +253,8 @@ TEST(ShRotation, NearRotationIsOrthonormalised) {
     glm::dmat3 skewed = exact;  // e.g. a matrix typed with five digits
     skewed[0][1] += 3e-5, skewed[2][0] -= 2e-5, skewed[1][1] *= 1 + 2e-5;
     ASSERT_NO_THROW(checkRotation(skewed));
-    ASSERT_GT(orthoError(skewed), 1e-5);  // the input really is off
+    constexpr double kSkewAtLeast = 1e-5;  // the input is off far beyond kBlockOrthoTol
+    ASSERT_GT(orthoError(skewed), kSkewAtLeast);
     const glm::dmat3 q = orthonormalizeRotation(skewed);
     EXPECT_LT(orthoError(q), kOrthonormalTol);
     EXPECT_NEAR(glm::determinant(q), 1.0, kOrthonormalTol);

@@ -15,6 +15,21 @@ namespace {
 constexpr double kFourPi = 4.0 * std::numbers::pi;
 // Weights are sums of ~N doubles of size 4π/N.
 constexpr double kWeightSumTol = 1e-9;
+// Unit directions and closed-form Gauss–Legendre nodes/weights in double: a few ulps.
+constexpr double kUnitLengthTol = 1e-12;
+constexpr double kNodeTol = 1e-14;
+constexpr double kZeroNodeTol = 1e-15;
+// Moment errors (relative error of ∫ z⁴): the area-weighted tetrahedron with 290 points on
+// strongly non-uniform triangles, Fibonacci with 2000 points, and Gauss–Legendre, exact for
+// degree ≤ 7 up to rounding.
+constexpr double kTetrahedronMomentTol = 0.02;
+constexpr double kFibonacciMomentTol = 1e-3;
+constexpr double kExactMomentTol = 1e-13;
+// Monte-Carlo error of z⁴ at N = 4096 has σ ≈ 0.8/√N ≈ 1.3 % relative; 8 seeds, 5σ.
+constexpr double kMonteCarloMomentBound = 0.065;
+// Jittered stratification must at least halve the uniform Monte-Carlo moment error (the test's bar;
+// for a smooth integrand like z⁴ the real gain is much larger).
+constexpr double kStratificationGain = 0.5;
 
 double sumWeights(const SphereSamples& s) {
     double w = 0;
@@ -36,7 +51,7 @@ double momentError(const SphereSamples& s) {
 
 void expectUnitAndSummed(const SphereSamples& s) {
     ASSERT_EQ(s.directions.size(), s.weights.size());
-    for (const auto& d : s.directions) ASSERT_NEAR(glm::length(d), 1.0, 1e-12);
+    for (const auto& d : s.directions) ASSERT_NEAR(glm::length(d), 1.0, kUnitLengthTol);
     EXPECT_NEAR(sumWeights(s), kFourPi, kWeightSumTol) << s;
 }
 }  // namespace
@@ -76,18 +91,17 @@ TEST(SphereSamples, QuadratureAccuracyOrdering) {
     const double equalTet =
         momentError(polyhedronSamples(Polyhedron::Tetrahedron, 12, SampleWeighting::Equal));
     EXPECT_LT(areaTet, equalTet);
-    EXPECT_LT(areaTet, 0.02);  // 290 points on strongly non-uniform tetrahedral triangles
-    EXPECT_LT(momentError(fibonacciSamples(2000)), 1e-3);
-    EXPECT_LT(momentError(gaussLegendreSamples(4)), 1e-13);  // exact for degree ≤ 7
+    EXPECT_LT(areaTet, kTetrahedronMomentTol);
+    EXPECT_LT(momentError(fibonacciSamples(2000)), kFibonacciMomentTol);
+    EXPECT_LT(momentError(gaussLegendreSamples(4)), kExactMomentTol);
     // Stratification reduces the error of uniform Monte-Carlo at N = 4096 (averaged over 8 seeds).
     double jit = 0, mc = 0;
     for (int s = 0; s < 8; ++s) {
         jit += momentError(jitteredSamples(4096, s));
         mc += momentError(uniformRandomSamples(4096, s));
     }
-    EXPECT_LT(jit, 0.5 * mc);
-    // Monte-Carlo error of z⁴ at N = 4096 has σ ≈ 0.8/√N ≈ 1.3 % relative; 8 seeds, 5σ.
-    EXPECT_LT(mc / 8, 0.065);
+    EXPECT_LT(jit, kStratificationGain * mc);
+    EXPECT_LT(mc / 8, kMonteCarloMomentBound);
 }
 
 TEST(SphereSamples, JitteredPatternsAreDeterministicAndDistinct) {
@@ -103,10 +117,10 @@ TEST(SphereSamples, GaussLegendreNodes) {
     gaussLegendre(5, x, w);
     // Closed form for n = 5: nodes 0, ±(1/3)√(5 − 2√(10/7)), ±(1/3)√(5 + 2√(10/7)); weight of 0 is
     // 128/225.
-    EXPECT_NEAR(x[2], 0.0, 1e-15);
-    EXPECT_NEAR(w[2], 128.0 / 225.0, 1e-14);
-    EXPECT_NEAR(std::abs(x[1]), std::sqrt(5.0 - 2.0 * std::sqrt(10.0 / 7.0)) / 3.0, 1e-14);
-    EXPECT_NEAR(std::abs(x[0]), std::sqrt(5.0 + 2.0 * std::sqrt(10.0 / 7.0)) / 3.0, 1e-14);
+    EXPECT_NEAR(x[2], 0.0, kZeroNodeTol);
+    EXPECT_NEAR(w[2], 128.0 / 225.0, kNodeTol);
+    EXPECT_NEAR(std::abs(x[1]), std::sqrt(5.0 - 2.0 * std::sqrt(10.0 / 7.0)) / 3.0, kNodeTol);
+    EXPECT_NEAR(std::abs(x[0]), std::sqrt(5.0 + 2.0 * std::sqrt(10.0 / 7.0)) / 3.0, kNodeTol);
 }
 
 TEST(SphereSamples, MinimumSeparationOfIcosahedron) {
