@@ -76,6 +76,31 @@ template <class View>
     return m * d;
 }
 
+/// World gradient from the precomputed central differences: their trilinear interpolation at p
+/// (same clamping and weights as trilinear()), then the same scaling as gradientAt.
+[[gnu::always_inline]] inline glm::vec3 voxelGradientAt(const VoxelGradients& g, const glm::vec3& p,
+                                                        const glm::mat3& m) {
+    const float x = std::min(std::max(p.x, 0.f), float(g.nx - 1));
+    const float y = std::min(std::max(p.y, 0.f), float(g.ny - 1));
+    const float z = std::min(std::max(p.z, 0.f), float(g.nz - 1));
+    const int i = std::min(int(x), g.nx - 2 < 0 ? 0 : g.nx - 2);
+    const int j = std::min(int(y), g.ny - 2 < 0 ? 0 : g.ny - 2);
+    const int k = std::min(int(z), g.nz - 2 < 0 ? 0 : g.nz - 2);
+    const float fx = x - float(i), fy = y - float(j), fz = z - float(k);
+    const int di = g.nx > 1 ? 1 : 0;
+    const std::size_t dj = g.ny > 1 ? g.sy : 0, dk = g.nz > 1 ? g.sz : 0;
+    const auto* q = g.d.data() + i + g.sy * j + g.sz * k;
+    auto lerpX = [&](const std::array<std::int16_t, 4>& a, const std::array<std::int16_t, 4>& b) {
+        return glm::vec3(float(a[0]) + fx * (float(b[0]) - float(a[0])),
+                         float(a[1]) + fx * (float(b[1]) - float(a[1])),
+                         float(a[2]) + fx * (float(b[2]) - float(a[2])));
+    };
+    const glm::vec3 c00 = lerpX(q[0], q[di]), c10 = lerpX(q[dj], q[dj + di]);
+    const glm::vec3 c01 = lerpX(q[dk], q[dk + di]), c11 = lerpX(q[dk + dj], q[dk + dj + di]);
+    const glm::vec3 c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
+    return m * (g.slope * (c0 + fz * (c1 - c0)));
+}
+
 /// World gradient by forward differences from the known value s0 at p (3 taps instead of 6; the
 /// estimate belongs to p + half a voxel, which shading does not notice at clinical zoom).
 template <class View>
@@ -195,7 +220,10 @@ struct DvrMarcher {
         if constexpr (S::kNeedsNormal) {
             const glm::vec3 p = r.originIndex + t1 * r.dirIndex;
             glm::vec3 g;
-            if (c.options().centralDifferences) {
+            if (const VoxelGradients* vg = c.voxelGradients()) {
+                g = voxelGradientAt(*vg, p, c.gradientMatrix());
+                samples += 1;
+            } else if (c.options().centralDifferences) {
                 g = gradientAt(v, p, c.gradientMatrix());
                 samples += 6;
             } else {

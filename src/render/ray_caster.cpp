@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
 #include <mutex>
@@ -76,6 +77,43 @@ grid::BrickMajorants refineMajorants(const core::Volume& volume, const grid::Bri
 }
 }  // namespace
 
+VoxelGradients VoxelGradients::build(const core::Volume& volume) {
+    VoxelGradients g;
+    if (volume.type() == core::VoxelType::Float32 || volume.voxelCount() > kMaxVoxels) return g;
+    const glm::ivec3 n = volume.dims();
+    g.nx = n.x, g.ny = n.y, g.nz = n.z;
+    g.sy = std::size_t(n.x);
+    g.sz = std::size_t(n.x) * std::size_t(n.y);
+    g.slope = float(volume.mapping.slope);
+    g.d.resize(std::size_t(volume.voxelCount()));
+    std::atomic<bool> fits = true;
+    volume.visit([&](const auto& v) {
+        // Central differences with clamped indices (what gradientAt's clamped taps see).
+        tbb::parallel_for(0, n.z, [&](int k) {
+            const int k0 = std::max(k - 1, 0), k1 = std::min(k + 1, n.z - 1);
+            bool ok = true;
+            for (int j = 0; j < n.y; ++j) {
+                const int j0 = std::max(j - 1, 0), j1 = std::min(j + 1, n.y - 1);
+                auto* out = g.d.data() + g.sy * j + g.sz * k;
+                for (int i = 0; i < n.x; ++i) {
+                    const int i0 = std::max(i - 1, 0), i1 = std::min(i + 1, n.x - 1);
+                    const int dx = int(v.data[i1 + v.sy * j + v.sz * k]) -
+                                   int(v.data[i0 + v.sy * j + v.sz * k]);
+                    const int dy = int(v.data[i + v.sy * j1 + v.sz * k]) -
+                                   int(v.data[i + v.sy * j0 + v.sz * k]);
+                    const int dz = int(v.data[i + v.sy * j + v.sz * k1]) -
+                                   int(v.data[i + v.sy * j + v.sz * k0]);
+                    ok &= std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) <= 32767;
+                    out[i] = {std::int16_t(dx), std::int16_t(dy), std::int16_t(dz), 0};
+                }
+            }
+            if (!ok) fits = false;
+        });
+    });
+    if (!fits) g.d = {};
+    return g;
+}
+
 RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
                      const optics::TransferFunction& tf, RenderOptions options)
     : volume_(&volume), tf_(&tf), options_(std::move(options)) {
@@ -96,8 +134,11 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     // Which bricks can be skipped in this mode, refined to kSkipCellVoxels³ cells.
     const float widen = table_->cellWidth();  // table interpolation leaks σt up to one cell
     switch (options_.mode) {
-        case Mode::EmissionAbsorption:
         case Mode::Gradient: {
+            if (options_.centralDifferences) voxelGradients_ = VoxelGradients::build(volume);
+            [[fallthrough]];
+        }
+        case Mode::EmissionAbsorption: {
             auto classify = [&](float lo, float hi) {
                 return tf.maxExtinction(lo - widen, hi + widen);
             };
