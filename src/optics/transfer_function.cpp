@@ -212,21 +212,49 @@ TfTable::Segment TfTable::midpoint(float sf, float sb) const {
     return g;
 }
 
-TfTable::Segment TfTable::segmentSlow(float sf, float sb) const {
+TfTable::Cumulative& TfTable::cumulative(float value, SegmentCache& cache,
+                                         const Cumulative* other) const {
+    for (Cumulative& c : cache.slot)
+        if (c.value == value) return c;  // NaN never equals: recomputed below
+    Cumulative& c = &cache.slot[0] == other ? cache.slot[1] : cache.slot[0];
+    c.value = value;
+    c.haveWeighted = false;
+    c.sigma = cumulativeSigma(value, c.cell, c.x);
+    return c;
+}
+
+void TfTable::ensureWeighted(Cumulative& c) const {
+    if (c.haveWeighted) return;
+    cumulativeWeighted(double(c.value), c.cell, c.x, c.weighted);
+    c.haveWeighted = true;
+}
+
+TfTable::Segment TfTable::segmentSlow(float sf, float sb, SegmentCache* cache) const {
     // Below a hundredth of a cell the integrand is linear to float precision: point-sample.
     constexpr float kPointSampleFraction = 1e-2f;
     if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction)) return midpoint(sf, sb);
-    int ca, cb;
-    double xa, xb;
-    const double ia = cumulativeSigma(sf, ca, xa), ib = cumulativeSigma(sb, cb, xb);
+    Cumulative local[2];
+    Cumulative* a;
+    Cumulative* b;
+    if (cache) {
+        a = &cumulative(sf, *cache, nullptr);
+        b = &cumulative(sb, *cache, a);
+    } else {
+        a = &local[0], b = &local[1];
+        a->value = sf, b->value = sb;
+        a->sigma = cumulativeSigma(sf, a->cell, a->x);
+        b->sigma = cumulativeSigma(sb, b->cell, b->x);
+    }
+    const double ia = a->sigma, ib = b->sigma;
     const double inv = 1.0 / (double(sb) - double(sf));
     const double sigma = (ib - ia) * inv;
     Segment g;
     if (!(sigma > 0.0)) return g;
     g.meanExtinction = float(sigma);
-    double wa[6], wb[6];
-    cumulativeWeighted(sf, ca, xa, wa);
-    cumulativeWeighted(sb, cb, xb, wb);
+    ensureWeighted(*a);
+    ensureWeighted(*b);
+    const double* wa = a->weighted;
+    const double* wb = b->weighted;
     const double w = 1.0 / (ib - ia);
     for (int c = 0; c < 3; ++c) {
         g.albedo[c] = float(std::clamp((wb[c] - wa[c]) * w, 0.0, 1.0));

@@ -132,6 +132,24 @@ class TfTable {
         if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
         return segmentSlow(sf, sb);
     }
+    /// The cumulative integrals at one value, as segment() evaluates them. A ray marcher keeps the
+    /// last two (SegmentCache): the back value of one segment is the front of the next, so each
+    /// value's integrals are evaluated once instead of twice. Results are bit-identical.
+    struct Cumulative {
+        float value = NAN;  ///< key (bitwise); NaN never matches, so a NaN value is recomputed
+        int cell = 0;
+        bool haveWeighted = false;
+        double x = 0.0, sigma = 0.0;
+        double weighted[6];
+    };
+    struct SegmentCache {
+        Cumulative slot[2];
+    };
+    /// segment(sf, sb) reusing (and updating) `cache`.
+    Segment segment(float sf, float sb, SegmentCache& cache) const {
+        if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
+        return segmentSlow(sf, sb, &cache);
+    }
     /// True when segment(sf, sb) is certainly transparent (cheap test).
     bool transparentSegment(float sf, float sb) const {
         return std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_;
@@ -147,7 +165,10 @@ class TfTable {
     float hi() const { return hi_; }
 
   private:
-    Segment segmentSlow(float sf, float sb) const;
+    Segment segmentSlow(float sf, float sb, SegmentCache* cache = nullptr) const;
+    /// Entry of `cache` for `value` (computing σ's integral into the slot `other` does not use).
+    Cumulative& cumulative(float value, SegmentCache& cache, const Cumulative* other) const;
+    void ensureWeighted(Cumulative& c) const;
     struct Node {
         float sigma;
         glm::vec3 albedo;

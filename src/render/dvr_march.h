@@ -171,6 +171,7 @@ struct DvrMarcher {
     float T = 1.f;
     glm::vec3 L{0.f};
     std::uint64_t samples = 0;
+    optics::TfTable::SegmentCache cache;  ///< integrals at the last values (each value once)
 
     DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
         : c(c_), v(v_), r(r_), shader(s_), table(c_.table()) {
@@ -208,7 +209,7 @@ struct DvrMarcher {
             }
         }
         const optics::TfTable::Segment seg =
-            preint ? table.segment(s0, s1) : table.midpoint(s0, s1);
+            preint ? table.segment(s0, s1, cache) : table.midpoint(s0, s1);
         const float tau = seg.meanExtinction * dt;
         if (!(tau > 0.f)) return;
         const float alpha = 1.f - std::exp(-tau);
