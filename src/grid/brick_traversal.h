@@ -12,6 +12,8 @@
 // which brick floor(p)/16 bounds (BrickGrid includes the apron voxel), so brick b covers
 // [16·b, 16·b + 16) on each axis; positions outside the grid clamp to the edge bricks. The same
 // holds for finer majorant cells of any size (BrickMajorants::fromCells).
+#include <algorithm>
+#include <cstddef>
 #include <cstdint>
 #include <vector>
 
@@ -37,8 +39,8 @@ class BrickMajorants {
             m.range_[i] = {s.min, s.max};
             const float v = s.valid() ? float(classify(s.min, s.max)) : 0.f;
             m.majorant_[i] = v > 0.f ? v : 0.f;
-            m.nonEmpty_ += m.majorant_[i] > 0.f ? 1 : 0;
         }
+        m.finish();
         return m;
     }
     /// A majorant grid of cells of `cellSize` voxels (same apron rule as the bricks), e.g. finer
@@ -54,7 +56,7 @@ class BrickMajorants {
         m.cellSize_ = cellSize;
         m.majorant_ = std::move(majorants);
         m.range_ = std::move(ranges);
-        for (float v : m.majorant_) m.nonEmpty_ += v > 0.f ? 1 : 0;
+        m.finish();
         return m;
     }
     const glm::ivec3& counts() const { return counts_; }
@@ -68,12 +70,23 @@ class BrickMajorants {
     const std::array<float, 2>& valueRange(std::size_t i) const { return range_[i]; }
     std::size_t size() const { return majorant_.size(); }
     std::size_t nonEmptyCount() const { return nonEmpty_; }
+    /// 1 where majorant(i) > 0 (a byte per cell, for the traversal's hot loop).
+    const std::uint8_t* nonEmptyFlags() const { return flags_.data(); }
 
   private:
+    void finish() {
+        flags_.resize(majorant_.size());
+        nonEmpty_ = 0;
+        for (std::size_t i = 0; i < majorant_.size(); ++i) {
+            flags_[i] = majorant_[i] > 0.f ? 1 : 0;
+            nonEmpty_ += flags_[i];
+        }
+    }
     glm::ivec3 counts_{0};
     int cellSize_ = kBrickSize;
     std::vector<float> majorant_;
     std::vector<std::array<float, 2>> range_;
+    std::vector<std::uint8_t> flags_;
     std::size_t nonEmpty_ = 0;
 };
 
@@ -83,6 +96,65 @@ struct RayInterval {
     float maxExtinction = 0.f;             ///< majorant; 0 = skippable
     bool empty() const { return !(maxExtinction > 0.f); }
 };
+
+/// The 3D-DDA state over the cells of a BrickMajorants, shared by RayIntervalIterator and
+/// forEachNonEmptyRun (same arithmetic, so both yield bit-identical interval ends).
+struct CellDda {
+    CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
+            const glm::vec3& directionIndex, float tMin, float tMax);
+    /// The next cell along the ray: its linear index and parameter range [t0, t1]; false when the
+    /// ray has left [tMin, tMax] (the last cell extends to tMax).
+    [[gnu::always_inline]] bool step(float& t0, float& t1, std::size_t& cellIndex) {
+        if (done) return false;
+        const int a =
+            tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2) : (tNext.y <= tNext.z ? 1 : 2);
+        cellIndex = index;
+        t0 = t;
+        t1 = std::min(tNext[a], tMax);
+        t = t1;
+        if (t1 >= tMax) {
+            done = true;
+        } else {
+            cell[a] += stepDir[a];
+            index += indexStep[a];
+            tNext[a] += tDelta[a];
+            if (cell[a] < 0 || cell[a] >= counts[a]) done = true;
+            if (done) t1 = tMax;  // leaving the grid: the rest of the ray is in the edge cell
+            t = t1;
+        }
+        return true;
+    }
+
+    glm::ivec3 cell{0}, stepDir{0}, counts{0};
+    std::ptrdiff_t indexStep[3] = {0, 0, 0};
+    std::size_t index = 0;
+    glm::vec3 tNext{0.f}, tDelta{0.f};
+    float t = 0.f, tMax = 0.f;
+    bool done = false;
+};
+
+/// Calls f(t0, t1) for each maximal run of consecutive non-empty cells along the ray within
+/// [tMin, tMax], in order; f returns false to stop. The non-empty intervals of a merging
+/// RayIntervalIterator, bit for bit, without the value ranges (the ray caster's fast path).
+template <class F>
+inline void forEachNonEmptyRun(const BrickMajorants& majorants, const glm::vec3& originIndex,
+                               const glm::vec3& directionIndex, float tMin, float tMax, F&& f) {
+    CellDda dda(majorants, originIndex, directionIndex, tMin, tMax);
+    const std::uint8_t* flags = majorants.nonEmptyFlags();
+    float t0, t1, runT0 = 0.f, runT1 = 0.f;
+    std::size_t i;
+    bool inRun = false;
+    while (dda.step(t0, t1, i)) {
+        if (flags[i]) {
+            if (!inRun) runT0 = t0, inRun = true;
+            runT1 = t1;
+        } else if (inRun) {
+            inRun = false;
+            if (!f(runT0, runT1)) return;
+        }
+    }
+    if (inRun) f(runT0, runT1);
+}
 
 /// DDA over the bricks a ray crosses within [tMin, tMax], merging runs of the same kind.
 class RayIntervalIterator {
@@ -96,13 +168,9 @@ class RayIntervalIterator {
     bool next(RayInterval& out);
 
   private:
-    bool stepBrick(float& t0, float& t1, std::size_t& brick);
-
     const BrickMajorants* m_;
-    glm::ivec3 cell_{0}, step_{0};
-    glm::vec3 tNext_{0.f}, tDelta_{0.f};
-    float t_ = 0.f, tMax_ = 0.f;
-    bool merge_ = true, done_ = false;
+    CellDda dda_;
+    bool merge_ = true;
     bool havePending_ = false;
     RayInterval pending_;
 };

@@ -143,12 +143,8 @@ inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const Sa
         f(std::int64_t(0), lat.last);
         return;
     }
-    grid::RayIntervalIterator it(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar);
-    grid::RayInterval iv;
-    while (it.next(iv)) {
-        if (iv.empty()) continue;
-        if (!f(lat.before(iv.t0), lat.after(iv.t1))) return;
-    }
+    grid::forEachNonEmptyRun(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar,
+                             [&](float t0, float t1) { return f(lat.before(t0), lat.after(t1)); });
 }
 
 /// Segments longer than one voxel (coarse steps) may see a strongly non-linear value profile
