@@ -156,6 +156,18 @@ inline void forEachNonEmptyRun(const BrickMajorants& majorants, const glm::vec3&
     if (inRun) f(runT0, runT1);
 }
 
+/// Calls f(t0, t1, cellIndex) for every cell along the ray within [tMin, tMax], in order (no
+/// merging); f returns false to stop.
+template <class F>
+inline void forEachCell(const BrickMajorants& majorants, const glm::vec3& originIndex,
+                        const glm::vec3& directionIndex, float tMin, float tMax, F&& f) {
+    CellDda dda(majorants, originIndex, directionIndex, tMin, tMax);
+    float t0, t1;
+    std::size_t i;
+    while (dda.step(t0, t1, i))
+        if (!f(t0, t1, i)) return;
+}
+
 /// DDA over the bricks a ray crosses within [tMin, tMax], merging runs of the same kind.
 class RayIntervalIterator {
   public:

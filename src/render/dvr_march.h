@@ -289,18 +289,21 @@ bool marchExtremum(const RayCaster& c, const View& v, const RaySegment& r, float
     if (!c.options().emptySpaceSkipping) {
         visit(0, lat.last);
     } else {
-        // Skip bricks that cannot beat the current extremum.
-        grid::RayIntervalIterator it(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar,
-                                     /*mergeNonEmpty=*/false);
-        grid::RayInterval iv;
+        // Skip cells that cannot beat the current extremum (samples inside a cell are bounded by
+        // its value range; a skipped sample can therefore not change the result).
+        const grid::BrickMajorants& cells = c.majorants();
         std::int64_t done = -1;
-        while (it.next(iv)) {
-            if (any && (kMax ? iv.valueMax <= m : iv.valueMin >= m)) continue;
-            const std::int64_t i0 = std::max(lat.before(iv.t0), done + 1), i1 = lat.after(iv.t1);
-            if (i1 < i0) continue;
-            visit(i0, i1);
-            done = i1;
-        }
+        grid::forEachCell(cells, r.originIndex, r.dirIndex, r.tNear, r.tFar,
+                          [&](float t0, float t1, std::size_t cell) {
+                              const std::array<float, 2>& range = cells.valueRange(cell);
+                              if (any && (kMax ? range[1] <= m : range[0] >= m)) return true;
+                              const std::int64_t i0 = std::max(lat.before(t0), done + 1);
+                              const std::int64_t i1 = lat.after(t1);
+                              if (i1 < i0) return true;
+                              visit(i0, i1);
+                              done = i1;
+                              return true;
+                          });
     }
     result = m;
     return any;

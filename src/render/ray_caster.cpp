@@ -147,9 +147,13 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
             break;
         }
         case Mode::Mip:
-        case Mode::MinIp:
-            majorants_ = grid::BrickMajorants::build(grid, [](float, float) { return 1.f; });
+        case Mode::MinIp: {
+            // Nothing is skippable, but the kSkipCellVoxels³ value ranges let the extremum
+            // search skip cells that cannot beat the current extremum (tighter than bricks).
+            auto any = [](float, float) { return 1.f; };
+            majorants_ = refineMajorants(volume, grid::BrickMajorants::build(grid, any), any);
             break;
+        }
         case Mode::Isosurface: {
             auto classify = [&](float lo, float hi) {
                 return lo <= isoValue_ && isoValue_ <= hi ? 1.f : 0.f;
