@@ -157,7 +157,7 @@ inline constexpr int kMaxRefinement = 4;
 template <class View, class S>
 struct DvrMarcher {
     const RayCaster& c;
-    const View& v;
+    const View v;  ///< a copy: stores to the counters below cannot alias its fields
     const RaySegment& r;
     const S& shader;
     const optics::TfTable& table;
@@ -279,10 +279,13 @@ bool marchExtremum(const RayCaster& c, const View& v, const RaySegment& r, float
     const SampleLattice lat(r, c.stepMm());
     float m = kMax ? -INFINITY : INFINITY;
     bool any = false;
+    // Local copies, so that the compiler keeps them in registers across the sample loop.
+    const View view = v;
+    std::uint64_t taken = 0;
     auto visit = [&](std::int64_t i0, std::int64_t i1) {
         for (std::int64_t i = i0; i <= i1; ++i) {
-            const float s = sampleAt(v, r, lat.t(i));
-            ++samples;
+            const float s = sampleAt(view, r, lat.t(i));
+            ++taken;
             if (kMax ? s > m : s < m) m = s, any = true;
         }
     };
@@ -305,6 +308,7 @@ bool marchExtremum(const RayCaster& c, const View& v, const RaySegment& r, float
                               return true;
                           });
     }
+    samples += taken;
     result = m;
     return any;
 }
