@@ -128,19 +128,6 @@ double torsoHU(const glm::dvec3& p, double h) {
     paint(dSkin, 30.0);                 // skin
     paint(body(167.0, 117.0), -100.0);  // subcutaneous fat
     paint(body(150.0, 102.0), 50.0);    // muscle / soft tissue
-    // Ribs: elliptic tubes inside the muscle wall, upper half, open anteriorly (costal cartilage
-    // left out).
-    if (p.z > -40.0 && p.z < 170.0) {
-        const double ang = std::atan2(p.y, p.x);  // +y posterior
-        const bool besideSternum = std::abs(std::abs(ang) - kPi / 2) < 0.35 && p.y < 0;
-        if (!besideSternum) {
-            const double ring = sdEllipse2(p.x, p.y, 138.0, 92.0);
-            for (double zr = -25.0; std::abs(ring) < 5.5 + h && zr < 170.0; zr += 24.0) {
-                const double zc = zr + 12.0 * std::sin(ang);  // ribs slope downward anteriorly
-                paint(std::hypot(ring, p.z - zc) - 5.5, 700.0);
-            }
-        }
-    }
     // Lungs (upper half), with a faint parenchyma texture added by the noise below.
     paintEllipsoid({-72.0, -5.0, 85.0}, {58.0, 78.0, 105.0}, -850.0);
     paintEllipsoid({72.0, -5.0, 85.0}, {55.0, 78.0, 105.0}, -850.0);
@@ -152,6 +139,47 @@ double torsoHU(const glm::dvec3& p, double h) {
     paintEllipsoid({-58.0, 60.0, -115.0}, {25.0, 22.0, 45.0}, 35.0);
     paintEllipsoid({58.0, 60.0, -110.0}, {25.0, 22.0, 45.0}, 35.0);
     paintEllipsoid({78.0, 30.0, -45.0}, {35.0, 45.0, 40.0}, 45.0);
+    // Rib cage: ten pairs of ribs from the transverse processes around to the front, sloping down
+    // anteriorly and widening caudally, each a flattened tube (cortex with a marrow core); the
+    // upper seven join the sternum through costal cartilage.
+    if (p.z > -60.0 && p.z < 175.0 && p.y < 95.0) {
+        const double phi =
+            std::atan2(std::abs(p.x), p.y);  // 0 at the spine (posterior), π at the sternum
+        const double t = phi / kPi;
+        for (int n = 0; n < 10; ++n) {
+            const double rx = 126.0 + 2.0 * n, ry = 88.0 + 0.8 * n;
+            const double ring = sdEllipse2(p.x, p.y, rx, ry);
+            if (std::abs(ring) > 8.0 + h) continue;
+            const double zc = 160.0 - 21.0 * n - 55.0 * std::pow(t, 1.4);
+            const double dz = p.z - zc;
+            if (std::abs(dz) > 10.0 + h) continue;
+            const double tEnd = 0.80 - 0.012 * n;
+            if (t < 0.12 || t > 0.97) continue;
+            if (t <= tEnd) {
+                paint((std::hypot(ring / 4.5, dz / 7.5) - 1.0) * 4.5, 750.0);
+                paint((std::hypot(ring / 2.5, dz / 5.0) - 1.0) * 2.5, 260.0);
+            } else if (n < 7) {
+                paint((std::hypot(ring / 3.5, dz / 6.0) - 1.0) * 3.5, 130.0);  // costal cartilage
+            }
+        }
+    }
+    // Sternum (manubrium and body), scapulae and clavicles.
+    paint(sdBox(p, {-14.0, -101.0, 30.0}, {14.0, -89.0, 165.0}), 700.0);
+    paint(sdBox(p, {-10.0, -98.0, 34.0}, {10.0, -92.0, 161.0}), 250.0);
+    for (int side = -1; side <= 1; side += 2) {
+        // Scapula: a thin plate on the posterior ribs, turned 35° to follow the back.
+        const double c = std::cos(side * 0.61), s = std::sin(side * 0.61);
+        const glm::dvec3 q = p - glm::dvec3(side * 78.0, 86.0, 112.0);
+        const glm::dvec3 local(c * q.x + s * q.y, -s * q.x + c * q.y, q.z);
+        const double taper =
+            std::clamp((local.z + 55.0) / 110.0, 0.2, 1.0);  // triangular: narrow at the tip
+        paint(sdBox(local, {-40.0 * taper, -2.0, -55.0}, {40.0 * taper, 2.0, 55.0}), 650.0);
+        // Clavicle: a capsule from the manubrium to the acromion.
+        const glm::dvec3 a(side * 16.0, -92.0, 168.0), b(side * 118.0, 10.0, 182.0);
+        const glm::dvec3 ab = b - a;
+        const double u = std::clamp(glm::dot(p - a, ab) / glm::dot(ab, ab), 0.0, 1.0);
+        paint(glm::length(p - (a + u * ab)) - 6.0, 700.0);
+    }
     // Vertebral column: bodies (cortical shell, cancellous core), discs, spinous processes.
     const double spineX = 0.0, spineY = 78.0;
     // Only the vertebrae within reach of p (each spans 30 mm of z; processes reach 52 mm behind the
