@@ -358,6 +358,17 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     return v;
 }
 
+/// Spacing (absolute) and origin of a VTK image; direction left as identity for the caller to set.
+Geometry spacingAndOrigin(vtkImageData* img) {
+    Geometry g;
+    double sp[3], org[3];
+    img->GetSpacing(sp);
+    img->GetOrigin(org);
+    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
+    g.origin = glm::dvec3(org[0], org[1], org[2]);
+    return g;
+}
+
 template <class VtkReader>
 Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r) {
     r->SetFileName(path.c_str());
@@ -368,12 +379,7 @@ Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkRe
     runVtkChecked(
         r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
-    Geometry g;
-    double sp[3], org[3];
-    img->GetSpacing(sp);
-    img->GetOrigin(org);
-    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
-    g.origin = glm::dvec3(org[0], org[1], org[2]);
+    Geometry g = spacingAndOrigin(img);
     Volume v = fromImageData(img, path, g);
     v.description = path.filename().string();
     return v;
@@ -468,12 +474,7 @@ Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& p
     runVtkChecked(
         r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
-    Geometry g;
-    double sp[3], org[3];
-    img->GetSpacing(sp);
-    img->GetOrigin(org);
-    g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
-    g.origin = glm::dvec3(org[0], org[1], org[2]);
+    Geometry g = spacingAndOrigin(img);
     const double* d = img->GetDirectionMatrix()->GetData();  // row-major
     for (int c = 0; c < 3; ++c)
         for (int rr = 0; rr < 3; ++rr) g.direction[c][rr] = d[3 * rr + c];
