@@ -5,6 +5,7 @@
 #include <vtkCommand.h>
 #include <vtkDataArray.h>
 #include <vtkImageData.h>
+#include <vtkImageReader2.h>
 #include <vtkInformation.h>
 #include <vtkLogger.h>
 #include <vtkMatrix3x3.h>
@@ -301,8 +302,9 @@ bool hasExtension(const fs::path& p, const std::vector<std::string>& exts) {
     return false;
 }
 
-Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
-    vtkNew<vtkNIFTIImageReader> r;
+/// Runs a vtkImageReader2: header, size checks before any allocation, then the data.
+vtkImageData* runImageReader(vtkImageReader2* r, const fs::path& path,
+                             const core::Progress& progress) {
     r->SetFileName(path.c_str());
     runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
     int ext[6];
@@ -310,7 +312,12 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
     runVtkChecked(
         r, path, "data", [&] { r->Update(); }, progress);
-    vtkImageData* img = r->GetOutput();
+    return r->GetOutput();
+}
+
+Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    vtkNew<vtkNIFTIImageReader> r;
+    vtkImageData* img = runImageReader(r, path, progress);
 
     // NIfTI world (RAS) = M · (vtkOrigin + ijk ⊙ spacing); M from sform (preferred, as nibabel) or
     // qform.
@@ -371,14 +378,7 @@ Geometry spacingAndOrigin(vtkImageData* img) {
 
 template <class VtkReader>
 Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r) {
-    r->SetFileName(path.c_str());
-    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
-    int ext[6];
-    r->GetDataExtent(ext);
-    checkExtent(ext, r->GetNumberOfScalarComponents(), path);
-    runVtkChecked(
-        r, path, "data", [&] { r->Update(); }, progress);
-    vtkImageData* img = r->GetOutput();
+    vtkImageData* img = runImageReader(r, path, progress);
     Geometry g = spacingAndOrigin(img);
     Volume v = fromImageData(img, path, g);
     v.description = path.filename().string();
