@@ -52,8 +52,9 @@ void renderFrames(benchmark::State& state, const Prepared& p, render::Mode mode)
     o.mode = mode;
     o.threads = int(state.range(0));
     const render::RayCaster caster(p.volume, p.grid, p.tf, o);
-    render::CameraSpec s;  // orbit 30°/20°, fitted: the view the VTK comparison uses
-    const auto b = p.volume.geometry().worldBounds();
+    render::CameraSpec s;  // orbit 30°/20°, fitted to what the TF shows: the CLI's and the VTK
+                           // comparison's view
+    const auto b = render::visibleWorldBounds(caster);
     const render::Camera cam(s, b[0], b[1], 512, 512);
     render::RenderStats stats;
     for (auto _ : state)

@@ -62,6 +62,7 @@ Command addRenderCommand(CLI::App& app) {
     auto stats = std::make_shared<std::string>();
     auto sets = std::make_shared<std::vector<std::string>>();
     auto quiet = std::make_shared<bool>(false);
+    auto frames = std::make_shared<int>(1);
     c.sub->add_option("SCENE", *scene, "Scene JSON")->required();
     c.sub->add_option("-o,--output", *out, "Tone-mapped sRGB image (.png, .jpg, .tif, .bmp)")
         ->required();
@@ -69,6 +70,10 @@ Command addRenderCommand(CLI::App& app) {
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
+    c.sub
+        ->add_option("--frames", *frames,
+                     "Render the frame N times; stats report the median and every frame's time")
+        ->check(CLI::Range(1, render::kMaxFrames));
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
@@ -76,7 +81,7 @@ Command addRenderCommand(CLI::App& app) {
         if (!exr->empty()) checkOutput(*exr, {".exr"}, "--exr");
         if (!stats->empty()) checkOutput(*stats, {".json"}, "--stats");
         const io::Scene s = io::loadScene(*scene, *sets);
-        render::SceneRenderResult r = render::renderScene(s, terminalProgress(*quiet));
+        render::SceneRenderResult r = render::renderScene(s, terminalProgress(*quiet), *frames);
 
         core::Stopwatch sw;
         io::writeImage(render::toDisplay(r.film, float(s.image.exposureStops)), *out);

@@ -7,6 +7,46 @@
 
 namespace voxlight::grid {
 
+void BrickMajorants::finish() {
+    const std::size_t n = majorant_.size();
+    flags_.resize(n);
+    nonEmpty_ = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        flags_[i] = majorant_[i] > 0.f ? 1 : 0;
+        nonEmpty_ += flags_[i];
+    }
+    // Chebyshev distance transform by breadth-first search over the 26-neighbourhood from the
+    // non-empty cells (one BFS level = one cell of max-norm distance), capped.
+    distance_.assign(n, std::uint8_t(kMaxSkipDistance));
+    if (nonEmpty_ == 0) return;
+    std::vector<std::uint32_t> front, next;
+    for (std::size_t i = 0; i < n; ++i)
+        if (flags_[i]) {
+            distance_[i] = 0;
+            front.push_back(std::uint32_t(i));
+        }
+    const glm::ivec3 c = counts_;
+    for (int level = 1; level < kMaxSkipDistance && !front.empty(); ++level) {
+        next.clear();
+        for (const std::uint32_t i : front) {
+            const int x = int(i % std::uint32_t(c.x)),
+                      y = int((i / std::uint32_t(c.x)) % std::uint32_t(c.y));
+            const int z = int(i / (std::uint32_t(c.x) * std::uint32_t(c.y)));
+            for (int dz = -1; dz <= 1; ++dz)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int u = x + dx, v = y + dy, w = z + dz;
+                        if (u < 0 || v < 0 || w < 0 || u >= c.x || v >= c.y || w >= c.z) continue;
+                        const std::size_t j = index(u, v, w);
+                        if (distance_[j] != kMaxSkipDistance) continue;
+                        distance_[j] = std::uint8_t(level);
+                        next.push_back(std::uint32_t(j));
+                    }
+        }
+        front.swap(next);
+    }
+}
+
 CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
                  const glm::vec3& directionIndex, float tMin, float tMax)
     : counts(majorants.counts()), t(tMin), tMax(tMax) {

@@ -72,21 +72,20 @@ class BrickMajorants {
     std::size_t nonEmptyCount() const { return nonEmpty_; }
     /// 1 where majorant(i) > 0 (a byte per cell, for the traversal's hot loop).
     const std::uint8_t* nonEmptyFlags() const { return flags_.data(); }
+    /// Per cell, the Chebyshev distance (in cells) to the nearest non-empty cell, capped at
+    /// kMaxSkipDistance: 0 for a non-empty cell, d > 0 means every cell within distance d − 1 of
+    /// this one (a cube of 2d − 1 cells a side) is empty, so a ray may leave that cube in one jump.
+    const std::uint8_t* skipDistances() const { return distance_.data(); }
+    static constexpr int kMaxSkipDistance = 255;
 
   private:
-    void finish() {
-        flags_.resize(majorant_.size());
-        nonEmpty_ = 0;
-        for (std::size_t i = 0; i < majorant_.size(); ++i) {
-            flags_[i] = majorant_[i] > 0.f ? 1 : 0;
-            nonEmpty_ += flags_[i];
-        }
-    }
+    void finish();
     glm::ivec3 counts_{0};
     int cellSize_ = kBrickSize;
     std::vector<float> majorant_;
     std::vector<std::array<float, 2>> range_;
     std::vector<std::uint8_t> flags_;
+    std::vector<std::uint8_t> distance_;
     std::size_t nonEmpty_ = 0;
 };
 
@@ -125,6 +124,29 @@ struct CellDda {
         return true;
     }
 
+    /// Leaves the cube of cells within Chebyshev distance `radius` of the current (not yet
+    /// returned) cell in one jump: afterwards the current cell is the last cell of that cube along
+    /// the ray, so the next step() returns it and then crosses the cube's face. The caller
+    /// guarantees that the cube holds only empty cells. Cells stay inside the grid.
+    [[gnu::always_inline]] void jump(int radius) {
+        if (done || radius < 1) return;
+        const float r = float(radius);
+        float tExit =
+            std::min({tNext.x + r * tDelta.x, tNext.y + r * tDelta.y, tNext.z + r * tDelta.z});
+        if (!(tExit < tMax)) tExit = tMax;
+        for (int a = 0; a < 3; ++a) {
+            if (stepDir[a] == 0 || !(tNext[a] < tExit)) continue;
+            // Boundary crossings on this axis strictly before tExit, at most `radius`.
+            int k = int(std::ceil((tExit - tNext[a]) / tDelta[a]));
+            k = std::min(k, radius);
+            k = std::min(k, stepDir[a] > 0 ? counts[a] - 1 - cell[a] : cell[a]);
+            if (k <= 0) continue;
+            cell[a] += stepDir[a] * k;
+            index += indexStep[a] * k;
+            tNext[a] += float(k) * tDelta[a];
+        }
+    }
+
     glm::ivec3 cell{0}, stepDir{0}, counts{0};
     std::ptrdiff_t indexStep[3] = {0, 0, 0};
     std::size_t index = 0;
@@ -136,22 +158,32 @@ struct CellDda {
 /// Calls f(t0, t1) for each maximal run of consecutive non-empty cells along the ray within
 /// [tMin, tMax], in order; f returns false to stop. The non-empty intervals of a merging
 /// RayIntervalIterator, bit for bit, without the value ranges (the ray caster's fast path).
+/// Long empty stretches are crossed in jumps over the skip-distance cubes, so the cost grows with
+/// the number of runs rather than with the number of cells crossed. The runs cover every non-empty
+/// cell the ray crosses; their ends can differ from RayIntervalIterator's by float rounding of the
+/// jumped-over boundaries (they lie in empty cells, which contribute nothing).
 template <class F>
 inline void forEachNonEmptyRun(const BrickMajorants& majorants, const glm::vec3& originIndex,
                                const glm::vec3& directionIndex, float tMin, float tMax, F&& f) {
     CellDda dda(majorants, originIndex, directionIndex, tMin, tMax);
-    const std::uint8_t* flags = majorants.nonEmptyFlags();
+    const std::uint8_t* dist = majorants.skipDistances();
     float t0, t1, runT0 = 0.f, runT1 = 0.f;
     std::size_t i;
     bool inRun = false;
     while (dda.step(t0, t1, i)) {
-        if (flags[i]) {
+        const int d = dist[i];
+        if (d == 0) {
             if (!inRun) runT0 = t0, inRun = true;
             runT1 = t1;
-        } else if (inRun) {
+            continue;
+        }
+        if (inRun) {
             inRun = false;
             if (!f(runT0, runT1)) return;
         }
+        // The cell just returned is the centre of an empty cube of radius d − 1; the DDA already
+        // stands in its neighbour, the centre of an empty cube of radius d − 2.
+        if (d >= 3) dda.jump(d - 2);
     }
     if (inRun) f(runT0, runT1);
 }

@@ -66,9 +66,12 @@ inline constexpr float kClipFaceBandVoxels = 2.f;
 /// normal is blended toward the fallback (plane normal at a cut face, else the view direction).
 inline constexpr float kWeakGradientFraction = 0.01f;
 /// Side (voxels) of the majorant cells the ray caster skips with: the 16³ bricks are refined to
-/// 8³ cells inside the bricks the TF does not make transparent (a scan of those bricks only), so
-/// thin structures (ribs, vessels) do not force sampling of the soft tissue around them.
-inline constexpr int kSkipCellVoxels = 8;
+/// 4³ cells inside the bricks the TF does not make transparent (a scan of those bricks only), so
+/// thin structures (ribs, vessels) do not force sampling of the soft tissue around them. Empty
+/// stretches are crossed in skip-distance jumps (grid::forEachNonEmptyRun), so the finer cells do
+/// not cost DDA steps there (measured: 4³ with jumps 12 % (torso) and 24 % (bonsai) faster per
+/// frame than 8³ cells stepped one by one).
+inline constexpr int kSkipCellVoxels = 4;
 /// Largest image the renderer accepts (pixels): 16384 × 8192 RGBA float is 2 GiB.
 inline constexpr std::uint64_t kMaxPixels = std::uint64_t(16384) * 8192;
 

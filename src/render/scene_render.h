@@ -56,6 +56,9 @@ CameraSpec buildCameraSpec(const io::CameraDesc& desc);
 /// receives the method parameters as used (defaults filled in).
 RenderOptions buildRenderOptions(const io::Scene& scene, nlohmann::json* used = nullptr);
 
+/// Most frames renderScene() repeats (a timing aid, not a batch renderer).
+inline constexpr int kMaxFrames = 1000;
+
 struct SceneRenderResult {
     io::ImageRGBA film;  ///< linear radiance, alpha = coverage
     std::vector<StageRecord> stages;
@@ -64,9 +67,13 @@ struct SceneRenderResult {
     RenderStats stats;
 };
 
-/// Runs load → brick grid → TF → render. Throws InputError on bad scene content.
+/// Runs load → brick grid → TF → render. Throws InputError on bad scene content. With frames > 1
+/// the frame is rendered that many times (same image each time): the "render" stage reports the
+/// median frame, details.frame_seconds every frame (for timing a view as an interactive viewer
+/// would redraw it, after the one-time preparation).
 SceneRenderResult renderScene(const io::Scene& scene,
-                              const core::Progress& progress = core::Progress::none());
+                              const core::Progress& progress = core::Progress::none(),
+                              int frames = 1);
 
 /// Stats JSON (ARCHITECTURE.md §4): stages, total_seconds, peak_rss_mb, method, details.
 nlohmann::json statsJson(const SceneRenderResult& result, double totalSeconds);

@@ -105,3 +105,88 @@ TEST(RayIntervals, FinerCellsFromCellsFollowTheirOwnCellSize) {
     EXPECT_NEAR(iv.t1, 9.f, kTTol);
     EXPECT_FALSE(it.next(iv));
 }
+
+namespace {
+/// Sparse random majorants on a 40×33×27 grid of 4³ cells (a few non-empty cells in clusters and
+/// isolated, so that skip distances from 1 to > 10 occur).
+grid::BrickMajorants sparseCells(std::uint64_t seed) {
+    const glm::ivec3 counts(40, 33, 27);
+    const std::size_t n = std::size_t(counts.x) * counts.y * counts.z;
+    std::vector<float> maj(n, 0.f);
+    std::vector<std::array<float, 2>> ranges(n, {0.f, 0.f});
+    core::CounterRng rng(seed);
+    for (int k = 0; k < 12; ++k) {
+        const glm::ivec3 c(int(rng.uniform() * counts.x), int(rng.uniform() * counts.y),
+                           int(rng.uniform() * counts.z));
+        const int r = k % 3;  // single cells and small blocks
+        for (int z = c.z - r; z <= c.z + r; ++z)
+            for (int y = c.y - r; y <= c.y + r; ++y)
+                for (int x = c.x - r; x <= c.x + r; ++x)
+                    if (x >= 0 && y >= 0 && z >= 0 && x < counts.x && y < counts.y && z < counts.z)
+                        maj[std::size_t(x) +
+                            std::size_t(counts.x) * (y + std::size_t(counts.y) * z)] = 1.f;
+    }
+    return grid::BrickMajorants::fromCells(counts, 4, std::move(maj), std::move(ranges));
+}
+}  // namespace
+
+TEST(SkipDistance, IsTheChebyshevDistanceToTheNearestNonEmptyCell) {
+    const auto m = sparseCells(3);
+    const glm::ivec3 c = m.counts();
+    std::vector<glm::ivec3> full;
+    for (int z = 0; z < c.z; ++z)
+        for (int y = 0; y < c.y; ++y)
+            for (int x = 0; x < c.x; ++x)
+                if (m.nonEmptyFlags()[m.index(x, y, z)]) full.emplace_back(x, y, z);
+    ASSERT_GT(full.size(), 0u);
+    int maxSeen = 0;
+    for (int z = 0; z < c.z; ++z)
+        for (int y = 0; y < c.y; ++y)
+            for (int x = 0; x < c.x; ++x) {
+                int best = grid::BrickMajorants::kMaxSkipDistance;
+                for (const glm::ivec3& f : full)
+                    best = std::min(
+                        best, std::max({std::abs(f.x - x), std::abs(f.y - y), std::abs(f.z - z)}));
+                ASSERT_EQ(int(m.skipDistances()[m.index(x, y, z)]), best)
+                    << x << " " << y << " " << z;
+                maxSeen = std::max(maxSeen, best);
+            }
+    EXPECT_GT(maxSeen, 5) << "the grid should have long empty stretches to jump over";
+}
+
+TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
+    // forEachNonEmptyRun jumps over empty cubes; its runs must be exactly the non-empty intervals
+    // of the cell-by-cell RayIntervalIterator (ends within float rounding).
+    for (std::uint64_t seed = 1; seed <= 4; ++seed) {
+        const auto m = sparseCells(seed);
+        const glm::vec3 hi = glm::vec3(m.counts() * 4) - 1.f;
+        core::CounterRng rng(100 + seed);
+        int runsSeen = 0;
+        for (int n = 0; n < 2000; ++n) {
+            const glm::vec3 o(rng.uniform() * hi.x, rng.uniform() * hi.y, rng.uniform() * hi.z);
+            glm::vec3 d(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
+            if (n % 7 == 0) d.y = 0.f;
+            if (n % 11 == 0) d = glm::vec3(0, 0, -1);
+            d = glm::normalize(d);
+            float t1 = 1e9f;  // exit of the box [0, hi]
+            for (int a = 0; a < 3; ++a)
+                if (d[a] != 0.f) t1 = std::min(t1, ((d[a] > 0 ? hi[a] : 0.f) - o[a]) / d[a]);
+            std::vector<std::array<float, 2>> expect, got;
+            grid::RayIntervalIterator it(m, o, d, 0.f, t1);
+            grid::RayInterval iv;
+            while (it.next(iv))
+                if (!iv.empty()) expect.push_back({iv.t0, iv.t1});
+            grid::forEachNonEmptyRun(m, o, d, 0.f, t1, [&](float a, float b) {
+                got.push_back({a, b});
+                return true;
+            });
+            ASSERT_EQ(got.size(), expect.size()) << "seed " << seed << " ray " << n;
+            for (std::size_t i = 0; i < got.size(); ++i) {
+                EXPECT_NEAR(got[i][0], expect[i][0], kTTol) << "seed " << seed << " ray " << n;
+                EXPECT_NEAR(got[i][1], expect[i][1], kTTol) << "seed " << seed << " ray " << n;
+            }
+            runsSeen += int(got.size());
+        }
+        EXPECT_GT(runsSeen, 100) << "rays should hit non-empty cells";
+    }
+}
