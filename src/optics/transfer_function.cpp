@@ -130,6 +130,7 @@ TfTable::TfTable(const TransferFunction& tf) {
     if (!(hi_ > lo_)) hi_ = lo_ + 1.f;  // single point: constant TF; any width works
     cell_ = (double(hi_) - double(lo_)) / kTableCells;
     invCell_ = float(1.0 / cell_);
+    invCellD_ = 1.0 / cell_;
     const std::size_t n = kTableCells + 1;
     nodes_.resize(n);
     sigma_.resize(n);
@@ -143,6 +144,7 @@ TfTable::TfTable(const TransferFunction& tf) {
         for (int c = 0; c < 3; ++c) {
             weighted_[i][c] = s.extinction * s.albedo[c];
             weighted_[i][3 + c] = s.extinction * (1.f - s.albedo[c]) * s.emission[c];
+            emissive_ |= weighted_[i][3 + c] > 0.f;
         }
     }
     // Cumulative integrals of the linearly interpolated table (the trapezoid rule is exact).
@@ -168,7 +170,7 @@ TfTable::TfTable(const TransferFunction& tf) {
 }
 
 double TfTable::cumulativeSigma(double value, int& cell, double& x) const {
-    const double u = (value - double(lo_)) / cell_;
+    const double u = (value - double(lo_)) * invCellD_;
     if (!(u > 0.0)) {  // below the range (or NaN): constant extension of the first node
         cell = -1;
         x = std::isnan(u) ? 0.0 : u * cell_;
@@ -183,24 +185,27 @@ double TfTable::cumulativeSigma(double value, int& cell, double& x) const {
     x = (u - cell) * cell_;
     const double a = sigma_[std::size_t(cell)], b = sigma_[std::size_t(cell) + 1];
     // ∫_0^x (a + (b − a) t / h) dt = a·x + (b − a)·x² / (2h): exact inside the linear cell.
-    return cumSigma_[std::size_t(cell)] + a * x + (b - a) * x * x / (2.0 * cell_);
+    return cumSigma_[std::size_t(cell)] + a * x + (b - a) * x * x * (0.5 * invCellD_);
 }
 
 void TfTable::cumulativeWeighted(double value, int cell, double x, double out[6]) const {
+    // Without emission anywhere the last three integrals are 0 and not evaluated.
+    const int channels = emissive_ ? 6 : 3;
+    for (int c = channels; c < 6; ++c) out[c] = 0.0;
     if (cell < 0) {
-        for (int c = 0; c < 6; ++c) out[c] = double(weighted_.front()[c]) * x;
+        for (int c = 0; c < channels; ++c) out[c] = double(weighted_.front()[c]) * x;
         return;
     }
     if (cell >= kTableCells) {
-        for (int c = 0; c < 6; ++c)
+        for (int c = 0; c < channels; ++c)
             out[c] = cumWeighted_.back()[c] + double(weighted_.back()[c]) * x;
         return;
     }
     const auto& a = weighted_[std::size_t(cell)];
     const auto& b = weighted_[std::size_t(cell) + 1];
     const auto& base = cumWeighted_[std::size_t(cell)];
-    const double q = x * x / (2.0 * cell_);
-    for (int c = 0; c < 6; ++c) out[c] = base[c] + a[c] * x + (double(b[c]) - a[c]) * q;
+    const double q = x * x * (0.5 * invCellD_);
+    for (int c = 0; c < channels; ++c) out[c] = base[c] + a[c] * x + (double(b[c]) - a[c]) * q;
 }
 
 TfTable::Segment TfTable::midpoint(float sf, float sb) const {

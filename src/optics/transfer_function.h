@@ -181,7 +181,8 @@ class TfTable {
     void cumulativeWeighted(double value, int cell, double x, double out[6]) const;
 
     float lo_ = 0.f, hi_ = 1.f, invCell_ = 1.f;
-    double cell_ = 1.0;
+    double cell_ = 1.0, invCellD_ = 1.0;
+    bool emissive_ = false;                    // some node has σt·(1 − a)·e > 0
     float zeroBelow_ = 0.f, zeroAbove_ = 0.f;  // σt = 0 on (−∞, zeroBelow_] and [zeroAbove_, ∞)
     std::vector<Node> nodes_;                  // kTableCells + 1
     std::vector<float> sigma_;                 // integrand σt at nodes

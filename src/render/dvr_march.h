@@ -114,12 +114,15 @@ template <class View>
 
 /// Shading normal facing the eye: the gradient normal, blended toward `fallback` where the gradient
 /// is weak (weight |g| / weak, clamped to 1).
-inline glm::vec3 shadingNormal(const glm::vec3& g, const glm::vec3& fallback,
-                               const glm::vec3& toEye, float weak) {
-    const float len = glm::length(g);
+[[gnu::always_inline]] inline glm::vec3 shadingNormal(const glm::vec3& g, const glm::vec3& fallback,
+                                                      const glm::vec3& toEye, float weak) {
+    const float len2 = glm::dot(g, g);
     glm::vec3 n = fallback;
-    if (len > 0.f && std::isfinite(len)) {
-        const float w = len >= weak ? 1.f : len / weak;
+    if (len2 >= weak * weak && len2 > 0.f && len2 < INFINITY) {
+        n = g * (-1.f / std::sqrt(len2));  // the common case: a strong, finite gradient
+    } else if (len2 > 0.f && len2 < INFINITY) {
+        const float len = std::sqrt(len2);
+        const float w = len / weak;
         n = w * (-g / len) + (1.f - w) * fallback;
         const float l2 = glm::length(n);
         n = l2 > 1e-6f ? n / l2 : fallback;

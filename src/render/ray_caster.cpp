@@ -373,28 +373,29 @@ std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster) {
 
 std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera) {
     const RenderOptions& o = caster.options();
-    BlinnPhongShader bp;
-    bp.params = o.blinnPhong;
-    bp.lights = o.lights;
-    if (bp.lights.empty()) {
+    std::vector<Light> lights = o.lights;
+    if (lights.empty()) {
         Light head;
         head.direction = glm::normalize(
             glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
-        bp.lights.push_back(head);
+        lights.push_back(head);
     }
     switch (o.mode) {
         case Mode::EmissionAbsorption:
             return std::make_unique<DvrModel<EmissionAbsorptionShader>>(
                 "emission-absorption", EmissionAbsorptionShader{o.ambient});
         case Mode::Gradient:
-            return std::make_unique<DvrModel<BlinnPhongShader>>("gradient", bp);
+            return std::make_unique<DvrModel<BlinnPhongShader>>(
+                "gradient", BlinnPhongShader(o.blinnPhong, lights));
         case Mode::Mip:
             return std::make_unique<ExtremumModel<true>>();
         case Mode::MinIp:
             return std::make_unique<ExtremumModel<false>>();
-        case Mode::Isosurface:
-            bp.params.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
-            return std::make_unique<IsoModel>(bp);
+        case Mode::Isosurface: {
+            BlinnPhongParams lambert = o.blinnPhong;
+            lambert.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
+            return std::make_unique<IsoModel>(BlinnPhongShader(lambert, lights));
+        }
     }
     throw InternalError("unknown render mode");
 }

@@ -13,6 +13,8 @@
 // and emission term E adds  T · α · (E + A ⊙ diffuse + specular)  to the pixel, where
 // (diffuse, specular) = scatter(...). `diffuse` is the in-scattered radiance that the albedo
 // filters (∫ p · L_light · V dω for the exact model); `specular` is added unfiltered.
+#include <algorithm>
+#include <cmath>
 #include <glm/glm.hpp>
 #include <vector>
 
@@ -55,18 +57,49 @@ struct BlinnPhongParams {
     float shininess = 24.f;  ///< Blinn–Phong exponent
 };
 
+/// Specular powers x^n, x ∈ [0, 1], come from a table of kSpecularTableCells cells with linear
+/// interpolation when kMinTableShininess ≤ n ≤ kMaxTableShininess (std::pow costs about a fifth of
+/// a shaded sample). Interpolation error ≤ max|f''|·h²/8 = n(n − 1)/(8·cells²): 1.9e-3 at n = 256,
+/// 6.6e-6 at the default n = 24 — below one 8-bit level after the specular weight. Outside that
+/// range (n < 2 has an unbounded second derivative at 0) std::pow is used.
+inline constexpr int kSpecularTableCells = 2048;
+inline constexpr float kMinTableShininess = 2.f;
+inline constexpr float kMaxTableShininess = 256.f;
+
 /// Gradient Blinn–Phong with directional and point lights, no visibility (the clinical baseline,
 /// Kronander et al. 2012 Fig. 1a "local diffuse shading"). Two-sided: the marcher hands over a
 /// normal that faces the eye.
-struct BlinnPhongShader {
+class BlinnPhongShader {
+  public:
     static constexpr bool kNeedsNormal = true;
-    BlinnPhongParams params;
-    std::vector<Light> lights;
+
+    BlinnPhongShader(const BlinnPhongParams& params, std::vector<Light> lights)
+        : params_(params), lights_(std::move(lights)) {
+        const float n = params_.shininess;
+        if (n >= kMinTableShininess && n <= kMaxTableShininess) {
+            powTable_.resize(kSpecularTableCells + 1);
+            for (int i = 0; i <= kSpecularTableCells; ++i)
+                powTable_[std::size_t(i)] =
+                    float(std::pow(double(i) / kSpecularTableCells, double(n)));
+        }
+    }
+    const BlinnPhongParams& params() const { return params_; }
+    const std::vector<Light>& lights() const { return lights_; }
+
+    /// x^shininess for x ∈ [0, 1] (table or std::pow, see kSpecularTableCells).
+    float specularPower(float x) const {
+        if (powTable_.empty()) return std::pow(x, params_.shininess);
+        const float u = std::min(std::max(x, 0.f), 1.f) * float(kSpecularTableCells);
+        const int i = std::min(int(u), kSpecularTableCells - 1);
+        const float f = u - float(i);
+        const float a = powTable_[std::size_t(i)], b = powTable_[std::size_t(i) + 1];
+        return a + f * (b - a);
+    }
 
     Scatter scatter(const ShadeInput& in) const {
         Scatter s;
-        s.diffuse = glm::vec3(params.ambient);
-        for (const Light& l : lights) {
+        s.diffuse = glm::vec3(params_.ambient);
+        for (const Light& l : lights_) {
             glm::vec3 toLight, e = l.radiance;
             if (l.type == Light::Type::Directional) {
                 toLight = -l.direction;
@@ -79,16 +112,20 @@ struct BlinnPhongShader {
             }
             const float ndl = glm::dot(in.normal, toLight);
             if (ndl <= 0.f) continue;
-            s.diffuse += (params.diffuse * ndl) * e;
-            if (params.specular > 0.f) {
+            s.diffuse += (params_.diffuse * ndl) * e;
+            if (params_.specular > 0.f) {
                 const glm::vec3 h = glm::normalize(toLight + in.toEye);
                 const float ndh = glm::dot(in.normal, h);
-                if (ndh > 0.f)
-                    s.specular += (params.specular * std::pow(ndh, params.shininess)) * e;
+                if (ndh > 0.f) s.specular += (params_.specular * specularPower(ndh)) * e;
             }
         }
         return s;
     }
+
+  private:
+    BlinnPhongParams params_;
+    std::vector<Light> lights_;
+    std::vector<float> powTable_;
 };
 
 }  // namespace voxlight::render

@@ -1,0 +1,71 @@
+// SPDX-License-Identifier: MIT
+// Blinn–Phong shader against its closed form: the tabulated specular power stays within its
+// interpolation bound, and a shaded sample equals ambient + diffuse·(n·l) + specular·(n·h)^n.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "render/shading.h"
+
+using namespace voxlight;
+
+namespace {
+/// Bound of linear interpolation of x^n on cells of width h: n(n − 1)·h² / 8 (plus float rounding).
+double tableBound(double n) {
+    const double h = 1.0 / render::kSpecularTableCells;
+    return n * (n - 1.0) * h * h / 8.0 + 4e-7;
+}
+}  // namespace
+
+TEST(BlinnPhong, SpecularPowerTableStaysWithinItsInterpolationBound) {
+    for (const float n : {2.f, 8.f, 24.f, 100.f, 256.f}) {
+        render::BlinnPhongParams p;
+        p.shininess = n;
+        const render::BlinnPhongShader s(p, {});
+        double worst = 0.0;
+        for (int i = 0; i <= 100000; ++i) {
+            const float x = float(i) / 100000.f;
+            worst = std::max(worst, std::abs(double(s.specularPower(x)) - std::pow(double(x), n)));
+        }
+        EXPECT_LE(worst, tableBound(n)) << "shininess " << n;
+        EXPECT_GT(worst, 0.0) << "shininess " << n << ": the table path should be in use";
+    }
+}
+
+TEST(BlinnPhong, ShininessOutsideTheTableRangeIsExact) {
+    for (const float n : {0.5f, 1.f, 300.f, 1000.f}) {
+        render::BlinnPhongParams p;
+        p.shininess = n;
+        const render::BlinnPhongShader s(p, {});
+        for (const float x : {0.f, 0.001f, 0.3f, 0.9f, 0.999f, 1.f})
+            EXPECT_FLOAT_EQ(s.specularPower(x), std::pow(x, n)) << n << " " << x;
+    }
+}
+
+TEST(BlinnPhong, ScatterMatchesTheClosedForm) {
+    render::BlinnPhongParams p;  // defaults: 0.25 / 0.75 / 0.25, n = 24
+    render::Light l;
+    l.direction = glm::normalize(glm::vec3(0.3f, -0.2f, -1.f));
+    l.radiance = glm::vec3(1.f, 0.5f, 2.f);
+    const render::BlinnPhongShader s(p, {l});
+    render::ShadeInput in;
+    in.position = glm::vec3(0.f);
+    in.toEye = glm::normalize(glm::vec3(-0.1f, 0.2f, 1.f));
+    for (const glm::vec3 n : {glm::vec3(0, 0, 1), glm::normalize(glm::vec3(0.2f, -0.1f, 1.f)),
+                              glm::normalize(glm::vec3(1.f, 0.f, 0.1f))}) {
+        in.normal = n;
+        const render::Scatter sc = s.scatter(in);
+        const glm::dvec3 ld = -glm::dvec3(l.direction), nd(n), ed(in.toEye);
+        const double ndl = glm::dot(nd, ld);
+        const double ndh = glm::dot(nd, glm::normalize(ld + ed));
+        for (int c = 0; c < 3; ++c) {
+            const double diffuse = p.ambient + (ndl > 0 ? p.diffuse * ndl * l.radiance[c] : 0.0);
+            const double spec =
+                ndl > 0 && ndh > 0 ? p.specular * std::pow(ndh, double(p.shininess)) * l.radiance[c]
+                                   : 0.0;
+            EXPECT_NEAR(sc.diffuse[c], diffuse, 1e-5);
+            EXPECT_NEAR(sc.specular[c], spec,
+                        2.f * l.radiance[c] * p.specular * tableBound(24) + 1e-5);
+        }
+    }
+}
