@@ -6,8 +6,9 @@ Same volume file (the 256^3 torso phantom written as .vti, and ../shared/dataset
 transfer function (voxlight's, exported through --stats: colour points, and opacity per mm
 1 - exp(-sigma_t * 1 mm) with ScalarOpacityUnitDistance 1 mm), same camera (eye, forward, up, fov),
 same sample distance, 512x512, Blinn-Phong ambient/diffuse/specular/power alike, all cores.
-Prints per-frame seconds (median of the steady-state frames, the two renderers alternating frame by
-frame so that both see the same load) for both and the ratio voxlight/VTK. voxlight's frame time is a steady-state
+Prints per-frame seconds (median of the steady-state frames, the two renderers alternating round by
+round so that both see the same load) for both, and the ratio voxlight/VTK as the median of the
+per-round ratios with their range. voxlight's frame time is a steady-state
 frame of `render --frames` (volume loading, brick scan and gradient table excluded, as VTK's first frame
 with its normal encoding is).
 
@@ -122,7 +123,7 @@ def main():
         cases.append(("bonsai CT 256^3 (generic)", os.path.abspath(bonsai), "generic"))
     else:
         print("note: ../shared/datasets/ct/bonsai.vti absent, real-CT case skipped", file=sys.stderr)
-    print(f"{'case':28s} {'voxlight s/frame':>17s} {'VTK s/frame':>12s} {'ratio':>6s} {'VTK 1st frame':>14s}")
+    print(f"{'case':28s} {'voxlight s/frame':>17s} {'VTK s/frame':>12s} {'ratio':>6s} {'range':>9s} {'VTK 1st frame':>14s}")
     for name, path, preset in cases:
         scene = os.path.join(work, f"scene-{preset}.json")
         json.dump({"volume": path, "transfer_function": preset, "method": "gradient",
@@ -132,16 +133,22 @@ def main():
         # renderers so that both see the same machine load (other jobs share these cores).
         _, stats = voxlight_frames(exe, scene, 1, work)
         first, vtk_frame, vtk_save = vtk_setup(path, stats)
-        vt, kt = [], []
+        vt, kt, ratios = [], [], []
         for _ in range(args.frames):
             # Rounds of 3 frames each, alternating with VTK; the first frame of each process is
-            # dropped (cold caches), as VTK's first frame is.
-            vt += voxlight_frames(exe, scene, 3, work)[0][1:]
-            kt += [vtk_frame(), vtk_frame()]
+            # dropped (cold caches), as VTK's first frame is. The ratio is taken round by round, so
+            # that a drift of the machine's speed (other jobs share these cores) cancels.
+            v = voxlight_frames(exe, scene, 3, work)[0][1:]
+            k = [vtk_frame(), vtk_frame()]
+            vt += v
+            kt += k
+            ratios.append(statistics.median(v) / statistics.median(k))
         os.replace(os.path.join(work, "voxlight.png"), os.path.join(work, f"voxlight-{preset}.png"))
         vtk_save(os.path.join(work, f"vtk-{preset}.png"))
         v, k = statistics.median(vt), statistics.median(kt)
-        print(f"{name:28s} {v:17.3f} {k:12.3f} {v / k:6.2f} {first:14.3f}", flush=True)
+        r = statistics.median(ratios)
+        print(f"{name:28s} {v:17.3f} {k:12.3f} {r:6.2f} {min(ratios):5.2f}-{max(ratios):4.2f} {first:14.3f}",
+              flush=True)
     print(f"images in {work}")
 
 
