@@ -5,6 +5,7 @@
 // dispatched once on the voxel type (View) and the shader type (Shader).
 #include <algorithm>
 #include <cmath>
+#include <type_traits>
 #if defined(__SSE4_1__)
 #include <smmintrin.h>
 #endif
@@ -63,6 +64,104 @@ template <class View>
     return v.slope * (c0 + fz * (c1 - c0)) + v.intercept;
 }
 
+/// Trilinear interpolation of the precomputed central differences in the cell at `offset` with
+/// weights (fx, fy, fz) and corner strides (di, dj, dk), scaled to a world gradient. With SSE4.1
+/// each corner's (Δi, Δj, Δk, 0) is one 64-bit load widened to four floats and the seven lerps run
+/// on all three components at once (the same arithmetic per component as the scalar path).
+[[gnu::always_inline]] inline glm::vec3 gradientAtCell(const VoxelGradients& g, std::size_t offset,
+                                                       float fx, float fy, float fz, std::size_t di,
+                                                       std::size_t dj, std::size_t dk,
+                                                       const glm::mat3& m) {
+    const auto* q = g.d.data() + offset;
+#if defined(__SSE4_1__)
+    auto corner = [&](std::size_t o) {
+        return _mm_cvtepi32_ps(
+            _mm_cvtepi16_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + o))));
+    };
+    auto lerp = [](__m128 a, __m128 b, __m128 f) {
+        return _mm_add_ps(a, _mm_mul_ps(f, _mm_sub_ps(b, a)));
+    };
+    const __m128 vx = _mm_set1_ps(fx), vy = _mm_set1_ps(fy), vz = _mm_set1_ps(fz);
+    const __m128 c00 = lerp(corner(0), corner(di), vx);
+    const __m128 c10 = lerp(corner(dj), corner(dj + di), vx);
+    const __m128 c01 = lerp(corner(dk), corner(dk + di), vx);
+    const __m128 c11 = lerp(corner(dk + dj), corner(dk + dj + di), vx);
+    const __m128 r = lerp(lerp(c00, c10, vy), lerp(c01, c11, vy), vz);
+    alignas(16) float out[4];
+    _mm_store_ps(out, r);
+    return m * (g.slope * glm::vec3(out[0], out[1], out[2]));
+#else
+    auto lerpX = [&](const std::array<std::int16_t, 4>& a, const std::array<std::int16_t, 4>& b) {
+        return glm::vec3(float(a[0]) + fx * (float(b[0]) - float(a[0])),
+                         float(a[1]) + fx * (float(b[1]) - float(a[1])),
+                         float(a[2]) + fx * (float(b[2]) - float(a[2])));
+    };
+    const glm::vec3 c00 = lerpX(q[0], q[di]), c10 = lerpX(q[dj], q[dj + di]);
+    const glm::vec3 c01 = lerpX(q[dk], q[dk + di]), c11 = lerpX(q[dk + dj], q[dk + dj + di]);
+    const glm::vec3 c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
+    return m * (g.slope * (c0 + fz * (c1 - c0)));
+#endif
+}
+
+/// The hot-loop form of trilinear(): the grid constants (clamp limits, corner strides) are
+/// computed once per ray instead of per sample, and a sample is split into locate() (cell and
+/// weights) and value(), so that the gradient table can reuse the cell of the value sample at the
+/// same point. Same clamping, weights and arithmetic as trilinear(), so results are identical.
+template <class View>
+struct CellSampler {
+    using Elem = std::remove_cv_t<std::remove_pointer_t<decltype(View::data)>>;
+    struct Cell {
+        std::size_t offset = 0;  ///< linear index of the cell's lower corner
+        float fx = 0.f, fy = 0.f, fz = 0.f;
+    };
+    const Elem* data;
+    std::size_t sy, sz, di, dj, dk;
+    float hx, hy, hz;  ///< largest index per axis, as float
+    int mi, mj, mk;    ///< largest lower-corner index per axis
+    float slope, intercept;
+
+    explicit CellSampler(const View& v)
+        : data(v.data),
+          sy(v.sy),
+          sz(v.sz),
+          di(v.nx > 1 ? 1 : 0),
+          dj(v.ny > 1 ? v.sy : 0),
+          dk(v.nz > 1 ? v.sz : 0),
+          hx(float(v.nx - 1)),
+          hy(float(v.ny - 1)),
+          hz(float(v.nz - 1)),
+          mi(v.nx - 2 < 0 ? 0 : v.nx - 2),
+          mj(v.ny - 2 < 0 ? 0 : v.ny - 2),
+          mk(v.nz - 2 < 0 ? 0 : v.nz - 2),
+          slope(v.slope),
+          intercept(v.intercept) {}
+
+    [[gnu::always_inline]] Cell locate(const glm::vec3& p) const {
+        const float x = std::min(std::max(p.x, 0.f), hx);
+        const float y = std::min(std::max(p.y, 0.f), hy);
+        const float z = std::min(std::max(p.z, 0.f), hz);
+        const int i = std::min(int(x), mi), j = std::min(int(y), mj), k = std::min(int(z), mk);
+        return {std::size_t(i) + sy * std::size_t(j) + sz * std::size_t(k), x - float(i),
+                y - float(j), z - float(k)};
+    }
+    [[gnu::always_inline]] float value(const Cell& c) const {
+        const Elem* p = data + c.offset;
+        const float c00 = float(p[0]) + c.fx * (float(p[di]) - float(p[0]));
+        const float c10 = float(p[dj]) + c.fx * (float(p[dj + di]) - float(p[dj]));
+        const float c01 = float(p[dk]) + c.fx * (float(p[dk + di]) - float(p[dk]));
+        const float c11 = float(p[dk + dj]) + c.fx * (float(p[dk + dj + di]) - float(p[dk + dj]));
+        const float c0 = c00 + c.fy * (c10 - c00);
+        const float c1 = c01 + c.fy * (c11 - c01);
+        return slope * (c0 + c.fz * (c1 - c0)) + intercept;
+    }
+    /// World gradient from the precomputed central differences (same grid as the volume) at a
+    /// located cell.
+    [[gnu::always_inline]] glm::vec3 gradient(const VoxelGradients& g, const Cell& c,
+                                              const glm::mat3& m) const {
+        return gradientAtCell(g, c.offset, c.fx, c.fy, c.fz, di, dj, dk, m);
+    }
+};
+
 template <class View>
 [[gnu::always_inline]] inline float sampleAt(const View& v, const RaySegment& r, float t) {
     const glm::vec3 p = r.originIndex + t * r.dirIndex;
@@ -80,9 +179,7 @@ template <class View>
 }
 
 /// World gradient from the precomputed central differences: their trilinear interpolation at p
-/// (same clamping and weights as trilinear()), then the same scaling as gradientAt. With SSE4.1
-/// each corner's (Δi, Δj, Δk, 0) is one 64-bit load widened to four floats, and the seven lerps
-/// run on all three components at once (same arithmetic per component as the scalar path).
+/// (same clamping and weights as trilinear()), then the same scaling as gradientAt.
 [[gnu::always_inline]] inline glm::vec3 voxelGradientAt(const VoxelGradients& g, const glm::vec3& p,
                                                         const glm::mat3& m) {
     const float x = std::min(std::max(p.x, 0.f), float(g.nx - 1));
@@ -91,38 +188,9 @@ template <class View>
     const int i = std::min(int(x), g.nx - 2 < 0 ? 0 : g.nx - 2);
     const int j = std::min(int(y), g.ny - 2 < 0 ? 0 : g.ny - 2);
     const int k = std::min(int(z), g.nz - 2 < 0 ? 0 : g.nz - 2);
-    const float fx = x - float(i), fy = y - float(j), fz = z - float(k);
-    const int di = g.nx > 1 ? 1 : 0;
-    const std::size_t dj = g.ny > 1 ? g.sy : 0, dk = g.nz > 1 ? g.sz : 0;
-    const auto* q = g.d.data() + i + g.sy * j + g.sz * k;
-#if defined(__SSE4_1__)
-    auto corner = [&](std::size_t o) {
-        return _mm_cvtepi32_ps(
-            _mm_cvtepi16_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + o))));
-    };
-    auto lerp = [](__m128 a, __m128 b, __m128 f) {
-        return _mm_add_ps(a, _mm_mul_ps(f, _mm_sub_ps(b, a)));
-    };
-    const __m128 vx = _mm_set1_ps(fx), vy = _mm_set1_ps(fy), vz = _mm_set1_ps(fz);
-    const __m128 c00 = lerp(corner(0), corner(di), vx);
-    const __m128 c10 = lerp(corner(dj), corner(dj + di), vx);
-    const __m128 c01 = lerp(corner(dk), corner(dk + di), vx);
-    const __m128 c11 = lerp(corner(dk + dj), corner(dk + dj + di), vx);
-    const __m128 c = lerp(lerp(c00, c10, vy), lerp(c01, c11, vy), vz);
-    alignas(16) float out[4];
-    _mm_store_ps(out, c);
-    return m * (g.slope * glm::vec3(out[0], out[1], out[2]));
-#else
-    auto lerpX = [&](const std::array<std::int16_t, 4>& a, const std::array<std::int16_t, 4>& b) {
-        return glm::vec3(float(a[0]) + fx * (float(b[0]) - float(a[0])),
-                         float(a[1]) + fx * (float(b[1]) - float(a[1])),
-                         float(a[2]) + fx * (float(b[2]) - float(a[2])));
-    };
-    const glm::vec3 c00 = lerpX(q[0], q[di]), c10 = lerpX(q[dj], q[dj + di]);
-    const glm::vec3 c01 = lerpX(q[dk], q[dk + di]), c11 = lerpX(q[dk + dj], q[dk + dj + di]);
-    const glm::vec3 c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
-    return m * (g.slope * (c0 + fz * (c1 - c0)));
-#endif
+    return gradientAtCell(g, std::size_t(i) + g.sy * std::size_t(j) + g.sz * std::size_t(k),
+                          x - float(i), y - float(j), z - float(k), g.nx > 1 ? 1 : 0,
+                          g.ny > 1 ? g.sy : 0, g.nz > 1 ? g.sz : 0, m);
 }
 
 /// World gradient by forward differences from the known value s0 at p (3 taps instead of 6; the
@@ -185,6 +253,7 @@ template <class View, class S>
 struct DvrMarcher {
     const RayCaster& c;
     const View v;  ///< a copy: stores to the counters below cannot alias its fields
+    const CellSampler<View> sampler;
     const RaySegment& r;
     const S& shader;
     const optics::TfTable& table;
@@ -196,10 +265,12 @@ struct DvrMarcher {
     float T = 1.f;
     glm::vec3 L{0.f};
     std::uint64_t samples = 0;
-    optics::TfTable::SegmentCache cache;  ///< integrals at the last values (each value once)
+    optics::TfTable::SegmentCache cache;        ///< integrals at the last values (each value once)
+    typename CellSampler<View>::Cell lastCell;  ///< where the last sample was taken
+    float lastT = NAN;
 
     DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
-        : c(c_), v(v_), r(r_), shader(s_), table(c_.table()) {
+        : c(c_), v(v_), sampler(v_), r(r_), shader(s_), table(c_.table()) {
         preint = c.options().preintegrated;
         central = c.options().centralDifferences;
         gradients = c.voxelGradients();
@@ -211,9 +282,11 @@ struct DvrMarcher {
         toEye = -r.dirWorld;
     }
 
-    float sample(float t) {
+    [[gnu::always_inline]] float sample(float t) {
         ++samples;
-        return sampleAt(v, r, t);
+        lastCell = sampler.locate(r.originIndex + t * r.dirIndex);
+        lastT = t;
+        return sampler.value(lastCell);
     }
 
     /// Composites the segment (t0, s0) → (t1, s1); shading at its back end.
@@ -250,7 +323,9 @@ struct DvrMarcher {
             const glm::vec3 p = r.originIndex + t1 * r.dirIndex;
             glm::vec3 g;
             if (gradients) {
-                g = voxelGradientAt(*gradients, p, gradientMatrix);
+                // The back end of a segment is (nearly always) the last sample taken.
+                g = t1 == lastT ? sampler.gradient(*gradients, lastCell, gradientMatrix)
+                                : voxelGradientAt(*gradients, p, gradientMatrix);
                 samples += 1;
             } else if (central) {
                 g = gradientAt(v, p, gradientMatrix);
