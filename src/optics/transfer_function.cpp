@@ -156,6 +156,15 @@ TfTable::TfTable(const TransferFunction& tf) {
             cumWeighted_[i][c] = cumWeighted_[i - 1][c] +
                                  0.5 * cell_ * (double(weighted_[i - 1][c]) + weighted_[i][c]);
     }
+    fused_.resize(n);
+    for (std::size_t i = 0; i < n; ++i) {
+        fused_[i].cum[0] = cumSigma_[i];
+        fused_[i].f[0] = sigma_[i];
+        for (int c = 0; c < 3; ++c) {
+            fused_[i].cum[1 + c] = cumWeighted_[i][c];
+            fused_[i].f[1 + c] = weighted_[i][c];
+        }
+    }
     // Transparent ends, for the O(1) rejection of segments that see no extinction at all.
     std::size_t first = 0, last = n - 1;
     while (first < n && sigma_[first] <= 0.f) ++first;
@@ -235,8 +244,6 @@ void TfTable::ensureWeighted(Cumulative& c) const {
 }
 
 TfTable::Segment TfTable::segmentSlow(float sf, float sb, SegmentCache* cache) const {
-    // Below a hundredth of a cell the integrand is linear to float precision: point-sample.
-    constexpr float kPointSampleFraction = 1e-2f;
     if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction)) return midpoint(sf, sb);
     Cumulative local[2];
     Cumulative* a;

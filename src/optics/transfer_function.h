@@ -26,6 +26,7 @@
 // tables are independent of Δ, partial segments (clip planes, jittered starts) are exact too.
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <glm/glm.hpp>
 #include <iosfwd>
 #include <string>
@@ -150,6 +151,51 @@ class TfTable {
         if (std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_) return {};
         return segmentSlow(sf, sb, &cache);
     }
+    /// The fused form of segment() for ray marchers, for TFs without emission (hasEmission()
+    /// false; otherwise use segment()): the cumulative integrals of σt and σt·a at one value, from
+    /// one interleaved node fetch, kept by the caller for the next segment (the back value of one
+    /// segment is the front of the next). Same double arithmetic as segment(), same results up to
+    /// rounding.
+    struct Integrals {
+        double v[4];  ///< ∫σt, ∫σt·a_r, ∫σt·a_g, ∫σt·a_b from lo() to the value
+    };
+    [[gnu::always_inline]] Integrals integrals(float value) const {
+        const double u = (double(value) - double(lo_)) * invCellD_;
+        Integrals out;
+        if (u > 0.0 && u < double(kTableCells)) {  // the common case (NaN fails both)
+            const int cell = int(u);
+            const double x = (u - double(cell)) * cell_;
+            const double q = x * x * (0.5 * invCellD_);
+            const FusedNode& a = fused_[std::size_t(cell)];
+            const FusedNode& b = fused_[std::size_t(cell) + 1];
+            for (int c = 0; c < 4; ++c)
+                out.v[c] = a.cum[c] + double(a.f[c]) * x + (double(b.f[c]) - double(a.f[c])) * q;
+            return out;
+        }
+        const FusedNode& e = u > 0.0 ? fused_.back() : fused_.front();
+        const double x =
+            u > 0.0 ? (u - double(kTableCells)) * cell_ : (std::isnan(u) ? 0.0 : u * cell_);
+        for (int c = 0; c < 4; ++c) out.v[c] = e.cum[c] + double(e.f[c]) * x;
+        return out;
+    }
+    /// segment(sf, sb) from the integrals at both ends (see integrals()).
+    [[gnu::always_inline]] Segment segment(float sf, const Integrals& a, float sb,
+                                           const Integrals& b) const {
+        if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction)) return midpoint(sf, sb);
+        const double d = b.v[0] - a.v[0];
+        const double sigma = d / (double(sb) - double(sf));
+        Segment g;
+        if (!(sigma > 0.0)) return g;
+        g.meanExtinction = float(sigma);
+        const double w = 1.0 / d;
+        for (int c = 0; c < 3; ++c)
+            g.albedo[c] = float(std::clamp((b.v[1 + c] - a.v[1 + c]) * w, 0.0, 1.0));
+        return g;
+    }
+    bool hasEmission() const { return emissive_; }
+    /// Below a hundredth of a cell the integrand is linear to float precision: point-sample.
+    static constexpr float kPointSampleFraction = 1e-2f;
+
     /// True when segment(sf, sb) is certainly transparent (cheap test).
     bool transparentSegment(float sf, float sb) const {
         return std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_;
@@ -161,6 +207,7 @@ class TfTable {
     /// much, because linear interpolation of the table can leak σt up to one cell past a
     /// breakpoint.
     float cellWidth() const { return 1.f / invCell_; }
+    float invCellWidth() const { return invCell_; }
     float lo() const { return lo_; }
     float hi() const { return hi_; }
 
@@ -189,6 +236,11 @@ class TfTable {
     std::vector<std::array<float, 6>> weighted_;  // σt·a, σt·(1−a)·e at nodes
     std::vector<double> cumSigma_;                // cumulative integrals at nodes
     std::vector<std::array<double, 6>> cumWeighted_;
+    struct FusedNode {
+        double cum[4];  ///< cumSigma_, cumWeighted_[0..2]
+        float f[4];     ///< sigma_, weighted_[0..2]
+    };
+    std::vector<FusedNode> fused_;  // kTableCells + 1, interleaved for integrals()
 };
 
 }  // namespace voxlight::optics

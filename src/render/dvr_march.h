@@ -266,12 +266,16 @@ struct DvrMarcher {
     glm::vec3 L{0.f};
     std::uint64_t samples = 0;
     optics::TfTable::SegmentCache cache;        ///< integrals at the last values (each value once)
+    bool fused;                                 ///< TF without emission: integrals() path
+    optics::TfTable::Integrals backIntegrals;   ///< integrals at backValue
+    float backValue = NAN;                      ///< back value of the last integrated segment
     typename CellSampler<View>::Cell lastCell;  ///< where the last sample was taken
     float lastT = NAN;
 
     DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
         : c(c_), v(v_), sampler(v_), r(r_), shader(s_), table(c_.table()) {
         preint = c.options().preintegrated;
+        fused = !table.hasEmission();
         central = c.options().centralDifferences;
         gradients = c.voxelGradients();
         gradientMatrix = c.gradientMatrix();
@@ -296,6 +300,18 @@ struct DvrMarcher {
     }
     bool refinable(float dt) const { return dt * voxelsPerMm > 1.f; }
 
+    /// Pre-integrated segment; the integrals at s1 are kept for the next segment's front.
+    [[gnu::always_inline]] optics::TfTable::Segment preintegrated(float s0, float s1) {
+        if (!fused) return table.segment(s0, s1, cache);
+        if (!(std::abs(s1 - s0) * table.invCellWidth() > optics::TfTable::kPointSampleFraction))
+            return table.midpoint(s0, s1);
+        const optics::TfTable::Integrals front =
+            s0 == backValue ? backIntegrals : table.integrals(s0);
+        backIntegrals = table.integrals(s1);
+        backValue = s1;
+        return table.segment(s0, front, s1, backIntegrals);
+    }
+
     void segmentFull(float t0, float s0, float t1, float s1, int depth) {
         const float dt = t1 - t0;
         if (preint && depth < kMaxRefinement && refinable(dt)) {
@@ -310,7 +326,7 @@ struct DvrMarcher {
             }
         }
         const optics::TfTable::Segment seg =
-            preint ? table.segment(s0, s1, cache) : table.midpoint(s0, s1);
+            preint ? preintegrated(s0, s1) : table.midpoint(s0, s1);
         const float tau = seg.meanExtinction * dt;
         if (!(tau > 0.f)) return;
         const float alpha = 1.f - std::exp(-tau);

@@ -4,6 +4,7 @@
 #include <cmath>
 
 #include "core/phantoms.h"
+#include "core/rng.h"
 #include "optics/presets.h"
 #include "optics/transfer_function.h"
 
@@ -105,6 +106,36 @@ TEST(TfTable, PreintegratedSegmentIsTheExactMeanOverTheValueRange) {
     const optics::TfTable empty(TransferFunction({pt(0, 0), pt(1, 0)}, {0.5f, 1}));
     EXPECT_EQ(empty.segment(0.2f, 0.8f).meanExtinction, 0.f);
     EXPECT_EQ(empty.segment(NAN, 0.8f).meanExtinction, 0.f);
+}
+
+TEST(TfTable, FusedIntegralsGiveTheSameSegmentsAsTheCachedPath) {
+    // The ray marcher's integrals() + segment(sf, a, sb, b) must agree with segment(sf, sb) (same
+    // double arithmetic; only the order of a few operations differs) for every kind of pair:
+    // inside the range, across the sharp step, tails on either side, tiny and zero differences,
+    // NaN ends.
+    constexpr double kFusedRelTol = 1e-5;  // float rounding of the result, not the method
+    const TransferFunction tf = optics::makePreset("ct-bone");
+    const optics::TfTable table(tf);
+    ASSERT_FALSE(table.hasEmission());
+    core::CounterRng rng(11);
+    const float lo = table.lo() - 500.f, hi = table.hi() + 500.f;
+    int checked = 0;
+    for (int n = 0; n < 20000; ++n) {
+        float a = lo + (hi - lo) * rng.uniform();
+        float b = n % 5 == 0 ? a + (rng.uniform() - 0.5f) * 2.f : lo + (hi - lo) * rng.uniform();
+        if (n % 97 == 0) b = a;
+        if (n % 101 == 0) a = NAN;
+        const auto ref = table.segment(a, b);
+        const auto got = table.segment(a, table.integrals(a), b, table.integrals(b));
+        const double tol = kFusedRelTol * std::max(1.0, double(ref.meanExtinction));
+        ASSERT_NEAR(got.meanExtinction, ref.meanExtinction, tol) << a << " -> " << b;
+        ASSERT_TRUE(std::isfinite(got.meanExtinction));
+        if (ref.meanExtinction > 1e-3f)
+            for (int c = 0; c < 3; ++c)
+                ASSERT_NEAR(got.albedo[c], ref.albedo[c], 1e-4) << a << " -> " << b;
+        checked += ref.meanExtinction > 0.f;
+    }
+    EXPECT_GT(checked, 5000) << "most pairs should see bone";
 }
 
 TEST(Presets, EveryPresetBuildsAndRelativeOnesFollowTheRange) {
