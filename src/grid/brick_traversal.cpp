@@ -67,10 +67,12 @@ CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
             stepDir[a] = 1;
             tNext[a] = tMin + (float(size * (c + 1)) - p[a]) / d;
             tDelta[a] = float(size) / d;
+            invDelta[a] = d / float(size);
         } else if (d < 0.f) {
             stepDir[a] = -1;
             tNext[a] = tMin + (float(size * c) - p[a]) / d;
             tDelta[a] = -float(size) / d;
+            invDelta[a] = -d / float(size);
         } else {
             stepDir[a] = 0;
             tNext[a] = kInf;

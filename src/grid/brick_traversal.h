@@ -137,7 +137,7 @@ struct CellDda {
         for (int a = 0; a < 3; ++a) {
             if (stepDir[a] == 0 || !(tNext[a] < tExit)) continue;
             // Boundary crossings on this axis strictly before tExit, at most `radius`.
-            int k = int(std::ceil((tExit - tNext[a]) / tDelta[a]));
+            int k = int(std::ceil((tExit - tNext[a]) * invDelta[a]));
             k = std::min(k, radius);
             k = std::min(k, stepDir[a] > 0 ? counts[a] - 1 - cell[a] : cell[a]);
             if (k <= 0) continue;
@@ -151,6 +151,7 @@ struct CellDda {
     std::ptrdiff_t indexStep[3] = {0, 0, 0};
     std::size_t index = 0;
     glm::vec3 tNext{0.f}, tDelta{0.f};
+    glm::vec3 invDelta{0.f};  ///< 1 / tDelta (0 on axes the ray does not cross)
     float t = 0.f, tMax = 0.f;
     bool done = false;
 };

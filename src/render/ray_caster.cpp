@@ -126,6 +126,9 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     table_ = std::make_shared<optics::TfTable>(tf);
     for (int a = 0; a < 3; ++a)
         gradientMatrix_[a] = glm::vec3(g.direction[a]) / float(2.0 * g.spacing[a]);
+    worldToIndexMatrix_ = glm::transpose(g.direction);
+    for (int c = 0; c < 3; ++c)
+        for (int a = 0; a < 3; ++a) worldToIndexMatrix_[c][a] /= g.spacing[a];
     weakGradient_ = kWeakGradientFraction * tf.window().width;
     isoValue_ = options_.isoValue.value_or(tf.surfaceValue());
     if (!std::isfinite(isoValue_))
@@ -171,8 +174,9 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
     RaySegment r;
     r.originWorld = glm::vec3(ray.origin);
     r.dirWorld = glm::vec3(ray.direction);
-    const glm::dvec3 oi = g.worldToIndex(ray.origin);
-    const glm::dvec3 di = (glm::transpose(g.direction) * ray.direction) / g.spacing;
+    // worldToIndex without its per-call transpose and divisions (worldToIndexMatrix_ holds them).
+    const glm::dvec3 oi = worldToIndexMatrix_ * (ray.origin - g.origin);
+    const glm::dvec3 di = worldToIndexMatrix_ * ray.direction;
     r.originIndex = glm::vec3(oi);
     r.dirIndex = glm::vec3(di);
     double tn = 0.0, tf = std::numeric_limits<double>::infinity();
@@ -184,7 +188,8 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
             if (oi[a] < lo || oi[a] > hi) tf = -1.0;
             continue;
         }
-        double t1 = (lo - oi[a]) / di[a], t2 = (hi - oi[a]) / di[a];
+        const double inv = 1.0 / di[a];
+        double t1 = (lo - oi[a]) * inv, t2 = (hi - oi[a]) * inv;
         if (t1 > t2) std::swap(t1, t2);
         tn = std::max(tn, t1);
         tf = std::min(tf, t2);

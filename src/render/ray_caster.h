@@ -188,6 +188,7 @@ class RayCaster {
     RenderOptions options_;
     float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
     glm::mat3 gradientMatrix_{1.f};
+    glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
     VoxelGradients voxelGradients_;
 };
 
