@@ -424,12 +424,13 @@ Scene parseScene(const json& doc, const std::string& source, const fs::path& bas
     }
     if (root.has("render")) {
         const Field r = root.child("render");
-        r.allowOnly({"step", "seed", "threads"});
+        r.allowOnly({"step", "seed", "threads", "termination"});
         r.get("step", s.render.stepVoxels, 0.01, 16.0);
         int seed = 1;
         r.get("seed", seed, 0, 2147483647);
         s.render.seed = std::uint64_t(seed);
         r.get("threads", s.render.threads, 0, 1024);
+        r.get("termination", s.render.termination, 0.0, 0.5);
     }
     if (root.has("effects")) {
         const Field e = root.child("effects");

@@ -364,7 +364,8 @@ template <class View, class S>
 RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const S& shader) {
     RayResult out;
     const SampleLattice lat(r, c.stepMm());
-    const float termination = c.options().earlyTermination ? kTerminationTransmittance : 0.f;
+    const float termination =
+        c.options().earlyTermination ? c.options().terminationTransmittance : 0.f;
     DvrMarcher<View, S> m(c, v, r, shader);
     std::int64_t iPrev = -1;
     float sPrev = 0.f, tPrev = 0.f;

@@ -121,6 +121,8 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     if (!(options_.stepVoxels > 0.f) || !std::isfinite(options_.stepVoxels))
         throw InputError("scene", "render.step", "must be a finite number > 0 (voxels)");
     if (options_.tileSize < 1) options_.tileSize = 16;
+    if (!(options_.terminationTransmittance >= 0.f && options_.terminationTransmittance < 1.f))
+        throw InputError("scene", "render.termination", "must be a transmittance in [0, 1)");
     const core::Geometry& g = volume.geometry();
     stepMm_ = float(options_.stepVoxels * core::minComponent(g.spacing));
     table_ = std::make_shared<optics::TfTable>(tf);

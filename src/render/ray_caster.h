@@ -81,6 +81,8 @@ struct RenderOptions {
     bool preintegrated = true;  ///< pre-integrated segments (else midpoint point sampling)
     bool emptySpaceSkipping = true;
     bool earlyTermination = true;
+    /// Rays stop once their transmittance falls below this (with earlyTermination), ∈ [0, 1).
+    float terminationTransmittance = kTerminationTransmittance;
     bool jitter = true;  ///< per-pixel deterministic start offset
     std::uint64_t seed = 1;
     int threads = 0;            ///< 0 = all hardware threads

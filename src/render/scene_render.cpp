@@ -171,6 +171,7 @@ RenderOptions buildRenderOptions(const io::Scene& scene, json* usedOut) {
     if (m == "iso" && p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
     o.seed = scene.render.seed;
     o.threads = scene.render.threads;
+    o.terminationTransmittance = float(scene.render.termination);
     o.background = glm::vec3(scene.image.background);
     for (const auto& c : scene.clipPlanes) o.clipPlanes.push_back({c.point, c.normal});
     if (scene.cropBox) o.cropBox = CropBox{scene.cropBox->min, scene.cropBox->max};
@@ -289,6 +290,7 @@ SceneRenderResult renderScene(const io::Scene& scene, const core::Progress& prog
     res.details["render"] = {{"step_voxels", options.stepVoxels},
                              {"step_mm", caster.stepMm()},
                              {"seed", options.seed},
+                             {"termination", options.terminationTransmittance},
                              {"threads", options.threads}};
     res.details["counters"] = {
         {"rays", res.stats.rays},

@@ -68,3 +68,30 @@ TEST(SceneRender, WindowRemapsPresetsAndSetsMipGrey) {
     EXPECT_FLOAT_EQ(tf.window().level, 600.f);
     EXPECT_FLOAT_EQ(tf.points().back().value, 600.f + (3071.f - 500.f) / 2.f);
 }
+
+TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) {
+    // A looser termination stops rays earlier: fewer samples, and each pixel differs from the
+    // strict render by at most what the remaining transmittance could still add (≤ threshold
+    // times the largest scattered radiance, here ≤ ambient + diffuse + specular = 1.25).
+    json d = base();
+    d["volume"] = {{"phantom", "torso"}, {"size", 64}};
+    d["transfer_function"] = "ct-bone";
+    d["image"] = {{"width", 48}, {"height", 48}};
+    d["render"] = {{"termination", 0.0}};
+    const auto strict = render::renderScene(scene(d));
+    d["render"] = {{"termination", 0.02}};
+    const auto loose = render::renderScene(scene(d));
+    EXPECT_LT(loose.stats.samples, strict.stats.samples);
+    constexpr float kMaxRadiance = 1.25f;
+    float worst = 0.f;
+    for (int y = 0; y < 48; ++y)
+        for (int x = 0; x < 48; ++x)
+            for (int c = 0; c < 4; ++c)
+                worst = std::max(worst, std::abs(loose.film.at(x, y)[c] - strict.film.at(x, y)[c]));
+    EXPECT_LE(worst, 0.02f * kMaxRadiance + 1e-5f);
+    EXPECT_GT(worst, 0.f) << "the loose threshold should change something";
+    d["render"] = {{"termination", 0.7}};
+    EXPECT_THROW(scene(d), InputError);
+    d["render"] = {{"termination", "often"}};
+    EXPECT_THROW(scene(d), InputError);
+}
