@@ -114,7 +114,7 @@ struct VolumeView {
 
     /// Trilinear interpolation of the physical value at continuous index (x, y, z), clamped to the
     /// grid.
-    float sample(float x, float y, float z) const {
+    [[gnu::always_inline]] float sample(float x, float y, float z) const {
         x = std::min(std::max(x, 0.f), float(nx - 1));
         y = std::min(std::max(y, 0.f), float(ny - 1));
         z = std::min(std::max(z, 0.f), float(nz - 1));

@@ -41,29 +41,6 @@ struct SampleLattice {
     }
 };
 
-/// Trilinear sample of the physical value at continuous index p: the same arithmetic as
-/// core::VolumeView::sample (so results are identical), forced inline for the per-sample loop.
-template <class View>
-[[gnu::always_inline]] inline float trilinear(const View& v, float x, float y, float z) {
-    x = std::min(std::max(x, 0.f), float(v.nx - 1));
-    y = std::min(std::max(y, 0.f), float(v.ny - 1));
-    z = std::min(std::max(z, 0.f), float(v.nz - 1));
-    const int i = std::min(int(x), v.nx - 2 < 0 ? 0 : v.nx - 2);
-    const int j = std::min(int(y), v.ny - 2 < 0 ? 0 : v.ny - 2);
-    const int k = std::min(int(z), v.nz - 2 < 0 ? 0 : v.nz - 2);
-    const float fx = x - float(i), fy = y - float(j), fz = z - float(k);
-    const int di = v.nx > 1 ? 1 : 0;
-    const std::size_t dj = v.ny > 1 ? v.sy : 0, dk = v.nz > 1 ? v.sz : 0;
-    const auto* p = v.data + i + v.sy * j + v.sz * k;
-    const float c00 = float(p[0]) + fx * (float(p[di]) - float(p[0]));
-    const float c10 = float(p[dj]) + fx * (float(p[dj + di]) - float(p[dj]));
-    const float c01 = float(p[dk]) + fx * (float(p[dk + di]) - float(p[dk]));
-    const float c11 = float(p[dk + dj]) + fx * (float(p[dk + dj + di]) - float(p[dk + dj]));
-    const float c0 = c00 + fy * (c10 - c00);
-    const float c1 = c01 + fy * (c11 - c01);
-    return v.slope * (c0 + fz * (c1 - c0)) + v.intercept;
-}
-
 /// Trilinear interpolation of the precomputed central differences in the cell at `offset` with
 /// weights (fx, fy, fz) and corner strides (di, dj, dk), scaled to a world gradient. With SSE4.1
 /// each corner's (Δi, Δj, Δk, 0) is one 64-bit load widened to four floats and the seven lerps run
@@ -103,10 +80,11 @@ template <class View>
 #endif
 }
 
-/// The hot-loop form of trilinear(): the grid constants (clamp limits, corner strides) are
-/// computed once per ray instead of per sample, and a sample is split into locate() (cell and
+/// The hot-loop form of core::VolumeView::sample: the grid constants (clamp limits, corner strides)
+/// are computed once per ray instead of per sample, and a sample is split into locate() (cell and
 /// weights) and value(), so that the gradient table can reuse the cell of the value sample at the
-/// same point. Same clamping, weights and arithmetic as trilinear(), so results are identical.
+/// same point. Same clamping, weights and arithmetic as core::VolumeView::sample, so results are
+/// identical.
 template <class View>
 struct CellSampler {
     using Elem = std::remove_cv_t<std::remove_pointer_t<decltype(View::data)>>;
@@ -165,21 +143,21 @@ struct CellSampler {
 template <class View>
 [[gnu::always_inline]] inline float sampleAt(const View& v, const RaySegment& r, float t) {
     const glm::vec3 p = r.originIndex + t * r.dirIndex;
-    return trilinear(v, p.x, p.y, p.z);
+    return v.sample(p.x, p.y, p.z);
 }
 
 /// World gradient (value/mm) by central differences of the trilinear field at index position p.
 template <class View>
 [[gnu::always_inline]] inline glm::vec3 gradientAt(const View& v, const glm::vec3& p,
                                                    const glm::mat3& m) {
-    const glm::vec3 d(trilinear(v, p.x + 1.f, p.y, p.z) - trilinear(v, p.x - 1.f, p.y, p.z),
-                      trilinear(v, p.x, p.y + 1.f, p.z) - trilinear(v, p.x, p.y - 1.f, p.z),
-                      trilinear(v, p.x, p.y, p.z + 1.f) - trilinear(v, p.x, p.y, p.z - 1.f));
+    const glm::vec3 d(v.sample(p.x + 1.f, p.y, p.z) - v.sample(p.x - 1.f, p.y, p.z),
+                      v.sample(p.x, p.y + 1.f, p.z) - v.sample(p.x, p.y - 1.f, p.z),
+                      v.sample(p.x, p.y, p.z + 1.f) - v.sample(p.x, p.y, p.z - 1.f));
     return m * d;
 }
 
 /// World gradient from the precomputed central differences: their trilinear interpolation at p
-/// (same clamping and weights as trilinear()), then the same scaling as gradientAt.
+/// (same clamping and weights as core::VolumeView::sample), then the same scaling as gradientAt.
 [[gnu::always_inline]] inline glm::vec3 voxelGradientAt(const VoxelGradients& g, const glm::vec3& p,
                                                         const glm::mat3& m) {
     const float x = std::min(std::max(p.x, 0.f), float(g.nx - 1));
@@ -198,9 +176,8 @@ template <class View>
 template <class View>
 [[gnu::always_inline]] inline glm::vec3 forwardGradientAt(const View& v, const glm::vec3& p,
                                                           float s0, const glm::mat3& m) {
-    const glm::vec3 d(trilinear(v, p.x + 1.f, p.y, p.z) - s0,
-                      trilinear(v, p.x, p.y + 1.f, p.z) - s0,
-                      trilinear(v, p.x, p.y, p.z + 1.f) - s0);
+    const glm::vec3 d(v.sample(p.x + 1.f, p.y, p.z) - s0, v.sample(p.x, p.y + 1.f, p.z) - s0,
+                      v.sample(p.x, p.y, p.z + 1.f) - s0);
     return m * (2.f * d);  // m holds 1 / (2·spacing)
 }
 
