@@ -58,9 +58,12 @@ TransferFunction absolutePreset(const std::string& name) {
     if (name == "ct-angio") {
         const glm::vec3 red(0.80f, 0.10f, 0.07f), metal(0.80f, 0.84f, 0.92f);
         // Lumen red up to ≈ 330 HU, bone ivory from ≈ 430 HU (cortex at 3 mm voxels is often
-        // only 400–700 HU), metal silver above 1500 HU.
-        return TransferFunction({pt(-1024, 0, red), pt(110, 0, red), pt(200, 0.35f, red),
-                                 pt(330, 0.9f, {0.85f, 0.24f, 0.15f}), pt(430, 1.2f, ivory),
+        // only 400–700 HU), metal silver above 1500 HU. The red band is only moderately dense
+        // (σt ≤ 0.3/mm): a contrast-filled vessel is many mm thick and still turns opaque, while
+        // the 1–2 mm partial-volume rim on every bone surface stays translucent, so bone reads
+        // ivory rather than red.
+        return TransferFunction({pt(-1024, 0, red), pt(110, 0, red), pt(200, 0.12f, red),
+                                 pt(330, 0.3f, {0.85f, 0.24f, 0.15f}), pt(430, 1.2f, ivory),
                                  pt(1150, 3.f, bright), pt(1500, 6.f, metal), pt(3071, 6.f, metal)},
                                 {400, 1400}, name);
     }
