@@ -290,7 +290,7 @@ SceneRenderResult renderScene(const io::Scene& scene, const core::Progress& prog
     res.details["render"] = {{"step_voxels", options.stepVoxels},
                              {"step_mm", caster.stepMm()},
                              {"seed", options.seed},
-                             {"termination", options.terminationTransmittance},
+                             {"termination", scene.render.termination},
                              {"threads", options.threads}};
     res.details["counters"] = {
         {"rays", res.stats.rays},
