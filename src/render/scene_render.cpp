@@ -130,6 +130,17 @@ class Params {
 }  // namespace
 
 RenderOptions buildRenderOptions(const io::Scene& scene, json* usedOut) {
+    // The TF preset is named before the volume is loaded: refuse an unknown one now.
+    if (const std::string& preset = scene.transferFunction.preset; !preset.empty()) {
+        const auto& cat = optics::presetCatalog();
+        if (std::none_of(cat.begin(), cat.end(),
+                         [&](const optics::PresetInfo& p) { return p.name == preset; })) {
+            std::string list;
+            for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
+            throw InputError(scene.source, "transfer_function.preset",
+                             "'" + preset + "' is not a preset", "choose one of: " + list);
+        }
+    }
     RenderOptions o;
     const std::string& m = scene.method.name;
     const auto& impl = rayCasterMethods();
@@ -207,16 +218,6 @@ SceneRenderResult renderScene(const io::Scene& scene, const core::Progress& prog
     json used;
     RenderOptions options = buildRenderOptions(scene, &used);
     res.method = {{"name", scene.method.name}, {"params", used}};
-    if (const std::string& preset = scene.transferFunction.preset; !preset.empty()) {
-        const auto& cat = optics::presetCatalog();
-        if (std::none_of(cat.begin(), cat.end(),
-                         [&](const optics::PresetInfo& p) { return p.name == preset; })) {
-            std::string list;
-            for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
-            throw InputError(scene.source, "transfer_function.preset",
-                             "'" + preset + "' is not a preset", "choose one of: " + list);
-        }
-    }
 
     core::Volume volume = loadSceneVolume(scene, progress);
     {

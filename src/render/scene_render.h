@@ -53,7 +53,9 @@ core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progr
 optics::TransferFunction buildTransferFunction(const io::Scene& scene, const core::Volume& volume);
 CameraSpec buildCameraSpec(const io::CameraDesc& desc);
 /// Render options from method, params, lights, clip planes, image and render settings. `used`
-/// receives the method parameters as used (defaults filled in).
+/// receives the method parameters as used (defaults filled in). Everything about the scene that
+/// can be checked without its volume is checked here (method, params, TF preset name, ...):
+/// throws InputError naming the field.
 RenderOptions buildRenderOptions(const io::Scene& scene, nlohmann::json* used = nullptr);
 
 /// Most frames renderScene() repeats (a timing aid, not a batch renderer).

@@ -245,12 +245,23 @@ TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
     EXPECT_NEAR(faceCovered, 2 * expected, 2 * rim + 4);
 }
 
-TEST(Determinism, SameImageBitForBitWithOneAndTwoThreads) {
+namespace {
+/// A 40³ torso and a TF with a transparent tail, a red soft ramp and opaque bone: every mode and
+/// the skipping have something to do (shared by the determinism and skipping checks).
+core::Volume smallTorso() {
     core::PhantomOptions po;
     po.size = 40;
-    const core::Volume v = core::makePhantom("torso", po);
-    const auto tf = optics::TransferFunction(
+    return core::makePhantom("torso", po);
+}
+optics::TransferFunction boneRampTf() {
+    return optics::TransferFunction(
         {tfPoint(100, 0), tfPoint(300, 0.3f, {0.9f, 0.3f, 0.2f}), tfPoint(900, 2.f)}, {500, 800});
+}
+}  // namespace
+
+TEST(Determinism, SameImageBitForBitWithOneAndTwoThreads) {
+    const core::Volume v = smallTorso();
+    const auto tf = boneRampTf();
     render::CameraSpec s;
     const auto b = v.geometry().worldBounds();
     const render::Camera cam(s, b[0], b[1], 48, 40);
@@ -271,11 +282,8 @@ TEST(Determinism, SameImageBitForBitWithOneAndTwoThreads) {
 }
 
 TEST(EmptySpaceSkipping, DoesNotChangeTheImage) {
-    core::PhantomOptions po;
-    po.size = 40;
-    const core::Volume v = core::makePhantom("torso", po);
-    const auto tf = optics::TransferFunction(
-        {tfPoint(100, 0), tfPoint(300, 0.3f, {0.9f, 0.3f, 0.2f}), tfPoint(900, 2.f)}, {500, 800});
+    const core::Volume v = smallTorso();
+    const auto tf = boneRampTf();
     render::CameraSpec s;
     const auto b = v.geometry().worldBounds();
     const render::Camera cam(s, b[0], b[1], 40, 40);

@@ -95,3 +95,30 @@ TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) 
     d["render"] = {{"termination", "often"}};
     EXPECT_THROW(scene(d), InputError);
 }
+
+TEST(SceneRender, RepeatedFramesReportEveryFrameAndTheSameImage) {
+    json d = base();
+    const auto once = render::renderScene(scene(d));
+    const auto thrice = render::renderScene(scene(d), core::Progress::none(), 3);
+    ASSERT_TRUE(thrice.details.contains("frame_seconds"));
+    EXPECT_EQ(thrice.details["frame_seconds"].size(), 3u);
+    EXPECT_FALSE(once.details.contains("frame_seconds"));
+    EXPECT_EQ(once.film.pixels, thrice.film.pixels);
+    EXPECT_EQ(once.stats.samples, thrice.stats.samples) << "stats are one frame's, not the sum";
+    EXPECT_THROW(render::renderScene(scene(d), core::Progress::none(), 0), InputError);
+    EXPECT_THROW(render::renderScene(scene(d), core::Progress::none(), render::kMaxFrames + 1),
+                 InputError);
+}
+
+TEST(SceneRender, UnknownPresetIsRefusedBeforeTheVolumeIsLoaded) {
+    json d = base();
+    d["transfer_function"] = "ct-lungs";
+    d["volume"] = {{"path", "/nonexistent/volume.nii.gz"}};  // never reached
+    try {
+        (void)render::buildRenderOptions(scene(d));
+        FAIL() << "unknown preset accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("transfer_function.preset"), std::string::npos)
+            << e.what();
+    }
+}
