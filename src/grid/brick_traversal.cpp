@@ -49,7 +49,8 @@ void BrickMajorants::finish() {
 
 CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
                  const glm::vec3& directionIndex, float tMin, float tMax)
-    : counts(majorants.counts()), t(tMin), tMax(tMax) {
+    : t(tMin), tMax(tMax) {
+    const glm::ivec3 counts = majorants.counts();
     done = !(tMax > tMin) || majorants.size() == 0;
     if (done) return;
     const glm::vec3 p = originIndex + tMin * directionIndex;
@@ -57,6 +58,7 @@ CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
     const float kInf = std::numeric_limits<float>::infinity();
     const std::ptrdiff_t stride[3] = {1, std::ptrdiff_t(counts.x),
                                       std::ptrdiff_t(counts.x) * std::ptrdiff_t(counts.y)};
+    glm::ivec3 cell;
     for (int a = 0; a < 3; ++a) {
         const int n = counts[a];
         int c = int(std::floor(p[a] / float(size)));
@@ -64,21 +66,23 @@ CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,
         cell[a] = c;
         const float d = directionIndex[a];
         if (d > 0.f) {
-            stepDir[a] = 1;
+            indexStep[a] = stride[a];
+            left[a] = n - 1 - c;
             tNext[a] = tMin + (float(size * (c + 1)) - p[a]) / d;
             tDelta[a] = float(size) / d;
             invDelta[a] = d / float(size);
         } else if (d < 0.f) {
-            stepDir[a] = -1;
+            indexStep[a] = -stride[a];
+            left[a] = c;
             tNext[a] = tMin + (float(size * c) - p[a]) / d;
             tDelta[a] = -float(size) / d;
             invDelta[a] = -d / float(size);
         } else {
-            stepDir[a] = 0;
+            indexStep[a] = 0;
+            left[a] = std::numeric_limits<int>::max();
             tNext[a] = kInf;
             tDelta[a] = kInf;
         }
-        indexStep[a] = stepDir[a] * stride[a];
         // A position clamped into the edge cell from outside: its boundary may be "behind" us.
         if (tNext[a] < tMin) tNext[a] = tMin;
     }

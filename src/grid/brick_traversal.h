@@ -106,21 +106,19 @@ struct CellDda {
     [[gnu::always_inline]] bool step(float& t0, float& t1, std::size_t& cellIndex) {
         if (done) return false;
         const int a =
-            tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2) : (tNext.y <= tNext.z ? 1 : 2);
+            tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2) : (tNext[1] <= tNext[2] ? 1 : 2);
         cellIndex = index;
         t0 = t;
         t1 = std::min(tNext[a], tMax);
-        t = t1;
         if (t1 >= tMax) {
             done = true;
         } else {
-            cell[a] += stepDir[a];
             index += indexStep[a];
             tNext[a] += tDelta[a];
-            if (cell[a] < 0 || cell[a] >= counts[a]) done = true;
-            if (done) t1 = tMax;  // leaving the grid: the rest of the ray is in the edge cell
-            t = t1;
+            // Leaving the grid: the rest of the ray is in the edge cell.
+            if (--left[a] < 0) done = true, t1 = tMax;
         }
+        t = t1;
         return true;
     }
 
@@ -131,27 +129,28 @@ struct CellDda {
     [[gnu::always_inline]] void jump(int radius) {
         if (done || radius < 1) return;
         const float r = float(radius);
-        float tExit =
-            std::min({tNext.x + r * tDelta.x, tNext.y + r * tDelta.y, tNext.z + r * tDelta.z});
+        float tExit = std::min(
+            {tNext[0] + r * tDelta[0], tNext[1] + r * tDelta[1], tNext[2] + r * tDelta[2]});
         if (!(tExit < tMax)) tExit = tMax;
         for (int a = 0; a < 3; ++a) {
-            if (stepDir[a] == 0 || !(tNext[a] < tExit)) continue;
+            if (!(tNext[a] < tExit)) continue;  // also an axis the ray does not cross (tNext = ∞)
             // Boundary crossings on this axis strictly before tExit, at most `radius`.
             int k = int(std::ceil((tExit - tNext[a]) * invDelta[a]));
-            k = std::min(k, radius);
-            k = std::min(k, stepDir[a] > 0 ? counts[a] - 1 - cell[a] : cell[a]);
+            k = std::min({k, radius, left[a]});
             if (k <= 0) continue;
-            cell[a] += stepDir[a] * k;
+            left[a] -= k;
             index += indexStep[a] * k;
             tNext[a] += float(k) * tDelta[a];
         }
     }
 
-    glm::ivec3 cell{0}, stepDir{0}, counts{0};
+    /// Per axis: cells left in the stepping direction before the ray leaves the grid (a large
+    /// number on an axis it does not cross).
+    int left[3] = {0, 0, 0};
     std::ptrdiff_t indexStep[3] = {0, 0, 0};
     std::size_t index = 0;
-    glm::vec3 tNext{0.f}, tDelta{0.f};
-    glm::vec3 invDelta{0.f};  ///< 1 / tDelta (0 on axes the ray does not cross)
+    float tNext[3] = {0.f, 0.f, 0.f}, tDelta[3] = {0.f, 0.f, 0.f};
+    float invDelta[3] = {0.f, 0.f, 0.f};  ///< 1 / tDelta (0 on axes the ray does not cross)
     float t = 0.f, tMax = 0.f;
     bool done = false;
 };

@@ -50,20 +50,23 @@ Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::d
     }
     orthoHeight_ =
         spec.orthoHeight > 0.0 ? spec.orthoHeight : 2.04 * radius / std::min(1.0, aspect);
+    pixelScaleX_ = 2.0 / width_;
+    pixelScaleY_ = 2.0 / height_;
+    const double h = projection_ == Projection::Perspective ? tanHalf_ : 0.5 * orthoHeight_;
+    rightStep_ = (h * aspect) * right_;
+    upStep_ = h * up_;
 }
 
 Ray Camera::generate(int x, int y) const {
-    const double sx = (2.0 * (x + 0.5) / width_ - 1.0);   // −1 left … +1 right
-    const double sy = (1.0 - 2.0 * (y + 0.5) / height_);  // +1 top … −1 bottom
-    const double aspect = double(width_) / double(height_);
+    const double sx = (x + 0.5) * pixelScaleX_ - 1.0;  // −1 left … +1 right
+    const double sy = 1.0 - (y + 0.5) * pixelScaleY_;  // +1 top … −1 bottom
     Ray r;
     if (projection_ == Projection::Perspective) {
+        const glm::dvec3 d = forward_ + sx * rightStep_ + sy * upStep_;
         r.origin = eye_;
-        r.direction =
-            glm::normalize(forward_ + (sx * tanHalf_ * aspect) * right_ + (sy * tanHalf_) * up_);
+        r.direction = d * (1.0 / std::sqrt(glm::dot(d, d)));
     } else {
-        const double h = 0.5 * orthoHeight_;
-        r.origin = eye_ + (sx * h * aspect) * right_ + (sy * h) * up_;
+        r.origin = eye_ + sx * rightStep_ + sy * upStep_;
         r.direction = forward_;
     }
     return r;

@@ -56,6 +56,10 @@ class Camera {
     glm::dvec3 eye_, forward_, right_, up_;
     double fovY_ = 0.5, tanHalf_ = 0.27, orthoHeight_ = 1.0;
     int width_ = 1, height_ = 1;
+    // generate()'s per-pixel constants: 2/width, 2/height, and right/up scaled to one unit of the
+    // normalised image coordinate (image-plane half-extent at unit distance, or in mm for ortho).
+    double pixelScaleX_ = 1.0, pixelScaleY_ = 1.0;
+    glm::dvec3 rightStep_{0.0}, upStep_{0.0};
 };
 std::ostream& operator<<(std::ostream& os, const Camera& c);
 

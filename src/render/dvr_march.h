@@ -6,6 +6,7 @@
 #include <algorithm>
 #include <cmath>
 #include <type_traits>
+#include <utility>
 #if defined(__SSE4_1__)
 #include <smmintrin.h>
 #endif
@@ -132,6 +133,7 @@ struct CellSampler {
         const float c1 = c01 + c.fy * (c11 - c01);
         return slope * (c0 + c.fz * (c1 - c0)) + intercept;
     }
+
     /// World gradient from the precomputed central differences (same grid as the volume) at a
     /// located cell.
     [[gnu::always_inline]] glm::vec3 gradient(const VoxelGradients& g, const Cell& c,
@@ -232,7 +234,9 @@ struct DvrMarcher {
     const View v;  ///< a copy: stores to the counters below cannot alias its fields
     const CellSampler<View> sampler;
     const RaySegment& r;
-    const S& shader;
+    /// The shader's per-ray form (ray constants such as halfway vectors hoisted).
+    using RayShader = std::decay_t<decltype(std::declval<const S&>().forRay(glm::vec3()))>;
+    const RayShader shader;
     const optics::TfTable& table;
     const VoxelGradients* gradients;  ///< precomputed central differences, or nullptr
     glm::mat3 gradientMatrix;
@@ -250,7 +254,7 @@ struct DvrMarcher {
     float lastT = NAN;
 
     DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
-        : c(c_), v(v_), sampler(v_), r(r_), shader(s_), table(c_.table()) {
+        : c(c_), v(v_), sampler(v_), r(r_), shader(s_.forRay(-r_.dirWorld)), table(c_.table()) {
         preint = c.options().preintegrated;
         fused = !table.hasEmission();
         central = c.options().centralDifferences;
@@ -271,9 +275,13 @@ struct DvrMarcher {
     }
 
     /// Composites the segment (t0, s0) → (t1, s1); shading at its back end.
-    [[gnu::always_inline]] void segment(float t0, float s0, float t1, float s1, int depth) {
-        if (preint && table.transparentSegment(s0, s1) && depth == 0 && !refinable(t1 - t0)) return;
-        segmentFull(t0, s0, t1, s1, depth);
+    [[gnu::always_inline]] void segment(float t0, float s0, float t1, float s1) {
+        if (preint && refinable(t1 - t0)) {
+            refine(t0, s0, t1, s1, 0);
+            return;
+        }
+        if (preint && table.transparentSegment(s0, s1)) return;
+        composite(t0, s0, t1, s1);
     }
     bool refinable(float dt) const { return dt * voxelsPerMm > 1.f; }
 
@@ -289,19 +297,28 @@ struct DvrMarcher {
         return table.segment(s0, front, s1, backIntegrals);
     }
 
-    void segmentFull(float t0, float s0, float t1, float s1, int depth) {
-        const float dt = t1 - t0;
-        if (preint && depth < kMaxRefinement && refinable(dt)) {
+    /// A pre-integrated segment longer than a voxel (coarse steps): split at its midpoint while
+    /// the value profile departs from linear (kLinearityFraction), up to kMaxRefinement levels.
+    /// Kept out of line: at the default step of one voxel or less it never runs.
+    [[gnu::noinline]] void refine(float t0, float s0, float t1, float s1, int depth) {
+        if (depth < kMaxRefinement && refinable(t1 - t0)) {
             const float sMid = sample(0.5f * (t0 + t1));
             if (std::abs(sMid - 0.5f * (s0 + s1)) > linearityTol &&
                 table.segment(std::min({s0, s1, sMid}), std::max({s0, s1, sMid})).meanExtinction >
                     0.f) {
                 const float tMid = 0.5f * (t0 + t1);
-                segment(t0, s0, tMid, sMid, depth + 1);
-                segment(tMid, sMid, t1, s1, depth + 1);
+                refine(t0, s0, tMid, sMid, depth + 1);
+                refine(tMid, sMid, t1, s1, depth + 1);
                 return;
             }
         }
+        composite(t0, s0, t1, s1);
+    }
+
+    /// One segment of the optical model: opacity from its (pre-integrated) extinction, shading at
+    /// its back end.
+    [[gnu::always_inline]] void composite(float t0, float s0, float t1, float s1) {
+        const float dt = t1 - t0;
         const optics::TfTable::Segment seg =
             preint ? preintegrated(s0, s1) : table.midpoint(s0, s1);
         const float tau = seg.meanExtinction * dt;
@@ -313,18 +330,18 @@ struct DvrMarcher {
         in.value = s1;
         in.normal = toEye;
         if constexpr (S::kNeedsNormal) {
-            const glm::vec3 p = r.originIndex + t1 * r.dirIndex;
             glm::vec3 g;
             if (gradients) {
                 // The back end of a segment is (nearly always) the last sample taken.
                 g = t1 == lastT ? sampler.gradient(*gradients, lastCell, gradientMatrix)
-                                : voxelGradientAt(*gradients, p, gradientMatrix);
+                                : voxelGradientAt(*gradients, r.originIndex + t1 * r.dirIndex,
+                                                  gradientMatrix);
                 samples += 1;
             } else if (central) {
-                g = gradientAt(v, p, gradientMatrix);
+                g = gradientAt(v, r.originIndex + t1 * r.dirIndex, gradientMatrix);
                 samples += 6;
             } else {
-                g = forwardGradientAt(v, p, s1, gradientMatrix);
+                g = forwardGradientAt(v, r.originIndex + t1 * r.dirIndex, s1, gradientMatrix);
                 samples += 3;
             }
             const bool cutFace = r.clipEntry && (t1 - r.tNear) < band;
@@ -346,26 +363,27 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
     DvrMarcher<View, S> m(c, v, r, shader);
     std::int64_t iPrev = -1;
     float sPrev = 0.f, tPrev = 0.f;
-    forEachActiveRange(c, r, lat, [&](std::int64_t i0, std::int64_t i1) {
-        if (iPrev < i0) {
-            tPrev = lat.t(i0);
-            sPrev = m.sample(tPrev);
-            iPrev = i0;
-        }
-        for (std::int64_t i = iPrev + 1; i <= i1; ++i) {
-            const float t = lat.t(i);
-            const float s = m.sample(t);
-            m.segment(tPrev, sPrev, t, s, 0);
-            sPrev = s;
-            tPrev = t;
-            iPrev = i;
-            if (m.T < termination) {
-                out.terminated = true;
-                return false;
+    forEachActiveRange(
+        c, r, lat, [&](std::int64_t i0, std::int64_t i1) __attribute__((always_inline)) {
+            if (iPrev < i0) {
+                tPrev = lat.t(i0);
+                sPrev = m.sample(tPrev);
+                iPrev = i0;
             }
-        }
-        return true;
-    });
+            for (std::int64_t i = iPrev + 1; i <= i1; ++i) {
+                const float t = lat.t(i);
+                const float s = m.sample(t);
+                m.segment(tPrev, sPrev, t, s);
+                sPrev = s;
+                tPrev = t;
+                iPrev = i;
+                if (m.T < termination) {
+                    out.terminated = true;
+                    return false;
+                }
+            }
+            return true;
+        });
     out.radiance = m.L;
     out.transmittance = m.T;
     out.samples = m.samples;

@@ -128,6 +128,12 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     table_ = std::make_shared<optics::TfTable>(tf);
     for (int a = 0; a < 3; ++a)
         gradientMatrix_[a] = glm::vec3(g.direction[a]) / float(2.0 * g.spacing[a]);
+    for (int a = 0; a < 3; ++a) {
+        // Volume box in index space: the voxel centres [0, n − 1] (a single slice gets ±0.5).
+        const int n = g.dims[a];
+        indexBoxLo_[a] = n > 1 ? 0.0 : -0.5;
+        indexBoxHi_[a] = n > 1 ? double(n - 1) : 0.5;
+    }
     worldToIndexMatrix_ = glm::transpose(g.direction);
     for (int c = 0; c < 3; ++c)
         for (int a = 0; a < 3; ++a) worldToIndexMatrix_[c][a] /= g.spacing[a];
@@ -182,10 +188,9 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
     r.originIndex = glm::vec3(oi);
     r.dirIndex = glm::vec3(di);
     double tn = 0.0, tf = std::numeric_limits<double>::infinity();
-    // Volume box in index space: the voxel centres [0, n − 1] (a single slice gets ±0.5).
+    // Volume box in index space (indexBoxLo_/Hi_).
     for (int a = 0; a < 3; ++a) {
-        const int n = g.dims[a];
-        const double lo = n > 1 ? 0.0 : -0.5, hi = n > 1 ? double(n - 1) : 0.5;
+        const double lo = indexBoxLo_[a], hi = indexBoxHi_[a];
         if (std::abs(di[a]) < 1e-300) {
             if (oi[a] < lo || oi[a] > hi) tf = -1.0;
             continue;
@@ -236,7 +241,10 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
     }
     r.tNear = float(tn);
     r.tFar = float(tf);
-    if (!(r.tFar > r.tNear)) r.tFar = r.tNear;  // miss
+    if (!(r.tFar > r.tNear)) {  // miss
+        r.tFar = r.tNear;
+        return r;
+    }
     r.jitter = options_.jitter
                    ? core::toUnitFloat(core::hashCounters(
                          std::uint64_t(y) * std::uint64_t(camera.width()) + std::uint64_t(x), 0, 0,

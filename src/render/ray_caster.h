@@ -189,6 +189,7 @@ class RayCaster {
     grid::BrickMajorants majorants_;
     RenderOptions options_;
     float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
+    glm::dvec3 indexBoxLo_{0.0}, indexBoxHi_{0.0};  ///< the volume box in index space
     glm::mat3 gradientMatrix_{1.f};
     glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
     VoxelGradients voxelGradients_;

@@ -8,6 +8,8 @@
 //
 //   static constexpr bool kNeedsNormal;        // marcher computes the gradient normal if true
 //   Scatter scatter(const ShadeInput&) const;   // in-scattered radiance factors at the sample
+//   R forRay(const glm::vec3& toEye) const;     // per-ray form: R::scatter(in) == scatter(in)
+//                                               // for in.toEye == toEye (ray constants hoisted)
 //
 // The optical model (ARCHITECTURE.md §1): a segment with opacity α, extinction-weighted albedo A
 // and emission term E adds  T · α · (E + A ⊙ diffuse + specular)  to the pixel, where
@@ -48,6 +50,7 @@ struct EmissionAbsorptionShader {
     static constexpr bool kNeedsNormal = false;
     float ambient = 1.f;
     Scatter scatter(const ShadeInput&) const { return {glm::vec3(ambient), glm::vec3(0.f)}; }
+    const EmissionAbsorptionShader& forRay(const glm::vec3&) const { return *this; }
 };
 
 struct BlinnPhongParams {
@@ -96,13 +99,47 @@ class BlinnPhongShader {
         return a + f * (b - a);
     }
 
-    Scatter scatter(const ShadeInput& in) const {
+    Scatter scatter(const ShadeInput& in) const { return scatter(in, nullptr); }
+
+    /// Halfway vectors of the first kRayLights directional lights are fixed along a ray (the eye
+    /// direction is); the per-ray form computes them once. Same arithmetic as scatter(), so the
+    /// same results bit for bit.
+    static constexpr int kRayLights = 4;
+    class RayShader {
+      public:
+        [[gnu::always_inline]] Scatter scatter(const ShadeInput& in) const {
+            return s_->scatter(in, halfway_);
+        }
+
+      private:
+        friend class BlinnPhongShader;
+        const BlinnPhongShader* s_ = nullptr;
+        glm::vec3 halfway_[kRayLights];
+    };
+    RayShader forRay(const glm::vec3& toEye) const {
+        RayShader r;
+        r.s_ = this;
+        int k = 0;
+        for (const Light& l : lights_)
+            if (l.type == Light::Type::Directional && k < kRayLights)
+                r.halfway_[k++] = glm::normalize(-l.direction + toEye);
+        return r;
+    }
+
+  private:
+    /// `halfway`: the halfway vectors of the first kRayLights directional lights for in.toEye,
+    /// or nullptr (computed here).
+    [[gnu::always_inline]] Scatter scatter(const ShadeInput& in, const glm::vec3* halfway) const {
         Scatter s;
         s.diffuse = glm::vec3(params_.ambient);
+        int k = 0;  // directional lights seen so far
         for (const Light& l : lights_) {
             glm::vec3 toLight, e = l.radiance;
+            const glm::vec3* h = nullptr;
             if (l.type == Light::Type::Directional) {
                 toLight = -l.direction;
+                if (halfway && k < kRayLights) h = halfway + k;
+                ++k;
             } else {
                 const glm::vec3 d = l.position - in.position;
                 const float dist = glm::length(d);
@@ -114,15 +151,13 @@ class BlinnPhongShader {
             if (ndl <= 0.f) continue;
             s.diffuse += (params_.diffuse * ndl) * e;
             if (params_.specular > 0.f) {
-                const glm::vec3 h = glm::normalize(toLight + in.toEye);
-                const float ndh = glm::dot(in.normal, h);
+                const float ndh = glm::dot(in.normal, h ? *h : glm::normalize(toLight + in.toEye));
                 if (ndh > 0.f) s.specular += (params_.specular * specularPower(ndh)) * e;
             }
         }
         return s;
     }
 
-  private:
     BlinnPhongParams params_;
     std::vector<Light> lights_;
     std::vector<float> powTable_;
