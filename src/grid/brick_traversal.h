@@ -105,21 +105,32 @@ struct CellDda {
     /// ray has left [tMin, tMax] (the last cell extends to tMax).
     [[gnu::always_inline]] bool step(float& t0, float& t1, std::size_t& cellIndex) {
         if (done) return false;
-        const int a =
-            tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2) : (tNext[1] <= tNext[2] ? 1 : 2);
         cellIndex = index;
         t0 = t;
-        t1 = std::min(tNext[a], tMax);
-        if (t1 >= tMax) {
-            done = true;
-        } else {
-            index += indexStep[a];
-            tNext[a] += tDelta[a];
-            // Leaving the grid: the rest of the ray is in the edge cell.
-            if (--left[a] < 0) done = true, t1 = tMax;
-        }
+        // One branch per axis with constant indices, so that the state stays in registers.
+        if (tNext[0] <= tNext[1])
+            t1 = tNext[0] <= tNext[2] ? advance<0>() : advance<2>();
+        else
+            t1 = tNext[1] <= tNext[2] ? advance<1>() : advance<2>();
         t = t1;
         return true;
+    }
+    /// Crosses the next boundary on axis A; returns the end of the cell being left.
+    template <int A>
+    [[gnu::always_inline]] float advance() {
+        const float t1 = std::min(tNext[A], tMax);
+        if (t1 >= tMax) {
+            done = true;
+            return t1;
+        }
+        index += indexStep[A];
+        tNext[A] += tDelta[A];
+        // Leaving the grid: the rest of the ray is in the edge cell.
+        if (--left[A] < 0) {
+            done = true;
+            return tMax;
+        }
+        return t1;
     }
 
     /// Leaves the cube of cells within Chebyshev distance `radius` of the current (not yet
