@@ -217,8 +217,10 @@ inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const Sa
         f(std::int64_t(0), lat.last);
         return;
     }
-    grid::forEachNonEmptyRun(c.majorants(), r.originIndex, r.dirIndex, r.tNear, r.tFar,
-                             [&](float t0, float t1) { return f(lat.before(t0), lat.after(t1)); });
+    float t0, t1;
+    if (!c.visibleRange(r, t0, t1)) return;
+    grid::forEachNonEmptyRun(c.majorants(), r.originIndex, r.dirIndex, t0, t1,
+                             [&](float a, float b) { return f(lat.before(a), lat.after(b)); });
 }
 
 /// Segments longer than one voxel (coarse steps) may see a strongly non-linear value profile

@@ -114,6 +114,26 @@ VoxelGradients VoxelGradients::build(const core::Volume& volume) {
     return g;
 }
 
+namespace {
+
+/// Index-space box of the non-empty cells of `m` (cell edges, clamped to the voxel-centre box
+/// [0, n − 1]); lo > hi when there is none.
+std::array<glm::vec3, 2> nonEmptyCellBox(const grid::BrickMajorants& m, const glm::ivec3& dims) {
+    glm::ivec3 lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
+    for (int z = 0; z < m.counts().z; ++z)
+        for (int y = 0; y < m.counts().y; ++y)
+            for (int x = 0; x < m.counts().x; ++x)
+                if (m.majorant(m.index(x, y, z)) > 0.f) {
+                    lo = glm::min(lo, glm::ivec3(x, y, z));
+                    hi = glm::max(hi, glm::ivec3(x, y, z));
+                }
+    if (lo.x > hi.x) return {glm::vec3(0.f), glm::vec3(-1.f)};
+    return {glm::vec3(lo * m.cellSize()),
+            glm::min(glm::vec3((hi + 1) * m.cellSize()), glm::vec3(glm::max(dims - 1, 0)))};
+}
+
+}  // namespace
+
 RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
                      const optics::TransferFunction& tf, RenderOptions options)
     : volume_(&volume), tf_(&tf), options_(std::move(options)) {
@@ -174,6 +194,7 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
             break;
         }
     }
+    visibleIndexBox_ = nonEmptyCellBox(majorants_, g.dims);
 }
 
 RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
@@ -251,6 +272,26 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
                          options_.seed))
                    : 0.f;
     return r;
+}
+
+bool RayCaster::visibleRange(const RaySegment& r, float& t0, float& t1) const {
+    t0 = r.tNear;
+    t1 = r.tFar;
+    const auto& [lo, hi] = visibleIndexBox_;
+    for (int a = 0; a < 3; ++a) {
+        const float l = lo[a] - kVisibleBoxMarginVoxels, h = hi[a] + kVisibleBoxMarginVoxels;
+        const float o = r.originIndex[a], d = r.dirIndex[a];
+        if (d == 0.f) {
+            if (!(o >= l && o <= h)) return false;
+            continue;
+        }
+        const float inv = 1.f / d;
+        float ta = (l - o) * inv, tb = (h - o) * inv;
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta);
+        t1 = std::min(t1, tb);
+    }
+    return t1 > t0;
 }
 
 namespace {
@@ -365,16 +406,7 @@ std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster) {
     const core::Geometry& g = caster.volume().geometry();
     const grid::BrickMajorants& m = caster.majorants();
     if (m.nonEmptyCount() == 0 || m.nonEmptyCount() == m.size()) return g.worldBounds();
-    glm::ivec3 lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
-    for (int z = 0; z < m.counts().z; ++z)
-        for (int y = 0; y < m.counts().y; ++y)
-            for (int x = 0; x < m.counts().x; ++x)
-                if (m.majorant(m.index(x, y, z)) > 0.f) {
-                    lo = glm::min(lo, glm::ivec3(x, y, z));
-                    hi = glm::max(hi, glm::ivec3(x, y, z));
-                }
-    const glm::dvec3 first = glm::dvec3(lo * m.cellSize());
-    const glm::dvec3 last = glm::min(glm::dvec3((hi + 1) * m.cellSize()), glm::dvec3(g.dims - 1));
+    const glm::dvec3 first(caster.visibleIndexBox()[0]), last(caster.visibleIndexBox()[1]);
     glm::dvec3 bmin(INFINITY), bmax(-INFINITY);
     for (int c = 0; c < 8; ++c) {
         const glm::dvec3 ijk((c & 1) ? last.x : first.x, (c & 2) ? last.y : first.y,

@@ -137,6 +137,11 @@ class ShadingModel {
                             int y1, io::ImageRGBA& film, RenderStats& stats) const = 0;
 };
 
+/// visibleRange() widens the non-empty cells' box by this much on each side (voxels), so that float
+/// rounding of the clipped ends can never cut a sample off a non-empty cell; beyond the margin
+/// there are only empty cells.
+inline constexpr float kVisibleBoxMarginVoxels = 0.01f;
+
 /// Ray set-up shared by every model: the clipped parametric range of one camera ray.
 struct RaySegment {
     glm::vec3 originWorld, dirWorld;  ///< world mm (float copies for the hot loop)
@@ -177,6 +182,13 @@ class RayCaster {
     /// Gradient (value/mm, world) from central differences = gradientMatrix · (Δi, Δj, Δk).
     const glm::mat3& gradientMatrix() const { return gradientMatrix_; }
     float weakGradient() const { return weakGradient_; }
+    /// The part [t0, t1] of the ray's [tNear, tFar] inside the index-space box of the non-empty
+    /// skip cells (widened by kVisibleBoxMarginVoxels); false when the ray misses it. Every
+    /// non-empty run lies inside, so traversal may start and stop there.
+    bool visibleRange(const RaySegment& r, float& t0, float& t1) const;
+    /// Index-space bounds of the non-empty skip cells (cell edges, clamped to the voxel-centre
+    /// box); empty (lo > hi) when no cell is non-empty.
+    const std::array<glm::vec3, 2>& visibleIndexBox() const { return visibleIndexBox_; }
     /// Precomputed central differences (Gradient mode with central differences), or nullptr.
     const VoxelGradients* voxelGradients() const {
         return voxelGradients_.empty() ? nullptr : &voxelGradients_;
@@ -190,6 +202,7 @@ class RayCaster {
     RenderOptions options_;
     float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
     glm::dvec3 indexBoxLo_{0.0}, indexBoxHi_{0.0};  ///< the volume box in index space
+    std::array<glm::vec3, 2> visibleIndexBox_{glm::vec3(0.f), glm::vec3(-1.f)};
     glm::mat3 gradientMatrix_{1.f};
     glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
     VoxelGradients voxelGradients_;
