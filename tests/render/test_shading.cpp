@@ -4,7 +4,9 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 
+#include "render/dvr_march.h"
 #include "render/shading.h"
 
 using namespace voxlight;
@@ -68,4 +70,34 @@ TEST(BlinnPhong, ScatterMatchesTheClosedForm) {
                         2.f * l.radiance[c] * p.specular * tableBound(24) + 1e-5);
         }
     }
+}
+
+// The marcher's opacity α = 1 − e^(−τ) (series for thin segments, Eigen's inline exp above)
+// against −expm1(−τ) in double over τ ∈ [1e-8, 88] (log-spaced, 2·10⁵ values).
+TEST(Opacity, MatchesOneMinusExpIncludingThinSegments) {
+    // Series branch: a few float roundings (≈ 6e-8 each) plus truncation (4e-8 at τ = 0.01).
+    constexpr double kSeriesRelTol = 3e-7;
+    // Exp branch: ≈ 2 ulp of e^(−τ) near 1 (1.2e-7 absolute), relative to α ≥ 0.00995.
+    constexpr double kExpRelTol = 1.5e-5;
+    double worstSeries = 0.0, worstExp = 0.0;
+    constexpr int kN = 200000;
+    for (int i = 0; i <= kN; ++i) {
+        const float tau = float(std::pow(10.0, -8.0 + 9.94 * i / kN));  // 1e-8 … 8.7e1
+        const float alpha = render::detail::opacity(tau);
+        const double want = -std::expm1(-double(tau));
+        const double rel = std::abs(alpha - want) / want;
+        double& worst = tau < render::detail::kOpacitySeriesTau ? worstSeries : worstExp;
+        worst = std::max(worst, rel);
+        ASSERT_GE(alpha, 0.f) << tau;
+        ASSERT_LE(alpha, 1.f) << tau;
+    }
+    EXPECT_LE(worstSeries, kSeriesRelTol);
+    EXPECT_LE(worstExp, kExpRelTol);
+    std::printf("opacity: worst relative error %.2g (series), %.2g (exp)\n", worstSeries, worstExp);
+    // The plain float form would fail the series tolerance by orders of magnitude at τ = 1e-6.
+    EXPECT_GT(std::abs((1.f - std::exp(-1e-6f)) - 1e-6) / 1e-6, 100 * kSeriesRelTol);
+    for (const float tau : {88.f, 100.f, 1e6f, INFINITY})
+        EXPECT_EQ(render::detail::opacity(tau), 1.f) << tau;
+    EXPECT_EQ(render::detail::opacity(0.f), 0.f);
+    EXPECT_EQ(render::detail::expInline(0.f), 1.f);
 }
