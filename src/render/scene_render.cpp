@@ -129,18 +129,22 @@ class Params {
 
 }  // namespace
 
+void checkPresetName(const io::Scene& scene) {
+    const std::string& preset = scene.transferFunction.preset;
+    if (preset.empty()) return;
+    const auto& cat = optics::presetCatalog();
+    if (std::any_of(cat.begin(), cat.end(),
+                    [&](const optics::PresetInfo& p) { return p.name == preset; }))
+        return;
+    std::string list;
+    for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
+    throw InputError(scene.source, "transfer_function.preset", "'" + preset + "' is not a preset",
+                     "choose one of: " + list);
+}
+
 RenderOptions buildRenderOptions(const io::Scene& scene, json* usedOut) {
     // The TF preset is named before the volume is loaded: refuse an unknown one now.
-    if (const std::string& preset = scene.transferFunction.preset; !preset.empty()) {
-        const auto& cat = optics::presetCatalog();
-        if (std::none_of(cat.begin(), cat.end(),
-                         [&](const optics::PresetInfo& p) { return p.name == preset; })) {
-            std::string list;
-            for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
-            throw InputError(scene.source, "transfer_function.preset",
-                             "'" + preset + "' is not a preset", "choose one of: " + list);
-        }
-    }
+    checkPresetName(scene);
     RenderOptions o;
     const std::string& m = scene.method.name;
     const auto& impl = rayCasterMethods();

@@ -58,6 +58,10 @@ CameraSpec buildCameraSpec(const io::CameraDesc& desc);
 /// throws InputError naming the field.
 RenderOptions buildRenderOptions(const io::Scene& scene, nlohmann::json* used = nullptr);
 
+/// Throws InputError (field transfer_function.preset) when the scene names a TF preset that does
+/// not exist (part of buildRenderOptions; also for scenes of methods this renderer lacks).
+void checkPresetName(const io::Scene& scene);
+
 /// Most frames renderScene() repeats (a timing aid, not a batch renderer).
 inline constexpr int kMaxFrames = 1000;
 
