@@ -309,8 +309,8 @@ struct DvrMarcher {
     }
     bool refinable(float dt) const { return dt * voxelsPerMm > 1.f; }
     /// Whether any segment of this ray can be refinable: no segment is longer than the step
-    /// (up to rounding, covered by the 1e-3 margin), so at steps of a voxel or less the
-    /// per-segment test is skipped.
+    /// (up to rounding, covered by the 1e-3 margin), so at steps below a voxel the per-segment
+    /// test is skipped.
     bool coarse = false;
 
     /// Pre-integrated segment; the integrals at s1 are kept for the next segment's front.

@@ -195,6 +195,17 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
         }
     }
     visibleIndexBox_ = nonEmptyCellBox(majorants_, g.dims);
+    // visibleRange's box: where the cells' box reaches the grid's edge it extends to the volume
+    // box (a single slice is the slab ±0.5, and its cell holds the samples clamped into it), then
+    // the margin.
+    clipBox_ = visibleIndexBox_;
+    if (clipBox_[0].x <= clipBox_[1].x)
+        for (int a = 0; a < 3; ++a) {
+            if (clipBox_[0][a] <= 0.f) clipBox_[0][a] = float(indexBoxLo_[a]);
+            if (clipBox_[1][a] >= float(g.dims[a] - 1)) clipBox_[1][a] = float(indexBoxHi_[a]);
+            clipBox_[0][a] -= kVisibleBoxMarginVoxels;
+            clipBox_[1][a] += kVisibleBoxMarginVoxels;
+        }
 }
 
 RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
@@ -277,9 +288,10 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
 bool RayCaster::visibleRange(const RaySegment& r, float& t0, float& t1) const {
     t0 = r.tNear;
     t1 = r.tFar;
-    const auto& [lo, hi] = visibleIndexBox_;
+    const auto& [lo, hi] = clipBox_;
+    if (lo.x > hi.x) return false;  // nothing is visible
     for (int a = 0; a < 3; ++a) {
-        const float l = lo[a] - kVisibleBoxMarginVoxels, h = hi[a] + kVisibleBoxMarginVoxels;
+        const float l = lo[a], h = hi[a];
         const float o = r.originIndex[a], d = r.dirIndex[a];
         if (d == 0.f) {
             if (!(o >= l && o <= h)) return false;

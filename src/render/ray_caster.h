@@ -183,7 +183,8 @@ class RayCaster {
     const glm::mat3& gradientMatrix() const { return gradientMatrix_; }
     float weakGradient() const { return weakGradient_; }
     /// The part [t0, t1] of the ray's [tNear, tFar] inside the index-space box of the non-empty
-    /// skip cells (widened by kVisibleBoxMarginVoxels); false when the ray misses it. Every
+    /// skip cells (extended to the volume box where it reaches the grid's edge, then widened by
+    /// kVisibleBoxMarginVoxels); false when the ray misses it or nothing is visible. Every
     /// non-empty run lies inside, so traversal may start and stop there.
     bool visibleRange(const RaySegment& r, float& t0, float& t1) const;
     /// Index-space bounds of the non-empty skip cells (cell edges, clamped to the voxel-centre
@@ -203,6 +204,7 @@ class RayCaster {
     float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
     glm::dvec3 indexBoxLo_{0.0}, indexBoxHi_{0.0};  ///< the volume box in index space
     std::array<glm::vec3, 2> visibleIndexBox_{glm::vec3(0.f), glm::vec3(-1.f)};
+    std::array<glm::vec3, 2> clipBox_{glm::vec3(0.f), glm::vec3(-1.f)};  ///< visibleRange's box
     glm::mat3 gradientMatrix_{1.f};
     glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
     VoxelGradients voxelGradients_;

@@ -303,3 +303,51 @@ TEST(EmptySpaceSkipping, DoesNotChangeTheImage) {
         if (m == render::Mode::Gradient) EXPECT_LT(with.samples, without.samples);
     }
 }
+
+// RayCaster::visibleRange clips rays to the box of the non-empty skip cells: brute force along
+// every ray of a 48² view, every position (0.05-voxel steps) inside a non-empty cell lies within
+// the clipped [t0, t1], and the box is no larger than the non-empty cells' extent.
+TEST(EmptySpaceSkipping, VisibleRangeKeepsEveryNonEmptyCell) {
+    core::PhantomOptions po;
+    po.size = 64;
+    const core::Volume v = core::makePhantom("sphere", po);
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const auto tf = stepTf(1.f);
+    const render::RayCaster caster(v, g, tf, render::RenderOptions{});
+    const grid::BrickMajorants& m = caster.majorants();
+    const int cs = m.cellSize();
+    auto nonEmptyAt = [&](const glm::vec3& p) {
+        glm::ivec3 c;
+        for (int a = 0; a < 3; ++a)
+            c[a] = std::clamp(int(std::floor(p[a])) / cs, 0, m.counts()[a] - 1);
+        return m.majorant(m.index(c.x, c.y, c.z)) > 0.f;
+    };
+    ASSERT_GT(m.nonEmptyCount(), 0u);
+    ASSERT_LT(m.nonEmptyCount(), m.size());  // the box must be a real clip here
+    const auto& box = caster.visibleIndexBox();
+    for (int a = 0; a < 3; ++a) EXPECT_LT(box[1][a] - box[0][a], float(v.geometry().dims[a] - 1));
+    const render::Camera cam = orthoCamera(v, 35, 25, 70, 48);
+    int clipped = 0, checked = 0;
+    for (int y = 0; y < 48; ++y)
+        for (int x = 0; x < 48; ++x) {
+            const render::RaySegment r = caster.setupRay(cam, x, y);
+            if (!r.hit()) continue;
+            float t0 = 0.f, t1 = 0.f;
+            const bool any = caster.visibleRange(r, t0, t1);
+            if (any) {
+                EXPECT_GE(t0, r.tNear);
+                EXPECT_LE(t1, r.tFar);
+                clipped += (t0 > r.tNear || t1 < r.tFar) ? 1 : 0;
+            }
+            const float dt = 0.05f / glm::length(r.dirIndex);
+            for (float t = r.tNear; t <= r.tFar; t += dt) {
+                if (!nonEmptyAt(r.originIndex + t * r.dirIndex)) continue;
+                ++checked;
+                ASSERT_TRUE(any) << x << "," << y << " t=" << t;
+                ASSERT_GE(t, t0 - 1e-4f) << x << "," << y;
+                ASSERT_LE(t, t1 + 1e-4f) << x << "," << y;
+            }
+        }
+    EXPECT_GT(clipped, 100);   // most rays are shortened
+    EXPECT_GT(checked, 1000);  // and many positions were checked
+}

@@ -97,6 +97,35 @@ TEST(Robustness, AbsurdImageSizesAndStepsAreClearErrors) {
     EXPECT_THROW(render::RayCaster(v, g, tf, bad), InputError);
 }
 
+// A single slice is the slab ±0.5 voxel thick on its axis (5 mm slices here): empty-space
+// skipping must keep all of it (a clip to the cells' box [0, 0] once left a 0.02-voxel sliver).
+TEST(Robustness, SingleSliceSkippingDoesNotChangeTheImage) {
+    core::Geometry geom;
+    geom.dims = {16, 16, 1};
+    geom.spacing = {1.0, 1.0, 4.0};
+    core::Volume v(geom, core::VoxelType::UInt8);
+    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const optics::TransferFunction tf({tfPoint(0, 0), tfPoint(255, 0.2f)}, {128, 256});
+    const auto b = v.geometry().worldBounds();
+    for (const double elevation : {60.0, 0.0}) {  // oblique, and rays parallel to the slice
+        render::CameraSpec s;
+        s.elevationDeg = elevation;
+        const render::Camera cam(s, b[0], b[1], 16, 16);
+        for (render::Mode m :
+             {render::Mode::EmissionAbsorption, render::Mode::Gradient, render::Mode::Isosurface}) {
+            render::RenderOptions o;
+            o.mode = m;
+            const io::ImageRGBA a = renderWith(v, tf, cam, o);
+            o.emptySpaceSkipping = false;
+            const io::ImageRGBA c = renderWith(v, tf, cam, o);
+            double maxDiff = 0;
+            for (std::size_t i = 0; i < a.pixels.size(); ++i)
+                maxDiff = std::max(maxDiff, double(std::abs(a.pixels[i] - c.pixels[i])));
+            EXPECT_LT(maxDiff, 1e-4) << render::toString(m) << " elevation " << elevation;
+        }
+    }
+}
+
 TEST(Robustness, DegenerateSingleSliceVolumeRenders) {
     core::Geometry geom;
     geom.dims = {16, 16, 1};
