@@ -173,23 +173,37 @@ struct CellDda {
 /// the number of runs rather than with the number of cells crossed. The runs cover every non-empty
 /// cell the ray crosses; their ends can differ from RayIntervalIterator's by float rounding of the
 /// jumped-over boundaries (they lie in empty cells, which contribute nothing).
+///
+/// With `maxRunCells` > 0 a run is handed over in pieces of at most that many cells, back to back
+/// (each piece starts exactly where the previous one ended). A ray marcher wants this: it can stop
+/// (early ray termination) only when it is handed an interval, and a ray that enters a large opaque
+/// object would otherwise cross all of its cells before the first sample is taken.
 template <class F>
 inline void forEachNonEmptyRun(const BrickMajorants& majorants, const glm::vec3& originIndex,
-                               const glm::vec3& directionIndex, float tMin, float tMax, F&& f) {
+                               const glm::vec3& directionIndex, float tMin, float tMax, F&& f,
+                               int maxRunCells = 0) {
     CellDda dda(majorants, originIndex, directionIndex, tMin, tMax);
     const std::uint8_t* dist = majorants.skipDistances();
     float t0, t1, runT0 = 0.f, runT1 = 0.f;
     std::size_t i;
     bool inRun = false;
+    // Cells until the current piece is handed over (never reaches 0 without a limit).
+    int cellsLeft = maxRunCells > 0 ? maxRunCells : -1;
     while (dda.step(t0, t1, i)) {
         const int d = dist[i];
         if (d == 0) {
             if (!inRun) runT0 = t0, inRun = true;
             runT1 = t1;
+            if (--cellsLeft == 0) {
+                inRun = false;
+                cellsLeft = maxRunCells;
+                if (!f(runT0, runT1)) return;
+            }
             continue;
         }
         if (inRun) {
             inRun = false;
+            if (maxRunCells > 0) cellsLeft = maxRunCells;
             if (!f(runT0, runT1)) return;
         }
         // The cell just returned is the centre of an empty cube of radius d − 1; the DDA already

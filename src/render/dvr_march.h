@@ -229,6 +229,11 @@ struct RayResult {
     bool terminated = false;
 };
 
+/// Non-empty runs reach the marcher in pieces of at most this many skip cells (kSkipCellVoxels
+/// voxels each), so that a ray stops crossing cells soon after it is terminated early; smaller
+/// pieces cost more lattice arithmetic per sample, larger ones more cells crossed in vain.
+inline constexpr int kRunPieceCells = 4;
+
 /// Calls f(i0, i1) for the lattice index ranges that cover the non-empty intervals of the ray
 /// (or the whole ray without skipping), in order and without overlap; f returns false to stop.
 template <class F>
@@ -240,8 +245,9 @@ inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const Sa
     }
     float t0, t1;
     if (!c.visibleRange(r, t0, t1)) return;
-    grid::forEachNonEmptyRun(c.majorants(), r.originIndex, r.dirIndex, t0, t1,
-                             [&](float a, float b) { return f(lat.before(a), lat.after(b)); });
+    grid::forEachNonEmptyRun(
+        c.majorants(), r.originIndex, r.dirIndex, t0, t1,
+        [&](float a, float b) { return f(lat.before(a), lat.after(b)); }, kRunPieceCells);
 }
 
 /// Segments longer than one voxel (coarse steps) may see a strongly non-linear value profile

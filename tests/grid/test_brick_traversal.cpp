@@ -186,6 +186,26 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
                 EXPECT_NEAR(got[i][1], expect[i][1], kTTol) << "seed " << seed << " ray " << n;
             }
             runsSeen += int(got.size());
+            // Handed over in pieces of at most k cells: the pieces join back to the same runs
+            // exactly (each starts where the previous ended), and a piece stops the walk.
+            for (int k : {1, 2, 3}) {
+                std::vector<std::array<float, 2>> joined;
+                grid::forEachNonEmptyRun(
+                    m, o, d, 0.f, t1,
+                    [&](float a, float b) {
+                        if (!joined.empty() && joined.back()[1] == a)
+                            joined.back()[1] = b;
+                        else
+                            joined.push_back({a, b});
+                        return true;
+                    },
+                    k);
+                ASSERT_EQ(joined, got) << "pieces of " << k << ", seed " << seed << " ray " << n;
+                int calls = 0;
+                grid::forEachNonEmptyRun(
+                    m, o, d, 0.f, t1, [&](float, float) { return ++calls < 2; }, k);
+                EXPECT_LE(calls, 2);
+            }
         }
         EXPECT_GT(runsSeen, 100) << "rays should hit non-empty cells";
     }
