@@ -72,6 +72,22 @@ Ray Camera::generate(int x, int y) const {
     return r;
 }
 
+bool Camera::project(const glm::dvec3& p, double& x, double& y) const {
+    // generate() builds d = forward + sx·rightStep + sy·upStep with the three mutually orthogonal.
+    const glm::dvec3 v = p - eye_;
+    double sx = glm::dot(v, rightStep_) / glm::dot(rightStep_, rightStep_);
+    double sy = glm::dot(v, upStep_) / glm::dot(upStep_, upStep_);
+    if (projection_ == Projection::Perspective) {
+        const double depth = glm::dot(v, forward_);
+        if (!(depth > 0.0)) return false;
+        sx /= depth;
+        sy /= depth;
+    }
+    x = (sx + 1.0) / pixelScaleX_ - 0.5;
+    y = (1.0 - sy) / pixelScaleY_ - 0.5;
+    return true;
+}
+
 std::ostream& operator<<(std::ostream& os, const Camera& c) {
     return os << "Camera{" << (c.projection() == Projection::Perspective ? "perspective" : "ortho")
               << " eye (" << c.eye().x << ", " << c.eye().y << ", " << c.eye().z << ") forward ("

@@ -40,6 +40,10 @@ class Camera {
            int width, int height);
 
     Ray generate(int x, int y) const;
+    /// Inverse of generate(): the continuous pixel coordinates (x, y) of world point p, so that
+    /// the ray of pixel (i, j) passes through p exactly when p projects to (i, j). False when p is
+    /// not in front of a perspective camera (depth along forward() ≤ 0), where nothing is returned.
+    bool project(const glm::dvec3& p, double& x, double& y) const;
     int width() const { return width_; }
     int height() const { return height_; }
     const glm::dvec3& eye() const { return eye_; }

@@ -13,6 +13,7 @@
 
 #include "core/rng.h"
 #include "render/dvr_march.h"
+#include "render/footprint.h"
 #include "render/tonemap.h"
 
 namespace voxlight::render {
@@ -318,8 +319,10 @@ float finiteOr0(float v) { return std::isfinite(v) ? v : 0.f; }
 template <class Shader>
 class DvrModel final : public ShadingModel {
   public:
-    DvrModel(std::string name, Shader shader)
-        : name_(std::move(name)), shader_(std::move(shader)) {}
+    /// `footprint`: the pixels that can see a non-empty cell from the camera the tiles are
+    /// rendered with; the others get the background without a ray.
+    DvrModel(std::string name, Shader shader, PixelFootprint footprint)
+        : name_(std::move(name)), shader_(std::move(shader)), footprint_(std::move(footprint)) {}
     std::string name() const override { return name_; }
     void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
                     io::ImageRGBA& film, RenderStats& stats) const override {
@@ -328,6 +331,10 @@ class DvrModel final : public ShadingModel {
             for (int y = y0; y < y1; ++y)
                 for (int x = x0; x < x1; ++x) {
                     float* px = film.at(x, y);
+                    if (!footprint_.covers(x, y)) {
+                        writeMiss(px, bg);  // what marchDvr returns without a non-empty cell
+                        continue;
+                    }
                     const RaySegment r = c.setupRay(cam, x, y);
                     if (!r.hit()) {
                         writeMiss(px, bg);
@@ -347,6 +354,7 @@ class DvrModel final : public ShadingModel {
   private:
     std::string name_;
     Shader shader_;
+    PixelFootprint footprint_;
 };
 
 template <bool kMax>
@@ -442,10 +450,11 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
     switch (o.mode) {
         case Mode::EmissionAbsorption:
             return std::make_unique<DvrModel<EmissionAbsorptionShader>>(
-                "emission-absorption", EmissionAbsorptionShader{o.ambient});
+                "emission-absorption", EmissionAbsorptionShader{o.ambient},
+                PixelFootprint(caster, camera));
         case Mode::Gradient:
             return std::make_unique<DvrModel<BlinnPhongShader>>(
-                "gradient", BlinnPhongShader(o.blinnPhong, lights));
+                "gradient", BlinnPhongShader(o.blinnPhong, lights), PixelFootprint(caster, camera));
         case Mode::Mip:
             return std::make_unique<ExtremumModel<true>>();
         case Mode::MinIp:

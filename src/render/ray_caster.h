@@ -80,6 +80,9 @@ struct RenderOptions {
     float stepVoxels = 0.5f;    ///< step in units of the smallest voxel spacing, > 0
     bool preintegrated = true;  ///< pre-integrated segments (else midpoint point sampling)
     bool emptySpaceSkipping = true;
+    /// With emptySpaceSkipping: pixels outside the projection of the non-empty cells
+    /// (PixelFootprint) get the background without a ray. Off only to measure or test it.
+    bool pixelFootprint = true;
     bool earlyTermination = true;
     /// Rays stop once their transmittance falls below this (with earlyTermination), ∈ [0, 1).
     float terminationTransmittance = kTerminationTransmittance;

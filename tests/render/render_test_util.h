@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // Small helpers shared by the renderer tests.
+#include <algorithm>
 #include <cmath>
 
 #include "core/phantoms.h"
@@ -39,6 +40,16 @@ inline io::ImageRGBA renderWith(const core::Volume& v, const optics::TransferFun
     const grid::BrickGrid g = grid::BrickGrid::build(v);
     const render::RayCaster caster(v, g, tf, o);
     return caster.render(cam, core::Progress::none(), stats);
+}
+
+/// Whether index-space point p lies in a non-empty skip cell of m (the cell the DDA assigns it to:
+/// cells of cellSize() voxels from index 0, points outside clamped to the edge cell).
+inline bool inNonEmptyCell(const grid::BrickMajorants& m, const glm::vec3& p) {
+    const int cs = m.cellSize();
+    glm::ivec3 c;
+    for (int a = 0; a < 3; ++a)
+        c[a] = std::clamp(int(std::floor(p[a] / float(cs))), 0, m.counts()[a] - 1);
+    return m.majorant(m.index(c.x, c.y, c.z)) > 0.f;
 }
 
 inline bool allFinite(const io::ImageRGBA& img) {

@@ -315,13 +315,7 @@ TEST(EmptySpaceSkipping, VisibleRangeKeepsEveryNonEmptyCell) {
     const auto tf = stepTf(1.f);
     const render::RayCaster caster(v, g, tf, render::RenderOptions{});
     const grid::BrickMajorants& m = caster.majorants();
-    const int cs = m.cellSize();
-    auto nonEmptyAt = [&](const glm::vec3& p) {
-        glm::ivec3 c;
-        for (int a = 0; a < 3; ++a)
-            c[a] = std::clamp(int(std::floor(p[a])) / cs, 0, m.counts()[a] - 1);
-        return m.majorant(m.index(c.x, c.y, c.z)) > 0.f;
-    };
+    auto nonEmptyAt = [&](const glm::vec3& p) { return inNonEmptyCell(m, p); };
     ASSERT_GT(m.nonEmptyCount(), 0u);
     ASSERT_LT(m.nonEmptyCount(), m.size());  // the box must be a real clip here
     const auto& box = caster.visibleIndexBox();
