@@ -2,8 +2,13 @@
 // Bad input gives a defined image or a clear error, never NaN pixels.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <limits>
+#include <string>
+#include <thread>
+#include <vector>
 
 #include "render_test_util.h"
 
@@ -138,4 +143,44 @@ TEST(Robustness, DegenerateSingleSliceVolumeRenders) {
         o.mode = m;
         EXPECT_TRUE(allFinite(renderWith(v, tf, cam, o))) << render::toString(m);
     }
+}
+
+// Progress comes from the calling thread only, rises to 1, and a cancel request stops the frame
+// with CancelledError (tiles run in one parallel loop; the workers stop taking tiles).
+TEST(Robustness, RenderReportsProgressAndCancels) {
+    core::PhantomOptions po;
+    po.size = 48;
+    const core::Volume v = core::makePhantom("sphere", po);
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const auto tf = stepTf(1.f);
+    render::RenderOptions o;
+    o.threads = 2;
+    o.tileSize = 4;
+    const render::RayCaster caster(v, g, tf, o);
+    const render::Camera cam = defaultCamera(v, 64, 64);
+    const std::thread::id self = std::this_thread::get_id();
+    std::vector<double> seen;
+    bool otherThread = false;
+    std::atomic<bool> cancel = false;
+    const core::Progress p(
+        [&](const std::string& stage, double f) {
+            EXPECT_EQ(stage, "render");
+            otherThread |= std::this_thread::get_id() != self;
+            seen.push_back(f);
+        },
+        &cancel);
+    (void)caster.render(cam, p);
+    EXPECT_FALSE(otherThread);
+    ASSERT_GE(seen.size(), 3u);
+    EXPECT_TRUE(std::is_sorted(seen.begin(), seen.end()));
+    EXPECT_EQ(seen.front(), 0.0);
+    EXPECT_EQ(seen.back(), 1.0);
+
+    int calls = 0;
+    const core::Progress cancelling(
+        [&](const std::string&, double) {
+            if (++calls == 2) cancel = true;  // after the first chunk of tiles
+        },
+        &cancel);
+    EXPECT_THROW((void)caster.render(cam, cancelling), CancelledError);
 }
