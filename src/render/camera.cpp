@@ -72,19 +72,36 @@ Ray Camera::generate(int x, int y) const {
     return r;
 }
 
-bool Camera::project(const glm::dvec3& p, double& x, double& y) const {
-    // generate() builds d = forward + sx·rightStep + sy·upStep with the three mutually orthogonal.
-    const glm::dvec3 v = p - eye_;
-    double sx = glm::dot(v, rightStep_) / glm::dot(rightStep_, rightStep_);
-    double sy = glm::dot(v, upStep_) / glm::dot(upStep_, upStep_);
+Camera::ProjectiveMap Camera::projectiveMap() const {
+    // generate() builds d = forward + sx·rightStep + sy·upStep with the three mutually orthogonal,
+    // and pixel x = (sx + 1) / pixelScaleX − ½, y = (1 − sy) / pixelScaleY − ½. For p − eye = λ·d
+    // (perspective) λ is the depth W, and sx·W = (p − eye)·rightStep / |rightStep|².
+    const glm::dvec3 rx = rightStep_ / (glm::dot(rightStep_, rightStep_) * pixelScaleX_);
+    const glm::dvec3 ry = -upStep_ / (glm::dot(upStep_, upStep_) * pixelScaleY_);
+    const double cx = 1.0 / pixelScaleX_ - 0.5, cy = 1.0 / pixelScaleY_ - 0.5;
+    ProjectiveMap m;
     if (projection_ == Projection::Perspective) {
-        const double depth = glm::dot(v, forward_);
-        if (!(depth > 0.0)) return false;
-        sx /= depth;
-        sy /= depth;
+        m.x = rx + cx * forward_;
+        m.y = ry + cy * forward_;
+        m.w = forward_;
+        m.x0 = -glm::dot(m.x, eye_);
+        m.y0 = -glm::dot(m.y, eye_);
+        m.w0 = -glm::dot(m.w, eye_);
+    } else {
+        m.x = rx;
+        m.y = ry;
+        m.x0 = cx - glm::dot(rx, eye_);
+        m.y0 = cy - glm::dot(ry, eye_);
     }
-    x = (sx + 1.0) / pixelScaleX_ - 0.5;
-    y = (1.0 - sy) / pixelScaleY_ - 0.5;
+    return m;
+}
+
+bool Camera::project(const glm::dvec3& p, double& x, double& y) const {
+    const ProjectiveMap m = projectiveMap();
+    const double w = glm::dot(m.w, p) + m.w0;
+    if (!(w > 0.0)) return false;
+    x = (glm::dot(m.x, p) + m.x0) / w;
+    y = (glm::dot(m.y, p) + m.y0) / w;
     return true;
 }
 

@@ -44,6 +44,14 @@ class Camera {
     /// the ray of pixel (i, j) passes through p exactly when p projects to (i, j). False when p is
     /// not in front of a perspective camera (depth along forward() ≤ 0), where nothing is returned.
     bool project(const glm::dvec3& p, double& x, double& y) const;
+    /// The map behind project(), affine in p: X = dot(x, p) + x0, Y = …, W = …; the pixel
+    /// coordinates are X / W, Y / W, and W is the depth along forward() (perspective, in front
+    /// when W > 0) or 1 (orthographic). For projecting many points (boxes of cells).
+    struct ProjectiveMap {
+        glm::dvec3 x{0.0}, y{0.0}, w{0.0};
+        double x0 = 0.0, y0 = 0.0, w0 = 1.0;
+    };
+    ProjectiveMap projectiveMap() const;
     int width() const { return width_; }
     int height() const { return height_; }
     const glm::dvec3& eye() const { return eye_; }
