@@ -23,6 +23,13 @@ inline optics::TransferFunction stepTf(float sigma) {
         "step");
 }
 
+/// The analytic sphere phantom (0.5-level set = the exact sphere) on a size³ grid.
+inline core::Volume spherePhantom(int size) {
+    core::PhantomOptions po;
+    po.size = size;
+    return core::makePhantom("sphere", po);
+}
+
 inline render::Camera orthoCamera(const core::Volume& v, double azimuth, double elevation,
                                   double height, int pixels) {
     render::CameraSpec s;

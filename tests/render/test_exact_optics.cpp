@@ -163,9 +163,7 @@ TEST(ExactOptics, SphereTransmittanceMatchesChordLengthAtAnisotropicSpacing) {
 }
 
 TEST(ExactOptics, PreintegratedCoarseStepsAgreeWithFineSteppingOfASharpTf) {
-    core::PhantomOptions po;
-    po.size = 40;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(40);
     const core::SphereFacts f = core::spherePhantomFacts(v.geometry());
     const auto tf = stepTf(float(2.0 / f.radius));  // τ = 4 through the centre
     const render::Camera cam = orthoCamera(v, 20, 10, 2.3 * f.radius, 20);
@@ -193,9 +191,7 @@ TEST(ExactOptics, PreintegratedCoarseStepsAgreeWithFineSteppingOfASharpTf) {
 }
 
 TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
-    core::PhantomOptions po;
-    po.size = 48;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(48);
     const core::SphereFacts f = core::spherePhantomFacts(v.geometry());
     const auto tf = stepTf(5.f);  // opaque
     render::RenderOptions o = eaOptions(0.5f);
@@ -308,9 +304,7 @@ TEST(EmptySpaceSkipping, DoesNotChangeTheImage) {
 // every ray of a 48² view, every position (0.05-voxel steps) inside a non-empty cell lies within
 // the clipped [t0, t1], and the box is no larger than the non-empty cells' extent.
 TEST(EmptySpaceSkipping, VisibleRangeKeepsEveryNonEmptyCell) {
-    core::PhantomOptions po;
-    po.size = 64;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(64);
     const grid::BrickGrid g = grid::BrickGrid::build(v);
     const auto tf = stepTf(1.f);
     const render::RayCaster caster(v, g, tf, render::RenderOptions{});

@@ -50,9 +50,7 @@ TEST(Camera, ProjectInvertsGenerate) {
 
 /// A sparse sphere shell on an oblique, anisotropic grid (so that index and world axes differ).
 core::Volume obliqueSphere() {
-    core::PhantomOptions po;
-    po.size = 64;
-    core::Volume v = core::makePhantom("sphere", po);
+    core::Volume v = test::spherePhantom(64);
     const double c = std::cos(0.4), s = std::sin(0.4);
     v.geometry().direction =
         glm::dmat3(glm::dvec3(c, s, 0), glm::dvec3(-s, c, 0), glm::dvec3(0, 0, 1));

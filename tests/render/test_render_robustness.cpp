@@ -26,9 +26,7 @@ render::Camera defaultCamera(const core::Volume& v, int w, int h) {
 }  // namespace
 
 TEST(Robustness, NonFiniteVoxelsNeverGiveNonFinitePixels) {
-    core::PhantomOptions po;
-    po.size = 32;
-    core::Volume v = core::makePhantom("sphere", po);
+    core::Volume v = spherePhantom(32);
     float* d = v.dataAs<float>();
     const float bad[] = {std::numeric_limits<float>::quiet_NaN(),
                          std::numeric_limits<float>::infinity(),
@@ -44,9 +42,7 @@ TEST(Robustness, NonFiniteVoxelsNeverGiveNonFinitePixels) {
 }
 
 TEST(Robustness, TransparentTfGivesTheBackgroundAndOpaqueTfAFiniteImage) {
-    core::PhantomOptions po;
-    po.size = 32;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(32);
     const render::Camera cam = defaultCamera(v, 24, 24);
     render::RenderOptions o;
     o.background = {0.2f, 0.3f, 0.4f};
@@ -85,9 +81,7 @@ TEST(Robustness, CameraInsideTheVolumeRendersFromInside) {
 }
 
 TEST(Robustness, AbsurdImageSizesAndStepsAreClearErrors) {
-    core::PhantomOptions po;
-    po.size = 16;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(16);
     const auto b = v.geometry().worldBounds();
     EXPECT_THROW(render::Camera(render::CameraSpec{}, b[0], b[1], 0, 10), InputError);
     const render::Camera huge(render::CameraSpec{}, b[0], b[1], 16384, 16384);
@@ -148,9 +142,7 @@ TEST(Robustness, DegenerateSingleSliceVolumeRenders) {
 // Progress comes from the calling thread only, rises to 1, and a cancel request stops the frame
 // with CancelledError (tiles run in one parallel loop; the workers stop taking tiles).
 TEST(Robustness, RenderReportsProgressAndCancels) {
-    core::PhantomOptions po;
-    po.size = 48;
-    const core::Volume v = core::makePhantom("sphere", po);
+    const core::Volume v = spherePhantom(48);
     const grid::BrickGrid g = grid::BrickGrid::build(v);
     const auto tf = stepTf(1.f);
     render::RenderOptions o;
