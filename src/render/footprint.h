@@ -4,6 +4,7 @@
 // returns the background unchanged, so it need not be set up or walked through the cell grid.
 #include <cstddef>
 #include <cstdint>
+#include <glm/glm.hpp>
 #include <vector>
 
 namespace voxlight::render {
@@ -19,11 +20,17 @@ inline constexpr int kFootprintMarginPixels = 1;
 /// A superset of the pixels whose rays cross a non-empty cell of caster.majorants(): the union of
 /// the bounding rectangles of the projected corners of each run of non-empty cells along i (the
 /// projection of a box lies inside the hull of its projected corners), widened by
-/// kFootprintMarginPixels. Every pixel is covered when skipping (or the footprint) is off, or when
-/// a non-empty cell is not entirely in front of a perspective camera (its projection is unbounded).
+/// kFootprintMarginPixels. Cells at the grid's edge reach out to the volume box (a single slice is
+/// the slab ±0.5, and the marcher clamps its samples into the edge cell). Cells entirely behind a
+/// perspective camera are left out (its rays start at the eye); every pixel is covered when
+/// skipping (or the footprint) is off, or when a non-empty cell straddles the eye's plane (its
+/// projection is unbounded).
 class PixelFootprint {
   public:
     PixelFootprint(const RayCaster& caster, const Camera& camera);
+    /// Whether the footprint belongs to `camera` (same view and image size); use covers() only
+    /// then.
+    bool builtFor(const Camera& camera) const;
     bool covers(int x, int y) const {
         return all_ || mask_[std::size_t(y) * std::size_t(width_) + std::size_t(x)] != 0;
     }
@@ -37,7 +44,10 @@ class PixelFootprint {
         mask_.clear();
     }
     bool all_ = false;
-    int width_ = 0;
+    int width_ = 0, height_ = 0;
+    glm::dvec3 eye_{0.0}, forward_{0.0}, right_{0.0}, up_{0.0};
+    double fovY_ = 0.0, orthoHeight_ = 0.0;
+    bool perspective_ = true;
     std::vector<std::uint8_t> mask_;
 };
 

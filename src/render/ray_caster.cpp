@@ -320,19 +320,20 @@ float finiteOr0(float v) { return std::isfinite(v) ? v : 0.f; }
 template <class Shader>
 class DvrModel final : public ShadingModel {
   public:
-    /// `footprint`: the pixels that can see a non-empty cell from the camera the tiles are
-    /// rendered with; the others get the background without a ray.
+    /// `footprint`: the pixels that can see a non-empty cell; when the tiles are rendered with its
+    /// camera, the others get the background without a ray.
     DvrModel(std::string name, Shader shader, PixelFootprint footprint)
         : name_(std::move(name)), shader_(std::move(shader)), footprint_(std::move(footprint)) {}
     std::string name() const override { return name_; }
     void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
                     io::ImageRGBA& film, RenderStats& stats) const override {
         const glm::vec3 bg = c.options().background;
+        const bool footprint = footprint_.builtFor(cam);
         c.volume().visit([&](const auto& view) {
             for (int y = y0; y < y1; ++y)
                 for (int x = x0; x < x1; ++x) {
                     float* px = film.at(x, y);
-                    if (!footprint_.covers(x, y)) {
+                    if (footprint && !footprint_.covers(x, y)) {
                         writeMiss(px, bg);  // what marchDvr returns without a non-empty cell
                         continue;
                     }

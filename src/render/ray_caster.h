@@ -190,6 +190,9 @@ class RayCaster {
     /// kVisibleBoxMarginVoxels); false when the ray misses it or nothing is visible. Every
     /// non-empty run lies inside, so traversal may start and stop there.
     bool visibleRange(const RaySegment& r, float& t0, float& t1) const;
+    /// The volume box in index space, where rays run: the voxel centres [0, n − 1] per axis, ±0.5
+    /// on an axis with a single slice.
+    std::array<glm::dvec3, 2> volumeIndexBox() const { return {indexBoxLo_, indexBoxHi_}; }
     /// Index-space bounds of the non-empty skip cells (cell edges, clamped to the voxel-centre
     /// box); empty (lo > hi) when no cell is non-empty.
     const std::array<glm::vec3, 2>& visibleIndexBox() const { return visibleIndexBox_; }

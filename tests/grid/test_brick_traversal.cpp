@@ -161,7 +161,7 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
         const auto m = sparseCells(seed);
         const glm::vec3 hi = glm::vec3(m.counts() * 4) - 1.f;
         core::CounterRng rng(100 + seed);
-        int runsSeen = 0;
+        int runsSeen = 0, pieces = 0, runsJoined = 0;
         for (int n = 0; n < 2000; ++n) {
             const glm::vec3 o(rng.uniform() * hi.x, rng.uniform() * hi.y, rng.uniform() * hi.z);
             glm::vec3 d(rng.uniform() - 0.5f, rng.uniform() - 0.5f, rng.uniform() - 0.5f);
@@ -193,6 +193,9 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
                 grid::forEachNonEmptyRun(
                     m, o, d, 0.f, t1,
                     [&](float a, float b) {
+                        ++pieces;
+                        // k cells span at most k cell diagonals along the ray.
+                        EXPECT_LE(b - a, float(k) * 4.f * std::sqrt(3.f) + kTTol);
                         if (!joined.empty() && joined.back()[1] == a)
                             joined.back()[1] = b;
                         else
@@ -200,6 +203,7 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
                         return true;
                     },
                     k);
+                runsJoined += int(joined.size());
                 ASSERT_EQ(joined, got) << "pieces of " << k << ", seed " << seed << " ray " << n;
                 int calls = 0;
                 grid::forEachNonEmptyRun(
@@ -208,5 +212,6 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
             }
         }
         EXPECT_GT(runsSeen, 100) << "rays should hit non-empty cells";
+        EXPECT_GT(pieces, runsJoined + 100) << "runs should be split into pieces";
     }
 }

@@ -3,8 +3,10 @@
 // meet a non-empty cell.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <string>
 
 #include "core/phantoms.h"
 #include "core/rng.h"
@@ -156,6 +158,89 @@ TEST(PixelFootprint, DoesNotChangeTheImage) {
             EXPECT_LT(with.rays, without.rays) << "the footprint should leave rays out";
             EXPECT_EQ(with.samples, without.samples) << "and only rays that take no sample";
         }
+}
+
+/// Bit-for-bit comparison of a render with the footprint (default) and with every ray cast.
+void expectFootprintChangesNothing(const core::Volume& v, const optics::TransferFunction& tf,
+                                   const render::Camera& cam, render::Mode mode,
+                                   const std::string& what) {
+    render::RenderOptions o;
+    o.mode = mode;
+    o.background = glm::vec3(0.2f, 0.3f, 0.4f);
+    const io::ImageRGBA a = test::renderWith(v, tf, cam, o);
+    o.pixelFootprint = false;
+    const io::ImageRGBA c = test::renderWith(v, tf, cam, o);
+    ASSERT_EQ(a.pixels.size(), c.pixels.size());
+    EXPECT_EQ(0, std::memcmp(a.pixels.data(), c.pixels.data(), a.pixels.size() * sizeof(float)))
+        << what;
+}
+
+// A single slice is the slab ±0.5 voxel around index 0 on its axis; the marcher clamps the lower
+// half into the edge cell, so the footprint must reach down to −0.5 (seen edge-on and zoomed in,
+// the half slab spans several pixels).
+TEST(PixelFootprint, SingleSliceKeepsBothHalvesOfTheSlab) {
+    core::Geometry geom;
+    geom.dims = {16, 16, 1};
+    geom.spacing = {1.0, 1.0, 5.0};
+    core::Volume v(geom, core::VoxelType::UInt8);
+    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const optics::TransferFunction tf({test::tfPoint(0, 0), test::tfPoint(255, 0.3f)}, {128, 256});
+    const auto b = v.geometry().worldBounds();
+    for (double elevation : {0.0, 3.0, -3.0}) {
+        render::CameraSpec s;
+        s.elevationDeg = elevation;
+        s.fovYDeg = 8.0;
+        const render::Camera cam(s, b[0], b[1], 48, 48);
+        for (render::Mode m : {render::Mode::EmissionAbsorption, render::Mode::Gradient})
+            expectFootprintChangesNothing(v, tf, cam, m, "elevation " + std::to_string(elevation));
+    }
+}
+
+// From inside the volume box, cells wholly behind the eye are left out rather than switching the
+// footprint off; looking away from the object nothing is covered, looking at it part is.
+TEST(PixelFootprint, CameraInsideTheBoxLeavesOutCellsBehindIt) {
+    const core::Volume v = test::spherePhantom(64);
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const auto tf = stepTf(0.5f);
+    const auto b = v.geometry().worldBounds();
+    const glm::dvec3 corner = b[0] + 0.04 * (b[1] - b[0]);  // inside the box, outside the sphere
+    const glm::dvec3 centre = 0.5 * (b[0] + b[1]);
+    const render::RayCaster caster(v, g, tf, render::RenderOptions{});
+    for (bool toward : {false, true}) {
+        render::CameraSpec s;
+        s.eye = corner;
+        s.target = toward ? centre : corner - (centre - corner);
+        s.fovYDeg = 100.0;  // wide enough to see past the sphere
+        const render::Camera cam(s, b[0], b[1], 40, 40);
+        const render::PixelFootprint fp(caster, cam);
+        EXPECT_FALSE(fp.coversEverything()) << (toward ? "toward" : "away");
+        if (toward) {
+            EXPECT_GT(fp.coveredFraction(), 0.05);
+            EXPECT_LT(fp.coveredFraction(), 0.95);
+        } else {
+            EXPECT_EQ(fp.coveredFraction(), 0.0);
+        }
+        expectFootprintChangesNothing(v, tf, cam, render::Mode::Gradient,
+                                      toward ? "toward" : "away");
+    }
+}
+
+// A built-in model keeps the footprint of the camera it was made for; rendering it with another
+// camera (here larger, so a stale mask would be read out of bounds) casts every ray instead.
+TEST(PixelFootprint, ModelRenderedWithAnotherCameraIgnoresIt) {
+    const core::Volume v = obliqueSphere();
+    const grid::BrickGrid g = grid::BrickGrid::build(v);
+    const auto tf = stepTf(0.5f);
+    render::RenderOptions o;
+    o.mode = render::Mode::EmissionAbsorption;  // the gradient mode's headlight follows the camera
+    const render::RayCaster caster(v, g, tf, o);
+    const render::Camera small = test::orthoCamera(v, 35, 25, 70, 24);
+    const render::Camera large = test::orthoCamera(v, 120, -10, 70, 56);
+    const auto model = render::makeBuiltinModel(caster, small);
+    const io::ImageRGBA a = caster.render(large, *model, core::Progress::none());
+    const io::ImageRGBA c = caster.render(large, core::Progress::none());
+    ASSERT_EQ(a.pixels.size(), c.pixels.size());
+    EXPECT_EQ(0, std::memcmp(a.pixels.data(), c.pixels.data(), a.pixels.size() * sizeof(float)));
 }
 
 }  // namespace

@@ -168,11 +168,27 @@ TEST(Robustness, RenderReportsProgressAndCancels) {
     EXPECT_EQ(seen.front(), 0.0);
     EXPECT_EQ(seen.back(), 1.0);
 
+    // Cancelled after the caller's first chunk: the frame throws, and the tiles rendered stop
+    // well short of all of them (workers take no new chunk).
+    struct CountingModel final : render::ShadingModel {
+        mutable std::atomic<int> tiles{0};
+        std::string name() const override { return "counting"; }
+        void renderTile(const render::RayCaster&, const render::Camera&, int, int, int, int,
+                        io::ImageRGBA&, render::RenderStats&) const override {
+            ++tiles;
+        }
+    };
+    CountingModel counting;
+    const render::Camera big = defaultCamera(v, 256, 256);  // 4096 tiles of 4²
     int calls = 0;
     const core::Progress cancelling(
         [&](const std::string&, double) {
             if (++calls == 2) cancel = true;  // after the first chunk of tiles
         },
         &cancel);
-    EXPECT_THROW((void)caster.render(cam, cancelling), CancelledError);
+    EXPECT_THROW((void)caster.render(big, counting, cancelling), CancelledError);
+    EXPECT_LT(counting.tiles.load(), 4096 / 2);
+    cancel = false;
+    (void)caster.render(big, counting, core::Progress::none());
+    EXPECT_GE(counting.tiles.load(), 4096);
 }
