@@ -30,6 +30,16 @@ inline core::Volume spherePhantom(int size) {
     return core::makePhantom("sphere", po);
 }
 
+/// One 16×16 uint8 slice of value 200, `thickness` mm thick (the slab ±0.5 voxel on k).
+inline core::Volume singleSlice(double thickness) {
+    core::Geometry geom;
+    geom.dims = {16, 16, 1};
+    geom.spacing = {1.0, 1.0, thickness};
+    core::Volume v(geom, core::VoxelType::UInt8);
+    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    return v;
+}
+
 inline render::Camera orthoCamera(const core::Volume& v, double azimuth, double elevation,
                                   double height, int pixels) {
     render::CameraSpec s;

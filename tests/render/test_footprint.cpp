@@ -179,11 +179,7 @@ void expectFootprintChangesNothing(const core::Volume& v, const optics::Transfer
 // half into the edge cell, so the footprint must reach down to −0.5 (seen edge-on and zoomed in,
 // the half slab spans several pixels).
 TEST(PixelFootprint, SingleSliceKeepsBothHalvesOfTheSlab) {
-    core::Geometry geom;
-    geom.dims = {16, 16, 1};
-    geom.spacing = {1.0, 1.0, 5.0};
-    core::Volume v(geom, core::VoxelType::UInt8);
-    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const core::Volume v = test::singleSlice(5.0);
     const optics::TransferFunction tf({test::tfPoint(0, 0), test::tfPoint(255, 0.3f)}, {128, 256});
     const auto b = v.geometry().worldBounds();
     for (double elevation : {0.0, 3.0, -3.0}) {

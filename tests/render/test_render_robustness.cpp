@@ -99,11 +99,7 @@ TEST(Robustness, AbsurdImageSizesAndStepsAreClearErrors) {
 // A single slice is the slab ±0.5 voxel thick on its axis (5 mm slices here): empty-space
 // skipping must keep all of it (a clip to the cells' box [0, 0] once left a 0.02-voxel sliver).
 TEST(Robustness, SingleSliceSkippingDoesNotChangeTheImage) {
-    core::Geometry geom;
-    geom.dims = {16, 16, 1};
-    geom.spacing = {1.0, 1.0, 4.0};
-    core::Volume v(geom, core::VoxelType::UInt8);
-    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const core::Volume v = singleSlice(4.0);
     const optics::TransferFunction tf({tfPoint(0, 0), tfPoint(255, 0.2f)}, {128, 256});
     const auto b = v.geometry().worldBounds();
     for (const double elevation : {60.0, 0.0}) {  // oblique, and rays parallel to the slice
@@ -126,10 +122,7 @@ TEST(Robustness, SingleSliceSkippingDoesNotChangeTheImage) {
 }
 
 TEST(Robustness, DegenerateSingleSliceVolumeRenders) {
-    core::Geometry geom;
-    geom.dims = {16, 16, 1};
-    core::Volume v(geom, core::VoxelType::UInt8);
-    std::fill_n(v.dataAs<std::uint8_t>(), 256, std::uint8_t(200));
+    const core::Volume v = singleSlice(1.0);
     const render::Camera cam = defaultCamera(v, 16, 16);
     const optics::TransferFunction tf({tfPoint(0, 0), tfPoint(255, 1.f)}, {128, 256});
     for (render::Mode m : kAllModes) {
