@@ -63,15 +63,15 @@ struct SampleLattice {
     }
 };
 
-/// Trilinear interpolation of the precomputed central differences in the cell at `offset` with
-/// weights (fx, fy, fz) and corner strides (di, dj, dk), scaled to a world gradient. With SSE4.1
-/// each corner's (Δi, Δj, Δk, 0) is one 64-bit load widened to four floats and the seven lerps run
-/// on all three components at once (the same arithmetic per component as the scalar path).
-[[gnu::always_inline]] inline glm::vec3 gradientAtCell(const VoxelGradients& g, std::size_t offset,
+/// Trilinear interpolation of the precomputed central differences of a cell whose lower corner
+/// entry is q, with weights (fx, fy, fz) and corner strides (di, dj, dk), scaled to a world
+/// gradient. With SSE4.1 each corner's (Δi, Δj, Δk, 0) is one 64-bit load widened to four floats
+/// and the seven lerps run on all three components at once (the same arithmetic per component as
+/// the scalar path).
+[[gnu::always_inline]] inline glm::vec3 gradientAtCell(const GradientEntry* q, float slope,
                                                        float fx, float fy, float fz, std::size_t di,
                                                        std::size_t dj, std::size_t dk,
                                                        const glm::mat3& m) {
-    const auto* q = g.d.data() + offset;
 #if defined(__SSE4_1__)
     auto corner = [&](std::size_t o) {
         return _mm_cvtepi32_ps(
@@ -88,9 +88,9 @@ struct SampleLattice {
     const __m128 r = lerp(lerp(c00, c10, vy), lerp(c01, c11, vy), vz);
     alignas(16) float out[4];
     _mm_store_ps(out, r);
-    return m * (g.slope * glm::vec3(out[0], out[1], out[2]));
+    return m * (slope * glm::vec3(out[0], out[1], out[2]));
 #else
-    auto lerpX = [&](const std::array<std::int16_t, 4>& a, const std::array<std::int16_t, 4>& b) {
+    auto lerpX = [&](const GradientEntry& a, const GradientEntry& b) {
         return glm::vec3(float(a[0]) + fx * (float(b[0]) - float(a[0])),
                          float(a[1]) + fx * (float(b[1]) - float(a[1])),
                          float(a[2]) + fx * (float(b[2]) - float(a[2])));
@@ -98,7 +98,7 @@ struct SampleLattice {
     const glm::vec3 c00 = lerpX(q[0], q[di]), c10 = lerpX(q[dj], q[dj + di]);
     const glm::vec3 c01 = lerpX(q[dk], q[dk + di]), c11 = lerpX(q[dk + dj], q[dk + dj + di]);
     const glm::vec3 c0 = c00 + fy * (c10 - c00), c1 = c01 + fy * (c11 - c01);
-    return m * (g.slope * (c0 + fz * (c1 - c0)));
+    return m * (slope * (c0 + fz * (c1 - c0)));
 #endif
 }
 
@@ -107,10 +107,17 @@ struct SampleLattice {
 /// weights) and value(), so that the gradient table can reuse the cell of the value sample at the
 /// same point. Same clamping, weights and arithmetic as core::VolumeView::sample, so results are
 /// identical.
-template <class View>
+struct CellCorner {
+    int i = 0, j = 0, k = 0;  ///< the cell's lower corner
+};
+struct NoCellCorner {};
+
+/// kWithCorner: cells also carry their lower corner (i, j, k), for BrickedGradients (kept out of
+/// the cell otherwise: the marcher stores every sample's cell).
+template <class View, bool kWithCorner = false>
 struct CellSampler {
     using Elem = std::remove_cv_t<std::remove_pointer_t<decltype(View::data)>>;
-    struct Cell {
+    struct Cell : std::conditional_t<kWithCorner, CellCorner, NoCellCorner> {
         std::size_t offset = 0;  ///< linear index of the cell's lower corner
         float fx = 0.f, fy = 0.f, fz = 0.f;
     };
@@ -141,8 +148,13 @@ struct CellSampler {
         const float y = std::min(std::max(p.y, 0.f), hy);
         const float z = std::min(std::max(p.z, 0.f), hz);
         const int i = std::min(int(x), mi), j = std::min(int(y), mj), k = std::min(int(z), mk);
-        return {std::size_t(i) + sy * std::size_t(j) + sz * std::size_t(k), x - float(i),
-                y - float(j), z - float(k)};
+        Cell c;
+        c.offset = std::size_t(i) + sy * std::size_t(j) + sz * std::size_t(k);
+        c.fx = x - float(i);
+        c.fy = y - float(j);
+        c.fz = z - float(k);
+        if constexpr (kWithCorner) c.i = i, c.j = j, c.k = k;
+        return c;
     }
     [[gnu::always_inline]] float value(const Cell& c) const {
         const Elem* p = data + c.offset;
@@ -153,13 +165,6 @@ struct CellSampler {
         const float c0 = c00 + c.fy * (c10 - c00);
         const float c1 = c01 + c.fy * (c11 - c01);
         return slope * (c0 + c.fz * (c1 - c0)) + intercept;
-    }
-
-    /// World gradient from the precomputed central differences (same grid as the volume) at a
-    /// located cell.
-    [[gnu::always_inline]] glm::vec3 gradient(const VoxelGradients& g, const Cell& c,
-                                              const glm::mat3& m) const {
-        return gradientAtCell(g, c.offset, c.fx, c.fy, c.fz, di, dj, dk, m);
     }
 };
 
@@ -177,21 +182,6 @@ template <class View>
                       v.sample(p.x, p.y + 1.f, p.z) - v.sample(p.x, p.y - 1.f, p.z),
                       v.sample(p.x, p.y, p.z + 1.f) - v.sample(p.x, p.y, p.z - 1.f));
     return m * d;
-}
-
-/// World gradient from the precomputed central differences: their trilinear interpolation at p
-/// (same clamping and weights as core::VolumeView::sample), then the same scaling as gradientAt.
-[[gnu::always_inline]] inline glm::vec3 voxelGradientAt(const VoxelGradients& g, const glm::vec3& p,
-                                                        const glm::mat3& m) {
-    const float x = std::min(std::max(p.x, 0.f), float(g.nx - 1));
-    const float y = std::min(std::max(p.y, 0.f), float(g.ny - 1));
-    const float z = std::min(std::max(p.z, 0.f), float(g.nz - 1));
-    const int i = std::min(int(x), g.nx - 2 < 0 ? 0 : g.nx - 2);
-    const int j = std::min(int(y), g.ny - 2 < 0 ? 0 : g.ny - 2);
-    const int k = std::min(int(z), g.nz - 2 < 0 ? 0 : g.nz - 2);
-    return gradientAtCell(g, std::size_t(i) + g.sy * std::size_t(j) + g.sz * std::size_t(k),
-                          x - float(i), y - float(j), z - float(k), g.nx > 1 ? 1 : 0,
-                          g.ny > 1 ? g.sy : 0, g.nz > 1 ? g.sz : 0, m);
 }
 
 /// World gradient by forward differences from the known value s0 at p (3 taps instead of 6; the
@@ -257,17 +247,18 @@ inline void forEachActiveRange(const RayCaster& c, const RaySegment& r, const Sa
 inline constexpr float kLinearityFraction = 0.01f;
 inline constexpr int kMaxRefinement = 4;
 
-template <class View, class S>
+/// G: the central-difference table type (VoxelGradients or BrickedGradients).
+template <class View, class S, class G>
 struct DvrMarcher {
     const RayCaster& c;
     const View v;  ///< a copy: stores to the counters below cannot alias its fields
-    const CellSampler<View> sampler;
+    const CellSampler<View, G::kByIndex> sampler;
     const RaySegment& r;
     /// The shader's per-ray form (ray constants such as halfway vectors hoisted).
     using RayShader = std::decay_t<decltype(std::declval<const S&>().forRay(glm::vec3()))>;
     const RayShader shader;
     const optics::TfTable& table;
-    const VoxelGradients* gradients;  ///< precomputed central differences, or nullptr
+    const G* gradients;  ///< precomputed central differences, or nullptr
     glm::mat3 gradientMatrix;
     bool preint, central;
     float band, weak, voxelsPerMm, linearityTol;
@@ -275,19 +266,25 @@ struct DvrMarcher {
     float T = 1.f;
     glm::vec3 L{0.f};
     std::uint64_t samples = 0;
-    optics::TfTable::SegmentCache cache;        ///< integrals at the last values (each value once)
-    bool fused;                                 ///< TF without emission: integrals() path
-    optics::TfTable::Integrals backIntegrals;   ///< integrals at backValue
-    float backValue = NAN;                      ///< back value of the last integrated segment
-    typename CellSampler<View>::Cell lastCell;  ///< where the last sample was taken
+    optics::TfTable::SegmentCache cache;       ///< integrals at the last values (each value once)
+    bool fused;                                ///< TF without emission: integrals() path
+    optics::TfTable::Integrals backIntegrals;  ///< integrals at backValue
+    float backValue = NAN;                     ///< back value of the last integrated segment
+    typename CellSampler<View, G::kByIndex>::Cell lastCell;  ///< where the last sample was taken
     float lastT = NAN;
 
-    DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_)
-        : c(c_), v(v_), sampler(v_), r(r_), shader(s_.forRay(-r_.dirWorld)), table(c_.table()) {
+    DvrMarcher(const RayCaster& c_, const View& v_, const RaySegment& r_, const S& s_,
+               const G* gradients_)
+        : c(c_),
+          v(v_),
+          sampler(v_),
+          r(r_),
+          shader(s_.forRay(-r_.dirWorld)),
+          table(c_.table()),
+          gradients(gradients_) {
         preint = c.options().preintegrated;
         fused = !table.hasEmission();
         central = c.options().centralDifferences;
-        gradients = c.voxelGradients();
         gradientMatrix = c.gradientMatrix();
         band = kClipFaceBandVoxels * c.stepMm() / c.options().stepVoxels;
         weak = c.weakGradient();
@@ -349,6 +346,12 @@ struct DvrMarcher {
         composite(t0, s0, t1, s1);
     }
 
+    /// Central difference of the field by six taps, out of line: the table's rare miss.
+    [[gnu::noinline]] glm::vec3 sixTapGradient(float t) {
+        samples += 6;
+        return gradientAt(v, r.originIndex + t * r.dirIndex, gradientMatrix);
+    }
+
     /// One segment of the optical model: opacity from its (pre-integrated) extinction, shading at
     /// its back end.
     [[gnu::always_inline]] void composite(float t0, float s0, float t1, float s1) {
@@ -365,12 +368,22 @@ struct DvrMarcher {
         in.normal = toEye;
         if constexpr (S::kNeedsNormal) {
             glm::vec3 g;
+            const GradientEntry* q = nullptr;
             if (gradients) {
                 // The back end of a segment is (nearly always) the last sample taken.
-                g = t1 == lastT ? sampler.gradient(*gradients, lastCell, gradientMatrix)
-                                : voxelGradientAt(*gradients, r.originIndex + t1 * r.dirIndex,
-                                                  gradientMatrix);
-                samples += 1;
+                const auto cell =
+                    t1 == lastT ? lastCell : sampler.locate(r.originIndex + t1 * r.dirIndex);
+                q = gradients->corner(cell);
+                // A dense table holds every cell; a bricked one may not (then the six taps
+                // below give the same values).
+                if (!G::kByIndex || q) {
+                    g = gradientAtCell(q, gradients->slope, cell.fx, cell.fy, cell.fz,
+                                       gradients->di, gradients->dj, gradients->dk, gradientMatrix);
+                    samples += 1;
+                }
+            }
+            if (gradients) {
+                if (G::kByIndex && !q) g = sixTapGradient(t1);
             } else if (central) {
                 g = gradientAt(v, r.originIndex + t1 * r.dirIndex, gradientMatrix);
                 samples += 6;
@@ -387,14 +400,16 @@ struct DvrMarcher {
     }
 };
 
-/// Front-to-back compositing of the optical model with shader S.
-template <class View, class S>
-RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const S& shader) {
+/// Front-to-back compositing of the optical model with shader S and the central-difference table
+/// `gradients` (may be null).
+template <class View, class S, class G>
+RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const S& shader,
+                   const G* gradients) {
     RayResult out;
     const SampleLattice lat(r, c.stepMm());
     const float termination =
         c.options().earlyTermination ? c.options().terminationTransmittance : 0.f;
-    DvrMarcher<View, S> m(c, v, r, shader);
+    DvrMarcher<View, S, G> m(c, v, r, shader, gradients);
     std::int64_t iPrev = -1;
     float sPrev = 0.f, tPrev = 0.f;
     forEachActiveRange(

@@ -79,40 +79,102 @@ grid::BrickMajorants refineMajorants(const core::Volume& volume, const grid::Bri
 }
 }  // namespace
 
+namespace {
+
+/// Central differences of the stored values at voxel (i, j, k) with clamped indices (what
+/// gradientAt's clamped taps see); false when a difference does not fit in int16.
+template <class View>
+bool centralDifference(const View& v, const glm::ivec3& n, int i, int j, int k,
+                       GradientEntry& out) {
+    auto at = [&](int x, int y, int z) {
+        return int(v.data[std::size_t(x) + v.sy * std::size_t(y) + v.sz * std::size_t(z)]);
+    };
+    const int dx = at(std::min(i + 1, n.x - 1), j, k) - at(std::max(i - 1, 0), j, k);
+    const int dy = at(i, std::min(j + 1, n.y - 1), k) - at(i, std::max(j - 1, 0), k);
+    const int dz = at(i, j, std::min(k + 1, n.z - 1)) - at(i, j, std::max(k - 1, 0));
+    out = {std::int16_t(dx), std::int16_t(dy), std::int16_t(dz), 0};
+    return std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) <= 32767;
+}
+
+}  // namespace
+
 VoxelGradients VoxelGradients::build(const core::Volume& volume) {
     VoxelGradients g;
     if (volume.type() == core::VoxelType::Float32 || volume.voxelCount() > kMaxVoxels) return g;
     const glm::ivec3 n = volume.dims();
     g.nx = n.x, g.ny = n.y, g.nz = n.z;
-    g.sy = std::size_t(n.x);
-    g.sz = std::size_t(n.x) * std::size_t(n.y);
+    g.di = n.x > 1 ? 1 : 0;
+    g.dj = n.y > 1 ? std::size_t(n.x) : 0;
+    g.dk = n.z > 1 ? std::size_t(n.x) * std::size_t(n.y) : 0;
     g.slope = float(volume.mapping.slope);
     g.d.resize(std::size_t(volume.voxelCount()));
     std::atomic<bool> fits = true;
     volume.visit([&](const auto& v) {
-        // Central differences with clamped indices (what gradientAt's clamped taps see).
         tbb::parallel_for(0, n.z, [&](int k) {
-            const int k0 = std::max(k - 1, 0), k1 = std::min(k + 1, n.z - 1);
             bool ok = true;
-            for (int j = 0; j < n.y; ++j) {
-                const int j0 = std::max(j - 1, 0), j1 = std::min(j + 1, n.y - 1);
-                auto* out = g.d.data() + g.sy * j + g.sz * k;
-                for (int i = 0; i < n.x; ++i) {
-                    const int i0 = std::max(i - 1, 0), i1 = std::min(i + 1, n.x - 1);
-                    const int dx = int(v.data[i1 + v.sy * j + v.sz * k]) -
-                                   int(v.data[i0 + v.sy * j + v.sz * k]);
-                    const int dy = int(v.data[i + v.sy * j1 + v.sz * k]) -
-                                   int(v.data[i + v.sy * j0 + v.sz * k]);
-                    const int dz = int(v.data[i + v.sy * j + v.sz * k1]) -
-                                   int(v.data[i + v.sy * j + v.sz * k0]);
-                    ok &= std::max({std::abs(dx), std::abs(dy), std::abs(dz)}) <= 32767;
-                    out[i] = {std::int16_t(dx), std::int16_t(dy), std::int16_t(dz), 0};
-                }
-            }
+            GradientEntry* out = g.d.data() + std::size_t(n.x) * std::size_t(n.y) * std::size_t(k);
+            for (int j = 0; j < n.y; ++j)
+                for (int i = 0; i < n.x; ++i) ok &= centralDifference(v, n, i, j, k, *out++);
             if (!ok) fits = false;
         });
     });
     if (!fits) g.d = {};
+    return g;
+}
+
+BrickedGradients BrickedGradients::build(const core::Volume& volume,
+                                         const grid::BrickMajorants& cells) {
+    static_assert(kBrickVoxels % kSkipCellVoxels == 0, "bricks hold whole skip cells");
+    BrickedGradients g;
+    if (volume.type() == core::VoxelType::Float32 || cells.size() == 0) return g;
+    VL_CHECK_EQ(cells.cellSize(), kSkipCellVoxels);
+    const glm::ivec3 n = volume.dims();
+    g.di = n.x > 1 ? 1 : 0;
+    g.dj = n.y > 1 ? std::size_t(kStored) : 0;
+    g.dk = n.z > 1 ? std::size_t(kStored) * kStored : 0;
+    g.slope = float(volume.mapping.slope);
+    g.bricks = (n + (kBrickVoxels - 1)) / kBrickVoxels;
+    // Bricks holding a cell within one cell of a non-empty one (skip distance ≤ 1).
+    constexpr int kCells = kBrickVoxels / kSkipCellVoxels;  // per brick side
+    const glm::ivec3 cc = cells.counts();
+    const std::uint8_t* dist = cells.skipDistances();
+    auto wanted = [&](const glm::ivec3& b) {
+        const glm::ivec3 lo = b * kCells, hi = glm::min(lo + kCells, cc);
+        for (int z = lo.z; z < hi.z; ++z)
+            for (int y = lo.y; y < hi.y; ++y)
+                for (int x = lo.x; x < hi.x; ++x)
+                    if (dist[cells.index(x, y, z)] <= 1) return true;
+        return false;
+    };
+    g.slot.assign(std::size_t(g.bricks.x) * g.bricks.y * g.bricks.z, -1);
+    std::vector<glm::ivec3> stored;
+    std::size_t b = 0;
+    for (int bz = 0; bz < g.bricks.z; ++bz)
+        for (int by = 0; by < g.bricks.y; ++by)
+            for (int bx = 0; bx < g.bricks.x; ++bx, ++b)
+                if (wanted({bx, by, bz})) {
+                    g.slot[b] = std::int64_t(stored.size() * kBrickEntries);
+                    stored.push_back({bx, by, bz});
+                }
+    if (stored.empty() || stored.size() * kBrickEntries > kMaxEntries) return {};
+    g.d.resize(stored.size() * kBrickEntries);
+    std::atomic<bool> fits = true;
+    volume.visit([&](const auto& v) {
+        // The apron (local index kBrickVoxels) and voxels past the grid clamp to the last voxel.
+        tbb::parallel_for(std::size_t(0), stored.size(), [&](std::size_t s) {
+            const glm::ivec3 o = stored[s] * kBrickVoxels;
+            GradientEntry* out = g.d.data() + s * kBrickEntries;
+            bool ok = true;
+            for (int lk = 0; lk < kStored; ++lk)
+                for (int lj = 0; lj < kStored; ++lj)
+                    for (int li = 0; li < kStored; ++li)
+                        ok &= centralDifference(v, n, std::min(o.x + li, n.x - 1),
+                                                std::min(o.y + lj, n.y - 1),
+                                                std::min(o.z + lk, n.z - 1), *out++);
+            if (!ok) fits = false;
+        });
+    });
+    if (!fits) return {};
     return g;
 }
 
@@ -167,16 +229,22 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     // Which bricks can be skipped in this mode, refined to kSkipCellVoxels³ cells.
     const float widen = table_->cellWidth();  // table interpolation leaks σt up to one cell
     switch (options_.mode) {
-        case Mode::Gradient: {
-            if (options_.centralDifferences) voxelGradients_ = VoxelGradients::build(volume);
-            [[fallthrough]];
-        }
+        case Mode::Gradient:
         case Mode::EmissionAbsorption: {
             auto classify = [&](float lo, float hi) {
                 return tf.maxExtinction(lo - widen, hi + widen);
             };
             majorants_ =
                 refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
+            if (options_.mode == Mode::Gradient && options_.centralDifferences) {
+                const bool dense = options_.gradientTable == GradientTable::Dense ||
+                                   (options_.gradientTable == GradientTable::Auto &&
+                                    volume.voxelCount() <= VoxelGradients::kMaxVoxels);
+                if (dense)
+                    voxelGradients_ = VoxelGradients::build(volume);
+                else
+                    brickedGradients_ = BrickedGradients::build(volume, majorants_);
+            }
             break;
         }
         case Mode::Mip:
@@ -329,7 +397,7 @@ class DvrModel final : public ShadingModel {
                     io::ImageRGBA& film, RenderStats& stats) const override {
         const glm::vec3 bg = c.options().background;
         const bool footprint = footprint_.builtFor(cam);
-        c.volume().visit([&](const auto& view) {
+        auto tile = [&](const auto& view, const auto* gradients) {
             for (int y = y0; y < y1; ++y)
                 for (int x = x0; x < x1; ++x) {
                     float* px = film.at(x, y);
@@ -342,7 +410,7 @@ class DvrModel final : public ShadingModel {
                         writeMiss(px, bg);
                         continue;
                     }
-                    const detail::RayResult res = detail::marchDvr(c, view, r, shader_);
+                    const detail::RayResult res = detail::marchDvr(c, view, r, shader_, gradients);
                     const float T = res.transmittance;
                     for (int k = 0; k < 3; ++k) px[k] = finiteOr0(res.radiance[k] + T * bg[k]);
                     px[3] = finiteOr0(1.f - T);
@@ -350,6 +418,16 @@ class DvrModel final : public ShadingModel {
                     stats.samples += res.samples;
                     stats.terminatedEarly += res.terminated ? 1 : 0;
                 }
+        };
+        c.volume().visit([&](const auto& view) {
+            if constexpr (Shader::kNeedsNormal) {
+                if (const BrickedGradients* b = c.brickedGradients())
+                    tile(view, b);
+                else
+                    tile(view, c.voxelGradients());
+            } else {
+                tile(view, static_cast<const VoxelGradients*>(nullptr));
+            }
         });
     }
 

@@ -75,6 +75,13 @@ inline constexpr int kSkipCellVoxels = 4;
 /// Largest image the renderer accepts (pixels): 16384 × 8192 RGBA float is 2 GiB.
 inline constexpr std::uint64_t kMaxPixels = std::uint64_t(16384) * 8192;
 
+/// Which central-difference table the gradient mode uses.
+enum class GradientTable {
+    Auto,     ///< dense up to VoxelGradients::kMaxVoxels voxels, bricked beyond
+    Dense,    ///< VoxelGradients (when the volume is at most kMaxVoxels)
+    Bricked,  ///< BrickedGradients
+};
+
 struct RenderOptions {
     Mode mode = Mode::Gradient;
     float stepVoxels = 0.5f;    ///< step in units of the smallest voxel spacing, > 0
@@ -97,6 +104,8 @@ struct RenderOptions {
     float ambient = 1.f;          ///< EmissionAbsorption: uniform illumination
     /// Gradient normals by central differences (6 taps) or forward differences (3 taps, faster).
     bool centralDifferences = true;
+    /// Table of the central differences (with centralDifferences in Gradient mode).
+    GradientTable gradientTable = GradientTable::Auto;
     std::optional<float> isoValue;  ///< Isosurface: physical value; default TF surfaceValue()
     int tileSize = 16;              ///< pixels per tile side
 };
@@ -116,17 +125,68 @@ class RayCaster;
 /// interpolating D at p equals the central difference of the trilinear field at p ± 1 voxel
 /// (gradientAt) up to float rounding, including the clamping at the edges: one 8-corner fetch
 /// instead of six trilinear taps, computed once per caster (VTK encodes normals the same way,
-/// but quantised).
+/// but quantised). Two layouts with one interface (corner()): VoxelGradients, dense on the
+/// volume's own grid (its index is the value sample's, so a fetch costs no index arithmetic;
+/// 8 bytes per voxel), and BrickedGradients, only near the visible cells (for volumes too large
+/// for the dense table).
+using GradientEntry = std::array<std::int16_t, 4>;  ///< (Δi, Δj, Δk, 0)
+
 struct VoxelGradients {
-    /// Largest volume (voxels) that gets the table: 8 bytes per voxel.
+    /// Largest volume (voxels) that gets the dense table (GradientTable::Auto): 512 MiB.
     static constexpr std::uint64_t kMaxVoxels = std::uint64_t(1) << 26;
-    std::vector<std::array<std::int16_t, 4>> d;  ///< (Δi, Δj, Δk, 0) per voxel, x fastest
+    std::vector<GradientEntry> d;  ///< per voxel, x fastest
     int nx = 0, ny = 0, nz = 0;
-    std::size_t sy = 0, sz = 0;
-    float slope = 1.f;  ///< stored → physical value
+    std::size_t di = 0, dj = 0, dk = 0;  ///< corner strides (0 on a single-voxel axis)
+    float slope = 1.f;                   ///< stored → physical value
     /// The table for `volume`, or empty when the type is float or a difference does not fit.
     static VoxelGradients build(const core::Volume& volume);
     bool empty() const { return d.empty(); }
+    /// Looked up by the cell's linear voxel index (cell.offset), not by (i, j, k).
+    static constexpr bool kByIndex = false;
+    /// Entry of the lower corner of a located cell (cell.offset: its linear voxel index).
+    template <class Cell>
+    const GradientEntry* corner(const Cell& cell) const {
+        return d.data() + cell.offset;
+    }
+};
+
+/// The central differences only where shading can ask for them: in the kBrickVoxels³ bricks that
+/// hold a skip cell within one cell of a non-empty one (a shaded segment ends at most one step
+/// past a non-empty cell at steps up to a cell), each stored with a one-voxel apron on its high
+/// sides, so that the 8 corners of any cell whose lower corner is in the brick lie in its
+/// kStored³ block. Elsewhere corner() is null and the marcher takes the six-tap central
+/// difference of the field (the same values up to rounding). Built per transfer function.
+struct BrickedGradients {
+    static constexpr int kBrickVoxels = 16;
+    static constexpr int kStored = kBrickVoxels + 1;
+    static constexpr std::size_t kBrickEntries = std::size_t(kStored) * kStored * kStored;
+    /// Most entries (8 bytes each) the table may hold: beyond, no table is built (1 GiB).
+    static constexpr std::uint64_t kMaxEntries = std::uint64_t(1) << 27;
+    std::vector<std::int64_t> slot;  ///< per brick (i fastest): its first entry in d, or −1
+    std::vector<GradientEntry> d;
+    glm::ivec3 bricks{0};
+    std::size_t di = 0, dj = 0, dk = 0;  ///< corner strides in a block (0 on a single-voxel axis)
+    float slope = 1.f;                   ///< stored → physical value
+    /// The table for `volume` in the bricks near the non-empty cells of `cells` (the caster's
+    /// kSkipCellVoxels³ skip cells, with skip distances); empty when the type is float, a
+    /// difference does not fit in int16, or it would exceed kMaxEntries.
+    static BrickedGradients build(const core::Volume& volume, const grid::BrickMajorants& cells);
+    bool empty() const { return d.empty(); }
+    /// Looked up by the cell's lower corner (cell.i, cell.j, cell.k).
+    static constexpr bool kByIndex = true;
+    /// Entry of a located cell's lower corner (i, j, k) in its brick's block, with the other
+    /// corners at +di, +dj, +dk; null when the brick is not stored.
+    template <class Cell>
+    const GradientEntry* corner(const Cell& cell) const {
+        static_assert(kBrickVoxels == 16, "shifts and masks below");
+        const auto ui = unsigned(cell.i), uj = unsigned(cell.j), uk = unsigned(cell.k);
+        const std::int64_t s =
+            slot[(ui >> 4) + std::size_t(bricks.x) *
+                                 ((uj >> 4) + std::size_t(bricks.y) * std::size_t(uk >> 4))];
+        if (s < 0) return nullptr;
+        return d.data() + s + (ui & 15u) +
+               std::size_t(kStored) * ((uj & 15u) + std::size_t(kStored) * (uk & 15u));
+    }
 };
 
 /// The per-tile seam between traversal and shading: one virtual call per tile, concrete shader
@@ -200,6 +260,10 @@ class RayCaster {
     const VoxelGradients* voxelGradients() const {
         return voxelGradients_.empty() ? nullptr : &voxelGradients_;
     }
+    /// Bricked central differences (Gradient mode, large volumes), or nullptr.
+    const BrickedGradients* brickedGradients() const {
+        return brickedGradients_.empty() ? nullptr : &brickedGradients_;
+    }
 
   private:
     const core::Volume* volume_;
@@ -214,6 +278,7 @@ class RayCaster {
     glm::mat3 gradientMatrix_{1.f};
     glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
     VoxelGradients voxelGradients_;
+    BrickedGradients brickedGradients_;
 };
 
 /// World-space axis-aligned bounds of what the caster can see (the non-empty skip cells; the

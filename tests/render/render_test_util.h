@@ -23,6 +23,19 @@ inline optics::TransferFunction stepTf(float sigma) {
         "step");
 }
 
+/// The CT torso phantom (HU) at 40³.
+inline core::Volume smallTorso(int size = 40) {
+    core::PhantomOptions po;
+    po.size = size;
+    return core::makePhantom("torso", po);
+}
+
+/// Bone-like ramp over HU: transparent below 100, red-tinted 300, opaque-ish 900.
+inline optics::TransferFunction boneRampTf() {
+    return optics::TransferFunction(
+        {tfPoint(100, 0), tfPoint(300, 0.3f, {0.9f, 0.3f, 0.2f}), tfPoint(900, 2.f)}, {500, 800});
+}
+
 /// The analytic sphere phantom (0.5-level set = the exact sphere) on a size³ grid.
 inline core::Volume spherePhantom(int size) {
     core::PhantomOptions po;

@@ -211,7 +211,9 @@ TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
             covered += img.at(x, y)[3] > 0.5f;
             expected += kept && d < f.radius;
             rim += kept && std::abs(d - f.radius) < 0.5 * px;
-            if (!kept) EXPECT_EQ(img.at(x, y)[3], 0.f) << "clipped half must be empty";
+            if (!kept) {
+                EXPECT_EQ(img.at(x, y)[3], 0.f) << "clipped half must be empty";
+            }
         }
     EXPECT_NEAR(covered, expected, rim);
     EXPECT_GT(expected, 1000);
@@ -241,20 +243,8 @@ TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
     EXPECT_NEAR(faceCovered, 2 * expected, 2 * rim + 4);
 }
 
-namespace {
-/// A 40³ torso and a TF with a transparent tail, a red soft ramp and opaque bone: every mode and
-/// the skipping have something to do (shared by the determinism and skipping checks).
-core::Volume smallTorso() {
-    core::PhantomOptions po;
-    po.size = 40;
-    return core::makePhantom("torso", po);
-}
-optics::TransferFunction boneRampTf() {
-    return optics::TransferFunction(
-        {tfPoint(100, 0), tfPoint(300, 0.3f, {0.9f, 0.3f, 0.2f}), tfPoint(900, 2.f)}, {500, 800});
-}
-}  // namespace
-
+// smallTorso() and boneRampTf() (render_test_util.h): a transparent tail, a red soft ramp and
+// opaque bone, so that every mode and the skipping have something to do.
 TEST(Determinism, SameImageBitForBitWithOneAndTwoThreads) {
     const core::Volume v = smallTorso();
     const auto tf = boneRampTf();
@@ -296,7 +286,9 @@ TEST(EmptySpaceSkipping, DoesNotChangeTheImage) {
             maxDiff = std::max(maxDiff, double(std::abs(a.pixels[i] - c.pixels[i])));
         // Skipping only drops segments whose both ends lie in TF-transparent bricks.
         EXPECT_LT(maxDiff, 1e-4) << render::toString(m);
-        if (m == render::Mode::Gradient) EXPECT_LT(with.samples, without.samples);
+        if (m == render::Mode::Gradient) {
+            EXPECT_LT(with.samples, without.samples);
+        }
     }
 }
 
