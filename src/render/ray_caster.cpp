@@ -123,7 +123,8 @@ VoxelGradients VoxelGradients::build(const core::Volume& volume) {
 }
 
 BrickedGradients BrickedGradients::build(const core::Volume& volume,
-                                         const grid::BrickMajorants& cells) {
+                                         const grid::BrickMajorants& cells,
+                                         std::uint64_t maxEntries) {
     static_assert(kBrickVoxels % kSkipCellVoxels == 0, "bricks hold whole skip cells");
     BrickedGradients g;
     if (volume.type() == core::VoxelType::Float32 || cells.size() == 0) return g;
@@ -134,29 +135,40 @@ BrickedGradients BrickedGradients::build(const core::Volume& volume,
     g.dk = n.z > 1 ? std::size_t(kStored) * kStored : 0;
     g.slope = float(volume.mapping.slope);
     g.bricks = (n + (kBrickVoxels - 1)) / kBrickVoxels;
-    // Bricks holding a cell within one cell of a non-empty one (skip distance ≤ 1).
+    // Bricks holding a cell within one cell of a non-empty one (skip distance ≤ 1): those with a
+    // non-empty cell first, then the neighbours, up to maxEntries (the rest fall back to six
+    // taps, which is what all cells would do without a table).
     constexpr int kCells = kBrickVoxels / kSkipCellVoxels;  // per brick side
     const glm::ivec3 cc = cells.counts();
     const std::uint8_t* dist = cells.skipDistances();
-    auto wanted = [&](const glm::ivec3& b) {
+    auto nearest = [&](const glm::ivec3& b) {  // smallest skip distance in brick b
         const glm::ivec3 lo = b * kCells, hi = glm::min(lo + kCells, cc);
+        int d = 255;
         for (int z = lo.z; z < hi.z; ++z)
             for (int y = lo.y; y < hi.y; ++y)
-                for (int x = lo.x; x < hi.x; ++x)
-                    if (dist[cells.index(x, y, z)] <= 1) return true;
-        return false;
+                for (int x = lo.x; x < hi.x; ++x) d = std::min(d, int(dist[cells.index(x, y, z)]));
+        return d;
     };
     g.slot.assign(std::size_t(g.bricks.x) * g.bricks.y * g.bricks.z, -1);
-    std::vector<glm::ivec3> stored;
+    std::vector<std::uint8_t> near(g.slot.size());
     std::size_t b = 0;
     for (int bz = 0; bz < g.bricks.z; ++bz)
         for (int by = 0; by < g.bricks.y; ++by)
             for (int bx = 0; bx < g.bricks.x; ++bx, ++b)
-                if (wanted({bx, by, bz})) {
-                    g.slot[b] = std::int64_t(stored.size() * kBrickEntries);
-                    stored.push_back({bx, by, bz});
-                }
-    if (stored.empty() || stored.size() * kBrickEntries > kMaxEntries) return {};
+                near[b] = std::uint8_t(nearest({bx, by, bz}));
+    const std::size_t maxBricks = std::size_t(maxEntries / kBrickEntries);
+    std::vector<glm::ivec3> stored;
+    for (int d = 0; d <= 1; ++d) {
+        b = 0;
+        for (int bz = 0; bz < g.bricks.z; ++bz)
+            for (int by = 0; by < g.bricks.y; ++by)
+                for (int bx = 0; bx < g.bricks.x; ++bx, ++b)
+                    if (near[b] == d && stored.size() < maxBricks) {
+                        g.slot[b] = std::int64_t(stored.size() * kBrickEntries);
+                        stored.push_back({bx, by, bz});
+                    }
+    }
+    if (stored.empty()) return {};
     g.d.resize(stored.size() * kBrickEntries);
     std::atomic<bool> fits = true;
     volume.visit([&](const auto& v) {

@@ -160,7 +160,8 @@ struct BrickedGradients {
     static constexpr int kBrickVoxels = 16;
     static constexpr int kStored = kBrickVoxels + 1;
     static constexpr std::size_t kBrickEntries = std::size_t(kStored) * kStored * kStored;
-    /// Most entries (8 bytes each) the table may hold: beyond, no table is built (1 GiB).
+    /// Most entries (8 bytes each) the table may hold (1 GiB): bricks with a non-empty cell
+    /// come first, then their neighbours; bricks beyond the limit are not stored.
     static constexpr std::uint64_t kMaxEntries = std::uint64_t(1) << 27;
     std::vector<std::int64_t> slot;  ///< per brick (i fastest): its first entry in d, or −1
     std::vector<GradientEntry> d;
@@ -168,9 +169,10 @@ struct BrickedGradients {
     std::size_t di = 0, dj = 0, dk = 0;  ///< corner strides in a block (0 on a single-voxel axis)
     float slope = 1.f;                   ///< stored → physical value
     /// The table for `volume` in the bricks near the non-empty cells of `cells` (the caster's
-    /// kSkipCellVoxels³ skip cells, with skip distances); empty when the type is float, a
-    /// difference does not fit in int16, or it would exceed kMaxEntries.
-    static BrickedGradients build(const core::Volume& volume, const grid::BrickMajorants& cells);
+    /// kSkipCellVoxels³ skip cells, with skip distances); empty when the type is float or a
+    /// difference does not fit in int16.
+    static BrickedGradients build(const core::Volume& volume, const grid::BrickMajorants& cells,
+                                  std::uint64_t maxEntries = kMaxEntries);
     bool empty() const { return d.empty(); }
     /// Looked up by the cell's lower corner (cell.i, cell.j, cell.k).
     static constexpr bool kByIndex = true;
