@@ -196,6 +196,9 @@ class TfTable {
     /// Below a hundredth of a cell the integrand is linear to float precision: point-sample.
     static constexpr float kPointSampleFraction = 1e-2f;
 
+    /// σt is 0 on (−∞, zeroBelow()] and [zeroAbove(), ∞).
+    float zeroBelow() const { return zeroBelow_; }
+    float zeroAbove() const { return zeroAbove_; }
     /// True when segment(sf, sb) is certainly transparent (cheap test).
     bool transparentSegment(float sf, float sb) const {
         return std::max(sf, sb) <= zeroBelow_ || std::min(sf, sb) >= zeroAbove_;
