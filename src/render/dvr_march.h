@@ -27,6 +27,16 @@ namespace voxlight::render::detail {
         Eigen::internal::pexp(Eigen::internal::pset1<Eigen::internal::Packet4f>(x)));
 }
 
+/// a·b + c rounded once where the target has FMA (then SampleBatch's vector lanes and the scalar
+/// sampling agree bit for bit at any optimisation level), else as written.
+[[gnu::always_inline]] inline float fmaF(float a, float b, float c) {
+#if defined(__FMA__)
+    return std::fma(a, b, c);
+#else
+    return a * b + c;
+#endif
+}
+
 /// Below this optical depth opacity() uses the series (see there).
 inline constexpr float kOpacitySeriesTau = 0.01f;
 
@@ -50,7 +60,7 @@ struct SampleLattice {
     }
     float t(std::int64_t i) const {
         if (i <= 0) return tNear;
-        const float t = tNear + (jitter + float(i - 1)) * step;
+        const float t = fmaF(jitter + float(i - 1), step, tNear);
         return i >= last || t > tFar ? tFar : t;
     }
     /// Largest i with t(i) ≤ x.
@@ -105,16 +115,17 @@ struct SampleLattice {
 #endif
 }
 
-/// The hot-loop form of core::VolumeView::sample: the grid constants (clamp limits, corner strides)
-/// are computed once per ray instead of per sample, and a sample is split into locate() (cell and
-/// weights) and value(), so that the gradient table can reuse the cell of the value sample at the
-/// same point. Same clamping, weights and arithmetic as core::VolumeView::sample, so results are
-/// identical.
 struct CellCorner {
     int i = 0, j = 0, k = 0;  ///< the cell's lower corner
 };
 struct NoCellCorner {};
 
+/// The hot-loop form of core::VolumeView::sample: the grid constants (clamp limits, corner strides)
+/// are computed once per ray instead of per sample, and a sample is split into locate() (cell and
+/// weights) and value(), so that the gradient table can reuse the cell of the value sample at the
+/// same point. Same clamping, weights and lerps as core::VolumeView::sample, with the
+/// multiply-adds fused where the target has FMA (fmaF: what an optimising build contracts them to
+/// anyway), so that SampleBatch's lanes equal it bit for bit in any build.
 /// kWithCorner: cells also carry their lower corner (i, j, k), for BrickedGradients (kept out of
 /// the cell otherwise: the marcher stores every sample's cell).
 template <class View, bool kWithCorner = false>
@@ -161,13 +172,13 @@ struct CellSampler {
     }
     [[gnu::always_inline]] float value(const Cell& c) const {
         const Elem* p = data + c.offset;
-        const float c00 = float(p[0]) + c.fx * (float(p[di]) - float(p[0]));
-        const float c10 = float(p[dj]) + c.fx * (float(p[dj + di]) - float(p[dj]));
-        const float c01 = float(p[dk]) + c.fx * (float(p[dk + di]) - float(p[dk]));
-        const float c11 = float(p[dk + dj]) + c.fx * (float(p[dk + dj + di]) - float(p[dk + dj]));
-        const float c0 = c00 + c.fy * (c10 - c00);
-        const float c1 = c01 + c.fy * (c11 - c01);
-        return slope * (c0 + c.fz * (c1 - c0)) + intercept;
+        auto lerp = [](float a, float b, float f) { return fmaF(f, b - a, a); };
+        const float c00 = lerp(float(p[0]), float(p[di]), c.fx);
+        const float c10 = lerp(float(p[dj]), float(p[dj + di]), c.fx);
+        const float c01 = lerp(float(p[dk]), float(p[dk + di]), c.fx);
+        const float c11 = lerp(float(p[dk + dj]), float(p[dk + dj + di]), c.fx);
+        const float c0 = lerp(c00, c10, c.fy), c1 = lerp(c01, c11, c.fy);
+        return fmaF(slope, lerp(c0, c1, c.fz), intercept);
     }
 };
 
@@ -444,9 +455,15 @@ struct DvrMarcher {
     bool skipsTransparent() const { return preint && !coarse; }
 #endif
 
+    /// Index-space position at t (fused like SampleBatch).
+    [[gnu::always_inline]] glm::vec3 at(float t) const {
+        return {fmaF(t, r.dirIndex.x, r.originIndex.x), fmaF(t, r.dirIndex.y, r.originIndex.y),
+                fmaF(t, r.dirIndex.z, r.originIndex.z)};
+    }
+
     [[gnu::always_inline]] float sample(float t) {
         ++samples;
-        lastCell = sampler.locate(r.originIndex + t * r.dirIndex);
+        lastCell = sampler.locate(at(t));
         lastT = t;
         return sampler.value(lastCell);
     }
@@ -521,8 +538,7 @@ struct DvrMarcher {
             const GradientEntry* q = nullptr;
             if (gradients) {
                 // The back end of a segment is (nearly always) the last sample taken.
-                const auto cell =
-                    t1 == lastT ? lastCell : sampler.locate(r.originIndex + t1 * r.dirIndex);
+                const auto cell = t1 == lastT ? lastCell : sampler.locate(at(t1));
                 q = gradients->corner(cell);
                 // A dense table holds every cell; a bricked one may not (then the six taps
                 // below give the same values).

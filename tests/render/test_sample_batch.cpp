@@ -33,6 +33,13 @@ core::Volume randomVolume(glm::ivec3 dims, std::uint64_t seed) {
     return v;
 }
 
+/// The marcher's sample position (DvrMarcher::at): fused multiply-adds, as the batch's lanes.
+glm::vec3 at(const render::RaySegment& r, float t) {
+    using render::detail::fmaF;
+    return {fmaF(t, r.dirIndex.x, r.originIndex.x), fmaF(t, r.dirIndex.y, r.originIndex.y),
+            fmaF(t, r.dirIndex.z, r.originIndex.z)};
+}
+
 template <class T>
 void expectBatchEqualsScalar(const core::Volume& vol, const std::string& what) {
     using View = core::VolumeView<T>;
@@ -65,13 +72,12 @@ void expectBatchEqualsScalar(const core::Volume& vol, const std::string& what) {
         const render::detail::SampleLattice lat(r, 0.37f + 0.5f * rng.uniform());
         for (std::int64_t i = 1; i <= lat.last; i += Batch::kLanes) {
             Batch batch;
-            const float before =
-                sampler.value(sampler.locate(r.originIndex + lat.t(i - 1) * r.dirIndex));
+            const float before = sampler.value(sampler.locate(at(r, lat.t(i - 1))));
             batch.take(i, lat, r, sampler, vol.voxelCount(), before, zeroBelow, zeroAbove);
             float prev = before;
             for (int l = 0; l < Batch::kLanes; ++l) {
                 const float t = lat.t(i + l);
-                const auto cell = sampler.locate(r.originIndex + t * r.dirIndex);
+                const auto cell = sampler.locate(at(r, t));
                 const float s = sampler.value(cell);
                 ASSERT_EQ(batch.t[l], t) << what << " ray " << n << " sample " << i + l;
                 const auto bc = batch.cell(l);
