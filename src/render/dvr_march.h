@@ -579,7 +579,9 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
 #if defined(__AVX2__) && defined(__FMA__)
     using Batch = typename DvrMarcher<View, S, G>::Batch;
     const std::size_t voxels = std::size_t(v.nx) * std::size_t(v.ny) * std::size_t(v.nz);
-    const bool batched = Batch::usable(m.sampler, voxels);
+    // Lattice indices must fit the lanes' int32 (steps far below a voxel on long rays do not).
+    const bool batched =
+        Batch::usable(m.sampler, voxels) && lat.last < std::int64_t(INT32_MAX) - Batch::kLanes;
     const bool skips = m.skipsTransparent();
     const float zeroBelow = c.table().zeroBelow(), zeroAbove = c.table().zeroAbove();
     Batch batch;
@@ -602,31 +604,33 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
             };
             std::int64_t i = iPrev + 1;
 #if defined(__AVX2__) && defined(__FMA__)
-            if (batched) {
-                // Eight samples at a time; lanes past i1 are computed and dropped.
-                for (; i <= i1;) {
-                    batch.take(i, lat, r, m.sampler, voxels, sPrev, zeroBelow, zeroAbove);
-                    const int n = int(std::min<std::int64_t>(Batch::kLanes, i1 - i + 1));
-                    int l = 0;
-                    if (skips) {
-                        // Leading transparent segments change nothing but the last sample.
-                        l = std::min(n, __builtin_ctz(~batch.transparent));
-                        if (l > 0) {
-                            m.sampleFrom(batch, l - 1);
-                            m.samples += unsigned(l - 1);
-                            sPrev = batch.s[l - 1];
-                            tPrev = batch.t[l - 1];
-                            i += l;
-                            iPrev = i - 1;
+            if constexpr (Batch::kSupported) {
+                if (batched) {
+                    // Eight samples at a time; lanes past i1 are computed and dropped.
+                    for (; i <= i1;) {
+                        batch.take(i, lat, r, m.sampler, voxels, sPrev, zeroBelow, zeroAbove);
+                        const int n = int(std::min<std::int64_t>(Batch::kLanes, i1 - i + 1));
+                        int l = 0;
+                        if (skips) {
+                            // Leading transparent segments change nothing but the last sample.
+                            l = std::min(n, __builtin_ctz(~batch.transparent));
+                            if (l > 0) {
+                                m.sampleFrom(batch, l - 1);
+                                m.samples += unsigned(l - 1);
+                                sPrev = batch.s[l - 1];
+                                tPrev = batch.t[l - 1];
+                                i += l;
+                                iPrev = i - 1;
+                            }
                         }
+                        for (; l < n; ++l, ++i)
+                            if (step(i, batch.t[l], m.sampleFrom(batch, l))) {
+                                out.terminated = true;
+                                return false;
+                            }
                     }
-                    for (; l < n; ++l, ++i)
-                        if (step(i, batch.t[l], m.sampleFrom(batch, l))) {
-                            out.terminated = true;
-                            return false;
-                        }
+                    return true;
                 }
-                return true;
             }
 #endif
             for (; i <= i1; ++i) {
