@@ -368,8 +368,9 @@ struct RayResult {
 
 /// Non-empty runs reach the marcher in pieces of at most this many skip cells (kSkipCellVoxels
 /// voxels each), so that a ray stops crossing cells soon after it is terminated early; smaller
-/// pieces cost more lattice arithmetic per sample, larger ones more cells crossed in vain.
-inline constexpr int kRunPieceCells = 4;
+/// pieces cost more lattice arithmetic and more part-filled sample batches, larger ones more cells
+/// crossed in vain (measured with batches: 8 is 3–4 % faster than 4 on bonsai, torso unchanged).
+inline constexpr int kRunPieceCells = 8;
 
 /// Calls f(i0, i1) for the lattice index ranges that cover the non-empty intervals of the ray
 /// (or the whole ray without skipping), in order and without overlap; f returns false to stop.
