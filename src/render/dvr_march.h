@@ -585,7 +585,7 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
         Batch::usable(m.sampler, voxels) && lat.last < std::int64_t(INT32_MAX) - Batch::kLanes;
     const bool skips = m.skipsTransparent();
     const float zeroBelow = c.table().zeroBelow(), zeroAbove = c.table().zeroAbove();
-    Batch batch;
+    Batch batches[2];
 #endif
     std::int64_t iPrev = -1;
     float sPrev = 0.f, tPrev = 0.f;
@@ -607,10 +607,18 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
 #if defined(__AVX2__) && defined(__FMA__)
             if constexpr (Batch::kSupported) {
                 if (batched) {
-                    // Eight samples at a time; lanes past i1 are computed and dropped.
+                    // Eight samples at a time; lanes past i1 are computed and dropped. The next
+                    // batch is taken before this one's segments run (its gathers then overlap
+                    // their branches); its lane 0 follows this batch's last lane.
+                    Batch* cur = &batches[0];
+                    Batch* next = &batches[1];
+                    cur->take(i, lat, r, m.sampler, voxels, sPrev, zeroBelow, zeroAbove);
                     for (; i <= i1;) {
-                        batch.take(i, lat, r, m.sampler, voxels, sPrev, zeroBelow, zeroAbove);
                         const int n = int(std::min<std::int64_t>(Batch::kLanes, i1 - i + 1));
+                        if (i + Batch::kLanes <= i1)
+                            next->take(i + Batch::kLanes, lat, r, m.sampler, voxels,
+                                       cur->s[Batch::kLanes - 1], zeroBelow, zeroAbove);
+                        const Batch& batch = *cur;
                         int l = 0;
                         if (skips) {
                             // Leading transparent segments change nothing but the last sample.
@@ -629,6 +637,7 @@ RayResult marchDvr(const RayCaster& c, const View& v, const RaySegment& r, const
                                 out.terminated = true;
                                 return false;
                             }
+                        std::swap(cur, next);
                     }
                     return true;
                 }
