@@ -156,7 +156,7 @@ def main():
             vtk_save(os.path.join(work, f"vtk-{preset}.png"))
             v, k = statistics.median(vt), statistics.median(kt)
             r = statistics.median(ratios)
-            print(f"{name + label:48s} {v:9.3f} {k:9.3f} {r:6.2f} {min(ratios):5.2f}-{max(ratios):4.2f} "
+            print(f"{name + label:48s} {v:9.3f} {k:9.3f} {r:6.3f} {min(ratios):5.2f}-{max(ratios):4.2f} "
                   f"{first:9.3f}", flush=True)
     print(f"images in {work}")
 
