@@ -184,8 +184,9 @@ struct CellSampler {
 
 /// Lattice samples taken eight at a time (AVX2): positions, cells and trilinear values of
 /// samples i … i + 7 of a ray in vector registers, the corner pairs (x, x + 1) of each row fetched
-/// by one 32-bit gather. Same arithmetic per lane as SampleLattice::t, CellSampler::locate and
-/// CellSampler::value (fused multiply-adds where the scalar code contracts to them). For 8- and
+/// by one 32-bit gather. Same arithmetic per lane as SampleLattice::t, DvrMarcher::at,
+/// CellSampler::locate and CellSampler::value (whose multiply-adds are fmaF), so equal bit for
+/// bit. For 8- and
 /// 16-bit voxels on grids with more than one voxel along i; otherwise kSupported is false or
 /// usable() is, and the marcher takes samples one by one.
 #if defined(__AVX2__) && defined(__FMA__)
@@ -536,21 +537,19 @@ struct DvrMarcher {
         in.normal = toEye;
         if constexpr (S::kNeedsNormal) {
             glm::vec3 g;
-            const GradientEntry* q = nullptr;
             if (gradients) {
                 // The back end of a segment is (nearly always) the last sample taken.
                 const auto cell = t1 == lastT ? lastCell : sampler.locate(at(t1));
-                q = gradients->corner(cell);
-                // A dense table holds every cell; a bricked one may not (then the six taps
-                // below give the same values).
+                const GradientEntry* q = gradients->corner(cell);
+                // A dense table holds every cell; a bricked one may not (then six taps give the
+                // same values).
                 if (!G::kByIndex || q) {
                     g = gradientAtCell(q, gradients->slope, cell.fx, cell.fy, cell.fz,
                                        gradients->di, gradients->dj, gradients->dk, gradientMatrix);
                     samples += 1;
+                } else {
+                    g = sixTapGradient(t1);
                 }
-            }
-            if (gradients) {
-                if (G::kByIndex && !q) g = sixTapGradient(t1);
             } else if (central) {
                 g = gradientAt(v, r.originIndex + t1 * r.dirIndex, gradientMatrix);
                 samples += 6;

@@ -12,15 +12,7 @@
 namespace voxlight::render {
 
 PixelFootprint::PixelFootprint(const RayCaster& caster, const Camera& camera)
-    : width_(camera.width()),
-      height_(camera.height()),
-      eye_(camera.eye()),
-      forward_(camera.forward()),
-      right_(camera.right()),
-      up_(camera.up()),
-      fovY_(camera.fovY()),
-      orthoHeight_(camera.orthoHeight()),
-      perspective_(camera.projection() == Projection::Perspective) {
+    : width_(camera.width()), height_(camera.height()), map_(camera.projectiveMap()) {
     if (!caster.options().emptySpaceSkipping || !caster.options().pixelFootprint) {
         coverAll();
         return;
@@ -31,7 +23,7 @@ PixelFootprint::PixelFootprint(const RayCaster& caster, const Camera& camera)
     // The camera's projective map composed with index → world (origin + D·(ijk ⊙ spacing)), so
     // that a box corner costs three multiply-adds per coordinate.
     const core::Geometry& geo = caster.volume().geometry();
-    const Camera::ProjectiveMap pm = camera.projectiveMap();
+    const Camera::ProjectiveMap& pm = map_;
     auto inIndex = [&](const glm::dvec3& row, double c, glm::dvec3& out, double& out0) {
         out = (glm::transpose(geo.direction) * row) * geo.spacing;
         out0 = glm::dot(row, geo.origin) + c;
@@ -106,10 +98,10 @@ PixelFootprint::PixelFootprint(const RayCaster& caster, const Camera& camera)
 }
 
 bool PixelFootprint::builtFor(const Camera& c) const {
-    return c.width() == width_ && c.height() == height_ && c.eye() == eye_ &&
-           c.forward() == forward_ && c.right() == right_ && c.up() == up_ && c.fovY() == fovY_ &&
-           c.orthoHeight() == orthoHeight_ &&
-           (c.projection() == Projection::Perspective) == perspective_;
+    // The mask depends on the camera through its projective map and image size only.
+    const Camera::ProjectiveMap m = c.projectiveMap();
+    return c.width() == width_ && c.height() == height_ && m.x == map_.x && m.y == map_.y &&
+           m.w == map_.w && m.x0 == map_.x0 && m.y0 == map_.y0 && m.w0 == map_.w0;
 }
 
 double PixelFootprint::coveredFraction() const {

@@ -4,12 +4,12 @@
 // returns the background unchanged, so it need not be set up or walked through the cell grid.
 #include <cstddef>
 #include <cstdint>
-#include <glm/glm.hpp>
 #include <vector>
+
+#include "render/camera.h"
 
 namespace voxlight::render {
 
-class Camera;
 class RayCaster;
 
 /// Pixels are widened by this many on each side of a projected rectangle: the ray of a pixel that
@@ -45,9 +45,7 @@ class PixelFootprint {
     }
     bool all_ = false;
     int width_ = 0, height_ = 0;
-    glm::dvec3 eye_{0.0}, forward_{0.0}, right_{0.0}, up_{0.0};
-    double fovY_ = 0.0, orthoHeight_ = 0.0;
-    bool perspective_ = true;
+    Camera::ProjectiveMap map_;  ///< what the mask was projected with
     std::vector<std::uint8_t> mask_;
 };
 

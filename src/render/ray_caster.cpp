@@ -102,7 +102,6 @@ VoxelGradients VoxelGradients::build(const core::Volume& volume) {
     VoxelGradients g;
     if (volume.type() == core::VoxelType::Float32 || volume.voxelCount() > kMaxVoxels) return g;
     const glm::ivec3 n = volume.dims();
-    g.nx = n.x, g.ny = n.y, g.nz = n.z;
     g.di = n.x > 1 ? 1 : 0;
     g.dj = n.y > 1 ? std::size_t(n.x) : 0;
     g.dk = n.z > 1 ? std::size_t(n.x) * std::size_t(n.y) : 0;

@@ -134,8 +134,7 @@ using GradientEntry = std::array<std::int16_t, 4>;  ///< (Δi, Δj, Δk, 0)
 struct VoxelGradients {
     /// Largest volume (voxels) that gets the dense table (GradientTable::Auto): 512 MiB.
     static constexpr std::uint64_t kMaxVoxels = std::uint64_t(1) << 26;
-    std::vector<GradientEntry> d;  ///< per voxel, x fastest
-    int nx = 0, ny = 0, nz = 0;
+    std::vector<GradientEntry> d;        ///< per voxel, x fastest
     std::size_t di = 0, dj = 0, dk = 0;  ///< corner strides (0 on a single-voxel axis)
     float slope = 1.f;                   ///< stored → physical value
     /// The table for `volume`, or empty when the type is float or a difference does not fit.
