@@ -162,3 +162,18 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
 }
 
 }  // namespace voxlight::io
+
+namespace voxlight::io {
+
+ImageRGBA readHdrImage(const std::filesystem::path& path) {
+    ImageReadInfo info;
+    ImageRGBA img = readImage(path, info);
+    if (!info.floatingPoint)
+        throw InputError(path.string(), "format",
+                         "is an integer (" + info.format +
+                             ") image, not HDR: environment lights need linear radiance",
+                         "convert the map to .hdr or .exr");
+    return img;
+}
+
+}  // namespace voxlight::io

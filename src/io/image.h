@@ -1,10 +1,9 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Float RGBA images and their files (OpenImageIO). Used by environment maps and by the renderer's
-// output.
+// Image files (OpenImageIO) to and from core::ImageRGBA: environment maps in, the renderer's output
+// out.
 //
-// ImageRGBA: width × height pixels, 4 floats each (R, G, B, A interleaved), row 0 = top of the
-// picture. Values are linear radiance for HDR formats (.hdr, .exr, .pfm, float TIFF). For 8/16-bit
+// Values read are linear radiance for HDR formats (.hdr, .exr, .pfm, float TIFF). For 8/16-bit
 // formats (.png, .jpg …) readImage returns the stored values scaled to 0..1 with no colour-space
 // conversion (display-encoded, usually sRGB) — ImageReadInfo::floatingPoint tells the caller which
 // case it got.
@@ -20,17 +19,11 @@
 #include <string>
 #include <vector>
 
+#include "core/image.h"
+
 namespace voxlight::io {
 
-struct ImageRGBA {
-    int width = 0, height = 0;
-    std::vector<float> pixels;  ///< RGBA interleaved, linear, row 0 = top; size = 4·width·height
-
-    ImageRGBA() = default;
-    ImageRGBA(int w, int h) : width(w), height(h), pixels(std::size_t(4) * w * h, 0.0f) {}
-    float* at(int x, int y) { return pixels.data() + 4 * (std::size_t(y) * width + x); }
-    const float* at(int x, int y) const { return pixels.data() + 4 * (std::size_t(y) * width + x); }
-};
+using core::ImageRGBA;
 
 /// What the file held before promotion to float RGBA.
 struct ImageReadInfo {
@@ -45,6 +38,10 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info);
 struct ImageWriteOptions {
     bool exrHalf = false;  ///< .exr: 16-bit half instead of 32-bit float
 };
+/// An HDR image for linear radiance (environment maps): readImage, then InputError (field "format")
+/// when the file stores integers (an 8-bit PNG/JPEG is display-encoded, not radiance).
+ImageRGBA readHdrImage(const std::filesystem::path& path);
+
 void writeImage(const ImageRGBA& image, const std::filesystem::path& path);
 void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
                 const ImageWriteOptions& options);

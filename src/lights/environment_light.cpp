@@ -17,7 +17,7 @@ constexpr double kPi = std::numbers::pi;
 double luminance(const glm::vec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; }
 
 // Angular-probe image → equirect of 2S × S (map frame of environment_light.h), bilinear.
-std::vector<glm::vec3> probeToEquirect(const io::ImageRGBA& img, int& w, int& h) {
+std::vector<glm::vec3> probeToEquirect(const core::ImageRGBA& img, int& w, int& h) {
     const int s = img.width;
     h = s;
     w = 2 * s;
@@ -50,19 +50,7 @@ std::string_view toString(EnvironmentLayout l) {
     return l == EnvironmentLayout::Equirect ? "equirect" : "angular_probe";
 }
 
-EnvironmentLight EnvironmentLight::load(const std::filesystem::path& path,
-                                        const EnvironmentOptions& options) {
-    io::ImageReadInfo info;
-    const io::ImageRGBA img = io::readImage(path, info);
-    if (!info.floatingPoint)
-        throw InputError(path.string(), "format",
-                         "is an integer (" + info.format +
-                             ") image, not HDR: environment lights need linear radiance",
-                         "convert the map to .hdr or .exr");
-    return EnvironmentLight(img, options, path.string());
-}
-
-EnvironmentLight::EnvironmentLight(const io::ImageRGBA& image, const EnvironmentOptions& options,
+EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const EnvironmentOptions& options,
                                    std::string source)
     : source_(std::move(source)) {
     if (image.width <= 0 || image.height <= 0 ||

@@ -30,7 +30,7 @@
 #include <mutex>
 #include <string>
 
-#include "io/image.h"
+#include "core/image.h"
 #include "lights/light.h"
 #include "sh/sh_projection.h"
 #include "sh/sh_rotation.h"
@@ -48,11 +48,9 @@ struct EnvironmentOptions {
 
 class EnvironmentLight final : public Light {
   public:
-    /// Loads .hdr/.exr (any float format OpenImageIO reads).
-    static EnvironmentLight load(const std::filesystem::path& path,
-                                 const EnvironmentOptions& options = {});
-    /// From an image in memory; `source` names it in error messages.
-    EnvironmentLight(const io::ImageRGBA& image, const EnvironmentOptions& options,
+    /// From an HDR image in memory (linear radiance; io::readHdrImage reads .hdr/.exr files);
+    /// `source` names it in error messages.
+    EnvironmentLight(const core::ImageRGBA& image, const EnvironmentOptions& options,
                      std::string source = "image");
 
     /// InputError unless a rotation within sh::checkRotation's tolerance; stored orthonormalised

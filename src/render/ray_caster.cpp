@@ -405,7 +405,7 @@ class DvrModel final : public ShadingModel {
         : name_(std::move(name)), shader_(std::move(shader)), footprint_(std::move(footprint)) {}
     std::string name() const override { return name_; }
     void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
-                    io::ImageRGBA& film, RenderStats& stats) const override {
+                    core::ImageRGBA& film, RenderStats& stats) const override {
         const glm::vec3 bg = c.options().background;
         const bool footprint = footprint_.builtFor(cam);
         auto tile = [&](const auto& view, const auto* gradients) {
@@ -453,7 +453,7 @@ class ExtremumModel final : public ShadingModel {
   public:
     std::string name() const override { return kMax ? "mip" : "minip"; }
     void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
-                    io::ImageRGBA& film, RenderStats& stats) const override {
+                    core::ImageRGBA& film, RenderStats& stats) const override {
         const glm::vec3 bg = c.options().background;
         const optics::Window w = c.transferFunction().window();
         c.volume().visit([&](const auto& view) {
@@ -481,7 +481,7 @@ class IsoModel final : public ShadingModel {
     explicit IsoModel(BlinnPhongShader shader) : shader_(std::move(shader)) {}
     std::string name() const override { return "iso"; }
     void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
-                    io::ImageRGBA& film, RenderStats& stats) const override {
+                    core::ImageRGBA& film, RenderStats& stats) const override {
         const glm::vec3 bg = c.options().background;
         const glm::vec3 albedo = c.transferFunction().eval(c.isoValue()).albedo;
         c.volume().visit([&](const auto& view) {
@@ -559,13 +559,13 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
     throw InternalError("unknown render mode");
 }
 
-io::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& progress,
+core::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& progress,
                                 RenderStats* stats) const {
     const auto model = makeBuiltinModel(*this, camera);
     return render(camera, *model, progress, stats);
 }
 
-io::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
+core::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
                                 const core::Progress& progress, RenderStats* stats) const {
     const int W = camera.width(), H = camera.height();
     if (std::uint64_t(W) * std::uint64_t(H) > kMaxPixels)
@@ -574,7 +574,7 @@ io::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
                              " pixels is larger than the renderer's limit (" +
                              std::to_string(kMaxPixels) + " pixels)",
                          "render a smaller image");
-    io::ImageRGBA film(W, H);
+    core::ImageRGBA film(W, H);
     const int ts = options_.tileSize;
     const int tilesX = (W + ts - 1) / ts, tilesY = (H + ts - 1) / ts;
     const int tiles = tilesX * tilesY;

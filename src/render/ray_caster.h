@@ -26,7 +26,7 @@
 // the entry are shaded with the plane's normal where the gradient is weak (the cut face of a
 // homogeneous organ), as clinical viewers do.
 //
-// Output: io::ImageRGBA with *linear* radiance + T·background in RGB and coverage 1 − T in alpha.
+// Output: core::ImageRGBA with *linear* radiance + T·background in RGB and coverage 1 − T in alpha.
 // Non-finite voxels never produce non-finite pixels (NaN samples act as the TF's lowest value).
 #include <cstdint>
 #include <memory>
@@ -198,7 +198,7 @@ class ShadingModel {
     virtual std::string name() const = 0;
     /// Renders pixels [x0, x1) × [y0, y1) into `film`. Called concurrently for disjoint tiles.
     virtual void renderTile(const RayCaster& caster, const Camera& camera, int x0, int y0, int x1,
-                            int y1, io::ImageRGBA& film, RenderStats& stats) const = 0;
+                            int y1, core::ImageRGBA& film, RenderStats& stats) const = 0;
 };
 
 /// visibleRange() widens the non-empty cells' box by this much on each side (voxels), so that float
@@ -225,11 +225,11 @@ class RayCaster {
               const optics::TransferFunction& tf, RenderOptions options);
 
     /// Renders with the built-in model of options().mode.
-    io::ImageRGBA render(const Camera& camera,
+    core::ImageRGBA render(const Camera& camera,
                          const core::Progress& progress = core::Progress::none(),
                          RenderStats* stats = nullptr) const;
     /// Renders with any shading model (later issues plug theirs in here).
-    io::ImageRGBA render(const Camera& camera, const ShadingModel& model,
+    core::ImageRGBA render(const Camera& camera, const ShadingModel& model,
                          const core::Progress& progress = core::Progress::none(),
                          RenderStats* stats = nullptr) const;
 

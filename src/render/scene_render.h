@@ -66,7 +66,7 @@ void checkPresetName(const io::Scene& scene);
 inline constexpr int kMaxFrames = 1000;
 
 struct SceneRenderResult {
-    io::ImageRGBA film;  ///< linear radiance, alpha = coverage
+    core::ImageRGBA film;  ///< linear radiance, alpha = coverage
     std::vector<StageRecord> stages;
     nlohmann::json method;   ///< {"name", "params" as used}
     nlohmann::json details;  ///< TF, camera, volume, counters

@@ -18,8 +18,8 @@ float srgbToLinear(float e) {
     return e <= 0.04045f ? e / 12.92f : std::pow((e + 0.055f) / 1.055f, 2.4f);
 }
 
-io::ImageRGBA toDisplay(const io::ImageRGBA& linear, float exposureStops) {
-    io::ImageRGBA out(linear.width, linear.height);
+core::ImageRGBA toDisplay(const core::ImageRGBA& linear, float exposureStops) {
+    core::ImageRGBA out(linear.width, linear.height);
     const float k = std::exp2(exposureStops);
     for (std::size_t i = 0; i < linear.pixels.size(); i += 4) {
         for (int c = 0; c < 3; ++c) out.pixels[i + c] = linearToSrgb(k * linear.pixels[i + c]);

@@ -12,6 +12,6 @@ float srgbToLinear(float encoded);
 
 /// Display-encoded copy (sRGB, 0..1) of a linear film, opaque (alpha 1): the film's RGB already
 /// holds the background seen through the volume, and 8-bit writers would otherwise un-premultiply.
-io::ImageRGBA toDisplay(const io::ImageRGBA& linear, float exposureStops = 0.f);
+core::ImageRGBA toDisplay(const core::ImageRGBA& linear, float exposureStops = 0.f);
 
 }  // namespace voxlight::render

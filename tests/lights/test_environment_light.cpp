@@ -19,6 +19,12 @@ using namespace voxlight::lights;
 
 namespace {
 constexpr double kPi = std::numbers::pi;
+
+/// An environment light from an HDR file, as the pipeline builds one.
+EnvironmentLight loadEnvironment(const std::filesystem::path& path,
+                                 const EnvironmentOptions& options = {}) {
+    return EnvironmentLight(io::readHdrImage(path), options, path.string());
+}
 // The bar: env projection vs brute force over all pixels, relative to the largest
 // coefficient.
 constexpr double kEnvRelTol = 1e-4;
@@ -40,8 +46,8 @@ constexpr double kInverseSeparation = 20.0;
 // Nearest equirect texel of a bilinear resample of a 256² probe: ≈ 1° steps of a gradient 0.6/rad.
 constexpr double kProbeLookupTol = 0.03;
 
-io::ImageRGBA randomEquirect(int w, int h, std::uint64_t seed) {
-    io::ImageRGBA img(w, h);
+core::ImageRGBA randomEquirect(int w, int h, std::uint64_t seed) {
+    core::ImageRGBA img(w, h);
     core::CounterRng rng(seed);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
@@ -159,7 +165,7 @@ TEST(EnvironmentLight, DsfCoefficientsFollowTheRotation) {
     constexpr int kW = 256, kH = 128;
     const glm::dvec3 a = glm::normalize(glm::dvec3(0.8, -0.3, 0.5));
     auto f = [&](const glm::dvec3& mapDir) { return 1.0 + 0.5 * glm::dot(a, mapDir); };
-    io::ImageRGBA img(kW, kH);
+    core::ImageRGBA img(kW, kH);
     for (int r = 0; r < kH; ++r)
         for (int c = 0; c < kW; ++c) {
             const glm::dvec3 d =
@@ -242,7 +248,7 @@ TEST(EnvironmentLight, ImportanceSamplingIsExact) {
     // Grey map: value/pdf = Σ lum Ω for every sample (zero variance), and pixel frequencies follow
     // lum·Ω.
     constexpr int kW = 16, kH = 8;
-    io::ImageRGBA img(kW, kH);
+    core::ImageRGBA img(kW, kH);
     core::CounterRng rng(5);
     double integral = 0;
     std::vector<double> prob(kW * kH);
@@ -281,7 +287,7 @@ TEST(EnvironmentLight, ImportanceSamplingIsExact) {
 TEST(EnvironmentLight, AngularProbeLayout) {
     // Render f(ω) = 1 + 0.5 ω_x + 0.3 ω_z into a probe; the loaded light must reproduce it.
     constexpr int kS = 256;
-    io::ImageRGBA probe(kS, kS);
+    core::ImageRGBA probe(kS, kS);
     auto f = [](const glm::dvec3& d) { return 1.0 + 0.5 * d.x + 0.3 * d.z; };
     for (int y = 0; y < kS; ++y)
         for (int x = 0; x < kS; ++x) {
@@ -315,30 +321,30 @@ TEST(EnvironmentLight, AngularProbeLayout) {
 TEST(EnvironmentLight, BadInputIsAClearError) {
     test::TempDir tmp;
     // Missing file.
-    EXPECT_THROW(EnvironmentLight::load(tmp / "missing.hdr"), InputError);
+    EXPECT_THROW(loadEnvironment(tmp / "missing.hdr"), InputError);
     // Corrupt .hdr: a Radiance header followed by garbage.
     {
         std::ofstream out(tmp / "corrupt.hdr", std::ios::binary);
         out << "#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 512 +X 1024\n" << std::string(100, '\x07');
     }
     try {
-        EnvironmentLight::load(tmp / "corrupt.hdr");
+        loadEnvironment(tmp / "corrupt.hdr");
         FAIL() << "corrupt file accepted";
     } catch (const InputError& e) {
         EXPECT_NE(std::string(e.what()).find("corrupt.hdr"), std::string::npos) << e.what();
     }
     // Not HDR: an 8-bit PNG.
-    io::ImageRGBA small(8, 4);
+    core::ImageRGBA small(8, 4);
     io::writeImage(small, tmp / "ldr.png");
     try {
-        EnvironmentLight::load(tmp / "ldr.png");
+        loadEnvironment(tmp / "ldr.png");
         FAIL() << "8-bit map accepted";
     } catch (const InputError& e) {
         EXPECT_EQ(e.field(), "format");
         EXPECT_NE(std::string(e.what()).find("ldr.png"), std::string::npos);
     }
     // Zero size, NaN, Inf, negative, wrong aspect.
-    EXPECT_THROW(EnvironmentLight(io::ImageRGBA{}, {}, "empty"), InputError);
+    EXPECT_THROW(EnvironmentLight(core::ImageRGBA{}, {}, "empty"), InputError);
     for (float bad : {NAN, INFINITY, -1.0f}) {
         auto img = randomEquirect(16, 8, 3);
         img.at(5, 3)[1] = bad;
@@ -364,7 +370,7 @@ TEST(EnvironmentLight, BadInputIsAClearError) {
 TEST(EnvironmentLight, RealHdrProbeProjection) {
     VL_REQUIRE_SHARED(city, "env/city.hdr");
     const EnvironmentLight env =
-        EnvironmentLight::load(city, {.rotation = rotationZyz(0.5, 0.4, 0.2)});
+        loadEnvironment(city, {.rotation = rotationZyz(0.5, 0.4, 0.2)});
     EXPECT_EQ(env.width(), 1024);
     EXPECT_EQ(env.height(), 512);
     expectShMatchesBruteForce(env, 8);
@@ -378,7 +384,7 @@ TEST(EnvironmentLight, RealHdrProbeProjection) {
 
 TEST(EnvironmentLight, RealExrProbeLoads) {
     VL_REQUIRE_SHARED(studio, "env/studio.exr");
-    const EnvironmentLight env = EnvironmentLight::load(studio);
+    const EnvironmentLight env = loadEnvironment(studio);
     EXPECT_EQ(env.width(), 1024);
     const auto c = env.shCoefficients({}, 4);
     EXPECT_GT(c[0].x, 0.0f);

@@ -64,7 +64,7 @@ inline render::Camera orthoCamera(const core::Volume& v, double azimuth, double 
     return render::Camera(s, b[0], b[1], pixels, pixels);
 }
 
-inline io::ImageRGBA renderWith(const core::Volume& v, const optics::TransferFunction& tf,
+inline core::ImageRGBA renderWith(const core::Volume& v, const optics::TransferFunction& tf,
                                 const render::Camera& cam, const render::RenderOptions& o,
                                 render::RenderStats* stats = nullptr) {
     const grid::BrickGrid g = grid::BrickGrid::build(v);
@@ -82,7 +82,7 @@ inline bool inNonEmptyCell(const grid::BrickMajorants& m, const glm::vec3& p) {
     return m.majorant(m.index(c.x, c.y, c.z)) > 0.f;
 }
 
-inline bool allFinite(const io::ImageRGBA& img) {
+inline bool allFinite(const core::ImageRGBA& img) {
     for (float x : img.pixels)
         if (!std::isfinite(x)) return false;
     return true;

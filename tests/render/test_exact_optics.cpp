@@ -44,7 +44,7 @@ TEST(ExactOptics, SlabTransmittanceForAnySpacingStepAndAngle) {
         const float sigma = float(0.8 / (f.zMax - f.zMin));  // τ ≈ 0.8 vertically
         const double minExtentXY = 47 * std::min(c.spacing.x, c.spacing.y);
         const render::Camera cam = orthoCamera(v, c.azimuth, c.elevation, 0.2 * minExtentXY, 8);
-        const io::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
+        const core::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
         const double L = (f.zMax - f.zMin) / std::abs(cam.forward().z);
         const double expected = std::exp(-sigma * L);
         for (int y = 0; y < 8; ++y)
@@ -68,7 +68,7 @@ TEST(ExactOptics, SphereTransmittanceMatchesChordLength) {
         const float sigma = float(1.0 / (2 * f.radius));  // τ = 1 through the centre
         const int n = 24;
         const render::Camera cam = orthoCamera(v, c.azimuth, c.elevation, 2.4 * f.radius, n);
-        const io::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
+        const core::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
         int checked = 0;
         for (int y = 0; y < n; ++y)
             for (int x = 0; x < n; ++x) {
@@ -144,7 +144,7 @@ TEST(ExactOptics, SphereTransmittanceMatchesChordLengthAtAnisotropicSpacing) {
     for (const Case& c : cases) {
         const int n = 32;
         const render::Camera cam = orthoCamera(v, c.azimuth, c.elevation, 2.3 * kAnisoRadius, n);
-        const io::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
+        const core::ImageRGBA img = renderWith(v, stepTf(sigma), cam, eaOptions(c.stepVoxels));
         int checked = 0;
         for (int y = 0; y < n; ++y)
             for (int x = 0; x < n; ++x) {
@@ -170,7 +170,7 @@ TEST(ExactOptics, PreintegratedCoarseStepsAgreeWithFineSteppingOfASharpTf) {
     render::RenderOptions coarse = eaOptions(2.0f), fine = eaOptions(0.02f), naive = coarse;
     fine.preintegrated = false;
     naive.preintegrated = false;
-    const io::ImageRGBA a = renderWith(v, tf, cam, coarse), b = renderWith(v, tf, cam, fine),
+    const core::ImageRGBA a = renderWith(v, tf, cam, coarse), b = renderWith(v, tf, cam, fine),
                         c = renderWith(v, tf, cam, naive);
     double maxPre = 0, maxNaive = 0;
     for (int y = 0; y < 20; ++y)
@@ -200,7 +200,7 @@ TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
     const double h = 2.2 * f.radius, px = h / n;
     // Top view: count covered pixels vs pixel centres inside the right half-disc.
     const render::Camera top = orthoCamera(v, 0, 90, h, n);
-    const io::ImageRGBA img = renderWith(v, tf, top, o);
+    const core::ImageRGBA img = renderWith(v, tf, top, o);
     int covered = 0, expected = 0, rim = 0;
     for (int y = 0; y < n; ++y)
         for (int x = 0; x < n; ++x) {
@@ -222,7 +222,7 @@ TEST(ClipPlanes, PlaneThroughTheCentreRemovesExactlyHalfTheSphere) {
     render::RenderOptions g = o;
     g.mode = render::Mode::Gradient;
     const render::Camera side = orthoCamera(v, -90, 0, h, n);  // from patient right (−x)
-    const io::ImageRGBA face = renderWith(v, tf, side, g);
+    const core::ImageRGBA face = renderWith(v, tf, side, g);
     double sum = 0, sum2 = 0;
     int inside = 0, faceCovered = 0;
     for (int y = 0; y < n; ++y)
@@ -257,9 +257,9 @@ TEST(Determinism, SameImageBitForBitWithOneAndTwoThreads) {
         o.mode = m;
         o.tileSize = 8;
         o.threads = 1;
-        const io::ImageRGBA one = renderWith(v, tf, cam, o);
+        const core::ImageRGBA one = renderWith(v, tf, cam, o);
         o.threads = 2;
-        const io::ImageRGBA two = renderWith(v, tf, cam, o);
+        const core::ImageRGBA two = renderWith(v, tf, cam, o);
         ASSERT_EQ(one.pixels.size(), two.pixels.size());
         EXPECT_EQ(
             0, std::memcmp(one.pixels.data(), two.pixels.data(), one.pixels.size() * sizeof(float)))
@@ -278,9 +278,9 @@ TEST(EmptySpaceSkipping, DoesNotChangeTheImage) {
         render::RenderOptions o;
         o.mode = m;
         render::RenderStats with, without;
-        const io::ImageRGBA a = renderWith(v, tf, cam, o, &with);
+        const core::ImageRGBA a = renderWith(v, tf, cam, o, &with);
         o.emptySpaceSkipping = false;
-        const io::ImageRGBA c = renderWith(v, tf, cam, o, &without);
+        const core::ImageRGBA c = renderWith(v, tf, cam, o, &without);
         double maxDiff = 0;
         for (std::size_t i = 0; i < a.pixels.size(); ++i)
             maxDiff = std::max(maxDiff, double(std::abs(a.pixels[i] - c.pixels[i])));

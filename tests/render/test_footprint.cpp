@@ -148,9 +148,9 @@ TEST(PixelFootprint, DoesNotChangeTheImage) {
             o.mode = mode;
             o.background = glm::vec3(0.2f, 0.3f, 0.4f);
             render::RenderStats with, without;
-            const io::ImageRGBA a = test::renderWith(v, tf, cam, o, &with);
+            const core::ImageRGBA a = test::renderWith(v, tf, cam, o, &with);
             o.pixelFootprint = false;
-            const io::ImageRGBA c = test::renderWith(v, tf, cam, o, &without);
+            const core::ImageRGBA c = test::renderWith(v, tf, cam, o, &without);
             ASSERT_EQ(a.pixels.size(), c.pixels.size());
             EXPECT_EQ(
                 0, std::memcmp(a.pixels.data(), c.pixels.data(), a.pixels.size() * sizeof(float)))
@@ -167,9 +167,9 @@ void expectFootprintChangesNothing(const core::Volume& v, const optics::Transfer
     render::RenderOptions o;
     o.mode = mode;
     o.background = glm::vec3(0.2f, 0.3f, 0.4f);
-    const io::ImageRGBA a = test::renderWith(v, tf, cam, o);
+    const core::ImageRGBA a = test::renderWith(v, tf, cam, o);
     o.pixelFootprint = false;
-    const io::ImageRGBA c = test::renderWith(v, tf, cam, o);
+    const core::ImageRGBA c = test::renderWith(v, tf, cam, o);
     ASSERT_EQ(a.pixels.size(), c.pixels.size());
     EXPECT_EQ(0, std::memcmp(a.pixels.data(), c.pixels.data(), a.pixels.size() * sizeof(float)))
         << what;
@@ -233,8 +233,8 @@ TEST(PixelFootprint, ModelRenderedWithAnotherCameraIgnoresIt) {
     const render::Camera small = test::orthoCamera(v, 35, 25, 70, 24);
     const render::Camera large = test::orthoCamera(v, 120, -10, 70, 56);
     const auto model = render::makeBuiltinModel(caster, small);
-    const io::ImageRGBA a = caster.render(large, *model, core::Progress::none());
-    const io::ImageRGBA c = caster.render(large, core::Progress::none());
+    const core::ImageRGBA a = caster.render(large, *model, core::Progress::none());
+    const core::ImageRGBA c = caster.render(large, core::Progress::none());
     ASSERT_EQ(a.pixels.size(), c.pixels.size());
     EXPECT_EQ(0, std::memcmp(a.pixels.data(), c.pixels.data(), a.pixels.size() * sizeof(float)));
 }

@@ -53,17 +53,17 @@ void checkGolden(const GoldenCase& c) {
     s.elevationDeg = 15;
     const auto b = v.geometry().worldBounds();
     const render::Camera cam(s, b[0], b[1], kGoldenSize, kGoldenSize);
-    const io::ImageRGBA img = render::toDisplay(test::renderWith(v, tf, cam, o));
+    const core::ImageRGBA img = render::toDisplay(test::renderWith(v, tf, cam, o));
     const fs::path golden = test::sourceDir() / "tests/render/golden" / (c.name + ".png");
     if (std::getenv("VOXLIGHT_UPDATE_GOLDEN")) {
         io::writeImage(img, golden);
         GTEST_SKIP() << "wrote " << golden;
     }
     ASSERT_TRUE(fs::exists(golden)) << golden << " missing: run tools/make_golden.sh";
-    const io::ImageRGBA ref = io::readImage(golden);
+    const core::ImageRGBA ref = io::readImage(golden);
     ASSERT_EQ(ref.width, img.width);
     ASSERT_EQ(ref.height, img.height);
-    io::ImageRGBA diff(img.width, img.height);
+    core::ImageRGBA diff(img.width, img.height);
     double sum = 0;
     int bad = 0;
     for (int y = 0; y < img.height; ++y)
@@ -83,7 +83,7 @@ void checkGolden(const GoldenCase& c) {
     if (mean > kMeanTol || badFraction > kMaxBadFraction) {
         const fs::path dir = fs::temp_directory_path() / "voxlight-golden-failures";
         fs::create_directories(dir);
-        io::ImageRGBA opaque = img;
+        core::ImageRGBA opaque = img;
         for (std::size_t i = 3; i < opaque.pixels.size(); i += 4) opaque.pixels[i] = 1.f;
         io::writeImage(opaque, dir / (c.name + "-actual.png"));
         io::writeImage(diff, dir / (c.name + "-diff.png"));

@@ -199,10 +199,10 @@ TEST(GradientTables, SameImageWithEitherTableOrNone) {
             o.stepVoxels = step;
             return test::renderWith(vol, tf, cam, o, stats);
         };
-        const io::ImageRGBA dense = render(v, render::GradientTable::Dense);
-        const io::ImageRGBA bricked = render(v, render::GradientTable::Bricked);
+        const core::ImageRGBA dense = render(v, render::GradientTable::Dense);
+        const core::ImageRGBA bricked = render(v, render::GradientTable::Bricked);
         // No table: the same physical values as float32 (tables hold integer differences only).
-        const io::ImageRGBA none = render(asFloat, render::GradientTable::Auto);
+        const core::ImageRGBA none = render(asFloat, render::GradientTable::Auto);
         double maxBricked = 0.0, maxNone = 0.0, maxValue = 0.0;
         for (std::size_t i = 0; i < dense.pixels.size(); ++i) {
             maxBricked =
@@ -246,9 +246,9 @@ TEST(GradientTables, BrickedMissFallsBackToSixTaps) {
     o.stepVoxels = 24.f;
     o.preintegrated = false;  // midpoint segments are not refined: they end far past the object
     render::RenderStats denseStats, brickedStats;
-    const io::ImageRGBA dense = test::renderWith(v, tf, cam, o, &denseStats);
+    const core::ImageRGBA dense = test::renderWith(v, tf, cam, o, &denseStats);
     o.gradientTable = render::GradientTable::Bricked;
-    const io::ImageRGBA bricked = test::renderWith(v, tf, cam, o, &brickedStats);
+    const core::ImageRGBA bricked = test::renderWith(v, tf, cam, o, &brickedStats);
     EXPECT_GT(brickedStats.samples, denseStats.samples) << "the fallback should have run";
     double maxDiff = 0.0, maxValue = 0.0;
     for (std::size_t i = 0; i < dense.pixels.size(); ++i) {

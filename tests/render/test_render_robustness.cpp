@@ -36,7 +36,7 @@ TEST(Robustness, NonFiniteVoxelsNeverGiveNonFinitePixels) {
     for (render::Mode m : kAllModes) {
         render::RenderOptions o;
         o.mode = m;
-        const io::ImageRGBA img = renderWith(v, stepTf(0.5f), cam, o);
+        const core::ImageRGBA img = renderWith(v, stepTf(0.5f), cam, o);
         EXPECT_TRUE(allFinite(img)) << render::toString(m);
     }
 }
@@ -47,7 +47,7 @@ TEST(Robustness, TransparentTfGivesTheBackgroundAndOpaqueTfAFiniteImage) {
     render::RenderOptions o;
     o.background = {0.2f, 0.3f, 0.4f};
     const optics::TransferFunction empty({tfPoint(0, 0), tfPoint(1, 0)}, {0.5f, 1});
-    const io::ImageRGBA e = renderWith(v, empty, cam, o);
+    const core::ImageRGBA e = renderWith(v, empty, cam, o);
     for (int y = 0; y < 24; ++y)
         for (int x = 0; x < 24; ++x) {
             EXPECT_EQ(e.at(x, y)[2], 0.4f);
@@ -56,7 +56,7 @@ TEST(Robustness, TransparentTfGivesTheBackgroundAndOpaqueTfAFiniteImage) {
     const optics::TransferFunction opaque({tfPoint(0, 1e6f), tfPoint(1, 1e6f)}, {0.5f, 1});
     for (render::Mode m : kAllModes) {
         o.mode = m;
-        const io::ImageRGBA img = renderWith(v, opaque, cam, o);
+        const core::ImageRGBA img = renderWith(v, opaque, cam, o);
         EXPECT_TRUE(allFinite(img)) << render::toString(m);
         EXPECT_EQ(img.at(12, 12)[3], 1.f) << render::toString(m);
     }
@@ -75,7 +75,7 @@ TEST(Robustness, CameraInsideTheVolumeRendersFromInside) {
     render::RenderOptions o;
     const auto bone = optics::TransferFunction(
         {tfPoint(150, 0), tfPoint(400, 1.f), tfPoint(1000, 3.f)}, {500, 1000});
-    const io::ImageRGBA img = renderWith(v, bone, cam, o);
+    const core::ImageRGBA img = renderWith(v, bone, cam, o);
     EXPECT_TRUE(allFinite(img));
     EXPECT_GT(img.at(12, 12)[3], 0.9f) << "the vertebra ahead is opaque";
 }
@@ -110,9 +110,9 @@ TEST(Robustness, SingleSliceSkippingDoesNotChangeTheImage) {
              {render::Mode::EmissionAbsorption, render::Mode::Gradient, render::Mode::Isosurface}) {
             render::RenderOptions o;
             o.mode = m;
-            const io::ImageRGBA a = renderWith(v, tf, cam, o);
+            const core::ImageRGBA a = renderWith(v, tf, cam, o);
             o.emptySpaceSkipping = false;
-            const io::ImageRGBA c = renderWith(v, tf, cam, o);
+            const core::ImageRGBA c = renderWith(v, tf, cam, o);
             double maxDiff = 0;
             for (std::size_t i = 0; i < a.pixels.size(); ++i)
                 maxDiff = std::max(maxDiff, double(std::abs(a.pixels[i] - c.pixels[i])));
@@ -167,7 +167,7 @@ TEST(Robustness, RenderReportsProgressAndCancels) {
         mutable std::atomic<int> tiles{0};
         std::string name() const override { return "counting"; }
         void renderTile(const render::RayCaster&, const render::Camera&, int, int, int, int,
-                        io::ImageRGBA&, render::RenderStats&) const override {
+                        core::ImageRGBA&, render::RenderStats&) const override {
             ++tiles;
         }
     };

@@ -184,8 +184,8 @@ TEST(SampleBatch, MarcherGivesTheOneAtATimeImage) {
                         o.emptySpaceSkipping = skipping;
                         o.earlyTermination = termination;
                         render::RenderStats sb, ss;
-                        const io::ImageRGBA a = test::renderWith(u8, tf, cam, o, &sb);
-                        const io::ImageRGBA b = test::renderWith(f32, tf, cam, o, &ss);
+                        const core::ImageRGBA a = test::renderWith(u8, tf, cam, o, &sb);
+                        const core::ImageRGBA b = test::renderWith(f32, tf, cam, o, &ss);
                         ASSERT_EQ(a.pixels.size(), b.pixels.size());
                         const std::string what =
                             std::string(render::toString(mode)) +

@@ -21,8 +21,8 @@ constexpr double kHalfAbsTol = 1e-4;
 constexpr float kRgbeRelTol = 1.0f / 100.0f;
 // PNG: one 8-bit quantisation step.
 constexpr float kPngStep = 1.0f / 255.0f;
-io::ImageRGBA ramp(int w, int h) {
-    io::ImageRGBA img(w, h);
+core::ImageRGBA ramp(int w, int h) {
+    core::ImageRGBA img(w, h);
     for (int y = 0; y < h; ++y)
         for (int x = 0; x < w; ++x) {
             float* p = img.at(x, y);
@@ -60,7 +60,7 @@ TEST(Image, ExrHalfAndHdrAreWithinTheirPrecision) {
     for (std::size_t i = 0; i < img.pixels.size(); ++i)
         EXPECT_NEAR(h.pixels[i], img.pixels[i], kHalfRelTol * std::abs(img.pixels[i]) + kHalfAbsTol)
             << i;
-    io::ImageRGBA pos = img;
+    core::ImageRGBA pos = img;
     for (float& v : pos.pixels) v = std::abs(v);
     io::writeImage(pos, tmp / "r.hdr");
     const auto r = io::readImage(tmp / "r.hdr");
@@ -75,7 +75,7 @@ TEST(Image, ExrHalfAndHdrAreWithinTheirPrecision) {
 
 TEST(Image, PngClampsAndQuantises) {
     test::TempDir tmp;
-    io::ImageRGBA img(4, 1);
+    core::ImageRGBA img(4, 1);
     const float values[4] = {-0.5f, 0.5f, 1.7f, 0.25f};
     for (int x = 0; x < 4; ++x) {
         float* p = img.at(x, 0);
@@ -147,7 +147,7 @@ TEST(Image, BadFilesNameTheFile) {
     { std::ofstream(tmp / "empty.png"); }
     EXPECT_THROW(io::readImage(tmp / "empty.png"), InputError);
     EXPECT_THROW(io::readImage(tmp.path()), InputError);
-    EXPECT_THROW(io::writeImage(io::ImageRGBA{}, tmp / "zero.exr"), InputError);
+    EXPECT_THROW(io::writeImage(core::ImageRGBA{}, tmp / "zero.exr"), InputError);
     EXPECT_THROW(io::writeImage(ramp(2, 2), tmp / "nodir" / "x.exr"), InputError);
     EXPECT_THROW(io::writeImage(ramp(2, 2), tmp / "x.unknownext"), InputError);
 }
