@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 // voxlight render SCENE.json -o OUT.png [--exr OUT.exr] [--stats STATS.json] [--set key=value]...
-// Renders a scene with the CPU ray caster: tone-mapped sRGB PNG, linear EXR, stats JSON.
+//                 [--cache DIR] [--frames N] [--explain]
+// Renders a scene through the pipeline (its method's plan of stages): tone-mapped sRGB PNG, linear
+// EXR, stats JSON. --explain prints the plan and what each stage would do, and renders nothing.
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -10,7 +12,7 @@
 #include "core/timing.h"
 #include "io/image.h"
 #include "io/scene.h"
-#include "render/scene_render.h"
+#include "pipeline/pipeline.h"
 #include "render/tonemap.h"
 
 namespace voxlight::app {
@@ -63,9 +65,10 @@ Command addRenderCommand(CLI::App& app) {
     auto sets = std::make_shared<std::vector<std::string>>();
     auto quiet = std::make_shared<bool>(false);
     auto frames = std::make_shared<int>(1);
+    auto cacheDir = std::make_shared<std::string>();
+    auto explain = std::make_shared<bool>(false);
     c.sub->add_option("SCENE", *scene, "Scene JSON")->required();
-    c.sub->add_option("-o,--output", *out, "Tone-mapped sRGB image (.png, .jpg, .tif, .bmp)")
-        ->required();
+    c.sub->add_option("-o,--output", *out, "Tone-mapped sRGB image (.png, .jpg, .tif, .bmp)");
     c.sub->add_option("--exr", *exr, "Also write the linear radiance (+ alpha) as OpenEXR");
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
@@ -73,35 +76,61 @@ Command addRenderCommand(CLI::App& app) {
     c.sub
         ->add_option("--frames", *frames,
                      "Render the frame N times; stats report the median and every frame's time")
-        ->check(CLI::Range(1, render::kMaxFrames));
+        ->check(CLI::Range(1, pipeline::kMaxFrames));
+    c.sub->add_option("--cache", *cacheDir,
+                      "Keep precomputed stages in DIR across runs (shared safely between processes)");
+    c.sub->add_flag("--explain", *explain,
+                    "Print the plan: each stage, what it reads, and whether it would run, be "
+                    "cached or is not needed; render nothing");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
+        pipeline::Session session;
+        if (!cacheDir->empty()) session.cache().setDirectory(*cacheDir);
+        if (*explain) {
+            const io::Scene s = io::loadScene(*scene, *sets);
+            std::printf("%-18s %-10s %-8s %-16s %s\n", "stage", "kind", "runs", "key", "reason");
+            for (const auto& r : session.explain(s)) {
+                std::string inputs;
+                for (const auto& i : r.inputs) inputs += (inputs.empty() ? "" : ", ") + i;
+                std::printf("%-18s %-10s %-8s %-16s %s  [reads: %s]\n", r.name.c_str(),
+                            pipeline::toString(r.kind).c_str(), r.ran ? "yes" : "no",
+                            r.key.empty() ? "-" : r.key.c_str(), r.reason.c_str(), inputs.c_str());
+            }
+            return kExitOk;
+        }
+        if (out->empty())
+            throw InputError("command line", "--output", "is required",
+                             "give -o OUT.png (or --explain to only print the plan)");
         checkOutput(*out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}, "--output");
         if (!exr->empty()) checkOutput(*exr, {".exr"}, "--exr");
         if (!stats->empty()) checkOutput(*stats, {".json"}, "--stats");
         const io::Scene s = io::loadScene(*scene, *sets);
-        render::SceneRenderResult r = render::renderScene(s, terminalProgress(*quiet), *frames);
+        pipeline::RunResult r =
+            session.run(s, {.frames = *frames}, terminalProgress(*quiet));
 
         core::Stopwatch sw;
-        io::writeImage(render::toDisplay(r.film, float(s.image.exposureStops)), *out);
-        r.stages.push_back({"write_image", true, *out, sw.seconds()});
+        io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), *out);
+        r.stages.push_back({"write_image", pipeline::StageKind::Frame, true, *out, sw.seconds(),
+                            "", {"render"}});
         sw.restart();
         if (!exr->empty()) {
-            io::writeImage(r.film, *exr);
-            r.stages.push_back({"write_exr", true, *exr, sw.seconds()});
+            io::writeImage(r.image, *exr);
+            r.stages.push_back({"write_exr", pipeline::StageKind::Frame, true, *exr,
+                                sw.seconds(), "", {"render"}});
         } else {
-            r.stages.push_back({"write_exr", false, "no --exr given", 0.0});
+            r.stages.push_back({"write_exr", pipeline::StageKind::Frame, false,
+                                "not needed: no --exr given", 0.0, "", {"render"}});
         }
         if (!stats->empty()) {
-            nlohmann::json j = render::statsJson(r, total.seconds());
+            nlohmann::json j = pipeline::statsJson(r, total.seconds());
             j["scene"] = s.document;
             writeTextAtomically(*stats, j.dump(2));
         }
         if (!*quiet)
             std::fprintf(stderr, "wrote %s (%dx%d, %s, render %.3f s, total %.2f s)\n",
-                         out->c_str(), r.film.width, r.film.height, s.method.name.c_str(),
-                         r.stages.size() > 3 ? r.stages[3].seconds : 0.0, total.seconds());
+                         out->c_str(), r.image.width, r.image.height, s.method.name.c_str(),
+                         r.stage("render").seconds, total.seconds());
         return kExitOk;
     };
     return c;

@@ -1,13 +1,12 @@
 // SPDX-License-Identifier: MIT
 // voxlight scene SCENE.json [--set key=value]...: validate a scene (after overrides) and print it
 // resolved.
-#include <algorithm>
 #include <iostream>
 #include <memory>
 
 #include "app/cli_support.h"
 #include "io/scene.h"
-#include "render/scene_render.h"
+#include "pipeline/pipeline.h"
 
 namespace voxlight::app {
 
@@ -22,21 +21,12 @@ Command addSceneCommand(CLI::App& app) {
         ->allow_extra_args(false);
     c.run = [=] {
         const io::Scene s = io::loadScene(*path, *sets);
-        // Everything `render` checks before loading the volume, so that "valid" here means the
-        // scene renders (methods of later issues get the file contract and the preset check).
-        const auto& impl = render::rayCasterMethods();
-        const bool renderable = std::find(impl.begin(), impl.end(), s.method.name) != impl.end();
-        if (renderable)
-            render::buildRenderOptions(s);
-        else
-            render::checkPresetName(s);
+        // Everything `render` checks before loading the volume (method, params, effects, preset),
+        // so that "valid" here means the scene renders.
+        const pipeline::Plan plan = pipeline::Session().plan(s);
         std::cout << s.document.dump(2) << "\n";
-        std::cerr << s.source << ": valid (method " << s.method.name << ", " << s.lights.size()
-                  << " light(s), " << s.clipPlanes.size() << " clip plane(s))";
-        if (!renderable)
-            std::cerr << "; note: method '" << s.method.name
-                      << "' is not implemented by this build's renderer, `render` refuses it";
-        std::cerr << "\n";
+        std::cerr << s.source << ": valid (method " << plan.method << ", " << s.lights.size()
+                  << " light(s), " << s.clipPlanes.size() << " clip plane(s))\n";
         return kExitOk;
     };
     return c;

@@ -25,6 +25,21 @@ std::array<float, 2> BrickGrid::binRange(int b) const {
     return {lo_ + w * b, lo_ + w * (b + 1)};
 }
 
+bool BrickGrid::fromParts(const glm::ivec3& dims, float valueLo, float valueHi,
+                          std::vector<BrickStats> bricks, BrickGrid& out) {
+    if (dims.x < 1 || dims.y < 1 || dims.z < 1 || dims.x > core::kMaxDim ||
+        dims.y > core::kMaxDim || dims.z > core::kMaxDim)
+        return false;
+    const glm::ivec3 counts = (dims + kBrickSize - 1) / kBrickSize;
+    if (bricks.size() != std::size_t(counts.x) * counts.y * counts.z) return false;
+    out.dims_ = dims;
+    out.counts_ = counts;
+    out.lo_ = valueLo;
+    out.hi_ = valueHi;
+    out.bricks_ = std::move(bricks);
+    return true;
+}
+
 BrickGrid BrickGrid::build(const core::Volume& volume, const core::Progress& progress) {
     BrickGrid g;
     g.dims_ = volume.dims();

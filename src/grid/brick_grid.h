@@ -36,6 +36,13 @@ class BrickGrid {
     static BrickGrid build(const core::Volume& volume,
                            const core::Progress& progress = core::Progress::none());
 
+    /// From stored parts (a cache file): the bricks of a `dims` volume with histogram domain
+    /// [valueLo, valueHi]. Returns false, leaving `out` untouched, when the parts do not fit
+    /// together (dims out of range, brick count).
+    static bool fromParts(const glm::ivec3& dims, float valueLo, float valueHi,
+                          std::vector<BrickStats> bricks, BrickGrid& out);
+
+    const glm::ivec3& dims() const { return dims_; }
     const glm::ivec3& brickCounts() const { return counts_; }
     std::size_t size() const { return bricks_.size(); }
     const BrickStats& at(int bx, int by, int bz) const {

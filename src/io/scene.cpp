@@ -299,20 +299,6 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 
 }  // namespace
 
-const std::vector<std::string>& knownMethods() {
-    static const std::vector<std::string> m = {
-        "emission-absorption", "gradient", "mip",  "minip",    "iso", "sh-local",
-        "sh-global",           "ritschel", "pvrt", "pathtrace"};
-    return m;
-}
-
-const std::vector<std::string>& knownEffects() {
-    static const std::vector<std::string> e = {"local_shadows",       "global_shadows",
-                                               "multiple_scattering", "specular",
-                                               "depth_of_field",      "ambient_occlusion"};
-    return e;
-}
-
 void applyOverride(json& doc, const std::string& assignment) {
     const auto eq = assignment.find('=');
     if (eq == std::string::npos || eq == 0)
@@ -402,12 +388,14 @@ Scene parseScene(const json& doc, const std::string& source, const fs::path& bas
     }
     if (root.has("method")) {
         const Field m = root.child("method");
+        // Which names exist, and what their params mean, is the method registry's business
+        // (pipeline/registry.h); here only the shape.
         if (m.isString()) {
-            s.method.name = m.oneOf(knownMethods());
+            s.method.name = m.string();
         } else {
             m.allowOnly({"name", "params"});
-            if (!m.has("name")) m.fail("needs a 'name'", "one of: " + joinList(knownMethods()));
-            s.method.name = m.child("name").oneOf(knownMethods());
+            if (!m.has("name")) m.fail("needs a 'name'", "e.g. \"gradient\"");
+            s.method.name = m.child("name").string();
             if (m.has("params")) {
                 m.child("params").expectObject();
                 s.method.params = m.child("params").raw();
@@ -435,8 +423,8 @@ Scene parseScene(const json& doc, const std::string& source, const fs::path& bas
     if (root.has("effects")) {
         const Field e = root.child("effects");
         if (!e.isArray()) e.fail("must be an array of effect names", "e.g. [\"local_shadows\"]");
-        for (std::size_t i = 0; i < e.size(); ++i)
-            s.effects.push_back(e.at(i).oneOf(knownEffects()));
+        s.effectsGiven = true;
+        for (std::size_t i = 0; i < e.size(); ++i) s.effects.push_back(e.at(i).string());
     }
     return s;
 }

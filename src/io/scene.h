@@ -11,28 +11,31 @@
 //   "volume": "ct.nii.gz" | {"path": "dicom/", "series": "1.2.3", "nonfinite": "reject"|"min"}
 //             | {"phantom": "torso", "size": 128},
 //   "transfer_function": "ct-bone" | {"preset": "ct-bone", "extinction_scale": 1.0}
-//             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0, "emission":
-//             [r,g,b]}, ...]},   (either form may add "window": {"level": L, "width": W})
+//             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0,
+//                            "emission": [r,g,b]}, ...]},
+//             (either form may add "window": {"level": L, "width": W})
 //   "camera": {"projection": "perspective"|"orthographic", "azimuth": deg, "elevation": deg,
-//   "distance": mm (0 = fit),
-//              "fov_y": deg, "ortho_height": mm (0 = fit), "target": [x,y,z] mm, "eye": [x,y,z],
-//              "up": [x,y,z], "roll": deg},
-//   "lights": [{"type": "directional", "direction": [x,y,z] (travel direction), "color": [r,g,b],
-//   "intensity": W/m²},
+//              "distance": mm (0 = fit), "fov_y": deg, "ortho_height": mm (0 = fit),
+//              "target": [x,y,z] mm, "eye": [x,y,z], "up": [x,y,z], "roll": deg},
+//   "lights": [{"type": "directional", "direction": [x,y,z] (the direction the light travels),
+//               "color": [r,g,b], "intensity": W/m²},
 //              {"type": "point", "position": [x,y,z], "color": ..., "intensity": W/sr,
-//              "min_distance": mm},
+//               "min_distance": mm},
 //              {"type": "area", "shape": "sphere"|"rect"|"disk", "position": ..., "normal": ...,
-//              "radius": mm,
-//               "size": [w,h]},
-//              {"type": "environment", "path": "sky.hdr", "intensity": 1, "rotation": [x,y,z] deg,
-//               "layout": "equirect"|"probe"}],
-//   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z]}]   (keeps the side the normal points to,
-//   as VTK), "crop_box": {"min": [x,y,z], "max": [x,y,z]}             (world mm), "method":
-//   "gradient" | {"name": "gradient", "params": {...}}, "image": {"width": 512, "height": 512,
-//   "background": [r,g,b], "exposure": 0.0 (stops)}, "render": {"step": 0.5 (voxels), "seed": 1,
-//   "threads": 0 (0 = all), "termination": 0.001 (transmittance that ends a ray)},
-//   "effects": ["shadows", ...]
+//               "radius": mm, "size": [w,h]},
+//              {"type": "environment", "path": "sky.hdr", "intensity": 1,
+//               "rotation": [x,y,z] deg, "layout": "equirect"|"probe"}],
+//   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z]}]  (keeps the side the normal points to,
+//                                                            as VTK),
+//   "crop_box": {"min": [x,y,z], "max": [x,y,z]}            (world mm),
+//   "method": "gradient" | {"name": "gradient", "params": {...}},
+//   "image": {"width": 512, "height": 512, "background": [r,g,b], "exposure": 0.0 (stops)},
+//   "render": {"step": 0.5 (voxels), "seed": 1, "threads": 0 (0 = all),
+//              "termination": 0.001 (transmittance that ends a ray)},
+//   "effects": ["specular", ...]
 // }
+// Method names, their params and the effect names are checked by the pipeline's method registry
+// (pipeline/registry.h), not here: io/ knows the scene's shape, not what each method reads.
 // Units: mm, degrees in the file (radians in code after conversion), colours linear RGB.
 #include <filesystem>
 #include <nlohmann/json.hpp>
@@ -137,14 +140,11 @@ struct Scene {
     MethodDesc method;
     ImageDesc image;
     RenderSettings render;
+    /// Effect names as given (the pipeline checks them against its catalogue and the method).
     std::vector<std::string> effects;
+    bool effectsGiven = false;  ///< the scene has an "effects" key (even an empty list)
     nlohmann::json document;  ///< the validated document after overrides (echoed into stats)
 };
-
-/// Method names the scene accepts (whether this build implements each is the renderer's business).
-const std::vector<std::string>& knownMethods();
-/// Effect names the scene accepts.
-const std::vector<std::string>& knownEffects();
 
 /// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
 /// override.

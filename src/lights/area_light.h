@@ -25,6 +25,10 @@ namespace voxlight::lights {
 class SphereLight final : public Light {
   public:
     SphereLight(const glm::vec3& radiance, const glm::dvec3& centre, double radius);
+    const glm::dvec3& centre() const { return c_; }
+    double radius() const { return r_; }
+    /// Radiance leaving the surface (uniform, every direction).
+    const glm::vec3& emittedRadiance() const { return le_; }
     /// Solid angle [sr] the sphere subtends at x (4π inside).
     double solidAngle(const glm::dvec3& x) const;
 
@@ -57,6 +61,10 @@ class PlanarLight : public Light {
 
     double area() const { return area_; }
     const glm::dvec3& normal() const { return n_; }
+    /// Radiance leaving the front face (uniform).
+    const glm::vec3& emittedRadiance() const { return le_; }
+    /// Centre of the emitter (rect: of its parallelogram; disk: its centre).
+    virtual glm::dvec3 centre() const = 0;
     /// Cells per side of the SH/DSF quadrature (default 32), ≥ 1.
     void setQuadratureResolution(int cellsPerSide);
 
@@ -89,6 +97,7 @@ class RectLight final : public PlanarLight {
               const glm::dvec3& edgeV);
     std::string_view kind() const override { return "rectangle"; }
     std::string toString() const override;
+    glm::dvec3 centre() const override { return p0_ + 0.5 * (eu_ + ev_); }
 
   private:
     glm::dvec3 pointAt(double u, double v) const override { return p0_ + u * eu_ + v * ev_; }
@@ -103,6 +112,7 @@ class DiskLight final : public PlanarLight {
               double radius);
     std::string_view kind() const override { return "disk"; }
     std::string toString() const override;
+    glm::dvec3 centre() const override { return c_; }
 
   private:
     glm::dvec3 pointAt(double u, double v) const override;

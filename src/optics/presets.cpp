@@ -120,7 +120,7 @@ TransferFunction makePreset(const std::string& name, const std::array<float, 2>&
     const auto it =
         std::find_if(cat.begin(), cat.end(), [&](const PresetInfo& p) { return p.name == name; });
     if (it == cat.end())
-        throw InputError("scene", "transfer_function.preset", "'" + name + "' is not a preset",
+        throw InputError("presets", "name", "'" + name + "' is not a preset",
                          "choose one of: " + presetList());
     if (!it->relative) return absolutePreset(name);
     const float lo = robust[0], hi = robust[1] > robust[0] ? robust[1] : robust[0] + 1.f;

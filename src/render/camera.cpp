@@ -16,7 +16,7 @@ Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::d
                int width, int height)
     : projection_(spec.projection), width_(width), height_(height) {
     if (width < 1 || height < 1)
-        throw InputError("scene", "image.width", "image size must be at least 1x1");
+        throw InputError("camera", "image size", "must be at least 1x1");
     const glm::dvec3 centre = 0.5 * (boundsMin + boundsMax);
     const double radius = std::max(0.5 * glm::length(boundsMax - boundsMin), 1e-3);
     const glm::dvec3 target = spec.target.value_or(centre);

@@ -209,18 +209,99 @@ std::array<glm::vec3, 2> nonEmptyCellBox(const grid::BrickMajorants& m, const gl
 
 }  // namespace
 
+float resolveIsoValue(const optics::TransferFunction& tf, const RenderOptions& options) {
+    const float iso = options.isoValue.value_or(tf.surfaceValue());
+    if (!std::isfinite(iso)) throw InputError("render options", "iso_value", "must be finite");
+    return iso;
+}
+
+grid::BrickMajorants buildSkipCells(const core::Volume& volume, const grid::BrickGrid& grid,
+                                    const optics::TransferFunction& tf,
+                                    const optics::TfTable& table, const RenderOptions& options) {
+    const float widen = table.cellWidth();  // table interpolation leaks σt up to one cell
+    switch (options.mode) {
+        case Mode::Gradient:
+        case Mode::EmissionAbsorption: {
+            auto classify = [&](float lo, float hi) {
+                return tf.maxExtinction(lo - widen, hi + widen);
+            };
+            return refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
+        }
+        case Mode::Mip:
+        case Mode::MinIp: {
+            // Nothing is skippable, but the kSkipCellVoxels³ value ranges let the extremum
+            // search skip cells that cannot beat the current extremum (tighter than bricks).
+            auto any = [](float, float) { return 1.f; };
+            return refineMajorants(volume, grid::BrickMajorants::build(grid, any), any);
+        }
+        case Mode::Isosurface: {
+            const float iso = resolveIsoValue(tf, options);
+            auto classify = [&](float lo, float hi) { return lo <= iso && iso <= hi ? 1.f : 0.f; };
+            return refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
+        }
+    }
+    throw InternalError("unknown render mode");
+}
+
+GradientTableUse gradientTableUse(const core::Volume& volume, const RenderOptions& options) {
+    if (options.mode != Mode::Gradient || !options.centralDifferences)
+        return GradientTableUse::None;
+    const bool dense = options.gradientTable == GradientTable::Dense ||
+                       (options.gradientTable == GradientTable::Auto &&
+                        volume.voxelCount() <= VoxelGradients::kMaxVoxels);
+    return dense ? GradientTableUse::Dense : GradientTableUse::Bricked;
+}
+
+namespace {
+/// A shared_ptr that does not own (the caller keeps the object alive).
+template <class T>
+std::shared_ptr<const T> borrowed(const T& object) {
+    return std::shared_ptr<const T>(std::shared_ptr<const void>(), &object);
+}
+
+CasterTables buildTables(const core::Volume& volume, const grid::BrickGrid& grid,
+                         const optics::TransferFunction& tf, const RenderOptions& options) {
+    CasterTables t;
+    t.table = std::make_shared<const optics::TfTable>(tf);
+    t.skipCells = std::make_shared<const grid::BrickMajorants>(
+        buildSkipCells(volume, grid, tf, *t.table, options));
+    switch (gradientTableUse(volume, options)) {
+        case GradientTableUse::Dense:
+            t.voxelGradients = std::make_shared<const VoxelGradients>(VoxelGradients::build(volume));
+            break;
+        case GradientTableUse::Bricked:
+            t.brickedGradients = std::make_shared<const BrickedGradients>(
+                BrickedGradients::build(volume, *t.skipCells));
+            break;
+        case GradientTableUse::None:
+            break;
+    }
+    return t;
+}
+}  // namespace
+
 RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
                      const optics::TransferFunction& tf, RenderOptions options)
-    : volume_(&volume), tf_(&tf), options_(std::move(options)) {
+    : RayCaster(borrowed(volume), borrowed(tf), options, buildTables(volume, grid, tf, options)) {}
+
+RayCaster::RayCaster(std::shared_ptr<const core::Volume> volumePtr,
+                     std::shared_ptr<const optics::TransferFunction> tfPtr, RenderOptions options,
+                     CasterTables tables)
+    : volume_(std::move(volumePtr)),
+      tf_(std::move(tfPtr)),
+      tables_(std::move(tables)),
+      options_(std::move(options)) {
+    VL_CHECK(volume_ && tf_ && tables_.table && tables_.skipCells);
+    const core::Volume& volume = *volume_;
+    const optics::TransferFunction& tf = *tf_;
     VL_CHECK(!volume.empty());
     if (!(options_.stepVoxels > 0.f) || !std::isfinite(options_.stepVoxels))
-        throw InputError("scene", "render.step", "must be a finite number > 0 (voxels)");
+        throw InputError("render options", "step", "must be a finite number > 0 (voxels)");
     if (options_.tileSize < 1) options_.tileSize = 16;
     if (!(options_.terminationTransmittance >= 0.f && options_.terminationTransmittance < 1.f))
-        throw InputError("scene", "render.termination", "must be a transmittance in [0, 1)");
+        throw InputError("render options", "termination", "must be a transmittance in [0, 1)");
     const core::Geometry& g = volume.geometry();
     stepMm_ = float(options_.stepVoxels * core::minComponent(g.spacing));
-    table_ = std::make_shared<optics::TfTable>(tf);
     for (int a = 0; a < 3; ++a)
         gradientMatrix_[a] = glm::vec3(g.direction[a]) / float(2.0 * g.spacing[a]);
     for (int a = 0; a < 3; ++a) {
@@ -233,49 +314,10 @@ RayCaster::RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
     for (int c = 0; c < 3; ++c)
         for (int a = 0; a < 3; ++a) worldToIndexMatrix_[c][a] /= g.spacing[a];
     weakGradient_ = kWeakGradientFraction * tf.window().width;
-    isoValue_ = options_.isoValue.value_or(tf.surfaceValue());
-    if (!std::isfinite(isoValue_))
-        throw InputError("scene", "method.params.iso_value", "must be finite");
-
-    // Which bricks can be skipped in this mode, refined to kSkipCellVoxels³ cells.
-    const float widen = table_->cellWidth();  // table interpolation leaks σt up to one cell
-    switch (options_.mode) {
-        case Mode::Gradient:
-        case Mode::EmissionAbsorption: {
-            auto classify = [&](float lo, float hi) {
-                return tf.maxExtinction(lo - widen, hi + widen);
-            };
-            majorants_ =
-                refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
-            if (options_.mode == Mode::Gradient && options_.centralDifferences) {
-                const bool dense = options_.gradientTable == GradientTable::Dense ||
-                                   (options_.gradientTable == GradientTable::Auto &&
-                                    volume.voxelCount() <= VoxelGradients::kMaxVoxels);
-                if (dense)
-                    voxelGradients_ = VoxelGradients::build(volume);
-                else
-                    brickedGradients_ = BrickedGradients::build(volume, majorants_);
-            }
-            break;
-        }
-        case Mode::Mip:
-        case Mode::MinIp: {
-            // Nothing is skippable, but the kSkipCellVoxels³ value ranges let the extremum
-            // search skip cells that cannot beat the current extremum (tighter than bricks).
-            auto any = [](float, float) { return 1.f; };
-            majorants_ = refineMajorants(volume, grid::BrickMajorants::build(grid, any), any);
-            break;
-        }
-        case Mode::Isosurface: {
-            auto classify = [&](float lo, float hi) {
-                return lo <= isoValue_ && isoValue_ <= hi ? 1.f : 0.f;
-            };
-            majorants_ =
-                refineMajorants(volume, grid::BrickMajorants::build(grid, classify), classify);
-            break;
-        }
-    }
-    visibleIndexBox_ = nonEmptyCellBox(majorants_, g.dims);
+    isoValue_ = resolveIsoValue(tf, options_);
+    const grid::BrickMajorants& cells = *tables_.skipCells;
+    VL_CHECK_EQ(cells.cellSize(), kSkipCellVoxels);
+    visibleIndexBox_ = nonEmptyCellBox(cells, g.dims);
     // visibleRange's box: where the cells' box reaches the grid's edge it extends to the volume
     // box (a single slice is the slab ±0.5, and its cell holds the samples clamped into it), then
     // the margin.
@@ -514,10 +556,14 @@ class IsoModel final : public ShadingModel {
 }  // namespace
 
 std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster) {
-    const core::Geometry& g = caster.volume().geometry();
-    const grid::BrickMajorants& m = caster.majorants();
+    return visibleWorldBounds(caster.volume().geometry(), caster.majorants());
+}
+
+std::array<glm::dvec3, 2> visibleWorldBounds(const core::Geometry& g,
+                                             const grid::BrickMajorants& m) {
     if (m.nonEmptyCount() == 0 || m.nonEmptyCount() == m.size()) return g.worldBounds();
-    const glm::dvec3 first(caster.visibleIndexBox()[0]), last(caster.visibleIndexBox()[1]);
+    const auto box = nonEmptyCellBox(m, g.dims);
+    const glm::dvec3 first(box[0]), last(box[1]);
     glm::dvec3 bmin(INFINITY), bmax(-INFINITY);
     for (int c = 0; c < 8; ++c) {
         const glm::dvec3 ijk((c & 1) ? last.x : first.x, (c & 2) ? last.y : first.y,
@@ -531,12 +577,12 @@ std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster) {
 
 std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera) {
     const RenderOptions& o = caster.options();
-    std::vector<Light> lights = o.lights;
+    std::vector<std::shared_ptr<const lights::Light>> lights = o.lights;
     if (lights.empty()) {
-        Light head;
-        head.direction = glm::normalize(
+        // Travels along the view direction, from just above-left of the camera.
+        const glm::vec3 travel = glm::normalize(
             glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
-        lights.push_back(head);
+        lights.push_back(std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), -travel));
     }
     switch (o.mode) {
         case Mode::EmissionAbsorption:
@@ -545,7 +591,8 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
                 PixelFootprint(caster, camera));
         case Mode::Gradient:
             return std::make_unique<DvrModel<BlinnPhongShader>>(
-                "gradient", BlinnPhongShader(o.blinnPhong, lights), PixelFootprint(caster, camera));
+                "gradient", BlinnPhongShader(o.blinnPhong, lights, o.irradianceSh),
+                PixelFootprint(caster, camera));
         case Mode::Mip:
             return std::make_unique<ExtremumModel<true>>();
         case Mode::MinIp:
@@ -553,7 +600,7 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
         case Mode::Isosurface: {
             BlinnPhongParams lambert = o.blinnPhong;
             lambert.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
-            return std::make_unique<IsoModel>(BlinnPhongShader(lambert, lights));
+            return std::make_unique<IsoModel>(BlinnPhongShader(lambert, lights, o.irradianceSh));
         }
     }
     throw InternalError("unknown render mode");
@@ -569,7 +616,7 @@ core::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& mode
                                 const core::Progress& progress, RenderStats* stats) const {
     const int W = camera.width(), H = camera.height();
     if (std::uint64_t(W) * std::uint64_t(H) > kMaxPixels)
-        throw InputError("scene", "image.width",
+        throw InputError("render options", "image size",
                          "image of " + std::to_string(W) + "x" + std::to_string(H) +
                              " pixels is larger than the renderer's limit (" +
                              std::to_string(kMaxPixels) + " pixels)",
@@ -579,8 +626,8 @@ core::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& mode
     const int tilesX = (W + ts - 1) / ts, tilesY = (H + ts - 1) / ts;
     const int tiles = tilesX * tilesY;
     RenderStats total;
-    total.bricksTotal = majorants_.size();
-    total.bricksNonEmpty = majorants_.nonEmptyCount();
+    total.skipCells = majorants().size();
+    total.skipCellsVisible = majorants().nonEmptyCount();
     std::mutex statsMutex;
     tbb::task_arena arena(options_.threads > 0 ? options_.threads : tbb::task_arena::automatic);
     // One loop over all tiles (waves with a barrier each cost 4-5 % of a 40 ms frame in idle

@@ -38,9 +38,10 @@
 #include "core/volume.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
-#include "io/image.h"
+#include "core/image.h"
 #include "optics/transfer_function.h"
 #include "render/camera.h"
+#include "lights/light.h"
 #include "render/shading.h"
 
 namespace voxlight::render {
@@ -99,7 +100,11 @@ struct RenderOptions {
     glm::vec3 background{0.f};  ///< linear RGB behind the volume
     std::vector<ClipPlane> clipPlanes;
     std::optional<CropBox> cropBox;
-    std::vector<Light> lights;    ///< Gradient/Isosurface; empty = one headlight
+    /// Gradient/Isosurface lights (see BlinnPhongShader for how each type shades); empty = one
+    /// headlight.
+    std::vector<std::shared_ptr<const lights::Light>> lights;
+    /// environmentIrradianceSh(lights): required when an environment light is among them.
+    std::vector<glm::vec3> irradianceSh;
     BlinnPhongParams blinnPhong;  ///< Gradient (Isosurface uses ambient + diffuse only)
     float ambient = 1.f;          ///< EmissionAbsorption: uniform illumination
     /// Gradient normals by central differences (6 taps) or forward differences (3 taps, faster).
@@ -114,10 +119,42 @@ struct RenderStats {
     std::uint64_t rays = 0;             ///< rays that hit the (clipped) volume
     std::uint64_t samples = 0;          ///< volume samples taken (incl. gradient taps)
     std::uint64_t terminatedEarly = 0;  ///< rays stopped by early termination
-    std::size_t bricksTotal = 0, bricksNonEmpty = 0;  ///< under the current TF / mode
+    /// kSkipCellVoxels³ skip cells, and those not empty under the current TF / mode.
+    std::size_t skipCells = 0, skipCellsVisible = 0;
 };
 
 class RayCaster;
+struct VoxelGradients;
+struct BrickedGradients;
+
+/// The precomputed tables a caster reads. Each depends on a known subset of the inputs, so the
+/// pipeline builds it as one stage's artifact and shares it between frames and casters:
+///   table            ← TF
+///   skipCells        ← volume + TF + the mode's skip rule (iso value for Isosurface)
+///   voxelGradients   ← volume
+///   brickedGradients ← volume + skipCells
+struct CasterTables {
+    std::shared_ptr<const optics::TfTable> table;
+    std::shared_ptr<const grid::BrickMajorants> skipCells;
+    std::shared_ptr<const VoxelGradients> voxelGradients;      ///< may be null
+    std::shared_ptr<const BrickedGradients> brickedGradients;  ///< may be null
+};
+
+/// The isovalue the Isosurface mode uses: options.isoValue, else the TF's surfaceValue().
+/// Throws InputError (field "iso_value") when it is not finite.
+float resolveIsoValue(const optics::TransferFunction& tf, const RenderOptions& options);
+
+/// The kSkipCellVoxels³ skip cells of `options.mode` (the 16³ bricks classified, then refined
+/// inside the bricks that are not empty): DVR modes skip where the TF's σt is 0 over the cell's
+/// value range (widened by one table cell), MIP/MinIP skip nothing but keep the cells' value
+/// ranges, Isosurface skips cells whose range does not hold the isovalue.
+grid::BrickMajorants buildSkipCells(const core::Volume& volume, const grid::BrickGrid& grid,
+                                    const optics::TransferFunction& tf,
+                                    const optics::TfTable& table, const RenderOptions& options);
+
+/// Which central-difference table a caster with these options reads.
+enum class GradientTableUse { None, Dense, Bricked };
+GradientTableUse gradientTableUse(const core::Volume& volume, const RenderOptions& options);
 
 /// Per-voxel central differences of the *stored* voxel values, D(i,j,k) = (v[i+1] − v[i−1],
 /// v[j+1] − v[j−1], v[k+1] − v[k−1]) with indices clamped to the grid, kept as int16 (exact for
@@ -219,8 +256,14 @@ struct RaySegment {
 
 class RayCaster {
   public:
-    /// Prepares TF tables and brick majorants for `options.mode`. The volume, grid and TF must
-    /// outlive the caster. Throws InputError on bad options (step ≤ 0, ...).
+    /// From tables built beforehand (pipeline stages: each is an owned, shareable artifact).
+    /// `tables` must hold the TF table and skip cells for these options (buildSkipCells), and the
+    /// gradient table gradientTableUse() names (else the marcher's six-tap fallback is used).
+    /// Throws InputError on bad options (step ≤ 0, ...).
+    RayCaster(std::shared_ptr<const core::Volume> volume,
+              std::shared_ptr<const optics::TransferFunction> tf, RenderOptions options,
+              CasterTables tables);
+    /// Builds every table itself (tests, benchmarks). The volume and TF must outlive the caster.
     RayCaster(const core::Volume& volume, const grid::BrickGrid& grid,
               const optics::TransferFunction& tf, RenderOptions options);
 
@@ -238,8 +281,8 @@ class RayCaster {
 
     const core::Volume& volume() const { return *volume_; }
     const optics::TransferFunction& transferFunction() const { return *tf_; }
-    const optics::TfTable& table() const { return *table_; }
-    const grid::BrickMajorants& majorants() const { return majorants_; }
+    const optics::TfTable& table() const { return *tables_.table; }
+    const grid::BrickMajorants& majorants() const { return *tables_.skipCells; }
     const RenderOptions& options() const { return options_; }
     float stepMm() const { return stepMm_; }
     float isoValue() const { return isoValue_; }
@@ -259,18 +302,19 @@ class RayCaster {
     const std::array<glm::vec3, 2>& visibleIndexBox() const { return visibleIndexBox_; }
     /// Precomputed central differences (Gradient mode with central differences), or nullptr.
     const VoxelGradients* voxelGradients() const {
-        return voxelGradients_.empty() ? nullptr : &voxelGradients_;
+        const auto& g = tables_.voxelGradients;
+        return g && !g->empty() ? g.get() : nullptr;
     }
     /// Bricked central differences (Gradient mode, large volumes), or nullptr.
     const BrickedGradients* brickedGradients() const {
-        return brickedGradients_.empty() ? nullptr : &brickedGradients_;
+        const auto& g = tables_.brickedGradients;
+        return g && !g->empty() ? g.get() : nullptr;
     }
 
   private:
-    const core::Volume* volume_;
-    const optics::TransferFunction* tf_;
-    std::shared_ptr<optics::TfTable> table_;
-    grid::BrickMajorants majorants_;
+    std::shared_ptr<const core::Volume> volume_;
+    std::shared_ptr<const optics::TransferFunction> tf_;
+    CasterTables tables_;
     RenderOptions options_;
     float stepMm_ = 1.f, isoValue_ = 0.f, weakGradient_ = 1.f;
     glm::dvec3 indexBoxLo_{0.0}, indexBoxHi_{0.0};  ///< the volume box in index space
@@ -278,14 +322,15 @@ class RayCaster {
     std::array<glm::vec3, 2> clipBox_{glm::vec3(0.f), glm::vec3(-1.f)};  ///< visibleRange's box
     glm::mat3 gradientMatrix_{1.f};
     glm::dmat3 worldToIndexMatrix_{1.0};  ///< diag(1/spacing) · directionᵀ
-    VoxelGradients voxelGradients_;
-    BrickedGradients brickedGradients_;
 };
 
 /// World-space axis-aligned bounds of what the caster can see (the non-empty skip cells; the
 /// whole volume when nothing or everything is skippable): cameras fit this, so a TF that shows
 /// only the skeleton frames the skeleton rather than the air around the patient.
 std::array<glm::dvec3, 2> visibleWorldBounds(const RayCaster& caster);
+/// The same from the geometry and the skip cells alone (what a fitted camera depends on).
+std::array<glm::dvec3, 2> visibleWorldBounds(const core::Geometry& geometry,
+                                             const grid::BrickMajorants& skipCells);
 
 /// Built-in shading model of options().mode; with no lights given, Gradient/Isosurface get one
 /// directional light from just above-left of the camera (a head light, as clinical viewers use).

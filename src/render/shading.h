@@ -15,22 +15,21 @@
 // and emission term E adds  T · α · (E + A ⊙ diffuse + specular)  to the pixel, where
 // (diffuse, specular) = scatter(...). `diffuse` is the in-scattered radiance that the albedo
 // filters (∫ p · L_light · V dω for the exact model); `specular` is added unfiltered.
+//
+// Lights are lights::Light (lights/light.h), the one light type below io: directions point from
+// the shaded point *toward* the light. BlinnPhongShader flattens them once into the few numbers
+// its per-sample loop reads (no virtual call per sample).
 #include <algorithm>
 #include <cmath>
 #include <glm/glm.hpp>
+#include <memory>
+#include <span>
 #include <vector>
 
-namespace voxlight::render {
+#include "lights/light.h"
+#include "sh/sh_basis.h"
 
-struct Light {
-    enum class Type { Directional, Point };
-    Type type = Type::Directional;
-    glm::vec3 direction{0.f, 0.f, -1.f};  ///< directional: unit direction the light *travels*
-    glm::vec3 position{0.f};              ///< point: world mm
-    glm::vec3 radiance{1.f};              ///< colour × intensity (directional: irradiance; point:
-                                          ///< intensity, falls off as 1/d² with d in mm)
-    float minDistance = 1.f;              ///< point: clamps 1/d² near the light, mm
-};
+namespace voxlight::render {
 
 struct ShadeInput {
     glm::vec3 position;  ///< world mm
@@ -69,25 +68,33 @@ inline constexpr int kSpecularTableCells = 2048;
 inline constexpr float kMinTableShininess = 2.f;
 inline constexpr float kMaxTableShininess = 256.f;
 
-/// Gradient Blinn–Phong with directional and point lights, no visibility (the clinical baseline,
-/// Kronander et al. 2012 Fig. 1a "local diffuse shading"). Two-sided: the marcher hands over a
-/// normal that faces the eye.
+/// Irradiance SH of the lights that are neither delta nor area lights (environment maps): 9 RGB
+/// coefficients E_lm = Â_l L_lm (Ramamoorthi & Hanrahan 2001; Â = π, 2π/3, π/4 for bands 0..2),
+/// so that E(n) = Σ E_lm Y_lm(n) is the irradiance on a surface facing n with no visibility (error
+/// of the 3-band truncation ≤ ~3 % of the mean for natural maps). Position-independent (environment
+/// lights are at infinity). Empty when there is no such light.
+std::vector<glm::vec3> environmentIrradianceSh(
+    std::span<const std::shared_ptr<const lights::Light>> lights);
+
+/// Gradient Blinn–Phong without visibility (the clinical baseline, Kronander et al. 2012 Fig. 1a
+/// "local diffuse shading"). Two-sided: the marcher hands over a normal that faces the eye.
+/// Lights, per sample at x with normal n:
+///   directional  E·max(n·ω, 0), Blinn–Phong highlight
+///   point        I/max(d, minDistance)² · max(n·ω, 0), highlight
+///   sphere area  as a point light of intensity L·π r² at its centre (exact irradiance facing the
+///                sphere for d ≥ r), minDistance = r; highlight
+///   rect / disk  as a point light at the centre with the one-sided far-field intensity
+///                L·A·max(cos θ_emitter, 0); minDistance = √(A/π); highlight
+///   environment  diffuse only: E(n) from environmentIrradianceSh (no highlight)
+/// Environment lights need `irradianceSh` (InputError naming the light otherwise).
 class BlinnPhongShader {
   public:
     static constexpr bool kNeedsNormal = true;
 
-    BlinnPhongShader(const BlinnPhongParams& params, std::vector<Light> lights)
-        : params_(params), lights_(std::move(lights)) {
-        const float n = params_.shininess;
-        if (n >= kMinTableShininess && n <= kMaxTableShininess) {
-            powTable_.resize(kSpecularTableCells + 1);
-            for (int i = 0; i <= kSpecularTableCells; ++i)
-                powTable_[std::size_t(i)] =
-                    float(std::pow(double(i) / kSpecularTableCells, double(n)));
-        }
-    }
+    BlinnPhongShader(const BlinnPhongParams& params,
+                     std::span<const std::shared_ptr<const lights::Light>> lights,
+                     std::span<const glm::vec3> irradianceSh = {});
     const BlinnPhongParams& params() const { return params_; }
-    const std::vector<Light>& lights() const { return lights_; }
 
     /// x^shininess for x ∈ [0, 1] (table or std::pow, see kSpecularTableCells).
     float specularPower(float x) const {
@@ -120,9 +127,9 @@ class BlinnPhongShader {
         RayShader r;
         r.s_ = this;
         int k = 0;
-        for (const Light& l : lights_)
-            if (l.type == Light::Type::Directional && k < kRayLights)
-                r.halfway_[k++] = glm::normalize(-l.direction + toEye);
+        for (const Emitter& l : lights_)
+            if (l.directional && k < kRayLights)
+                r.halfway_[k++] = glm::normalize(l.toLight + toEye);
         return r;
     }
 
@@ -133,11 +140,11 @@ class BlinnPhongShader {
         Scatter s;
         s.diffuse = glm::vec3(params_.ambient);
         int k = 0;  // directional lights seen so far
-        for (const Light& l : lights_) {
-            glm::vec3 toLight, e = l.radiance;
+        for (const Emitter& l : lights_) {
+            glm::vec3 toLight, e = l.value;
             const glm::vec3* h = nullptr;
-            if (l.type == Light::Type::Directional) {
-                toLight = -l.direction;
+            if (l.directional) {
+                toLight = l.toLight;
                 if (halfway && k < kRayLights) h = halfway + k;
                 ++k;
             } else {
@@ -146,6 +153,11 @@ class BlinnPhongShader {
                 toLight = dist > 0.f ? d / dist : in.normal;
                 const float r = dist > l.minDistance ? dist : l.minDistance;
                 e /= r * r;
+                if (l.oneSided) {
+                    const float c = -glm::dot(toLight, l.emitterNormal);
+                    if (c <= 0.f) continue;
+                    e *= c;
+                }
             }
             const float ndl = glm::dot(in.normal, toLight);
             if (ndl <= 0.f) continue;
@@ -155,11 +167,35 @@ class BlinnPhongShader {
                 if (ndh > 0.f) s.specular += (params_.specular * specularPower(ndh)) * e;
             }
         }
+        if (hasEnvironment_) s.diffuse += params_.diffuse * environmentIrradiance(in.normal);
         return s;
     }
 
+    /// E(n) of the environment lights from their 9 irradiance SH coefficients.
+    glm::vec3 environmentIrradiance(const glm::vec3& n) const {
+        float y[9];
+        sh::evalShFixed<2>(n, y);
+        glm::vec3 e(0.f);
+        for (int i = 0; i < 9; ++i) e += envSh_[i] * y[i];
+        return glm::max(e, glm::vec3(0.f));  // ringing of the truncation can dip below 0
+    }
+
+  private:
+    /// A light as the per-sample loop reads it (a flat copy of a lights::Light).
+    struct Emitter {
+        bool directional = false;
+        bool oneSided = false;        ///< rect/disk: emits toward emitterNormal only
+        glm::vec3 toLight{0.f};       ///< directional: unit, toward the light
+        glm::vec3 position{0.f};      ///< point-like: world mm
+        glm::vec3 value{0.f};         ///< directional: irradiance; point-like: intensity
+        float minDistance = 1.f;      ///< point-like: clamps 1/d², mm
+        glm::vec3 emitterNormal{0.f};  ///< oneSided: unit emission direction
+    };
+
     BlinnPhongParams params_;
-    std::vector<Light> lights_;
+    std::vector<Emitter> lights_;
+    bool hasEnvironment_ = false;
+    glm::vec3 envSh_[9] = {};
     std::vector<float> powTable_;
 };
 

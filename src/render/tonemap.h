@@ -3,7 +3,7 @@
 // Film → display. Linear radiance is scaled by 2^exposure, clamped to [0, 1] (a clinical image
 // should map equal radiance to equal grey everywhere, so no local or filmic operator) and encoded
 // with the sRGB transfer curve (IEC 61966-2-1). Non-finite values become 0.
-#include "io/image.h"
+#include "core/image.h"
 
 namespace voxlight::render {
 

@@ -94,16 +94,19 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
     EXPECT_FALSE(fs::exists(tmp / "x.bmp"));
 }
 
-TEST(Cli, SceneOfAMethodOfALaterIssueIsValidWithANote) {
+TEST(Cli, SceneOfAnUnregisteredMethodIsRefusedNamingTheRegisteredOnes) {
     test::TempDir tmp;
     std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "torso"}, "method": "pvrt"})";
     const Result r = run("scene '" + (tmp / "scene.json").string() + "'", tmp.path());
-    EXPECT_EQ(r.code, 0) << r.err;
-    EXPECT_NE(r.err.find("not implemented by this build's renderer"), std::string::npos) << r.err;
-    // ... and a misspelt preset is still caught for it.
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("method.name"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("gradient"), std::string::npos) << r.err;
+    // A registered method with a misspelt preset is caught before any volume is read.
     std::ofstream(tmp / "scene.json")
-        << R"({"volume": {"phantom": "torso"}, "method": "pvrt", "transfer_function": "lung"})";
-    EXPECT_EQ(run("scene '" + (tmp / "scene.json").string() + "'", tmp.path()).code, 2);
+        << R"({"volume": {"phantom": "torso"}, "method": "mip", "transfer_function": "lung"})";
+    const Result p = run("scene '" + (tmp / "scene.json").string() + "'", tmp.path());
+    EXPECT_EQ(p.code, 2);
+    EXPECT_NE(p.err.find("transfer_function.preset"), std::string::npos) << p.err;
 }
 
 TEST(Cli, SceneOverridesAreValidated) {

@@ -89,7 +89,11 @@ TEST(Scene, ErrorsNameTheKeyPath) {
         json::parse(
             R"({"volume": "a.nii", "transfer_function": {"points": [{"value": 0, "color": [2, 0, 0]}]}})"),
         "transfer_function.points[0].color[0]", {"[0, 1]"});
-    expectBad(json::parse(R"({"volume": "a.nii", "method": "raytrace"})"), "method", {"pathtrace"});
+    // Method and effect *names* are the pipeline registry's to check (tests/pipeline); io checks
+    // their shape.
+    expectBad(json::parse(R"({"volume": "a.nii", "method": 3})"), "method", {"object"});
+    expectBad(json::parse(R"({"volume": "a.nii", "method": {"params": {}}})"), "method",
+              {"name"});
     expectBad(json::parse(R"({"volume": "a.nii", "clip_planes": {"normal": [0, 0, 1]}})"),
               "clip_planes", {"array"});
     expectBad(
@@ -97,7 +101,8 @@ TEST(Scene, ErrorsNameTheKeyPath) {
         "crop_box.min", {"below"});
     expectBad(json::parse(R"({"volume": {"path": "a.nii", "phantom": "torso"}})"), "volume",
               {"exactly one"});
-    expectBad(json::parse(R"({"volume": "a.nii", "effects": ["bloom"]})"), "effects[0]");
+    expectBad(json::parse(R"({"volume": "a.nii", "effects": [7]})"), "effects[0]", {"string"});
+    expectBad(json::parse(R"({"volume": "a.nii", "effects": "specular"})"), "effects", {"array"});
 }
 
 TEST(Scene, OverridesApplyBeforeValidation) {

@@ -46,10 +46,11 @@ TEST(BlinnPhong, ShininessOutsideTheTableRangeIsExact) {
 
 TEST(BlinnPhong, ScatterMatchesTheClosedForm) {
     render::BlinnPhongParams p;  // defaults: 0.25 / 0.75 / 0.25, n = 24
-    render::Light l;
-    l.direction = glm::normalize(glm::vec3(0.3f, -0.2f, -1.f));
-    l.radiance = glm::vec3(1.f, 0.5f, 2.f);
-    const render::BlinnPhongShader s(p, {l});
+    const glm::vec3 travel = glm::normalize(glm::vec3(0.3f, -0.2f, -1.f));
+    const glm::vec3 radiance(1.f, 0.5f, 2.f);
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {
+        std::make_shared<lights::DirectionalLight>(radiance, -travel)};
+    const render::BlinnPhongShader s(p, ls);
     render::ShadeInput in;
     in.position = glm::vec3(0.f);
     in.toEye = glm::normalize(glm::vec3(-0.1f, 0.2f, 1.f));
@@ -57,17 +58,17 @@ TEST(BlinnPhong, ScatterMatchesTheClosedForm) {
                               glm::normalize(glm::vec3(1.f, 0.f, 0.1f))}) {
         in.normal = n;
         const render::Scatter sc = s.scatter(in);
-        const glm::dvec3 ld = -glm::dvec3(l.direction), nd(n), ed(in.toEye);
+        const glm::dvec3 ld = -glm::dvec3(travel), nd(n), ed(in.toEye);
         const double ndl = glm::dot(nd, ld);
         const double ndh = glm::dot(nd, glm::normalize(ld + ed));
         for (int c = 0; c < 3; ++c) {
-            const double diffuse = p.ambient + (ndl > 0 ? p.diffuse * ndl * l.radiance[c] : 0.0);
+            const double diffuse = p.ambient + (ndl > 0 ? p.diffuse * ndl * radiance[c] : 0.0);
             const double spec =
-                ndl > 0 && ndh > 0 ? p.specular * std::pow(ndh, double(p.shininess)) * l.radiance[c]
+                ndl > 0 && ndh > 0 ? p.specular * std::pow(ndh, double(p.shininess)) * radiance[c]
                                    : 0.0;
             EXPECT_NEAR(sc.diffuse[c], diffuse, 1e-5);
             EXPECT_NEAR(sc.specular[c], spec,
-                        2.f * l.radiance[c] * p.specular * tableBound(24) + 1e-5);
+                        2.f * radiance[c] * p.specular * tableBound(24) + 1e-5);
         }
     }
 }

@@ -4,7 +4,8 @@
 
 #include "core/phantoms.h"
 #include "io/scene.h"
-#include "render/scene_render.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/scene_inputs.h"
 
 using namespace voxlight;
 using nlohmann::json;
@@ -22,10 +23,10 @@ TEST(SceneRender, RendersAndReportsStagesAndParameters) {
     json d = base();
     d["method"] = {{"name", "gradient"}, {"params", {{"specular", 0.5}}}};
     d["clip_planes"] = json::array({{{"point", {0, 0, 0}}, {"normal", {0, 0, 1}}}});
-    const auto r = render::renderScene(scene(d));
-    EXPECT_EQ(r.film.width, 16);
-    EXPECT_EQ(r.film.height, 12);
-    const json s = render::statsJson(r, 1.0);
+    const auto r = pipeline::renderScene(scene(d));
+    EXPECT_EQ(r.image.width, 16);
+    EXPECT_EQ(r.image.height, 12);
+    const json s = pipeline::statsJson(r, 1.0);
     ASSERT_TRUE(s["stages"].is_array());
     for (const auto& st : s["stages"]) {
         EXPECT_TRUE(st.contains("name") && st.contains("ran") && st.contains("reason") &&
@@ -41,20 +42,26 @@ TEST(SceneRender, RejectsUnknownParamsUnimplementedMethodsAndUnsupportedLights) 
     json d = base();
     d["method"] = {{"name", "gradient"}, {"params", {{"shinyness", 3}}}};
     try {
-        render::buildRenderOptions(scene(d));
+        pipeline::Session().plan(scene(d));
         FAIL();
     } catch (const InputError& e) {
         EXPECT_EQ(e.field(), "method.params.shinyness");
     }
     d = base();
     d["method"] = "pathtrace";
-    EXPECT_THROW(render::buildRenderOptions(scene(d)), InputError);
+    EXPECT_THROW(pipeline::Session().plan(scene(d)), InputError);
     d = base();
-    d["lights"] = json::array({{{"type", "area"}}});
-    EXPECT_THROW(render::buildRenderOptions(scene(d)), InputError);
+    d["method"] = "no-such-method";
+    try {
+        pipeline::Session().plan(scene(d));
+        FAIL();
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.name");
+        EXPECT_NE(std::string(e.what()).find("gradient"), std::string::npos) << e.what();
+    }
     d = base();
     d["transfer_function"] = "no-such-preset";
-    EXPECT_THROW(render::renderScene(scene(d)), InputError);
+    EXPECT_THROW(pipeline::renderScene(scene(d)), InputError);
 }
 
 TEST(SceneRender, WindowRemapsPresetsAndSetsMipGrey) {
@@ -64,7 +71,7 @@ TEST(SceneRender, WindowRemapsPresetsAndSetsMipGrey) {
     core::PhantomOptions o;
     o.size = 24;
     const core::Volume v = core::makePhantom("torso", o);
-    const auto tf = render::buildTransferFunction(scene(d), v);
+    const auto tf = pipeline::buildTransferFunction(scene(d), v);
     EXPECT_FLOAT_EQ(tf.window().level, 600.f);
     EXPECT_FLOAT_EQ(tf.points().back().value, 600.f + (3071.f - 500.f) / 2.f);
 }
@@ -78,16 +85,16 @@ TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) 
     d["transfer_function"] = "ct-bone";
     d["image"] = {{"width", 48}, {"height", 48}};
     d["render"] = {{"termination", 0.0}};
-    const auto strict = render::renderScene(scene(d));
+    const auto strict = pipeline::renderScene(scene(d));
     d["render"] = {{"termination", 0.02}};
-    const auto loose = render::renderScene(scene(d));
-    EXPECT_LT(loose.stats.samples, strict.stats.samples);
+    const auto loose = pipeline::renderScene(scene(d));
+    EXPECT_LT(loose.details["counters"]["samples"].get<std::uint64_t>(), strict.details["counters"]["samples"].get<std::uint64_t>());
     constexpr float kMaxRadiance = 1.25f;
     float worst = 0.f;
     for (int y = 0; y < 48; ++y)
         for (int x = 0; x < 48; ++x)
             for (int c = 0; c < 4; ++c)
-                worst = std::max(worst, std::abs(loose.film.at(x, y)[c] - strict.film.at(x, y)[c]));
+                worst = std::max(worst, std::abs(loose.image.at(x, y)[c] - strict.image.at(x, y)[c]));
     EXPECT_LE(worst, 0.02f * kMaxRadiance + 1e-5f);
     EXPECT_GT(worst, 0.f) << "the loose threshold should change something";
     d["render"] = {{"termination", 0.7}};
@@ -98,15 +105,16 @@ TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) 
 
 TEST(SceneRender, RepeatedFramesReportEveryFrameAndTheSameImage) {
     json d = base();
-    const auto once = render::renderScene(scene(d));
-    const auto thrice = render::renderScene(scene(d), core::Progress::none(), 3);
+    const auto once = pipeline::renderScene(scene(d));
+    const auto thrice = pipeline::renderScene(scene(d), {.frames = 3});
     ASSERT_TRUE(thrice.details.contains("frame_seconds"));
     EXPECT_EQ(thrice.details["frame_seconds"].size(), 3u);
     EXPECT_FALSE(once.details.contains("frame_seconds"));
-    EXPECT_EQ(once.film.pixels, thrice.film.pixels);
-    EXPECT_EQ(once.stats.samples, thrice.stats.samples) << "stats are one frame's, not the sum";
-    EXPECT_THROW(render::renderScene(scene(d), core::Progress::none(), 0), InputError);
-    EXPECT_THROW(render::renderScene(scene(d), core::Progress::none(), render::kMaxFrames + 1),
+    EXPECT_EQ(once.image.pixels, thrice.image.pixels);
+    EXPECT_EQ(once.details["counters"], thrice.details["counters"])
+        << "stats are one frame's, not the sum";
+    EXPECT_THROW(pipeline::renderScene(scene(d), {.frames = 0}), InputError);
+    EXPECT_THROW(pipeline::renderScene(scene(d), {.frames = pipeline::kMaxFrames + 1}),
                  InputError);
 }
 
@@ -115,7 +123,7 @@ TEST(SceneRender, UnknownPresetIsRefusedBeforeTheVolumeIsLoaded) {
     d["transfer_function"] = "ct-lungs";
     d["volume"] = {{"path", "/nonexistent/volume.nii.gz"}};  // never reached
     try {
-        (void)render::buildRenderOptions(scene(d));
+        (void)pipeline::Session().plan(scene(d));
         FAIL() << "unknown preset accepted";
     } catch (const InputError& e) {
         EXPECT_NE(std::string(e.what()).find("transfer_function.preset"), std::string::npos)

@@ -16,7 +16,7 @@
 
 #include "core/phantoms.h"
 #include "io/scene.h"
-#include "render/scene_render.h"
+#include "pipeline/pipeline.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -63,14 +63,14 @@ std::string joined(const std::vector<std::string>& names) {
 /// The film is kImageSize², has no NaN/Inf, and at least 1% of it is not plain background (the
 /// camera fits what the TF makes visible, so a working scene fills far more).
 void expectVisibleFiniteFilm(const std::string& name, const io::Scene& s,
-                             const render::SceneRenderResult& r) {
-    ASSERT_EQ(r.film.width, kImageSize);
-    ASSERT_EQ(r.film.height, kImageSize);
+                             const pipeline::RunResult& r) {
+    ASSERT_EQ(r.image.width, kImageSize);
+    ASSERT_EQ(r.image.height, kImageSize);
     const glm::dvec3 bg = s.image.background;
     int nonFinite = 0, visible = 0;
-    for (int y = 0; y < r.film.height; ++y)
-        for (int x = 0; x < r.film.width; ++x) {
-            const float* p = r.film.at(x, y);
+    for (int y = 0; y < r.image.height; ++y)
+        for (int x = 0; x < r.image.width; ++x) {
+            const float* p = r.image.at(x, y);
             bool finite = true;
             for (int c = 0; c < 4; ++c) finite = finite && std::isfinite(p[c]);
             if (!finite) {
@@ -111,10 +111,10 @@ TEST(ExampleScenes, EveryScenePassesTheStrictContract) {
             continue;
         }
         ++parsed;
-        // What the renderer validates without the volume: method (implemented by the ray
-        // caster), params, TF preset name, lights, clip planes, crop box.
+        // What the pipeline validates without the volume: method (registered), params, effects,
+        // TF preset name.
         try {
-            (void)render::buildRenderOptions(s);
+            (void)pipeline::Session().plan(s);
         } catch (const std::exception& e) {
             ADD_FAILURE() << nameOf(file) << ": rejected by the renderer: " << e.what();
         }
@@ -160,9 +160,9 @@ TEST(ExampleScenes, RealDataScenesRenderWhenTheirDataArePresent) {
             missing.push_back(missingEntry(file, s));
             continue;
         }
-        render::SceneRenderResult r;
+        pipeline::RunResult r;
         try {
-            r = render::renderScene(s);
+            r = pipeline::renderScene(s);
         } catch (const std::exception& e) {
             ADD_FAILURE() << nameOf(file) << " does not render: " << e.what();
             continue;
@@ -193,9 +193,9 @@ TEST(ExampleScenes, PhantomScenesRenderSomethingFinite) {
         } catch (const std::exception&) {
             continue;  // reported by EveryScenePassesTheStrictContract
         }
-        render::SceneRenderResult r;
+        pipeline::RunResult r;
         try {
-            r = render::renderScene(s);
+            r = pipeline::renderScene(s);
         } catch (const std::exception& e) {
             ADD_FAILURE() << nameOf(file) << " does not render: " << e.what();
             continue;

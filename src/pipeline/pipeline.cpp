@@ -1,0 +1,265 @@
+// SPDX-License-Identifier: MIT
+#include "pipeline/pipeline.h"
+
+#include <algorithm>
+
+#include "core/hash.h"
+#include "core/timing.h"
+#include "pipeline/registry.h"
+
+namespace voxlight::pipeline {
+
+using nlohmann::json;
+
+std::string toString(StageKind k) {
+    switch (k) {
+        case StageKind::Input:
+            return "input";
+        case StageKind::Precompute:
+            return "precompute";
+        case StageKind::Frame:
+            return "frame";
+    }
+    return "?";
+}
+
+json toJson(const StageRecord& r) {
+    return {{"name", r.name},      {"kind", toString(r.kind)}, {"ran", r.ran},
+            {"reason", r.reason},  {"seconds", r.seconds},     {"key", r.key},
+            {"inputs", r.inputs}};
+}
+
+std::optional<std::uint64_t> Run::keyOf(const std::string& stage) const {
+    const auto it = keys_.find(stage);
+    if (it == keys_.end()) return std::nullopt;
+    return it->second;
+}
+
+const Artifact& Run::artifact(const std::string& stage) const {
+    const auto it = artifacts_.find(stage);
+    if (it == artifacts_.end())
+        throw InternalError("stage '" + stage + "' has no artifact yet (plan order)");
+    return it->second;
+}
+
+KeyBuilder::KeyBuilder(const Run& run, const std::string& stage, std::uint32_t version)
+    : run_(run), h_(core::Hasher().add(stage).add(version).value()) {}
+
+KeyBuilder& KeyBuilder::stage(const std::string& upstream) {
+    const auto k = run_.keyOf(upstream);
+    if (!k) known_ = false;
+    h_ = core::Hasher(h_).add(upstream).add(k.value_or(0)).value();
+    return *this;
+}
+
+KeyBuilder& KeyBuilder::json(const nlohmann::json& value) {
+    // dump() of nlohmann's default (sorted) object map is canonical.
+    h_ = core::Hasher(h_).add(value.dump()).value();
+    return *this;
+}
+
+KeyBuilder& KeyBuilder::text(const std::string& value) {
+    h_ = core::Hasher(h_).add(value).value();
+    return *this;
+}
+
+KeyBuilder& KeyBuilder::number(double value) {
+    h_ = core::Hasher(h_).add(value).value();
+    return *this;
+}
+
+std::optional<std::uint64_t> KeyBuilder::value() const {
+    if (!known_) return std::nullopt;
+    return h_;
+}
+
+const StageRecord& RunResult::stage(const std::string& name) const {
+    for (const auto& s : stages)
+        if (s.name == name) return s;
+    throw InternalError("no stage '" + name + "' in this run");
+}
+
+json statsJson(const RunResult& r, double totalSeconds) {
+    json stages = json::array();
+    for (const auto& s : r.stages) stages.push_back(toJson(s));
+    json j = {{"stages", stages},
+              {"total_seconds", totalSeconds},
+              {"peak_rss_mb", core::peakRssMiB()},
+              {"method", {{"name", r.method}, {"params", r.params}}}};
+    for (auto it = r.details.begin(); it != r.details.end(); ++it) j[it.key()] = it.value();
+    return j;
+}
+
+Plan Session::plan(const io::Scene& scene) const {
+    const MethodRegistry& reg = MethodRegistry::instance();
+    const MethodInfo* m = reg.find(scene.method.name);
+    if (!m) {
+        std::string list;
+        for (const auto& n : reg.names()) list += (list.empty() ? "" : ", ") + n;
+        throw InputError(scene.source, "method.name",
+                         "'" + scene.method.name + "' is not a method of this build",
+                         "choose one of: " + list);
+    }
+    // Effects: known names, and ones this method simulates.
+    for (std::size_t i = 0; i < scene.effects.size(); ++i) {
+        const std::string& e = scene.effects[i];
+        const std::string field = "effects[" + std::to_string(i) + "]";
+        const auto& cat = effectCatalog();
+        if (std::none_of(cat.begin(), cat.end(), [&](const EffectInfo& c) { return c.name == e; })) {
+            std::string list;
+            for (const auto& c : cat) list += (list.empty() ? "" : ", ") + c.name;
+            throw InputError(scene.source, field, "'" + e + "' is not an effect",
+                             "choose from: " + list);
+        }
+        if (std::find(m->effects.begin(), m->effects.end(), e) == m->effects.end()) {
+            std::string providers;
+            for (const auto& other : reg.methods())
+                if (std::find(other.effects.begin(), other.effects.end(), e) != other.effects.end())
+                    providers += (providers.empty() ? "" : ", ") + other.name;
+            throw InputError(scene.source, field,
+                             "method '" + m->name + "' does not simulate '" + e + "'",
+                             providers.empty()
+                                 ? "no method of this build simulates it yet; remove it"
+                                 : "use " + providers + ", or remove it");
+        }
+    }
+    ParamReader reader(scene, m->params);
+    Plan p = m->plan(scene, reader);
+    p.method = m->name;
+    return p;
+}
+
+namespace {
+double median(std::vector<double> v) {
+    if (v.empty()) return 0.0;
+    std::sort(v.begin(), v.end());
+    return v[v.size() / 2];
+}
+
+/// The key a stage that is not needed passes downstream (a fixed value: "not needed" is an input
+/// like any other, and known before running).
+constexpr std::uint64_t kNotNeededKey = 0x6e6f742d6e656564ull;  // "not-need"
+
+std::string cachedReason(std::uint64_t key, bool disk) {
+    return "cached " + core::hexKey(key).substr(0, 8) + (disk ? " (disk)" : "");
+}
+}  // namespace
+
+std::vector<StageRecord> Session::explain(const io::Scene& scene) {
+    const Plan plan = this->plan(scene);
+    Run run(scene, cache_, core::Progress::none());
+    std::vector<StageRecord> out;
+    for (const Stage& st : plan.stages) {
+        StageRecord r{st.name, st.kind, false, "", 0.0, "", st.inputs};
+        if (!st.skip.empty()) {
+            r.reason = st.skip;
+            run.keys_[st.name] = kNotNeededKey;
+            out.push_back(r);
+            continue;
+        }
+        const std::optional<std::uint64_t> key = st.key(run);
+        if (!key) {
+            r.ran = true;
+            r.reason = "computed (volume not read before)";
+            out.push_back(r);
+            continue;
+        }
+        r.key = core::hexKey(*key);
+        const bool memory = st.kind != StageKind::Frame && cache_.inMemory(st.name, *key);
+        const bool disk = !memory && st.kind == StageKind::Precompute && st.codec &&
+                          cache_.onDisk(st.name, *key);
+        if (memory || disk) {
+            r.reason = cachedReason(*key, disk);
+        } else {
+            r.ran = true;
+            r.reason = "computed";
+        }
+        std::optional<std::uint64_t> out_key = key;
+        if (st.predictOutputKey) out_key = st.predictOutputKey(run, *key);
+        if (out_key) run.keys_[st.name] = *out_key;
+        out.push_back(r);
+    }
+    return out;
+}
+
+RunResult Session::run(const io::Scene& scene, const RunOptions& options,
+                       const core::Progress& progress) {
+    if (options.frames < 1 || options.frames > kMaxFrames)
+        throw InputError("command line", "--frames",
+                         "must be between 1 and " + std::to_string(kMaxFrames));
+    const Plan plan = this->plan(scene);
+    Run run(scene, cache_, progress);
+    RunResult res;
+    res.method = plan.method;
+    res.params = plan.params;
+    std::vector<double> frameSeconds(std::size_t(options.frames), 0.0);
+
+    for (const Stage& st : plan.stages) {
+        StageRecord r{st.name, st.kind, false, "", 0.0, "", st.inputs};
+        if (!st.skip.empty()) {
+            r.reason = st.skip;
+            run.keys_[st.name] = kNotNeededKey;
+            res.stages.push_back(r);
+            continue;
+        }
+        const std::optional<std::uint64_t> keyOpt = st.key(run);
+        if (!keyOpt) throw InternalError("stage '" + st.name + "' has an unknown input key");
+        const std::uint64_t key = *keyOpt;
+        r.key = core::hexKey(key);
+        Artifact a;
+        if (st.kind == StageKind::Frame) {
+            // Every frame, never cached: the median frame is the stage's time.
+            std::vector<double> times;
+            for (int f = 0; f < options.frames; ++f) {
+                core::Stopwatch sw;
+                a = st.compute(run);
+                times.push_back(sw.seconds());
+                frameSeconds[std::size_t(f)] += times.back();
+            }
+            r.seconds = median(times);
+            r.ran = true;
+            r.reason = "computed";
+        } else {
+            core::Stopwatch sw;
+            bool disk = false;
+            if (auto m = cache_.findInMemory(st.name, key)) {
+                a = *m;
+            } else if (st.kind == StageKind::Precompute && st.codec) {
+                if (auto d = cache_.readDisk(st.name, key, *st.codec)) {
+                    a = *d;
+                    disk = true;
+                    cache_.putInMemory(st.name, key, a);
+                }
+            }
+            if (!a.empty()) {
+                r.reason = cachedReason(key, disk);
+            } else {
+                a = st.compute(run);
+                r.ran = true;
+                r.reason = "computed";
+                cache_.putInMemory(st.name, key, a);
+                if (st.kind == StageKind::Precompute && st.codec)
+                    cache_.writeDisk(st.name, key, *st.codec, a);
+            }
+            r.seconds = sw.seconds();
+        }
+        if (st.describe) r.reason += ": " + st.describe(run, a);
+        run.keys_[st.name] = st.outputKey ? st.outputKey(run, a) : key;
+        run.artifacts_[st.name] = a;
+        res.stages.push_back(r);
+    }
+    if (!run.has(plan.imageStage))
+        throw InternalError("plan of '" + plan.method + "' has no image stage '" +
+                            plan.imageStage + "'");
+    res.image = *run.get<core::ImageRGBA>(plan.imageStage);
+    res.details = run.details();
+    if (options.frames > 1) res.details["frame_seconds"] = frameSeconds;
+    return res;
+}
+
+RunResult renderScene(const io::Scene& scene, const RunOptions& options) {
+    Session session;
+    return session.run(scene, options);
+}
+
+}  // namespace voxlight::pipeline

@@ -1,0 +1,179 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Scene → plan of stages → run with a cache: "simulate only what the scene calls for".
+//
+// A method (registry.h) turns a scene into a Plan: an ordered list of Stages. Each stage declares
+// what it reads (`inputs`, for people) and computes its key from exactly those (`key`, for the
+// cache): the keys of the earlier stages it reads plus its own settings. So
+//   load_volume      ← the volume's source (file identity: path, size, mtime; or phantom + size);
+//                      its *output* key is the content hash of what it loaded
+//   brick_grid       ← volume content
+//   transfer_function← volume content (relative presets fit its range) + the scene's TF
+//   skip_cells       ← volume + TF + the method's skip rule
+//   gradients        ← volume (dense) or volume + skip cells (bricked)
+//   lights, light_sh ← the scene's lights (+ each environment map file's identity)
+//   camera           ← skip cells (a fitted camera frames what the TF makes visible) + camera + image
+//   render           ← all of the above
+// Stage kinds: Input (reads files; cached in memory only), Precompute (memory, and disk when the
+// stage has a Codec and a cache directory is set) and Frame (run every frame, never cached). A
+// stage the scene does not need stays in the plan with `skip` = why ("not needed: no environment
+// light"), so the stats say what was *not* simulated, and why.
+//
+// Running: each stage in order — not needed → recorded as such; else its key; memory cache hit →
+// "cached <key>"; disk hit → "cached <key> (disk)"; else computed (and stored). explain() walks the
+// same plan without computing and says what run() would do; it agrees with run() except when a
+// volume file's content hash is not yet known (first sight of that file), where it says
+// "computed (volume not read before)" for stages a different file with the same content could
+// still serve from the cache.
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "core/progress.h"
+#include "io/scene.h"
+#include "pipeline/artifact_cache.h"
+
+namespace voxlight::pipeline {
+
+enum class StageKind { Input, Precompute, Frame };
+std::string toString(StageKind k);
+
+class Run;
+
+struct Stage {
+    std::string name;
+    StageKind kind = StageKind::Precompute;
+    /// What the key covers, in words (stage names and scene keys), for --explain and the docs.
+    std::vector<std::string> inputs;
+    /// Non-empty: the stage is not needed for this scene, and this says why.
+    std::string skip;
+    /// The key of the artifact from the run's earlier keys and the scene; nullopt when an input's
+    /// key is not known yet (explain before a volume was ever read).
+    std::function<std::optional<std::uint64_t>(const Run&)> key;
+    std::function<Artifact(Run&)> compute;
+    /// Non-null: the artifact may be kept in a disk cache.
+    const Codec* codec = nullptr;
+    /// Input stages whose product has a content key other than its input key (load_volume: file
+    /// identity → content hash). predict: the content key without computing (explain), if known.
+    std::function<std::uint64_t(const Run&, const Artifact&)> outputKey;
+    std::function<std::optional<std::uint64_t>(const Run&, std::uint64_t)> predictOutputKey;
+    /// A short description of the artifact for the stats ("4096 bricks of 16^3").
+    std::function<std::string(const Run&, const Artifact&)> describe;
+};
+
+struct Plan {
+    std::string method;
+    nlohmann::json params = nlohmann::json::object();  ///< method params as used (defaults filled)
+    std::vector<Stage> stages;
+    std::string imageStage = "render";  ///< the Frame stage whose artifact is the image
+};
+
+struct StageRecord {
+    std::string name;
+    StageKind kind = StageKind::Precompute;
+    bool ran = false;       ///< computed in this run (false: cached or not needed)
+    std::string reason;     ///< "computed", "cached <key>", "not needed: ..."
+    double seconds = 0.0;   ///< Frame stages: the median frame
+    std::string key;        ///< 16 hex digits, or "" when unknown / not needed
+    std::vector<std::string> inputs;
+};
+
+/// Stats JSON of a record (name, kind, ran, reason, seconds, key, inputs).
+nlohmann::json toJson(const StageRecord& r);
+
+/// State of one run that stages read and write.
+class Run {
+  public:
+    Run(const io::Scene& scene, ArtifactCache& cache, const core::Progress& progress)
+        : scene_(scene), cache_(cache), progress_(progress) {}
+    const io::Scene& scene() const { return scene_; }
+    ArtifactCache& cache() const { return cache_; }
+    const core::Progress& progress() const { return progress_; }
+
+    /// Output key of an earlier stage (nullopt when unknown or the stage was not needed).
+    std::optional<std::uint64_t> keyOf(const std::string& stage) const;
+    /// The artifact of an earlier stage (InternalError when it has none: a plan-order bug).
+    template <class T>
+    std::shared_ptr<const T> get(const std::string& stage) const {
+        return artifact(stage).as<T>();
+    }
+    const Artifact& artifact(const std::string& stage) const;
+    bool has(const std::string& stage) const { return artifacts_.count(stage) > 0; }
+    /// Method-specific details for the stats (counters, the TF as used, ...).
+    nlohmann::json& details() { return details_; }
+    const nlohmann::json& details() const { return details_; }
+
+  private:
+    friend class Session;
+    const io::Scene& scene_;
+    ArtifactCache& cache_;
+    const core::Progress& progress_;
+    std::map<std::string, std::uint64_t> keys_;
+    std::map<std::string, Artifact> artifacts_;
+    nlohmann::json details_ = nlohmann::json::object();
+};
+
+/// Builds a key from named parts; unknown (nullopt) as soon as one upstream key is unknown.
+class KeyBuilder {
+  public:
+    KeyBuilder(const Run& run, const std::string& stage, std::uint32_t version = 1);
+    KeyBuilder& stage(const std::string& upstream);
+    KeyBuilder& json(const nlohmann::json& value);
+    KeyBuilder& text(const std::string& value);
+    KeyBuilder& number(double value);
+    std::optional<std::uint64_t> value() const;
+
+  private:
+    const Run& run_;
+    std::uint64_t h_;
+    bool known_ = true;
+};
+
+struct RunOptions {
+    int frames = 1;  ///< Frame stages run this many times (timing); records report the median
+};
+
+/// Most frames one run repeats (a timing aid, not a batch renderer).
+inline constexpr int kMaxFrames = 1000;
+
+struct RunResult {
+    core::ImageRGBA image;  ///< the image stage's artifact: linear radiance, alpha = coverage
+    std::vector<StageRecord> stages;
+    std::string method;
+    nlohmann::json params;   ///< as used
+    nlohmann::json details;  ///< method details + "frame_seconds" when frames > 1
+    /// The record of a stage by name (InternalError when absent).
+    const StageRecord& stage(const std::string& name) const;
+};
+
+/// Stats JSON (ARCHITECTURE.md §4): stages, total_seconds, peak_rss_mb, method, details.
+nlohmann::json statsJson(const RunResult& result, double totalSeconds);
+
+/// Owns the cache; plans and runs scenes. One per process (the CLI) or per viewer; a sweep runs
+/// many scenes through one session so they share tables.
+class Session {
+  public:
+    explicit Session(std::size_t memoryBudget = kDefaultMemoryBudget) : cache_(memoryBudget) {}
+    ArtifactCache& cache() { return cache_; }
+
+    /// The scene's plan: method from the registry, params parsed strictly, effects checked.
+    /// Throws InputError naming the scene key. Loads nothing.
+    Plan plan(const io::Scene& scene) const;
+    /// What run() would do, stage by stage, without computing anything.
+    std::vector<StageRecord> explain(const io::Scene& scene);
+    RunResult run(const io::Scene& scene, const RunOptions& options = {},
+                  const core::Progress& progress = core::Progress::none());
+
+  private:
+    ArtifactCache cache_;
+};
+
+/// Renders one scene with a fresh session (tests, one-off callers).
+RunResult renderScene(const io::Scene& scene, const RunOptions& options = {});
+
+}  // namespace voxlight::pipeline

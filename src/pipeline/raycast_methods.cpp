@@ -1,0 +1,581 @@
+// SPDX-License-Identifier: MIT
+// The CPU ray caster's methods (render/ray_caster.h): emission-absorption, gradient, mip, minip,
+// iso. One module: their params, their stages and their codecs. Params (all optional; unknown keys
+// are an InputError naming the allowed ones):
+//   every method:         step (voxels; default render.step), preintegrated, empty_space_skipping,
+//                         early_termination, jitter (booleans)
+//   emission-absorption:  ambient
+//   gradient:             ambient, diffuse, specular, shininess, central_differences (true: 6-tap
+//                         gradients from a table; false: 3-tap forward differences, no table)
+//   iso:                  iso_value (physical; default where the TF reaches 1/10 of its max σt),
+//                         ambient, diffuse
+//   mip, minip:           (window from the TF)
+// Lights: gradient and iso shade with every light type (render/shading.h says how); the other
+// three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
+// "specular" (an effects list without it turns the highlight off).
+#include <cmath>
+#include <sstream>
+
+#include "core/hash.h"
+#include "grid/brick_grid.h"
+#include "grid/brick_traversal.h"
+#include "pipeline/registry.h"
+#include "pipeline/scene_inputs.h"
+#include "render/ray_caster.h"
+
+namespace voxlight::pipeline {
+
+namespace {
+
+using nlohmann::json;
+
+// ---- Artifacts -----------------------------------------------------------------------------
+
+struct LoadedVolume {
+    core::Volume volume;
+    std::uint64_t contentHash = 0;
+    std::uint64_t nonFinite = 0;
+};
+
+struct TfArtifact {
+    optics::TransferFunction tf;
+    std::shared_ptr<const optics::TfTable> table;
+};
+
+struct GradientArtifact {
+    std::shared_ptr<const render::VoxelGradients> dense;
+    std::shared_ptr<const render::BrickedGradients> bricked;
+};
+
+using LightList = std::vector<std::shared_ptr<const lights::Light>>;
+
+// ---- Codecs (bump a version when its encoding or meaning changes) ---------------------------
+
+/// Sizes a cache file may claim (far above any volume the readers accept).
+constexpr std::uint64_t kMaxCells = std::uint64_t(1) << 34;
+
+[[noreturn]] void badPayload(const std::string& what) { throw CacheFormatError(what); }
+
+const Codec& brickGridCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& g = *a.as<grid::BrickGrid>();
+            w.pod(g.dims());
+            w.pod(g.valueLo());
+            w.pod(g.valueHi());
+            w.array(g.bricks());
+        },
+        [](ByteReader& r) {
+            const auto dims = r.pod<glm::ivec3>();
+            const auto lo = r.pod<float>(), hi = r.pod<float>();
+            auto bricks = r.array<grid::BrickStats>(kMaxCells);
+            auto g = std::make_shared<grid::BrickGrid>();
+            if (!grid::BrickGrid::fromParts(dims, lo, hi, std::move(bricks), *g))
+                badPayload("brick grid parts do not fit together");
+            const std::size_t bytes = g->size() * sizeof(grid::BrickStats);
+            return Artifact::of<grid::BrickGrid>(std::move(g), bytes);
+        }};
+    return c;
+}
+
+const Codec& skipCellsCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& m = *a.as<grid::BrickMajorants>();
+            w.pod(m.counts());
+            w.pod(m.cellSize());
+            std::vector<float> maj(m.size());
+            std::vector<std::array<float, 2>> ranges(m.size());
+            for (std::size_t i = 0; i < m.size(); ++i) {
+                maj[i] = m.majorant(i);
+                ranges[i] = m.valueRange(i);
+            }
+            w.array(maj);
+            w.array(ranges);
+        },
+        [](ByteReader& r) {
+            const auto counts = r.pod<glm::ivec3>();
+            const int cellSize = r.pod<int>();
+            auto maj = r.array<float>(kMaxCells);
+            auto ranges = r.array<std::array<float, 2>>(kMaxCells);
+            if (counts.x < 1 || counts.y < 1 || counts.z < 1 || cellSize != render::kSkipCellVoxels ||
+                maj.size() != std::size_t(counts.x) * counts.y * counts.z ||
+                ranges.size() != maj.size())
+                badPayload("skip cell sizes do not fit together");
+            for (float m : maj)
+                if (!(m >= 0.f)) badPayload("negative or NaN majorant");
+            const std::size_t bytes = maj.size() * 12;
+            return Artifact::of(std::make_shared<const grid::BrickMajorants>(
+                                    grid::BrickMajorants::fromCells(counts, cellSize,
+                                                                    std::move(maj),
+                                                                    std::move(ranges))),
+                                bytes);
+        }};
+    return c;
+}
+
+const Codec& transferFunctionCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& t = a.as<TfArtifact>()->tf;
+            w.string(t.name());
+            w.pod(t.window());
+            w.array(t.points());
+        },
+        [](ByteReader& r) {
+            auto t = std::make_shared<TfArtifact>();
+            const std::string name = r.string(256);
+            const auto window = r.pod<optics::Window>();
+            auto points = r.array<optics::TfPoint>(1 << 20);
+            // The constructor validates the points (InputError → the cache reports and recomputes).
+            t->tf = optics::TransferFunction(std::move(points), window, name);
+            t->table = std::make_shared<const optics::TfTable>(t->tf);
+            return Artifact::of<TfArtifact>(std::move(t), sizeof(TfArtifact) + 64 * 1024);
+        }};
+    return c;
+}
+
+const Codec& gradientsCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& g = *a.as<GradientArtifact>();
+            w.pod(std::uint8_t(g.dense ? 1 : g.bricked ? 2 : 0));
+            if (g.dense) {
+                w.pod(std::array<std::uint64_t, 3>{g.dense->di, g.dense->dj, g.dense->dk});
+                w.pod(g.dense->slope);
+                w.array(g.dense->d);
+            } else if (g.bricked) {
+                w.pod(std::array<std::uint64_t, 3>{g.bricked->di, g.bricked->dj, g.bricked->dk});
+                w.pod(g.bricked->slope);
+                w.pod(g.bricked->bricks);
+                w.array(g.bricked->slot);
+                w.array(g.bricked->d);
+            }
+        },
+        [](ByteReader& r) {
+            auto g = std::make_shared<GradientArtifact>();
+            const auto kind = r.pod<std::uint8_t>();
+            std::size_t bytes = 0;
+            if (kind == 1) {
+                auto d = std::make_shared<render::VoxelGradients>();
+                const auto s = r.pod<std::array<std::uint64_t, 3>>();
+                d->di = s[0], d->dj = s[1], d->dk = s[2];
+                d->slope = r.pod<float>();
+                d->d = r.array<render::GradientEntry>(render::VoxelGradients::kMaxVoxels);
+                bytes = d->d.size() * sizeof(render::GradientEntry);
+                g->dense = std::move(d);
+            } else if (kind == 2) {
+                auto b = std::make_shared<render::BrickedGradients>();
+                const auto s = r.pod<std::array<std::uint64_t, 3>>();
+                b->di = s[0], b->dj = s[1], b->dk = s[2];
+                b->slope = r.pod<float>();
+                b->bricks = r.pod<glm::ivec3>();
+                b->slot = r.array<std::int64_t>(kMaxCells);
+                b->d = r.array<render::GradientEntry>(render::BrickedGradients::kMaxEntries);
+                if (b->bricks.x < 1 || b->bricks.y < 1 || b->bricks.z < 1 ||
+                    b->slot.size() != std::size_t(b->bricks.x) * b->bricks.y * b->bricks.z)
+                    badPayload("gradient brick table sizes do not fit together");
+                for (std::int64_t slot : b->slot)
+                    if (slot < -1 || (slot >= 0 && std::uint64_t(slot) +
+                                                        render::BrickedGradients::kBrickEntries >
+                                                        b->d.size()))
+                        badPayload("gradient brick slot out of range");
+                bytes = b->d.size() * sizeof(render::GradientEntry) + b->slot.size() * 8;
+                g->bricked = std::move(b);
+            } else if (kind != 0) {
+                badPayload("unknown gradient table kind");
+            }
+            return Artifact::of<GradientArtifact>(std::move(g), bytes);
+        }};
+    return c;
+}
+
+const Codec& irradianceCodec() {
+    static const Codec c{
+        1, [](const Artifact& a, ByteWriter& w) { w.array(*a.as<std::vector<glm::vec3>>()); },
+        [](ByteReader& r) {
+            auto v = std::make_shared<std::vector<glm::vec3>>(r.array<glm::vec3>(9));
+            if (!v->empty() && v->size() != 9) badPayload("irradiance SH needs 9 coefficients");
+            return Artifact::of<std::vector<glm::vec3>>(std::move(v), 9 * 12);
+        }};
+    return c;
+}
+
+// ---- Method params -------------------------------------------------------------------------
+
+enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso };
+
+render::Mode modeOf(Kind k) {
+    switch (k) {
+        case Kind::EmissionAbsorption:
+            return render::Mode::EmissionAbsorption;
+        case Kind::Gradient:
+            return render::Mode::Gradient;
+        case Kind::Mip:
+            return render::Mode::Mip;
+        case Kind::MinIp:
+            return render::Mode::MinIp;
+        case Kind::Iso:
+            return render::Mode::Isosurface;
+    }
+    throw InternalError("unknown ray-caster method");
+}
+
+bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso; }
+
+/// Options of the caster from the scene and the method params (read strictly).
+render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReader& p) {
+    render::RenderOptions o;
+    o.mode = modeOf(kind);
+    o.stepVoxels = float(p.number("step", scene.render.stepVoxels, 0.01, 16.0));
+    o.preintegrated = p.boolean("preintegrated", true);
+    o.emptySpaceSkipping = p.boolean("empty_space_skipping", true);
+    o.earlyTermination = p.boolean("early_termination", true);
+    o.jitter = p.boolean("jitter", true);
+    if (kind == Kind::EmissionAbsorption) o.ambient = float(p.number("ambient", 1.0, 0.0, 1e6));
+    if (kind == Kind::Gradient || kind == Kind::Iso) {
+        o.blinnPhong.ambient = float(p.number("ambient", o.blinnPhong.ambient, 0.0, 1e6));
+        o.blinnPhong.diffuse = float(p.number("diffuse", o.blinnPhong.diffuse, 0.0, 1e6));
+    }
+    if (kind == Kind::Gradient) {
+        const bool specular = wantsEffect(scene, "specular");
+        if (!specular && p.has("specular"))
+            p.fail("specular", "is set but the scene's effects list omits 'specular'",
+                   "add \"specular\" to effects or remove the parameter");
+        o.blinnPhong.specular =
+            specular ? float(p.number("specular", o.blinnPhong.specular, 0.0, 1e6)) : 0.f;
+        if (!specular) p.used["specular"] = 0.0;
+        o.blinnPhong.shininess = float(p.number("shininess", o.blinnPhong.shininess, 1.0, 1e4));
+        o.centralDifferences = p.boolean("central_differences", o.centralDifferences);
+    }
+    if (kind == Kind::Iso) {
+        if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
+        o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
+    }
+    o.seed = scene.render.seed;
+    o.threads = scene.render.threads;
+    o.terminationTransmittance = float(scene.render.termination);
+    o.background = glm::vec3(scene.image.background);
+    for (const auto& c : scene.clipPlanes) o.clipPlanes.push_back({c.point, c.normal});
+    if (scene.cropBox) o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max};
+    return o;
+}
+
+/// Errors of the render library name its own option; the scene calls them by these keys.
+[[noreturn]] void rethrowAsScene(const io::Scene& scene, const InputError& e) {
+    static const std::map<std::string, std::string> kSceneKey = {
+        {"step", "render.step"},
+        {"termination", "render.termination"},
+        {"iso_value", "method.params.iso_value"},
+        {"image size", "image.width"}};
+    if (e.source() == "render options" || e.source() == "camera") {
+        const auto it = kSceneKey.find(e.field());
+        throw InputError(scene.source, it != kSceneKey.end() ? it->second : e.field(),
+                         e.problem(), e.fix());
+    }
+    throw e;
+}
+
+std::string dims(const glm::ivec3& d) {
+    return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
+}
+
+// ---- The plan ----------------------------------------------------------------------------------
+
+Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
+    checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
+    const render::RenderOptions options = parseOptions(kind, scene, reader);
+    Plan plan;
+    plan.params = reader.used;
+    const json optionsKey = {{"params", reader.used},
+                             {"seed", options.seed},
+                             {"termination", scene.render.termination},
+                             {"background", scene.document.value("image", json::object())},
+                             {"clip", scene.document.value("clip_planes", json::array())},
+                             {"crop", scene.document.value("crop_box", json::object())}};
+    // The skip rule: what makes a cell empty for this method.
+    const json skipRule = {{"mode", int(options.mode)},
+                           {"iso_value", options.isoValue ? json(*options.isoValue) : json()}};
+
+    Stage load{"load_volume", StageKind::Input, {"volume"}};
+    load.key = [](const Run& run) -> std::optional<std::uint64_t> {
+        return volumeIdentity(run.scene());
+    };
+    load.compute = [](Run& run) {
+        auto v = std::make_shared<LoadedVolume>();
+        v->volume = loadSceneVolume(run.scene(), run.progress());
+        v->contentHash = core::contentHash(v->volume);
+        v->nonFinite = v->volume.countNonFinite();
+        run.cache().putRecord("volume-content", volumeIdentity(run.scene()), v->contentHash);
+        const std::size_t bytes = v->volume.sizeBytes();
+        return Artifact::of<LoadedVolume>(std::move(v), bytes);
+    };
+    load.outputKey = [](const Run&, const Artifact& a) { return a.as<LoadedVolume>()->contentHash; };
+    load.predictOutputKey = [](const Run& run, std::uint64_t identity) {
+        return run.cache().record("volume-content", identity);
+    };
+    load.describe = [](const Run& run, const Artifact& a) {
+        const auto& v = a.as<LoadedVolume>()->volume;
+        const io::VolumeSource& src = run.scene().volume;
+        return (src.phantom.empty() ? src.path.string() : "phantom '" + src.phantom + "'") + ", " +
+               dims(v.dims()) + " " + std::string(core::toString(v.type()));
+    };
+    plan.stages.push_back(load);
+
+    Stage brick{"brick_grid", StageKind::Precompute, {"load_volume"}};
+    brick.key = [](const Run& run) { return KeyBuilder(run, "brick_grid").stage("load_volume").value(); };
+    brick.compute = [](Run& run) {
+        auto g = std::make_shared<const grid::BrickGrid>(grid::BrickGrid::build(
+            run.get<LoadedVolume>("load_volume")->volume, run.progress()));
+        const std::size_t bytes = g->size() * sizeof(grid::BrickStats);
+        return Artifact::of<grid::BrickGrid>(std::move(g), bytes);
+    };
+    brick.codec = &brickGridCodec();
+    brick.describe = [](const Run&, const Artifact& a) {
+        return std::to_string(a.as<grid::BrickGrid>()->size()) + " bricks of " +
+               std::to_string(grid::kBrickSize) + "^3";
+    };
+    plan.stages.push_back(brick);
+
+    const json tfDesc = scene.document.value("transfer_function", json());
+    Stage tf{"transfer_function", StageKind::Precompute, {"load_volume", "transfer_function"}};
+    tf.key = [tfDesc](const Run& run) {
+        return KeyBuilder(run, "transfer_function").stage("load_volume").json(tfDesc).value();
+    };
+    tf.compute = [](Run& run) {
+        auto t = std::make_shared<TfArtifact>();
+        t->tf = buildTransferFunction(run.scene(), run.get<LoadedVolume>("load_volume")->volume);
+        t->table = std::make_shared<const optics::TfTable>(t->tf);
+        return Artifact::of<TfArtifact>(std::move(t), sizeof(TfArtifact) + 64 * 1024);
+    };
+    tf.codec = &transferFunctionCodec();
+    tf.describe = [](const Run&, const Artifact& a) { return "'" + a.as<TfArtifact>()->tf.name() + "'"; };
+    plan.stages.push_back(tf);
+
+    Stage cells{"skip_cells", StageKind::Precompute, {"brick_grid", "transfer_function", "method"}};
+    cells.key = [skipRule](const Run& run) {
+        return KeyBuilder(run, "skip_cells")
+            .stage("load_volume")
+            .stage("transfer_function")
+            .json(skipRule)
+            .value();
+    };
+    cells.compute = [options](Run& run) {
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        auto m = std::make_shared<const grid::BrickMajorants>(render::buildSkipCells(
+            run.get<LoadedVolume>("load_volume")->volume, *run.get<grid::BrickGrid>("brick_grid"),
+            tfa->tf, *tfa->table, options));
+        const std::size_t bytes = m->size() * 13;
+        return Artifact::of<grid::BrickMajorants>(std::move(m), bytes);
+    };
+    cells.codec = &skipCellsCodec();
+    cells.describe = [](const Run&, const Artifact& a) {
+        const auto& m = *a.as<grid::BrickMajorants>();
+        return std::to_string(m.nonEmptyCount()) + " of " + std::to_string(m.size()) +
+               " skip cells (" + std::to_string(render::kSkipCellVoxels) + "^3) visible";
+    };
+    plan.stages.push_back(cells);
+
+    // Gradients: which table depends on the volume's size, known only after loading; the key
+    // names the choice so that dense and bricked tables never share one.
+    Stage grad{"gradients", StageKind::Precompute, {"load_volume"}};
+    if (kind != Kind::Gradient)
+        grad.skip = "not needed: method '" + scene.method.name + "' reads no gradient table";
+    else if (!options.centralDifferences)
+        grad.skip = "not needed: forward differences (central_differences false) read no table";
+    grad.key = [options](const Run& run) -> std::optional<std::uint64_t> {
+        // Dense ← volume; bricked ← volume + skip cells. The choice needs the voxel count: before
+        // the volume is read (explain) the dense key is assumed, as for all but > 64 M voxels.
+        const bool bricked = run.has("load_volume") &&
+                             render::gradientTableUse(run.get<LoadedVolume>("load_volume")->volume,
+                                                      options) == render::GradientTableUse::Bricked;
+        KeyBuilder k(run, "gradients");
+        k.stage("load_volume").text(bricked ? "bricked" : "dense");
+        if (bricked) k.stage("skip_cells");
+        return k.value();
+    };
+    grad.compute = [options](Run& run) {
+        const core::Volume& v = run.get<LoadedVolume>("load_volume")->volume;
+        auto g = std::make_shared<GradientArtifact>();
+        std::size_t bytes = 0;
+        if (render::gradientTableUse(v, options) == render::GradientTableUse::Bricked) {
+            g->bricked = std::make_shared<const render::BrickedGradients>(
+                render::BrickedGradients::build(v, *run.get<grid::BrickMajorants>("skip_cells")));
+            bytes = g->bricked->d.size() * sizeof(render::GradientEntry);
+        } else {
+            g->dense = std::make_shared<const render::VoxelGradients>(render::VoxelGradients::build(v));
+            bytes = g->dense->d.size() * sizeof(render::GradientEntry);
+        }
+        return Artifact::of<GradientArtifact>(std::move(g), bytes);
+    };
+    grad.codec = &gradientsCodec();
+    grad.describe = [](const Run&, const Artifact& a) -> std::string {
+        const auto& g = *a.as<GradientArtifact>();
+        if (g.dense && !g.dense->empty()) return "dense central differences";
+        if (g.bricked && !g.bricked->empty()) return "bricked central differences near visible cells";
+        return "no table (float volume or differences beyond int16): six taps per sample";
+    };
+    plan.stages.push_back(grad);
+
+    Stage lightsStage{"lights", StageKind::Input, {"lights"}};
+    if (!isLit(kind)) lightsStage.skip = "not needed: method '" + scene.method.name + "' is unlit";
+    lightsStage.key = [](const Run& run) -> std::optional<std::uint64_t> {
+        return lightsIdentity(run.scene());
+    };
+    lightsStage.compute = [](Run& run) {
+        auto l = std::make_shared<LightList>(buildLights(run.scene()));
+        return Artifact::of<LightList>(std::move(l), 1024);
+    };
+    lightsStage.describe = [](const Run&, const Artifact& a) {
+        const auto& l = *a.as<LightList>();
+        if (l.empty()) return std::string("none in the scene: a headlight follows the camera");
+        std::string s;
+        for (const auto& x : l) s += (s.empty() ? "" : ", ") + std::string(x->kind());
+        return s;
+    };
+    plan.stages.push_back(lightsStage);
+
+    Stage sh{"light_sh", StageKind::Precompute, {"lights"}};
+    if (!isLit(kind))
+        sh.skip = "not needed: method '" + scene.method.name + "' is unlit";
+    else if (!hasEnvironmentLight(scene))
+        sh.skip = "not needed: no environment light";
+    sh.key = [](const Run& run) { return KeyBuilder(run, "light_sh").stage("lights").value(); };
+    sh.compute = [](Run& run) {
+        const auto l = run.get<LightList>("lights");
+        auto e = std::make_shared<std::vector<glm::vec3>>(render::environmentIrradianceSh(*l));
+        return Artifact::of<std::vector<glm::vec3>>(std::move(e), 9 * 12);
+    };
+    sh.codec = &irradianceCodec();
+    sh.describe = [](const Run&, const Artifact&) {
+        return std::string("irradiance SH, 9 coefficients");
+    };
+    plan.stages.push_back(sh);
+
+    const json cameraDesc = scene.document.value("camera", json::object());
+    Stage camera{"camera", StageKind::Frame, {"skip_cells", "camera", "image"}};
+    camera.key = [cameraDesc](const Run& run) {
+        const auto& im = run.scene().image;
+        return KeyBuilder(run, "camera")
+            .stage("skip_cells")
+            .json(cameraDesc)
+            .number(im.width)
+            .number(im.height)
+            .value();
+    };
+    camera.compute = [](Run& run) {
+        // Fitted to what the TF makes visible (clinical viewers frame the anatomy, not the air).
+        const core::Volume& v = run.get<LoadedVolume>("load_volume")->volume;
+        const auto bounds =
+            render::visibleWorldBounds(v.geometry(), *run.get<grid::BrickMajorants>("skip_cells"));
+        const io::Scene& s = run.scene();
+        try {
+            auto c = std::make_shared<const render::Camera>(buildCameraSpec(s.camera), bounds[0],
+                                                            bounds[1], s.image.width,
+                                                            s.image.height);
+            return Artifact::of<render::Camera>(std::move(c), sizeof(render::Camera));
+        } catch (const InputError& e) {
+            rethrowAsScene(s, e);
+        }
+    };
+    plan.stages.push_back(camera);
+
+    Stage frame{"render", StageKind::Frame, {"camera", "skip_cells", "gradients", "light_sh", "method"}};
+    frame.key = [optionsKey](const Run& run) {
+        return KeyBuilder(run, "render")
+            .stage("load_volume")
+            .stage("transfer_function")
+            .stage("skip_cells")
+            .stage("camera")
+            .stage("lights")
+            .json(optionsKey)
+            .value();
+    };
+    frame.compute = [options, kind](Run& run) {
+        const io::Scene& s = run.scene();
+        const auto loaded = run.get<LoadedVolume>("load_volume");
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        render::CasterTables tables;
+        tables.table = tfa->table;
+        tables.skipCells = run.get<grid::BrickMajorants>("skip_cells");
+        if (run.has("gradients")) {
+            const auto g = run.get<GradientArtifact>("gradients");
+            tables.voxelGradients = g->dense;
+            tables.brickedGradients = g->bricked;
+        }
+        render::RenderOptions o = options;
+        if (run.has("lights")) o.lights = *run.get<LightList>("lights");
+        if (run.has("light_sh")) o.irradianceSh = *run.get<std::vector<glm::vec3>>("light_sh");
+        const auto camera = run.get<render::Camera>("camera");
+        render::RenderStats stats;
+        try {
+            const render::RayCaster caster(
+                std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
+                std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
+            auto film = std::make_shared<core::ImageRGBA>(
+                caster.render(*camera, run.progress(), &stats));
+            json& d = run.details();
+            d["render"] = {{"step_voxels", o.stepVoxels},
+                           {"step_mm", caster.stepMm()},
+                           {"seed", o.seed},
+                           {"termination", s.render.termination},
+                           {"threads", o.threads}};
+            if (kind == Kind::Iso) d["iso_value"] = caster.isoValue();
+            d["counters"] = {{"rays", stats.rays},
+                             {"samples", stats.samples},
+                             {"rays_terminated_early", stats.terminatedEarly},
+                             {"skip_cells", stats.skipCells},
+                             {"skip_cells_visible", stats.skipCellsVisible}};
+            const std::size_t bytes = film->pixels.size() * sizeof(float);
+            return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
+        } catch (const InputError& e) {
+            rethrowAsScene(s, e);
+        }
+    };
+    frame.describe = [kind](const Run& run, const Artifact& a) {
+        const auto& img = *a.as<core::ImageRGBA>();
+        return run.scene().method.name + " " + std::to_string(img.width) + "x" +
+               std::to_string(img.height);
+    };
+    plan.stages.push_back(frame);
+    return plan;
+}
+
+MethodInfo rayCasterMethod(Kind kind, std::string name, std::string summary,
+                           std::vector<std::string> extraParams, std::vector<std::string> effects) {
+    MethodInfo m;
+    m.name = std::move(name);
+    m.summary = std::move(summary);
+    m.effects = std::move(effects);
+    std::vector<std::string> allowed = {"step", "preintegrated", "empty_space_skipping",
+                                        "early_termination", "jitter"};
+    allowed.insert(allowed.end(), extraParams.begin(), extraParams.end());
+    m.params = allowed;
+    m.plan = [kind](const io::Scene& scene, ParamReader& reader) {
+        return planRayCaster(kind, scene, reader);
+    };
+    return m;
+}
+
+const RegisterMethod kEmissionAbsorption(rayCasterMethod(
+    Kind::EmissionAbsorption, "emission-absorption",
+    "σt, albedo and emission from the TF under uniform unit light, no visibility", {"ambient"}, {}));
+const RegisterMethod kGradient(rayCasterMethod(
+    Kind::Gradient, "gradient", "gradient Blinn–Phong without visibility (the clinical baseline)",
+    {"ambient", "diffuse", "specular", "shininess", "central_differences"}, {"specular"}));
+const RegisterMethod kMip(rayCasterMethod(Kind::Mip, "mip",
+                                          "maximum intensity projection, grey through the window",
+                                          {}, {}));
+const RegisterMethod kMinIp(rayCasterMethod(
+    Kind::MinIp, "minip", "minimum intensity projection, grey through the window", {}, {}));
+const RegisterMethod kIso(rayCasterMethod(
+    Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
+    {"iso_value", "ambient", "diffuse"}, {}));
+
+}  // namespace
+
+}  // namespace voxlight::pipeline

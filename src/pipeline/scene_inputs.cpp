@@ -1,0 +1,215 @@
+// SPDX-License-Identifier: MIT
+#include "pipeline/scene_inputs.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <sstream>
+
+#include "core/hash.h"
+#include "core/phantoms.h"
+#include "io/image.h"
+#include "io/volume_io.h"
+#include "lights/area_light.h"
+#include "lights/environment_light.h"
+#include "optics/presets.h"
+
+namespace voxlight::pipeline {
+
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+namespace {
+/// Path, size and modification time of a file (nothing when it does not exist: the loader will
+/// say so).
+void addFileIdentity(core::Hasher& h, const fs::path& p) {
+    std::error_code ec;
+    h.add(p.string());
+    const auto size = fs::file_size(p, ec);
+    h.add(ec ? std::uint64_t(0) : std::uint64_t(size));
+    const auto time = fs::last_write_time(p, ec);
+    h.add(ec ? std::int64_t(0) : std::int64_t(time.time_since_epoch().count()));
+}
+
+std::string stemOf(const fs::path& p) {
+    const std::string name = p.filename().string();
+    return name.substr(0, name.find('.'));
+}
+}  // namespace
+
+core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progress) {
+    const io::VolumeSource& src = scene.volume;
+    if (!src.phantom.empty()) {
+        core::PhantomOptions o;
+        o.size = src.phantomSize;
+        return core::makePhantom(src.phantom, o, progress);
+    }
+    return io::readVolume(src.path, src.readOptions, progress);
+}
+
+std::uint64_t volumeIdentity(const io::Scene& scene) {
+    const io::VolumeSource& src = scene.volume;
+    core::Hasher h;
+    h.add("volume-source.v1");
+    if (!src.phantom.empty()) {
+        h.add("phantom").add(src.phantom).add(src.phantomSize);
+        return h.value();
+    }
+    const io::ReadOptions& o = src.readOptions;
+    h.add(o.dicomSeriesUid).add(int(o.nonFinite)).add(o.raw.has_value());
+    std::error_code ec;
+    const fs::path path = fs::weakly_canonical(src.path, ec).empty() ? src.path
+                                                                     : fs::weakly_canonical(src.path, ec);
+    if (fs::is_directory(path, ec)) {
+        // A DICOM series: every file of the directory (sorted, so the order is fixed).
+        std::vector<fs::path> files;
+        for (const auto& e : fs::directory_iterator(path, ec))
+            if (e.is_regular_file(ec)) files.push_back(e.path());
+        std::sort(files.begin(), files.end());
+        for (const auto& f : files) addFileIdentity(h, f);
+    } else {
+        addFileIdentity(h, path);
+        // Detached data (header.mhd + header.raw, .nhdr + .raw.gz): files beside it with its stem.
+        std::vector<fs::path> siblings;
+        for (const auto& e : fs::directory_iterator(path.parent_path(), ec))
+            if (e.path() != path && stemOf(e.path()) == stemOf(path) && e.is_regular_file(ec))
+                siblings.push_back(e.path());
+        std::sort(siblings.begin(), siblings.end());
+        for (const auto& f : siblings) addFileIdentity(h, f);
+    }
+    return h.value();
+}
+
+optics::TransferFunction buildTransferFunction(const io::Scene& scene, const core::Volume& volume) {
+    const io::TransferFunctionDesc& d = scene.transferFunction;
+    optics::TransferFunction tf;
+    if (!d.points.empty()) {
+        std::vector<optics::TfPoint> pts;
+        for (const auto& p : d.points)
+            pts.push_back(
+                {float(p.value), glm::vec3(p.color), float(p.extinction), glm::vec3(p.emission)});
+        const float lo = pts.front().value, hi = pts.back().value;
+        optics::Window w{0.5f * (lo + hi), hi > lo ? hi - lo : 1.f};
+        if (d.window) w = {float(d.window->x), float(d.window->y)};
+        tf = optics::TransferFunction(std::move(pts), w, "custom");
+    } else {
+        const std::string name = d.preset.empty() ? optics::defaultPresetName(volume) : d.preset;
+        const auto& cat = optics::presetCatalog();
+        const auto it = std::find_if(cat.begin(), cat.end(),
+                                     [&](const optics::PresetInfo& p) { return p.name == name; });
+        const bool relative = it != cat.end() && it->relative;
+        try {
+            tf = optics::makePreset(
+                name, relative ? optics::robustRange(volume) : std::array<float, 2>{0.f, 1.f});
+        } catch (const InputError& e) {
+            throw InputError(scene.source, "transfer_function.preset", e.problem(), e.fix());
+        }
+        if (d.window) tf = tf.withWindow({float(d.window->x), float(d.window->y)});
+    }
+    if (d.extinctionScale != 1.0) tf = tf.scaledExtinction(float(d.extinctionScale));
+    return tf;
+}
+
+render::CameraSpec buildCameraSpec(const io::CameraDesc& d) {
+    render::CameraSpec s;
+    s.projection =
+        d.projection == "orthographic" ? render::Projection::Orthographic : render::Projection::Perspective;
+    s.azimuthDeg = d.azimuthDeg;
+    s.elevationDeg = d.elevationDeg;
+    s.rollDeg = d.rollDeg;
+    s.distance = d.distance;
+    s.fovYDeg = d.fovYDeg;
+    s.orthoHeight = d.orthoHeight;
+    s.target = d.target;
+    s.eye = d.eye;
+    s.up = d.up;
+    return s;
+}
+
+void checkPresetName(const io::Scene& scene) {
+    const std::string& preset = scene.transferFunction.preset;
+    if (preset.empty()) return;
+    const auto& cat = optics::presetCatalog();
+    if (std::any_of(cat.begin(), cat.end(),
+                    [&](const optics::PresetInfo& p) { return p.name == preset; }))
+        return;
+    std::string list;
+    for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
+    throw InputError(scene.source, "transfer_function.preset", "'" + preset + "' is not a preset",
+                     "choose one of: " + list);
+}
+
+namespace {
+/// Two unit tangents (t1, t2) with t1 × t2 = n.
+std::pair<glm::dvec3, glm::dvec3> tangentFrame(const glm::dvec3& n) {
+    const glm::dvec3 ref = std::abs(n.z) < 0.9 ? glm::dvec3(0, 0, 1) : glm::dvec3(1, 0, 0);
+    const glm::dvec3 t1 = glm::normalize(glm::cross(ref, n));
+    return {t1, glm::cross(n, t1)};
+}
+
+std::shared_ptr<const lights::Light> buildLight(const io::LightDesc& l) {
+    const glm::vec3 power = glm::vec3(l.color * l.intensity);
+    if (l.type == "directional")
+        return std::make_shared<lights::DirectionalLight>(power, glm::vec3(-l.direction));
+    if (l.type == "point")
+        return std::make_shared<lights::PointLight>(power, l.position, l.minDistance);
+    if (l.type == "area") {
+        if (l.shape == "sphere")
+            return std::make_shared<lights::SphereLight>(power, l.position, l.radius);
+        if (l.shape == "disk")
+            return std::make_shared<lights::DiskLight>(power, l.position, l.normal, l.radius);
+        const auto [t1, t2] = tangentFrame(l.normal);
+        const glm::dvec3 eu = l.size.x * t1, ev = l.size.y * t2;
+        return std::make_shared<lights::RectLight>(power, l.position - 0.5 * (eu + ev), eu, ev);
+    }
+    // Environment: the map scaled per channel by colour × intensity.
+    core::ImageRGBA image = io::readHdrImage(l.path);
+    for (std::size_t i = 0; i < image.pixels.size(); ++i)
+        if (i % 4 != 3) image.pixels[i] *= power[int(i % 4)];
+    lights::EnvironmentOptions o;
+    o.layout = l.layout == "probe" ? lights::EnvironmentLayout::AngularProbe
+                                   : lights::EnvironmentLayout::Equirect;
+    const glm::dvec3 r = glm::radians(l.rotationDeg);
+    const glm::dmat3 rx(1, 0, 0, 0, std::cos(r.x), std::sin(r.x), 0, -std::sin(r.x), std::cos(r.x));
+    const glm::dmat3 ry(std::cos(r.y), 0, -std::sin(r.y), 0, 1, 0, std::sin(r.y), 0, std::cos(r.y));
+    const glm::dmat3 rz(std::cos(r.z), std::sin(r.z), 0, -std::sin(r.z), std::cos(r.z), 0, 0, 0, 1);
+    o.rotation = rz * ry * rx;  // x, then y, then z (extrinsic), as the scene documents
+    return std::make_shared<lights::EnvironmentLight>(image, o, l.path.string());
+}
+}  // namespace
+
+std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& scene) {
+    std::vector<std::shared_ptr<const lights::Light>> out;
+    for (std::size_t i = 0; i < scene.lights.size(); ++i) {
+        try {
+            out.push_back(buildLight(scene.lights[i]));
+        } catch (const InputError& e) {
+            // A file's own errors (environment map) name the file; the lights library names
+            // its field: map it to the scene key.
+            if (e.source() == "light")
+                throw InputError(scene.source, "lights[" + std::to_string(i) + "]." + e.field(),
+                                 e.problem(), e.fix());
+            throw;
+        }
+    }
+    return out;
+}
+
+std::uint64_t lightsIdentity(const io::Scene& scene) {
+    core::Hasher h;
+    h.add("lights.v1");
+    for (const auto& l : scene.lights) {
+        h.add(l.type).addPod(l.color).add(l.intensity).addPod(l.direction).addPod(l.position);
+        h.add(l.minDistance).add(l.shape).addPod(l.normal).add(l.radius).addPod(l.size);
+        h.addPod(l.rotationDeg).add(l.layout);
+        if (l.type == "environment") addFileIdentity(h, l.path);
+    }
+    return h.value();
+}
+
+bool hasEnvironmentLight(const io::Scene& scene) {
+    return std::any_of(scene.lights.begin(), scene.lights.end(),
+                       [](const io::LightDesc& l) { return l.type == "environment"; });
+}
+
+}  // namespace voxlight::pipeline
