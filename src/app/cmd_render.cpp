@@ -43,6 +43,14 @@ void checkOutput(const std::string& path, const std::vector<std::string>& extens
                          "create it first");
 }
 
+/// The record of an output stage (written after the pipeline's stages, by this command).
+pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
+                                   const std::string& option) {
+    pipeline::StageRecord r{name, pipeline::StageKind::Frame, !path.empty(), "", 0.0, "", {"render"}};
+    r.reason = path.empty() ? "not needed: no " + option + " given" : "computed: " + path;
+    return r;
+}
+
 /// Writes text to a temporary file beside `path` and renames it (nothing half-written).
 void writeTextAtomically(const fs::path& path, const std::string& text) {
     const fs::path tmp = path.string() + ".tmp";
@@ -90,7 +98,10 @@ Command addRenderCommand(CLI::App& app) {
         if (*explain) {
             const io::Scene s = io::loadScene(*scene, *sets);
             std::printf("%-18s %-10s %-8s %-16s %s\n", "stage", "kind", "runs", "key", "reason");
-            for (const auto& r : session.explain(s)) {
+            std::vector<pipeline::StageRecord> plan = session.explain(s);
+            plan.push_back(outputRecord("write_image", *out, "-o"));
+            plan.push_back(outputRecord("write_exr", *exr, "--exr"));
+            for (const auto& r : plan) {
                 std::string inputs;
                 for (const auto& i : r.inputs) inputs += (inputs.empty() ? "" : ", ") + i;
                 std::printf("%-18s %-10s %-8s %-16s %s  [reads: %s]\n", r.name.c_str(),
@@ -111,17 +122,12 @@ Command addRenderCommand(CLI::App& app) {
 
         core::Stopwatch sw;
         io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), *out);
-        r.stages.push_back({"write_image", pipeline::StageKind::Frame, true, *out, sw.seconds(),
-                            "", {"render"}});
+        r.stages.push_back(outputRecord("write_image", *out, "-o"));
+        r.stages.back().seconds = sw.seconds();
         sw.restart();
-        if (!exr->empty()) {
-            io::writeImage(r.image, *exr);
-            r.stages.push_back({"write_exr", pipeline::StageKind::Frame, true, *exr,
-                                sw.seconds(), "", {"render"}});
-        } else {
-            r.stages.push_back({"write_exr", pipeline::StageKind::Frame, false,
-                                "not needed: no --exr given", 0.0, "", {"render"}});
-        }
+        if (!exr->empty()) io::writeImage(r.image, *exr);
+        r.stages.push_back(outputRecord("write_exr", *exr, "--exr"));
+        r.stages.back().seconds = sw.seconds();
         if (!stats->empty()) {
             nlohmann::json j = pipeline::statsJson(r, total.seconds());
             j["scene"] = s.document;

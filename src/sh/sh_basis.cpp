@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <limits>
 #include <numbers>
 #include <string>
 
@@ -83,6 +84,11 @@ V normalizeDirectionImpl(const V& dir, const char* source, const char* field) {
                          "direction has a NaN or infinite component (" + std::to_string(dir.x) +
                              ", " + std::to_string(dir.y) + ", " + std::to_string(dir.z) + ")",
                          "give a finite, non-zero direction vector");
+    // A direction already of unit length to rounding is kept as given: normalising it again would
+    // only move its last bits (and a renderer handed a unit vector should shade with exactly it).
+    using S = typename V::value_type;
+    const S len2 = dir.x * dir.x + dir.y * dir.y + dir.z * dir.z;
+    if (std::abs(len2 - S(1)) <= S(4) * std::numeric_limits<S>::epsilon()) return dir;
     // Scale by the largest component first so that tiny (but non-zero) vectors normalise without
     // underflow.
     const auto big = std::max(std::abs(dir.x), std::max(std::abs(dir.y), std::abs(dir.z)));

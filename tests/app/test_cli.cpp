@@ -118,3 +118,46 @@ TEST(Cli, SceneOverridesAreValidated) {
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(nlohmann::json::parse(r.out)["camera"]["fov_y"], 35);
 }
+
+TEST(Cli, TwoProcessesShareOneCacheDirectoryAndExplainMatchesTheRun) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json")
+        << R"({"volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+               "image": {"width": 40, "height": 32}})";
+    const std::string scene = "'" + (tmp / "scene.json").string() + "'";
+    const std::string cache = " --cache '" + (tmp / "cache").string() + "'";
+    // Both at once, into one empty cache directory.
+    const std::string both = "render " + scene + " -q -o '" + (tmp / "a.png").string() + "'" +
+                             cache + " & " + VOXLIGHT_BINARY + " render " + scene + " -q -o '" +
+                             (tmp / "b.png").string() + "'" + cache + "; wait $!";
+    const Result r = run(both, tmp.path());
+    EXPECT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(tmp / "a.png"));
+    EXPECT_TRUE(fs::exists(tmp / "b.png"));
+    for (const auto& e : fs::directory_iterator(tmp / "cache"))
+        EXPECT_EQ(e.path().extension(), ".vlcache") << "left behind: " << e.path();
+    // A third process: --explain says every precompute stage is cached, and the run agrees.
+    const Result ex = run("render " + scene + " --explain" + cache, tmp.path());
+    ASSERT_EQ(ex.code, 0) << ex.err;
+    EXPECT_NE(ex.out.find("brick_grid"), std::string::npos) << ex.out;
+    const Result third = run("render " + scene + " -q -o '" + (tmp / "c.png").string() +
+                                 "' --stats '" + (tmp / "c.json").string() + "'" + cache,
+                             tmp.path());
+    ASSERT_EQ(third.code, 0) << third.err;
+    std::ifstream sf(tmp / "c.json");
+    const auto stats = nlohmann::json::parse(sf);
+    int precompute = 0;
+    for (const auto& st : stats["stages"]) {
+        const std::string name = st["name"], reason = st["reason"];
+        const auto line = ex.out.find("\n" + name + " ");
+        ASSERT_NE(line, std::string::npos) << name << " missing from --explain:\n" << ex.out;
+        const std::string explained = ex.out.substr(line + 1, ex.out.find('\n', line + 1) - line);
+        if (st["kind"] == "precompute" && reason.rfind("not needed", 0) != 0) {
+            ++precompute;
+            EXPECT_FALSE(st["ran"].get<bool>()) << name << ": " << reason;
+            EXPECT_NE(reason.find("(disk)"), std::string::npos) << name << ": " << reason;
+            EXPECT_NE(explained.find("(disk)"), std::string::npos) << explained;
+        }
+    }
+    EXPECT_GE(precompute, 4);
+}
