@@ -46,7 +46,8 @@ void checkOutput(const std::string& path, const std::vector<std::string>& extens
 /// The record of an output stage (written after the pipeline's stages, by this command).
 pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
                                    const std::string& option) {
-    pipeline::StageRecord r{name, pipeline::StageKind::Frame, !path.empty(), "", 0.0, "", {"render"}};
+    pipeline::StageRecord r{name,      pipeline::StageKind::Frame, !path.empty(), "", 0.0, "",
+                            {"render"}};
     r.reason = path.empty() ? "not needed: no " + option + " given" : "computed: " + path;
     return r;
 }
@@ -85,8 +86,9 @@ Command addRenderCommand(CLI::App& app) {
         ->add_option("--frames", *frames,
                      "Render the frame N times; stats report the median and every frame's time")
         ->check(CLI::Range(1, pipeline::kMaxFrames));
-    c.sub->add_option("--cache", *cacheDir,
-                      "Keep precomputed stages in DIR across runs (shared safely between processes)");
+    c.sub->add_option(
+        "--cache", *cacheDir,
+        "Keep precomputed stages in DIR across runs (shared safely between processes)");
     c.sub->add_flag("--explain", *explain,
                     "Print the plan: each stage, what it reads, and whether it would run, be "
                     "cached or is not needed; render nothing");
@@ -117,8 +119,7 @@ Command addRenderCommand(CLI::App& app) {
         if (!exr->empty()) checkOutput(*exr, {".exr"}, "--exr");
         if (!stats->empty()) checkOutput(*stats, {".json"}, "--stats");
         const io::Scene s = io::loadScene(*scene, *sets);
-        pipeline::RunResult r =
-            session.run(s, {.frames = *frames}, terminalProgress(*quiet));
+        pipeline::RunResult r = session.run(s, {.frames = *frames}, terminalProgress(*quiet));
 
         core::Stopwatch sw;
         io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), *out);

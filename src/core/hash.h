@@ -40,8 +40,7 @@ class Hasher {
     Hasher& add(const char* s) { return add(std::string_view(s)); }
     Hasher& add(const std::string& s) { return add(std::string_view(s)); }
     template <class T>
-        requires std::is_arithmetic_v<T> || std::is_enum_v<T>
-    Hasher& add(T v) {
+    requires std::is_arithmetic_v<T> || std::is_enum_v<T> Hasher& add(T v) {
         std::uint64_t w = 0;
         static_assert(sizeof(T) <= 8);
         std::memcpy(&w, &v, sizeof(T));

@@ -143,7 +143,7 @@ struct Scene {
     /// Effect names as given (the pipeline checks them against its catalogue and the method).
     std::vector<std::string> effects;
     bool effectsGiven = false;  ///< the scene has an "effects" key (even an empty list)
-    nlohmann::json document;  ///< the validated document after overrides (echoed into stats)
+    nlohmann::json document;    ///< the validated document after overrides (echoed into stats)
 };
 
 /// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed

@@ -15,7 +15,8 @@ namespace voxlight::pipeline {
 namespace fs = std::filesystem;
 
 namespace {
-constexpr char kMagic[16] = {'V', 'O', 'X', 'L', 'I', 'G', 'H', 'T', '-', 'C', 'A', 'C', 'H', 'E', '\0', '\n'};
+constexpr char kMagic[16] = {'V', 'O', 'X', 'L', 'I', 'G', 'H',  'T',
+                             '-', 'C', 'A', 'C', 'H', 'E', '\0', '\n'};
 constexpr std::size_t kMaxStageName = 256;
 
 std::vector<unsigned char> readWholeFile(const fs::path& path, bool& exists) {
@@ -34,11 +35,11 @@ std::vector<unsigned char> readWholeFile(const fs::path& path, bool& exists) {
 
 /// Records are one 64-bit value.
 const Codec& recordCodec() {
-    static const Codec c{
-        1, [](const Artifact& a, ByteWriter& w) { w.pod(*a.as<std::uint64_t>()); },
-        [](ByteReader& r) {
-            return Artifact::of(std::make_shared<const std::uint64_t>(r.pod<std::uint64_t>()), 8);
-        }};
+    static const Codec c{1, [](const Artifact& a, ByteWriter& w) { w.pod(*a.as<std::uint64_t>()); },
+                         [](ByteReader& r) {
+                             return Artifact::of(
+                                 std::make_shared<const std::uint64_t>(r.pod<std::uint64_t>()), 8);
+                         }};
     return c;
 }
 
@@ -47,9 +48,9 @@ fs::path temporaryBeside(const fs::path& target) {
     static std::atomic<std::uint64_t> counter{0};
     const std::uint64_t n = counter.fetch_add(1);
     const auto t = std::uint64_t(std::chrono::steady_clock::now().time_since_epoch().count());
-    return target.parent_path() / ("." + target.filename().string() + "." +
-                                   std::to_string(::getpid()) + "." + std::to_string(n) + "." +
-                                   core::hexKey(t) + ".tmp");
+    return target.parent_path() /
+           ("." + target.filename().string() + "." + std::to_string(::getpid()) + "." +
+            std::to_string(n) + "." + core::hexKey(t) + ".tmp");
 }
 
 /// Writes bytes to path atomically (temporary file, then rename). Returns an error text or "".
@@ -183,7 +184,8 @@ std::optional<Artifact> ArtifactCache::readDisk(const std::string& stage, std::u
         ByteReader r(file.data(), file.size());
         char magic[sizeof kMagic];
         for (char& c : magic) c = r.pod<char>();
-        if (std::memcmp(magic, kMagic, sizeof kMagic) != 0) return bad("is not a voxlight cache file");
+        if (std::memcmp(magic, kMagic, sizeof kMagic) != 0)
+            return bad("is not a voxlight cache file");
         const auto format = r.pod<std::uint32_t>();
         if (format != kCacheFormatVersion)
             return bad("has cache format " + std::to_string(format) + ", this build reads " +
@@ -252,7 +254,8 @@ void ArtifactCache::putRecord(const std::string& kind, std::uint64_t key, std::u
         records_[{kind, key}] = value;
     }
     if (dir_ && !onDisk(kind, key))
-        writeDisk(kind, key, recordCodec(), Artifact::of(std::make_shared<const std::uint64_t>(value), 8));
+        writeDisk(kind, key, recordCodec(),
+                  Artifact::of(std::make_shared<const std::uint64_t>(value), 8));
 }
 
 }  // namespace voxlight::pipeline

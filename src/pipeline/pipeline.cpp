@@ -24,8 +24,8 @@ std::string toString(StageKind k) {
 }
 
 json toJson(const StageRecord& r) {
-    return {{"name", r.name},      {"kind", toString(r.kind)}, {"ran", r.ran},
-            {"reason", r.reason},  {"seconds", r.seconds},     {"key", r.key},
+    return {{"name", r.name},     {"kind", toString(r.kind)}, {"ran", r.ran},
+            {"reason", r.reason}, {"seconds", r.seconds},     {"key", r.key},
             {"inputs", r.inputs}};
 }
 
@@ -105,7 +105,8 @@ Plan Session::plan(const io::Scene& scene) const {
         const std::string& e = scene.effects[i];
         const std::string field = "effects[" + std::to_string(i) + "]";
         const auto& cat = effectCatalog();
-        if (std::none_of(cat.begin(), cat.end(), [&](const EffectInfo& c) { return c.name == e; })) {
+        if (std::none_of(cat.begin(), cat.end(),
+                         [&](const EffectInfo& c) { return c.name == e; })) {
             std::string list;
             for (const auto& c : cat) list += (list.empty() ? "" : ", ") + c.name;
             throw InputError(scene.source, field, "'" + e + "' is not an effect",
@@ -116,11 +117,10 @@ Plan Session::plan(const io::Scene& scene) const {
             for (const auto& other : reg.methods())
                 if (std::find(other.effects.begin(), other.effects.end(), e) != other.effects.end())
                     providers += (providers.empty() ? "" : ", ") + other.name;
-            throw InputError(scene.source, field,
-                             "method '" + m->name + "' does not simulate '" + e + "'",
-                             providers.empty()
-                                 ? "no method of this build simulates it yet; remove it"
-                                 : "use " + providers + ", or remove it");
+            throw InputError(
+                scene.source, field, "method '" + m->name + "' does not simulate '" + e + "'",
+                providers.empty() ? "no method of this build simulates it yet; remove it"
+                                  : "use " + providers + ", or remove it");
         }
     }
     ParamReader reader(scene, m->params);
@@ -166,8 +166,8 @@ std::vector<StageRecord> Session::explain(const io::Scene& scene) {
         }
         r.key = core::hexKey(*key);
         const bool memory = st.kind != StageKind::Frame && cache_.inMemory(st.name, *key);
-        const bool disk = !memory && st.kind == StageKind::Precompute && st.codec &&
-                          cache_.onDisk(st.name, *key);
+        const bool disk =
+            !memory && st.kind == StageKind::Precompute && st.codec && cache_.onDisk(st.name, *key);
         if (memory || disk) {
             r.reason = cachedReason(*key, disk);
         } else {
@@ -249,8 +249,8 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
         res.stages.push_back(r);
     }
     if (!run.has(plan.imageStage))
-        throw InternalError("plan of '" + plan.method + "' has no image stage '" +
-                            plan.imageStage + "'");
+        throw InternalError("plan of '" + plan.method + "' has no image stage '" + plan.imageStage +
+                            "'");
     res.image = *run.get<core::ImageRGBA>(plan.imageStage);
     res.details = run.details();
     if (options.frames > 1) res.details["frame_seconds"] = frameSeconds;

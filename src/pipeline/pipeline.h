@@ -76,10 +76,10 @@ struct Plan {
 struct StageRecord {
     std::string name;
     StageKind kind = StageKind::Precompute;
-    bool ran = false;       ///< computed in this run (false: cached or not needed)
-    std::string reason;     ///< "computed", "cached <key>", "not needed: ..."
-    double seconds = 0.0;   ///< Frame stages: the median frame
-    std::string key;        ///< 16 hex digits, or "" when unknown / not needed
+    bool ran = false;      ///< computed in this run (false: cached or not needed)
+    std::string reason;    ///< "computed", "cached <key>", "not needed: ..."
+    double seconds = 0.0;  ///< Frame stages: the median frame
+    std::string key;       ///< 16 hex digits, or "" when unknown / not needed
     std::vector<std::string> inputs;
 };
 

@@ -57,25 +57,24 @@ constexpr std::uint64_t kMaxCells = std::uint64_t(1) << 34;
 [[noreturn]] void badPayload(const std::string& what) { throw CacheFormatError(what); }
 
 const Codec& brickGridCodec() {
-    static const Codec c{
-        1,
-        [](const Artifact& a, ByteWriter& w) {
-            const auto& g = *a.as<grid::BrickGrid>();
-            w.pod(g.dims());
-            w.pod(g.valueLo());
-            w.pod(g.valueHi());
-            w.array(g.bricks());
-        },
-        [](ByteReader& r) {
-            const auto dims = r.pod<glm::ivec3>();
-            const auto lo = r.pod<float>(), hi = r.pod<float>();
-            auto bricks = r.array<grid::BrickStats>(kMaxCells);
-            auto g = std::make_shared<grid::BrickGrid>();
-            if (!grid::BrickGrid::fromParts(dims, lo, hi, std::move(bricks), *g))
-                badPayload("brick grid parts do not fit together");
-            const std::size_t bytes = g->size() * sizeof(grid::BrickStats);
-            return Artifact::of<grid::BrickGrid>(std::move(g), bytes);
-        }};
+    static const Codec c{1,
+                         [](const Artifact& a, ByteWriter& w) {
+                             const auto& g = *a.as<grid::BrickGrid>();
+                             w.pod(g.dims());
+                             w.pod(g.valueLo());
+                             w.pod(g.valueHi());
+                             w.array(g.bricks());
+                         },
+                         [](ByteReader& r) {
+                             const auto dims = r.pod<glm::ivec3>();
+                             const auto lo = r.pod<float>(), hi = r.pod<float>();
+                             auto bricks = r.array<grid::BrickStats>(kMaxCells);
+                             auto g = std::make_shared<grid::BrickGrid>();
+                             if (!grid::BrickGrid::fromParts(dims, lo, hi, std::move(bricks), *g))
+                                 badPayload("brick grid parts do not fit together");
+                             const std::size_t bytes = g->size() * sizeof(grid::BrickStats);
+                             return Artifact::of<grid::BrickGrid>(std::move(g), bytes);
+                         }};
     return c;
 }
 
@@ -100,41 +99,41 @@ const Codec& skipCellsCodec() {
             const int cellSize = r.pod<int>();
             auto maj = r.array<float>(kMaxCells);
             auto ranges = r.array<std::array<float, 2>>(kMaxCells);
-            if (counts.x < 1 || counts.y < 1 || counts.z < 1 || cellSize != render::kSkipCellVoxels ||
+            if (counts.x < 1 || counts.y < 1 || counts.z < 1 ||
+                cellSize != render::kSkipCellVoxels ||
                 maj.size() != std::size_t(counts.x) * counts.y * counts.z ||
                 ranges.size() != maj.size())
                 badPayload("skip cell sizes do not fit together");
             for (float m : maj)
                 if (!(m >= 0.f)) badPayload("negative or NaN majorant");
             const std::size_t bytes = maj.size() * 12;
-            return Artifact::of(std::make_shared<const grid::BrickMajorants>(
-                                    grid::BrickMajorants::fromCells(counts, cellSize,
-                                                                    std::move(maj),
-                                                                    std::move(ranges))),
-                                bytes);
+            return Artifact::of(
+                std::make_shared<const grid::BrickMajorants>(grid::BrickMajorants::fromCells(
+                    counts, cellSize, std::move(maj), std::move(ranges))),
+                bytes);
         }};
     return c;
 }
 
 const Codec& transferFunctionCodec() {
-    static const Codec c{
-        1,
-        [](const Artifact& a, ByteWriter& w) {
-            const auto& t = a.as<TfArtifact>()->tf;
-            w.string(t.name());
-            w.pod(t.window());
-            w.array(t.points());
-        },
-        [](ByteReader& r) {
-            auto t = std::make_shared<TfArtifact>();
-            const std::string name = r.string(256);
-            const auto window = r.pod<optics::Window>();
-            auto points = r.array<optics::TfPoint>(1 << 20);
-            // The constructor validates the points (InputError → the cache reports and recomputes).
-            t->tf = optics::TransferFunction(std::move(points), window, name);
-            t->table = std::make_shared<const optics::TfTable>(t->tf);
-            return Artifact::of<TfArtifact>(std::move(t), sizeof(TfArtifact) + 64 * 1024);
-        }};
+    static const Codec c{1,
+                         [](const Artifact& a, ByteWriter& w) {
+                             const auto& t = a.as<TfArtifact>()->tf;
+                             w.string(t.name());
+                             w.pod(t.window());
+                             w.array(t.points());
+                         },
+                         [](ByteReader& r) {
+                             auto t = std::make_shared<TfArtifact>();
+                             const std::string name = r.string(256);
+                             const auto window = r.pod<optics::Window>();
+                             auto points = r.array<optics::TfPoint>(1 << 20);
+                             // The constructor validates the points (InputError → the cache reports and recomputes).
+                             t->tf = optics::TransferFunction(std::move(points), window, name);
+                             t->table = std::make_shared<const optics::TfTable>(t->tf);
+                             return Artifact::of<TfArtifact>(std::move(t),
+                                                             sizeof(TfArtifact) + 64 * 1024);
+                         }};
     return c;
 }
 
@@ -181,8 +180,8 @@ const Codec& gradientsCodec() {
                     badPayload("gradient brick table sizes do not fit together");
                 for (std::int64_t slot : b->slot)
                     if (slot < -1 || (slot >= 0 && std::uint64_t(slot) +
-                                                        render::BrickedGradients::kBrickEntries >
-                                                        b->d.size()))
+                                                           render::BrickedGradients::kBrickEntries >
+                                                       b->d.size()))
                         badPayload("gradient brick slot out of range");
                 bytes = b->d.size() * sizeof(render::GradientEntry) + b->slot.size() * 8;
                 g->bricked = std::move(b);
@@ -274,8 +273,8 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
         {"image size", "image.width"}};
     if (e.source() == "render options" || e.source() == "camera") {
         const auto it = kSceneKey.find(e.field());
-        throw InputError(scene.source, it != kSceneKey.end() ? it->second : e.field(),
-                         e.problem(), e.fix());
+        throw InputError(scene.source, it != kSceneKey.end() ? it->second : e.field(), e.problem(),
+                         e.fix());
     }
     throw e;
 }
@@ -314,7 +313,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         const std::size_t bytes = v->volume.sizeBytes();
         return Artifact::of<LoadedVolume>(std::move(v), bytes);
     };
-    load.outputKey = [](const Run&, const Artifact& a) { return a.as<LoadedVolume>()->contentHash; };
+    load.outputKey = [](const Run&, const Artifact& a) {
+        return a.as<LoadedVolume>()->contentHash;
+    };
     load.predictOutputKey = [](const Run& run, std::uint64_t identity) {
         return run.cache().record("volume-content", identity);
     };
@@ -327,10 +328,12 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     plan.stages.push_back(load);
 
     Stage brick{"brick_grid", StageKind::Precompute, {"load_volume"}};
-    brick.key = [](const Run& run) { return KeyBuilder(run, "brick_grid").stage("load_volume").value(); };
+    brick.key = [](const Run& run) {
+        return KeyBuilder(run, "brick_grid").stage("load_volume").value();
+    };
     brick.compute = [](Run& run) {
-        auto g = std::make_shared<const grid::BrickGrid>(grid::BrickGrid::build(
-            run.get<LoadedVolume>("load_volume")->volume, run.progress()));
+        auto g = std::make_shared<const grid::BrickGrid>(
+            grid::BrickGrid::build(run.get<LoadedVolume>("load_volume")->volume, run.progress()));
         const std::size_t bytes = g->size() * sizeof(grid::BrickStats);
         return Artifact::of<grid::BrickGrid>(std::move(g), bytes);
     };
@@ -353,7 +356,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return Artifact::of<TfArtifact>(std::move(t), sizeof(TfArtifact) + 64 * 1024);
     };
     tf.codec = &transferFunctionCodec();
-    tf.describe = [](const Run&, const Artifact& a) { return "'" + a.as<TfArtifact>()->tf.name() + "'"; };
+    tf.describe = [](const Run&, const Artifact& a) {
+        return "'" + a.as<TfArtifact>()->tf.name() + "'";
+    };
     plan.stages.push_back(tf);
 
     Stage cells{"skip_cells", StageKind::Precompute, {"brick_grid", "transfer_function", "method"}};
@@ -407,7 +412,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 render::BrickedGradients::build(v, *run.get<grid::BrickMajorants>("skip_cells")));
             bytes = g->bricked->d.size() * sizeof(render::GradientEntry);
         } else {
-            g->dense = std::make_shared<const render::VoxelGradients>(render::VoxelGradients::build(v));
+            g->dense =
+                std::make_shared<const render::VoxelGradients>(render::VoxelGradients::build(v));
             bytes = g->dense->d.size() * sizeof(render::GradientEntry);
         }
         return Artifact::of<GradientArtifact>(std::move(g), bytes);
@@ -416,7 +422,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     grad.describe = [](const Run&, const Artifact& a) -> std::string {
         const auto& g = *a.as<GradientArtifact>();
         if (g.dense && !g.dense->empty()) return "dense central differences";
-        if (g.bricked && !g.bricked->empty()) return "bricked central differences near visible cells";
+        if (g.bricked && !g.bricked->empty())
+            return "bricked central differences near visible cells";
         return "no table (float volume or differences beyond int16): six taps per sample";
     };
     plan.stages.push_back(grad);
@@ -474,9 +481,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             render::visibleWorldBounds(v.geometry(), *run.get<grid::BrickMajorants>("skip_cells"));
         const io::Scene& s = run.scene();
         try {
-            auto c = std::make_shared<const render::Camera>(buildCameraSpec(s.camera), bounds[0],
-                                                            bounds[1], s.image.width,
-                                                            s.image.height);
+            auto c = std::make_shared<const render::Camera>(
+                buildCameraSpec(s.camera), bounds[0], bounds[1], s.image.width, s.image.height);
             return Artifact::of<render::Camera>(std::move(c), sizeof(render::Camera));
         } catch (const InputError& e) {
             rethrowAsScene(s, e);
@@ -484,7 +490,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(camera);
 
-    Stage frame{"render", StageKind::Frame, {"camera", "skip_cells", "gradients", "light_sh", "method"}};
+    Stage frame{
+        "render", StageKind::Frame, {"camera", "skip_cells", "gradients", "light_sh", "method"}};
     frame.key = [optionsKey](const Run& run) {
         return KeyBuilder(run, "render")
             .stage("load_volume")
@@ -516,8 +523,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             const render::RayCaster caster(
                 std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
                 std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
-            auto film = std::make_shared<core::ImageRGBA>(
-                caster.render(*camera, run.progress(), &stats));
+            auto film =
+                std::make_shared<core::ImageRGBA>(caster.render(*camera, run.progress(), &stats));
             json& d = run.details();
             d["render"] = {{"step_voxels", o.stepVoxels},
                            {"step_mm", caster.stepMm()},
@@ -561,17 +568,19 @@ MethodInfo rayCasterMethod(Kind kind, std::string name, std::string summary,
     return m;
 }
 
-const RegisterMethod kEmissionAbsorption(rayCasterMethod(
-    Kind::EmissionAbsorption, "emission-absorption",
-    "σt, albedo and emission from the TF under uniform unit light, no visibility", {"ambient"}, {}));
+const RegisterMethod kEmissionAbsorption(
+    rayCasterMethod(Kind::EmissionAbsorption, "emission-absorption",
+                    "σt, albedo and emission from the TF under uniform unit light, no visibility",
+                    {"ambient"}, {}));
 const RegisterMethod kGradient(rayCasterMethod(
     Kind::Gradient, "gradient", "gradient Blinn–Phong without visibility (the clinical baseline)",
     {"ambient", "diffuse", "specular", "shininess", "central_differences"}, {"specular"}));
 const RegisterMethod kMip(rayCasterMethod(Kind::Mip, "mip",
                                           "maximum intensity projection, grey through the window",
                                           {}, {}));
-const RegisterMethod kMinIp(rayCasterMethod(
-    Kind::MinIp, "minip", "minimum intensity projection, grey through the window", {}, {}));
+const RegisterMethod kMinIp(rayCasterMethod(Kind::MinIp, "minip",
+                                            "minimum intensity projection, grey through the window",
+                                            {}, {}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

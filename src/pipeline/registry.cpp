@@ -92,7 +92,8 @@ const std::vector<EffectInfo>& effectCatalog() {
         {"global_shadows",
          "shadows from matter anywhere between a sample and the light (SH global visibility, "
          "PVRT, path tracer)"},
-        {"multiple_scattering", "light scattered more than once inside the volume (PVRT, path tracer)"},
+        {"multiple_scattering",
+         "light scattered more than once inside the volume (PVRT, path tracer)"},
         {"depth_of_field", "thin-lens camera blur around a focal distance (path tracer)"},
     };
     return e;

@@ -58,8 +58,8 @@ std::uint64_t volumeIdentity(const io::Scene& scene) {
     const io::ReadOptions& o = src.readOptions;
     h.add(o.dicomSeriesUid).add(int(o.nonFinite)).add(o.raw.has_value());
     std::error_code ec;
-    const fs::path path = fs::weakly_canonical(src.path, ec).empty() ? src.path
-                                                                     : fs::weakly_canonical(src.path, ec);
+    const fs::path path =
+        fs::weakly_canonical(src.path, ec).empty() ? src.path : fs::weakly_canonical(src.path, ec);
     if (fs::is_directory(path, ec)) {
         // A DICOM series: every file of the directory (sorted, so the order is fixed).
         std::vector<fs::path> files;
@@ -112,8 +112,8 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
 
 render::CameraSpec buildCameraSpec(const io::CameraDesc& d) {
     render::CameraSpec s;
-    s.projection =
-        d.projection == "orthographic" ? render::Projection::Orthographic : render::Projection::Perspective;
+    s.projection = d.projection == "orthographic" ? render::Projection::Orthographic
+                                                  : render::Projection::Perspective;
     s.azimuthDeg = d.azimuthDeg;
     s.elevationDeg = d.elevationDeg;
     s.rollDeg = d.rollDeg;

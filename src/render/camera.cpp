@@ -15,8 +15,7 @@ constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
 Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
                int width, int height)
     : projection_(spec.projection), width_(width), height_(height) {
-    if (width < 1 || height < 1)
-        throw InputError("camera", "image size", "must be at least 1x1");
+    if (width < 1 || height < 1) throw InputError("camera", "image size", "must be at least 1x1");
     const glm::dvec3 centre = 0.5 * (boundsMin + boundsMax);
     const double radius = std::max(0.5 * glm::length(boundsMax - boundsMin), 1e-3);
     const glm::dvec3 target = spec.target.value_or(centre);

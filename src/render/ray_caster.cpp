@@ -267,7 +267,8 @@ CasterTables buildTables(const core::Volume& volume, const grid::BrickGrid& grid
         buildSkipCells(volume, grid, tf, *t.table, options));
     switch (gradientTableUse(volume, options)) {
         case GradientTableUse::Dense:
-            t.voxelGradients = std::make_shared<const VoxelGradients>(VoxelGradients::build(volume));
+            t.voxelGradients =
+                std::make_shared<const VoxelGradients>(VoxelGradients::build(volume));
             break;
         case GradientTableUse::Bricked:
             t.brickedGradients = std::make_shared<const BrickedGradients>(
@@ -607,13 +608,13 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
 }
 
 core::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& progress,
-                                RenderStats* stats) const {
+                                  RenderStats* stats) const {
     const auto model = makeBuiltinModel(*this, camera);
     return render(camera, *model, progress, stats);
 }
 
 core::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
-                                const core::Progress& progress, RenderStats* stats) const {
+                                  const core::Progress& progress, RenderStats* stats) const {
     const int W = camera.width(), H = camera.height();
     if (std::uint64_t(W) * std::uint64_t(H) > kMaxPixels)
         throw InputError("render options", "image size",

@@ -34,14 +34,14 @@
 #include <string>
 #include <vector>
 
+#include "core/image.h"
 #include "core/progress.h"
 #include "core/volume.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
-#include "core/image.h"
+#include "lights/light.h"
 #include "optics/transfer_function.h"
 #include "render/camera.h"
-#include "lights/light.h"
 #include "render/shading.h"
 
 namespace voxlight::render {
@@ -269,12 +269,12 @@ class RayCaster {
 
     /// Renders with the built-in model of options().mode.
     core::ImageRGBA render(const Camera& camera,
-                         const core::Progress& progress = core::Progress::none(),
-                         RenderStats* stats = nullptr) const;
+                           const core::Progress& progress = core::Progress::none(),
+                           RenderStats* stats = nullptr) const;
     /// Renders with any shading model (later issues plug theirs in here).
     core::ImageRGBA render(const Camera& camera, const ShadingModel& model,
-                         const core::Progress& progress = core::Progress::none(),
-                         RenderStats* stats = nullptr) const;
+                           const core::Progress& progress = core::Progress::none(),
+                           RenderStats* stats = nullptr) const;
 
     /// The clipped range of the camera ray through pixel (x, y).
     RaySegment setupRay(const Camera& camera, int x, int y) const;

@@ -184,11 +184,11 @@ class BlinnPhongShader {
     /// A light as the per-sample loop reads it (a flat copy of a lights::Light).
     struct Emitter {
         bool directional = false;
-        bool oneSided = false;        ///< rect/disk: emits toward emitterNormal only
-        glm::vec3 toLight{0.f};       ///< directional: unit, toward the light
-        glm::vec3 position{0.f};      ///< point-like: world mm
-        glm::vec3 value{0.f};         ///< directional: irradiance; point-like: intensity
-        float minDistance = 1.f;      ///< point-like: clamps 1/d², mm
+        bool oneSided = false;         ///< rect/disk: emits toward emitterNormal only
+        glm::vec3 toLight{0.f};        ///< directional: unit, toward the light
+        glm::vec3 position{0.f};       ///< point-like: world mm
+        glm::vec3 value{0.f};          ///< directional: irradiance; point-like: intensity
+        float minDistance = 1.f;       ///< point-like: clamps 1/d², mm
         glm::vec3 emitterNormal{0.f};  ///< oneSided: unit emission direction
     };
 

@@ -92,8 +92,7 @@ TEST(Scene, ErrorsNameTheKeyPath) {
     // Method and effect *names* are the pipeline registry's to check (tests/pipeline); io checks
     // their shape.
     expectBad(json::parse(R"({"volume": "a.nii", "method": 3})"), "method", {"object"});
-    expectBad(json::parse(R"({"volume": "a.nii", "method": {"params": {}}})"), "method",
-              {"name"});
+    expectBad(json::parse(R"({"volume": "a.nii", "method": {"params": {}}})"), "method", {"name"});
     expectBad(json::parse(R"({"volume": "a.nii", "clip_planes": {"normal": [0, 0, 1]}})"),
               "clip_planes", {"array"});
     expectBad(

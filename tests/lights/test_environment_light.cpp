@@ -369,8 +369,7 @@ TEST(EnvironmentLight, BadInputIsAClearError) {
 
 TEST(EnvironmentLight, RealHdrProbeProjection) {
     VL_REQUIRE_SHARED(city, "env/city.hdr");
-    const EnvironmentLight env =
-        loadEnvironment(city, {.rotation = rotationZyz(0.5, 0.4, 0.2)});
+    const EnvironmentLight env = loadEnvironment(city, {.rotation = rotationZyz(0.5, 0.4, 0.2)});
     EXPECT_EQ(env.width(), 1024);
     EXPECT_EQ(env.height(), 512);
     expectShMatchesBruteForce(env, 8);

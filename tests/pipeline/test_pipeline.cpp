@@ -26,13 +26,13 @@ namespace {
 io::Scene scene(const json& doc) { return io::parseScene(doc, "test.json", "."); }
 
 json gradientScene() {
-    return {{"volume", {{"phantom", "torso"}, {"size", 32}}},
-            {"transfer_function", "ct-bone"},
-            {"method", "gradient"},
-            {"lights", json::array({{{"type", "point"},
-                                     {"position", {0, -300, 100}},
-                                     {"intensity", 60000}}})},
-            {"image", {{"width", 24}, {"height", 20}}}};
+    return {
+        {"volume", {{"phantom", "torso"}, {"size", 32}}},
+        {"transfer_function", "ct-bone"},
+        {"method", "gradient"},
+        {"lights",
+         json::array({{{"type", "point"}, {"position", {0, -300, 100}}, {"intensity", 60000}}})},
+        {"image", {{"width", 24}, {"height", 20}}}};
 }
 
 std::set<std::string> ranStages(const RunResult& r) {
@@ -284,7 +284,8 @@ TEST(Pipeline, UniformEnvironmentLightAddsDiffuseTimesPiL) {
     Session session;
     json d = gradientScene();
     const json dark = {{"type", "directional"}, {"direction", {0, 0, -1}}, {"intensity", 0}};
-    d["lights"] = json::array({dark, {{"type", "environment"}, {"path", (tmp / "uniform.hdr").string()}}});
+    d["lights"] =
+        json::array({dark, {{"type", "environment"}, {"path", (tmp / "uniform.hdr").string()}}});
     const RunResult withEnv = session.run(scene(d));
     EXPECT_TRUE(withEnv.stage("light_sh").ran);
     d["lights"] = json::array({dark});
@@ -307,12 +308,11 @@ struct MeanValue {
 };
 
 const Codec& meanCodec() {
-    static const Codec c{1,
-                         [](const Artifact& a, ByteWriter& w) { w.pod(a.as<MeanValue>()->mean); },
-                         [](ByteReader& r) {
-                             return Artifact::of(
-                                 std::make_shared<const MeanValue>(MeanValue{r.pod<double>()}), 8);
-                         }};
+    static const Codec c{
+        1, [](const Artifact& a, ByteWriter& w) { w.pod(a.as<MeanValue>()->mean); },
+        [](ByteReader& r) {
+            return Artifact::of(std::make_shared<const MeanValue>(MeanValue{r.pod<double>()}), 8);
+        }};
     return c;
 }
 
@@ -323,17 +323,23 @@ Plan planToy(const io::Scene& s, ParamReader& p) {
     plan.params = p.used;
     Stage load{"load_volume", StageKind::Input, {"volume"}};
     load.key = [](const Run& run) -> std::optional<std::uint64_t> {
-        return core::Hasher().add(run.scene().volume.phantom).add(run.scene().volume.phantomSize).value();
+        return core::Hasher()
+            .add(run.scene().volume.phantom)
+            .add(run.scene().volume.phantomSize)
+            .value();
     };
     load.compute = [](Run& run) {
         core::PhantomOptions o;
         o.size = run.scene().volume.phantomSize;
-        auto v = std::make_shared<const core::Volume>(core::makePhantom(run.scene().volume.phantom, o));
+        auto v =
+            std::make_shared<const core::Volume>(core::makePhantom(run.scene().volume.phantom, o));
         return Artifact::of<core::Volume>(v, v->sizeBytes());
     };
     plan.stages.push_back(load);
     Stage mean{"toy_mean", StageKind::Precompute, {"load_volume"}};
-    mean.key = [](const Run& run) { return KeyBuilder(run, "toy_mean").stage("load_volume").value(); };
+    mean.key = [](const Run& run) {
+        return KeyBuilder(run, "toy_mean").stage("load_volume").value();
+    };
     mean.compute = [](Run& run) {
         const auto v = run.get<core::Volume>("load_volume");
         double sum = 0;
@@ -341,12 +347,15 @@ Plan planToy(const io::Scene& s, ParamReader& p) {
         for (int k = 0; k < n.z; ++k)
             for (int j = 0; j < n.y; ++j)
                 for (int i = 0; i < n.x; ++i) sum += v->at(i, j, k);
-        return Artifact::of(std::make_shared<const MeanValue>(MeanValue{sum / double(v->voxelCount())}), 8);
+        return Artifact::of(
+            std::make_shared<const MeanValue>(MeanValue{sum / double(v->voxelCount())}), 8);
     };
     mean.codec = &meanCodec();
     plan.stages.push_back(mean);
     Stage render{"render", StageKind::Frame, {"toy_mean", "method"}};
-    render.key = [gain](const Run& run) { return KeyBuilder(run, "render").stage("toy_mean").number(gain).value(); };
+    render.key = [gain](const Run& run) {
+        return KeyBuilder(run, "render").stage("toy_mean").number(gain).value();
+    };
     render.compute = [gain, w = s.image.width, h = s.image.height](Run& run) {
         auto img = std::make_shared<core::ImageRGBA>(w, h);
         const float v = float(run.get<MeanValue>("toy_mean")->mean * gain);
@@ -357,7 +366,8 @@ Plan planToy(const io::Scene& s, ParamReader& p) {
     return plan;
 }
 
-const RegisterMethod kToy({"test-toy", "test only: the volume's mean as a flat image", {}, {"gain"}, planToy});
+const RegisterMethod kToy(
+    {"test-toy", "test only: the volume's mean as a flat image", {}, {"gain"}, planToy});
 }  // namespace
 
 TEST(Pipeline, AToyMethodRegistersFromATestWithoutTouchingOtherLayers) {

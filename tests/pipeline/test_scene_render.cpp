@@ -88,13 +88,15 @@ TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) 
     const auto strict = pipeline::renderScene(scene(d));
     d["render"] = {{"termination", 0.02}};
     const auto loose = pipeline::renderScene(scene(d));
-    EXPECT_LT(loose.details["counters"]["samples"].get<std::uint64_t>(), strict.details["counters"]["samples"].get<std::uint64_t>());
+    EXPECT_LT(loose.details["counters"]["samples"].get<std::uint64_t>(),
+              strict.details["counters"]["samples"].get<std::uint64_t>());
     constexpr float kMaxRadiance = 1.25f;
     float worst = 0.f;
     for (int y = 0; y < 48; ++y)
         for (int x = 0; x < 48; ++x)
             for (int c = 0; c < 4; ++c)
-                worst = std::max(worst, std::abs(loose.image.at(x, y)[c] - strict.image.at(x, y)[c]));
+                worst =
+                    std::max(worst, std::abs(loose.image.at(x, y)[c] - strict.image.at(x, y)[c]));
     EXPECT_LE(worst, 0.02f * kMaxRadiance + 1e-5f);
     EXPECT_GT(worst, 0.f) << "the loose threshold should change something";
     d["render"] = {{"termination", 0.7}};
@@ -114,8 +116,7 @@ TEST(SceneRender, RepeatedFramesReportEveryFrameAndTheSameImage) {
     EXPECT_EQ(once.details["counters"], thrice.details["counters"])
         << "stats are one frame's, not the sum";
     EXPECT_THROW(pipeline::renderScene(scene(d), {.frames = 0}), InputError);
-    EXPECT_THROW(pipeline::renderScene(scene(d), {.frames = pipeline::kMaxFrames + 1}),
-                 InputError);
+    EXPECT_THROW(pipeline::renderScene(scene(d), {.frames = pipeline::kMaxFrames + 1}), InputError);
 }
 
 TEST(SceneRender, UnknownPresetIsRefusedBeforeTheVolumeIsLoaded) {

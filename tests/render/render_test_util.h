@@ -65,8 +65,8 @@ inline render::Camera orthoCamera(const core::Volume& v, double azimuth, double 
 }
 
 inline core::ImageRGBA renderWith(const core::Volume& v, const optics::TransferFunction& tf,
-                                const render::Camera& cam, const render::RenderOptions& o,
-                                render::RenderStats* stats = nullptr) {
+                                  const render::Camera& cam, const render::RenderOptions& o,
+                                  render::RenderStats* stats = nullptr) {
     const grid::BrickGrid g = grid::BrickGrid::build(v);
     const render::RayCaster caster(v, g, tf, o);
     return caster.render(cam, core::Progress::none(), stats);

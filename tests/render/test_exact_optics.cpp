@@ -171,7 +171,7 @@ TEST(ExactOptics, PreintegratedCoarseStepsAgreeWithFineSteppingOfASharpTf) {
     fine.preintegrated = false;
     naive.preintegrated = false;
     const core::ImageRGBA a = renderWith(v, tf, cam, coarse), b = renderWith(v, tf, cam, fine),
-                        c = renderWith(v, tf, cam, naive);
+                          c = renderWith(v, tf, cam, naive);
     double maxPre = 0, maxNaive = 0;
     for (int y = 0; y < 20; ++y)
         for (int x = 0; x < 20; ++x) {

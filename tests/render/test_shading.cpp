@@ -63,9 +63,9 @@ TEST(BlinnPhong, ScatterMatchesTheClosedForm) {
         const double ndh = glm::dot(nd, glm::normalize(ld + ed));
         for (int c = 0; c < 3; ++c) {
             const double diffuse = p.ambient + (ndl > 0 ? p.diffuse * ndl * radiance[c] : 0.0);
-            const double spec =
-                ndl > 0 && ndh > 0 ? p.specular * std::pow(ndh, double(p.shininess)) * radiance[c]
-                                   : 0.0;
+            const double spec = ndl > 0 && ndh > 0
+                                    ? p.specular * std::pow(ndh, double(p.shininess)) * radiance[c]
+                                    : 0.0;
             EXPECT_NEAR(sc.diffuse[c], diffuse, 1e-5);
             EXPECT_NEAR(sc.specular[c], spec,
                         2.f * radiance[c] * p.specular * tableBound(24) + 1e-5);
