@@ -253,6 +253,12 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                             "'");
     res.image = *run.get<core::ImageRGBA>(plan.imageStage);
     res.details = run.details();
+    if (res.details.contains("params_resolved")) {
+        for (auto it = res.details["params_resolved"].begin();
+             it != res.details["params_resolved"].end(); ++it)
+            res.params[it.key()] = it.value();
+        res.details.erase("params_resolved");
+    }
     if (options.frames > 1) res.details["frame_seconds"] = frameSeconds;
     return res;
 }

@@ -104,7 +104,9 @@ class Run {
     }
     const Artifact& artifact(const std::string& stage) const;
     bool has(const std::string& stage) const { return artifacts_.count(stage) > 0; }
-    /// Method-specific details for the stats (counters, the TF as used, ...).
+    /// Method-specific details for the stats (counters, the TF as used, ...). Entries under
+    /// "params_resolved" are parameters whose default was resolved while running (the iso mode's
+    /// isovalue): they join the params as used.
     nlohmann::json& details() { return details_; }
     const nlohmann::json& details() const { return details_; }
 

@@ -17,6 +17,7 @@
 #include <sstream>
 
 #include "core/hash.h"
+#include "core/timing.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
 #include "pipeline/registry.h"
@@ -523,20 +524,51 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             const render::RayCaster caster(
                 std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
                 std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
+            core::Stopwatch sw;
             auto film =
                 std::make_shared<core::ImageRGBA>(caster.render(*camera, run.progress(), &stats));
+            const double seconds = sw.seconds();
             json& d = run.details();
             d["render"] = {{"step_voxels", o.stepVoxels},
                            {"step_mm", caster.stepMm()},
                            {"seed", o.seed},
                            {"termination", s.render.termination},
                            {"threads", o.threads}};
-            if (kind == Kind::Iso) d["iso_value"] = caster.isoValue();
-            d["counters"] = {{"rays", stats.rays},
-                             {"samples", stats.samples},
-                             {"rays_terminated_early", stats.terminatedEarly},
-                             {"skip_cells", stats.skipCells},
-                             {"skip_cells_visible", stats.skipCellsVisible}};
+            // A resolved default is a parameter as used (pipeline.h: "params_resolved").
+            if (kind == Kind::Iso) d["params_resolved"]["iso_value"] = caster.isoValue();
+            const optics::TransferFunction& tfn = tfa->tf;
+            json points = json::array();
+            for (const auto& p : tfn.points())
+                points.push_back({{"value", p.value},
+                                  {"color", {p.color.r, p.color.g, p.color.b}},
+                                  {"extinction", p.extinction}});
+            d["transfer_function"] = {
+                {"name", tfn.name()},
+                {"window", {{"level", tfn.window().level}, {"width", tfn.window().width}}},
+                {"points", points}};
+            const core::Volume& vol = loaded->volume;
+            d["volume"] = {{"dims", {vol.dims().x, vol.dims().y, vol.dims().z}},
+                           {"type", std::string(core::toString(vol.type()))},
+                           {"modality", std::string(core::toString(vol.modality))},
+                           {"content_hash", core::hexKey(loaded->contentHash)}};
+            if (loaded->nonFinite > 0)
+                d["nonfinite_voxels"] = loaded->nonFinite;  // rendered as the TF's lowest value
+            const render::Camera& cam = *camera;
+            d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
+                           {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
+                           {"up", {cam.up().x, cam.up().y, cam.up().z}},
+                           {"projection", cam.projection() == render::Projection::Perspective
+                                              ? "perspective"
+                                              : "orthographic"},
+                           {"fov_y_deg", cam.fovY() * 180.0 / 3.14159265358979323846},
+                           {"ortho_height_mm", cam.orthoHeight()}};
+            d["counters"] = {
+                {"rays", stats.rays},
+                {"samples", stats.samples},
+                {"rays_terminated_early", stats.terminatedEarly},
+                {"samples_per_second", seconds > 0 ? double(stats.samples) / seconds : 0.0},
+                {"skip_cells", stats.skipCells},
+                {"skip_cells_visible", stats.skipCellsVisible}};
             const std::size_t bytes = film->pixels.size() * sizeof(float);
             return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
         } catch (const InputError& e) {
