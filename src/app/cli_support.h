@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // What every voxlight subcommand shares: progress display, Ctrl-C cancellation, exit codes.
-//   0 success · 1 internal error (a bug: please report) · 2 bad input (one line on stderr) · 130
-//   cancelled (Ctrl-C)
+//   0    success
+//   1    internal error (a bug: please report)
+//   2    bad input (one line on stderr)
+//   130  cancelled (Ctrl-C)
 #include <CLI/CLI.hpp>
 #include <atomic>
 #include <functional>

@@ -3,12 +3,11 @@
 // Error handling for voxlight.
 //
 // * InputError — bad *user input* (a file, a JSON field, a CLI value). It carries what was being
-// read (`source`,
-//   a path or "scene.json"), which part was wrong (`field`) and what to do about it (`fix`). The
-//   CLI prints it as one line and exits with code 2; the viewer shows it. Libraries never call
-//   exit() or abort() on bad input.
+//   read (`source`, a path or "scene.json"), which part was wrong (`field`) and what to do about it
+//   (`fix`). The CLI prints it as one line and exits with code 2; the viewer shows it. Libraries
+//   never call exit() or abort() on bad input.
 // * VL_CHECK(cond) — an internal invariant, always on (also in Release). Throws InternalError with
-// both operands.
+//   both operands.
 // * VL_DCHECK(cond) — debug-only, for per-sample hot loops.
 // * CancelledError — thrown by long algorithms when their cancel flag is raised.
 #include <sstream>

@@ -1,8 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Content hashes for cache keys (pipeline/): a 64-bit, seedless, platform-fixed hash of bytes and of
-// the values a stage reads. Not cryptographic: it detects changed inputs and damaged cache files,
-// not an adversary (a cache directory is trusted as much as the scene file that names it).
+// Content hashes for cache keys (pipeline/): a 64-bit, seedless, platform-fixed hash of bytes and
+// of the values a stage reads. Not cryptographic: it detects changed inputs and damaged cache
+// files, not an adversary (a cache directory is trusted as much as the scene file that names it).
 //
 // Hasher: streams values in order; add(x) for arithmetic types hashes their object bytes
 // (little-endian x86-64 / aarch64 layout: keys are only compared on one kind of machine), strings
@@ -10,9 +10,9 @@
 // (wyhash-style folding of 8-byte words) — about 4 GB/s per core, so hashing a 256 MB CT costs
 // ~35 ms on 2 cores, far less than reading it.
 //
-// contentHash(volume): geometry, voxel type, value mapping, modality and every voxel byte. The voxel
-// bytes are hashed in fixed 1 MiB chunks in parallel and the chunk hashes combined in order, so the
-// result does not depend on the thread count.
+// contentHash(volume): geometry, voxel type, value mapping, modality and every voxel byte. The
+// voxel bytes are hashed in fixed 1 MiB chunks in parallel and the chunk hashes combined in order,
+// so the result does not depend on the thread count.
 #include <cstdint>
 #include <cstring>
 #include <string>

@@ -171,8 +171,8 @@ double torsoHU(const glm::dvec3& p, double h) {
         const double c = std::cos(side * 0.61), s = std::sin(side * 0.61);
         const glm::dvec3 q = p - glm::dvec3(side * 78.0, 86.0, 112.0);
         const glm::dvec3 local(c * q.x + s * q.y, -s * q.x + c * q.y, q.z);
-        const double taper =
-            std::clamp((local.z + 55.0) / 110.0, 0.2, 1.0);  // triangular: narrow at the tip
+        // Triangular: narrow at the tip.
+        const double taper = std::clamp((local.z + 55.0) / 110.0, 0.2, 1.0);
         paint(sdBox(local, {-40.0 * taper, -2.0, -55.0}, {40.0 * taper, 2.0, 55.0}), 650.0);
         // Clavicle: a capsule from the manubrium to the acromion.
         const glm::dvec3 a(side * 16.0, -92.0, 168.0), b(side * 118.0, 10.0, 182.0);
@@ -210,8 +210,8 @@ double torsoHU(const glm::dvec3& p, double h) {
         // 0.9 mm.
         const double R = 11.5, pitch = 60.0, wire = 0.9;
         const double rho = std::hypot(p.x - ax, p.y - ay), phi = std::atan2(p.y - ay, p.x - ax);
-        const double sinA =
-            pitch / std::hypot(pitch, 2.0 * kPi * R);  // wire vs circumferential direction
+        // Wire vs circumferential direction.
+        const double sinA = pitch / std::hypot(pitch, 2.0 * kPi * R);
         double d = 1e9;
         for (int hand = -1; hand <= 1; hand += 2)
             for (int w = 0; w < 6; ++w) {

@@ -5,21 +5,17 @@
 // signed distances), like real scans.
 //
 //  kronander  Kronander et al. 2012 corner case (their Figs. 5–7): an opaque sphere and a torus
-//  resting on a perfectly
-//             flat plate. uint8, 0 = air, 255 = solid; 1 mm voxels at size 128. The plate's top
-//             face is exactly the plane z = kronanderPlateTop(size) in world mm, and it is
-//             axis-aligned, so it is flat to the last bit.
+//             resting on a perfectly flat plate. uint8, 0 = air, 255 = solid; 1 mm voxels at size
+//             128. The plate's top face is exactly the plane z = kronanderPlateTop(size) in world
+//             mm, and it is axis-aligned, so it is flat to the last bit.
 //  torso      CT-like torso in HU (int16): air, skin/fat/muscle, lungs, heart, liver, kidneys,
-//  contrast-filled aorta with
-//             a braided metal stent, vertebrae with discs, ribs. 400 mm field of view; 256³ by
-//             default.
+//             contrast-filled aorta with a braided metal stent, vertebrae with discs, ribs. 400 mm
+//             field of view; 256³ by default.
 //  sphere     Homogeneous sphere for exact optics: float32, value 1 inside, 0 outside, with a
-//  linear ramp over ±1 voxel
-//             placed so the trilinear 0.5-level set is the sphere of radius 0.35·extent centred in
-//             the volume.
+//             linear ramp over ±1 voxel placed so the trilinear 0.5-level set is the sphere of
+//             radius 0.35·extent centred in the volume.
 //  slab       Homogeneous slab for exact optics: float32, value 1 for |z − zc| < 0.25·extent (same
-//  0.5-level ramp),
-//             0 elsewhere (same ramp), infinite in x and y within the volume.
+//             0.5-level ramp), 0 elsewhere (same ramp), infinite in x and y within the volume.
 #include <string>
 #include <vector>
 

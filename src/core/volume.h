@@ -3,8 +3,7 @@
 // A scalar volume on a regular grid, in patient LPS millimetres.
 //
 // Geometry (ITK/DICOM convention): voxel (i,j,k) has its *centre* at
-//     world = origin + D · (ijk ⊙ spacing)          [mm, LPS: +x patient left, +y posterior, +z
-//     superior]
+//     world = origin + D · (ijk ⊙ spacing)   [mm, LPS: +x patient left, +y posterior, +z superior]
 // where D is the 3×3 direction matrix whose columns are the unit directions of the i, j, k axes. D
 // must be orthonormal (det ±1); readers reject sheared grids (gantry tilt) with a clear message.
 // Index space is continuous: sampling at (1.5, 0, 0) interpolates between voxels 1 and 2. Samples
@@ -13,8 +12,8 @@
 // Values: voxels are stored in their native type (uint8, int16, uint16, float32). The *physical*
 // value (HU for CT) is
 //     physical = slope · stored + intercept
-// and every sampler returns physical values as float. Storage is x-fastest: index = i + nx·(j +
-// ny·k).
+// and every sampler returns physical values as float. Storage is x-fastest:
+//     index = i + nx·(j + ny·k)
 #include <algorithm>
 #include <array>
 #include <cstddef>

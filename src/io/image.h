@@ -8,13 +8,13 @@
 // conversion (display-encoded, usually sRGB) — ImageReadInfo::floatingPoint tells the caller which
 // case it got.
 //
-// readImage: any format OpenImageIO reads. 1 channel → (v, v, v, 1); 2 → (v, v, v, a); 3 → (r, g,
-// b, 1); ≥ 4 → the first four. Missing file, unreadable/corrupt data or zero size → InputError
-// naming the file and what to do. writeImage: format by extension. .exr → linear float (or half,
-// WriteOptions) RGBA; .hdr → RGBE (alpha dropped); .png/.jpg/.tif/.bmp → 8-bit, the caller provides
-// display values in 0..1 which are clamped and rounded (NaN/Inf → InputError, as they would
-// otherwise silently become 0 or 255). The file is written to a temporary name in the same
-// directory and renamed, so a crash never leaves a half-written file.
+// readImage: any format OpenImageIO reads. 1 channel → (v, v, v, 1); 2 → (v, v, v, a);
+// 3 → (r, g, b, 1); ≥ 4 → the first four. Missing file, unreadable/corrupt data or zero size →
+// InputError naming the file and what to do. writeImage: format by extension. .exr → linear float
+// (or half, WriteOptions) RGBA; .hdr → RGBE (alpha dropped); .png/.jpg/.tif/.bmp → 8-bit, the
+// caller provides display values in 0..1 which are clamped and rounded (NaN/Inf → InputError, as
+// they would otherwise silently become 0 or 255). The file is written to a temporary name in the
+// same directory and renamed, so a crash never leaves a half-written file.
 #include <filesystem>
 #include <string>
 #include <vector>

@@ -4,18 +4,16 @@
 // radiance Le. Conventions and units: lights/light.h.
 //
 // * SphereLight: emits Le outward from every point of its surface. Seen from outside it subtends a
-// cone of
-//   half-angle α = asin(r/D); sample() draws uniformly in that cone (pdf 1/(2π(1 − cos α))). From
-//   inside (D ≤ r) the incident radiance is Le from every direction (pdf 1/(4π)). SH: closed form
-//   (a cap of constant radiance is zonal: z_l = 2π Le √((2l+1)/4π) ∫_{cos α}^1 P_l, with ∫_c^1 P_l
-//   = (P_{l−1}(c) − P_{l+1}(c))/(2l+1)).
+//   cone of half-angle α = asin(r/D); sample() draws uniformly in that cone
+//   (pdf 1/(2π(1 − cos α))). From inside (D ≤ r) the incident radiance is Le from every direction
+//   (pdf 1/(4π)). SH: closed form (a cap of constant radiance is zonal:
+//   z_l = 2π Le √((2l+1)/4π) ∫_{cos α}^1 P_l, with ∫_c^1 P_l = (P_{l−1}(c) − P_{l+1}(c))/(2l+1)).
 // * RectLight (corner + two edge vectors) and DiskLight (centre, normal, radius): one-sided,
-// emitting toward the
-//   normal n = normalize(edgeU × edgeV) resp. the given normal. sample() picks a uniform point on
-//   the emitter (pdf d²/(A cos θ_l) in solid angle); points behind the emitter receive nothing. SH
-//   and DSF: midpoint quadrature over `quadratureResolution`² equal-area cells of the emitter, each
-//   cell a small directional source of irradiance Le·cos θ_l·ΔA/d² (accurate while the cell is
-//   small seen from x: d ≳ 2·size/resolution).
+//   emitting toward the normal n = normalize(edgeU × edgeV) resp. the given normal. sample() picks
+//   a uniform point on the emitter (pdf d²/(A cos θ_l) in solid angle); points behind the emitter
+//   receive nothing. SH and DSF: midpoint quadrature over `quadratureResolution`² equal-area cells
+//   of the emitter, each cell a small directional source of irradiance Le·cos θ_l·ΔA/d² (accurate
+//   while the cell is small seen from x: d ≳ 2·size/resolution).
 // DSF of every area light: a sum of such small directional sources, each blended barycentrically
 // (sh/dsf.h).
 #include "lights/light.h"

@@ -9,11 +9,10 @@
 // * Equirectangular (latitude–longitude, width = 2·height): pixel (c, r), row 0 at the top, covers
 //   θ ∈ [π r/H, π(r+1)/H] from +z and φ ∈ [π − 2π(c+1)/W, π − 2π c/W] (φ from +x toward +y):
 //   EquirectLayout {W, H, φ0 = π, Δφ = −2π/W} of sh_projection.h.
-// * Angular light probe (Debevec's angular map, square): for image coordinates (u, v) ∈ [−1, 1]² (u
-// right, v up,
-//   ρ = √(u²+v²) ≤ 1) the direction is at angle πρ from the centre direction (+x), toward (u·right
-//   + v·up)/ρ. The probe is resampled (bilinear) to an equirect of 2S × S at load time; everything
-//   below works on that grid.
+// * Angular light probe (Debevec's angular map, square): for image coordinates (u, v) ∈ [−1, 1]²
+//   (u right, v up, ρ = √(u²+v²) ≤ 1) the direction is at angle πρ from the centre direction
+//   (+x), toward (u·right + v·up)/ρ. The probe is resampled (bilinear) to an equirect of 2S × S at
+//   load time; everything below works on that grid.
 // Radiance is piecewise constant per pixel (nearest lookup), so sampling pdf and radiance agree
 // exactly. Importance sampling: a pixel is drawn with probability ∝ luminance × solid angle, then a
 // uniform point in (φ, cos θ) inside it, so pdf(ω) = luminance(pixel(ω)) / Σ_p luminance_p Ω_p

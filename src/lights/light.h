@@ -28,13 +28,13 @@ namespace voxlight::lights {
 /// One light sample seen from a point.
 struct LightSample {
     glm::vec3 wi{0.0f};  ///< unit direction toward the light
-    glm::vec3 value{
-        0.0f};         ///< radiance L along wi; for delta lights the irradiance E (pdf is then 1)
+    /// Radiance L along wi; for delta lights the irradiance E (pdf is then 1).
+    glm::vec3 value{0.0f};
     float pdf = 0.0f;  ///< solid-angle density of wi; 0 = no contribution (sample invalid)
-    float distance =
-        std::numeric_limits<float>::infinity();  ///< to the light [mm] (shadow-ray length)
-    bool delta =
-        false;  ///< directional/point light: value is irradiance, wi was not drawn from a density
+    /// To the light [mm] (shadow-ray length).
+    float distance = std::numeric_limits<float>::infinity();
+    /// Directional/point light: value is irradiance, wi was not drawn from a density.
+    bool delta = false;
 };
 
 class Light {

@@ -173,6 +173,8 @@ std::vector<StageRecord> Session::explain(const io::Scene& scene) {
         } else {
             r.ran = true;
             r.reason = "computed";
+            if (cache_.directory() && st.kind == StageKind::Precompute && !st.notOnDisk.empty())
+                r.reason += " (not kept on disk: " + st.notOnDisk + ")";
         }
         std::optional<std::uint64_t> out_key = key;
         if (st.predictOutputKey) out_key = st.predictOutputKey(run, *key);
@@ -237,6 +239,8 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                 a = st.compute(run);
                 r.ran = true;
                 r.reason = "computed";
+                if (cache_.directory() && !st.notOnDisk.empty())
+                    r.reason += " (not kept on disk: " + st.notOnDisk + ")";
                 cache_.putInMemory(st.name, key, a);
                 if (st.kind == StageKind::Precompute && st.codec)
                     cache_.writeDisk(st.name, key, *st.codec, a);

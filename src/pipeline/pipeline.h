@@ -58,6 +58,9 @@ struct Stage {
     std::function<Artifact(Run&)> compute;
     /// Non-null: the artifact may be kept in a disk cache.
     const Codec* codec = nullptr;
+    /// A precompute stage without a codec says why it is not kept on disk (e.g. reading it back
+    /// costs more than computing it); shown when a cache directory is set.
+    std::string notOnDisk;
     /// Input stages whose product has a content key other than its input key (load_volume: file
     /// identity → content hash). predict: the content key without computing (explain), if known.
     std::function<std::uint64_t(const Run&, const Artifact&)> outputKey;

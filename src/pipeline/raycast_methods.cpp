@@ -138,62 +138,6 @@ const Codec& transferFunctionCodec() {
     return c;
 }
 
-const Codec& gradientsCodec() {
-    static const Codec c{
-        1,
-        [](const Artifact& a, ByteWriter& w) {
-            const auto& g = *a.as<GradientArtifact>();
-            w.pod(std::uint8_t(g.dense ? 1 : g.bricked ? 2 : 0));
-            if (g.dense) {
-                w.pod(std::array<std::uint64_t, 3>{g.dense->di, g.dense->dj, g.dense->dk});
-                w.pod(g.dense->slope);
-                w.array(g.dense->d);
-            } else if (g.bricked) {
-                w.pod(std::array<std::uint64_t, 3>{g.bricked->di, g.bricked->dj, g.bricked->dk});
-                w.pod(g.bricked->slope);
-                w.pod(g.bricked->bricks);
-                w.array(g.bricked->slot);
-                w.array(g.bricked->d);
-            }
-        },
-        [](ByteReader& r) {
-            auto g = std::make_shared<GradientArtifact>();
-            const auto kind = r.pod<std::uint8_t>();
-            std::size_t bytes = 0;
-            if (kind == 1) {
-                auto d = std::make_shared<render::VoxelGradients>();
-                const auto s = r.pod<std::array<std::uint64_t, 3>>();
-                d->di = s[0], d->dj = s[1], d->dk = s[2];
-                d->slope = r.pod<float>();
-                d->d = r.array<render::GradientEntry>(render::VoxelGradients::kMaxVoxels);
-                bytes = d->d.size() * sizeof(render::GradientEntry);
-                g->dense = std::move(d);
-            } else if (kind == 2) {
-                auto b = std::make_shared<render::BrickedGradients>();
-                const auto s = r.pod<std::array<std::uint64_t, 3>>();
-                b->di = s[0], b->dj = s[1], b->dk = s[2];
-                b->slope = r.pod<float>();
-                b->bricks = r.pod<glm::ivec3>();
-                b->slot = r.array<std::int64_t>(kMaxCells);
-                b->d = r.array<render::GradientEntry>(render::BrickedGradients::kMaxEntries);
-                if (b->bricks.x < 1 || b->bricks.y < 1 || b->bricks.z < 1 ||
-                    b->slot.size() != std::size_t(b->bricks.x) * b->bricks.y * b->bricks.z)
-                    badPayload("gradient brick table sizes do not fit together");
-                for (std::int64_t slot : b->slot)
-                    if (slot < -1 || (slot >= 0 && std::uint64_t(slot) +
-                                                           render::BrickedGradients::kBrickEntries >
-                                                       b->d.size()))
-                        badPayload("gradient brick slot out of range");
-                bytes = b->d.size() * sizeof(render::GradientEntry) + b->slot.size() * 8;
-                g->bricked = std::move(b);
-            } else if (kind != 0) {
-                badPayload("unknown gradient table kind");
-            }
-            return Artifact::of<GradientArtifact>(std::move(g), bytes);
-        }};
-    return c;
-}
-
 const Codec& irradianceCodec() {
     static const Codec c{
         1, [](const Artifact& a, ByteWriter& w) { w.array(*a.as<std::vector<glm::vec3>>()); },
@@ -419,7 +363,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         }
         return Artifact::of<GradientArtifact>(std::move(g), bytes);
     };
-    grad.codec = &gradientsCodec();
+    // Not on disk: 8 bytes per voxel read back (0.95 s for 256³ on this kind of machine) cost
+    // twice the pass that computes them (0.46 s).
+    grad.notOnDisk = "recomputing is faster than reading 8 bytes per voxel back";
     grad.describe = [](const Run&, const Artifact& a) -> std::string {
         const auto& g = *a.as<GradientArtifact>();
         if (g.dense && !g.dense->empty()) return "dense central differences";

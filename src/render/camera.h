@@ -2,8 +2,8 @@
 #pragma once
 // Pinhole (perspective) and orthographic cameras in world millimetres (patient LPS).
 //
-// Orbit parameters: the eye sits at target + distance · (sin az · cos el, −cos az · cos el, sin
-// el), so azimuth 0, elevation 0 looks from the patient's front (anterior, −y) toward posterior
+// Orbit parameters: the eye sits at target + distance · (sin az · cos el, −cos az · cos el,
+// sin el), so azimuth 0, elevation 0 looks from the patient's front (anterior, −y) toward posterior
 // with superior (+z) up and the patient's left on the image's right (the radiological anterior
 // view); azimuth 90° looks from the patient's left. Positive roll turns the image
 // counter-clockwise. Explicit look-at (eye, target, up) is used when `eye` is set. Pixel (x, y) has

@@ -186,9 +186,8 @@ struct CellSampler {
 /// samples i … i + 7 of a ray in vector registers, the corner pairs (x, x + 1) of each row fetched
 /// by one 32-bit gather. Same arithmetic per lane as SampleLattice::t, DvrMarcher::at,
 /// CellSampler::locate and CellSampler::value (whose multiply-adds are fmaF), so equal bit for
-/// bit. For 8- and
-/// 16-bit voxels on grids with more than one voxel along i; otherwise kSupported is false or
-/// usable() is, and the marcher takes samples one by one.
+/// bit. For 8- and 16-bit voxels on grids with more than one voxel along i; otherwise kSupported
+/// is false or usable() is, and the marcher takes samples one by one.
 #if defined(__AVX2__) && defined(__FMA__)
 template <class View, bool kWithCorner>
 struct SampleBatch {

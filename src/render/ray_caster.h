@@ -8,11 +8,12 @@
 //
 // Modes:
 //   EmissionAbsorption  σt / albedo / emission from the TF, uniform unit illumination, no
-//   visibility Gradient            gradient Blinn–Phong, directional and point lights (the clinical
-//   baseline) Mip / MinIp         maximum / minimum value along the ray, shown as grey through the
-//   window Isosurface          direct isosurface (Ritschel's DIR): first crossing of the isovalue
-//   along the
-//                       ray, refined by bisection, Lambertian with the TF albedo at the isovalue
+//                       visibility
+//   Gradient            gradient Blinn–Phong, directional and point lights (the clinical baseline)
+//   Mip / MinIp         maximum / minimum value along the ray, shown as grey through the window
+//   Isosurface          direct isosurface (Ritschel's DIR): first crossing of the isovalue along
+//                       the ray, refined by bisection, Lambertian with the TF albedo at the
+//                       isovalue
 //
 // Sampling: the step is Δ = stepVoxels · (smallest voxel spacing) mm. Sample points along a ray
 // are t_0 = tNear (exactly on the entry plane/box), then tNear + (j + k)·Δ with the per-pixel

@@ -2,26 +2,24 @@
 #pragma once
 // Discrete spherical function (DSF), Zhang, Dong & Ma 2013, §5 (eq. 7–8) and §8 (prefiltering).
 //
-// n directions ω_k from a subdivided icosahedron (42, 162, 642, 2562 = 10 f² + 2 for f = 2, 4, 8,
-// 16; see sphere_samples.h). A spherical function is represented by its values s_k ("coefficients")
-// and reconstructed as
-//     S(ω) = Σ_k w̄_k(ω) s_k,   w̄_k(ω) = W_h(ω, ω_k) / Σ_j W_h(ω, ω_j),   W_h = (h² − θ²)³ for θ <
-//     h, else 0,
+// n directions ω_k from a subdivided icosahedron (42, 162, 642, 2562 = 10 f² + 2 for
+// f = 2, 4, 8, 16; see sphere_samples.h). A spherical function is represented by its values s_k
+// ("coefficients") and reconstructed as
+//     S(ω) = Σ_k w̄_k(ω) s_k,   w̄_k(ω) = W_h(ω, ω_k) / Σ_j W_h(ω, ω_j),
+//     W_h = (h² − θ²)³ for θ < h, else 0,
 // θ = angle between the directions [rad], h = the minimum angle between two directions of the set.
 // Properties: interpolating (S(ω_k) = s_k), local support (only directions closer than h
 // contribute: ≤ ~7), rotation by re-sampling. Every direction on the sphere has at least one ω_k
 // within h (checked at construction).
 //
 // Units and meaning of the coefficients: s_k is a *radiance* [same unit as the light's radiance] in
-// direction ω_k. Basis solid angle A_k = ∫ w̄_k dω (Σ A_k = 4π) turns them into power: ∫ S dω = Σ_k
-// A_k s_k (integrate()).
-// * Environment light: s_k = Gaussian-prefiltered radiance at ω_k (Zhang §8: Gaussian of "bandwidth
-// h"). σ defaults
-//   to h/3: in the Fig. 7 experiment (tests/sh/test_dsf.cpp) the L2 error is flat for σ ∈ [h/4,
-//   h/3] and grows ~4 % (relative) at h/2 and for point sampling.
+// direction ω_k. Basis solid angle A_k = ∫ w̄_k dω (Σ A_k = 4π) turns them into power:
+// ∫ S dω = Σ_k A_k s_k (integrate()).
+// * Environment light: s_k = Gaussian-prefiltered radiance at ω_k (Zhang §8: Gaussian of
+//   "bandwidth h"). σ defaults to h/3: in the Fig. 7 experiment (tests/sh/test_dsf.cpp) the L2
+//   error is flat for σ ∈ [h/4, h/3] and grows ~4 % (relative) at h/2 and for point sampling.
 // * Directional light of irradiance E from ω_d (Zhang §5.2): barycentric blend over the 3 vertices
-// of the
-//   icosahedral triangle containing ω_d, s_k += E b_k / A_k — so Σ_k A_k s_k = E exactly.
+//   of the icosahedral triangle containing ω_d, s_k += E b_k / A_k — so Σ_k A_k s_k = E exactly.
 //
 // Evaluation cost: one cube-map cell lookup plus ~6–12 candidate dot products (precomputed
 // candidate lists).
@@ -126,8 +124,8 @@ struct DsfShComparisonRow {
     int shCount = 0;
     double shError = 0;         ///< plain truncation
     double shHanningError = 0;  ///< with the Hanning window
-    double dsfProjectedError =
-        0;  ///< DSF with the energy-conserving projectEquirect instead of sampling
+    /// DSF with the energy-conserving projectEquirect instead of sampling.
+    double dsfProjectedError = 0;
 };
 
 /// Reconstructs an equirect environment with DSF of each count (prefiltered sampling) and with SH

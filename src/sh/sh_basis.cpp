@@ -14,13 +14,12 @@ namespace voxlight::sh {
 
 namespace {
 
-// Coefficients of the normalised associated-Legendre recurrence (P̄ includes K_l^m, excludes sin^m
-// θ):
-//   P̄_m^m     = P̄_{m−1}^{m−1} · √((2m+1)/(2m)),          P̄_0^0 = 1/√(4π)
+// Coefficients of the normalised associated-Legendre recurrence (P̄ includes K_l^m, excludes
+// sin^m θ):
+//   P̄_m^m     = P̄_{m−1}^{m−1} · √((2m+1)/(2m)),     P̄_0^0 = 1/√(4π)
 //   P̄_{m+1}^m = √(2m+3) · z · P̄_m^m
-//   P̄_l^m     = a_l^m z P̄_{l−1}^m − b_l^m P̄_{l−2}^m,      a = √((4l²−1)/(l²−m²)),
-//                                                           b =
-//                                                           √(((l−1)²−m²)(2l+1)/((2l−3)(l²−m²)))
+//   P̄_l^m     = a_l^m z P̄_{l−1}^m − b_l^m P̄_{l−2}^m,  a = √((4l²−1)/(l²−m²)),
+//                                                      b = √(((l−1)²−m²)(2l+1)/((2l−3)(l²−m²)))
 struct RecurrenceTables {
     std::array<double, kMaxBand + 1> diag{};  // P̄_m^m / P̄_{m−1}^{m−1}
     std::array<double, kMaxCoeffs> a{}, b{};  // indexed by shIndex(l, m), m ≥ 0

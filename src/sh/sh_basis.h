@@ -9,39 +9,35 @@
 //
 // Conventions (the single place they are stated; every sh/ and lights/ file follows them):
 // * Index i = l(l+1) + m for band l = 0..L and order m = −l..l; a band-L expansion has (L+1)²
-// coefficients.
+//   coefficients.
 // * Orthonormal: ∫_S² Y_i Y_j dω = δ_ij (dω = sinθ dθ dφ; the sphere has area 4π).
 // * Spherical coordinates: θ is the angle from +z, φ the angle from +x towards +y, so
 //   ω = (sinθ cosφ, sinθ sinφ, cosθ).
-// * Y_l^0 = K_l^0 P_l(cosθ); Y_l^m = √2 K_l^m P_l^m(cosθ) cos(mφ) for m > 0; Y_l^m = √2 K_l^|m|
-// P_l^|m|(cosθ)
-//   sin(|m|φ) for m < 0, with K_l^m = √((2l+1)/(4π) · (l−m)!/(l+m)!).
+// * Y_l^0 = K_l^0 P_l(cosθ); Y_l^m = √2 K_l^m P_l^m(cosθ) cos(mφ) for m > 0;
+//   Y_l^m = √2 K_l^|m| P_l^|m|(cosθ) sin(|m|φ) for m < 0, with
+//   K_l^m = √((2l+1)/(4π) · (l−m)!/(l+m)!).
 // * **No Condon–Shortley phase**: P_l^m here is the associated Legendre function *without* the
-// (−1)^m factor (as
-//   C++17 std::assoc_legendre). Hence band 1 is (Y_1^{-1}, Y_1^0, Y_1^1) = √(3/4π)·(y, z, x) with
-//   positive signs, and Y_l^{±l} ∝ +Re/Im((x+iy)^l). This is the convention of Ivanic &
-//   Ruedenberg's real rotation recursion (band-1 rotation matrix = the 3×3 rotation with
-//   rows/columns permuted to (y, z, x)), so no sign fix-ups are needed there. Tested in
-//   tests/sh/test_sh_basis.cpp (CondonShortley*). Converting to/from a CS-phase basis: multiply
-//   coefficient (l, m) by (−1)^m.
+//   (−1)^m factor (as C++17 std::assoc_legendre). Hence band 1 is
+//   (Y_1^{-1}, Y_1^0, Y_1^1) = √(3/4π)·(y, z, x) with positive signs, and
+//   Y_l^{±l} ∝ +Re/Im((x+iy)^l). This is the convention of Ivanic & Ruedenberg's real rotation
+//   recursion (band-1 rotation matrix = the 3×3 rotation with rows/columns permuted to (y, z, x)),
+//   so no sign fix-ups are needed there. Tested in tests/sh/test_sh_basis.cpp (CondonShortley*).
+//   Converting to/from a CS-phase basis: multiply coefficient (l, m) by (−1)^m.
 //
 // Evaluation paths (all agree to float precision, see tests):
 // * evalShFixed<L>(unitDir, out): L ≤ 4, hand-unrolled Cartesian polynomials, float, no allocation,
-// no checks beyond
-//   VL_DCHECK — the hot-loop path (a few ns per direction).
+//   no checks beyond VL_DCHECK — the hot-loop path (a few ns per direction).
 // * evalSh(L, dir, out): any L ≤ kMaxBand; checks and normalises `dir` (zero, NaN or Inf →
-// InputError), uses the
-//   unrolled path for L ≤ 4 and the Cartesian recurrence otherwise.
+//   InputError), uses the unrolled path for L ≤ 4 and the Cartesian recurrence otherwise.
 // * evalShUnit(L, unitDir, out) / evalShUnitDouble: the Cartesian normalised-Legendre recurrence
-// (no factorials, no
-//   trigonometry, exact at the poles), float or double, for any L ≤ kMaxBand.
+//   (no factorials, no trigonometry, exact at the poles), float or double, for any L ≤ kMaxBand.
 // * evalShSlow(l, m, θ, φ): textbook reference in spherical coordinates (Legendre three-term
-// recurrence, K_l^m via a
-//   product of ratios so no factorial overflow), double; for tests and validation only.
+//   recurrence, K_l^m via a product of ratios so no factorial overflow), double; for tests and
+//   validation only.
 //
-// Supported bands: rendering uses L ≤ 4 (1/4/9/16/25 coefficients); every routine is tested to L =
-// 8 and accepts up to kMaxBand = 32 for high-band experiments (e.g. Zhang 2013 Fig. 7, SH with ≈
-// 642 coefficients).
+// Supported bands: rendering uses L ≤ 4 (1/4/9/16/25 coefficients); every routine is tested to
+// L = 8 and accepts up to kMaxBand = 32 for high-band experiments (e.g. Zhang 2013 Fig. 7, SH with
+// ≈ 642 coefficients).
 #include <glm/glm.hpp>
 #include <span>
 

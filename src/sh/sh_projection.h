@@ -5,14 +5,12 @@
 // in double (ARCHITECTURE §3).
 //
 // * ShProjector: an accumulator — add(direction, weight·value) one sample at a time (area lights,
-// cube maps, any
-//   custom quadrature). Evaluates each direction with the unrolled path for L ≤ 4.
+//   cube maps, any custom quadrature). Evaluates each direction with the unrolled path for L ≤ 4.
 // * projectSamples / projectSamplesRgb: values given at the directions of a SphereSamples set.
 // * projectFunction: a callable f(const glm::dvec3&) → double or glm::dvec3, sampled at a set.
-// * projectEquirect: a latitude–longitude grid of RGB values, separable fast path (O(W·H·L +
-// H·(L+1)²) instead of
-//   O(W·H·(L+1)²)), exactly equal to the pixel-centre midpoint rule with exact per-row pixel solid
-//   angles.
+// * projectEquirect: a latitude–longitude grid of RGB values, separable fast path
+//   (O(W·H·L + H·(L+1)²) instead of O(W·H·(L+1)²)), exactly equal to the pixel-centre midpoint
+//   rule with exact per-row pixel solid angles.
 #include <glm/glm.hpp>
 #include <span>
 #include <type_traits>

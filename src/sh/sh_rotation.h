@@ -84,8 +84,8 @@ class CachedShRotation {
     glm::dmat3 key_{1.0};  // the matrix cached_ was built from
 };
 
-/// Rotation by `angle` radians about +z (counter-clockwise seen from +z): out_lm for g(ω) =
-/// f(Rz(angle)⁻¹ ω). in and out may alias.
+/// Rotation by `angle` radians about +z (counter-clockwise seen from +z): out_lm for
+/// g(ω) = f(Rz(angle)⁻¹ ω). in and out may alias.
 void rotateZ(double angle, std::span<const float> in, std::span<float> out);
 
 }  // namespace voxlight::sh

@@ -93,8 +93,8 @@ void applyWindowRgb(std::span<glm::vec3> coeffs, ShWindow window, double strengt
 double nonNegativeGaussianStrength(std::span<const float> coeffs, const SphereSamples& dirs,
                                    double tolerance) {
     const int bands = shBandForCount(int(coeffs.size()));
-    const double floor =
-        -tolerance * coeffs[0] * 0.5 / std::sqrt(kPi);  // tolerance × the mean value
+    // Tolerance × the mean value.
+    const double floor = -tolerance * coeffs[0] * 0.5 / std::sqrt(kPi);
     if (!(coeffs[0] > 0))
         throw InputError("sh", "coefficients",
                          "a function with a non-positive mean (c_0 = " + std::to_string(coeffs[0]) +

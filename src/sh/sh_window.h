@@ -9,16 +9,17 @@
 // * Hanning:  w_l = (1 + cos(π l/(L+1)))/2
 // * Lanczos σ-factors: w_l = sinc(π l/(L+1)) = sin(π l/(L+1)) / (π l/(L+1))
 // * Gaussian (heat kernel, Sloan "Stupid SH tricks" §windowing): w_l = exp(−λ l(l+1)), λ ≥ 0 the
-// strength. applyWindow() applies one; nonNegativeGaussianStrength() finds the weakest Gaussian
-// window that makes a reconstruction non-negative on a direction set (Sloan's "minimum ringing"
-// goal as a 1-D search).
+//   strength.
+// applyWindow() applies one; nonNegativeGaussianStrength() finds the weakest Gaussian window that
+// makes a reconstruction non-negative on a direction set (Sloan's "minimum ringing" goal as a 1-D
+// search).
 //
-// Zonal functions g(ω) = g(ω·a) are rotationally symmetric about an axis a. With z_l = ∫ g(cosθ)
-// Y_l^0 dω (the coefficients of g about +z):
+// Zonal functions g(ω) = g(ω·a) are rotationally symmetric about an axis a. With
+// z_l = ∫ g(cosθ) Y_l^0 dω (the coefficients of g about +z):
 // * aligned to unit axis a: c_lm = z_l √(4π/(2l+1)) Y_lm(a) (zonalToAxis)
-// * convolution f ∗ g (Funk–Hecke): (f∗g)_lm = √(4π/(2l+1)) z_l f_lm = Â_l f_lm (convolveZonal) The
-// clamped cosine max(cosθ, 0) has Â_l = π, 2π/3, π/4, 0, −π/24, 0, π/64, … (Ramamoorthi & Hanrahan
-// 2001): irradiance E_lm = Â_l L_lm.
+// * convolution f ∗ g (Funk–Hecke): (f∗g)_lm = √(4π/(2l+1)) z_l f_lm = Â_l f_lm (convolveZonal)
+// The clamped cosine max(cosθ, 0) has Â_l = π, 2π/3, π/4, 0, −π/24, 0, π/64, … (Ramamoorthi &
+// Hanrahan 2001): irradiance E_lm = Â_l L_lm.
 #include <functional>
 #include <glm/glm.hpp>
 #include <span>

@@ -3,26 +3,24 @@
 // Direction sets on the unit sphere with quadrature weights, used to project functions onto SH
 // (Kronander 2012 eq. 4: V_i = (4π/N) Σ_k V(ω_k) Y_i(ω_k)) and as ray directions for visibility.
 //
-// Every set carries per-direction weights in steradians that sum to 4π, so that ∫ f dω ≈ Σ_k w_k
-// f(ω_k). For sets where every direction represents the same area the weights are 4π/N.
+// Every set carries per-direction weights in steradians that sum to 4π, so that
+// ∫ f dω ≈ Σ_k w_k f(ω_k). For sets where every direction represents the same area the weights are
+// 4π/N.
 //
 // * Subdivided polyhedra (Kronander §4.1: "vertices of a tetrahedron, icosahedron or octahedron
-// subdivided … using
-//   the partition method of Lessing et al."): every face is partitioned into frequency²
-//   sub-triangles on its plane (geodesic "class I" partition) and the vertices are projected to the
-//   sphere. Vertex counts: tetrahedron 2f²+2, octahedron 4f²+2, icosahedron 10f²+2 (f = 1, 2, 4, 8,
-//   16 → 12, 42, 162, 642, 2562 — the DSF sets of Zhang 2013). Weights: Equal (4π/N, Kronander) or
-//   Area (one third of the solid angle of the incident spherical triangles — better quadrature,
-//   still summing to exactly 4π).
+//   subdivided … using the partition method of Lessing et al."): every face is partitioned into
+//   frequency² sub-triangles on its plane (geodesic "class I" partition) and the vertices are
+//   projected to the sphere. Vertex counts: tetrahedron 2f²+2, octahedron 4f²+2, icosahedron 10f²+2
+//   (f = 1, 2, 4, 8, 16 → 12, 42, 162, 642, 2562 — the DSF sets of Zhang 2013). Weights: Equal
+//   (4π/N, Kronander) or Area (one third of the solid angle of the incident spherical triangles —
+//   better quadrature, still summing to exactly 4π).
 // * Spherical Fibonacci (Keinert et al. 2015 / Marques 2013): N nearly uniform directions, weights
-// 4π/N.
+//   4π/N.
 // * Stratified jittered (Ritschel 2007 §4: M precomputed jittered patterns): equal-area strata in
-// (z, φ), one
-//   counter-based random point per stratum; weights = the stratum's solid angle.
+//   (z, φ), one counter-based random point per stratum; weights = the stratum's solid angle.
 // * Uniform Monte-Carlo: N i.i.d. uniform directions, weights 4π/N.
 // * Gauss–Legendre product rule: exact for spherical polynomials of degree ≤ 2n−1 (n nodes in z, 2n
-// in φ); the
-//   high-order truth for orthonormality and projection tests.
+//   in φ); the high-order truth for orthonormality and projection tests.
 // All random sets are pure functions of (count, seed, pattern): independent of threads.
 #include <cstdint>
 #include <glm/glm.hpp>
