@@ -115,3 +115,29 @@ TEST(Cli, SceneOverridesAreValidated) {
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(nlohmann::json::parse(r.out)["camera"]["fov_y"], 35);
 }
+
+TEST(Cli, OpenImageIOIsLoadedOnlyToReadOrWriteImages) {
+    test::TempDir tmp;
+    // ld.so's trace mode (what ldd uses) lists every library mapped before main(): OpenImageIO must
+    // not be among them, or every process pays its ~280 libraries again (src/io/image_module.h).
+    {
+        const std::string cmd = "LD_TRACE_LOADED_OBJECTS=1 " + std::string(VOXLIGHT_BINARY);
+        FILE* pipe = ::popen(cmd.c_str(), "r");
+        ASSERT_TRUE(pipe);
+        std::string out;
+        std::array<char, 4096> buf;
+        while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe))
+            out.append(buf.data(), n);
+        ASSERT_EQ(::pclose(pipe), 0);
+        EXPECT_NE(out.find("libvtkCommonCore"), std::string::npos) << out;  // the trace worked
+        EXPECT_EQ(out.find("OpenImageIO"), std::string::npos) << out;
+    }
+    // ... and the module is found when an image is written.
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "image": {"width": 24, "height": 16}})";
+    const Result r = run("render -q '" + (tmp / "scene.json").string() + "' -o '" +
+                             (tmp / "out.png").string() + "'",
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(tmp / "out.png"));
+}
