@@ -3,7 +3,6 @@
 // the OpenImageIO calls live in a module loaded with dlopen on first use (image_module.h says why).
 #include "io/image.h"
 
-#include <dlfcn.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -15,6 +14,7 @@
 
 #include "core/error.h"
 #include "io/image_module.h"
+#include "io/module_loader.h"
 
 namespace voxlight::io {
 
@@ -31,76 +31,20 @@ std::string lowerExtension(const std::filesystem::path& p) {
     return e;
 }
 
-// --- Loading the OpenImageIO module -----------------------------------------------------------
-
-/// Where the module is looked for, in order: beside the running executable (an installed or
-/// copied voxlight), then where this build put it (tests run from build/tests/<lib>/).
-std::vector<std::filesystem::path> moduleCandidates() {
-    std::vector<std::filesystem::path> dirs;
-    std::error_code ec;
-    const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
-    if (!ec) dirs.push_back(exe.parent_path());
-#ifdef VOXLIGHT_IMAGE_MODULE_DIR
-    const std::filesystem::path built = VOXLIGHT_IMAGE_MODULE_DIR;
-    if (dirs.empty() || !std::filesystem::equivalent(dirs.front(), built, ec))
-        dirs.push_back(built);
-#endif
-    for (auto& d : dirs) d /= mod::kFileName;
-    return dirs;
-}
-
-struct LoadedModule {
-    const mod::Api* api = nullptr;
-    std::string error;  ///< why api is null: every place tried and what went wrong
-};
-
-LoadedModule loadModule() {
-    LoadedModule m;
-    std::string tried;
-    for (const auto& path : moduleCandidates()) {
-        if (!tried.empty()) tried += ", ";
-        std::error_code ec;
-        if (!std::filesystem::exists(path, ec)) {
-            tried += path.string() + " (not found)";
-            continue;
-        }
-        // RTLD_LOCAL: OpenImageIO's symbols stay out of the global namespace. The handle is never
-        // closed: OpenImageIO keeps plugin and thread-pool state that must outlive every caller.
-        void* handle = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
-        if (!handle) {
-            const char* err = ::dlerror();
-            tried += path.string() + " (" + (err ? err : "dlopen failed") + ")";
-            continue;
-        }
-        auto entry = reinterpret_cast<mod::EntryPoint>(::dlsym(handle, mod::kEntryPoint));
-        const mod::Api* api = entry ? entry() : nullptr;
-        if (!api || api->abiVersion != mod::kAbiVersion) {
-            tried += path.string() + " (" +
-                     (api ? "ABI version " + std::to_string(api->abiVersion) + ", expected " +
-                                std::to_string(mod::kAbiVersion)
-                          : std::string("no entry point ") + mod::kEntryPoint) +
-                     ")";
-            ::dlclose(handle);
-            continue;
-        }
-        m.api = api;
-        return m;
-    }
-    m.error = "image support (OpenImageIO) is unavailable: tried " + tried;
-    return m;
-}
-
 /// The module's functions, loaded once per process (thread-safe); InputError naming `file` when the
 /// module cannot be loaded.
 const mod::Api& imageModule(const std::string& file) {
     static std::once_flag once;
-    static LoadedModule loaded;
-    std::call_once(once, [] { loaded = loadModule(); });
+    static detail::LoadedModule loaded;
+    std::call_once(once, [] {
+        loaded = detail::loadModule(mod::kFileName, mod::kEntryPoint, mod::kAbiVersion);
+    });
     if (!loaded.api)
-        throw InputError(file, "image module", loaded.error,
+        throw InputError(file, "image module",
+                         "image support (OpenImageIO) is unavailable: " + loaded.error,
                          std::string("put ") + mod::kFileName +
                              " (built with voxlight) beside the voxlight executable");
-    return *loaded.api;
+    return *static_cast<const mod::Api*>(loaded.api);
 }
 }  // namespace
 

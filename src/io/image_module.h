@@ -23,7 +23,7 @@ namespace voxlight::io::image_module {
 inline constexpr int kAbiVersion = 1;
 /// The module's file name (looked up beside the executable, then in the build tree).
 inline constexpr const char* kFileName = "libvoxlight_image_oiio.so";
-/// The one symbol the module exports: `const Api* voxlight_image_module()`.
+/// The one symbol the module exports: `const void* voxlight_image_module()` returning an Api.
 inline constexpr const char* kEntryPoint = "voxlight_image_module";
 
 enum class Status : int {
@@ -64,12 +64,10 @@ struct WriteResult {
 };
 
 struct Api {
-    int abiVersion;
+    int abiVersion;  ///< first member (module_loader.h)
     /// Decodes `path`; files with more than maxPixels pixels are refused before allocating.
     void (*read)(const char* path, std::uint64_t maxPixels, ReadResult& out) noexcept;
     void (*write)(const WriteRequest& request, WriteResult& out) noexcept;
 };
-
-using EntryPoint = const Api* (*)();
 
 }  // namespace voxlight::io::image_module

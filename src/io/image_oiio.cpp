@@ -100,7 +100,6 @@ constexpr Api kApi{kAbiVersion, &read, &write};
 }  // namespace voxlight::io::image_module
 
 // The single exported symbol (the module is built with hidden visibility).
-extern "C" __attribute__((visibility("default"))) const voxlight::io::image_module::Api*
-voxlight_image_module() {
+extern "C" __attribute__((visibility("default"))) const void* voxlight_image_module() {
     return &voxlight::io::image_module::kApi;
 }

@@ -116,10 +116,11 @@ TEST(Cli, SceneOverridesAreValidated) {
     EXPECT_EQ(nlohmann::json::parse(r.out)["camera"]["fov_y"], 35);
 }
 
-TEST(Cli, OpenImageIOIsLoadedOnlyToReadOrWriteImages) {
+TEST(Cli, HeavyLibrariesAreLoadedOnlyWhenUsed) {
     test::TempDir tmp;
-    // ld.so's trace mode (what ldd uses) lists every library mapped before main(): OpenImageIO must
-    // not be among them, or every process pays its ~280 libraries again (src/io/image_module.h).
+    // ld.so's trace mode (what ldd uses) lists every library mapped before main(): OpenImageIO (~280
+    // libraries) and GDCM (its dictionary is built in static constructors) must not be among them,
+    // or every process pays for them again (src/io/module_loader.h).
     {
         const std::string cmd = "LD_TRACE_LOADED_OBJECTS=1 " + std::string(VOXLIGHT_BINARY);
         FILE* pipe = ::popen(cmd.c_str(), "r");
@@ -129,8 +130,9 @@ TEST(Cli, OpenImageIOIsLoadedOnlyToReadOrWriteImages) {
         while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe))
             out.append(buf.data(), n);
         ASSERT_EQ(::pclose(pipe), 0);
-        EXPECT_NE(out.find("libvtkCommonCore"), std::string::npos) << out;  // the trace worked
+        EXPECT_NE(out.find("libstdc++"), std::string::npos) << out;  // the trace worked
         EXPECT_EQ(out.find("OpenImageIO"), std::string::npos) << out;
+        EXPECT_EQ(out.find("gdcm"), std::string::npos) << out;
     }
     // ... and the module is found when an image is written.
     std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
