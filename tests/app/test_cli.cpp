@@ -119,8 +119,8 @@ TEST(Cli, SceneOverridesAreValidated) {
 TEST(Cli, HeavyLibrariesAreLoadedOnlyWhenUsed) {
     test::TempDir tmp;
     // ld.so's trace mode (what ldd uses) lists every library mapped before main(): OpenImageIO (~280
-    // libraries) and GDCM (its dictionary is built in static constructors) must not be among them,
-    // or every process pays for them again (src/io/module_loader.h).
+    // libraries), GDCM (its dictionary is built in static constructors) and VTK must not be among
+    // them, or every process pays for them again (src/io/module_loader.h).
     {
         const std::string cmd = "LD_TRACE_LOADED_OBJECTS=1 " + std::string(VOXLIGHT_BINARY);
         FILE* pipe = ::popen(cmd.c_str(), "r");
@@ -133,9 +133,12 @@ TEST(Cli, HeavyLibrariesAreLoadedOnlyWhenUsed) {
         EXPECT_NE(out.find("libstdc++"), std::string::npos) << out;  // the trace worked
         EXPECT_EQ(out.find("OpenImageIO"), std::string::npos) << out;
         EXPECT_EQ(out.find("gdcm"), std::string::npos) << out;
+        EXPECT_EQ(out.find("libvtk"), std::string::npos) << out;
     }
-    // ... and the module is found when an image is written.
-    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+    // ... and the modules are found when a volume is read and an image written.
+    const fs::path volume = tmp / "s.nii.gz";
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o '" + volume.string() + "'", tmp.path()).code, 0);
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"path": ")" << volume.string() << R"("},
         "image": {"width": 24, "height": 16}})";
     const Result r = run("render -q '" + (tmp / "scene.json").string() + "' -o '" +
                              (tmp / "out.png").string() + "'",
