@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "io/dicom_series.h"
 
+#include "io/dicom_module.h"
+
 // GDCM stays in this translation unit: its headers clash with OpenImageIO's (see BUILD-NOTES.md).
 #include <gdcmImage.h>
 #include <gdcmImageReader.h>
@@ -56,9 +58,6 @@ constexpr double kMissingSliceRatioTol = 0.15;
 /// finest pixel spacing over the whole series; more is a sheared grid (gantry tilt) that a Volume
 /// (orthonormal D) cannot hold.
 constexpr double kMaxShearPixels = 0.2;
-/// looksLikeDicom() opens at most this many files of a directory (cheap probe; non-DICOM files such
-/// as LICENSE.txt may come first in directory order).
-constexpr int kProbeFiles = 16;
 /// Rescale slope/intercept count as identical across slices to this relative accuracy.
 constexpr double kRescaleMatchRel = 1e-9;
 
@@ -156,26 +155,6 @@ struct SliceHeader {
     double slope = 1.0, intercept = 0.0;
     double along = 0.0;  ///< position projected on the slice normal (mm), filled when sorting
 };
-
-/// Cheap probe of one file: "DICM" at byte 128 (Part 10 file), or — for old files without a
-/// preamble — a first element in group 0x0002 or 0x0008 (little endian), which is how a bare DICOM
-/// data set starts.
-bool looksLikeDicomFile(const fs::path& file, bool* hasPreamble = nullptr) {
-    std::ifstream in(file, std::ios::binary);
-    if (!in) return false;
-    std::array<unsigned char, 132> head{};
-    in.read(reinterpret_cast<char*>(head.data()), head.size());
-    const std::streamsize n = in.gcount();
-    if (n >= 132 && std::memcmp(head.data() + 128, "DICM", 4) == 0) {
-        if (hasPreamble) *hasPreamble = true;
-        return true;
-    }
-    if (hasPreamble) *hasPreamble = false;
-    if (n < 8) return false;
-    const unsigned group = head[0] | (head[1] << 8);
-    const unsigned element = head[2] | (head[3] << 8);
-    return (group == 0x0002 || group == 0x0008) && element < 0x0100;
-}
 
 /// Step 0: framing check. Debian's GDCM is built with assertions on and *aborts the process*
 /// (assert(is.good())) on a file cut short inside its header, and silently accepts one cut inside
@@ -947,23 +926,8 @@ void readSlicePixels(const SliceHeader& h, const PixelPlan& plan, core::Volume& 
 
 }  // namespace
 
-bool looksLikeDicom(const std::filesystem::path& path) {
-    std::error_code ec;
-    if (fs::is_regular_file(path, ec)) return looksLikeDicomFile(path);
-    if (!fs::is_directory(path, ec)) return false;
-    int probed = 0;
-    for (fs::directory_iterator it(path, ec), end; !ec && it != end && probed < kProbeFiles;
-         it.increment(ec)) {
-        std::error_code fec;
-        if (!it->is_regular_file(fec)) continue;
-        ++probed;
-        if (looksLikeDicomFile(it->path())) return true;
-    }
-    return false;
-}
-
-core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOptions& options,
-                             const core::Progress& progress) {
+core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const ReadOptions& options,
+                                     const core::Progress& progress) {
     silenceGdcm();
     progress.report("dicom", 0.0);
 
@@ -1139,3 +1103,13 @@ core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOption
 }
 
 }  // namespace voxlight::io::detail
+
+namespace {
+constexpr voxlight::io::dicom_module::Api kApi{voxlight::io::dicom_module::kAbiVersion,
+                                               &voxlight::io::detail::readDicomSeriesWithGdcm};
+}  // namespace
+
+// The module's single exported symbol (it is built with hidden visibility; dicom_module.h).
+extern "C" __attribute__((visibility("default"))) const void* voxlight_dicom_module() {
+    return &kApi;
+}

@@ -1,22 +1,29 @@
 // SPDX-License-Identifier: MIT
-// OpenImageIO stays inside this translation unit (no GDCM/VTK includes here: their headers clash,
-// BUILD-NOTES).
+// Image I/O front end: validation, channel promotion, temporary names and every message live here;
+// the OpenImageIO calls live in a module loaded with dlopen on first use (image_module.h says why).
 #include "io/image.h"
 
-#include <OpenImageIO/imageio.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <mutex>
 #include <string>
 #include <system_error>
 
 #include "core/error.h"
+#include "io/image_module.h"
+#include "io/module_loader.h"
 
 namespace voxlight::io {
 
 namespace {
+namespace mod = image_module;
+
+/// Images larger than this are refused before decoding (2^28 float RGBA pixels = 4 GiB).
+constexpr std::uint64_t kMaxImagePixels = std::uint64_t(1) << 28;
+
 std::string lowerExtension(const std::filesystem::path& p) {
     std::string e = p.extension().string();
     std::transform(e.begin(), e.end(), e.begin(),
@@ -24,12 +31,24 @@ std::string lowerExtension(const std::filesystem::path& p) {
     return e;
 }
 
-std::string oiioError(const std::string& fromObject) {
-    std::string e = fromObject.empty() ? OIIO::geterror() : fromObject;
-    while (!e.empty() && (e.back() == '\n' || e.back() == ' ')) e.pop_back();
-    return e.empty() ? "unknown OpenImageIO error" : e;
+/// The module's functions, loaded once per process (thread-safe); InputError naming `file` when the
+/// module cannot be loaded.
+const mod::Api& imageModule(const std::string& file) {
+    static std::once_flag once;
+    static detail::LoadedModule loaded;
+    std::call_once(once, [] {
+        loaded = detail::loadModule(mod::kFileName, mod::kEntryPoint, mod::kAbiVersion);
+    });
+    if (!loaded.api)
+        throw InputError(file, "image module",
+                         "image support (OpenImageIO) is unavailable: " + loaded.error,
+                         std::string("put ") + mod::kFileName +
+                             " (built with voxlight) beside the voxlight executable");
+    return *static_cast<const mod::Api*>(loaded.api);
 }
 }  // namespace
+
+// --- Reading --------------------------------------------------------------------------------------
 
 ImageRGBA readImage(const std::filesystem::path& path) {
     ImageReadInfo info;
@@ -44,39 +63,40 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
     if (std::filesystem::is_directory(path, ec))
         throw InputError(file, "file", "is a directory, not an image file",
                          "give the path of an image file");
-    auto in = OIIO::ImageInput::open(file);
-    if (!in)
-        throw InputError(
-            file, "file", "cannot be read as an image: " + oiioError({}),
-            "give a valid .hdr, .exr, .png or .jpg file (is it truncated or mislabelled?)");
-    const OIIO::ImageSpec& spec = in->spec();
-    info.channels = spec.nchannels;
-    info.floatingPoint = spec.format.is_floating_point();
-    info.format = in->format_name();
-    const int w = spec.width, h = spec.height, nc = spec.nchannels;
-    if (w <= 0 || h <= 0 || nc <= 0)
-        throw InputError(file, "size",
-                         "image has zero size (" + std::to_string(w) + "×" + std::to_string(h) +
-                             ", " + std::to_string(nc) + " channels)",
-                         "give a non-empty image");
-    if (std::uint64_t(w) * std::uint64_t(h) > (std::uint64_t(1) << 28))
-        throw InputError(file, "size",
-                         "image is " + std::to_string(w) + "×" + std::to_string(h) +
-                             ", larger than the 2^28-pixel limit",
-                         "downsample the image");
-    // Only the channels used below are decoded: a many-channel EXR (AOVs, layers) would otherwise
-    // allocate nc floats per pixel, up to 2^28 · nc.
+    mod::ReadResult r;
+    imageModule(file).read(file.c_str(), kMaxImagePixels, r);
+    info.channels = r.channels;
+    info.floatingPoint = r.floatingPoint;
+    info.format = r.format;
+    const int w = r.width, h = r.height, nc = r.channels;
+    switch (r.status) {
+        case mod::Status::Ok:
+            break;
+        case mod::Status::OpenFailed:
+            throw InputError(
+                file, "file", "cannot be read as an image: " + r.message,
+                "give a valid .hdr, .exr, .png or .jpg file (is it truncated or mislabelled?)");
+        case mod::Status::ZeroSize:
+            throw InputError(file, "size",
+                             "image has zero size (" + std::to_string(w) + "×" + std::to_string(h) +
+                                 ", " + std::to_string(nc) + " channels)",
+                             "give a non-empty image");
+        case mod::Status::TooLarge:
+            throw InputError(file, "size",
+                             "image is " + std::to_string(w) + "×" + std::to_string(h) +
+                                 ", larger than the 2^28-pixel limit",
+                             "downsample the image");
+        default:
+            throw InputError(file, "pixels", "pixel data cannot be decoded: " + r.message,
+                             "the file is probably truncated or corrupt; re-export it");
+    }
     const int used = std::min(nc, 4);
-    std::vector<float> raw(std::size_t(w) * h * used);
-    if (!in->read_image(0, 0, 0, used, OIIO::TypeDesc::FLOAT, raw.data()))
-        throw InputError(file, "pixels",
-                         "pixel data cannot be decoded: " + oiioError(in->geterror()),
-                         "the file is probably truncated or corrupt; re-export it");
-    in->close();
+    VL_CHECK(r.pixels.size() == std::size_t(w) * h * used);
 
+    // Promote to RGBA: grey → (v, v, v), missing alpha → 1.
     ImageRGBA img(w, h);
     for (std::size_t p = 0; p < std::size_t(w) * h; ++p) {
-        const float* s = &raw[p * used];
+        const float* s = &r.pixels[p * used];
         float* d = &img.pixels[p * 4];
         if (nc <= 2) {
             d[0] = d[1] = d[2] = s[0];
@@ -88,6 +108,19 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
     }
     return img;
 }
+
+ImageRGBA readHdrImage(const std::filesystem::path& path) {
+    ImageReadInfo info;
+    ImageRGBA img = readImage(path, info);
+    if (!info.floatingPoint)
+        throw InputError(path.string(), "format",
+                         "is an integer (" + info.format +
+                             ") image, not HDR: environment lights need linear radiance",
+                         "convert the map to .hdr or .exr");
+    return img;
+}
+
+// --- Writing --------------------------------------------------------------------------------------
 
 void writeImage(const ImageRGBA& image, const std::filesystem::path& path) {
     writeImage(image, path, ImageWriteOptions{});
@@ -107,9 +140,9 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
     const bool eightBit = !hdr && !exr && ext != ".pfm" && ext != ".tif" && ext != ".tiff";
 
     int channels = hdr ? 3 : 4;
-    OIIO::TypeDesc type = OIIO::TypeDesc::FLOAT;
-    if (exr && options.exrHalf) type = OIIO::TypeDesc::HALF;
-    if (eightBit) type = OIIO::TypeDesc::UINT8;
+    mod::PixelType type = mod::PixelType::Float;
+    if (exr && options.exrHalf) type = mod::PixelType::Half;
+    if (eightBit) type = mod::PixelType::UInt8;
     if (ext == ".jpg" || ext == ".jpeg") channels = 3;
 
     // Pixels to write, as float; 8-bit formats are clamped to 0..1 (OIIO rounds), non-finite values
@@ -130,6 +163,7 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
             data[p * channels + c] = v;
         }
     }
+    const mod::Api& api = imageModule(file);
 
     // Temporary name in the same directory, same extension (OpenImageIO picks the format from it).
     static std::atomic<int> counter{0};
@@ -138,18 +172,23 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
     const std::filesystem::path tmp =
         dir / (path.stem().string() + ".tmp" + std::to_string(::getpid()) + "_" +
                std::to_string(counter++) + path.extension().string());
-    auto out = OIIO::ImageOutput::create(tmp.string());
-    if (!out)
-        throw InputError(file, "extension", "no image writer for \"" + ext + "\": " + oiioError({}),
+    const std::string tmpName = tmp.string();
+    mod::WriteRequest request;
+    request.path = tmpName.c_str();
+    request.width = w, request.height = h, request.channels = channels;
+    request.type = type;
+    request.zipCompression = exr;
+    request.pixels = data.data();
+    mod::WriteResult result;
+    api.write(request, result);
+    if (result.status == mod::Status::NoWriter)
+        throw InputError(file, "extension",
+                         "no image writer for \"" + ext + "\": " + result.message,
                          "use .exr (linear HDR), .hdr or .png");
-    OIIO::ImageSpec spec(w, h, channels, type);
-    if (exr) spec.attribute("compression", "zip");
-    if (!out->open(tmp.string(), spec) || !out->write_image(OIIO::TypeDesc::FLOAT, data.data()) ||
-        !out->close()) {
-        const std::string err = oiioError(out->geterror());
+    if (result.status != mod::Status::Ok) {
         std::error_code ec;
         std::filesystem::remove(tmp, ec);
-        throw InputError(file, "file", "cannot write image: " + err,
+        throw InputError(file, "file", "cannot write image: " + result.message,
                          "check that the directory exists and is writable");
     }
     std::error_code ec;
@@ -159,21 +198,6 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
         throw InputError(file, "file", "cannot move the written image into place: " + ec.message(),
                          "check permissions of the target directory");
     }
-}
-
-}  // namespace voxlight::io
-
-namespace voxlight::io {
-
-ImageRGBA readHdrImage(const std::filesystem::path& path) {
-    ImageReadInfo info;
-    ImageRGBA img = readImage(path, info);
-    if (!info.floatingPoint)
-        throw InputError(path.string(), "format",
-                         "is an integer (" + info.format +
-                             ") image, not HDR: environment lights need linear radiance",
-                         "convert the map to .hdr or .exr");
-    return img;
 }
 
 }  // namespace voxlight::io

@@ -15,6 +15,10 @@
 // caller provides display values in 0..1 which are clamped and rounded (NaN/Inf → InputError, as
 // they would otherwise silently become 0 or 255). The file is written to a temporary name in the
 // same directory and renamed, so a crash never leaves a half-written file.
+//
+// OpenImageIO is loaded on the first call (libvoxlight_image_oiio.so, beside the executable; see
+// image_module.h), so processes that never touch an image do not pay its start-up. When the module
+// cannot be loaded, every call throws InputError (field "image module") listing where it looked.
 #include <filesystem>
 #include <string>
 #include <vector>

@@ -1,4 +1,7 @@
 // SPDX-License-Identifier: MIT
+// Volume reading and writing through VTK (and DICOM through the GDCM module). Built into the module
+// libvoxlight_volume_vtk.so, not into io: the io functions of volume_io.h forward here
+// (volume_io_loader.cpp, volume_module.h).
 #include "io/volume_io.h"
 
 #include <unistd.h>
@@ -36,6 +39,7 @@
 #include <sstream>
 
 #include "io/dicom_series.h"
+#include "io/volume_module.h"
 
 namespace voxlight::io {
 
@@ -565,7 +569,7 @@ void applyNonFinitePolicy(Volume& v, const fs::path& path, NonFinitePolicy polic
 
 }  // namespace
 
-std::vector<std::string> supportedVolumeFormats() {
+std::vector<std::string> detail::supportedVolumeFormatsWithVtk() {
     std::vector<std::string> out;
     for (const auto& r : registry()) {
         std::string s = r.name + " (";
@@ -582,8 +586,8 @@ std::vector<std::string> supportedVolumeFormats() {
     return out;
 }
 
-Volume readVolume(const fs::path& path, const ReadOptions& options,
-                  const core::Progress& progress) {
+Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& options,
+                                 const core::Progress& progress) {
     std::error_code ec;
     if (!fs::exists(path, ec))
         throw InputError(path.string(), "path", "does not exist",
@@ -700,12 +704,12 @@ fs::path outputDirectory(const fs::path& path) {
 }
 }  // namespace
 
-void checkVolumeOutputPath(const fs::path& path) {
+void detail::checkVolumeOutputPathWithVtk(const fs::path& path) {
     outputExtension(path);
     outputDirectory(path);
 }
 
-void writeVolume(const Volume& v, const fs::path& path) {
+void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
     const std::string ext = outputExtension(path);
     const fs::path dir = outputDirectory(path);
     // Same directory (same file system) so the final rename is atomic; keep the extension for VTK's
@@ -775,3 +779,15 @@ void writeVolume(const Volume& v, const fs::path& path) {
 }
 
 }  // namespace voxlight::io
+
+namespace {
+constexpr voxlight::io::volume_module::Api kApi{
+    voxlight::io::volume_module::kAbiVersion, &voxlight::io::detail::readVolumeWithVtk,
+    &voxlight::io::detail::writeVolumeWithVtk, &voxlight::io::detail::checkVolumeOutputPathWithVtk,
+    &voxlight::io::detail::supportedVolumeFormatsWithVtk};
+}  // namespace
+
+// The module's single exported symbol (it is built with hidden visibility; volume_module.h).
+extern "C" __attribute__((visibility("default"))) const void* voxlight_volume_module() {
+    return &kApi;
+}

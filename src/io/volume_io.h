@@ -18,6 +18,11 @@
 // voxels under the Reject policy, mixed DICOM series, missing slices, gantry tilt) throws
 // voxlight::InputError naming the file, the field and the fix. Sizes are checked against
 // core::kMaxVoxels and the file's real length *before* allocating.
+//
+// VTK (and, for DICOM, GDCM) is loaded on the first call, from modules beside the executable
+// (libvoxlight_volume_vtk.so, libvoxlight_dicom_gdcm.so; see volume_module.h). When a module cannot
+// be loaded, the call throws InputError (field "volume module" / "dicom module") listing where it
+// looked.
 #include <filesystem>
 #include <optional>
 #include <string>

@@ -162,3 +162,34 @@ TEST(Cli, TwoProcessesShareOneCacheDirectoryAndExplainMatchesTheRun) {
     }
     EXPECT_EQ(precompute, 3) << "brick_grid, transfer_function, skip_cells";
 }
+
+TEST(Cli, HeavyLibrariesAreLoadedOnlyWhenUsed) {
+    test::TempDir tmp;
+    // ld.so's trace mode (what ldd uses) lists every library mapped before main(): OpenImageIO (~280
+    // libraries), GDCM (its dictionary is built in static constructors) and VTK must not be among
+    // them, or every process pays for them again (src/io/module_loader.h).
+    {
+        const std::string cmd = "LD_TRACE_LOADED_OBJECTS=1 " + std::string(VOXLIGHT_BINARY);
+        FILE* pipe = ::popen(cmd.c_str(), "r");
+        ASSERT_TRUE(pipe);
+        std::string out;
+        std::array<char, 4096> buf;
+        while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe))
+            out.append(buf.data(), n);
+        ASSERT_EQ(::pclose(pipe), 0);
+        EXPECT_NE(out.find("libstdc++"), std::string::npos) << out;  // the trace worked
+        EXPECT_EQ(out.find("OpenImageIO"), std::string::npos) << out;
+        EXPECT_EQ(out.find("gdcm"), std::string::npos) << out;
+        EXPECT_EQ(out.find("libvtk"), std::string::npos) << out;
+    }
+    // ... and the modules are found when a volume is read and an image written.
+    const fs::path volume = tmp / "s.nii.gz";
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o '" + volume.string() + "'", tmp.path()).code, 0);
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"path": ")" << volume.string() << R"("},
+        "image": {"width": 24, "height": 16}})";
+    const Result r = run(
+        "render -q '" + (tmp / "scene.json").string() + "' -o '" + (tmp / "out.png").string() + "'",
+        tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(tmp / "out.png"));
+}

@@ -1,0 +1,108 @@
+// SPDX-License-Identifier: MIT
+// The OpenImageIO module (libvoxlight_image_oiio.so): the only code that includes OpenImageIO,
+// loaded by io/image.cpp on the first image read or write (see image_module.h for why). No GDCM/VTK
+// includes here: their headers clash (BUILD-NOTES).
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <exception>
+#include <string>
+
+#include "io/image_module.h"
+
+namespace voxlight::io::image_module {
+
+namespace {
+std::string oiioError(const std::string& fromObject) {
+    std::string e = fromObject.empty() ? OIIO::geterror() : fromObject;
+    while (!e.empty() && (e.back() == '\n' || e.back() == ' ')) e.pop_back();
+    return e.empty() ? "unknown OpenImageIO error" : e;
+}
+
+OIIO::TypeDesc toOiio(PixelType t) {
+    switch (t) {
+        case PixelType::Half:
+            return OIIO::TypeDesc::HALF;
+        case PixelType::UInt8:
+            return OIIO::TypeDesc::UINT8;
+        case PixelType::Float:
+            break;
+    }
+    return OIIO::TypeDesc::FLOAT;
+}
+
+void readImpl(const char* path, std::uint64_t maxPixels, ReadResult& out) {
+    auto in = OIIO::ImageInput::open(path);
+    if (!in) {
+        out.status = Status::OpenFailed, out.message = oiioError({});
+        return;
+    }
+    const OIIO::ImageSpec& spec = in->spec();
+    out.width = spec.width, out.height = spec.height, out.channels = spec.nchannels;
+    out.floatingPoint = spec.format.is_floating_point();
+    out.format = in->format_name();
+    if (out.width <= 0 || out.height <= 0 || out.channels <= 0) {
+        out.status = Status::ZeroSize;
+        return;
+    }
+    if (std::uint64_t(out.width) * std::uint64_t(out.height) > maxPixels) {
+        out.status = Status::TooLarge;
+        return;
+    }
+    const int used = std::min(out.channels, 4);
+    out.pixels.resize(std::size_t(out.width) * out.height * used);
+    if (!in->read_image(0, 0, 0, used, OIIO::TypeDesc::FLOAT, out.pixels.data())) {
+        out.status = Status::DecodeFailed, out.message = oiioError(in->geterror());
+        out.pixels.clear();
+        return;
+    }
+    in->close();
+    out.status = Status::Ok;
+}
+
+void writeImpl(const WriteRequest& r, WriteResult& out) {
+    auto o = OIIO::ImageOutput::create(r.path);
+    if (!o) {
+        out.status = Status::NoWriter, out.message = oiioError({});
+        return;
+    }
+    OIIO::ImageSpec spec(r.width, r.height, r.channels, toOiio(r.type));
+    if (r.zipCompression) spec.attribute("compression", "zip");
+    if (!o->open(r.path, spec) || !o->write_image(OIIO::TypeDesc::FLOAT, r.pixels) || !o->close()) {
+        out.status = Status::WriteFailed, out.message = oiioError(o->geterror());
+        return;
+    }
+    out.status = Status::Ok;
+}
+
+// The entry points are noexcept: an exception must not unwind into the loader's frames, so
+// anything OpenImageIO (or an allocation) throws becomes Status::Exception.
+void read(const char* path, std::uint64_t maxPixels, ReadResult& out) noexcept {
+    try {
+        readImpl(path, maxPixels, out);
+    } catch (const std::exception& e) {
+        out.status = Status::Exception, out.message = e.what();
+    } catch (...) {
+        out.status = Status::Exception, out.message = "unknown exception in OpenImageIO";
+    }
+}
+
+void write(const WriteRequest& request, WriteResult& out) noexcept {
+    try {
+        writeImpl(request, out);
+    } catch (const std::exception& e) {
+        out.status = Status::Exception, out.message = e.what();
+    } catch (...) {
+        out.status = Status::Exception, out.message = "unknown exception in OpenImageIO";
+    }
+}
+
+constexpr Api kApi{kAbiVersion, &read, &write};
+}  // namespace
+
+}  // namespace voxlight::io::image_module
+
+// The single exported symbol (the module is built with hidden visibility).
+extern "C" __attribute__((visibility("default"))) const void* voxlight_image_module() {
+    return &voxlight::io::image_module::kApi;
+}

@@ -1,0 +1,68 @@
+// SPDX-License-Identifier: MIT
+#include "io/module_loader.h"
+
+#include <dlfcn.h>
+
+#include <filesystem>
+#include <system_error>
+#include <vector>
+
+namespace voxlight::io::detail {
+
+namespace {
+std::vector<std::filesystem::path> moduleDirectories() {
+    std::vector<std::filesystem::path> dirs;
+    std::error_code ec;
+    const auto exe = std::filesystem::read_symlink("/proc/self/exe", ec);
+    if (!ec) dirs.push_back(exe.parent_path());
+#ifdef VOXLIGHT_MODULE_BUILD_DIR
+    const std::filesystem::path built = VOXLIGHT_MODULE_BUILD_DIR;
+    if (dirs.empty() || !std::filesystem::equivalent(dirs.front(), built, ec))
+        dirs.push_back(built);
+#endif
+    return dirs;
+}
+}  // namespace
+
+LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion) {
+    using Entry = const void* (*)();
+    LoadedModule m;
+    std::string tried;
+    for (const auto& dir : moduleDirectories()) {
+        const std::filesystem::path path = dir / fileName;
+        if (!tried.empty()) tried += ", ";
+        std::error_code ec;
+        if (!std::filesystem::exists(path, ec)) {
+            tried += path.string() + " (not found)";
+            continue;
+        }
+        // RTLD_LOCAL: the module's libraries do not join the global symbol namespace.
+        void* handle = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+        if (!handle) {
+            const char* err = ::dlerror();
+            tried += path.string() + " (" + (err ? err : "dlopen failed") + ")";
+            continue;
+        }
+        const auto entry = reinterpret_cast<Entry>(::dlsym(handle, entryPoint));
+        const void* api = entry ? entry() : nullptr;
+        if (!api) {
+            tried += path.string() + " (no entry point " + entryPoint + ")";
+            ::dlclose(handle);
+            continue;
+        }
+        // Every module's Api struct starts with its int abiVersion (module_loader.h).
+        const int found = *static_cast<const int*>(api);
+        if (found != abiVersion) {
+            tried += path.string() + " (ABI version " + std::to_string(found) + ", expected " +
+                     std::to_string(abiVersion) + ": a stale module from another build)";
+            ::dlclose(handle);
+            continue;
+        }
+        m.api = api;
+        return m;
+    }
+    m.error = "tried " + tried;
+    return m;
+}
+
+}  // namespace voxlight::io::detail

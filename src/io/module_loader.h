@@ -1,0 +1,29 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Internal to io/: loading the modules that keep heavy third-party libraries out of start-up.
+//
+// OpenImageIO (~280 shared libraries) and GDCM (which builds its whole DICOM dictionary in static
+// constructors) would otherwise be mapped, relocated and initialised before main() in every voxlight
+// process, whether or not it reads an image or a DICOM series. They live in MODULE libraries instead,
+// opened here on first use.
+//
+// A module exports one `extern "C" const Api* <entryPoint>()`; its Api struct starts with
+// `int abiVersion`, compared with the version the caller was compiled against, so a stale module
+// left beside a newer executable is refused instead of called.
+#include <string>
+
+namespace voxlight::io::detail {
+
+struct LoadedModule {
+    const void* api = nullptr;  ///< what the entry point returned; null when loading failed
+    std::string error;          ///< why api is null: every place tried and what went wrong there
+};
+
+/// Looks `fileName` up beside the running executable (/proc/self/exe: an installed or copied
+/// voxlight), then in the directory this build put the modules in (tests run from
+/// build/tests/<lib>/), dlopens the first that exists and returns its entry point's result.
+/// Never throws; the handle is never closed (the libraries keep process-wide state). Not cached:
+/// callers keep the result in a function-local static under std::call_once.
+LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion);
+
+}  // namespace voxlight::io::detail
