@@ -137,7 +137,7 @@ Command addRenderCommand(CLI::App& app) {
         if (!*quiet)
             std::fprintf(stderr, "wrote %s (%dx%d, %s, render %.3f s, total %.2f s)\n",
                          out->c_str(), r.image.width, r.image.height, s.method.name.c_str(),
-                         r.stage("render").seconds, total.seconds());
+                         r.stage(r.imageStage).seconds, total.seconds());
         return kExitOk;
     };
     return c;

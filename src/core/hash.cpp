@@ -40,7 +40,7 @@ std::uint64_t hashBytes(const void* data, std::size_t size, std::uint64_t seed) 
         b = mum(load8(p + i + 8) ^ b ^ kM3, kM1 ^ (b >> 1));
     }
     std::uint64_t tail = 0;
-    std::memcpy(&tail, p + i, size - i < 8 ? size - i : 8);
+    if (size > i) std::memcpy(&tail, p + i, size - i < 8 ? size - i : 8);
     a ^= tail;
     if (size - i > 8) {
         std::uint64_t t2 = 0;

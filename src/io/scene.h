@@ -24,7 +24,8 @@
 //              {"type": "area", "shape": "sphere"|"rect"|"disk", "position": ..., "normal": ...,
 //               "radius": mm, "size": [w,h]},
 //              {"type": "environment", "path": "sky.hdr", "intensity": 1,
-//               "rotation": [x,y,z] deg, "layout": "equirect"|"probe"}],
+//               "rotation": [x,y,z] deg (about the world x, then y, then z axis; the map's
+//               frame is lights/environment_light.h's), "layout": "equirect"|"probe"}],
 //   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z]}]  (keeps the side the normal points to,
 //                                                            as VTK),
 //   "crop_box": {"min": [x,y,z], "max": [x,y,z]}            (world mm),

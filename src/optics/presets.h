@@ -33,7 +33,8 @@ std::array<float, 2> robustRange(const core::Volume& volume, float loFraction = 
                                  float hiFraction = 0.995f);
 
 /// Builds a preset. Relative presets are mapped onto `robust` (see robustRange). Throws InputError
-/// (field "transfer_function.preset") naming the presets on an unknown name.
+/// (source "presets", field "name") naming the presets on an unknown name; the layer that read
+/// the name maps it to its own key.
 TransferFunction makePreset(const std::string& name, const std::array<float, 2>& robust = {0, 1});
 
 /// The preset used when a scene names none: ct-bone for CT in HU, mr-t1-brain for MR, generic

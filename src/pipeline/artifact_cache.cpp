@@ -4,6 +4,7 @@
 #include <unistd.h>
 
 #include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <system_error>
@@ -19,18 +20,64 @@ constexpr char kMagic[16] = {'V', 'O', 'X', 'L', 'I', 'G', 'H',  'T',
                              '-', 'C', 'A', 'C', 'H', 'E', '\0', '\n'};
 constexpr std::size_t kMaxStageName = 256;
 
-std::vector<unsigned char> readWholeFile(const fs::path& path, bool& exists) {
+/// What a cache file's header says, checked against what the caller expects.
+struct Header {
+    bool exists = false;
+    std::string problem;  ///< empty: the header fits (the payload is not checked yet)
+    std::uint64_t payloadSize = 0, payloadHash = 0;
+    std::streamoff payloadOffset = 0;
+};
+
+/// Reads and checks only the header (magic, versions, stage, key, declared size against the
+/// file's size): cheap, so --explain can use it, and no allocation trusts a damaged length.
+Header readHeader(const fs::path& path, const std::string& stage, std::uint64_t key,
+                  std::uint32_t codecVersion) {
+    Header h;
     std::ifstream in(path, std::ios::binary);
-    exists = bool(in);
-    if (!in) return {};
+    if (!in) return h;
+    h.exists = true;
     in.seekg(0, std::ios::end);
-    const auto size = std::streamoff(in.tellg());
-    if (size < 0 || std::uint64_t(size) > kMaxPayloadBytes + 4096) return {};
+    const std::streamoff fileSize = in.tellg();
     in.seekg(0);
-    std::vector<unsigned char> bytes(static_cast<std::size_t>(size));
-    in.read(reinterpret_cast<char*>(bytes.data()), size);
-    if (!in) return {};
-    return bytes;
+    constexpr std::size_t kMaxHeader = sizeof kMagic + 4 + 4 + 8 + kMaxStageName + 8 + 8 + 8;
+    std::vector<unsigned char> head(kMaxHeader);
+    in.read(reinterpret_cast<char*>(head.data()), std::streamsize(head.size()));
+    head.resize(std::size_t(in.gcount()));
+    try {
+        ByteReader r(head.data(), head.size());
+        char magic[sizeof kMagic];
+        for (char& c : magic) c = r.pod<char>();
+        if (std::memcmp(magic, kMagic, sizeof kMagic) != 0) {
+            h.problem = "is not a voxlight cache file";
+            return h;
+        }
+        const auto format = r.pod<std::uint32_t>();
+        if (format != kCacheFormatVersion) {
+            h.problem = "has cache format " + std::to_string(format) + ", this build reads " +
+                        std::to_string(kCacheFormatVersion);
+            return h;
+        }
+        const auto version = r.pod<std::uint32_t>();
+        if (version != codecVersion) {
+            h.problem = "holds " + stage + " version " + std::to_string(version) +
+                        ", this build writes " + std::to_string(codecVersion);
+            return h;
+        }
+        if (r.string(kMaxStageName) != stage || r.pod<std::uint64_t>() != key) {
+            h.problem = "belongs to another stage or key";
+            return h;
+        }
+        h.payloadSize = r.pod<std::uint64_t>();
+        h.payloadHash = r.pod<std::uint64_t>();
+        h.payloadOffset = std::streamoff(head.size() - r.remaining());
+        const std::uint64_t actual = std::uint64_t(fileSize - h.payloadOffset);
+        if (h.payloadSize > kMaxPayloadBytes || h.payloadSize != actual)
+            h.problem = "is truncated or padded (" + std::to_string(actual) + " of " +
+                        std::to_string(h.payloadSize) + " payload bytes)";
+    } catch (const CacheFormatError&) {
+        h.problem = "is truncated (header incomplete)";
+    }
+    return h;
 }
 
 /// Records are one 64-bit value.
@@ -163,54 +210,38 @@ fs::path ArtifactCache::fileFor(const std::string& stage, std::uint64_t key) con
     return *dir_ / (stage + "-" + core::hexKey(key) + ".vlcache");
 }
 
-bool ArtifactCache::onDisk(const std::string& stage, std::uint64_t key) const {
+bool ArtifactCache::onDisk(const std::string& stage, std::uint64_t key, const Codec& codec) const {
     if (!dir_) return false;
-    std::error_code ec;
-    return fs::is_regular_file(fileFor(stage, key), ec);
+    const Header h = readHeader(fileFor(stage, key), stage, key, codec.version);
+    return h.exists && h.problem.empty();
 }
 
 std::optional<Artifact> ArtifactCache::readDisk(const std::string& stage, std::uint64_t key,
                                                 const Codec& codec) {
     if (!dir_) return std::nullopt;
     const fs::path path = fileFor(stage, key);
-    bool exists = false;
-    const std::vector<unsigned char> file = readWholeFile(path, exists);
-    if (!exists) return std::nullopt;
     auto bad = [&](const std::string& why) -> std::optional<Artifact> {
         warn("cache file " + path.string() + " " + why + "; recomputing " + stage);
         return std::nullopt;
     };
+    const Header h = readHeader(path, stage, key, codec.version);
+    if (!h.exists) return std::nullopt;
+    if (!h.problem.empty()) return bad(h.problem);
     try {
-        ByteReader r(file.data(), file.size());
-        char magic[sizeof kMagic];
-        for (char& c : magic) c = r.pod<char>();
-        if (std::memcmp(magic, kMagic, sizeof kMagic) != 0)
-            return bad("is not a voxlight cache file");
-        const auto format = r.pod<std::uint32_t>();
-        if (format != kCacheFormatVersion)
-            return bad("has cache format " + std::to_string(format) + ", this build reads " +
-                       std::to_string(kCacheFormatVersion));
-        const auto version = r.pod<std::uint32_t>();
-        if (version != codec.version)
-            return bad("holds " + stage + " version " + std::to_string(version) +
-                       ", this build writes " + std::to_string(codec.version));
-        if (r.string(kMaxStageName) != stage || r.pod<std::uint64_t>() != key)
-            return bad("belongs to another stage or key");
-        const auto size = r.pod<std::uint64_t>();
-        const auto hash = r.pod<std::uint64_t>();
-        if (size != r.remaining())
-            return bad("is truncated or padded (" + std::to_string(r.remaining()) + " of " +
-                       std::to_string(size) + " payload bytes)");
-        const unsigned char* payload = file.data() + (file.size() - size);
-        if (core::hashBytes(payload, std::size_t(size), key) != hash)
+        // The declared size matches the file's (readHeader), so this allocation is the file's.
+        std::vector<unsigned char> payload(static_cast<std::size_t>(h.payloadSize));
+        std::ifstream in(path, std::ios::binary);
+        in.seekg(h.payloadOffset);
+        in.read(reinterpret_cast<char*>(payload.data()), std::streamsize(payload.size()));
+        if (!in) return bad("cannot be read to its end");
+        if (core::hashBytes(payload.data(), payload.size(), key) != h.payloadHash)
             return bad("fails its checksum (damaged)");
-        ByteReader body(payload, std::size_t(size));
+        ByteReader body(payload.data(), payload.size());
         Artifact a = codec.read(body);
         body.expectEnd();
         return a;
-    } catch (const CacheFormatError& e) {
-        return bad(std::string("does not decode (") + e.what() + ")");
     } catch (const std::exception& e) {
+        // CacheFormatError, an InputError/InternalError from a constructor's checks, bad_alloc.
         return bad(std::string("does not decode (") + e.what() + ")");
     }
 }
@@ -253,7 +284,8 @@ void ArtifactCache::putRecord(const std::string& kind, std::uint64_t key, std::u
         std::lock_guard lock(mutex_);
         records_[{kind, key}] = value;
     }
-    if (dir_ && !onDisk(kind, key))
+    // Always rewritten (atomically): a damaged or stale record is repaired by the next load.
+    if (dir_)
         writeDisk(kind, key, recordCodec(),
                   Artifact::of(std::make_shared<const std::uint64_t>(value), 8));
 }

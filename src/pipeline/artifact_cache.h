@@ -94,8 +94,9 @@ class ArtifactCache {
     /// reported through warn()).
     std::optional<Artifact> readDisk(const std::string& stage, std::uint64_t key,
                                      const Codec& codec);
-    /// Whether a file for (stage, key) exists (not whether it is valid; for --explain).
-    bool onDisk(const std::string& stage, std::uint64_t key) const;
+    /// Whether a file for (stage, key) exists with a header that fits this codec and its size
+    /// (the payload's checksum is checked only when it is read; for --explain).
+    bool onDisk(const std::string& stage, std::uint64_t key, const Codec& codec) const;
     /// Writes atomically; a failure (disk full, permissions) is reported through warn(), not
     /// thrown: the render does not depend on the cache.
     void writeDisk(const std::string& stage, std::uint64_t key, const Codec& codec,

@@ -68,6 +68,11 @@ KeyBuilder& KeyBuilder::number(double value) {
     return *this;
 }
 
+KeyBuilder& KeyBuilder::integer(std::uint64_t value) {
+    h_ = core::Hasher(h_).add(value).value();
+    return *this;
+}
+
 std::optional<std::uint64_t> KeyBuilder::value() const {
     if (!known_) return std::nullopt;
     return h_;
@@ -166,8 +171,8 @@ std::vector<StageRecord> Session::explain(const io::Scene& scene) {
         }
         r.key = core::hexKey(*key);
         const bool memory = st.kind != StageKind::Frame && cache_.inMemory(st.name, *key);
-        const bool disk =
-            !memory && st.kind == StageKind::Precompute && st.codec && cache_.onDisk(st.name, *key);
+        const bool disk = !memory && st.kind == StageKind::Precompute && st.codec &&
+                          cache_.onDisk(st.name, *key, *st.codec);
         if (memory || disk) {
             r.reason = cachedReason(*key, disk);
         } else {
@@ -256,6 +261,7 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
         throw InternalError("plan of '" + plan.method + "' has no image stage '" + plan.imageStage +
                             "'");
     res.image = *run.get<core::ImageRGBA>(plan.imageStage);
+    res.imageStage = plan.imageStage;
     res.details = run.details();
     if (res.details.contains("params_resolved")) {
         for (auto it = res.details["params_resolved"].begin();

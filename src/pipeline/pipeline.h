@@ -131,6 +131,7 @@ class KeyBuilder {
     KeyBuilder& json(const nlohmann::json& value);
     KeyBuilder& text(const std::string& value);
     KeyBuilder& number(double value);
+    KeyBuilder& integer(std::uint64_t value);
     std::optional<std::uint64_t> value() const;
 
   private:
@@ -149,6 +150,7 @@ inline constexpr int kMaxFrames = 1000;
 struct RunResult {
     core::ImageRGBA image;  ///< the image stage's artifact: linear radiance, alpha = coverage
     std::vector<StageRecord> stages;
+    std::string imageStage;  ///< the stage whose artifact `image` is
     std::string method;
     nlohmann::json params;   ///< as used
     nlohmann::json details;  ///< method details + "frame_seconds" when frames > 1

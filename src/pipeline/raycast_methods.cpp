@@ -20,6 +20,8 @@
 #include "core/timing.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
+#include "lights/environment_light.h"
+#include "optics/presets.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
 #include "render/ray_caster.h"
@@ -49,6 +51,43 @@ struct GradientArtifact {
 };
 
 using LightList = std::vector<std::shared_ptr<const lights::Light>>;
+
+// Bytes per artifact, for the memory budget: a skip cell holds a majorant, a value range, a flag
+// and a skip distance; a TF table holds kTableCells + 1 nodes of σt, albedo and emission plus the
+// pre-integration sums (~16 floats each).
+constexpr std::size_t kSkipCellBytes = 4 + 8 + 1 + 1;
+constexpr std::size_t kTfBytes = sizeof(TfArtifact) + (optics::TfTable::kTableCells + 1) * 16 * 4;
+
+/// The lights as held in memory (an environment map keeps its texels, CDFs and SH).
+std::size_t lightBytes(const LightList& lights) {
+    std::size_t bytes = 0;
+    for (const auto& l : lights) {
+        bytes += 256;
+        if (const auto* e = dynamic_cast<const lights::EnvironmentLight*>(l.get()))
+            bytes += std::size_t(e->width()) * e->height() * (12 + 8 + 8);
+    }
+    return bytes;
+}
+
+/// Version of what the transfer_function stage computes beyond its inputs (robust range, default
+/// preset per modality): bump when that code changes. The presets' own definitions are hashed.
+constexpr std::uint32_t kTfStageVersion = 1;
+
+/// A hash of every preset's definition in this build (points on the unit range), so a retuned
+/// preset never meets a TF cached by an older build.
+std::uint64_t presetCatalogHash() {
+    static const std::uint64_t h = [] {
+        core::Hasher hh;
+        for (const auto& p : optics::presetCatalog()) {
+            const optics::TransferFunction tf = optics::makePreset(p.name, {0.f, 1.f});
+            hh.add(p.name).add(p.relative);
+            for (const auto& pt : tf.points()) hh.addPod(pt);
+            hh.addPod(tf.window());
+        }
+        return hh.value();
+    }();
+    return h;
+}
 
 // ---- Codecs (bump a version when its encoding or meaning changes) ---------------------------
 
@@ -100,14 +139,16 @@ const Codec& skipCellsCodec() {
             const int cellSize = r.pod<int>();
             auto maj = r.array<float>(kMaxCells);
             auto ranges = r.array<std::array<float, 2>>(kMaxCells);
-            if (counts.x < 1 || counts.y < 1 || counts.z < 1 ||
+            constexpr int kMaxCount = core::kMaxDim / render::kSkipCellVoxels + 1;
+            if (counts.x < 1 || counts.y < 1 || counts.z < 1 || counts.x > kMaxCount ||
+                counts.y > kMaxCount || counts.z > kMaxCount ||
                 cellSize != render::kSkipCellVoxels ||
                 maj.size() != std::size_t(counts.x) * counts.y * counts.z ||
                 ranges.size() != maj.size())
                 badPayload("skip cell sizes do not fit together");
             for (float m : maj)
                 if (!(m >= 0.f)) badPayload("negative or NaN majorant");
-            const std::size_t bytes = maj.size() * 12;
+            const std::size_t bytes = maj.size() * kSkipCellBytes;
             return Artifact::of(
                 std::make_shared<const grid::BrickMajorants>(grid::BrickMajorants::fromCells(
                     counts, cellSize, std::move(maj), std::move(ranges))),
@@ -132,8 +173,7 @@ const Codec& transferFunctionCodec() {
                              // The constructor validates the points (InputError → the cache reports and recomputes).
                              t->tf = optics::TransferFunction(std::move(points), window, name);
                              t->table = std::make_shared<const optics::TfTable>(t->tf);
-                             return Artifact::of<TfArtifact>(std::move(t),
-                                                             sizeof(TfArtifact) + 64 * 1024);
+                             return Artifact::of<TfArtifact>(std::move(t), kTfBytes);
                          }};
     return c;
 }
@@ -250,11 +290,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return volumeIdentity(run.scene());
     };
     load.compute = [](Run& run) {
+        const std::uint64_t identity = volumeIdentity(run.scene());  // the key it runs under
         auto v = std::make_shared<LoadedVolume>();
         v->volume = loadSceneVolume(run.scene(), run.progress());
         v->contentHash = core::contentHash(v->volume);
         v->nonFinite = v->volume.countNonFinite();
-        run.cache().putRecord("volume-content", volumeIdentity(run.scene()), v->contentHash);
+        // What a later process needs to name this volume's artifacts before reading it.
+        run.cache().putRecord("volume-content", identity, v->contentHash);
+        run.cache().putRecord("volume-voxels", identity, v->volume.voxelCount());
         const std::size_t bytes = v->volume.sizeBytes();
         return Artifact::of<LoadedVolume>(std::move(v), bytes);
     };
@@ -292,13 +335,17 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     const json tfDesc = scene.document.value("transfer_function", json());
     Stage tf{"transfer_function", StageKind::Precompute, {"load_volume", "transfer_function"}};
     tf.key = [tfDesc](const Run& run) {
-        return KeyBuilder(run, "transfer_function").stage("load_volume").json(tfDesc).value();
+        return KeyBuilder(run, "transfer_function", kTfStageVersion)
+            .stage("load_volume")
+            .json(tfDesc)
+            .integer(presetCatalogHash())
+            .value();
     };
     tf.compute = [](Run& run) {
         auto t = std::make_shared<TfArtifact>();
         t->tf = buildTransferFunction(run.scene(), run.get<LoadedVolume>("load_volume")->volume);
         t->table = std::make_shared<const optics::TfTable>(t->tf);
-        return Artifact::of<TfArtifact>(std::move(t), sizeof(TfArtifact) + 64 * 1024);
+        return Artifact::of<TfArtifact>(std::move(t), kTfBytes);
     };
     tf.codec = &transferFunctionCodec();
     tf.describe = [](const Run&, const Artifact& a) {
@@ -306,20 +353,30 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(tf);
 
-    Stage cells{"skip_cells", StageKind::Precompute, {"brick_grid", "transfer_function", "method"}};
-    cells.key = [skipRule](const Run& run) {
-        return KeyBuilder(run, "skip_cells")
-            .stage("load_volume")
-            .stage("transfer_function")
-            .json(skipRule)
-            .value();
+    // MIP/MinIP skip nothing and an explicit isovalue decides alone: their cells do not read the
+    // TF, so a TF change keeps them.
+    const bool cellsReadTf = !(kind == Kind::Mip || kind == Kind::MinIp ||
+                               (kind == Kind::Iso && options.isoValue.has_value()));
+    Stage cells{"skip_cells", StageKind::Precompute,
+                cellsReadTf ? std::vector<std::string>{"brick_grid", "transfer_function", "method"}
+                            : std::vector<std::string>{"brick_grid", "method"}};
+    cells.key = [skipRule, cellsReadTf](const Run& run) {
+        KeyBuilder k(run, "skip_cells");
+        k.stage("load_volume").json(skipRule);
+        if (cellsReadTf) k.stage("transfer_function");
+        return k.value();
     };
     cells.compute = [options](Run& run) {
         const auto tfa = run.get<TfArtifact>("transfer_function");
-        auto m = std::make_shared<const grid::BrickMajorants>(render::buildSkipCells(
-            run.get<LoadedVolume>("load_volume")->volume, *run.get<grid::BrickGrid>("brick_grid"),
-            tfa->tf, *tfa->table, options));
-        const std::size_t bytes = m->size() * 13;
+        std::shared_ptr<const grid::BrickMajorants> m;
+        try {
+            m = std::make_shared<const grid::BrickMajorants>(render::buildSkipCells(
+                run.get<LoadedVolume>("load_volume")->volume,
+                *run.get<grid::BrickGrid>("brick_grid"), tfa->tf, *tfa->table, options));
+        } catch (const InputError& e) {
+            rethrowAsScene(run.scene(), e);
+        }
+        const std::size_t bytes = m->size() * kSkipCellBytes;
         return Artifact::of<grid::BrickMajorants>(std::move(m), bytes);
     };
     cells.codec = &skipCellsCodec();
@@ -338,11 +395,19 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     else if (!options.centralDifferences)
         grad.skip = "not needed: forward differences (central_differences false) read no table";
     grad.key = [options](const Run& run) -> std::optional<std::uint64_t> {
-        // Dense ← volume; bricked ← volume + skip cells. The choice needs the voxel count: before
-        // the volume is read (explain) the dense key is assumed, as for all but > 64 M voxels.
-        const bool bricked = run.has("load_volume") &&
-                             render::gradientTableUse(run.get<LoadedVolume>("load_volume")->volume,
-                                                      options) == render::GradientTableUse::Bricked;
+        // Dense ← volume; bricked ← volume + skip cells. The choice needs the voxel count: from
+        // the loaded volume, or (explain) from the record its last load left; unknown otherwise.
+        std::uint64_t voxels = 0;
+        if (run.has("load_volume")) {
+            voxels = run.get<LoadedVolume>("load_volume")->volume.voxelCount();
+        } else if (const auto v =
+                       run.cache().record("volume-voxels", volumeIdentity(run.scene()))) {
+            voxels = *v;
+        } else {
+            return std::nullopt;
+        }
+        const bool bricked =
+            render::gradientTableUse(voxels, options) == render::GradientTableUse::Bricked;
         KeyBuilder k(run, "gradients");
         k.stage("load_volume").text(bricked ? "bricked" : "dense");
         if (bricked) k.stage("skip_cells");
@@ -382,7 +447,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     lightsStage.compute = [](Run& run) {
         auto l = std::make_shared<LightList>(buildLights(run.scene()));
-        return Artifact::of<LightList>(std::move(l), 1024);
+        const std::size_t bytes = lightBytes(*l);
+        return Artifact::of<LightList>(std::move(l), bytes);
     };
     lightsStage.describe = [](const Run&, const Artifact& a) {
         const auto& l = *a.as<LightList>();
@@ -398,7 +464,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         sh.skip = "not needed: method '" + scene.method.name + "' is unlit";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
-    sh.key = [](const Run& run) { return KeyBuilder(run, "light_sh").stage("lights").value(); };
+    // Keyed on the environment lights alone: moving a directional light re-projects no map.
+    sh.key = [](const Run& run) {
+        return KeyBuilder(run, "light_sh").integer(environmentLightsIdentity(run.scene())).value();
+    };
     sh.compute = [](Run& run) {
         const auto l = run.get<LightList>("lights");
         auto e = std::make_shared<std::vector<glm::vec3>>(render::environmentIrradianceSh(*l));
@@ -437,15 +506,19 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(camera);
 
-    Stage frame{
-        "render", StageKind::Frame, {"camera", "skip_cells", "gradients", "light_sh", "method"}};
+    Stage frame{"render",
+                StageKind::Frame,
+                {"load_volume", "transfer_function", "skip_cells", "gradients", "camera", "lights",
+                 "light_sh", "method", "render", "clip_planes", "crop_box", "image"}};
     frame.key = [optionsKey](const Run& run) {
         return KeyBuilder(run, "render")
             .stage("load_volume")
             .stage("transfer_function")
             .stage("skip_cells")
+            .stage("gradients")
             .stage("camera")
             .stage("lights")
+            .stage("light_sh")
             .json(optionsKey)
             .value();
     };

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <sstream>
 
 #include "core/hash.h"
@@ -31,9 +32,29 @@ void addFileIdentity(core::Hasher& h, const fs::path& p) {
     h.add(ec ? std::int64_t(0) : std::int64_t(time.time_since_epoch().count()));
 }
 
-std::string stemOf(const fs::path& p) {
-    const std::string name = p.filename().string();
-    return name.substr(0, name.find('.'));
+/// The data file a detached header names (MetaImage "ElementDataFile = x.raw", NRRD
+/// "data file: x.raw.gz"), resolved against the header's folder; empty when none (or LOCAL, a
+/// file list or pattern: those are covered by the content hash only).
+fs::path detachedDataFile(const fs::path& header) {
+    std::string ext = header.extension().string();
+    for (auto& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext != ".mhd" && ext != ".nhdr") return {};
+    std::ifstream in(header);
+    std::string line;
+    // Headers are short; stop at a bound so a wrong extension on a big binary costs nothing.
+    for (int n = 0; n < 256 && std::getline(in, line); ++n) {
+        const bool mhd = line.rfind("ElementDataFile", 0) == 0;
+        const bool nrrd = line.rfind("data file:", 0) == 0 || line.rfind("datafile:", 0) == 0;
+        if (!mhd && !nrrd) continue;
+        std::string v = line.substr(line.find(mhd ? '=' : ':') + 1);
+        v.erase(0, v.find_first_not_of(" \t"));
+        while (!v.empty() && (v.back() == ' ' || v.back() == '\r' || v.back() == '\t'))
+            v.pop_back();
+        if (v.empty() || v == "LOCAL" || v.find(' ') != std::string::npos) return {};
+        const fs::path data(v);
+        return data.is_absolute() ? data : header.parent_path() / data;
+    }
+    return {};
 }
 }  // namespace
 
@@ -69,13 +90,8 @@ std::uint64_t volumeIdentity(const io::Scene& scene) {
         for (const auto& f : files) addFileIdentity(h, f);
     } else {
         addFileIdentity(h, path);
-        // Detached data (header.mhd + header.raw, .nhdr + .raw.gz): files beside it with its stem.
-        std::vector<fs::path> siblings;
-        for (const auto& e : fs::directory_iterator(path.parent_path(), ec))
-            if (e.path() != path && stemOf(e.path()) == stemOf(path) && e.is_regular_file(ec))
-                siblings.push_back(e.path());
-        std::sort(siblings.begin(), siblings.end());
-        for (const auto& f : siblings) addFileIdentity(h, f);
+        // A detached header's data file: replacing it changes the identity too.
+        if (const fs::path data = detachedDataFile(path); !data.empty()) addFileIdentity(h, data);
     }
     return h.value();
 }
@@ -203,6 +219,17 @@ std::uint64_t lightsIdentity(const io::Scene& scene) {
         h.add(l.minDistance).add(l.shape).addPod(l.normal).add(l.radius).addPod(l.size);
         h.addPod(l.rotationDeg).add(l.layout);
         if (l.type == "environment") addFileIdentity(h, l.path);
+    }
+    return h.value();
+}
+
+std::uint64_t environmentLightsIdentity(const io::Scene& scene) {
+    core::Hasher h;
+    h.add("environment-lights.v1");
+    for (const auto& l : scene.lights) {
+        if (l.type != "environment") continue;
+        h.addPod(l.color).add(l.intensity).addPod(l.rotationDeg).add(l.layout);
+        addFileIdentity(h, l.path);
     }
     return h.value();
 }

@@ -48,6 +48,8 @@ render::CameraSpec buildCameraSpec(const io::CameraDesc& desc);
 std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& scene);
 /// Identity of the lights: their JSON and each environment map file's identity.
 std::uint64_t lightsIdentity(const io::Scene& scene);
+/// Identity of the environment lights alone (what their SH irradiance depends on).
+std::uint64_t environmentLightsIdentity(const io::Scene& scene);
 /// Whether one of the scene's lights is an environment map.
 bool hasEnvironmentLight(const io::Scene& scene);
 

@@ -35,7 +35,7 @@ struct Ray {
 class Camera {
   public:
     /// Frames `spec` around the world-space box [boundsMin, boundsMax] (used for fitting and the
-    /// default target). Throws InputError (field "image.width") on a size < 1.
+    /// default target). Throws InputError (source "camera", field "image size") on a size < 1.
     Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
            int width, int height);
 

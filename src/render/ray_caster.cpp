@@ -244,11 +244,15 @@ grid::BrickMajorants buildSkipCells(const core::Volume& volume, const grid::Bric
 }
 
 GradientTableUse gradientTableUse(const core::Volume& volume, const RenderOptions& options) {
+    return gradientTableUse(volume.voxelCount(), options);
+}
+
+GradientTableUse gradientTableUse(std::uint64_t voxelCount, const RenderOptions& options) {
     if (options.mode != Mode::Gradient || !options.centralDifferences)
         return GradientTableUse::None;
-    const bool dense = options.gradientTable == GradientTable::Dense ||
-                       (options.gradientTable == GradientTable::Auto &&
-                        volume.voxelCount() <= VoxelGradients::kMaxVoxels);
+    const bool dense =
+        options.gradientTable == GradientTable::Dense ||
+        (options.gradientTable == GradientTable::Auto && voxelCount <= VoxelGradients::kMaxVoxels);
     return dense ? GradientTableUse::Dense : GradientTableUse::Bricked;
 }
 
@@ -318,6 +322,8 @@ RayCaster::RayCaster(std::shared_ptr<const core::Volume> volumePtr,
     isoValue_ = resolveIsoValue(tf, options_);
     const grid::BrickMajorants& cells = *tables_.skipCells;
     VL_CHECK_EQ(cells.cellSize(), kSkipCellVoxels);
+    // Tables built for another volume would be read out of bounds: refuse them.
+    VL_CHECK(cells.counts() == (g.dims + kSkipCellVoxels - 1) / kSkipCellVoxels);
     visibleIndexBox_ = nonEmptyCellBox(cells, g.dims);
     // visibleRange's box: where the cells' box reaches the grid's edge it extends to the volume
     // box (a single slice is the slab ±0.5, and its cell holds the samples clamped into it), then

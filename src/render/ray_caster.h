@@ -156,6 +156,8 @@ grid::BrickMajorants buildSkipCells(const core::Volume& volume, const grid::Bric
 /// Which central-difference table a caster with these options reads.
 enum class GradientTableUse { None, Dense, Bricked };
 GradientTableUse gradientTableUse(const core::Volume& volume, const RenderOptions& options);
+/// The same from the voxel count alone (what the choice depends on).
+GradientTableUse gradientTableUse(std::uint64_t voxelCount, const RenderOptions& options);
 
 /// Per-voxel central differences of the *stored* voxel values, D(i,j,k) = (v[i+1] − v[i−1],
 /// v[j+1] − v[j−1], v[k+1] − v[k−1]) with indices clamped to the grid, kept as int16 (exact for

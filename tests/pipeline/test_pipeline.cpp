@@ -12,8 +12,10 @@
 #include "core/hash.h"
 #include "core/phantoms.h"
 #include "io/image.h"
+#include "io/volume_io.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/registry.h"
+#include "pipeline/scene_inputs.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -109,6 +111,12 @@ TEST(Pipeline, TransferFunctionChangeRerunsTfStagesButNotTheVolumes) {
               (std::set<std::string>{"transfer_function", "skip_cells", "camera", "render"}));
     EXPECT_NE(angio.stage("camera").key, r.stage("camera").key)
         << "the fitted camera's key follows the skip cells";
+    // MIP's skip cells do not read the TF: a TF change keeps them.
+    d["method"] = "mip";
+    session.run(scene(d));
+    d["transfer_function"] = {{"preset", "ct-bone"}, {"extinction_scale", 3.0}};
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"transfer_function", "camera", "render"}));
 }
 
 TEST(Pipeline, UnneededStagesSayWhy) {
@@ -181,6 +189,12 @@ TEST(Pipeline, DiskCacheSurvivesARestartAndRefusesDamagedFiles) {
         dmg.apply();
         Session c;
         c.cache().setDirectory(tmp.path());
+        // --explain reads headers: all but a damaged payload (found by the checksum on reading)
+        // are seen as "computed" before the run.
+        if (dmg.name != "flipped byte") {
+            for (const auto& e : c.explain(s))
+                if (e.name == "brick_grid") EXPECT_TRUE(e.ran) << e.reason;
+        }
         std::vector<std::string> warnings;
         c.cache().setWarn([&](const std::string& w) { warnings.push_back(w); });
         const RunResult r = c.run(s);
@@ -295,6 +309,14 @@ TEST(Pipeline, UniformEnvironmentLightAddsDiffuseTimesPiL) {
         json::array({dark, {{"type", "environment"}, {"path", (tmp / "uniform.hdr").string()}}});
     const RunResult withEnv = session.run(scene(d));
     EXPECT_TRUE(withEnv.stage("light_sh").ran);
+    {
+        // Changing the other light re-projects no map.
+        json moved = d;
+        moved["lights"][0]["direction"] = {0, 1, 0};
+        const RunResult m = session.run(scene(moved));
+        EXPECT_TRUE(m.stage("lights").ran);
+        EXPECT_FALSE(m.stage("light_sh").ran) << m.stage("light_sh").reason;
+    }
     d["lights"] = json::array({dark});
     const double ambient = 0.25 + 0.75 * std::numbers::pi * L;
     d["method"] = {{"name", "gradient"}, {"params", {{"ambient", ambient}}}};
@@ -427,4 +449,27 @@ TEST(ContentHash, ChangesWithAnyVoxelOrGeometryAndIsStable) {
     static_cast<std::int16_t*>(v.data())[v.voxelCount() - 1] ^= 1;
     v.geometry().spacing.x *= 1.0000001;
     EXPECT_NE(h, core::contentHash(v));
+}
+
+TEST(Pipeline, AVolumeFilesIdentityCoversItsDetachedDataAndNothingElse) {
+    test::TempDir tmp;
+    // A detached MetaImage header whose data file has another stem (as scanners write them).
+    std::ofstream(tmp / "ct.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 4\n"
+                                     "ElementType = MET_UCHAR\nElementDataFile = voxels.raw\n";
+    const fs::path data = tmp / "voxels.raw";
+    std::ofstream(data, std::ios::binary) << std::string(64, '\x10');
+    EXPECT_EQ(
+        loadSceneVolume(scene({{"volume", (tmp / "ct.mhd").string()}}), core::Progress::none())
+            .voxelCount(),
+        64u);
+    const io::Scene s = scene({{"volume", (tmp / "ct.mhd").string()}});
+    const std::uint64_t id = volumeIdentity(s);
+    std::ofstream(tmp / "ct.json") << "{}";  // a scene or stats file beside it: not its data
+    std::ofstream(tmp / "ct.png") << "png";
+    EXPECT_EQ(volumeIdentity(s), id);
+    // Replace the data file's content with another of the same size, later mtime.
+    const auto size = fs::file_size(data);
+    fs::last_write_time(data, fs::last_write_time(data) + std::chrono::seconds(5));
+    EXPECT_EQ(fs::file_size(data), size);
+    EXPECT_NE(volumeIdentity(s), id);
 }
