@@ -134,6 +134,7 @@ Command addRenderCommand(CLI::App& app) {
             j["scene"] = s.document;
             writeTextAtomically(*stats, j.dump(2));
         }
+        for (const auto& w : r.warnings) std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
         if (!*quiet)
             std::fprintf(stderr, "wrote %s (%dx%d, %s, render %.3f s, total %.2f s)\n",
                          out->c_str(), r.image.width, r.image.height, s.method.name.c_str(),

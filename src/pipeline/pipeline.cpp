@@ -263,6 +263,10 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
     res.image = *run.get<core::ImageRGBA>(plan.imageStage);
     res.imageStage = plan.imageStage;
     res.details = run.details();
+    for (const auto& w : run.warnings())  // a Frame stage may warn once per frame
+        if (std::find(res.warnings.begin(), res.warnings.end(), w) == res.warnings.end())
+            res.warnings.push_back(w);
+    if (!res.warnings.empty()) res.details["warnings"] = res.warnings;
     if (res.details.contains("params_resolved")) {
         for (auto it = res.details["params_resolved"].begin();
              it != res.details["params_resolved"].end(); ++it)

@@ -112,6 +112,10 @@ class Run {
     /// isovalue): they join the params as used.
     nlohmann::json& details() { return details_; }
     const nlohmann::json& details() const { return details_; }
+    /// A warning for the user (the CLI prints it on stderr; the stats list it under "warnings"):
+    /// what happened, why, and what to do — e.g. an image that shows nothing.
+    void warn(const std::string& message) { warnings_.push_back(message); }
+    const std::vector<std::string>& warnings() const { return warnings_; }
 
   private:
     friend class Session;
@@ -121,6 +125,7 @@ class Run {
     std::map<std::string, std::uint64_t> keys_;
     std::map<std::string, Artifact> artifacts_;
     nlohmann::json details_ = nlohmann::json::object();
+    std::vector<std::string> warnings_;
 };
 
 /// Builds a key from named parts; unknown (nullopt) as soon as one upstream key is unknown.
@@ -152,8 +157,9 @@ struct RunResult {
     std::vector<StageRecord> stages;
     std::string imageStage;  ///< the stage whose artifact `image` is
     std::string method;
-    nlohmann::json params;   ///< as used
-    nlohmann::json details;  ///< method details + "frame_seconds" when frames > 1
+    nlohmann::json params;              ///< as used
+    nlohmann::json details;             ///< method details + "frame_seconds" when frames > 1
+    std::vector<std::string> warnings;  ///< Run::warn() messages, each once
     /// The record of a stage by name (InternalError when absent).
     const StageRecord& stage(const std::string& name) const;
 };

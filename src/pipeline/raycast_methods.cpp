@@ -264,6 +264,42 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     throw e;
 }
 
+/// Coverage (alpha) below which a pixel shows nothing: under one 8-bit display level.
+constexpr float kVisibleAlpha = 0.5f / 255.f;
+
+/// Never a black image without a word: says why nothing shows and what to do.
+void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
+                        const render::RenderStats& stats, const optics::TransferFunction& tf,
+                        const grid::BrickGrid& grid) {
+    bool anything = false;
+    for (std::size_t i = 3; i < film.pixels.size() && !anything; i += 4)
+        anything = film.pixels[i] > kVisibleAlpha;
+    if (anything) return;
+    const std::string& method = run.scene().method.name;
+    if (stats.skipCellsVisible == 0) {
+        // The TF (or isovalue) leaves every cell empty: compare what it shows with what is there.
+        float lo = INFINITY, hi = -INFINITY;
+        for (const auto& p : tf.points())
+            if (p.extinction > 0.f) lo = std::min(lo, p.value), hi = std::max(hi, p.value);
+        std::ostringstream os;
+        os << "the image is empty: ";
+        if (kind == Kind::Iso)
+            os << "the isovalue lies outside this volume's values [" << grid.valueLo() << ", "
+               << grid.valueHi() << "] (set method.params.iso_value inside them)";
+        else
+            os << "transfer function '" << tf.name() << "' is transparent over all of this "
+               << "volume's values [" << grid.valueLo() << ", " << grid.valueHi() << "]"
+               << (lo <= hi ? "; it shows [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"
+                            : "; it shows nothing anywhere")
+               << " (choose a preset for this modality, or set transfer_function.window)";
+        run.warn(os.str());
+    } else if (stats.rays == 0 || (kind != Kind::Mip && kind != Kind::MinIp)) {
+        run.warn("the image is empty: no camera ray meets what '" + method +
+                 "' shows here (the camera looks past it, or clip_planes/crop_box remove it; "
+                 "check camera.target, camera.eye/azimuth/elevation, clip_planes and crop_box)");
+    }
+}
+
 std::string dims(const glm::ivec3& d) {
     return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
 }
@@ -499,6 +535,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         try {
             auto c = std::make_shared<const render::Camera>(
                 buildCameraSpec(s.camera), bounds[0], bounds[1], s.image.width, s.image.height);
+            const json& given = s.document.value("camera", json::object());
+            if (c->upReplaced() && given.is_object() && given.contains("up")) {
+                std::ostringstream os;
+                os << "camera.up is parallel to the view direction; used [" << c->up().x << ", "
+                   << c->up().y << ", " << c->up().z
+                   << "] as the image's up (set camera.up or camera.roll to choose)";
+                run.warn(os.str());
+            }
             return Artifact::of<render::Camera>(std::move(c), sizeof(render::Camera));
         } catch (const InputError& e) {
             rethrowAsScene(s, e);
@@ -588,6 +632,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 {"samples_per_second", seconds > 0 ? double(stats.samples) / seconds : 0.0},
                 {"skip_cells", stats.skipCells},
                 {"skip_cells_visible", stats.skipCellsVisible}};
+            warnIfNothingShows(run, kind, *film, stats, tfn,
+                               *run.get<grid::BrickGrid>("brick_grid"));
             const std::size_t bytes = film->pixels.size() * sizeof(float);
             return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
         } catch (const InputError& e) {

@@ -36,9 +36,18 @@ Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::d
         eye_ = target + d * dir;
     }
     forward_ = glm::normalize(target - eye_);
-    // Looking straight along `up` (elevation ±90°): use posterior/anterior as the image's up.
-    if (std::abs(glm::dot(glm::normalize(up), forward_)) > 0.999)
-        up = glm::dvec3(0.0, forward_.z > 0 ? 1.0 : -1.0, 0.0);
+    // Looking (nearly) along `up` leaves the image's up undefined: take the first world axis that
+    // is not (posterior/anterior first, as for a top view with the default up = superior).
+    if (std::abs(glm::dot(glm::normalize(up), forward_)) > kParallelUpCos) {
+        const glm::dvec3 candidates[] = {glm::dvec3(0.0, forward_.z > 0 ? 1.0 : -1.0, 0.0),
+                                         glm::dvec3(0.0, 0.0, 1.0), glm::dvec3(1.0, 0.0, 0.0)};
+        for (const glm::dvec3& c : candidates)
+            if (std::abs(glm::dot(c, forward_)) <= kParallelUpCos) {
+                up = c;
+                break;
+            }
+        upReplaced_ = true;
+    }
     right_ = glm::normalize(glm::cross(forward_, up));
     up_ = glm::cross(right_, forward_);
     if (spec.rollDeg != 0.0) {

@@ -32,6 +32,10 @@ struct Ray {
     glm::dvec3 direction;  ///< unit
 };
 
+/// |cos| between spec.up and the view direction above which up counts as parallel (within 2.6°:
+/// closer, the image's up would swing with every small change of view).
+inline constexpr double kParallelUpCos = 0.999;
+
 class Camera {
   public:
     /// Frames `spec` around the world-space box [boundsMin, boundsMax] (used for fitting and the
@@ -59,11 +63,15 @@ class Camera {
     const glm::dvec3& right() const { return right_; }
     const glm::dvec3& up() const { return up_; }
     Projection projection() const { return projection_; }
+    /// True when spec.up was (nearly) parallel to the view direction and a world axis replaced it
+    /// (up() says which); never a NaN basis.
+    bool upReplaced() const { return upReplaced_; }
     /// Perspective: vertical field of view in radians. Orthographic: view height in mm.
     double fovY() const { return fovY_; }
     double orthoHeight() const { return orthoHeight_; }
 
   private:
+    bool upReplaced_ = false;
     Projection projection_;
     glm::dvec3 eye_, forward_, right_, up_;
     double fovY_ = 0.5, tanHalf_ = 0.27, orthoHeight_ = 1.0;

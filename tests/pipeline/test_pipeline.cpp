@@ -473,3 +473,47 @@ TEST(Pipeline, AVolumeFilesIdentityCoversItsDetachedDataAndNothingElse) {
     EXPECT_EQ(fs::file_size(data), size);
     EXPECT_NE(volumeIdentity(s), id);
 }
+
+TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
+    Session session;
+    // A CT bone TF on the 0..1 sphere phantom: nothing is visible.
+    json d = {{"volume", {{"phantom", "sphere"}, {"size", 16}}},
+              {"transfer_function", "ct-bone"},
+              {"image", {{"width", 16}, {"height", 16}}}};
+    RunResult r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("transparent over all of this volume's values"), std::string::npos)
+        << r.warnings[0];
+    EXPECT_NE(r.warnings[0].find("ct-bone"), std::string::npos) << r.warnings[0];
+    EXPECT_EQ(r.details["warnings"].size(), 1u);
+    // The camera looking away from the visible part.
+    d["transfer_function"] = "phantom-step";
+    d["camera"] = {{"eye", {0, 0, 500}}, {"target", {0, 0, 1000}}};
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("camera looks past it"), std::string::npos) << r.warnings[0];
+    // A normal view: no warning.
+    d.erase("camera");
+    EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+}
+
+TEST(Pipeline, UpParallelToTheViewFallsBackWithAWarningNeverNaN) {
+    Session session;
+    json d = {{"volume", {{"phantom", "sphere"}, {"size", 16}}},
+              {"transfer_function", "phantom-step"},
+              {"image", {{"width", 16}, {"height", 16}}}};
+    for (const json& up : {json{0, 1, 0}, json{0, -1, 0}}) {
+        d["camera"] = {{"azimuth", 0}, {"elevation", 0}, {"up", up}};  // looking along ±y
+        const RunResult r = session.run(scene(d));
+        bool finite = true, visible = false;
+        for (std::size_t i = 0; i < r.image.pixels.size(); ++i) {
+            finite = finite && std::isfinite(r.image.pixels[i]);
+            if (i % 4 == 3) visible = visible || r.image.pixels[i] > 0.05f;
+        }
+        EXPECT_TRUE(finite);
+        EXPECT_TRUE(visible) << "the sphere is in view";
+        ASSERT_EQ(r.warnings.size(), 1u);
+        EXPECT_NE(r.warnings[0].find("camera.up is parallel"), std::string::npos) << r.warnings[0];
+        for (const auto& v : r.details["camera"]["up"]) EXPECT_TRUE(std::isfinite(v.get<double>()));
+    }
+}
