@@ -283,15 +283,18 @@ void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
             if (p.extinction > 0.f) lo = std::min(lo, p.value), hi = std::max(hi, p.value);
         std::ostringstream os;
         os << "the image is empty: ";
-        if (kind == Kind::Iso)
+        if (kind == Kind::Iso) {
             os << "the isovalue lies outside this volume's values [" << grid.valueLo() << ", "
                << grid.valueHi() << "] (set method.params.iso_value inside them)";
-        else
+        } else {
             os << "transfer function '" << tf.name() << "' is transparent over all of this "
-               << "volume's values [" << grid.valueLo() << ", " << grid.valueHi() << "]"
-               << (lo <= hi ? "; it shows [" + std::to_string(lo) + ", " + std::to_string(hi) + "]"
-                            : "; it shows nothing anywhere")
-               << " (choose a preset for this modality, or set transfer_function.window)";
+               << "volume's values [" << grid.valueLo() << ", " << grid.valueHi() << "]";
+            if (lo <= hi)
+                os << "; it shows [" << lo << ", " << hi << "]";
+            else
+                os << "; it shows nothing anywhere";
+            os << " (choose a preset for this modality, or set transfer_function.window)";
+        }
         run.warn(os.str());
     } else if (stats.rays == 0 || (kind != Kind::Mip && kind != Kind::MinIp)) {
         run.warn("the image is empty: no camera ray meets what '" + method +
