@@ -109,7 +109,9 @@ Command addRenderCommand(CLI::App& app) {
             throwIfCancelled();
             nlohmann::json j = pipeline::statsJson(r, total.seconds());
             j["scene"] = s.document;
-            const std::string text = j.dump(2);
+            // Paths from the command line may be any bytes: replaced, not a failure after the work.
+            const std::string text =
+                j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
             files.write(*stats, "--stats", [&](const fs::path& p) { writeTextFile(p, text); });
         }
         throwIfCancelled();
