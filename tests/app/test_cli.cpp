@@ -293,3 +293,36 @@ TEST(Cli, AllOutputsAreWrittenTogetherWithNoTemporariesLeft) {
     ASSERT_EQ(p.code, 0) << p.err;
     EXPECT_EQ(listing(out), (std::vector<std::string>{"a.exr", "a.json", "a.png", "v.nii.gz"}));
 }
+
+TEST(Cli, CtrlCLeavesAllOrNothing) {
+    test::TempDir tmp;
+    const fs::path out = tmp / "out";
+    fs::create_directories(out);
+    // Long enough (seconds on a shared CI core) to be interrupted while generating or writing.
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(run("phantom torso --size 192 -q -o " + q(out / "t.nii.gz"), tmp.path()).code, 0);
+    const double full =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    fs::remove(out / "t.nii.gz");
+    // Whenever the signal lands (generation, the write, after the end), the run either finished
+    // with its output in place or exited 130 leaving nothing, temporaries included.
+    for (const auto& [signal, fraction] :
+         std::vector<std::pair<std::string, double>>{{"INT", 0.4}, {"TERM", 0.9}}) {
+        const fs::path errFile = tmp / "phantom-stderr.txt";
+        const Result r =
+            run("phantom torso --size 192 -q -o " + q(out / "t.nii.gz") + " 2>" + q(errFile) +
+                    " & pid=$!; sleep " + std::to_string(full * fraction) + "; kill -" + signal +
+                    " $pid 2>/dev/null; wait $pid",
+                tmp.path());
+        std::ifstream ef(errFile);
+        const std::string err((std::istreambuf_iterator<char>(ef)), {});
+        if (r.code == 130) {
+            EXPECT_TRUE(listing(out).empty()) << signal << " at " << fraction;
+            EXPECT_NE(err.find("cancelled"), std::string::npos) << err;
+        } else {
+            EXPECT_EQ(r.code, 0) << signal << " at " << fraction << ": " << err;
+            EXPECT_EQ(listing(out), std::vector<std::string>{"t.nii.gz"});
+        }
+        fs::remove(out / "t.nii.gz");
+    }
+}
