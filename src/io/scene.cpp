@@ -4,7 +4,6 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
-#include <iterator>
 #include <map>
 #include <set>
 #include <string_view>
@@ -180,6 +179,10 @@ constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
 /// and dumps a document recursively, one stack frame per level, so ~100k levels overflow the
 /// stack; a real scene nests 3 levels (lights[0].color) and method params a few more.
 constexpr int kMaxSceneDepth = 64;
+
+/// Scene files larger than this are refused while reading: real scenes are a few KB, and reading
+/// /dev/zero or a volume given by mistake must not exhaust memory.
+constexpr std::size_t kMaxSceneBytes = std::size_t(16) << 20;
 
 /// Bytes of a message that are not printable ASCII, as \xNN: nlohmann's messages quote the bytes
 /// they stopped at, which may be control characters or invalid UTF-8.
@@ -540,7 +543,14 @@ Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides)
         throw InputError(file, "", "is a directory, not a scene file", "give a .json file");
     std::ifstream in(path, std::ios::binary);
     if (!in) throw InputError(file, "", "cannot be opened", "check the path");
-    const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    std::string text;
+    char chunk[1 << 16];
+    while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
+        text.append(chunk, std::size_t(in.gcount()));
+        if (text.size() > kMaxSceneBytes)
+            throw InputError(file, "", "is larger than 16 MiB, too large for a scene file",
+                             "is this the right file?");
+    }
     if (in.bad())
         throw InputError(file, "", "cannot be read", "check the file and its permissions");
     if (const std::size_t at = tooDeepAt(text); at != std::string_view::npos)

@@ -158,7 +158,7 @@ Scene parseScene(const nlohmann::json& doc, const std::string& source,
                  const std::filesystem::path& baseDir);
 
 /// Reads a scene file, applies overrides in order, validates. Every failure is an InputError naming
-/// the file: a directory or unreadable file, nesting deeper than 64 levels (refused by a linear scan
+/// the file: a directory, an unreadable file or one over 16 MiB, nesting deeper than 64 levels (refused by a linear scan
 /// before parsing, with the byte offset), any JSON error (syntax, invalid UTF-8, a number out of
 /// range such as 1e999).
 Scene loadScene(const std::filesystem::path& path, const std::vector<std::string>& overrides = {});

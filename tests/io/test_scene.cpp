@@ -178,9 +178,12 @@ TEST(Scene, HostileFilesAreInputErrorsNamingTheFile) {
     test::TempDir tmp;
     // 200 000 levels would overflow the stack in nlohmann's recursive copy and dump; refused by
     // the byte scan, with the offset of the first level too deep.
-    const std::string deep = loadError(tmp, std::string(200000, '['));
+    const std::string deep =
+        loadError(tmp, "{\"a\": " + std::string(200000, '[') + std::string(200000, ']') + "}");
     EXPECT_NE(deep.find("deeper than 64"), std::string::npos) << deep;
-    EXPECT_NE(deep.find("byte 64"), std::string::npos) << deep;
+    EXPECT_NE(deep.find("byte 69"), std::string::npos) << deep;  // {"a": + 63 more levels
+    const std::string open = loadError(tmp, std::string(200000, '['));
+    EXPECT_NE(open.find("byte 64"), std::string::npos) << open;
     // Brackets inside strings do not count.
     const std::string inString =
         loadError(tmp, R"({"volume": {"phantom": "torso"}, "description": ")" +
@@ -218,4 +221,14 @@ TEST(Scene, HostileOverridesAreInputErrors) {
     json* leaf = &built["description"];
     for (int i = 0; i < 100000; ++i) leaf = &(*leaf)[0];
     EXPECT_THROW((void)parse(built), InputError);
+}
+
+TEST(Scene, EndlessFileIsRefusedAtTheSizeLimit) {
+    // /dev/zero never ends: the reader stops at the size limit instead of exhausting memory.
+    try {
+        (void)io::loadScene("/dev/zero");
+        ADD_FAILURE() << "read /dev/zero";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("16 MiB"), std::string::npos) << e.what();
+    }
 }
