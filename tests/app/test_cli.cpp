@@ -211,8 +211,10 @@ std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
 
 TEST(Cli, HostileSceneFilesAreOneLineAndExitCodeTwo) {
     test::TempDir tmp;
-    // Deep nesting overflowed the stack; the byte scan refuses it at once.
-    std::ofstream(tmp / "deep.json") << std::string(200000, '[');
+    // Deep but well-formed nesting overflowed the stack (nlohmann copies and dumps recursively);
+    // the byte scan refuses it at once.
+    std::ofstream(tmp / "deep.json") << R"({"volume": {"phantom": "torso"}, "description": )"
+                                     << std::string(200000, '[') << std::string(200000, ']') << "}";
     std::ofstream(tmp / "huge.json")
         << R"({"volume": {"phantom": "torso"}, "image": {"exposure": 1e999}})";
     std::ofstream(tmp / "latin1.json", std::ios::binary) << "{\"description\": \"caf\xe9\"}";
