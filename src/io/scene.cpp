@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
 #include <string_view>
@@ -118,6 +119,11 @@ class Field {
     int integer(int lo, int hi) const {
         if (!j_.is_number_integer() && !j_.is_number_unsigned())
             fail("must be an integer, got " + typeName(j_) + " " + shortDump(j_));
+        // Unsigned values beyond long long (up to 2^64-1) would wrap to negatives in the message.
+        if (j_.is_number_unsigned() &&
+            j_.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max()))
+            fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                 "], got " + std::to_string(j_.get<std::uint64_t>()));
         const long long v = j_.get<long long>();
         if (v < lo || v > hi)
             fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +

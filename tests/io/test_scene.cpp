@@ -201,6 +201,11 @@ TEST(Scene, HostileFilesAreInputErrorsNamingTheFile) {
     EXPECT_THROW(io::loadScene(tmp.path()), InputError);  // a directory
 }
 
+TEST(Scene, HugeUnsignedIntegerIsReportedAsGiven) {
+    expectBad(json{{"volume", "a.nii"}, {"image", {{"width", 18446744073709551615ull}}}},
+              "image.width", {"18446744073709551615"});
+}
+
 TEST(Scene, HostileOverridesAreInputErrors) {
     json doc = json::parse(R"({"volume": {"phantom": "torso"}})");
     EXPECT_THROW(io::applyOverride(doc, "description=caf\xe9"), InputError);
