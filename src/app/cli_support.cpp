@@ -27,6 +27,10 @@ void installSignalHandlers() {
     std::signal(SIGTERM, onSignal);
 }
 
+void throwIfCancelled() {
+    if (cancelFlag().load()) throw CancelledError();
+}
+
 core::Progress terminalProgress(bool quiet) {
     if (quiet) return core::Progress({}, &cancelFlag());
     const bool tty = ::isatty(STDERR_FILENO);

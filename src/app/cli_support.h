@@ -19,6 +19,9 @@ inline constexpr int kExitOk = 0, kExitInternal = 1, kExitBadInput = 2, kExitCan
 /// Cancel flag raised by SIGINT/SIGTERM (installed by installSignalHandlers()).
 std::atomic<bool>& cancelFlag();
 void installSignalHandlers();
+/// Throws CancelledError when the cancel flag is raised: for steps between long calls that take no
+/// Progress (writing output files).
+void throwIfCancelled();
 
 /// Progress sink for the terminal: a redrawn bar when stderr is a TTY, plain lines every 10%
 /// otherwise; silent when `quiet`.

@@ -4,6 +4,7 @@
 #include <memory>
 
 #include "app/cli_support.h"
+#include "app/output_files.h"
 #include "core/phantoms.h"
 #include "core/timing.h"
 #include "io/volume_io.h"
@@ -36,13 +37,20 @@ Command addPhantomCommand(CLI::App& app) {
         if (name->empty() || out->empty())
             throw InputError("command line", "phantom", "needs a NAME and -o FILE",
                              "e.g. voxlight phantom torso -o torso.nii.gz (see --list)");
-        io::checkVolumeOutputPath(*out);  // fail before the work, not after
+        // Fail before the work, not after: the format, then the path (output_files.h).
+        io::checkVolumeOutputPath(*out);
+        checkOutputs({{"--output", *out, {}}});
         core::PhantomOptions o;
         o.size = *size;
         o.seed = *seed;
         core::Stopwatch sw;
         const core::Volume v = core::makePhantom(*name, o, terminalProgress(*quiet));
-        io::writeVolume(v, *out);
+        OutputFiles files;
+        throwIfCancelled();
+        files.write(*out, "--output",
+                    [&](const std::filesystem::path& p) { io::writeVolume(v, p); });
+        throwIfCancelled();  // Ctrl-C while VTK wrote: the temporary goes, nothing is left
+        files.commit();
         if (!*quiet)
             std::fprintf(stderr, "wrote %s: %s (%.2f s)\n", out->c_str(),
                          (std::ostringstream() << v.geometry()).str().c_str(), sw.seconds());

@@ -5,10 +5,10 @@
 // EXR, stats JSON. --explain prints the plan and what each stage would do, and renders nothing.
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
 #include <memory>
 
 #include "app/cli_support.h"
+#include "app/output_files.h"
 #include "core/timing.h"
 #include "io/image.h"
 #include "io/scene.h"
@@ -20,29 +20,6 @@ namespace voxlight::app {
 namespace {
 namespace fs = std::filesystem;
 
-std::string lowerExtension(const fs::path& p) {
-    std::string e = p.extension().string();
-    for (auto& ch : e) ch = char(std::tolower(static_cast<unsigned char>(ch)));
-    return e;
-}
-
-/// Fails before the work, not after: wrong extension or missing directory.
-void checkOutput(const std::string& path, const std::vector<std::string>& extensions,
-                 const std::string& option) {
-    const fs::path p(path);
-    const std::string ext = lowerExtension(p);
-    if (std::find(extensions.begin(), extensions.end(), ext) == extensions.end()) {
-        std::string list;
-        for (const auto& e : extensions) list += (list.empty() ? "" : ", ") + e;
-        throw InputError("command line", option, "'" + path + "' has an unsupported extension",
-                         "use one of: " + list);
-    }
-    const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
-    if (!fs::is_directory(dir))
-        throw InputError("command line", option, "directory '" + dir.string() + "' does not exist",
-                         "create it first");
-}
-
 /// The record of an output stage (written after the pipeline's stages, by this command).
 pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
                                    const std::string& option) {
@@ -52,16 +29,6 @@ pipeline::StageRecord outputRecord(const std::string& name, const std::string& p
     return r;
 }
 
-/// Writes text to a temporary file beside `path` and renames it (nothing half-written).
-void writeTextAtomically(const fs::path& path, const std::string& text) {
-    const fs::path tmp = path.string() + ".tmp";
-    {
-        std::ofstream out(tmp);
-        out << text << "\n";
-        if (!out) throw InputError(path.string(), "", "cannot be written", "check permissions");
-    }
-    fs::rename(tmp, path);
-}
 }  // namespace
 
 Command addRenderCommand(CLI::App& app) {
@@ -115,25 +82,40 @@ Command addRenderCommand(CLI::App& app) {
         if (out->empty())
             throw InputError("command line", "--output", "is required",
                              "give -o OUT.png (or --explain to only print the plan)");
-        checkOutput(*out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}, "--output");
-        if (!exr->empty()) checkOutput(*exr, {".exr"}, "--exr");
-        if (!stats->empty()) checkOutput(*stats, {".json"}, "--stats");
+        // Every output is checked before the work and committed together after it
+        // (output_files.h): a bad path fails now, and a failure or Ctrl-C leaves nothing behind.
+        checkOutputs({{"--output", *out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}},
+                      {"--exr", *exr, {".exr"}},
+                      {"--stats", *stats, {".json"}}});
         const io::Scene s = io::loadScene(*scene, *sets);
         pipeline::RunResult r = session.run(s, {.frames = *frames}, terminalProgress(*quiet));
 
+        OutputFiles files;
         core::Stopwatch sw;
-        io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), *out);
+        throwIfCancelled();
+        files.write(*out, "--output", [&](const fs::path& p) {
+            io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), p);
+        });
         r.stages.push_back(outputRecord("write_image", *out, "-o"));
         r.stages.back().seconds = sw.seconds();
         sw.restart();
-        if (!exr->empty()) io::writeImage(r.image, *exr);
+        if (!exr->empty()) {
+            throwIfCancelled();
+            files.write(*exr, "--exr", [&](const fs::path& p) { io::writeImage(r.image, p); });
+        }
         r.stages.push_back(outputRecord("write_exr", *exr, "--exr"));
         r.stages.back().seconds = sw.seconds();
         if (!stats->empty()) {
+            throwIfCancelled();
             nlohmann::json j = pipeline::statsJson(r, total.seconds());
             j["scene"] = s.document;
-            writeTextAtomically(*stats, j.dump(2));
+            // Paths from the command line may be any bytes: replaced, not a failure after the work.
+            const std::string text =
+                j.dump(2, ' ', false, nlohmann::json::error_handler_t::replace);
+            files.write(*stats, "--stats", [&](const fs::path& p) { writeTextFile(p, text); });
         }
+        throwIfCancelled();
+        files.commit();
         for (const auto& w : r.warnings) std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
         if (!*quiet)
             std::fprintf(stderr, "wrote %s (%dx%d, %s, render %.3f s, total %.2f s)\n",

@@ -4,8 +4,11 @@
 #include <algorithm>
 #include <cmath>
 #include <fstream>
+#include <limits>
 #include <map>
 #include <set>
+#include <string_view>
+#include <utility>
 
 namespace voxlight::io {
 
@@ -116,6 +119,11 @@ class Field {
     int integer(int lo, int hi) const {
         if (!j_.is_number_integer() && !j_.is_number_unsigned())
             fail("must be an integer, got " + typeName(j_) + " " + shortDump(j_));
+        // Unsigned values beyond long long (up to 2^64-1) would wrap to negatives in the message.
+        if (j_.is_number_unsigned() &&
+            j_.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max()))
+            fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                 "], got " + std::to_string(j_.get<std::uint64_t>()));
         const long long v = j_.get<long long>();
         if (v < lo || v > hi)
             fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
@@ -172,6 +180,81 @@ class Field {
 };
 
 constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
+
+/// Containers (arrays/objects) nested deeper than this are refused. nlohmann-json copies, compares
+/// and dumps a document recursively, one stack frame per level, so ~100k levels overflow the
+/// stack; a real scene nests 3 levels (lights[0].color) and method params a few more.
+constexpr int kMaxSceneDepth = 64;
+
+/// Scene files larger than this are refused while reading: real scenes are a few KB, and reading
+/// /dev/zero or a volume given by mistake must not exhaust memory.
+constexpr std::size_t kMaxSceneBytes = std::size_t(16) << 20;
+
+/// Bytes of a message that are not printable ASCII, as \xNN: nlohmann's messages quote the bytes
+/// they stopped at, which may be control characters or invalid UTF-8.
+std::string printable(std::string_view text) {
+    static constexpr char kHex[] = "0123456789abcdef";
+    std::string out;
+    for (const char ch : text) {
+        const auto c = static_cast<unsigned char>(ch);
+        if (c >= 0x20 && c < 0x7f) {
+            out += ch;
+        } else {
+            out += "\\x";
+            out += kHex[c >> 4];
+            out += kHex[c & 15];
+        }
+    }
+    return out;
+}
+
+/// nlohmann's message without its "[json.exception.parse_error.101] " prefix, made printable.
+std::string jsonMessage(const nlohmann::json::exception& e) {
+    const std::string what = e.what();
+    const auto p = what.find("] ");
+    return printable(p == std::string::npos ? what : what.substr(p + 2));
+}
+
+/// Byte offset in JSON text where a container opens deeper than kMaxSceneDepth (brackets inside
+/// strings do not count), or npos. Linear and non-recursive, so it runs before the parser.
+std::size_t tooDeepAt(std::string_view text) {
+    int depth = 0;
+    bool inString = false, escaped = false;
+    for (std::size_t i = 0; i < text.size(); ++i) {
+        const char c = text[i];
+        if (inString) {
+            if (escaped)
+                escaped = false;
+            else if (c == '\\')
+                escaped = true;
+            else if (c == '"')
+                inString = false;
+        } else if (c == '"') {
+            inString = true;
+        } else if (c == '[' || c == '{') {
+            if (++depth > kMaxSceneDepth) return i;
+        } else if ((c == ']' || c == '}') && depth > 0) {
+            --depth;
+        }
+    }
+    return std::string_view::npos;
+}
+
+/// Deepest container nesting of a document (a scalar is 0), walked with an explicit stack; stops
+/// counting past kMaxSceneDepth + 1.
+int nestingDepth(const json& doc) {
+    int deepest = 0;
+    std::vector<std::pair<const json*, int>> todo{{&doc, 0}};
+    while (!todo.empty()) {
+        const auto [node, depth] = todo.back();
+        todo.pop_back();
+        if (!node->is_structured()) continue;
+        deepest = std::max(deepest, depth + 1);
+        if (deepest > kMaxSceneDepth) break;
+        for (const auto& child : *node) todo.emplace_back(&child, depth + 1);
+    }
+    return deepest;
+}
 
 fs::path resolvePath(const std::string& p, const fs::path& baseDir) {
     const fs::path path(p);
@@ -304,7 +387,19 @@ void applyOverride(json& doc, const std::string& assignment) {
     if (eq == std::string::npos || eq == 0)
         throw InputError("--set", assignment, "is not of the form key=value",
                          "e.g. --set camera.azimuth=45");
+    // Strings reach the stats JSON and error messages, whose writers refuse invalid UTF-8.
+    try {
+        (void)json(assignment).dump();
+    } catch (const json::exception&) {
+        throw InputError("--set", printable(assignment), "is not valid UTF-8",
+                         "give keys and values as UTF-8 text");
+    }
     const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
+    if (tooDeepAt(text) != std::string_view::npos)
+        throw InputError(
+            "--set", key,
+            "value nests arrays/objects deeper than " + std::to_string(kMaxSceneDepth) + " levels",
+            "flatten the value");
     json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
     json* node = &doc;
@@ -347,7 +442,8 @@ void applyOverride(json& doc, const std::string& assignment) {
     *node = value;
 }
 
-Scene parseScene(const json& doc, const std::string& source, const fs::path& baseDir) {
+namespace {
+Scene parseValidDepth(const json& doc, const std::string& source, const fs::path& baseDir) {
     Scene s;
     s.source = source;
     s.document = doc;
@@ -428,24 +524,61 @@ Scene parseScene(const json& doc, const std::string& source, const fs::path& bas
     }
     return s;
 }
+}  // namespace
+
+Scene parseScene(const json& doc, const std::string& source, const fs::path& baseDir) {
+    // Checked before anything copies or dumps the document (both recurse per level).
+    if (nestingDepth(doc) > kMaxSceneDepth)
+        throw InputError(
+            source, "",
+            "nests arrays/objects deeper than " + std::to_string(kMaxSceneDepth) + " levels",
+            "a scene needs a handful of levels; check --set keys and the file");
+    try {
+        return parseValidDepth(doc, source, baseDir);
+    } catch (const json::exception& e) {
+        // A value nlohmann cannot convert or print (e.g. a string that is not UTF-8).
+        throw InputError(source, "", "cannot be read: " + jsonMessage(e),
+                         "fix the value the message names");
+    }
+}
 
 Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
-    std::ifstream in(path);
-    if (!in) throw InputError(path.string(), "", "cannot be opened", "check the path");
+    const std::string file = path.string();
+    std::error_code ec;
+    if (fs::is_directory(path, ec))
+        throw InputError(file, "", "is a directory, not a scene file", "give a .json file");
+    std::ifstream in(path, std::ios::binary);
+    if (!in) throw InputError(file, "", "cannot be opened", "check the path");
+    std::string text;
+    char chunk[1 << 16];
+    while (in.read(chunk, sizeof chunk) || in.gcount() > 0) {
+        text.append(chunk, std::size_t(in.gcount()));
+        if (text.size() > kMaxSceneBytes)
+            throw InputError(file, "", "is larger than 16 MiB, too large for a scene file",
+                             "is this the right file?");
+    }
+    if (in.bad())
+        throw InputError(file, "", "cannot be read", "check the file and its permissions");
+    if (const std::size_t at = tooDeepAt(text); at != std::string_view::npos)
+        throw InputError(file, "",
+                         "nests arrays/objects deeper than " + std::to_string(kMaxSceneDepth) +
+                             " levels (at byte " + std::to_string(at) + ")",
+                         "a scene needs a handful of levels; is this the right file?");
     json doc;
     try {
-        doc = json::parse(in);
-    } catch (const json::parse_error& e) {
-        std::string what = e.what();
-        const auto p = what.find("parse error");
-        throw InputError(path.string(), "",
-                         "is not valid JSON: " + (p == std::string::npos ? what : what.substr(p)),
+        doc = json::parse(text);
+    } catch (const json::out_of_range& e) {
+        throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
+                         "numbers must be within double range (about ±1.8e308)");
+    } catch (const json::exception& e) {
+        // parse_error for syntax and invalid UTF-8; any other kind is reported the same way.
+        throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
                          "fix the syntax at the byte shown");
     }
     for (const auto& o : overrides) applyOverride(doc, o);
     fs::path base = path.parent_path();
     if (base.empty()) base = ".";
-    return parseScene(doc, path.string(), base);
+    return parseScene(doc, file, base);
 }
 
 }  // namespace voxlight::io

@@ -148,15 +148,19 @@ struct Scene {
 };
 
 /// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
-/// override.
+/// override, one that is not UTF-8, or a value nesting deeper than the scene's depth limit (64).
 void applyOverride(nlohmann::json& doc, const std::string& assignment);
 
 /// Validates and converts a document. `source` names it in errors; relative paths resolve against
-/// `baseDir`.
+/// `baseDir`. A document nesting arrays/objects deeper than 64 levels, or holding a value nlohmann
+/// cannot convert or print (a string that is not UTF-8), is an InputError naming `source`.
 Scene parseScene(const nlohmann::json& doc, const std::string& source,
                  const std::filesystem::path& baseDir);
 
-/// Reads a scene file, applies overrides in order, validates.
+/// Reads a scene file, applies overrides in order, validates. Every failure is an InputError naming
+/// the file: a directory, an unreadable file or one over 16 MiB, nesting deeper than 64 levels (refused by a linear scan
+/// before parsing, with the byte offset), any JSON error (syntax, invalid UTF-8, a number out of
+/// range such as 1e999).
 Scene loadScene(const std::filesystem::path& path, const std::vector<std::string>& overrides = {});
 
 }  // namespace voxlight::io

@@ -2,10 +2,14 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
+#include <chrono>
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <string>
+#include <vector>
 
 #include "io/volume_io.h"
 #include "support/test_support.h"
@@ -192,4 +196,135 @@ TEST(Cli, HeavyLibrariesAreLoadedOnlyWhenUsed) {
         tmp.path());
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_TRUE(fs::exists(tmp / "out.png"));
+}
+
+namespace {
+/// Names in `dir`, sorted: what a run left behind.
+std::vector<std::string> listing(const fs::path& dir) {
+    std::vector<std::string> names;
+    for (const auto& e : fs::directory_iterator(dir)) names.push_back(e.path().filename().string());
+    std::sort(names.begin(), names.end());
+    return names;
+}
+std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+}  // namespace
+
+TEST(Cli, HostileSceneFilesAreOneLineAndExitCodeTwo) {
+    test::TempDir tmp;
+    // Deep but well-formed nesting overflowed the stack (nlohmann copies and dumps recursively);
+    // the byte scan refuses it at once.
+    std::ofstream(tmp / "deep.json") << R"({"volume": {"phantom": "torso"}, "description": )"
+                                     << std::string(200000, '[') << std::string(200000, ']') << "}";
+    std::ofstream(tmp / "huge.json")
+        << R"({"volume": {"phantom": "torso"}, "image": {"exposure": 1e999}})";
+    std::ofstream(tmp / "latin1.json", std::ios::binary) << "{\"description\": \"caf\xe9\"}";
+    std::ofstream(tmp / "ok.json") << R"({"volume": {"phantom": "torso"}})";
+    std::string deepKey = "a";
+    for (int i = 0; i < 99; ++i) deepKey += ".a";
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"scene " + q(tmp / "deep.json"), "deep.json"},
+        {"render " + q(tmp / "deep.json") + " -o " + q(tmp / "x.png"), "deeper than 64"},
+        {"scene " + q(tmp / "huge.json"), "huge.json"},
+        {"scene " + q(tmp / "latin1.json"), "\\xe9"},
+        // Not UTF-8 on the command line: once an internal error when the document was printed.
+        {"scene " + q(tmp / "ok.json") + " --set \"description=$(printf 'caf\\351')\"", "UTF-8"},
+        {"scene " + q(tmp / "ok.json") + " --set " + deepKey + "=1", "deeper than 64"},
+    };
+    for (const auto& [args, word] : cases) {
+        const auto start = std::chrono::steady_clock::now();
+        const Result r = run(args, tmp.path());
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+        EXPECT_EQ(r.code, 2) << args.substr(0, 200) << "\n" << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+        EXPECT_NE(r.err.find(word), std::string::npos) << r.err;
+        constexpr double kQuickSeconds = 5.0;  // the issue's bound for any refusal
+        EXPECT_LT(seconds, kQuickSeconds) << args.substr(0, 200);
+    }
+    EXPECT_FALSE(fs::exists(tmp / "x.png"));
+}
+
+TEST(Cli, OutputsAreCheckedBeforeRenderingAndNothingIsWritten) {
+    test::TempDir tmp;
+    const fs::path out = tmp / "out";
+    fs::create_directories(out / "dir");
+    fs::create_directories(out / "dir.png");
+    fs::create_directories(out / "dir.exr");
+    fs::create_directories(out / "dir.json");
+    fs::create_directories(out / "vol.nii.gz");
+    std::ofstream(out / "old.png") << "an earlier image";
+    fs::create_symlink(out / "old.png", out / "alias.exr");
+    // The volume does not exist: a run that reached the work would name it instead of the option.
+    std::ofstream(tmp / "scene.json") << R"({"volume": "missing.nii.gz"})";
+    const std::string render = "render -q " + q(tmp / "scene.json");
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {render + " -o " + q(out / "a.png") + " --stats " + q(out / "dir.json"), "--stats"},
+        {render + " -o " + q(out / "a.png") + " --exr " + q(out / "dir.exr"), "--exr"},
+        {render + " -o " + q(out / "dir.png"), "is a directory"},
+        {render + " -o " + q(out / "a.png") + " --stats " + q(out / "a.png"), "--stats"},
+        {render + " -o " + q(out / "a.png") + " --exr " + q(out / "nodir" / "a.exr"),
+         "does not exist"},
+        {render + " -o " + q(out / "old.png") + " --exr " + q(out / "alias.exr"), "same file"},
+        {"phantom sphere -q --size 16 -o " + q(out / "vol.nii.gz"), "is a directory"},
+    };
+    const std::vector<std::string> before = listing(out);
+    for (const auto& [args, word] : cases) {
+        const Result r = run(args, tmp.path());
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+        EXPECT_NE(r.err.find(word), std::string::npos) << args << "\n" << r.err;
+        EXPECT_EQ(r.err.find("missing.nii.gz"), std::string::npos) << "rendered first: " << r.err;
+        EXPECT_EQ(listing(out), before) << args;
+    }
+    std::ifstream old(out / "old.png");
+    EXPECT_EQ(std::string(std::istreambuf_iterator<char>(old), {}), "an earlier image");
+}
+
+TEST(Cli, AllOutputsAreWrittenTogetherWithNoTemporariesLeft) {
+    test::TempDir tmp;
+    const fs::path out = tmp / "out";
+    fs::create_directories(out);
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "image": {"width": 24, "height": 16}})";
+    const Result r = run("render -q " + q(tmp / "scene.json") + " -o " + q(out / "a.png") +
+                             " --exr " + q(out / "a.exr") + " --stats " + q(out / "a.json"),
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(listing(out), (std::vector<std::string>{"a.exr", "a.json", "a.png"}));
+    const Result p = run("phantom sphere -q --size 16 -o " + q(out / "v.nii.gz"), tmp.path());
+    ASSERT_EQ(p.code, 0) << p.err;
+    EXPECT_EQ(listing(out), (std::vector<std::string>{"a.exr", "a.json", "a.png", "v.nii.gz"}));
+}
+
+TEST(Cli, CtrlCLeavesAllOrNothing) {
+    test::TempDir tmp;
+    const fs::path out = tmp / "out";
+    fs::create_directories(out);
+    // Long enough (seconds on a shared CI core) to be interrupted while generating or writing.
+    const auto start = std::chrono::steady_clock::now();
+    ASSERT_EQ(run("phantom torso --size 192 -q -o " + q(out / "t.nii.gz"), tmp.path()).code, 0);
+    const double full =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    fs::remove(out / "t.nii.gz");
+    // Whenever the signal lands (generation, the write, after the end), the run either finished
+    // with its output in place or exited 130 leaving nothing, temporaries included.
+    for (const auto& [signal, fraction] :
+         std::vector<std::pair<std::string, double>>{{"INT", 0.4}, {"TERM", 0.9}}) {
+        const fs::path errFile = tmp / "phantom-stderr.txt";
+        const Result r =
+            run("phantom torso --size 192 -q -o " + q(out / "t.nii.gz") + " 2>" + q(errFile) +
+                    " & pid=$!; sleep " + std::to_string(full * fraction) + "; kill -" + signal +
+                    " $pid 2>/dev/null; wait $pid",
+                tmp.path());
+        std::ifstream ef(errFile);
+        const std::string err((std::istreambuf_iterator<char>(ef)), {});
+        if (r.code == 130) {
+            EXPECT_TRUE(listing(out).empty()) << signal << " at " << fraction;
+            EXPECT_NE(err.find("cancelled"), std::string::npos) << err;
+        } else {
+            EXPECT_EQ(r.code, 0) << signal << " at " << fraction << ": " << err;
+            EXPECT_EQ(listing(out), std::vector<std::string>{"t.nii.gz"});
+        }
+        fs::remove(out / "t.nii.gz");
+    }
 }

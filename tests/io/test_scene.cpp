@@ -158,3 +158,82 @@ TEST(Scene, OverridesReachIntoShorthandForms) {
     json k = json::parse(R"({"volume": "a.nii", "camera": {"projection": "perspective"}})");
     EXPECT_THROW(io::applyOverride(k, "camera.projection.x=1"), InputError);
 }
+
+namespace {
+/// loadScene's InputError message for a scene file holding `text`; fails the test if it loads.
+std::string loadError(const test::TempDir& tmp, const std::string& text) {
+    std::ofstream(tmp / "s.json", std::ios::binary) << text;
+    try {
+        (void)io::loadScene(tmp / "s.json");
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.source(), (tmp / "s.json").string());
+        return e.what();
+    }
+    ADD_FAILURE() << "loaded: " << text.substr(0, 80);
+    return {};
+}
+}  // namespace
+
+TEST(Scene, HostileFilesAreInputErrorsNamingTheFile) {
+    test::TempDir tmp;
+    // 200 000 levels would overflow the stack in nlohmann's recursive copy and dump; refused by
+    // the byte scan, with the offset of the first level too deep.
+    const std::string deep =
+        loadError(tmp, "{\"a\": " + std::string(200000, '[') + std::string(200000, ']') + "}");
+    EXPECT_NE(deep.find("deeper than 64"), std::string::npos) << deep;
+    EXPECT_NE(deep.find("byte 69"), std::string::npos) << deep;  // {"a": + 63 more levels
+    const std::string open = loadError(tmp, std::string(200000, '['));
+    EXPECT_NE(open.find("byte 64"), std::string::npos) << open;
+    // Brackets inside strings do not count.
+    const std::string inString =
+        loadError(tmp, R"({"volume": {"phantom": "torso"}, "description": ")" +
+                           std::string(1000, '[') + R"(", "camera": {"fov_y": "wide"}})");
+    EXPECT_NE(inString.find("camera.fov_y"), std::string::npos) << inString;
+    // A number beyond double range is nlohmann's out_of_range, not a parse_error.
+    const std::string huge =
+        loadError(tmp, R"({"volume": {"phantom": "torso"}, "image": {"exposure": 1e999}})");
+    EXPECT_NE(huge.find("not valid JSON"), std::string::npos) << huge;
+    EXPECT_NE(huge.find("1e999"), std::string::npos) << huge;
+    // Invalid UTF-8 is quoted escaped, so the message itself is clean text.
+    const std::string bytes = loadError(tmp, "{\"description\": \"caf\xe9\"}");
+    EXPECT_NE(bytes.find("\\xe9"), std::string::npos) << bytes;
+    EXPECT_EQ(bytes.find('\xe9'), std::string::npos) << bytes;
+    EXPECT_THROW(io::loadScene(tmp.path()), InputError);  // a directory
+}
+
+TEST(Scene, HugeUnsignedIntegerIsReportedAsGiven) {
+    expectBad(json{{"volume", "a.nii"}, {"image", {{"width", 18446744073709551615ull}}}},
+              "image.width", {"18446744073709551615"});
+}
+
+TEST(Scene, HostileOverridesAreInputErrors) {
+    json doc = json::parse(R"({"volume": {"phantom": "torso"}})");
+    EXPECT_THROW(io::applyOverride(doc, "description=caf\xe9"), InputError);
+    EXPECT_THROW(io::applyOverride(doc, "description=" + std::string(100000, '[')), InputError);
+    // A key path of 100 components nests 100 objects: refused before anything recurses into it.
+    std::string key = "a";
+    for (int i = 0; i < 99; ++i) key += ".a";
+    io::applyOverride(doc, key + "=1");
+    try {
+        (void)parse(doc);
+        ADD_FAILURE() << "accepted a 100-level document";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("deeper than 64"), std::string::npos) << e.what();
+    }
+    // A deep document built in code is refused the same way (built in place: copying it would
+    // recurse once per level).
+    json built = {{"volume", "a.nii"}};
+    json* leaf = &built["description"];
+    for (int i = 0; i < 100000; ++i) leaf = &(*leaf)[0];
+    EXPECT_THROW((void)parse(built), InputError);
+}
+
+TEST(Scene, EndlessFileIsRefusedAtTheSizeLimit) {
+    // /dev/zero never ends: the reader stops at the size limit instead of exhausting memory.
+    try {
+        (void)io::loadScene("/dev/zero");
+        ADD_FAILURE() << "read /dev/zero";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("16 MiB"), std::string::npos) << e.what();
+    }
+}

@@ -1,0 +1,60 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// A command's output files: every path checked before the work, all of them written beside their
+// targets and committed together after it.
+//
+// checkOutputs() runs before any work and throws InputError (source "command line", field the
+// option) for the first output that could not be written: a wrong extension, a missing or
+// unwritable parent directory, a path that is a directory, or two options naming the same file
+// (symlinks and hard links included).
+//
+// OutputFiles::write() runs a writer on a temporary file in the target's directory (same file
+// system, so the final rename is atomic; the temporary keeps the target's file name as its suffix,
+// so writers that pick the format by extension still do). commit() renames every temporary into
+// place only after all were written. Destroying an OutputFiles before commit() (an error or Ctrl-C
+// unwinding) removes every temporary; a rename failing during commit() also removes the targets
+// this commit already moved, so a run leaves all of its outputs or none of them. Errors name the
+// option and the target, with the system's reason (never the temporary's name, never "Success").
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace voxlight::app {
+
+struct OutputSpec {
+    std::string option;                   ///< "--output", "--exr", … (named in errors)
+    std::filesystem::path path;           ///< empty: the option was not given (skipped)
+    std::vector<std::string> extensions;  ///< allowed name endings, lower case; empty: any
+};
+
+/// Checks every given output before the work; InputError naming the option on the first problem.
+void checkOutputs(const std::vector<OutputSpec>& outputs);
+
+class OutputFiles {
+  public:
+    OutputFiles() = default;
+    OutputFiles(const OutputFiles&) = delete;
+    OutputFiles& operator=(const OutputFiles&) = delete;
+    ~OutputFiles();  ///< removes every temporary not committed
+
+    /// Calls `writer` with a fresh temporary path beside `target`. An InputError the writer raises
+    /// about the temporary is rethrown naming `target`; any failure removes the temporary.
+    void write(const std::filesystem::path& target, const std::string& option,
+               const std::function<void(const std::filesystem::path&)>& writer);
+
+    /// Renames every temporary onto its target, in the order written; see the header comment.
+    void commit();
+
+  private:
+    struct Entry {
+        std::filesystem::path temporary, target;
+        std::string option;
+    };
+    std::vector<Entry> entries_;
+};
+
+/// Writes `text` and a final newline to `path`; InputError with the system's reason on failure.
+void writeTextFile(const std::filesystem::path& path, const std::string& text);
+
+}  // namespace voxlight::app
