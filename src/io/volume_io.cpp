@@ -39,6 +39,7 @@
 #include <sstream>
 
 #include "io/dicom_series.h"
+#include "io/nrrd_header.h"
 #include "io/volume_module.h"
 
 namespace voxlight::io {
@@ -464,8 +465,17 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
 }
 
 Volume readNrrd(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    // VTK's reader crashes, hangs or zero-fills on bad headers and drops the space fields: validate
+    // the header and the data length first, and take the geometry from our own parse.
+    const detail::NrrdHeader h = detail::parseNrrdHeader(path);
+    detail::checkNrrdDataSize(h, path);
+    const Geometry g = detail::nrrdGeometry(h, path);
     vtkNew<vtkNrrdReader> r;
-    return readSimpleVtk(path, progress, r.Get());
+    vtkImageData* img = runImageReader(r, path, progress);
+    Volume v = fromImageData(img, path, g);
+    VL_CHECK(v.geometry().dims == g.dims);  // our parse and VTK agree on the layout
+    v.description = path.filename().string();
+    return v;
 }
 
 Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
@@ -532,13 +542,25 @@ bool vtkCanRead(const fs::path& p) {
     return r->CanReadFile(p.c_str()) > 0;
 }
 
+/// The first bytes of a file (at most `n`).
+std::string fileStart(const fs::path& p, std::size_t n) {
+    std::ifstream in(p, std::ios::binary);
+    std::string s(n, '\0');
+    in.read(s.data(), std::streamsize(n));
+    s.resize(std::size_t(in.gcount()));
+    return s;
+}
+
+/// vtkNrrdReader::CanReadFile reads the whole first line (unbounded); its test is the magic "NRRD".
+bool nrrdCanRead(const fs::path& p) { return fileStart(p, 4) == "NRRD"; }
+
 const std::vector<Reader>& registry() {
     static const std::vector<Reader> readers = {
         {"NIfTI",
          {".nii", ".nii.gz", ".hdr", ".img", ".img.gz"},
          vtkCanRead<vtkNIFTIImageReader>,
          readNifti},
-        {"NRRD", {".nrrd", ".nhdr"}, vtkCanRead<vtkNrrdReader>, readNrrd},
+        {"NRRD", {".nrrd", ".nhdr"}, nrrdCanRead, readNrrd},
         {"MetaImage", {".mhd", ".mha"}, vtkCanRead<vtkMetaImageReader>, readMeta},
         {"VTK XML image", {".vti"}, vtkCanRead<vtkXMLImageDataReader>, readVti},
         {"DICOM series",
