@@ -332,3 +332,52 @@ TEST(BadInput, NrrdDataShorterThanHeaderClaims) {
                         gz,
                     "data", {"could not be read"});
 }
+
+// ---------------------------------------------------------------------------------------------------
+// MetaImage: refused before MetaIO reads the file (it loops, divides by zero or zero-fills).
+
+namespace {
+std::string mhdText(const std::string& fields, const std::string& dataFile = "m.raw") {
+    return "ObjectType = Image\n" + fields +
+           "ElementType = MET_SHORT\nElementByteOrderMSB = False\n" +
+           "ElementDataFile = " + dataFile + "\n";
+}
+}  // namespace
+
+TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
+    test::TempDir tmp;
+    writeText(tmp / "m.raw", std::string(400, '\0'));
+    const std::string dims = "DimSize = 10 10 2\n";
+    expectNrrdError(tmp, "nd4.mhd", mhdText("NDims = 4\nDimSize = 10 10 2 1\n"), "NDims", {"'4'"});
+    expectNrrdError(tmp, "nd1e6.mhd", mhdText("NDims = 1e6\n" + dims), "NDims", {"'1e6'"});
+    expectNrrdError(tmp, "ndtwice.mhd", mhdText("NDims = 3\nNDims = 1e6\n" + dims), "NDims",
+                    {"twice"});
+    expectNrrdError(tmp, "ndmissing.mhd", mhdText(dims), "NDims", {"missing"});
+    expectNrrdError(tmp, "dimzero.mhd", mhdText("NDims = 3\nDimSize = 10 0 2\n"), "DimSize");
+    expectNrrdError(tmp, "spnan.mhd", mhdText("NDims = 3\n" + dims + "ElementSpacing = 1 nan 1\n"),
+                    "ElementSpacing", {"not a finite number"});
+    expectNrrdError(tmp, "spzero.mhd", mhdText("NDims = 3\n" + dims + "ElementSpacing = 1 0 1\n"),
+                    "ElementSpacing", {"positive"});
+    expectNrrdError(tmp, "step0.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 0"),
+                    "ElementDataFile", {"pattern"});
+}
+
+TEST(BadInput, MetaImageShortOrUndecompressibleData) {
+    test::TempDir tmp;
+    // LOCAL data cut short (.mha): 400 bytes claimed, 50 present.
+    expectNrrdError(tmp, "short.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\n", "LOCAL") + std::string(50, '\0'),
+                    "data", {"file holds 50 bytes", "claims 400"});
+    // Compressed data that does not decompress: MetaIO only prints "Uncompress failed".
+    expectNrrdError(tmp, "junk.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n", "LOCAL") +
+                        std::string(64, '\7'),
+                    "data", {"could not be read"});
+    // CompressedDataSize larger than the file.
+    expectNrrdError(tmp, "cds.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n"
+                            "CompressedDataSize = 5000\n",
+                            "LOCAL") +
+                        std::string(64, '\7'),
+                    "data", {"64 compressed bytes", "claims 5000"});
+}
