@@ -506,11 +506,14 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
 }
 
 /// Redirects std::cerr (where MetaIO reports short or undecompressible data) into a string while
-/// alive.
+/// alive. std::cerr is process-wide: captures are serialised, and anything another thread writes to
+/// std::cerr meanwhile is captured too (voxlight's own progress and messages use stdio's stderr).
 class CerrCapture {
   public:
-    CerrCapture() : old_(std::cerr.rdbuf(text_.rdbuf())) {}
+    CerrCapture() : lock_(mutex()), old_(std::cerr.rdbuf(text_.rdbuf())) {}
     ~CerrCapture() { std::cerr.rdbuf(old_); }
+    CerrCapture(const CerrCapture&) = delete;
+    CerrCapture& operator=(const CerrCapture&) = delete;
     std::string firstLine() const {
         std::string s = text_.str();
         s.erase(0, s.find_first_not_of(" \t\r\n"));
@@ -518,6 +521,11 @@ class CerrCapture {
     }
 
   private:
+    static std::mutex& mutex() {
+        static std::mutex m;
+        return m;
+    }
+    std::lock_guard<std::mutex> lock_;
     std::ostringstream text_;
     std::streambuf* old_;
 };
