@@ -26,6 +26,12 @@ constexpr std::int64_t kVtkComponentAxisMax = 9;
 /// VTK 9.1 passes the gzip data length to gzread as a 32-bit unsigned: longer data would wrap and
 /// load partly as zeros.
 constexpr std::uint64_t kVtkMaxGzipBytes = (std::uint64_t(1) << 32) - 1;
+/// VTK 9.1 counts pattern indices with an int (i += step): keep first, last and step far from its
+/// overflow.
+constexpr std::int64_t kMaxPatternIndex = 1'000'000'000;
+/// VTK 9.1 formats pattern names into a buffer this much longer than the pattern (longer names are
+/// cut); we make the same names.
+constexpr std::size_t kVtkPatternSlack = 20;
 /// Direction cosines are written with ~6 digits: the same tolerance as the NIfTI/VTI check.
 constexpr double kOrthoTol = 1e-3;
 
@@ -404,14 +410,20 @@ class Parser {
         const std::int64_t last = parseInt("data file", tok[2]);
         const std::int64_t step = parseInt("data file", tok[3]);
         if (tok.size() > 4) subdim_ = parseInt("data file", tok[4]);
+        const auto inRange = [](std::int64_t x) {
+            return x >= -kMaxPatternIndex && x <= kMaxPatternIndex;
+        };
+        if (!inRange(first) || !inRange(last) || !inRange(step))
+            fail("data file", "pattern indices " + tok[1] + " " + tok[2] + " " + tok[3] +
+                                  " are beyond +-" + std::to_string(kMaxPatternIndex));
         if (step <= 0 || last < first || (last - first) / step >= core::kMaxDim)
             fail("data file", "pattern range " + tok[1] + ".." + tok[2] + " step " + tok[3] +
                                   " is empty, endless or longer than " +
                                   std::to_string(core::kMaxDim) + " files");
         for (std::int64_t i = first; i <= last; i += step) {
-            std::string name(fmt.size() + 24, '\0');
+            std::string name(fmt.size() + kVtkPatternSlack, '\0');
             const int n = std::snprintf(name.data(), name.size(), fmt.c_str(), int(i));
-            name.resize(std::size_t(std::max(n, 0)));
+            name.resize(std::min(std::size_t(std::max(n, 0)), name.size() - 1));
             h.dataFiles.push_back(beside(name));
         }
     }

@@ -287,6 +287,8 @@ TEST(BadInput, NrrdSliceFilesCheckedOneByOne) {
                     {"step 0"});
     expectNrrdError(tmp, "down.nhdr", head + "data file: s%d.raw 2 1 -1\n", "data file",
                     {"step -1"});
+    expectNrrdError(tmp, "huge.nhdr", head + "data file: s%d.raw 2147483640 2147483647 9\n",
+                    "data file", {"beyond"});
     expectNrrdError(tmp, "fmt.nhdr", head + "data file: s%s%n.raw 1 2 1\n", "data file",
                     {"one %d conversion"});
     expectNrrdError(tmp, "gz.nhdr",
