@@ -34,11 +34,13 @@
 #include <cstring>
 #include <fstream>
 #include <functional>
+#include <iostream>
 #include <limits>
 #include <mutex>
 #include <sstream>
 
 #include "io/dicom_series.h"
+#include "io/nrrd_header.h"
 #include "io/volume_module.h"
 
 namespace voxlight::io {
@@ -389,12 +391,39 @@ Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkRe
     return v;
 }
 
-/// MetaImage header "Key = Value" pairs (only to validate the raw data file's length before VTK
-/// reads it).
-std::string metaHeaderValue(const fs::path& path, const std::string& key) {
+/// MetaImage header lines read at most: MetaIO headers hold a few dozen keys.
+constexpr int kMaxMetaHeaderLines = 256;
+/// MetaImage header bytes read at most (the header ends at ElementDataFile; binary data follows).
+constexpr std::size_t kMaxMetaHeaderBytes = std::size_t(1) << 20;
+
+/// MetaImage "Key = Value" header, up to and including ElementDataFile (the last key).
+struct MetaHeader {
+    std::vector<std::pair<std::string, std::string>> fields;
+    std::uint64_t dataOffset = 0;  ///< bytes before LOCAL data (after the ElementDataFile line)
+    bool complete = false;         ///< ElementDataFile was found
+
+    const std::string* find(const std::string& key) const {
+        for (const auto& [k, v] : fields)
+            if (k == key) return &v;
+        return nullptr;
+    }
+    std::string value(const std::string& key) const {
+        const std::string* v = find(key);
+        return v ? *v : std::string();
+    }
+};
+
+MetaHeader readMetaHeader(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
-    std::string line;
-    for (int n = 0; n < 64 && std::getline(in, line); ++n) {
+    std::string buf(kMaxMetaHeaderBytes, '\0');
+    in.read(buf.data(), std::streamsize(buf.size()));
+    buf.resize(std::size_t(in.gcount()));
+    MetaHeader h;
+    std::size_t pos = 0;
+    for (int n = 0; n < kMaxMetaHeaderLines && pos < buf.size(); ++n) {
+        const std::size_t nl = buf.find('\n', pos);
+        std::string line = buf.substr(pos, (nl == std::string::npos ? buf.size() : nl) - pos);
+        pos = nl == std::string::npos ? buf.size() : nl + 1;
         const auto eq = line.find('=');
         if (eq == std::string::npos) continue;
         std::string k = line.substr(0, eq), val = line.substr(eq + 1);
@@ -404,68 +433,197 @@ std::string metaHeaderValue(const fs::path& path, const std::string& key) {
         };
         trim(k);
         trim(val);
-        if (k == key) return val;
-        if (k == "ElementDataFile") break;  // last header key; binary data may follow
+        h.fields.emplace_back(k, val);
+        if (k == "ElementDataFile") {  // last header key; binary data may follow
+            h.dataOffset = pos;
+            h.complete = true;
+            break;
+        }
     }
-    return {};
+    return h;
 }
 
+/// Numbers of a header value; InputError naming the key unless there are exactly `n` finite ones.
+std::vector<double> metaNumbers(const MetaHeader& h, const fs::path& path, const std::string& key,
+                                std::size_t n) {
+    std::istringstream is(h.value(key));
+    std::vector<double> out;
+    std::string tok;
+    while (is >> tok) {
+        char* end = nullptr;
+        const double x = std::strtod(tok.c_str(), &end);
+        if (*end != '\0' || !std::isfinite(x))
+            throw InputError(path.string(), key, "holds '" + tok + "', not a finite number",
+                             "fix the MetaImage header");
+        out.push_back(x);
+    }
+    if (out.size() != n)
+        throw InputError(
+            path.string(), key,
+            "has " + std::to_string(out.size()) + " values, expected " + std::to_string(n),
+            "fix the MetaImage header");
+    return out;
+}
+
+/// Refuses what MetaIO loops on, divides by zero on or misreads, before it sees the file.
+void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
+    const auto fail = [&](const std::string& field, const std::string& problem) {
+        throw InputError(path.string(), field, problem, "fix the MetaImage header");
+    };
+    for (std::size_t i = 0; i < h.fields.size(); ++i)
+        for (std::size_t j = 0; j < i; ++j)
+            if (h.fields[i].first == h.fields[j].first) fail(h.fields[i].first, "appears twice");
+    if (!h.complete)
+        fail("ElementDataFile", "is missing (or comes after " +
+                                    std::to_string(kMaxMetaHeaderLines) + " header lines)");
+    if (!h.find("NDims")) fail("NDims", "is missing");
+    const std::string nd = h.value("NDims");
+    if (nd != "2" && nd != "3")
+        fail("NDims", "is '" + nd + "'; voxlight reads 3-D volumes (or 2-D slices)");
+    const std::size_t ndims = std::size_t(nd[0] - '0');
+    if (!h.find("DimSize")) fail("DimSize", "is missing");
+    for (double d : metaNumbers(h, path, "DimSize", ndims))
+        if (d < 1 || d != std::floor(d) || d > core::kMaxDim)
+            fail("DimSize", "holds " + std::to_string(d) + "; sizes must be integers 1.." +
+                                std::to_string(core::kMaxDim));
+    for (const char* key : {"ElementSpacing", "ElementSize"})
+        if (h.find(key))
+            for (double s : metaNumbers(h, path, key, ndims))
+                if (!(s > 0)) fail(key, "holds " + std::to_string(s) + "; must be positive");
+    for (const char* key : {"Offset", "Position", "Origin"})
+        if (h.find(key)) metaNumbers(h, path, key, ndims);
+    for (const char* key : {"TransformMatrix", "Rotation", "Orientation"})
+        if (h.find(key)) metaNumbers(h, path, key, ndims * ndims);
+    // A file pattern "name%03d.raw first last step": step 0 divides by zero inside MetaIO.
+    const std::string df = h.value("ElementDataFile");
+    if (df.find('%') != std::string::npos) {
+        std::istringstream is(df);
+        std::string fmt;
+        long long first = 0, last = 0, step = 0;
+        if (!(is >> fmt >> first >> last >> step) || step == 0 || (last - first) / step < 0)
+            fail("ElementDataFile", "'" + df + "' is not a valid 'pattern first last step'");
+    }
+}
+
+/// Redirects std::cerr (where MetaIO reports short or undecompressible data) into a string while
+/// alive. std::cerr is process-wide: captures are serialised, and anything another thread writes to
+/// std::cerr meanwhile is captured too (voxlight's own progress and messages use stdio's stderr).
+class CerrCapture {
+  public:
+    CerrCapture() : lock_(mutex()), old_(std::cerr.rdbuf(text_.rdbuf())) {}
+    ~CerrCapture() { std::cerr.rdbuf(old_); }
+    CerrCapture(const CerrCapture&) = delete;
+    CerrCapture& operator=(const CerrCapture&) = delete;
+    std::string firstLine() const {
+        std::string s = text_.str();
+        s.erase(0, s.find_first_not_of(" \t\r\n"));
+        return s.substr(0, s.find('\n'));
+    }
+
+  private:
+    static std::mutex& mutex() {
+        static std::mutex m;
+        return m;
+    }
+    std::lock_guard<std::mutex> lock_;
+    std::ostringstream text_;
+    std::streambuf* old_;
+};
+
 Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    const MetaHeader h = readMetaHeader(path);
+    validateMetaHeader(h, path);
     vtkNew<vtkMetaImageReader> r;
     r->SetFileName(path.c_str());
-    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    {
+        CerrCapture quiet;  // MetaIO's header complaints duplicate VTK's error
+        runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+    }
     int ext[6];
     r->GetDataExtent(ext);
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
-    // MetaIO reports a short raw file on std::cerr only, so check the length of uncompressed data
-    // ourselves.
-    const std::string compressed = metaHeaderValue(path, "CompressedData");
-    const std::string dataFile = metaHeaderValue(path, "ElementDataFile");
-    if (compressed != "True" && compressed != "true" && !dataFile.empty() && dataFile != "LOCAL" &&
-        dataFile != "LIST" && dataFile.find('%') == std::string::npos) {
-        const fs::path raw = path.parent_path() / dataFile;
-        const std::uint64_t need =
-            std::uint64_t(ext[1] - ext[0] + 1) * (ext[3] - ext[2] + 1) * (ext[5] - ext[4] + 1) *
-            std::uint64_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType())) *
-            std::uint64_t(r->GetNumberOfScalarComponents());
+    // MetaIO reports a short data file on std::cerr only, so check the data length ourselves.
+    const std::string compressed = h.value("CompressedData");
+    const bool isCompressed = compressed == "True" || compressed == "true";
+    const std::string dataFile = h.value("ElementDataFile");
+    const std::uint64_t need =
+        std::uint64_t(ext[1] - ext[0] + 1) * (ext[3] - ext[2] + 1) * (ext[5] - ext[4] + 1) *
+        std::uint64_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType())) *
+        std::uint64_t(r->GetNumberOfScalarComponents());
+    if (dataFile != "LIST" && dataFile.find('%') == std::string::npos) {
+        const bool local = dataFile == "LOCAL";
+        const fs::path raw = local ? path : path.parent_path() / dataFile;
         std::error_code ec;
-        const auto have = fs::file_size(raw, ec);
+        const std::uint64_t size = fs::file_size(raw, ec);
         if (ec)
             throw InputError(path.string(), "ElementDataFile",
                              "names '" + dataFile + "', which cannot be opened",
                              "put the data file beside the header");
-        if (have < need)
+        // HeaderSize: bytes to skip before raw data (-1: the data is at the end of the file).
+        std::uint64_t skip = local ? h.dataOffset : 0;
+        if (h.find("HeaderSize")) {
+            const double hs = metaNumbers(h, path, "HeaderSize", 1)[0];
+            if (hs > 0) skip += hs >= double(size) ? size : std::uint64_t(hs);
+        }
+        const std::uint64_t have = size - std::min(size, skip);
+        if (!isCompressed && have < need)
             throw InputError(raw.string(), "data",
-                             "is " + std::to_string(have) + " bytes but the header " +
-                                 path.filename().string() + " needs " + std::to_string(need),
-                             "the raw file is truncated; copy it again");
-    }
-    Volume v = readSimpleVtk(path, progress, r.Get());
-    // MetaImage stores TransformMatrix (row-major direction cosines) — VTK 9.1's reader ignores it.
-    const std::string tm = metaHeaderValue(path, "TransformMatrix");
-    if (!tm.empty()) {
-        std::istringstream is(tm);
-        double e[9];
-        int n = 0;
-        while (n < 9 && is >> e[n]) ++n;
-        if (n == 9) {
-            glm::dmat3 d;
-            for (int c = 0; c < 3; ++c)
-                for (int rr = 0; rr < 3; ++rr)
-                    d[c][rr] = e[3 * c + rr];  // MetaIO: row c = axis c's direction
-            checkDirection(d, path, "TransformMatrix");
-            v.geometry().direction = d;
+                             "file holds " + std::to_string(have) + " bytes, header " +
+                                 path.filename().string() + " claims " + std::to_string(need),
+                             "the data is truncated; copy it again");
+        if (isCompressed && h.find("CompressedDataSize")) {
+            const double claimed = metaNumbers(h, path, "CompressedDataSize", 1)[0];
+            if (double(have) < claimed)
+                throw InputError(raw.string(), "data",
+                                 "file holds " + std::to_string(have) +
+                                     " compressed bytes, header claims " +
+                                     std::to_string(std::uint64_t(claimed)),
+                                 "the data is truncated; copy it again");
         }
     }
-    const std::string modality = metaHeaderValue(path, "Modality");
+    Volume v;
+    {
+        // MetaIO loads short or undecompressible data with only a line on std::cerr.
+        CerrCapture metaio;
+        v = readSimpleVtk(path, progress, r.Get());
+        if (!metaio.firstLine().empty())
+            throw InputError(path.string(), "data", "could not be read: " + metaio.firstLine(),
+                             "the data is truncated or corrupt; copy it again");
+    }
+    // Orientation as ITK (which writes most MetaImages) reads it: TransformMatrix holds the
+    // direction cosines, one row per axis, in LPS; Offset is voxel (0,0,0)'s centre in LPS (VTK
+    // reads it as the origin). AnatomicalOrientation only describes that matrix and is ignored, as
+    // ITK does. VTK 9.1's reader ignores TransformMatrix, so apply it here.
+    std::string tmKey;  // MetaIO accepts Rotation and Orientation as synonyms
+    for (const char* key : {"TransformMatrix", "Rotation", "Orientation"})
+        if (tmKey.empty() && h.find(key)) tmKey = key;
+    if (!tmKey.empty() && h.value("NDims") == "3") {
+        const std::vector<double> e = metaNumbers(h, path, tmKey, 9);
+        glm::dmat3 d;
+        for (int c = 0; c < 3; ++c)
+            for (int rr = 0; rr < 3; ++rr)
+                d[c][rr] = e[std::size_t(3 * c + rr)];  // MetaIO: row c = axis c's direction
+        checkDirection(d, path, tmKey);
+        v.geometry().direction = d;
+    }
+    const std::string modality = h.value("Modality");
     if (modality == "MET_MOD_CT") v.modality = core::Modality::CT;
     if (modality == "MET_MOD_MR") v.modality = core::Modality::MR;
     return v;
 }
 
 Volume readNrrd(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    // VTK's reader crashes, hangs or zero-fills on bad headers and drops the space fields: validate
+    // the header and the data length first, and take the geometry from our own parse.
+    const detail::NrrdHeader h = detail::parseNrrdHeader(path);
+    detail::checkNrrdDataSize(h, path);
+    const Geometry g = detail::nrrdGeometry(h, path);
     vtkNew<vtkNrrdReader> r;
-    return readSimpleVtk(path, progress, r.Get());
+    vtkImageData* img = runImageReader(r, path, progress);
+    Volume v = fromImageData(img, path, g);
+    VL_CHECK(v.geometry().dims == g.dims);  // our parse and VTK agree on the layout
+    v.description = path.filename().string();
+    return v;
 }
 
 Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
@@ -532,14 +690,38 @@ bool vtkCanRead(const fs::path& p) {
     return r->CanReadFile(p.c_str()) > 0;
 }
 
+/// The first bytes of a file (at most `n`).
+std::string fileStart(const fs::path& p, std::size_t n) {
+    std::ifstream in(p, std::ios::binary);
+    std::string s(n, '\0');
+    in.read(s.data(), std::streamsize(n));
+    s.resize(std::size_t(in.gcount()));
+    return s;
+}
+
+/// vtkNrrdReader::CanReadFile reads the whole first line (unbounded); its test is the magic "NRRD".
+bool nrrdCanRead(const fs::path& p) { return fileStart(p, 4) == "NRRD"; }
+
+/// vtkMetaImageReader::CanReadFile reads the first word into a char[8000] (a longer one overflows
+/// it): refuse such files before asking VTK.
+bool metaCanRead(const fs::path& p) {
+    constexpr std::size_t kVtkMetaKeyBuffer = 8000;
+    const std::string head = fileStart(p, 2 * kVtkMetaKeyBuffer);
+    const auto begin = head.find_first_not_of(" \t\r\n\v\f");
+    if (begin == std::string::npos || begin >= kVtkMetaKeyBuffer) return false;
+    const auto end = std::min(head.find_first_of(" \t\r\n\v\f", begin), head.size());
+    if (end - begin >= kVtkMetaKeyBuffer) return false;
+    return vtkCanRead<vtkMetaImageReader>(p);
+}
+
 const std::vector<Reader>& registry() {
     static const std::vector<Reader> readers = {
         {"NIfTI",
          {".nii", ".nii.gz", ".hdr", ".img", ".img.gz"},
          vtkCanRead<vtkNIFTIImageReader>,
          readNifti},
-        {"NRRD", {".nrrd", ".nhdr"}, vtkCanRead<vtkNrrdReader>, readNrrd},
-        {"MetaImage", {".mhd", ".mha"}, vtkCanRead<vtkMetaImageReader>, readMeta},
+        {"NRRD", {".nrrd", ".nhdr"}, nrrdCanRead, readNrrd},
+        {"MetaImage", {".mhd", ".mha"}, metaCanRead, readMeta},
         {"VTK XML image", {".vti"}, vtkCanRead<vtkXMLImageDataReader>, readVti},
         {"DICOM series",
          {".dcm", ".ima", ""},

@@ -2,14 +2,17 @@
 #pragma once
 // Reading and writing volumes. Readers form a registry (tev-style): each reader either loads the
 // file or says "not my format"; when none accepts it, the error lists every reader tried. All
-// readers use VTK or GDCM, never hand-written format parsers (raw files are read as the layout the
-// user states).
+// readers use VTK or GDCM for the data (raw files are read as the layout the user states); the NRRD
+// and MetaImage text headers are parsed and validated here first (nrrd_header.h), because VTK 9.1
+// and MetaIO crash, hang or zero-fill on bad ones.
 //
 // Supported: NIfTI (.nii, .nii.gz), NRRD (.nrrd, .nhdr), MetaImage (.mhd, .mha), VTK XML image
 // (.vti), raw (any file, with an explicit RawLayout), DICOM series (a directory, or one file of it;
 // GDCM).
 //
-// Geometry is converted to patient LPS (NIfTI's RAS sform/qform is flipped in x and y). Physical
+// Geometry is converted to patient LPS (NIfTI's RAS sform/qform is flipped in x and y; NRRD's named
+// space, space directions and space origin likewise; MetaImage's TransformMatrix and Offset are LPS
+// as ITK writes them). Physical
 // values: NIfTI scl_slope/scl_inter and DICOM Rescale Slope/Intercept become Volume::mapping.
 // int32/float64/other types are converted to the narrowest native type that holds them exactly
 // (int16/uint16) or to float32.

@@ -145,3 +145,241 @@ TEST(BadInput, WritingToMissingDirectoryLeavesNothing) {
     EXPECT_THROW(io::writeVolume(core::makePhantom("sphere", o), tmp / "v.xyz"), InputError);
     EXPECT_TRUE(fs::is_empty(tmp.path()));
 }
+
+// ---------------------------------------------------------------------------------------------------
+// NRRD: the header is validated before VTK's reader sees the file (it crashes, hangs or zero-fills).
+
+namespace {
+/// A valid attached NRRD header for 10x10x2 int16 with `fields` inserted before `sizes` and
+/// `extra` after it; data bytes follow the blank line.
+std::string nrrdText(const std::string& before, const std::string& after = "",
+                     std::size_t dataBytes = 400) {
+    return "NRRD0004\ntype: short\n" + before + "sizes: 10 10 2\n" + after +
+           "endian: little\nencoding: raw\n\n" + std::string(dataBytes, '\0');
+}
+
+/// Writes `text` as tmp/name and expects an InputError naming the file, the field and `words`.
+void expectNrrdError(const test::TempDir& tmp, const std::string& name, const std::string& text,
+                     const std::string& field, std::vector<std::string> words = {}) {
+    writeText(tmp / name, text);
+    words.push_back(field);
+    expectInputError(tmp / name, name, words);
+}
+}  // namespace
+
+TEST(BadInput, NrrdValidHeaderStillLoads) {
+    test::TempDir tmp;
+    writeText(tmp / "ok.nrrd", nrrdText("dimension: 3\n", "spacings: 0.5 1 2\n"));
+    const core::Volume v = io::readVolume(tmp / "ok.nrrd");
+    EXPECT_EQ(v.dims(), glm::ivec3(10, 10, 2));
+    EXPECT_EQ(v.geometry().spacing, glm::dvec3(0.5, 1, 2));
+}
+
+TEST(BadInput, NrrdDimensionMissingZeroWrongOrLate) {
+    test::TempDir tmp;
+    expectNrrdError(tmp, "nodim.nrrd", nrrdText(""), "dimension", {"missing"});
+    expectNrrdError(tmp, "zero.nrrd", nrrdText("dimension: 0\n"), "dimension", {"is 0"});
+    expectNrrdError(tmp, "four.nrrd", nrrdText("dimension: 4\n"), "dimension", {"is 4"});
+    expectNrrdError(tmp, "junk.nrrd", nrrdText("dimension: three\n"), "dimension",
+                    {"not an integer"});
+    expectNrrdError(tmp, "late.nrrd", nrrdText("", "dimension: 3\n"), "dimension", {"missing"});
+    expectNrrdError(tmp, "twice.nrrd", nrrdText("dimension: 3\n", "dimension: 3\n"), "dimension",
+                    {"after"});
+}
+
+TEST(BadInput, NrrdSizesNonPositiveOverflowingOrMiscounted) {
+    test::TempDir tmp;
+    const auto withSizes = [](const std::string& sizes) {
+        return "NRRD0004\ntype: short\ndimension: 3\nsizes: " + sizes +
+               "\nendian: little\nencoding: raw\n\n";
+    };
+    expectNrrdError(tmp, "zero.nrrd", withSizes("10 0 2"), "sizes", {"size 0"});
+    expectNrrdError(tmp, "neg.nrrd", withSizes("10 -3 2"), "sizes", {"size -3"});
+    expectNrrdError(tmp, "over.nrrd", withSizes("10 99999999999999999999999 2"), "sizes",
+                    {"overflows"});
+    expectNrrdError(tmp, "count.nrrd", withSizes("10 10"), "sizes", {"2 values"});
+    expectNrrdError(tmp, "vector.nrrd", withSizes("3 10 10"), "sizes", {"vector components"});
+}
+
+TEST(BadInput, NrrdUnsupportedTypeOrEncoding) {
+    test::TempDir tmp;
+    expectNrrdError(tmp, "block.nrrd",
+                    "NRRD0004\ntype: block\ndimension: 3\nsizes: 10 10 2\nencoding: raw\n\n",
+                    "type", {"'block'"});
+    expectNrrdError(tmp, "notype.nrrd", "NRRD0004\ndimension: 3\nsizes: 10 10 2\nencoding: raw\n\n",
+                    "type", {"missing"});
+    expectNrrdError(tmp, "bz.nrrd",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: bzip2\n\n",
+                    "encoding", {"'bzip2'"});
+    expectNrrdError(tmp, "ascii.nrrd",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: ascii\n\n1 2\n",
+                    "encoding", {"ascii"});
+    expectNrrdError(tmp, "endian.nrrd", nrrdText("dimension: 3\n", "endian: middle\n"), "endian");
+    expectNrrdError(tmp, "skip.nrrd", nrrdText("dimension: 3\n", "byte skip: 12\n"), "byte skip");
+}
+
+TEST(BadInput, NrrdBadSpacingOrSpaceFields) {
+    test::TempDir tmp;
+    const std::string d3 = "dimension: 3\n";
+    for (const char* bad : {"nan", "inf", "0", "-1"})
+        expectNrrdError(tmp, std::string("sp_") + bad + ".nrrd",
+                        nrrdText(d3, std::string("spacings: 1 ") + bad + " 1\n"), "spacings");
+    expectNrrdError(tmp, "dir_nan.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0,nan,0) (0,0,1)\n"),
+                    "space directions", {"non-finite"});
+    expectNrrdError(tmp, "dir_zero.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0,0,0) (0,0,1)\n"),
+                    "space directions", {"zero-length"});
+    expectNrrdError(tmp, "dir_shear.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0.5,1,0) (0,0,1)\n"),
+                    "space directions", {"not orthogonal"});
+    expectNrrdError(tmp, "dir_none.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: none (0,1,0) (0,0,1)\n"),
+                    "space directions", {"none"});
+    expectNrrdError(tmp, "dir_count.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0,1,0)\n"),
+                    "space directions", {"2 vectors"});
+    expectNrrdError(tmp, "org_inf.nrrd", nrrdText(d3, "space: RAS\nspace origin: (0,inf,0)\n"),
+                    "space origin");
+    expectNrrdError(tmp, "space.nrrd", nrrdText(d3, "space: upside-down\n"), "space",
+                    {"upside-down"});
+    expectNrrdError(tmp, "time.nrrd", nrrdText(d3, "space: RAST\n"), "space");
+    expectNrrdError(tmp, "time2.nrrd", nrrdText(d3, "space: right-anterior-superior-time\n"),
+                    "space", {"time"});
+}
+
+TEST(BadInput, NrrdHeaderWithoutEnd) {
+    test::TempDir tmp;
+    // Detached header without a final newline: VTK 9.1 loops forever on it.
+    writeText(tmp / "d.raw", std::string(400, '\0'));
+    expectNrrdError(tmp, "nonl.nhdr",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: raw\n"
+                    "data file: d.raw",
+                    "header", {"newline"});
+    // Attached header that never ends: there is no data.
+    expectNrrdError(tmp, "noend.nrrd",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: raw\n",
+                    "header", {"blank line"});
+    expectNrrdError(tmp, "magic.nrrd", "NRRDxyz\ntype: short\n\n", "magic");
+}
+
+TEST(BadInput, NrrdSliceFilesCheckedOneByOne) {
+    test::TempDir tmp;
+    const std::string head =
+        "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nendian: little\n"
+        "encoding: raw\n";
+    writeText(tmp / "s1.raw", std::string(200, '\1'));
+    writeText(tmp / "s2.raw", std::string(200, '\2'));
+    writeText(tmp / "cut.raw", std::string(150, '\2'));
+    // Valid: a LIST and a pattern, one 10x10 int16 slice per file.
+    for (const char* df : {"LIST\ns1.raw\ns2.raw\n", "s%d.raw 1 2 1\n"}) {
+        writeText(tmp / "ok.nhdr", head + "data file: " + df);
+        const core::Volume v = io::readVolume(tmp / "ok.nhdr");
+        EXPECT_EQ(v.dims(), glm::ivec3(10, 10, 2));
+        EXPECT_EQ(v.dataAs<std::int16_t>()[199], 0x0202);
+    }
+    expectNrrdError(tmp, "count.nhdr", head + "data file: LIST\ns1.raw\ns2.raw\ns1.raw\n",
+                    "data file", {"3 files for 2 slices"});
+    writeText(tmp / "cut.nhdr", head + "data file: LIST\ns1.raw\ncut.raw\n");
+    expectInputError(tmp / "cut.nhdr", "cut.raw",
+                     {"data", "file holds 150 bytes, header claims 200 per slice"});
+    expectNrrdError(tmp, "step0.nhdr", head + "data file: s%d.raw 1 2 0\n", "data file",
+                    {"step 0"});
+    expectNrrdError(tmp, "down.nhdr", head + "data file: s%d.raw 2 1 -1\n", "data file",
+                    {"step -1"});
+    expectNrrdError(tmp, "huge.nhdr", head + "data file: s%d.raw 2147483640 2147483647 9\n",
+                    "data file", {"beyond"});
+    expectNrrdError(tmp, "fmt.nhdr", head + "data file: s%s%n.raw 1 2 1\n", "data file",
+                    {"one %d conversion"});
+    expectNrrdError(tmp, "gz.nhdr",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: gzip\n"
+                    "data file: s%d.raw 1 2 1\n",
+                    "data file", {"raw 3-D data only"});
+}
+
+TEST(BadInput, NrrdDataShorterThanHeaderClaims) {
+    test::TempDir tmp;
+    // Attached: 400 bytes needed, 100 present (VTK would load the rest as zeros).
+    expectNrrdError(tmp, "short.nrrd", nrrdText("dimension: 3\n", "", 100), "data",
+                    {"file holds 100 bytes, header claims 400"});
+    // Detached: the data file is named.
+    writeText(tmp / "short.raw", std::string(399, '\0'));
+    writeText(tmp / "det.nhdr",
+              "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nendian: little\n"
+              "encoding: raw\ndata file: short.raw\n");
+    expectInputError(tmp / "det.nhdr", "short.raw", {"file holds 399 bytes, header claims 400"});
+    writeText(tmp / "missing.nhdr",
+              "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: raw\n"
+              "data file: nowhere.raw\n");
+    expectInputError(tmp / "missing.nhdr", "missing.nhdr", {"data file", "nowhere.raw"});
+    // The 4 KB file claiming 1024x1024x2047 int16 of the issue.
+    expectNrrdError(tmp, "claim.nrrd",
+                    "NRRD0004\ntype: int16\ndimension: 3\nsizes: 1024 1024 2047\nendian: "
+                    "little\nencoding: raw\n\n" +
+                        std::string(4096, '\1'),
+                    "data", {"header claims 4292870144"});
+    // Detached ascii with too few values.
+    writeText(tmp / "few.txt", "1 2 3\n4 5\n");
+    writeText(tmp / "few.nhdr",
+              "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nencoding: ascii\n"
+              "data file: few.txt\n");
+    expectInputError(tmp / "few.nhdr", "few.txt", {"5 ascii values", "claims 200"});
+    // Gzip stream cut short: a stored deflate block announcing 400 bytes but holding 100.
+    std::string gz("\x1f\x8b\x08\x00\x00\x00\x00\x00\x00\x03", 10);
+    gz += std::string("\x01\x90\x01\x6f\xfe", 5);  // BFINAL stored block, LEN 400, NLEN ~400
+    gz += std::string(100, '\2');
+    expectNrrdError(tmp, "cut.nrrd",
+                    "NRRD0004\ntype: short\ndimension: 3\nsizes: 10 10 2\nendian: little\n"
+                    "encoding: gzip\n\n" +
+                        gz,
+                    "data", {"could not be read"});
+}
+
+// ---------------------------------------------------------------------------------------------------
+// MetaImage: refused before MetaIO reads the file (it loops, divides by zero or zero-fills).
+
+namespace {
+std::string mhdText(const std::string& fields, const std::string& dataFile = "m.raw") {
+    return "ObjectType = Image\n" + fields +
+           "ElementType = MET_SHORT\nElementByteOrderMSB = False\n" +
+           "ElementDataFile = " + dataFile + "\n";
+}
+}  // namespace
+
+TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
+    test::TempDir tmp;
+    writeText(tmp / "m.raw", std::string(400, '\0'));
+    const std::string dims = "DimSize = 10 10 2\n";
+    expectNrrdError(tmp, "nd4.mhd", mhdText("NDims = 4\nDimSize = 10 10 2 1\n"), "NDims", {"'4'"});
+    expectNrrdError(tmp, "nd1e6.mhd", mhdText("NDims = 1e6\n" + dims), "NDims", {"'1e6'"});
+    expectNrrdError(tmp, "ndtwice.mhd", mhdText("NDims = 3\nNDims = 1e6\n" + dims), "NDims",
+                    {"twice"});
+    expectNrrdError(tmp, "ndmissing.mhd", mhdText(dims), "NDims", {"missing"});
+    expectNrrdError(tmp, "dimzero.mhd", mhdText("NDims = 3\nDimSize = 10 0 2\n"), "DimSize");
+    expectNrrdError(tmp, "spnan.mhd", mhdText("NDims = 3\n" + dims + "ElementSpacing = 1 nan 1\n"),
+                    "ElementSpacing", {"not a finite number"});
+    expectNrrdError(tmp, "spzero.mhd", mhdText("NDims = 3\n" + dims + "ElementSpacing = 1 0 1\n"),
+                    "ElementSpacing", {"positive"});
+    expectNrrdError(tmp, "step0.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 0"),
+                    "ElementDataFile", {"pattern"});
+}
+
+TEST(BadInput, MetaImageShortOrUndecompressibleData) {
+    test::TempDir tmp;
+    // LOCAL data cut short (.mha): 400 bytes claimed, 50 present.
+    expectNrrdError(tmp, "short.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\n", "LOCAL") + std::string(50, '\0'),
+                    "data", {"file holds 50 bytes", "claims 400"});
+    // Compressed data that does not decompress: MetaIO only prints "Uncompress failed".
+    expectNrrdError(tmp, "junk.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n", "LOCAL") +
+                        std::string(64, '\7'),
+                    "data", {"could not be read"});
+    // CompressedDataSize larger than the file.
+    expectNrrdError(tmp, "cds.mha",
+                    mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n"
+                            "CompressedDataSize = 5000\n",
+                            "LOCAL") +
+                        std::string(64, '\7'),
+                    "data", {"64 compressed bytes", "claims 5000"});
+}

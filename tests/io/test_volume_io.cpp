@@ -6,6 +6,8 @@
 #include <cmath>
 #include <cstring>
 #include <fstream>
+#include <iomanip>
+#include <sstream>
 
 #include "core/phantoms.h"
 #include "io/volume_io.h"
@@ -127,4 +129,132 @@ TEST(VolumeIo, AbdomenInt32NiftiBecomesExactInt16Hu) {
     const auto r = v.physicalRange();
     EXPECT_EQ(r[0], -1207.0);
     EXPECT_EQ(r[1], 3382.0);
+}
+
+// ---------------------------------------------------------------------------------------------------
+// Orientation: one asymmetric phantom written as NIfTI (sform) and, by hand, as NRRD in RAS, LAS and
+// LPS space (attached and detached) and as MetaImage (TransformMatrix) loads to the same image in
+// world space.
+
+namespace {
+// Geometry chosen so every sform entry is exact in float32 (3-4-5 cosines times multiples of
+// 1.25 mm): the comparison can then be tight.
+constexpr double kWorldTol = 1e-6;  // mm; float32 sform entries are exact here, doubles elsewhere
+
+core::Volume orientedPhantom() {
+    core::Geometry g;
+    g.dims = {12, 11, 5};  // first axis > 9: VTK 9.1 reads a shorter one as vector components
+    g.spacing = {1.25, 2.5, 0.625};
+    // Oblique in the axial plane and left-handed (the third axis is flipped).
+    g.direction =
+        glm::dmat3(glm::dvec3(0.6, 0.8, 0), glm::dvec3(0, 0, -1), glm::dvec3(0.8, -0.6, 0));
+    g.origin = {10.5, -20.25, 30.0};
+    core::Volume v(g, core::VoxelType::Int16);
+    auto* p = v.dataAs<std::int16_t>();
+    for (int k = 0; k < g.dims.z; ++k)
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i)
+                p[i + g.dims.x * (j + g.dims.y * k)] = std::int16_t(1 + i + 13 * j + 150 * k);
+    return v;
+}
+
+std::string vec(const glm::dvec3& v) {
+    std::ostringstream os;
+    os << std::setprecision(17) << "(" << v.x << "," << v.y << "," << v.z << ")";
+    return os.str();
+}
+
+/// NRRD header of `v` in `space`, whose axes relate to LPS by the diagonal `lpsToSpace`.
+std::string nrrdHeaderFor(const core::Volume& v, const std::string& space,
+                          const glm::dvec3& lpsToSpace, const std::string& dataFile) {
+    const core::Geometry& g = v.geometry();
+    std::ostringstream os;
+    os << "NRRD0004\n# written by hand\ntype: short\ndimension: 3\nspace: " << space
+       << "\nsizes: " << g.dims.x << " " << g.dims.y << " " << g.dims.z << "\nspace directions:";
+    for (int a = 0; a < 3; ++a) os << " " << vec(lpsToSpace * g.direction[a] * g.spacing[a]);
+    os << "\nkinds: domain domain domain\nendian: little\nencoding: raw\nspace origin: "
+       << vec(lpsToSpace * g.origin) << "\n";
+    if (!dataFile.empty()) os << "data file: " << dataFile << "\n";
+    return os.str();
+}
+
+std::string rawBytes(const core::Volume& v) {
+    return std::string(static_cast<const char*>(v.data()), v.sizeBytes());
+}
+
+/// Every voxel of `b` sits at the world position of a voxel of `a` holding the same value.
+void expectSameWorldImage(const core::Volume& a, const core::Volume& b, const std::string& what) {
+    SCOPED_TRACE(what);
+    ASSERT_EQ(a.voxelCount(), b.voxelCount());
+    ASSERT_EQ(b.type(), core::VoxelType::Int16);
+    const auto& ga = a.geometry();
+    const auto& gb = b.geometry();
+    int bad = 0;
+    for (int k = 0; k < gb.dims.z; ++k)
+        for (int j = 0; j < gb.dims.y; ++j)
+            for (int i = 0; i < gb.dims.x; ++i) {
+                const glm::dvec3 p = gb.indexToWorld({i, j, k});
+                const glm::ivec3 q(glm::round(ga.worldToIndex(p)));
+                const bool inside = glm::all(glm::greaterThanEqual(q, glm::ivec3(0))) &&
+                                    glm::all(glm::lessThan(q, ga.dims));
+                const double dist = inside ? glm::length(ga.indexToWorld(glm::dvec3(q)) - p) : 1e9;
+                const auto va =
+                    inside ? a.dataAs<std::int16_t>()[q.x + ga.dims.x * (q.y + ga.dims.y * q.z)]
+                           : -1;
+                const auto vb = b.dataAs<std::int16_t>()[i + gb.dims.x * (j + gb.dims.y * k)];
+                if ((dist > kWorldTol || va != vb) && ++bad <= 3)
+                    ADD_FAILURE() << "voxel (" << i << "," << j << "," << k << ") at " << vec(p)
+                                  << " holds " << vb << "; nearest reference voxel is " << dist
+                                  << " mm away and holds " << va;
+            }
+    EXPECT_EQ(bad, 0);
+}
+}  // namespace
+
+TEST(VolumeIo, NrrdAndMetaImageOrientationMatchNifti) {
+    test::TempDir tmp;
+    const core::Volume v = orientedPhantom();
+    io::writeVolume(v, tmp / "ref.nii");
+    const core::Volume ref = io::readVolume(tmp / "ref.nii");
+    expectSameWorldImage(v, ref, "NIfTI sform");
+
+    const glm::dvec3 ras(-1, -1, 1), las(1, -1, 1), lps(1, 1, 1);
+    const auto writeFile = [&](const std::string& name, const std::string& text) {
+        std::ofstream(tmp / name, std::ios::binary) << text;
+        return tmp / name;
+    };
+    const struct {
+        const char* name;
+        const char* space;
+        glm::dvec3 flip;
+    } cases[] = {{"ras.nrrd", "RAS", ras},
+                 {"ras_long.nrrd", "right-anterior-superior", ras},
+                 {"las.nrrd", "LAS", las},
+                 {"lps.nrrd", "left-posterior-superior", lps},
+                 {"scanner.nrrd", "scanner-xyz", lps}};
+    for (const auto& c : cases) {
+        const auto path =
+            writeFile(c.name, nrrdHeaderFor(v, c.space, c.flip, "") + "\n" + rawBytes(v));
+        expectSameWorldImage(ref, io::readVolume(path), c.name);
+    }
+    writeFile("det.raw", rawBytes(v));
+    expectSameWorldImage(
+        ref, io::readVolume(writeFile("det.nhdr", nrrdHeaderFor(v, "RAS", ras, "det.raw"))),
+        "detached RAS");
+    expectSameWorldImage(
+        ref, io::readVolume(writeFile("detlas.nhdr", nrrdHeaderFor(v, "LAS", las, "det.raw"))),
+        "detached LAS");
+
+    // MetaImage as ITK writes it: TransformMatrix rows are the axes' LPS directions, Offset is
+    // voxel (0,0,0) in LPS. AnatomicalOrientation only describes the matrix (ITK ignores it).
+    std::ostringstream mhd;
+    mhd << std::setprecision(17) << "ObjectType = Image\nNDims = 3\nTransformMatrix =";
+    for (int a = 0; a < 3; ++a)
+        for (int r = 0; r < 3; ++r) mhd << " " << v.geometry().direction[a][r];
+    const auto& g = v.geometry();
+    mhd << "\nOffset = " << g.origin.x << " " << g.origin.y << " " << g.origin.z
+        << "\nAnatomicalOrientation = RSA\nElementSpacing = " << g.spacing.x << " " << g.spacing.y
+        << " " << g.spacing.z << "\nDimSize = " << g.dims.x << " " << g.dims.y << " " << g.dims.z
+        << "\nElementType = MET_SHORT\nElementByteOrderMSB = False\nElementDataFile = det.raw\n";
+    expectSameWorldImage(ref, io::readVolume(writeFile("meta.mhd", mhd.str())), "MetaImage");
 }
