@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <string>
@@ -162,16 +163,29 @@ TEST(Robustness, RenderReportsProgressAndCancels) {
     EXPECT_EQ(seen.back(), 1.0);
 
     // Cancelled after the caller's first chunk: the frame throws, and the tiles rendered stop
-    // well short of all of them (workers take no new chunk).
+    // well short of all of them (workers take no new chunk). Worker threads wait in their first
+    // tile until the cancel is raised (or kGateTimeout passes), so a caller descheduled on a
+    // loaded machine cannot let them finish the frame before it reports: the test checks the
+    // mechanism, not the scheduler.
     struct CountingModel final : render::ShadingModel {
         mutable std::atomic<int> tiles{0};
+        std::atomic<bool> gate{true};
+        const std::atomic<bool>* cancel = nullptr;
+        std::thread::id caller;
         std::string name() const override { return "counting"; }
         void renderTile(const render::RayCaster&, const render::Camera&, int, int, int, int,
                         core::ImageRGBA&, render::RenderStats&) const override {
+            constexpr auto kGateTimeout = std::chrono::seconds(10);
+            const auto start = std::chrono::steady_clock::now();
+            while (gate && std::this_thread::get_id() != caller && !*cancel &&
+                   std::chrono::steady_clock::now() - start < kGateTimeout)
+                std::this_thread::yield();
             ++tiles;
         }
     };
     CountingModel counting;
+    counting.cancel = &cancel;
+    counting.caller = self;
     const render::Camera big = defaultCamera(v, 256, 256);  // 4096 tiles of 4²
     int calls = 0;
     const core::Progress cancelling(
@@ -182,6 +196,7 @@ TEST(Robustness, RenderReportsProgressAndCancels) {
     EXPECT_THROW((void)caster.render(big, counting, cancelling), CancelledError);
     EXPECT_LT(counting.tiles.load(), 4096 / 2);
     cancel = false;
+    counting.gate = false;
     (void)caster.render(big, counting, core::Progress::none());
     EXPECT_GE(counting.tiles.load(), 4096);
 }
