@@ -31,6 +31,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <fstream>
 #include <functional>
@@ -354,9 +355,14 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
             if (len > 0) d[c] /= len;
             if (sp[c] < 0) d[c] = -d[c];
         }
-        checkDirection(d, path, h->GetSFormCode() > 0 ? "sform" : "qform");
+        const char* field = h->GetSFormCode() > 0 ? "sform" : "qform";
+        checkDirection(d, path, field);
         g.direction = d;
         g.origin = rasToLps * (rot * glm::dvec3(org[0], org[1], org[2]) + t);
+        if (!std::isfinite(g.origin.x) || !std::isfinite(g.origin.y) || !std::isfinite(g.origin.z))
+            throw InputError(path.string(), field, "has a NaN or infinite offset (origin)",
+                             "repair the header's " + std::string(field) +
+                                 " (e.g. with nibabel) or set its code to 0");
     } else {
         g.origin = glm::dvec3(org[0], org[1], org[2]);
     }
@@ -366,7 +372,19 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
         v.mapping.slope = slope;
         v.mapping.intercept = std::isfinite(inter) ? inter : 0.0;
     }
-    std::string descrip = h->GetDescrip() ? h->GetDescrip() : "";
+    // descrip is 80 bytes of anything: keep printable ASCII, escape the rest (\xNN), so that
+    // `info --json` and the stats stay valid UTF-8.
+    std::string descrip;
+    for (const char* c = h->GetDescrip() ? h->GetDescrip() : ""; *c; ++c) {
+        const auto b = static_cast<unsigned char>(*c);
+        if (b >= 0x20 && b < 0x7f) {
+            descrip += char(b);
+        } else {
+            char esc[5];
+            std::snprintf(esc, sizeof esc, "\\x%02x", b);
+            descrip += esc;
+        }
+    }
     v.description = descrip.empty() ? path.filename().string() : descrip;
     return v;
 }

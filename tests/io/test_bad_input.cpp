@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include <fstream>
+#include <limits>
 
 #include "core/phantoms.h"
 #include "io/volume_io.h"
@@ -382,4 +383,41 @@ TEST(BadInput, MetaImageShortOrUndecompressibleData) {
                             "LOCAL") +
                         std::string(64, '\7'),
                     "data", {"64 compressed bytes", "claims 5000"});
+}
+
+namespace {
+/// Overwrites bytes of a file in place.
+void patchBytes(const fs::path& p, std::streamoff offset, const void* bytes, std::size_t n) {
+    std::fstream f(p, std::ios::in | std::ios::out | std::ios::binary);
+    f.seekp(offset);
+    f.write(static_cast<const char*>(bytes), std::streamsize(n));
+}
+// NIfTI-1 header offsets (nifti1.h): descrip[80] at 148, sform_code at 254, srow_x[4] at 280.
+constexpr std::streamoff kNiftiDescrip = 148, kNiftiSformCode = 254, kNiftiSrowX = 280;
+}  // namespace
+
+TEST(BadInput, NiftiWithNonFiniteSformIsRefused) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 16;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "s.nii");
+    const std::int16_t code = 1;
+    patchBytes(tmp / "s.nii", kNiftiSformCode, &code, sizeof code);
+    for (const float bad :
+         {std::numeric_limits<float>::quiet_NaN(), std::numeric_limits<float>::infinity()}) {
+        const float row[4] = {1.f, 0.f, 0.f, bad};  // x offset
+        patchBytes(tmp / "s.nii", kNiftiSrowX, row, sizeof row);
+        expectInputError(tmp / "s.nii", "sform", {"infinite offset", "s.nii"});
+    }
+}
+
+TEST(BadInput, NiftiDescriptionBytesThatAreNotTextAreEscaped) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 16;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "d.nii");
+    const char descrip[] = "CT \xff\xfe scan";
+    patchBytes(tmp / "d.nii", kNiftiDescrip, descrip, sizeof descrip);
+    const core::Volume v = io::readVolume(tmp / "d.nii");
+    EXPECT_EQ(v.description, "CT \\xff\\xfe scan");
 }
