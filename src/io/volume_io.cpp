@@ -28,6 +28,7 @@
 #include <vtkType.h>
 #include <vtkXMLImageDataReader.h>
 #include <vtkXMLImageDataWriter.h>
+#include <zlib.h>
 
 #include <algorithm>
 #include <cmath>
@@ -37,6 +38,7 @@
 #include <functional>
 #include <iostream>
 #include <limits>
+#include <map>
 #include <mutex>
 #include <sstream>
 
@@ -322,7 +324,81 @@ vtkImageData* runImageReader(vtkImageReader2* r, const fs::path& path,
     return r->GetOutput();
 }
 
+/// NIfTI-1 (and Analyze) / NIfTI-2 header fields voxlight checks before vtkNIFTIImageReader sees
+/// the file: VTK 9.1 crashes on a datatype it does not know and takes NaN spacing at face value.
+/// Offsets from nifti1.h / nifti2.h.
+constexpr std::int32_t kNifti1HeaderSize = 348, kNifti2HeaderSize = 540;
+/// Datatype codes fromImageData converts: uint8, int16, int32, float32, float64, int8, uint16,
+/// uint32, int64, uint64 (NIfTI's DT_* codes) with their bits per voxel.
+const std::map<int, int>& niftiDatatypes() {
+    static const std::map<int, int> m = {{2, 8},   {4, 16},   {8, 32},   {16, 32},   {64, 64},
+                                         {256, 8}, {512, 16}, {768, 32}, {1024, 64}, {1280, 64}};
+    return m;
+}
+
+void checkNiftiHeader(const fs::path& path) {
+    gzFile f = gzopen(path.c_str(), "rb");  // reads plain files too
+    if (!f) return;                         // the reader reports the missing file
+    unsigned char h[kNifti2HeaderSize] = {};
+    const int got = gzread(f, h, sizeof h);
+    gzclose(f);
+    if (got < 4) return;  // too short for any header: the reader refuses it
+    auto i32 = [&](int off, bool swap) {
+        std::uint32_t v;
+        std::memcpy(&v, h + off, 4);
+        if (swap) v = __builtin_bswap32(v);
+        return std::int32_t(v);
+    };
+    const bool v1 = i32(0, false) == kNifti1HeaderSize || i32(0, true) == kNifti1HeaderSize;
+    const bool v2 = i32(0, false) == kNifti2HeaderSize || i32(0, true) == kNifti2HeaderSize;
+    if (!v1 && !v2) return;  // not a NIfTI/Analyze header: the reader says so
+    const bool swap = i32(0, false) != (v1 ? kNifti1HeaderSize : kNifti2HeaderSize);
+    if (got < (v1 ? kNifti1HeaderSize : kNifti2HeaderSize))
+        throw InputError(path.string(), "header",
+                         "ends before its " + std::to_string(v1 ? 348 : 540) + " bytes",
+                         "the file is truncated");
+    auto i16 = [&](int off) {
+        std::uint16_t v;
+        std::memcpy(&v, h + off, 2);
+        if (swap) v = __builtin_bswap16(v);
+        return int(std::int16_t(v));
+    };
+    auto f32 = [&](int off) {
+        const std::int32_t bits = i32(off, swap);
+        float v;
+        std::memcpy(&v, &bits, 4);
+        return double(v);
+    };
+    auto f64 = [&](int off) {
+        std::uint64_t bits;
+        std::memcpy(&bits, h + off, 8);
+        if (swap) bits = __builtin_bswap64(bits);
+        double v;
+        std::memcpy(&v, &bits, 8);
+        return v;
+    };
+    const int datatype = i16(v1 ? 70 : 12), bitpix = i16(v1 ? 72 : 14);
+    const auto it = niftiDatatypes().find(datatype);
+    if (it == niftiDatatypes().end())
+        throw InputError(path.string(), "datatype",
+                         "code " + std::to_string(datatype) + " is not a voxel type voxlight reads",
+                         "convert to uint8, int16, uint16 or float32");
+    if (bitpix != it->second)
+        throw InputError(path.string(), "bitpix",
+                         std::to_string(bitpix) + " does not match datatype " +
+                             std::to_string(datatype) + " (" + std::to_string(it->second) +
+                             " bits)",
+                         "repair the header");
+    for (int a = 1; a <= 3; ++a) {
+        const double sp = v1 ? f32(76 + 4 * a) : f64(104 + 8 * a);
+        if (!std::isfinite(sp))
+            throw InputError(path.string(), "pixdim[" + std::to_string(a) + "]",
+                             "voxel spacing is NaN or infinite", "repair the header");
+    }
+}
+
 Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    checkNiftiHeader(path);
     vtkNew<vtkNIFTIImageReader> r;
     vtkImageData* img = runImageReader(r, path, progress);
 

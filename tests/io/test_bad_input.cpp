@@ -421,3 +421,22 @@ TEST(BadInput, NiftiDescriptionBytesThatAreNotTextAreEscaped) {
     const core::Volume v = io::readVolume(tmp / "d.nii");
     EXPECT_EQ(v.description, "CT \\xff\\xfe scan");
 }
+
+TEST(BadInput, NiftiWithAnUnknownDatatypeOrNanSpacingIsRefusedBeforeVtk) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 16;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "t.nii");
+    // nifti1.h: datatype at 70, bitpix at 72, pixdim[8] at 76.
+    const std::int16_t unknown = 2560;
+    patchBytes(tmp / "t.nii", 70, &unknown, sizeof unknown);
+    expectInputError(tmp / "t.nii", "datatype", {"2560", "not a voxel type"});
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "b.nii");
+    const std::int16_t bitpix = 7;
+    patchBytes(tmp / "b.nii", 72, &bitpix, sizeof bitpix);
+    expectInputError(tmp / "b.nii", "bitpix", {"does not match"});
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "p.nii");
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    patchBytes(tmp / "p.nii", 76 + 4 * 2, &nan, sizeof nan);
+    expectInputError(tmp / "p.nii", "pixdim[2]", {"NaN"});
+}
