@@ -720,7 +720,183 @@ Volume readNrrd(const fs::path& path, const ReadOptions&, const core::Progress& 
     return v;
 }
 
+/// Most bytes of a .vti read as XML text before the appended data (inline data beyond this is
+/// left to VTK, which bounds it by the extent checked below).
+constexpr std::size_t kMaxVtiXmlBytes = std::size_t(64) << 20;
+/// Deepest element nesting accepted: a VTK image file has 6 levels; VTK's XML parser recurses per
+/// level and overflows the stack on a few hundred thousand.
+constexpr int kMaxVtiDepth = 32;
+
+/// The value of attribute `name` in the tag starting at `tag` (up to its '>'), or "".
+std::string xmlAttribute(const std::string& xml, std::size_t tag, const std::string& name) {
+    const std::size_t end = xml.find('>', tag);
+    const std::string key = " " + name + "=\"";
+    const std::size_t at = xml.find(key, tag);
+    if (at == std::string::npos || at > end) return {};
+    const std::size_t from = at + key.size(), to = xml.find('"', from);
+    return to == std::string::npos || to > end ? std::string() : xml.substr(from, to - from);
+}
+
+/// Bytes of `n` words of `wordBytes` at `at` in the appended block (raw or base64), or empty
+/// when the file ends first.
+std::vector<unsigned char> appendedWords(std::ifstream& in, std::uint64_t at, std::size_t n,
+                                         std::size_t wordBytes, bool base64) {
+    const std::size_t bytes = n * wordBytes;
+    const std::size_t chars = base64 ? (bytes + 2) / 3 * 4 : bytes;
+    std::string text(chars, '\0');
+    in.clear();
+    in.seekg(std::streamoff(at));
+    in.read(text.data(), std::streamsize(chars));
+    if (std::size_t(in.gcount()) != chars) return {};
+    if (!base64) return {text.begin(), text.end()};
+    static const std::string kAlphabet =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::vector<unsigned char> out;
+    std::uint32_t acc = 0;
+    int bits = 0;
+    for (char c : text) {
+        const std::size_t v = kAlphabet.find(c);
+        if (v == std::string::npos) break;  // '=' padding or damage: what was decoded counts
+        acc = (acc << 6) | std::uint32_t(v);
+        bits += 6;
+        if (bits >= 8) {
+            bits -= 8;
+            out.push_back(static_cast<unsigned char>((acc >> bits) & 0xff));
+        }
+    }
+    if (out.size() < bytes) return {};
+    out.resize(bytes);
+    return out;
+}
+
+/// What vtkXMLImageDataReader would be handed, checked first: element nesting (deep XML crashes
+/// its parser) and, for appended data, each array's size words against the extent and against
+/// the bytes the file holds (a compressed block relabelled raw makes VTK allocate gigabytes).
+void checkVtiFile(const fs::path& path) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return;  // the reader reports it
+    in.seekg(0, std::ios::end);
+    const std::uint64_t fileSize = std::uint64_t(in.tellg());
+    in.seekg(0);
+    std::string xml(std::size_t(std::min<std::uint64_t>(fileSize, kMaxVtiXmlBytes)), '\0');
+    in.read(xml.data(), std::streamsize(xml.size()));
+    const std::size_t appended = xml.find("<AppendedData");
+    if (appended != std::string::npos) xml.resize(appended + 1);
+    // Nesting: '<name' opens, '</' closes, '/>' closes what it opened; <? ?> and <!-- --> skipped.
+    int depth = 0;
+    for (std::size_t i = xml.find('<'); i != std::string::npos && i + 1 < xml.size();
+         i = xml.find('<', i + 1)) {
+        const char next = xml[i + 1];
+        if (next == '?' || next == '!') continue;
+        if (next == '/') {
+            --depth;
+            continue;
+        }
+        const std::size_t close = xml.find('>', i);
+        if (close != std::string::npos && close > 0 && xml[close - 1] == '/') continue;
+        if (++depth > kMaxVtiDepth)
+            throw InputError(path.string(), "XML",
+                             "nests elements deeper than " + std::to_string(kMaxVtiDepth) +
+                                 " levels (byte " + std::to_string(i) + ")",
+                             "the file is damaged or not a VTK image file");
+    }
+    if (appended == std::string::npos) return;
+    // Appended data: one '_' then the arrays, each at its offset.
+    const std::size_t root = xml.find("<VTKFile");
+    const std::size_t image = xml.find("<ImageData");
+    if (root == std::string::npos || image == std::string::npos) return;  // the reader says so
+    const bool compressed = !xmlAttribute(xml, root, "compressor").empty();
+    const std::size_t word = xmlAttribute(xml, root, "header_type") == "UInt64" ? 8 : 4;
+    const bool bigEndian = xmlAttribute(xml, root, "byte_order") == "BigEndian";
+    std::ifstream tail(path, std::ios::binary);
+    std::string block(4096, '\0');
+    tail.seekg(std::streamoff(appended));
+    tail.read(block.data(), std::streamsize(block.size()));
+    block.resize(std::size_t(tail.gcount()));
+    const bool base64 = xmlAttribute(block, 0, "encoding") == "base64";
+    const std::size_t underscore = block.find('_');
+    if (underscore == std::string::npos) return;
+    const std::uint64_t dataStart = appended + underscore + 1;
+    std::uint64_t voxels = 1;
+    {
+        std::istringstream ext(xmlAttribute(xml, image, "WholeExtent"));
+        long long e[6];
+        for (auto& x : e)
+            if (!(ext >> x)) return;  // the reader refuses a broken extent
+        for (int a = 0; a < 3; ++a) {
+            const long long n = e[2 * a + 1] - e[2 * a] + 1;
+            if (n < 1 || n > core::kMaxDim) return;  // checkExtent words this one
+            voxels *= std::uint64_t(n);
+        }
+    }
+    auto readWord = [&](const std::vector<unsigned char>& w, std::size_t k) {
+        std::uint64_t v = 0;
+        for (std::size_t b = 0; b < word; ++b) {
+            const std::size_t idx = bigEndian ? k * word + b : k * word + (word - 1 - b);
+            v = (v << 8) | w[idx];
+        }
+        return v;
+    };
+    static const std::map<std::string, std::uint64_t> kTypeBytes = {
+        {"Int8", 1},   {"UInt8", 1}, {"Int16", 2},  {"UInt16", 2},  {"Int32", 4},
+        {"UInt32", 4}, {"Int64", 8}, {"UInt64", 8}, {"Float32", 4}, {"Float64", 8}};
+    for (std::size_t tag = xml.find("<DataArray"); tag != std::string::npos;
+         tag = xml.find("<DataArray", tag + 1)) {
+        if (xmlAttribute(xml, tag, "format") != "appended") continue;
+        const auto type = kTypeBytes.find(xmlAttribute(xml, tag, "type"));
+        const std::string offsetText = xmlAttribute(xml, tag, "offset");
+        if (type == kTypeBytes.end() || offsetText.empty()) continue;  // the reader words these
+        std::uint64_t offset = 0, comps = 1;
+        try {
+            offset = std::stoull(offsetText);
+            if (const std::string c = xmlAttribute(xml, tag, "NumberOfComponents"); !c.empty())
+                comps = std::stoull(c);
+        } catch (const std::exception&) {
+            throw InputError(path.string(), "DataArray",
+                             "has a malformed offset or component count", "the file is damaged");
+        }
+        const std::uint64_t expected = voxels * std::max<std::uint64_t>(comps, 1) * type->second;
+        const std::uint64_t at = dataStart + offset;
+        auto fail = [&](const std::string& problem) {
+            throw InputError(path.string(), "AppendedData", problem,
+                             "the file is damaged, or its compressor or sizes were edited");
+        };
+        if (at >= fileSize)
+            fail("array offset " + std::to_string(offset) + " is past the file's end");
+        const std::uint64_t remaining = fileSize - at;
+        if (!compressed) {
+            const auto w = appendedWords(in, at, 1, word, base64);
+            if (w.empty()) fail("ends inside an array's size word");
+            const std::uint64_t n = readWord(w, 0);
+            if (n != expected)
+                fail("array claims " + std::to_string(n) + " bytes; the extent needs " +
+                     std::to_string(expected));
+            if ((base64 ? n / 3 * 4 : n) > remaining)
+                fail("array of " + std::to_string(n) + " bytes runs past the file's end");
+        } else {
+            const auto w3 = appendedWords(in, at, 3, word, base64);
+            if (w3.empty()) fail("ends inside a compressed array's header");
+            const std::uint64_t blocks = readWord(w3, 0), blockSize = readWord(w3, 1),
+                                last = readWord(w3, 2);
+            if (blocks == 0 || blockSize == 0 || blocks > remaining / word)
+                fail("compressed array header claims " + std::to_string(blocks) + " blocks");
+            const std::uint64_t total = (blocks - 1) * blockSize + (last ? last : blockSize);
+            if (total != expected)
+                fail("compressed array holds " + std::to_string(total) +
+                     " bytes; the extent needs " + std::to_string(expected));
+            const auto all = appendedWords(in, at, std::size_t(3 + blocks), word, base64);
+            if (all.empty()) fail("ends inside a compressed array's block sizes");
+            std::uint64_t sum = 0;
+            for (std::size_t k = 3; k < 3 + blocks; ++k) sum += readWord(all, k);
+            if ((base64 ? sum / 3 * 4 : sum) > remaining)
+                fail("compressed blocks of " + std::to_string(sum) +
+                     " bytes run past the file's end");
+        }
+    }
+}
+
 Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    checkVtiFile(path);
     vtkNew<vtkXMLImageDataReader> r;
     r->SetFileName(path.c_str());
     runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });

@@ -440,3 +440,38 @@ TEST(BadInput, NiftiWithAnUnknownDatatypeOrNanSpacingIsRefusedBeforeVtk) {
     patchBytes(tmp / "p.nii", 76 + 4 * 2, &nan, sizeof nan);
     expectInputError(tmp / "p.nii", "pixdim[2]", {"NaN"});
 }
+
+namespace {
+std::string readAll(const fs::path& p) {
+    std::ifstream f(p, std::ios::binary);
+    return {std::istreambuf_iterator<char>(f), {}};
+}
+}  // namespace
+
+TEST(BadInput, VtiDeepNestingAndEditedAppendedDataAreRefusedBeforeVtk) {
+    test::TempDir tmp;
+    // Deep XML: VTK's parser recursed until the stack overflowed.
+    {
+        std::string deep = "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\">";
+        for (int i = 0; i < 100000; ++i) deep += "<a>";
+        writeText(tmp / "deep.vti", deep);
+        expectInputError(tmp / "deep.vti", "deep.vti", {"XML", "nests elements deeper"});
+    }
+    core::PhantomOptions o;
+    o.size = 24;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "s.vti");
+    const std::string good = readAll(tmp / "s.vti");
+    ASSERT_NE(good.find("compressor=\"vtkZLibDataCompressor\""), std::string::npos);
+    // Compressed data relabelled uncompressed (same length, so offsets stay): VTK took the
+    // block count for a byte count and allocated gigabytes.
+    std::string relabelled = good;
+    const std::string attr = "compressor=\"vtkZLibDataCompressor\"";
+    relabelled.replace(relabelled.find(attr), attr.size(), std::string(attr.size(), ' '));
+    writeText(tmp / "relabelled.vti", relabelled);
+    expectInputError(tmp / "relabelled.vti", "AppendedData", {"the extent needs"});
+    // Cut short: the compressed blocks run past the end.
+    writeText(tmp / "cut.vti", good.substr(0, good.size() - good.size() / 3));
+    expectInputError(tmp / "cut.vti", "cut.vti", {});
+    // The untouched file still loads.
+    EXPECT_EQ(io::readVolume(tmp / "s.vti").voxelCount(), 24u * 24u * 24u);
+}
