@@ -134,6 +134,16 @@ void ArtifactCache::setDirectory(const fs::path& dir) {
                          "'" + dir.string() + "' is not a directory that can be created",
                          "give a writable directory");
     dir_ = dir;
+    // Temporaries of processes killed mid-write: old enough that no live writer owns them.
+    const auto now = fs::file_time_type::clock::now();
+    for (const auto& e : fs::directory_iterator(dir, ec)) {
+        const std::string name = e.path().filename().string();
+        if (name.size() < 5 || name[0] != '.' || name.compare(name.size() - 4, 4, ".tmp") != 0)
+            continue;
+        std::error_code tec;
+        const auto t = fs::last_write_time(e.path(), tec);
+        if (!tec && now - t > kStaleTemporaryAge) fs::remove(e.path(), tec);
+    }
 }
 
 void ArtifactCache::setMemoryBudget(std::size_t bytes) {

@@ -17,6 +17,7 @@
 //   file, the new one, or none — never a partial one — so processes may share a directory.
 // * small records: identity → 64-bit value (a volume file's identity → its content hash), so a new
 //   process can name the keys of the volume's artifacts before it has read the volume (--explain).
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
@@ -67,6 +68,9 @@ inline constexpr std::uint32_t kCacheFormatVersion = 1;
 /// Default in-process budget: a quarter of this kind of machine's 24 GB, enough for the tables of
 /// a few 512³ CTs; sweeps and the viewer may set their own.
 inline constexpr std::size_t kDefaultMemoryBudget = std::size_t(6) << 30;
+/// A temporary cache file older than this belongs to a process that died mid-write (writing even
+/// gigabytes takes seconds to minutes): setDirectory() removes it.
+inline constexpr std::chrono::hours kStaleTemporaryAge{1};
 /// Largest payload a cache file may claim (guards the read allocation).
 inline constexpr std::uint64_t kMaxPayloadBytes = std::uint64_t(64) << 30;
 
@@ -75,7 +79,7 @@ class ArtifactCache {
     explicit ArtifactCache(std::size_t memoryBudget = kDefaultMemoryBudget);
 
     /// Keep artifacts with a Codec on disk in `dir` too (created if missing; InputError naming
-    /// `--cache` when it cannot be).
+    /// `--cache` when it cannot be). Removes temporaries older than kStaleTemporaryAge.
     void setDirectory(const std::filesystem::path& dir);
     const std::optional<std::filesystem::path>& directory() const { return dir_; }
     void setMemoryBudget(std::size_t bytes);

@@ -517,3 +517,18 @@ TEST(Pipeline, UpParallelToTheViewFallsBackWithAWarningNeverNaN) {
         for (const auto& v : r.details["camera"]["up"]) EXPECT_TRUE(std::isfinite(v.get<double>()));
     }
 }
+
+TEST(ArtifactCache, StaleTemporariesOfKilledWritersAreRemovedFreshOnesKept) {
+    test::TempDir tmp;
+    const fs::path stale = tmp / ".brick_grid-0123.vlcache.999.0.abc.tmp";
+    const fs::path fresh = tmp / ".brick_grid-4567.vlcache.998.0.def.tmp";
+    const fs::path other = tmp / "notes.tmp";  // not one of ours: left alone
+    for (const auto& p : {stale, fresh, other}) std::ofstream(p) << "partial";
+    fs::last_write_time(stale, fs::file_time_type::clock::now() - 2 * kStaleTemporaryAge);
+    fs::last_write_time(other, fs::file_time_type::clock::now() - 2 * kStaleTemporaryAge);
+    ArtifactCache cache;
+    cache.setDirectory(tmp.path());
+    EXPECT_FALSE(fs::exists(stale));
+    EXPECT_TRUE(fs::exists(fresh)) << "a live writer may own it";
+    EXPECT_TRUE(fs::exists(other));
+}
