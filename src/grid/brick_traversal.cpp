@@ -18,14 +18,21 @@ void BrickMajorants::finish() {
     // Chebyshev distance transform by breadth-first search over the 26-neighbourhood from the
     // non-empty cells (one BFS level = one cell of max-norm distance), capped.
     distance_.assign(n, std::uint8_t(kMaxSkipDistance));
+    nonEmptyRange_ = {glm::ivec3(0), glm::ivec3(-1)};
     if (nonEmpty_ == 0) return;
+    const glm::ivec3 c = counts_;
     std::vector<std::uint32_t> front, next;
+    nonEmptyRange_ = {c, glm::ivec3(-1)};
     for (std::size_t i = 0; i < n; ++i)
         if (flags_[i]) {
             distance_[i] = 0;
             front.push_back(std::uint32_t(i));
+            const glm::ivec3 p(int(i % std::size_t(c.x)),
+                               int((i / std::size_t(c.x)) % std::size_t(c.y)),
+                               int(i / (std::size_t(c.x) * std::size_t(c.y))));
+            nonEmptyRange_[0] = glm::min(nonEmptyRange_[0], p);
+            nonEmptyRange_[1] = glm::max(nonEmptyRange_[1], p);
         }
-    const glm::ivec3 c = counts_;
     for (int level = 1; level < kMaxSkipDistance && !front.empty(); ++level) {
         next.clear();
         for (const std::uint32_t i : front) {

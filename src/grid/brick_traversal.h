@@ -70,6 +70,9 @@ class BrickMajorants {
     const std::array<float, 2>& valueRange(std::size_t i) const { return range_[i]; }
     std::size_t size() const { return majorant_.size(); }
     std::size_t nonEmptyCount() const { return nonEmpty_; }
+    /// Smallest and largest cell coordinates of the non-empty cells (inclusive; lo > hi when there
+    /// is none). Found once when the majorants are built, so callers per frame need no scan.
+    const std::array<glm::ivec3, 2>& nonEmptyCellRange() const { return nonEmptyRange_; }
     /// 1 where majorant(i) > 0 (a byte per cell, for the traversal's hot loop).
     const std::uint8_t* nonEmptyFlags() const { return flags_.data(); }
     /// Per cell, the Chebyshev distance (in cells) to the nearest non-empty cell, capped at
@@ -87,6 +90,7 @@ class BrickMajorants {
     std::vector<std::uint8_t> flags_;
     std::vector<std::uint8_t> distance_;
     std::size_t nonEmpty_ = 0;
+    std::array<glm::ivec3, 2> nonEmptyRange_{glm::ivec3(0), glm::ivec3(-1)};
 };
 
 struct RayInterval {

@@ -194,14 +194,7 @@ namespace {
 /// Index-space box of the non-empty cells of `m` (cell edges, clamped to the voxel-centre box
 /// [0, n − 1]); lo > hi when there is none.
 std::array<glm::vec3, 2> nonEmptyCellBox(const grid::BrickMajorants& m, const glm::ivec3& dims) {
-    glm::ivec3 lo(std::numeric_limits<int>::max()), hi(std::numeric_limits<int>::min());
-    for (int z = 0; z < m.counts().z; ++z)
-        for (int y = 0; y < m.counts().y; ++y)
-            for (int x = 0; x < m.counts().x; ++x)
-                if (m.majorant(m.index(x, y, z)) > 0.f) {
-                    lo = glm::min(lo, glm::ivec3(x, y, z));
-                    hi = glm::max(hi, glm::ivec3(x, y, z));
-                }
+    const auto& [lo, hi] = m.nonEmptyCellRange();
     if (lo.x > hi.x) return {glm::vec3(0.f), glm::vec3(-1.f)};
     return {glm::vec3(lo * m.cellSize()),
             glm::min(glm::vec3((hi + 1) * m.cellSize()), glm::vec3(glm::max(dims - 1, 0)))};

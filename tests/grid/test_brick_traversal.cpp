@@ -215,3 +215,19 @@ TEST(SkipDistance, JumpingRunsCoverEveryNonEmptyCellAndNothingElse) {
         EXPECT_GT(pieces, runsJoined + 100) << "runs should be split into pieces";
     }
 }
+
+TEST(RayIntervals, NonEmptyCellRangeIsTheBoxOfTheNonEmptyCells) {
+    const glm::ivec3 counts(7, 5, 6);
+    const std::size_t n = std::size_t(counts.x) * counts.y * counts.z;
+    std::vector<float> maj(n, 0.f);
+    std::vector<std::array<float, 2>> ranges(n, {0.f, 0.f});
+    auto at = [&](int x, int y, int z) { return std::size_t(x) + counts.x * (y + counts.y * z); };
+    EXPECT_GT(grid::BrickMajorants::fromCells(counts, 4, maj, ranges).nonEmptyCellRange()[0].x,
+              grid::BrickMajorants::fromCells(counts, 4, maj, ranges).nonEmptyCellRange()[1].x)
+        << "empty: lo > hi";
+    maj[at(2, 4, 1)] = 1.f;
+    maj[at(5, 1, 3)] = 0.5f;
+    const auto m = grid::BrickMajorants::fromCells(counts, 4, maj, ranges);
+    EXPECT_EQ(m.nonEmptyCellRange()[0], glm::ivec3(2, 1, 1));
+    EXPECT_EQ(m.nonEmptyCellRange()[1], glm::ivec3(5, 4, 3));
+}
