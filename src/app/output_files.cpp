@@ -49,9 +49,8 @@ void checkOne(const OutputSpec& o) {
         const std::string file = lower(o.path.filename().string());
         if (std::none_of(o.extensions.begin(), o.extensions.end(),
                          [&](const std::string& e) { return endsWith(file, e); })) {
-            std::string list;
-            for (const auto& e : o.extensions) list += (list.empty() ? "" : ", ") + e;
-            fail(o, "'" + name + "' has an unsupported extension", "use one of: " + list);
+            fail(o, "'" + name + "' has an unsupported extension",
+                 "use one of: " + joinNames(o.extensions));
         }
     }
     std::error_code ec;

@@ -21,6 +21,12 @@ InputError::InputError(std::string source, std::string field, std::string proble
       problem_(std::move(problem)),
       fix_(std::move(fix)) {}
 
+std::string joinNames(const std::vector<std::string>& names) {
+    std::string s;
+    for (const auto& n : names) s += (s.empty() ? "" : ", ") + n;
+    return s;
+}
+
 namespace detail {
 void checkFailed(const char* expr, const char* file, int line, const std::string& values) {
     std::ostringstream os;

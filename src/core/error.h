@@ -13,8 +13,12 @@
 #include <sstream>
 #include <stdexcept>
 #include <string>
+#include <vector>
 
 namespace voxlight {
+
+/// "a, b, c": the allowed names an InputError's fix lists.
+std::string joinNames(const std::vector<std::string>& names);
 
 class InputError : public std::runtime_error {
   public:

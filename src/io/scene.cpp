@@ -57,12 +57,6 @@ std::size_t editDistance(const std::string& a, const std::string& b) {
     return prev[b.size()];
 }
 
-std::string joinList(const std::vector<std::string>& items) {
-    std::string s;
-    for (const auto& i : items) s += (s.empty() ? "" : ", ") + i;
-    return s;
-}
-
 /// A JSON value with its dotted key path, for typed access with precise errors.
 class Field {
   public:
@@ -91,7 +85,7 @@ class Field {
             for (const auto& a : allowed)
                 if (std::size_t d = editDistance(it.key(), a); d < bestD) best = a, bestD = d;
             throw InputError(source_, child(it.key()).path_, "unknown key",
-                             best.empty() ? "allowed keys: " + joinList(allowed)
+                             best.empty() ? "allowed keys: " + joinNames(allowed)
                                           : "did you mean '" + best + "'?");
         }
     }
@@ -137,7 +131,7 @@ class Field {
     std::string oneOf(const std::vector<std::string>& allowed) const {
         const std::string s = string();
         if (std::find(allowed.begin(), allowed.end(), s) == allowed.end())
-            fail("'" + s + "' is not allowed", "choose one of: " + joinList(allowed));
+            fail("'" + s + "' is not allowed", "choose one of: " + joinNames(allowed));
         return s;
     }
     glm::dvec3 vec3(double lo = -HUGE_VAL, double hi = HUGE_VAL) const {

@@ -108,18 +108,23 @@ TransferFunction relativePreset(const std::string& name) {
     return {};
 }
 
-std::string presetList() {
-    std::string s;
-    for (const auto& p : presetCatalog()) s += (s.empty() ? "" : ", ") + p.name;
-    return s;
-}
 }  // namespace
 
+std::string presetList() {
+    std::vector<std::string> names;
+    for (const auto& p : presetCatalog()) names.push_back(p.name);
+    return joinNames(names);
+}
+
+const PresetInfo* findPreset(const std::string& name) {
+    for (const auto& p : presetCatalog())
+        if (p.name == name) return &p;
+    return nullptr;
+}
+
 TransferFunction makePreset(const std::string& name, const std::array<float, 2>& robust) {
-    const auto& cat = presetCatalog();
-    const auto it =
-        std::find_if(cat.begin(), cat.end(), [&](const PresetInfo& p) { return p.name == name; });
-    if (it == cat.end())
+    const PresetInfo* it = findPreset(name);
+    if (!it)
         throw InputError("presets", "name", "'" + name + "' is not a preset",
                          "choose one of: " + presetList());
     if (!it->relative) return absolutePreset(name);

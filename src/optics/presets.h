@@ -26,6 +26,10 @@ struct PresetInfo {
     bool relative = false;  ///< authored on [0,1] of the volume's robust range
 };
 const std::vector<PresetInfo>& presetCatalog();
+/// The catalogue entry of `name`, or nullptr.
+const PresetInfo* findPreset(const std::string& name);
+/// The preset names, comma-separated (for error messages).
+std::string presetList();
 
 /// Value range holding all but the tails of a volume's (finite) values: {q(loFraction),
 /// q(hiFraction)} estimated from a strided subsample of ≈ 1 M voxels (deterministic).

@@ -99,11 +99,9 @@ Plan Session::plan(const io::Scene& scene) const {
     const MethodRegistry& reg = MethodRegistry::instance();
     const MethodInfo* m = reg.find(scene.method.name);
     if (!m) {
-        std::string list;
-        for (const auto& n : reg.names()) list += (list.empty() ? "" : ", ") + n;
         throw InputError(scene.source, "method.name",
                          "'" + scene.method.name + "' is not a method of this build",
-                         "choose one of: " + list);
+                         "choose one of: " + joinNames(reg.names()));
     }
     // Effects: known names, and ones this method simulates.
     for (std::size_t i = 0; i < scene.effects.size(); ++i) {
@@ -112,16 +110,17 @@ Plan Session::plan(const io::Scene& scene) const {
         const auto& cat = effectCatalog();
         if (std::none_of(cat.begin(), cat.end(),
                          [&](const EffectInfo& c) { return c.name == e; })) {
-            std::string list;
-            for (const auto& c : cat) list += (list.empty() ? "" : ", ") + c.name;
+            std::vector<std::string> names;
+            for (const auto& c : cat) names.push_back(c.name);
             throw InputError(scene.source, field, "'" + e + "' is not an effect",
-                             "choose from: " + list);
+                             "choose from: " + joinNames(names));
         }
         if (std::find(m->effects.begin(), m->effects.end(), e) == m->effects.end()) {
-            std::string providers;
+            std::vector<std::string> names;
             for (const auto& other : reg.methods())
                 if (std::find(other.effects.begin(), other.effects.end(), e) != other.effects.end())
-                    providers += (providers.empty() ? "" : ", ") + other.name;
+                    names.push_back(other.name);
+            const std::string providers = joinNames(names);
             throw InputError(
                 scene.source, field, "method '" + m->name + "' does not simulate '" + e + "'",
                 providers.empty() ? "no method of this build simulates it yet; remove it"

@@ -9,20 +9,14 @@ namespace voxlight::pipeline {
 
 using nlohmann::json;
 
-namespace {
-std::string joinList(const std::vector<std::string>& items) {
-    std::string s;
-    for (const auto& i : items) s += (s.empty() ? "" : ", ") + i;
-    return s;
-}
-}  // namespace
+namespace {}  // namespace
 
 ParamReader::ParamReader(const io::Scene& scene, std::vector<std::string> allowed)
     : scene_(scene), params_(scene.method.params) {
     for (auto it = params_.begin(); it != params_.end(); ++it)
         if (std::find(allowed.begin(), allowed.end(), it.key()) == allowed.end())
             fail(it.key(), "is not a parameter of method '" + scene_.method.name + "'",
-                 "allowed: " + joinList(allowed));
+                 "allowed: " + joinNames(allowed));
 }
 
 void ParamReader::fail(const std::string& key, const std::string& problem,
@@ -74,10 +68,10 @@ std::string ParamReader::choice(const std::string& k, const std::string& def,
                                 const std::vector<std::string>& allowed) {
     std::string v = def;
     if (params_.contains(k)) {
-        if (!params_[k].is_string()) fail(k, "must be a string", "one of: " + joinList(allowed));
+        if (!params_[k].is_string()) fail(k, "must be a string", "one of: " + joinNames(allowed));
         v = params_[k].get<std::string>();
         if (std::find(allowed.begin(), allowed.end(), v) == allowed.end())
-            fail(k, "'" + v + "' is not allowed", "one of: " + joinList(allowed));
+            fail(k, "'" + v + "' is not allowed", "one of: " + joinNames(allowed));
     }
     used[k] = v;
     return v;

@@ -110,10 +110,8 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
         tf = optics::TransferFunction(std::move(pts), w, "custom");
     } else {
         const std::string name = d.preset.empty() ? optics::defaultPresetName(volume) : d.preset;
-        const auto& cat = optics::presetCatalog();
-        const auto it = std::find_if(cat.begin(), cat.end(),
-                                     [&](const optics::PresetInfo& p) { return p.name == name; });
-        const bool relative = it != cat.end() && it->relative;
+        const optics::PresetInfo* info = optics::findPreset(name);
+        const bool relative = info && info->relative;
         try {
             tf = optics::makePreset(
                 name, relative ? optics::robustRange(volume) : std::array<float, 2>{0.f, 1.f});
@@ -145,14 +143,9 @@ render::CameraSpec buildCameraSpec(const io::CameraDesc& d) {
 void checkPresetName(const io::Scene& scene) {
     const std::string& preset = scene.transferFunction.preset;
     if (preset.empty()) return;
-    const auto& cat = optics::presetCatalog();
-    if (std::any_of(cat.begin(), cat.end(),
-                    [&](const optics::PresetInfo& p) { return p.name == preset; }))
-        return;
-    std::string list;
-    for (const auto& p : cat) list += (list.empty() ? "" : ", ") + p.name;
+    if (optics::findPreset(preset)) return;
     throw InputError(scene.source, "transfer_function.preset", "'" + preset + "' is not a preset",
-                     "choose one of: " + list);
+                     "choose one of: " + optics::presetList());
 }
 
 namespace {
