@@ -3,9 +3,12 @@
 
 #include <unistd.h>
 
+#include <algorithm>
+#include <cctype>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <mutex>
 
@@ -92,6 +95,39 @@ int runGuarded(const std::function<int()>& body) {
         std::cerr << "voxlight: internal error: " << e.what() << " (please report this)\n";
         return kExitInternal;
     }
+}
+
+const std::vector<std::string>& viewNames() {
+    static const std::vector<std::string> names = [] {
+        std::vector<std::string> n;
+        for (const io::NamedView& v : io::namedViews()) n.push_back(v.name);
+        return n;
+    }();
+    return names;
+}
+
+bool inputIsVolume(const std::string& input) {
+    std::error_code ec;
+    const std::filesystem::path p(input);
+    if (std::filesystem::is_directory(p, ec)) return true;
+    std::string ext = p.extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext != ".json";
+}
+
+io::Scene loadInput(const std::string& input, const std::vector<std::string>& overrides,
+                    const std::string& view) {
+    const bool volume = inputIsVolume(input);
+    std::vector<std::string> all;
+    if (!view.empty()) {
+        if (!volume)  // the scene's own placement gives way to the named view
+            for (const char* k : {"camera.azimuth=null", "camera.elevation=null", "camera.eye=null",
+                                  "camera.up=null"})
+                all.push_back(k);
+        all.push_back("camera.view=" + view);
+    }
+    all.insert(all.end(), overrides.begin(), overrides.end());
+    return volume ? io::volumeScene(input, all) : io::loadScene(input, all);
 }
 
 }  // namespace voxlight::app

@@ -9,8 +9,10 @@
 #include <atomic>
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "core/progress.h"
+#include "io/scene.h"
 
 namespace voxlight::app {
 
@@ -29,6 +31,17 @@ core::Progress terminalProgress(bool quiet);
 
 /// Runs a subcommand body, mapping exceptions to one line on stderr and the exit codes above.
 int runGuarded(const std::function<int()>& body);
+
+/// The named camera views (io/scene.h's camera.view), for --view.
+const std::vector<std::string>& viewNames();
+
+/// The scene a command's INPUT names: a scene file (.json) with overrides, or a volume file or
+/// DICOM folder that makes a scene on its own (io::volumeScene). `view`, when set, replaces the
+/// camera's placement (azimuth/elevation/eye/up) by that named view before the overrides.
+io::Scene loadInput(const std::string& input, const std::vector<std::string>& overrides,
+                    const std::string& view = "");
+/// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
+bool inputIsVolume(const std::string& input);
 
 /// Subcommand registration: each adds itself to the app and sets `run` when chosen.
 struct Command {

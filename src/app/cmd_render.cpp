@@ -1,8 +1,10 @@
 // SPDX-License-Identifier: MIT
-// voxlight render SCENE.json -o OUT.png [--exr OUT.exr] [--stats STATS.json] [--set key=value]...
-//                 [--cache DIR] [--frames N] [--explain]
-// Renders a scene through the pipeline (its method's plan of stages): tone-mapped sRGB PNG, linear
-// EXR, stats JSON. --explain prints the plan and what each stage would do, and renders nothing.
+// voxlight render SCENE.json|VOLUME -o OUT.png [--view V] [--exr OUT.exr] [--stats STATS.json]
+//                 [--set key=value]... [--cache DIR] [--frames N] [--explain]
+// Renders a scene through the pipeline (its method's plan of stages): display-mapped PNG, linear
+// EXR, stats JSON. A volume file or DICOM folder is a scene on its own (io::volumeScene: the
+// modality's preset, an anterior view fitted to what it shows, a headlight). --explain prints the
+// plan and what each stage would do, and renders nothing.
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -33,7 +35,7 @@ pipeline::StageRecord outputRecord(const std::string& name, const std::string& p
 
 Command addRenderCommand(CLI::App& app) {
     Command c;
-    c.sub = app.add_subcommand("render", "Render a scene with the CPU ray caster");
+    c.sub = app.add_subcommand("render", "Render a scene (or a volume with defaults)");
     auto scene = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto exr = std::make_shared<std::string>();
@@ -43,8 +45,17 @@ Command addRenderCommand(CLI::App& app) {
     auto frames = std::make_shared<int>(1);
     auto cacheDir = std::make_shared<std::string>();
     auto explain = std::make_shared<bool>(false);
-    c.sub->add_option("SCENE", *scene, "Scene JSON")->required();
-    c.sub->add_option("-o,--output", *out, "Tone-mapped sRGB image (.png, .jpg, .tif, .bmp)");
+    auto view = std::make_shared<std::string>();
+    c.sub
+        ->add_option("INPUT", *scene,
+                     "Scene JSON, or a volume file / DICOM folder to render with defaults")
+        ->required();
+    c.sub->add_option("-o,--output", *out,
+                      "Display image (.png, .jpg, .tif, .bmp; image.display picks the mapping)");
+    c.sub
+        ->add_option("--view", *view,
+                     "Look from this side of the patient (replaces the scene's camera placement)")
+        ->check(CLI::IsMember(viewNames()));
     c.sub->add_option("--exr", *exr, "Also write the linear radiance (+ alpha) as OpenEXR");
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
@@ -65,7 +76,7 @@ Command addRenderCommand(CLI::App& app) {
         pipeline::Session session;
         if (!cacheDir->empty()) session.cache().setDirectory(*cacheDir);
         if (*explain) {
-            const io::Scene s = io::loadScene(*scene, *sets);
+            const io::Scene s = loadInput(*scene, *sets, *view);
             std::printf("%-18s %-10s %-8s %-16s %s\n", "stage", "kind", "runs", "key", "reason");
             std::vector<pipeline::StageRecord> plan = session.explain(s);
             plan.push_back(outputRecord("write_image", *out, "-o"));
@@ -87,14 +98,16 @@ Command addRenderCommand(CLI::App& app) {
         checkOutputs({{"--output", *out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}},
                       {"--exr", *exr, {".exr"}},
                       {"--stats", *stats, {".json"}}});
-        const io::Scene s = io::loadScene(*scene, *sets);
+        const io::Scene s = loadInput(*scene, *sets, *view);
         pipeline::RunResult r = session.run(s, {.frames = *frames}, terminalProgress(*quiet));
 
         OutputFiles files;
         core::Stopwatch sw;
         throwIfCancelled();
         files.write(*out, "--output", [&](const fs::path& p) {
-            io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops)), p);
+            io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops),
+                                             render::displayFromString(s.image.display)),
+                           p);
         });
         r.stages.push_back(outputRecord("write_image", *out, "-o"));
         r.stages.back().seconds = sw.seconds();

@@ -320,11 +320,45 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
     return tf;
 }
 
+}  // namespace
+
+const std::vector<NamedView>& namedViews() {
+    // camera.h's orbit: azimuth 0 = from the patient's front. The axial views keep anterior at
+    // the top of the image; seen from below (inferior) the patient's left is on the image's
+    // right, as radiological axial slices are shown.
+    static const std::vector<NamedView> views = {
+        {"anterior", 0.0, 0.0, {0.0, 0.0, 1.0}},   {"posterior", 180.0, 0.0, {0.0, 0.0, 1.0}},
+        {"left", 90.0, 0.0, {0.0, 0.0, 1.0}},      {"right", -90.0, 0.0, {0.0, 0.0, 1.0}},
+        {"superior", 0.0, 90.0, {0.0, -1.0, 0.0}}, {"inferior", 0.0, -90.0, {0.0, -1.0, 0.0}},
+        {"oblique", 30.0, 20.0, {0.0, 0.0, 1.0}},  {"auto", 0.0, 0.0, {0.0, 0.0, 1.0}},
+    };
+    return views;
+}
+
+const NamedView* findView(const std::string& name) {
+    for (const NamedView& v : namedViews())
+        if (v.name == name) return &v;
+    return nullptr;
+}
+
+namespace {
+
 CameraDesc parseCamera(const Field& f) {
     CameraDesc c;
     if (f.raw().is_null()) return c;
-    f.allowOnly({"projection", "azimuth", "elevation", "roll", "distance", "fov_y", "ortho_height",
-                 "target", "eye", "up"});
+    f.allowOnly({"projection", "view", "azimuth", "elevation", "roll", "distance", "fov_y",
+                 "ortho_height", "target", "eye", "up", "margin"});
+    if (f.has("view")) {
+        std::vector<std::string> names;
+        for (const NamedView& v : namedViews()) names.push_back(v.name);
+        f.get("view", c.view, names);
+        for (const char* other : {"azimuth", "elevation", "eye", "up"})
+            if (f.has(other))
+                f.child("view").fail(std::string("conflicts with camera.") + other,
+                                     "give either a named view or azimuth/elevation/eye/up");
+        const NamedView* v = findView(c.view);
+        c.azimuthDeg = v->azimuthDeg, c.elevationDeg = v->elevationDeg, c.up = v->up;
+    }
     f.get("projection", c.projection, {"perspective", "orthographic"});
     f.get("azimuth", c.azimuthDeg, -360.0, 360.0);
     f.get("elevation", c.elevationDeg, -90.0, 90.0);
@@ -332,6 +366,7 @@ CameraDesc parseCamera(const Field& f) {
     f.get("distance", c.distance, 0.0, kMaxCoord);
     f.get("fov_y", c.fovYDeg, 1.0, 170.0);
     f.get("ortho_height", c.orthoHeight, 0.0, kMaxCoord);
+    f.get("margin", c.margin, 0.0, 0.45);
     if (f.has("target")) c.target = f.child("target").vec3(-kMaxCoord, kMaxCoord);
     if (f.has("eye")) c.eye = f.child("eye").vec3(-kMaxCoord, kMaxCoord);
     f.getDirection("up", c.up);
@@ -397,8 +432,11 @@ void applyOverride(json& doc, const std::string& assignment) {
     json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
     json* node = &doc;
+    json* parent = nullptr;
+    std::string last;
     std::size_t start = 0;
     while (true) {
+        parent = node;
         const auto dot = key.find('.', start);
         const std::string part =
             key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
@@ -429,11 +467,16 @@ void applyOverride(json& doc, const std::string& assignment) {
                     "--set", key,
                     "'" + part + "' descends into " + typeName(*node) + ", not an object");
             node = &(*node)[part];
+            last = part;
         }
         if (dot == std::string::npos) break;
         start = dot + 1;
     }
-    *node = value;
+    // null removes an object key: the default applies again (--set camera.azimuth=null).
+    if (value.is_null() && parent && parent->is_object() && !last.empty())
+        parent->erase(last);
+    else
+        *node = value;
 }
 
 namespace {
@@ -494,11 +537,12 @@ Scene parseValidDepth(const json& doc, const std::string& source, const fs::path
     }
     if (root.has("image")) {
         const Field im = root.child("image");
-        im.allowOnly({"width", "height", "background", "exposure"});
+        im.allowOnly({"width", "height", "background", "exposure", "display"});
         im.get("width", s.image.width, 1, 16384);
         im.get("height", s.image.height, 1, 16384);
         im.get("background", s.image.background, 0.0, 1e9);
         im.get("exposure", s.image.exposureStops, -30.0, 30.0);
+        im.get("display", s.image.display, {"clinical", "srgb", "filmic"});
     }
     if (root.has("render")) {
         const Field r = root.child("render");
@@ -536,6 +580,144 @@ Scene parseScene(const json& doc, const std::string& source, const fs::path& bas
     }
 }
 
+bool isPathKey(const std::string& key) {
+    if (key == "volume" || key == "volume.path") return true;
+    // lights.N.path
+    if (key.rfind("lights.", 0) != 0) return false;
+    const auto dot = key.find('.', 7);
+    return dot != std::string::npos && dot > 7 && key.substr(dot) == ".path" &&
+           std::all_of(key.begin() + 7, key.begin() + long(dot), ::isdigit);
+}
+
+namespace {
+/// Applies overrides; a relative path given by one is made absolute against the current
+/// directory (the user typed it there), so the scene's folder no longer applies to it.
+void applyOverrides(json& doc, const std::vector<std::string>& overrides) {
+    for (const auto& o : overrides) {
+        applyOverride(doc, o);
+        const std::string key = o.substr(0, o.find('='));
+        if (!isPathKey(key)) continue;
+        json* node = &doc;
+        std::size_t start = 0;
+        while (node && start <= key.size()) {
+            const auto dot = key.find('.', start);
+            const std::string part =
+                key.substr(start, dot == std::string::npos ? dot : dot - start);
+            if (node->is_array())
+                node = &(*node)[std::stoul(part)];
+            else
+                node = &(*node)[part];
+            if (dot == std::string::npos) break;
+            start = dot + 1;
+        }
+        if (node->is_object() && node->contains("path")) node = &(*node)["path"];
+        if (node->is_string() && !fs::path(node->get<std::string>()).is_absolute())
+            *node = fs::absolute(node->get<std::string>()).string();
+    }
+}
+}  // namespace
+
+Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overrides) {
+    json doc = {{"volume", fs::absolute(volume).lexically_normal().string()}};
+    // The automatic view unless the overrides place the camera themselves.
+    bool placed = false;
+    for (const auto& o : overrides)
+        for (const char* k : {"camera=", "camera.view=", "camera.azimuth=", "camera.elevation=",
+                              "camera.eye=", "camera.up="})
+            placed = placed || o.rfind(k, 0) == 0;
+    if (!placed) doc["camera"] = {{"view", "auto"}};
+    applyOverrides(doc, overrides);
+    return parseScene(doc, volume.string(), fs::current_path());
+}
+
+json sceneDocument(const Scene& s) {
+    auto vec = [](const glm::dvec3& v) { return json::array({v.x, v.y, v.z}); };
+    json d = json::object();
+    if (s.document.contains("description")) d["description"] = s.document["description"];
+    const VolumeSource& v = s.volume;
+    if (!v.phantom.empty()) {
+        d["volume"] = {{"phantom", v.phantom}};
+        if (v.phantomSize > 0) d["volume"]["size"] = v.phantomSize;
+    } else {
+        d["volume"] = {
+            {"path", fs::absolute(v.path).lexically_normal().string()},
+            {"nonfinite",
+             v.readOptions.nonFinite == NonFinitePolicy::ReplaceWithMin ? "min" : "reject"}};
+        if (!v.readOptions.dicomSeriesUid.empty())
+            d["volume"]["series"] = v.readOptions.dicomSeriesUid;
+    }
+    const TransferFunctionDesc& t = s.transferFunction;
+    json tf = json::object();
+    if (!t.points.empty()) {
+        tf["points"] = json::array();
+        for (const auto& p : t.points)
+            tf["points"].push_back({{"value", p.value},
+                                    {"color", vec(p.color)},
+                                    {"extinction", p.extinction},
+                                    {"emission", vec(p.emission)}});
+    } else if (!t.preset.empty()) {
+        tf["preset"] = t.preset;
+    }
+    tf["extinction_scale"] = t.extinctionScale;
+    if (t.window) tf["window"] = {{"level", t.window->x}, {"width", t.window->y}};
+    d["transfer_function"] = tf;
+    const CameraDesc& c = s.camera;
+    json cam = {{"projection", c.projection}};
+    if (!c.view.empty()) {
+        cam["view"] = c.view;
+    } else {
+        if (c.eye) {
+            cam["eye"] = vec(*c.eye);
+        } else {
+            cam["azimuth"] = c.azimuthDeg;
+            cam["elevation"] = c.elevationDeg;
+        }
+        cam["up"] = vec(c.up);
+    }
+    cam["roll"] = c.rollDeg;
+    cam["distance"] = c.distance;
+    cam["fov_y"] = c.fovYDeg;
+    cam["ortho_height"] = c.orthoHeight;
+    cam["margin"] = c.margin;
+    if (c.target) cam["target"] = vec(*c.target);
+    d["camera"] = cam;
+    d["lights"] = json::array();
+    for (const LightDesc& l : s.lights) {
+        json j = {{"type", l.type}, {"color", vec(l.color)}, {"intensity", l.intensity}};
+        if (l.type == "directional") j["direction"] = vec(l.direction);
+        if (l.type == "point") j["position"] = vec(l.position), j["min_distance"] = l.minDistance;
+        if (l.type == "area") {
+            j["shape"] = l.shape;
+            j["position"] = vec(l.position);
+            j["normal"] = vec(l.normal);
+            j["radius"] = l.radius;
+            j["size"] = {l.size.x, l.size.y};
+        }
+        if (l.type == "environment") {
+            j["path"] = fs::absolute(l.path).lexically_normal().string();
+            j["rotation"] = vec(l.rotationDeg);
+            j["layout"] = l.layout;
+        }
+        d["lights"].push_back(j);
+    }
+    d["clip_planes"] = json::array();
+    for (const auto& p : s.clipPlanes)
+        d["clip_planes"].push_back({{"point", vec(p.point)}, {"normal", vec(p.normal)}});
+    if (s.cropBox) d["crop_box"] = {{"min", vec(s.cropBox->min)}, {"max", vec(s.cropBox->max)}};
+    d["method"] = {{"name", s.method.name}, {"params", s.method.params}};
+    d["image"] = {{"width", s.image.width},
+                  {"height", s.image.height},
+                  {"background", vec(s.image.background)},
+                  {"exposure", s.image.exposureStops},
+                  {"display", s.image.display}};
+    d["render"] = {{"step", s.render.stepVoxels},
+                   {"seed", s.render.seed},
+                   {"threads", s.render.threads},
+                   {"termination", s.render.termination}};
+    if (s.effectsGiven) d["effects"] = s.effects;
+    return d;
+}
+
 Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
     const std::string file = path.string();
     std::error_code ec;
@@ -569,7 +751,7 @@ Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides)
         throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
                          "fix the syntax at the byte shown");
     }
-    for (const auto& o : overrides) applyOverride(doc, o);
+    applyOverrides(doc, overrides);
     fs::path base = path.parent_path();
     if (base.empty()) base = ".";
     return parseScene(doc, file, base);

@@ -14,9 +14,14 @@
 //             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0,
 //                            "emission": [r,g,b]}, ...]},
 //             (either form may add "window": {"level": L, "width": W})
-//   "camera": {"projection": "perspective"|"orthographic", "azimuth": deg, "elevation": deg,
+//   "camera": {"projection": "perspective"|"orthographic",
+//              "view": "anterior"|"posterior"|"left"|"right"|"superior"|"inferior"|"oblique"
+//                      |"auto" (a named view; excludes azimuth/elevation/eye/up; "auto" is
+//                      anterior, or the face of a thin slab: pipeline/scene_inputs.h),
+//              "azimuth": deg, "elevation": deg,
 //              "distance": mm (0 = fit), "fov_y": deg, "ortho_height": mm (0 = fit),
-//              "target": [x,y,z] mm, "eye": [x,y,z], "up": [x,y,z], "roll": deg},
+//              "target": [x,y,z] mm, "eye": [x,y,z], "up": [x,y,z], "roll": deg,
+//              "margin": 0.05 (fitting: fraction of the image left empty on each side)},
 //   "lights": [{"type": "directional", "direction": [x,y,z] (the direction the light travels),
 //               "color": [r,g,b], "intensity": W/m²},
 //              {"type": "point", "position": [x,y,z], "color": ..., "intensity": W/sr,
@@ -30,7 +35,9 @@
 //                                                            as VTK),
 //   "crop_box": {"min": [x,y,z], "max": [x,y,z]}            (world mm),
 //   "method": "gradient" | {"name": "gradient", "params": {...}},
-//   "image": {"width": 512, "height": 512, "background": [r,g,b], "exposure": 0.0 (stops)},
+//   "image": {"width": 512, "height": 512, "background": [r,g,b], "exposure": 0.0 (stops),
+//             "display": "clinical"|"srgb"|"filmic" (PNG display transform, render/tonemap.h;
+//                        EXR stays linear)},
 //   "render": {"step": 0.5 (voxels), "seed": 1, "threads": 0 (0 = all),
 //              "termination": 0.001 (transmittance that ends a ray)},
 //   "effects": ["specular", ...]
@@ -73,8 +80,18 @@ struct TransferFunctionDesc {
     std::optional<glm::dvec2> window;
 };
 
+/// A standard view: orbit angles (camera.h) and the image's up.
+struct NamedView {
+    std::string name;
+    double azimuthDeg, elevationDeg;
+    glm::dvec3 up;
+};
+const std::vector<NamedView>& namedViews();
+const NamedView* findView(const std::string& name);  ///< nullptr when unknown
+
 struct CameraDesc {
     std::string projection = "perspective";  ///< "perspective" | "orthographic"
+    std::string view;  ///< a named view (sets azimuth, elevation, up); empty = none
     double azimuthDeg = 30.0, elevationDeg = 20.0, rollDeg = 0.0;
     double distance = 0.0;             ///< mm from target; 0 = fit the volume in view
     double fovYDeg = 30.0;             ///< perspective vertical field of view
@@ -82,6 +99,7 @@ struct CameraDesc {
     std::optional<glm::dvec3> target;  ///< default: volume centre
     std::optional<glm::dvec3> eye;  ///< set → explicit look-at (azimuth/elevation/distance ignored)
     glm::dvec3 up{0.0, 0.0, 1.0};  ///< LPS +z = superior
+    double margin = 0.05;          ///< fitting: image fraction left empty on each side
 };
 
 struct LightDesc {
@@ -118,6 +136,7 @@ struct ImageDesc {
     int width = 512, height = 512;
     glm::dvec3 background{0.0};
     double exposureStops = 0.0;
+    std::string display = "clinical";  ///< PNG display transform (render/tonemap.h)
 };
 
 struct RenderSettings {
@@ -149,6 +168,7 @@ struct Scene {
 
 /// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
 /// override, one that is not UTF-8, or a value nesting deeper than the scene's depth limit (64).
+/// The value null removes the key (its default applies again): --set camera.azimuth=null.
 void applyOverride(nlohmann::json& doc, const std::string& assignment);
 
 /// Validates and converts a document. `source` names it in errors; relative paths resolve against
@@ -157,7 +177,25 @@ void applyOverride(nlohmann::json& doc, const std::string& assignment);
 Scene parseScene(const nlohmann::json& doc, const std::string& source,
                  const std::filesystem::path& baseDir);
 
-/// Reads a scene file, applies overrides in order, validates. Every failure is an InputError naming
+/// The scene a volume file (or DICOM folder) makes on its own (`voxlight render ct.nii.gz`):
+/// {"volume": path, "camera": {"view": "auto"}}, everything else at its default (the TF is
+/// the modality's preset, chosen once the volume is loaded; no lights = a headlight), then the
+/// overrides. The path and relative paths in overrides resolve against the current directory.
+Scene volumeScene(const std::filesystem::path& volume,
+                  const std::vector<std::string>& overrides = {});
+
+/// Every key of `scene` written out at its value (defaults included), in the schema above, so that
+/// parseScene(sceneDocument(s)) describes the same render. Paths are written absolute. The
+/// transfer function is written as given (empty = the modality default: the caller may fill in
+/// the preset), method.params as given.
+nlohmann::json sceneDocument(const Scene& scene);
+
+/// True for the keys whose string values are file paths (volume, volume.path, lights.N.path):
+/// given on the command line (--set) they resolve against the current directory.
+bool isPathKey(const std::string& dottedKey);
+
+/// Reads a scene file, applies overrides in order (path keys given by them resolve against the
+/// current directory, other paths against the scene's folder), validates. Every failure is an InputError naming
 /// the file: a directory, an unreadable file or one over 16 MiB, nesting deeper than 64 levels (refused by a linear scan
 /// before parsing, with the byte offset), any JSON error (syntax, invalid UTF-8, a number out of
 /// range such as 1e999).

@@ -132,8 +132,18 @@ TransferFunction makePreset(const std::string& name, const std::array<float, 2>&
     return relativePreset(name).withWindow({0.5f * (lo + hi), hi - lo});
 }
 
+bool looksLikeHounsfield(const core::Volume& volume) {
+    if (volume.modality == core::Modality::CT && volume.mapping.unit == "HU") return true;
+    if (volume.modality != core::Modality::Unknown) return false;
+    // Air (−1000 HU) or the scanners' outside-the-field padding (−1024, −2048, −3024) fills at
+    // least the darkest percent of a CT in HU, and its bright end is soft tissue to bone; MR
+    // and unsigned/windowed CT hold nothing below zero.
+    const auto [lo, hi] = robustRange(volume, 0.01f, 0.995f);
+    return lo >= kHounsfieldAirMin && lo <= kHounsfieldAirMax && hi >= 0.f && hi <= 4000.f;
+}
+
 std::string defaultPresetName(const core::Volume& volume) {
-    if (volume.modality == core::Modality::CT && volume.mapping.unit == "HU") return "ct-bone";
+    if (looksLikeHounsfield(volume)) return "ct-bone";
     if (volume.modality == core::Modality::MR) return "mr-t1-brain";
     return "generic";
 }

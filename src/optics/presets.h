@@ -41,8 +41,15 @@ std::array<float, 2> robustRange(const core::Volume& volume, float loFraction = 
 /// the name maps it to its own key.
 TransferFunction makePreset(const std::string& name, const std::array<float, 2>& robust = {0, 1});
 
-/// The preset used when a scene names none: ct-bone for CT in HU, mr-t1-brain for MR, generic
-/// otherwise.
+/// Darkest-percent values a CT in Hounsfield units shows (air at −1000, padding down to −3024).
+inline constexpr float kHounsfieldAirMin = -3100.f, kHounsfieldAirMax = -500.f;
+
+/// True for a volume in Hounsfield units: a CT that says so, or one of unknown modality (NIfTI
+/// carries none) whose darkest percent is air or padding and whose top is tissue/bone (≤ 4000).
+bool looksLikeHounsfield(const core::Volume& volume);
+
+/// The preset used when a scene names none: ct-bone for CT in HU (said, or recognised by
+/// looksLikeHounsfield), mr-t1-brain for MR, generic otherwise.
 std::string defaultPresetName(const core::Volume& volume);
 
 }  // namespace voxlight::optics

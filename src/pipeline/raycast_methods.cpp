@@ -24,6 +24,7 @@
 #include "optics/presets.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
+#include "render/framing.h"
 #include "render/ray_caster.h"
 
 namespace voxlight::pipeline {
@@ -71,7 +72,11 @@ std::size_t lightBytes(const LightList& lights) {
 
 /// Version of what the transfer_function stage computes beyond its inputs (robust range, default
 /// preset per modality): bump when that code changes. The presets' own definitions are hashed.
-constexpr std::uint32_t kTfStageVersion = 1;
+constexpr std::uint32_t kTfStageVersion = 2;
+
+/// A volume whose lowest value is above this holds no air in HU (air −1000, fat −100): a CT preset
+/// on it is a mistake worth a warning.
+constexpr float kNoAirAbove = -200.f;
 
 /// A hash of every preset's definition in this build (points on the unit range), so a retuned
 /// preset never meets a TF cached by an older build.
@@ -264,6 +269,41 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     throw e;
 }
 
+/// Grey level (of 1) a MIP's background may reach (MinIP: fall short of white) with the TF's own
+/// window: about five 8-bit levels.
+constexpr float kBackgroundGrey = 0.02f;
+
+/// The grey window of a MIP (MinIP) whose scene sets none: the TF's own window when the data's
+/// low (high) end — a MIP's (MinIP's) background — maps to black (white) and the other end reaches
+/// past mid-grey, else the data's robust range. (A CT preset on a head angio stored 0..4095 put
+/// its background at 21 % grey: a grey box.)
+optics::Window extremumWindow(Kind kind, const optics::Window& w, const core::Volume& volume) {
+    const auto [lo, hi] = optics::robustRange(volume);
+    // Where the data's robust ends land on the window's grey ramp (0 black, 1 white).
+    const float atLo = (lo - w.lo()) / w.width, atHi = (hi - w.lo()) / w.width;
+    const bool fits = kind == Kind::Mip
+                          ? atLo <= kBackgroundGrey && atHi >= 0.5f  // black air, bright top
+                          : atHi >= 1.f - kBackgroundGrey && atLo <= 0.5f;
+    if (fits) return w;
+    return {0.5f * (lo + hi), hi > lo ? hi - lo : 1.f};
+}
+
+/// A CT preset (in HU) on a volume with no air: its values are not Hounsfield units (8-bit
+/// windowed exports, raw CT numbers), and the preset shows the wrong tissue or nothing.
+/// Returns whether it warned.
+bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf,
+                         const grid::BrickGrid& grid) {
+    const io::TransferFunctionDesc& d = run.scene().transferFunction;
+    if (d.preset.rfind("ct-", 0) != 0 || d.window) return false;
+    if (grid.valueLo() < kNoAirAbove) return false;
+    std::ostringstream os;
+    os << "'" << tf.name() << "' expects Hounsfield units (air at -1000); this volume holds "
+       << grid.valueLo() << ".." << grid.valueHi()
+       << " (not HU: use \"generic\", or set transfer_function.window to where the tissue lies)";
+    run.warn(os.str());
+    return true;
+}
+
 /// Coverage (alpha) below which a pixel shows nothing: under one 8-bit display level.
 constexpr float kVisibleAlpha = 0.5f / 255.f;
 
@@ -373,16 +413,24 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
 
     const json tfDesc = scene.document.value("transfer_function", json());
     Stage tf{"transfer_function", StageKind::Precompute, {"load_volume", "transfer_function"}};
-    tf.key = [tfDesc](const Run& run) {
+    // MIP/MinIP grey ramps choose their own window from the data unless the scene sets one.
+    const int windowRule = scene.transferFunction.window ? 0
+                           : kind == Kind::Mip           ? 1
+                           : kind == Kind::MinIp         ? 2
+                                                         : 0;
+    tf.key = [tfDesc, windowRule](const Run& run) {
         return KeyBuilder(run, "transfer_function", kTfStageVersion)
             .stage("load_volume")
             .json(tfDesc)
             .integer(presetCatalogHash())
+            .integer(windowRule)
             .value();
     };
-    tf.compute = [](Run& run) {
+    tf.compute = [kind, windowRule](Run& run) {
         auto t = std::make_shared<TfArtifact>();
-        t->tf = buildTransferFunction(run.scene(), run.get<LoadedVolume>("load_volume")->volume);
+        const core::Volume& volume = run.get<LoadedVolume>("load_volume")->volume;
+        t->tf = buildTransferFunction(run.scene(), volume);
+        if (windowRule != 0) t->tf = t->tf.withWindow(extremumWindow(kind, t->tf.window(), volume));
         t->table = std::make_shared<const optics::TfTable>(t->tf);
         return Artifact::of<TfArtifact>(std::move(t), kTfBytes);
     };
@@ -518,26 +566,69 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(sh);
 
+    // What the fitted camera frames: the hull of the visible matter (render/framing.h).
+    const json cutDesc = {{"clip", scene.document.value("clip_planes", json::array())},
+                          {"crop", scene.document.value("crop_box", json::object())}};
+    const bool voxelsByTf = kind == Kind::Gradient || kind == Kind::EmissionAbsorption;
+    Stage framing{"framing", StageKind::Precompute,
+                  voxelsByTf ? std::vector<std::string>{"skip_cells", "transfer_function",
+                                                        "clip_planes", "crop_box"}
+                             : std::vector<std::string>{"skip_cells", "clip_planes", "crop_box"}};
+    framing.key = [cutDesc, voxelsByTf](const Run& run) {
+        KeyBuilder k(run, "framing");
+        k.stage("skip_cells").json(cutDesc);
+        if (voxelsByTf) k.stage("transfer_function");
+        return k.value();
+    };
+    framing.compute = [options, voxelsByTf](Run& run) {
+        const core::Volume& v = run.get<LoadedVolume>("load_volume")->volume;
+        render::VoxelShows shows;
+        if (voxelsByTf) {
+            const auto tfa = run.get<TfArtifact>("transfer_function");
+            const float widen = tfa->table->cellWidth();  // as the skip cells widen
+            shows = [tfa, widen](float value) {
+                return tfa->tf.maxExtinction(value - widen, value + widen) > 0.f;
+            };
+        }
+        auto points = std::make_shared<const std::vector<glm::dvec3>>(
+            render::framingPoints(v, *run.get<grid::BrickMajorants>("skip_cells"), shows,
+                                  options.clipPlanes, options.cropBox));
+        const std::size_t bytes = points->size() * sizeof(glm::dvec3);
+        return Artifact::of<std::vector<glm::dvec3>>(std::move(points), bytes);
+    };
+    framing.notOnDisk = "recomputed from the skip cells in milliseconds";
+    framing.describe = [](const Run&, const Artifact& a) {
+        return std::to_string(a.as<std::vector<glm::dvec3>>()->size()) +
+               " hull points of the visible matter";
+    };
+    plan.stages.push_back(framing);
+
     const json cameraDesc = scene.document.value("camera", json::object());
-    Stage camera{"camera", StageKind::Frame, {"skip_cells", "camera", "image"}};
+    Stage camera{"camera", StageKind::Frame, {"framing", "camera", "image"}};
     camera.key = [cameraDesc](const Run& run) {
         const auto& im = run.scene().image;
         return KeyBuilder(run, "camera")
-            .stage("skip_cells")
+            .stage("framing")
             .json(cameraDesc)
             .number(im.width)
             .number(im.height)
             .value();
     };
     camera.compute = [](Run& run) {
-        // Fitted to what the TF makes visible (clinical viewers frame the anatomy, not the air).
-        const core::Volume& v = run.get<LoadedVolume>("load_volume")->volume;
-        const auto bounds =
-            render::visibleWorldBounds(v.geometry(), *run.get<grid::BrickMajorants>("skip_cells"));
+        // Fitted to what the TF makes visible and the clip planes / crop box keep (clinical
+        // viewers frame the anatomy, not the air), in this view's image plane.
+        const std::vector<glm::dvec3>& points = *run.get<std::vector<glm::dvec3>>("framing");
         const io::Scene& s = run.scene();
+        io::CameraDesc desc = s.camera;
+        if (desc.view == "auto") {
+            const io::NamedView* view = io::findView(resolveView(desc, points));
+            desc.azimuthDeg = view->azimuthDeg, desc.elevationDeg = view->elevationDeg;
+            desc.up = view->up;
+            run.details()["camera_view"] = "auto: " + view->name;
+        }
         try {
-            auto c = std::make_shared<const render::Camera>(
-                buildCameraSpec(s.camera), bounds[0], bounds[1], s.image.width, s.image.height);
+            auto c = std::make_shared<const render::Camera>(buildCameraSpec(desc), points,
+                                                            s.image.width, s.image.height);
             const json& given = s.document.value("camera", json::object());
             if (c->upReplaced() && given.is_object() && given.contains("up")) {
                 std::ostringstream os;
@@ -635,8 +726,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 {"samples_per_second", seconds > 0 ? double(stats.samples) / seconds : 0.0},
                 {"skip_cells", stats.skipCells},
                 {"skip_cells_visible", stats.skipCellsVisible}};
-            warnIfNothingShows(run, kind, *film, stats, tfn,
-                               *run.get<grid::BrickGrid>("brick_grid"));
+            const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
+            // One line about the TF: the unit mismatch explains an empty image too.
+            if (!warnIfNotHounsfield(run, tfn, bricks))
+                warnIfNothingShows(run, kind, *film, stats, tfn, bricks);
             const std::size_t bytes = film->pixels.size() * sizeof(float);
             return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
         } catch (const InputError& e) {

@@ -124,6 +124,17 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
     return tf;
 }
 
+std::string resolveView(const io::CameraDesc& desc, std::span<const glm::dvec3> points) {
+    if (desc.view != "auto" || points.empty()) return desc.view == "auto" ? "anterior" : desc.view;
+    glm::dvec3 lo(INFINITY), hi(-INFINITY);
+    for (const glm::dvec3& p : points) lo = glm::min(lo, p), hi = glm::max(hi, p);
+    const glm::dvec3 e = hi - lo;  // LPS: x left, y posterior, z superior
+    const double anterior = e.x * e.z, superior = e.x * e.y, left = e.y * e.z;
+    if (superior > kAutoViewAreaRatio * anterior && superior >= left) return "superior";
+    if (left > kAutoViewAreaRatio * anterior) return "left";
+    return "anterior";
+}
+
 render::CameraSpec buildCameraSpec(const io::CameraDesc& d) {
     render::CameraSpec s;
     s.projection = d.projection == "orthographic" ? render::Projection::Orthographic
@@ -137,6 +148,7 @@ render::CameraSpec buildCameraSpec(const io::CameraDesc& d) {
     s.target = d.target;
     s.eye = d.eye;
     s.up = d.up;
+    s.margin = d.margin;
     return s;
 }
 

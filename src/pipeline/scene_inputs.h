@@ -18,6 +18,8 @@
 // arbitrary but fixed tangent frame of the normal).
 #include <cstdint>
 #include <memory>
+#include <span>
+#include <string>
 #include <vector>
 
 #include "core/progress.h"
@@ -42,6 +44,14 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
 void checkPresetName(const io::Scene& scene);
 
 render::CameraSpec buildCameraSpec(const io::CameraDesc& desc);
+
+/// A side view must show this many times the anterior view's area to be chosen by "auto".
+inline constexpr double kAutoViewAreaRatio = 2.0;
+/// The named view a camera uses: desc.view itself, or for "auto" the anterior view unless the
+/// box of `points` (the visible matter) seen from above or from the left shows more than
+/// kAutoViewAreaRatio times its anterior area — a thin axial slab (a few CT slices) is shown face
+/// on from above, a sagittal one from the left. Empty when desc names no view.
+std::string resolveView(const io::CameraDesc& desc, std::span<const glm::dvec3> points);
 
 /// The scene's lights as lights::Light (environment maps are read here). Errors name
 /// "lights[i].<field>".

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "render/camera.h"
 
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <ostream>
 
@@ -10,32 +12,49 @@ namespace voxlight::render {
 
 namespace {
 constexpr double kDegToRad = 3.14159265358979323846 / 180.0;
+/// Smallest radius a fitted set of points counts as (mm): a single point still gets a camera.
+constexpr double kMinFitRadius = 1e-3;
+/// The fitted eye stays this fraction of the points' radius in front of the nearest one.
+constexpr double kNearGap = 1e-3;
+/// Margins above this leave less than a tenth of the image for the object.
+constexpr double kMaxFitMargin = 0.45;
+}  // namespace
+
+namespace {
+std::array<glm::dvec3, 8> boxCorners(const glm::dvec3& lo, const glm::dvec3& hi) {
+    std::array<glm::dvec3, 8> c;
+    for (int i = 0; i < 8; ++i)
+        c[i] = glm::dvec3((i & 1) ? hi.x : lo.x, (i & 2) ? hi.y : lo.y, (i & 4) ? hi.z : lo.z);
+    return c;
 }
+}  // namespace
 
 Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
                int width, int height)
+    : Camera(spec, boxCorners(boundsMin, boundsMax), width, height) {}
+
+Camera::Camera(const CameraSpec& spec, std::span<const glm::dvec3> points, int width, int height)
     : projection_(spec.projection), width_(width), height_(height) {
     if (width < 1 || height < 1) throw InputError("camera", "image size", "must be at least 1x1");
-    const glm::dvec3 centre = 0.5 * (boundsMin + boundsMax);
-    const double radius = std::max(0.5 * glm::length(boundsMax - boundsMin), 1e-3);
+    VL_CHECK(!points.empty());
+    glm::dvec3 lo(INFINITY), hi(-INFINITY);
+    for (const glm::dvec3& p : points) lo = glm::min(lo, p), hi = glm::max(hi, p);
+    const glm::dvec3 centre = 0.5 * (lo + hi);
     const glm::dvec3 target = spec.target.value_or(centre);
     fovY_ = spec.fovYDeg * kDegToRad;
     tanHalf_ = std::tan(0.5 * fovY_);
     const double aspect = double(width) / double(height);
-    // Fit: the bounding sphere fills the smaller image dimension.
-    const double fitTan = tanHalf_ * std::min(1.0, aspect);
-    const double fitDistance = radius / std::sin(std::atan(fitTan)) * 1.02;
-    glm::dvec3 up = spec.up;
+    // Orientation first (it does not depend on where the eye ends up), then placement.
+    glm::dvec3 up = spec.up, orbitDir(0.0);
     if (spec.eye) {
         eye_ = *spec.eye;
+        forward_ = glm::normalize(target - eye_);
     } else {
         const double az = spec.azimuthDeg * kDegToRad, el = spec.elevationDeg * kDegToRad;
-        const glm::dvec3 dir(std::sin(az) * std::cos(el), -std::cos(az) * std::cos(el),
-                             std::sin(el));
-        const double d = spec.distance > 0.0 ? spec.distance : fitDistance;
-        eye_ = target + d * dir;
+        orbitDir =
+            glm::dvec3(std::sin(az) * std::cos(el), -std::cos(az) * std::cos(el), std::sin(el));
+        forward_ = -orbitDir;
     }
-    forward_ = glm::normalize(target - eye_);
     // Looking (nearly) along `up` leaves the image's up undefined: take the first world axis that
     // is not (posterior/anterior first, as for a top view with the default up = superior).
     if (std::abs(glm::dot(glm::normalize(up), forward_)) > kParallelUpCos) {
@@ -56,13 +75,77 @@ Camera::Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::d
         right_ = r2;
         up_ = u2;
     }
-    orthoHeight_ =
-        spec.orthoHeight > 0.0 ? spec.orthoHeight : 2.04 * radius / std::min(1.0, aspect);
+    fit(spec, points, aspect);
     pixelScaleX_ = 2.0 / width_;
     pixelScaleY_ = 2.0 / height_;
     const double h = projection_ == Projection::Perspective ? tanHalf_ : 0.5 * orthoHeight_;
     rightStep_ = (h * aspect) * right_;
     upStep_ = h * up_;
+}
+
+void Camera::fit(const CameraSpec& spec, std::span<const glm::dvec3> points, double aspect) {
+    // Work in the camera's frame about O (the target, or the points' box centre): x right, y up,
+    // z forward. The eye goes to O + ex·right + ey·up + ez·forward.
+    glm::dvec3 lo(INFINITY), hi(-INFINITY);
+    for (const glm::dvec3& p : points) lo = glm::min(lo, p), hi = glm::max(hi, p);
+    const glm::dvec3 origin = spec.target.value_or(0.5 * (lo + hi));
+    const double radius = std::max(0.5 * glm::length(hi - lo), kMinFitRadius);
+    const double fill = 1.0 - 2.0 * std::clamp(spec.margin, 0.0, kMaxFitMargin);
+    // An explicit target (or look-at) stays in the centre.
+    const bool centred = spec.target.has_value() || spec.eye.has_value();
+    double ex = 0.0, ey = 0.0, ez = 0.0, zMin = INFINITY;
+    for (const glm::dvec3& p : points) zMin = std::min(zMin, glm::dot(p - origin, forward_));
+    if (projection_ == Projection::Perspective) {
+        // Frustum side planes of slope t (tangent of the half-angle times the fill): a point fits
+        // when |x − ex| ≤ t·(z − ez). Without a target the tightest eye on each axis is where both
+        // side planes touch the points: with A = max(x − t·z), B = min(x + t·z), ex = (A + B)/2
+        // and ez = (B − A)/(2t); the nearer-limited axis wins (the smaller ez) and the other stays
+        // centred at its own midpoint, which does not depend on ez.
+        const double tx = tanHalf_ * aspect * fill, ty = tanHalf_ * fill;
+        double ax = -INFINITY, bx = INFINITY, ay = -INFINITY, by = INFINITY, d = 0.0;
+        for (const glm::dvec3& p : points) {
+            const glm::dvec3 q = p - origin;
+            const double x = glm::dot(q, right_), y = glm::dot(q, up_), z = glm::dot(q, forward_);
+            ax = std::max(ax, x - tx * z), bx = std::min(bx, x + tx * z);
+            ay = std::max(ay, y - ty * z), by = std::min(by, y + ty * z);
+            d = std::max(d, std::max(std::abs(x) / tx, std::abs(y) / ty) - z);
+        }
+        if (spec.eye) {
+            return;  // placed by the scene
+        } else if (spec.distance > 0.0) {
+            ez = -spec.distance;
+        } else if (centred) {
+            ez = -d;
+        } else {
+            ex = 0.5 * (ax + bx), ey = 0.5 * (ay + by);
+            ez = std::min((bx - ax) / (2.0 * tx), (by - ay) / (2.0 * ty));
+        }
+        // Never inside or level with the nearest point (a single point, or a flat view).
+        if (spec.distance <= 0.0) ez = std::min(ez, zMin - kNearGap * radius);
+        orthoHeight_ = 2.0 * radius;
+    } else {
+        double xLo = INFINITY, xHi = -INFINITY, yLo = INFINITY, yHi = -INFINITY;
+        for (const glm::dvec3& p : points) {
+            const glm::dvec3 q = p - origin;
+            const double x = glm::dot(q, right_), y = glm::dot(q, up_);
+            xLo = std::min(xLo, x), xHi = std::max(xHi, x);
+            yLo = std::min(yLo, y), yHi = std::max(yHi, y);
+        }
+        double halfX = 0.0, halfY = 0.0;
+        if (centred || spec.orthoHeight > 0.0) {
+            halfX = std::max(-xLo, xHi), halfY = std::max(-yLo, yHi);
+        } else {
+            ex = 0.5 * (xLo + xHi), ey = 0.5 * (yLo + yHi);
+            halfX = 0.5 * (xHi - xLo), halfY = 0.5 * (yHi - yLo);
+        }
+        orthoHeight_ = spec.orthoHeight > 0.0
+                           ? spec.orthoHeight
+                           : std::max(2.0 * std::max(halfY, halfX / aspect) / fill, kMinFitRadius);
+        if (spec.eye) return;
+        // Rays start on the eye's plane: put it behind every point.
+        ez = spec.distance > 0.0 ? -spec.distance : zMin - radius;
+    }
+    eye_ = origin + ex * right_ + ey * up_ + ez * forward_;
 }
 
 Ray Camera::generate(int x, int y) const {

@@ -8,9 +8,17 @@
 // view); azimuth 90° looks from the patient's left. Positive roll turns the image
 // counter-clockwise. Explicit look-at (eye, target, up) is used when `eye` is set. Pixel (x, y) has
 // its centre at (x + 0.5, y + 0.5); row 0 is the top of the image.
+//
+// Fitting (orbit cameras with distance 0, orthographic ones with ortho_height 0): the camera frames
+// a set of world points (the hull of the visible matter) tightly in the image plane — the view
+// direction stays the orbit's, the eye moves (sideways and back) until the points' projection
+// fills 1 − 2·margin of the limiting image dimension, centred. With an explicit target only the
+// distance (or ortho height) is fitted, symmetric about the target. This frames what the view
+// shows, not a bounding sphere of the grid (which left objects at 42–65 % of the image width).
 #include <glm/glm.hpp>
 #include <iosfwd>
 #include <optional>
+#include <span>
 
 namespace voxlight::render {
 
@@ -19,12 +27,14 @@ enum class Projection { Perspective, Orthographic };
 struct CameraSpec {
     Projection projection = Projection::Perspective;
     double azimuthDeg = 30.0, elevationDeg = 20.0, rollDeg = 0.0;
-    double distance = 0.0;             ///< mm from the target; 0 = fit the bounding sphere in view
+    double distance = 0.0;             ///< mm from the target; 0 = fit the points in view
     double fovYDeg = 30.0;             ///< perspective: vertical field of view, (0, 180)
     double orthoHeight = 0.0;          ///< orthographic: view height in mm; 0 = fit
     std::optional<glm::dvec3> target;  ///< default: centre of the bounds
     std::optional<glm::dvec3> eye;     ///< set → look-at
     glm::dvec3 up{0.0, 0.0, 1.0};
+    /// Fitting: fraction of the limiting image dimension left empty on each side, [0, 0.45].
+    double margin = 0.05;
 };
 
 struct Ray {
@@ -38,10 +48,13 @@ inline constexpr double kParallelUpCos = 0.999;
 
 class Camera {
   public:
-    /// Frames `spec` around the world-space box [boundsMin, boundsMax] (used for fitting and the
-    /// default target). Throws InputError (source "camera", field "image size") on a size < 1.
+    /// Frames `spec` around the world-space box [boundsMin, boundsMax] (its eight corners are the
+    /// fit points). Throws InputError (source "camera", field "image size") on a size < 1.
     Camera(const CameraSpec& spec, const glm::dvec3& boundsMin, const glm::dvec3& boundsMax,
            int width, int height);
+    /// Frames `spec` around `fitPoints` (world mm, at least one; their bounding-box centre is the
+    /// default target). Same errors.
+    Camera(const CameraSpec& spec, std::span<const glm::dvec3> fitPoints, int width, int height);
 
     Ray generate(int x, int y) const;
     /// Inverse of generate(): the continuous pixel coordinates (x, y) of world point p, so that
@@ -71,6 +84,7 @@ class Camera {
     double orthoHeight() const { return orthoHeight_; }
 
   private:
+    void fit(const CameraSpec& spec, std::span<const glm::dvec3> points, double aspect);
     bool upReplaced_ = false;
     Projection projection_;
     glm::dvec3 eye_, forward_, right_, up_;

@@ -1,17 +1,34 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Film → display. Linear radiance is scaled by 2^exposure, clamped to [0, 1] (a clinical image
-// should map equal radiance to equal grey everywhere, so no local or filmic operator) and encoded
-// with the sRGB transfer curve (IEC 61966-2-1). Non-finite values become 0.
+// Film → display. The film holds linear radiance (EXR output keeps it). For 8-bit images one of
+// three display transforms, after scaling by 2^exposure (non-finite values become 0):
+//   Clinical  the composited value straight to the display, clamped to [0, 1] — how VTK and
+//             3D Slicer show TF colours (their colours are display values, not radiance), so
+//             voxlight's images read like the ones clinicians compare them to. Equal radiance
+//             maps to equal grey everywhere.
+//   Srgb      clamp, then the sRGB transfer curve (IEC 61966-2-1): physically right for a linear
+//             film on an sRGB monitor, but flat and washed out next to VTK for TF-coloured DVR.
+//   Filmic    the ACES filmic curve (Narkowicz's fit of the RRT+ODT), then sRGB: highlights roll
+//             off instead of clipping — for the path tracer and the SH methods, whose radiance
+//             under bright or several lights exceeds 1.
+#include <string>
+
 #include "core/image.h"
 
 namespace voxlight::render {
 
+enum class Display { Clinical, Srgb, Filmic };
+/// "clinical" | "srgb" | "filmic"; throws InputError (source "image", field "display") otherwise.
+Display displayFromString(const std::string& name);
+
 float linearToSrgb(float linear);
 float srgbToLinear(float encoded);
+/// The ACES filmic curve (Narkowicz 2015), [0, ∞) → [0, 1), monotone, 0 at 0.
+float acesFilmic(float linear);
 
-/// Display-encoded copy (sRGB, 0..1) of a linear film, opaque (alpha 1): the film's RGB already
-/// holds the background seen through the volume, and 8-bit writers would otherwise un-premultiply.
-core::ImageRGBA toDisplay(const core::ImageRGBA& linear, float exposureStops = 0.f);
+/// Display-encoded copy (0..1) of a linear film, opaque (alpha 1): the film's RGB already holds
+/// the background seen through the volume, and 8-bit writers would otherwise un-premultiply.
+core::ImageRGBA toDisplay(const core::ImageRGBA& linear, float exposureStops = 0.f,
+                          Display display = Display::Srgb);
 
 }  // namespace voxlight::render

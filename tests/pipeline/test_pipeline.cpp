@@ -103,12 +103,12 @@ TEST(Pipeline, TransferFunctionChangeRerunsTfStagesButNotTheVolumes) {
     d["transfer_function"] = {{"preset", "ct-bone"}, {"extinction_scale", 2.0}};
     const RunResult r = session.run(scene(d));
     // Brick grid and dense gradients depend on the volume only.
-    EXPECT_EQ(ranStages(r),
-              (std::set<std::string>{"transfer_function", "skip_cells", "camera", "render"}));
+    EXPECT_EQ(ranStages(r), (std::set<std::string>{"transfer_function", "skip_cells", "framing",
+                                                   "camera", "render"}));
     d["transfer_function"] = "ct-angio";  // different visible set: the fitted camera follows
     const RunResult angio = session.run(scene(d));
-    EXPECT_EQ(ranStages(angio),
-              (std::set<std::string>{"transfer_function", "skip_cells", "camera", "render"}));
+    EXPECT_EQ(ranStages(angio), (std::set<std::string>{"transfer_function", "skip_cells", "framing",
+                                                       "camera", "render"}));
     EXPECT_NE(angio.stage("camera").key, r.stage("camera").key)
         << "the fitted camera's key follows the skip cells";
     // MIP's skip cells do not read the TF: a TF change keeps them.
@@ -476,15 +476,22 @@ TEST(Pipeline, AVolumeFilesIdentityCoversItsDetachedDataAndNothingElse) {
 
 TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     Session session;
-    // A CT bone TF on the 0..1 sphere phantom: nothing is visible.
+    // A CT bone TF on the 0..1 sphere phantom: nothing is visible, because these are not HU.
     json d = {{"volume", {{"phantom", "sphere"}, {"size", 16}}},
               {"transfer_function", "ct-bone"},
               {"image", {{"width", 16}, {"height", 16}}}};
     RunResult r = session.run(scene(d));
     ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("'ct-bone' expects Hounsfield units"), std::string::npos)
+        << r.warnings[0];
+    // A TF whose window lies above every value: transparent over all of them.
+    d["transfer_function"] = {{"preset", "phantom-step"},
+                              {"window", {{"level", 50}, {"width", 1}}}};
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
     EXPECT_NE(r.warnings[0].find("transparent over all of this volume's values"), std::string::npos)
         << r.warnings[0];
-    EXPECT_NE(r.warnings[0].find("ct-bone"), std::string::npos) << r.warnings[0];
+    EXPECT_NE(r.warnings[0].find("phantom-step"), std::string::npos) << r.warnings[0];
     EXPECT_EQ(r.details["warnings"].size(), 1u);
     // The camera looking away from the visible part.
     d["transfer_function"] = "phantom-step";
