@@ -41,8 +41,8 @@ std::array<glm::dvec3, 8> worldCorners(const core::Geometry& g, const glm::dvec3
                                        const glm::dvec3& hi) {
     std::array<glm::dvec3, 8> w;
     for (int c = 0; c < 8; ++c)
-        w[c] = g.indexToWorld(glm::dvec3((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y,
-                                         (c & 4) ? hi.z : lo.z));
+        w[c] = g.indexToWorld(
+            glm::dvec3((c & 1) ? hi.x : lo.x, (c & 2) ? hi.y : lo.y, (c & 4) ? hi.z : lo.z));
     return w;
 }
 
@@ -118,16 +118,16 @@ std::vector<glm::dvec3> visibleHullPoints(const core::Volume& volume,
                                 const glm::ivec3 v(ii, j, k);
                                 vlo = glm::min(vlo, v), vhi = glm::max(vhi, v);
                                 for (int d = 0; d < 26; ++d) {
-                                    const double s = glm::dot(glm::dvec3(kDirections[d]),
-                                                              glm::dvec3(v));
+                                    const double s =
+                                        glm::dot(glm::dvec3(kDirections[d]), glm::dvec3(v));
                                     if (s > best[d]) best[d] = s, at[d] = v;
                                 }
                             }
                     if (vlo.x > vhi.x) continue;  // non-empty only through its apron
                     if (state[i] == 2) {
                         for (int d = 0; d < 26; ++d) {
-                            const glm::dvec3 p = g.indexToWorld(
-                                glm::dvec3(at[d]) + 0.5 * glm::dvec3(kDirections[d]));
+                            const glm::dvec3 p = g.indexToWorld(glm::dvec3(at[d]) +
+                                                                0.5 * glm::dvec3(kDirections[d]));
                             out.push_back(p);
                         }
                         continue;
@@ -156,9 +156,8 @@ std::vector<glm::dvec3> visibleHullPoints(const core::Volume& volume,
     return out;
 }
 
-std::vector<glm::dvec3> framingPoints(const core::Volume& volume,
-                                      const grid::BrickMajorants& cells, const VoxelShows& shows,
-                                      std::span<const ClipPlane> planes,
+std::vector<glm::dvec3> framingPoints(const core::Volume& volume, const grid::BrickMajorants& cells,
+                                      const VoxelShows& shows, std::span<const ClipPlane> planes,
                                       const std::optional<CropBox>& crop) {
     std::vector<glm::dvec3> p = visibleHullPoints(volume, cells, shows, planes, crop);
     if (!p.empty()) return p;

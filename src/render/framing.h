@@ -35,9 +35,8 @@ std::vector<glm::dvec3> visibleHullPoints(const core::Volume& volume,
 
 /// visibleHullPoints, or the volume's box corners when nothing is visible (the image is then
 /// empty, and says so).
-std::vector<glm::dvec3> framingPoints(const core::Volume& volume,
-                                      const grid::BrickMajorants& cells, const VoxelShows& shows,
-                                      std::span<const ClipPlane> planes,
+std::vector<glm::dvec3> framingPoints(const core::Volume& volume, const grid::BrickMajorants& cells,
+                                      const VoxelShows& shows, std::span<const ClipPlane> planes,
                                       const std::optional<CropBox>& crop);
 
 }  // namespace voxlight::render

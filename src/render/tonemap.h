@@ -9,7 +9,7 @@
 //   Srgb      clamp, then the sRGB transfer curve (IEC 61966-2-1): physically right for a linear
 //             film on an sRGB monitor, but flat and washed out next to VTK for TF-coloured DVR.
 //   Filmic    the ACES filmic curve (Narkowicz's fit of the RRT+ODT), then sRGB: highlights roll
-//             off instead of clipping — for the path tracer and the SH methods, whose radiance
+//             off (white is reached three stops above 1) instead of clipping at 1 — for the path tracer and the SH methods, whose radiance
 //             under bright or several lights exceeds 1.
 #include <string>
 
@@ -23,7 +23,7 @@ Display displayFromString(const std::string& name);
 
 float linearToSrgb(float linear);
 float srgbToLinear(float encoded);
-/// The ACES filmic curve (Narkowicz 2015), [0, ∞) → [0, 1), monotone, 0 at 0.
+/// The ACES filmic curve (Narkowicz 2015), [0, ∞) → [0, 1], monotone, 0 at 0, 1 from about 7.9.
 float acesFilmic(float linear);
 
 /// Display-encoded copy (0..1) of a linear film, opaque (alpha 1): the film's RGB already holds

@@ -11,6 +11,7 @@
 #include <string>
 #include <vector>
 
+#include "io/image.h"
 #include "io/volume_io.h"
 #include "support/test_support.h"
 
@@ -23,10 +24,10 @@ struct Result {
     std::string out, err;
 };
 
-Result run(const std::string& args, const fs::path& dir) {
+/// Runs a shell command line (its last command's stderr captured).
+Result runShell(const std::string& line, const fs::path& dir) {
     const fs::path errFile = dir / "stderr.txt";
-    const std::string cmd =
-        std::string(VOXLIGHT_BINARY) + " " + args + " 2>'" + errFile.string() + "'";
+    const std::string cmd = line + " 2>'" + errFile.string() + "'";
     FILE* pipe = ::popen(cmd.c_str(), "r");
     std::string out;
     std::array<char, 4096> buf;
@@ -36,6 +37,11 @@ Result run(const std::string& args, const fs::path& dir) {
     std::string err((std::istreambuf_iterator<char>(ef)), {});
     fs::remove(errFile);
     return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
+}
+
+/// Runs voxlight with `args`.
+Result run(const std::string& args, const fs::path& dir) {
+    return runShell(std::string(VOXLIGHT_BINARY) + " " + args, dir);
 }
 
 std::size_t lineCount(const std::string& s) {
@@ -327,4 +333,62 @@ TEST(Cli, CtrlCLeavesAllOrNothing) {
         }
         fs::remove(out / "t.nii.gz");
     }
+}
+
+TEST(Cli, AVolumeRendersDirectlyAndItsInitSceneRendersTheSameImage) {
+    test::TempDir tmp;
+    ASSERT_EQ(run("phantom torso --size 40 -q -o " + q(tmp / "t.nii.gz"), tmp.path()).code, 0);
+    // Relative paths on the command line resolve against the current directory (the test's is
+    // elsewhere: `cd` into tmp first).
+    const std::string cd = "cd " + q(tmp.path()) + " && ";
+    const std::string size = " --set image.width=40 --set image.height=32";
+    Result r = runShell(cd + std::string(VOXLIGHT_BINARY) +
+                            " render t.nii.gz -q -o direct.png --exr " + "direct.exr" + size,
+                        tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    r = runShell(
+        cd + std::string(VOXLIGHT_BINARY) + " scene --init t.nii.gz" + size + " > init.json",
+        tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto init = nlohmann::json::parse(std::ifstream(tmp / "init.json"));
+    EXPECT_EQ(init["transfer_function"]["preset"], "ct-bone") << "HU data: the CT preset";
+    EXPECT_EQ(init["camera"]["view"], "auto");
+    EXPECT_TRUE(fs::path(init["volume"]["path"].get<std::string>()).is_absolute());
+    for (const char* key : {"camera", "lights", "method", "image", "render", "effects"})
+        EXPECT_TRUE(init.contains(key)) << key;
+    // The starter scene, moved to another folder, renders the same image.
+    fs::create_directories(tmp / "elsewhere");
+    fs::rename(tmp / "init.json", tmp / "elsewhere" / "scene.json");
+    r = run("render -q " + q(tmp / "elsewhere" / "scene.json") + " -o " + q(tmp / "fromInit.png") +
+                " --exr " + q(tmp / "fromInit.exr"),
+            tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const core::ImageRGBA a = io::readImage(tmp / "direct.exr"),
+                          b = io::readImage(tmp / "fromInit.exr");
+    EXPECT_EQ(a.pixels, b.pixels);
+    // A scene's own volume key, overridden by a relative path, resolves against the current
+    // directory, not the scene's folder.
+    r = runShell(
+        cd + std::string(VOXLIGHT_BINARY) + " scene elsewhere/scene.json --set volume=t.nii.gz",
+        tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto shown = nlohmann::json::parse(r.out);
+    EXPECT_EQ(fs::path(shown["volume"].get<std::string>()), tmp / "t.nii.gz");
+}
+
+TEST(Cli, ViewReplacesTheScenesCameraPlacement) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "camera": {"azimuth": 40, "elevation": 10, "up": [0, 0, 1]},
+        "image": {"width": 16, "height": 16}})";
+    const Result r = run("render -q " + q(tmp / "scene.json") + " --view superior -o " +
+                             q(tmp / "a.png") + " --stats " + q(tmp / "a.json"),
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto stats = nlohmann::json::parse(std::ifstream(tmp / "a.json"));
+    EXPECT_NEAR(stats["camera"]["forward"][2].get<double>(), -1.0, 1e-9) << "looking down";
+    const Result bad =
+        run("render -q " + q(tmp / "scene.json") + " --view sideways -o " + q(tmp / "b.png"),
+            tmp.path());
+    EXPECT_EQ(bad.code, 2);
 }

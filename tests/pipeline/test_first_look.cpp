@@ -131,9 +131,10 @@ TEST(Views, NamedViewsLookFromThatSideAndConflictWithExplicitAngles) {
         glm::dvec3 forward, up;
     };
     // LPS: +x left, +y posterior, +z superior.
-    const Case cases[] = {{"anterior", {0, 1, 0}, {0, 0, 1}},  {"posterior", {0, -1, 0}, {0, 0, 1}},
-                          {"left", {-1, 0, 0}, {0, 0, 1}},     {"right", {1, 0, 0}, {0, 0, 1}},
-                          {"superior", {0, 0, -1}, {0, -1, 0}}, {"inferior", {0, 0, 1}, {0, -1, 0}}};
+    const Case cases[] = {
+        {"anterior", {0, 1, 0}, {0, 0, 1}},   {"posterior", {0, -1, 0}, {0, 0, 1}},
+        {"left", {-1, 0, 0}, {0, 0, 1}},      {"right", {1, 0, 0}, {0, 0, 1}},
+        {"superior", {0, 0, -1}, {0, -1, 0}}, {"inferior", {0, 0, 1}, {0, -1, 0}}};
     for (const Case& c : cases) {
         json d = phantomDoc("sphere", "phantom-step");
         d["camera"] = {{"view", c.view}};
@@ -220,7 +221,7 @@ TEST(ExtremumWindow, MipUsesTheDataRangeWhenThePresetWindowWouldGreyTheBackgroun
     r = Session().run(scene(d));
     const auto& mw = r.details["transfer_function"]["window"];
     EXPECT_NEAR(mw["level"].get<double>(), 0.5 * (lo + hi), 1e-3) << "ct-lung's window is below "
-                                                                      "this data";
+                                                                     "this data";
 }
 
 TEST(Hounsfield, ACtPresetOnValuesWithoutAirWarnsWithTheFix) {
