@@ -39,7 +39,7 @@ def voxlight_frames(exe, scene, frames, workdir):
     return times, stats
 
 
-def vtk_setup(volume_path, stats):
+def vtk_setup(volume_path, stats, size=512):
     reader = vtk.vtkXMLImageDataReader()
     reader.SetFileName(volume_path)
     reader.Update()
@@ -74,7 +74,7 @@ def vtk_setup(volume_path, stats):
     win = vtk.vtkRenderWindow()
     win.SetOffScreenRendering(1)
     win.AddRenderer(ren)
-    win.SetSize(512, 512)
+    win.SetSize(size, size)
     cam = ren.GetActiveCamera()
     c = stats["camera"]
     eye, fwd = c["eye"], c["forward"]
