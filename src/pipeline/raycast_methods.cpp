@@ -22,6 +22,7 @@
 #include "grid/brick_traversal.h"
 #include "lights/environment_light.h"
 #include "optics/presets.h"
+#include "pathtrace/path_tracer.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
 #include "render/framing.h"
@@ -73,6 +74,9 @@ std::size_t lightBytes(const LightList& lights) {
 /// Version of what the transfer_function stage computes beyond its inputs (robust range, default
 /// preset per modality): bump when that code changes. The presets' own definitions are hashed.
 constexpr std::uint32_t kTfStageVersion = 2;
+
+/// Bounces per path when multiple scattering is asked for (Russian roulette ends most before).
+constexpr int kDefaultMaxBounces = 16;
 
 /// A volume whose lowest value is above this holds no air in HU (air −1000, fat −100): a CT preset
 /// on it is a mistake worth a warning.
@@ -196,11 +200,12 @@ const Codec& irradianceCodec() {
 
 // ---- Method params -------------------------------------------------------------------------
 
-enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso };
+enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, PathTrace };
 
 render::Mode modeOf(Kind k) {
     switch (k) {
         case Kind::EmissionAbsorption:
+        case Kind::PathTrace:  // its skip cells are the σt majorants of delta tracking
             return render::Mode::EmissionAbsorption;
         case Kind::Gradient:
             return render::Mode::Gradient;
@@ -214,17 +219,19 @@ render::Mode modeOf(Kind k) {
     throw InternalError("unknown ray-caster method");
 }
 
-bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso; }
+bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso || k == Kind::PathTrace; }
 
 /// Options of the caster from the scene and the method params (read strictly).
 render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReader& p) {
     render::RenderOptions o;
     o.mode = modeOf(kind);
-    o.stepVoxels = float(p.number("step", scene.render.stepVoxels, 0.01, 16.0));
-    o.preintegrated = p.boolean("preintegrated", true);
-    o.emptySpaceSkipping = p.boolean("empty_space_skipping", true);
-    o.earlyTermination = p.boolean("early_termination", true);
-    o.jitter = p.boolean("jitter", true);
+    if (kind != Kind::PathTrace) {  // the marcher's own knobs
+        o.stepVoxels = float(p.number("step", scene.render.stepVoxels, 0.01, 16.0));
+        o.preintegrated = p.boolean("preintegrated", true);
+        o.emptySpaceSkipping = p.boolean("empty_space_skipping", true);
+        o.earlyTermination = p.boolean("early_termination", true);
+        o.jitter = p.boolean("jitter", true);
+    }
     if (kind == Kind::EmissionAbsorption) o.ambient = float(p.number("ambient", 1.0, 0.0, 1e6));
     if (kind == Kind::Gradient || kind == Kind::Iso) {
         o.blinnPhong.ambient = float(p.number("ambient", o.blinnPhong.ambient, 0.0, 1e6));
@@ -252,6 +259,31 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     for (const auto& c : scene.clipPlanes) o.clipPlanes.push_back({c.point, c.normal});
     if (scene.cropBox) o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max};
     return o;
+}
+
+/// The path tracer's options from the scene and method.params. Multiple scattering is the
+/// "multiple_scattering" effect: without it paths stop after one scattering event.
+pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::RenderOptions& o,
+                                         ParamReader& p) {
+    pathtrace::Options t;
+    t.samplesPerPixel = p.integer("spp", 64, 1, 1 << 20);
+    t.maxSeconds = p.number("seconds", 0.0, 0.0, 1e6);
+    const bool multiple = wantsEffect(scene, "multiple_scattering");
+    if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
+        p.fail("max_bounces",
+               "asks for more than one bounce but the scene's effects omit "
+               "'multiple_scattering'",
+               "add \"multiple_scattering\" to effects or set max_bounces to 1");
+    t.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
+    t.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
+    t.majorantGrid = p.boolean("majorant_grid", true);
+    t.pixelJitter = p.boolean("antialias", true);
+    t.seed = o.seed;
+    t.threads = o.threads;
+    t.background = o.background;
+    t.clipPlanes = o.clipPlanes;
+    t.cropBox = o.cropBox;
+    return t;
 }
 
 /// Errors of the render library name its own option; the scene calls them by these keys.
@@ -347,11 +379,61 @@ std::string dims(const glm::ivec3& d) {
     return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
 }
 
+/// The pathtrace method's image stage: the path tracer over the same volume, TF table, majorant
+/// cells, lights and camera as the ray caster's stages.
+Artifact renderPathTraced(Run& run, pathtrace::Options pt) {
+    const auto loaded = run.get<LoadedVolume>("load_volume");
+    const auto tfa = run.get<TfArtifact>("transfer_function");
+    if (run.has("lights")) pt.lights = *run.get<LightList>("lights");
+    const auto camera = run.get<render::Camera>("camera");
+    pathtrace::Stats st;
+    std::shared_ptr<core::ImageRGBA> film;
+    try {
+        const pathtrace::PathTracer tracer(
+            std::shared_ptr<const core::Volume>(loaded, &loaded->volume), tfa->table,
+            run.get<grid::BrickMajorants>("skip_cells"), pt);
+        film = std::make_shared<core::ImageRGBA>(tracer.render(*camera, run.progress(), &st));
+    } catch (const InputError& e) {
+        if (e.source() == "pathtrace")
+            throw InputError(run.scene().source, "method.params." + e.field(), e.problem(),
+                             e.fix());
+        throw;
+    }
+    json& d = run.details();
+    d["pathtrace"] = {{"spp", st.samplesPerPixel},
+                      {"seconds", st.seconds},
+                      {"paths_per_second", st.seconds > 0 ? double(st.paths) / st.seconds : 0.0},
+                      {"relative_std_error", st.relativeStdError},
+                      {"real_collisions", st.realCollisions},
+                      {"null_collisions", st.nullCollisions},
+                      {"shadow_rays", st.shadowRays},
+                      {"majorant_violations", st.majorantViolations},
+                      {"null_collision_budget_exceeded", st.budgetExceeded},
+                      {"max_bounces", pt.maxBounces},
+                      {"majorant_grid", pt.majorantGrid}};
+    if (st.budgetExceeded > 0)
+        run.warn(std::to_string(st.budgetExceeded) +
+                 " flights met a cell so dense (sigma_t x length > 4096) that they were taken as "
+                 "blocked there: lower transfer_function.extinction_scale if this is not meant");
+    if (st.majorantViolations > 0)
+        run.warn(
+            std::to_string(st.majorantViolations) +
+            " samples exceeded their cell's majorant: the image may be biased (please report)");
+    const render::Camera& cam = *camera;
+    d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
+                   {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
+                   {"up", {cam.up().x, cam.up().y, cam.up().z}}};
+    const std::size_t bytes = film->pixels.size() * sizeof(float);
+    return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
+}
+
 // ---- The plan ----------------------------------------------------------------------------------
 
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     const render::RenderOptions options = parseOptions(kind, scene, reader);
+    std::optional<pathtrace::Options> traced;
+    if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader);
     Plan plan;
     plan.params = reader.used;
     const json optionsKey = {{"params", reader.used},
@@ -549,6 +631,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     Stage sh{"light_sh", StageKind::Precompute, {"lights"}};
     if (!isLit(kind))
         sh.skip = "not needed: method '" + scene.method.name + "' is unlit";
+    else if (kind == Kind::PathTrace)
+        sh.skip = "not needed: the path tracer samples environment maps directly";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
     // Keyed on the environment lights alone: moving a directional light re-projects no map.
@@ -569,7 +653,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     // What the fitted camera frames: the hull of the visible matter (render/framing.h).
     const json cutDesc = {{"clip", scene.document.value("clip_planes", json::array())},
                           {"crop", scene.document.value("crop_box", json::object())}};
-    const bool voxelsByTf = kind == Kind::Gradient || kind == Kind::EmissionAbsorption;
+    const bool voxelsByTf =
+        kind == Kind::Gradient || kind == Kind::EmissionAbsorption || kind == Kind::PathTrace;
     Stage framing{"framing", StageKind::Precompute,
                   voxelsByTf ? std::vector<std::string>{"skip_cells", "transfer_function",
                                                         "clip_planes", "crop_box"}
@@ -660,6 +745,11 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .json(optionsKey)
             .value();
     };
+    if (kind == Kind::PathTrace) {
+        frame.compute = [pt = *traced](Run& run) { return renderPathTraced(run, pt); };
+        plan.stages.push_back(frame);
+        return plan;
+    }
     frame.compute = [options, kind](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
@@ -774,6 +864,19 @@ const RegisterMethod kMip(rayCasterMethod(Kind::Mip, "mip",
 const RegisterMethod kMinIp(rayCasterMethod(Kind::MinIp, "minip",
                                             "minimum intensity projection, grey through the window",
                                             {}, {}));
+const RegisterMethod kPathTrace([] {
+    MethodInfo m;
+    m.name = "pathtrace";
+    m.summary =
+        "Monte-Carlo path tracer: delta tracking over the majorant grid, exact shadows, "
+        "single or multiple scattering (the reference)";
+    m.effects = {"local_shadows", "global_shadows", "multiple_scattering"};
+    m.params = {"spp", "seconds", "max_bounces", "phase_g", "majorant_grid", "antialias"};
+    m.plan = [](const io::Scene& scene, ParamReader& reader) {
+        return planRayCaster(Kind::PathTrace, scene, reader);
+    };
+    return m;
+}());
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

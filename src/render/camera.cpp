@@ -148,9 +148,11 @@ void Camera::fit(const CameraSpec& spec, std::span<const glm::dvec3> points, dou
     eye_ = origin + ex * right_ + ey * up_ + ez * forward_;
 }
 
-Ray Camera::generate(int x, int y) const {
-    const double sx = (x + 0.5) * pixelScaleX_ - 1.0;  // −1 left … +1 right
-    const double sy = 1.0 - (y + 0.5) * pixelScaleY_;  // +1 top … −1 bottom
+Ray Camera::generate(int x, int y) const { return generateAt(x + 0.5, y + 0.5); }
+
+Ray Camera::generateAt(double px, double py) const {
+    const double sx = px * pixelScaleX_ - 1.0;  // −1 left … +1 right
+    const double sy = 1.0 - py * pixelScaleY_;  // +1 top … −1 bottom
     Ray r;
     if (projection_ == Projection::Perspective) {
         const glm::dvec3 d = forward_ + sx * rightStep_ + sy * upStep_;

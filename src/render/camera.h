@@ -57,6 +57,9 @@ class Camera {
     Camera(const CameraSpec& spec, std::span<const glm::dvec3> fitPoints, int width, int height);
 
     Ray generate(int x, int y) const;
+    /// The ray through continuous pixel coordinates (px, py) ∈ [0, width) × [0, height) (pixel
+    /// (x, y)'s centre is (x + 0.5, y + 0.5)): for sub-pixel samples.
+    Ray generateAt(double px, double py) const;
     /// Inverse of generate(): the continuous pixel coordinates (x, y) of world point p, so that
     /// the ray of pixel (i, j) passes through p exactly when p projects to (i, j). False when p is
     /// not in front of a perspective camera (depth along forward() ≤ 0), where nothing is returned.

@@ -1,0 +1,453 @@
+// SPDX-License-Identifier: MIT
+#include "pathtrace/path_tracer.h"
+
+#include <tbb/blocked_range2d.h>
+#include <tbb/global_control.h>
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cmath>
+#include <numbers>
+
+#include "core/error.h"
+#include "core/timing.h"
+
+namespace voxlight::pathtrace {
+
+namespace {
+
+constexpr double kInvFourPi = 0.25 / std::numbers::pi;
+/// Ratio tracking plays Russian roulette below this transmittance (survivors doubled): unbiased,
+/// and shadow rays through dense matter stop early.
+constexpr double kRouletteTransmittance = 0.1;
+/// Null collisions one free flight or shadow ray may take. A cell that is partly empty under a
+/// huge σt (10⁶/mm at a sharp TF edge) would take σt × (empty length) of them; past the budget the
+/// matter ahead is opaque at the scale of a micrometre, so the flight collides where it is and the
+/// shadow ray is blocked. Counted (Stats::budgetExceeded) and reported, never silent.
+constexpr int kNullCollisionBudget = 4096;
+/// Samples per progressive pass (the stop criteria are checked between passes).
+constexpr int kSamplesPerPass = 4;
+/// Irradiance of the headlight used when a scene has no light: 4π, so that a fully lit scatterer
+/// of albedo a under isotropic single scattering shows radiance a (comparable to the ray caster).
+constexpr float kHeadlightIrradiance = float(4.0 * std::numbers::pi);
+
+struct HalfSpace {
+    glm::dvec3 point, normal;
+};
+
+struct Counters {
+    std::uint64_t real = 0, null = 0, shadow = 0, violations = 0, budget = 0;
+};
+
+double powerHeuristic(double a, double b) { return a * a / (a * a + b * b); }
+
+}  // namespace
+
+float henyeyGreenstein(float cosTheta, float g) {
+    if (std::abs(g) < 1e-4f) return float(kInvFourPi);
+    const float d = 1.f + g * g - 2.f * g * cosTheta;
+    return float(kInvFourPi) * (1.f - g * g) / (d * std::sqrt(d));
+}
+
+glm::dvec3 sampleHenyeyGreenstein(const glm::dvec3& forward, float g, float u1, float u2) {
+    double cosT;
+    if (std::abs(g) < 1e-4f) {
+        cosT = 1.0 - 2.0 * u1;
+    } else {
+        const double s = (1.0 - double(g) * g) / (1.0 - g + 2.0 * g * u1);
+        cosT = (1.0 + double(g) * g - s * s) / (2.0 * g);
+    }
+    cosT = std::clamp(cosT, -1.0, 1.0);
+    const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
+    const double phi = 2.0 * std::numbers::pi * u2;
+    // Orthonormal basis around forward (Duff et al. 2017).
+    const double sign = std::copysign(1.0, forward.z);
+    const double a = -1.0 / (sign + forward.z), b = forward.x * forward.y * a;
+    const glm::dvec3 t1(1.0 + sign * forward.x * forward.x * a, sign * b, -sign * forward.x);
+    const glm::dvec3 t2(b, sign + forward.y * forward.y * a, -forward.y);
+    return glm::normalize(sinT * std::cos(phi) * t1 + sinT * std::sin(phi) * t2 + cosT * forward);
+}
+
+struct PathTracer::Impl {
+    std::shared_ptr<const core::Volume> volume;
+    std::shared_ptr<const optics::TfTable> table;
+    std::shared_ptr<const grid::BrickMajorants> cells;
+    glm::dmat3 toIndex;  ///< world direction → index units (Dᵀ / spacing)
+    glm::dvec3 origin;
+    glm::dvec3 boxLo, boxHi;  ///< volume box in index space (voxel centres; ±0.5 on a 1-voxel axis)
+    std::vector<HalfSpace> keep;
+    float globalMajorant = 0.f;
+    bool majorantGrid = true;
+    int cellSize = 1;
+    glm::ivec3 counts{1};
+
+    glm::dvec3 indexOf(const glm::dvec3& world) const { return toIndex * (world - origin); }
+
+    template <class View>
+    float sigma(const View& v, const glm::dvec3& ijk) const {
+        return table->lookup(v.sample(float(ijk.x), float(ijk.y), float(ijk.z))).extinction;
+    }
+
+    /// Calls f(ta, tb, majorant) for consecutive pieces of [t0, t1] with a constant majorant
+    /// (cells of the grid, or one piece under the global maximum) until f returns false.
+    template <class F>
+    void traverse(const Ray& ray, double t0, double t1, F&& f) const {
+        if (!(t1 > t0)) return;
+        if (!majorantGrid) {
+            f(t0, t1, globalMajorant);
+            return;
+        }
+        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        const glm::dvec3 start = o + d * (t0 + 1e-9 * (1.0 + std::abs(t0)));
+        glm::ivec3 c;
+        glm::dvec3 tNext, tStep;
+        glm::ivec3 step;
+        for (int a = 0; a < 3; ++a) {
+            c[a] = std::clamp(int(std::floor(start[a] / cellSize)), 0, counts[a] - 1);
+            if (d[a] > 0.0) {
+                step[a] = 1;
+                tNext[a] = c[a] + 1 < counts[a] ? ((c[a] + 1) * cellSize - o[a]) / d[a] : INFINITY;
+                tStep[a] = cellSize / d[a];
+            } else if (d[a] < 0.0) {
+                step[a] = -1;
+                tNext[a] = c[a] > 0 ? (c[a] * cellSize - o[a]) / d[a] : INFINITY;
+                tStep[a] = -cellSize / d[a];
+            } else {
+                step[a] = 0;
+                tNext[a] = INFINITY;
+                tStep[a] = INFINITY;
+            }
+        }
+        double t = t0;
+        while (t < t1) {
+            const int a = tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2)
+                                             : (tNext.y <= tNext.z ? 1 : 2);
+            const double tb = std::min(tNext[a], t1);
+            if (tb > t && !f(t, tb, cells->majorant(cells->index(c.x, c.y, c.z)))) return;
+            t = tb;
+            if (!(tNext[a] < t1)) return;
+            c[a] += step[a];
+            if (c[a] < 0 || c[a] >= counts[a]) return;
+            tNext[a] = c[a] + step[a] >= 0 && c[a] + step[a] < counts[a] ? tNext[a] + tStep[a]
+                                                                       : INFINITY;
+        }
+    }
+
+    template <class View>
+    std::optional<double> freeFlight(const View& v, const Ray& ray, double t0, double t1,
+                                     core::CounterRng& rng, Counters& n) const {
+        std::optional<double> hit;
+        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        int nulls = 0;
+        traverse(ray, t0, t1, [&](double ta, double tb, float m) {
+            if (!(m > 0.f)) return true;
+            double t = ta;
+            while (true) {
+                t -= std::log(1.0 - rng.uniformDouble()) / m;
+                if (t >= tb) return true;
+                const float s = sigma(v, o + t * d);
+                if (s > m) ++n.violations;
+                if (rng.uniform() * m < s || ++nulls > kNullCollisionBudget) {
+                    if (nulls > kNullCollisionBudget) ++n.budget;
+                    hit = t;
+                    ++n.real;
+                    return false;
+                }
+                ++n.null;
+            }
+        });
+        return hit;
+    }
+
+    template <class View>
+    double ratioTracking(const View& v, const Ray& ray, double t0, double t1,
+                         core::CounterRng& rng, Counters& n) const {
+        double T = 1.0;
+        ++n.shadow;
+        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        int steps = 0;
+        traverse(ray, t0, t1, [&](double ta, double tb, float m) {
+            if (!(m > 0.f)) return true;
+            double t = ta;
+            while (true) {
+                t -= std::log(1.0 - rng.uniformDouble()) / m;
+                if (t >= tb) return true;
+                if (++steps > kNullCollisionBudget) {
+                    ++n.budget;
+                    T = 0.0;
+                    return false;
+                }
+                const float s = sigma(v, o + t * d);
+                if (s > m) ++n.violations;
+                T *= std::max(0.0, 1.0 - double(s) / m);
+                if (T < kRouletteTransmittance) {
+                    if (rng.uniform() < 0.5f) {
+                        T = 0.0;
+                        return false;
+                    }
+                    T *= 2.0;
+                }
+            }
+        });
+        return T;
+    }
+
+    bool keptInterval(const Ray& ray, double& t0, double& t1) const {
+        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        for (int a = 0; a < 3; ++a) {
+            if (std::abs(d[a]) < 1e-15) {
+                if (o[a] < boxLo[a] || o[a] > boxHi[a]) return false;
+                continue;
+            }
+            double ta = (boxLo[a] - o[a]) / d[a], tb = (boxHi[a] - o[a]) / d[a];
+            if (ta > tb) std::swap(ta, tb);
+            t0 = std::max(t0, ta);
+            t1 = std::min(t1, tb);
+        }
+        for (const HalfSpace& h : keep) {
+            const double dn = glm::dot(ray.direction, h.normal);
+            const double s = glm::dot(ray.origin - h.point, h.normal);  // ≥ 0 kept
+            if (std::abs(dn) < 1e-15) {
+                if (s < 0.0) return false;
+                continue;
+            }
+            const double t = -s / dn;
+            if (dn > 0.0)
+                t0 = std::max(t0, t);
+            else
+                t1 = std::min(t1, t);
+        }
+        return t1 > t0;
+    }
+};
+
+PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
+                       std::shared_ptr<const optics::TfTable> table,
+                       std::shared_ptr<const grid::BrickMajorants> cells, Options options)
+    : options_(std::move(options)) {
+    if (options_.samplesPerPixel < 1)
+        throw InputError("pathtrace", "spp", "must be at least 1");
+    if (options_.maxBounces < 1) throw InputError("pathtrace", "max_bounces", "must be at least 1");
+    if (!(std::abs(options_.phaseG) < 1.f))
+        throw InputError("pathtrace", "phase_g", "must lie strictly between -1 and 1");
+    VL_CHECK(volume && table && cells);
+    auto impl = std::make_shared<Impl>();
+    const core::Geometry& g = volume->geometry();
+    VL_CHECK(cells->counts() ==
+             (g.dims + cells->cellSize() - 1) / cells->cellSize());  // built for this volume
+    impl->volume = std::move(volume);
+    impl->table = std::move(table);
+    impl->cells = std::move(cells);
+    impl->origin = g.origin;
+    const glm::dmat3 dt = glm::transpose(g.direction);
+    impl->toIndex = glm::dmat3(1.0);
+    for (int col = 0; col < 3; ++col)
+        for (int row = 0; row < 3; ++row) impl->toIndex[col][row] = dt[col][row] / g.spacing[row];
+    for (int a = 0; a < 3; ++a) {
+        const int n = g.dims[a];
+        impl->boxLo[a] = n > 1 ? 0.0 : -0.5;
+        impl->boxHi[a] = n > 1 ? double(n - 1) : 0.5;
+    }
+    for (const auto& p : options_.clipPlanes) impl->keep.push_back({p.point, p.normal});
+    if (options_.cropBox)
+        for (int a = 0; a < 3; ++a) {
+            glm::dvec3 n(0.0);
+            n[a] = 1.0;
+            impl->keep.push_back({options_.cropBox->min, n});
+            impl->keep.push_back({options_.cropBox->max, -n});
+        }
+    impl->cellSize = impl->cells->cellSize();
+    impl->counts = impl->cells->counts();
+    for (std::size_t i = 0; i < impl->cells->size(); ++i)
+        impl->globalMajorant = std::max(impl->globalMajorant, impl->cells->majorant(i));
+    impl->majorantGrid = options_.majorantGrid;
+    impl_ = std::move(impl);
+}
+
+bool PathTracer::keptInterval(const Ray& ray, double& t0, double& t1) const {
+    return impl_->keptInterval(ray, t0, t1);
+}
+
+std::optional<double> PathTracer::freeFlight(const Ray& ray, double t0, double t1,
+                                             core::CounterRng& rng) const {
+    Counters n;
+    return impl_->volume->visit(
+        [&](const auto& v) { return impl_->freeFlight(v, ray, t0, t1, rng, n); });
+}
+
+double PathTracer::transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const {
+    double t0 = 0.0, t1 = maxT;
+    if (!impl_->keptInterval(ray, t0, t1)) return 1.0;
+    Counters n;
+    return impl_->volume->visit(
+        [&](const auto& v) { return impl_->ratioTracking(v, ray, t0, t1, rng, n); });
+}
+
+float PathTracer::extinctionAt(const glm::dvec3& p) const {
+    return impl_->volume->visit([&](const auto& v) { return impl_->sigma(v, impl_->indexOf(p)); });
+}
+
+core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Progress& progress,
+                                   Stats* stats, core::ImageRGBA* stdError) const {
+    core::Stopwatch clock;
+    const Impl& im = *impl_;
+    const int w = camera.width(), h = camera.height();
+    const std::size_t pixels = std::size_t(w) * std::size_t(h);
+    // Per pixel, in double: Σ rgb, Σ rgb², Σ alpha.
+    std::vector<double> sum(pixels * 3, 0.0), sumSq(pixels * 3, 0.0), alpha(pixels, 0.0);
+    std::vector<std::shared_ptr<const lights::Light>> lightList = options_.lights;
+    if (lightList.empty()) {
+        // The ray caster's headlight: travels along the view, from above-left of the camera.
+        const glm::vec3 travel = glm::normalize(
+            glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
+        lightList.push_back(
+            std::make_shared<lights::DirectionalLight>(glm::vec3(kHeadlightIrradiance), -travel));
+    }
+    const float g = options_.phaseG;
+    const glm::dvec3 bg(options_.background);
+    std::atomic<std::uint64_t> paths{0}, real{0}, null{0}, shadow{0}, violations{0}, budget{0};
+
+    // One sample of pixel p: accumulates rgb, rgb² and coverage.
+    auto trace = [&](const auto& view, int x, int y, int s, Counters& n) {
+        const std::size_t p = std::size_t(y) * std::size_t(w) + std::size_t(x);
+        core::CounterRng rng(core::hashCounters(p, std::uint64_t(s), 0x7074, options_.seed));
+        const double jx = options_.pixelJitter ? rng.uniformDouble() : 0.5;
+        const double jy = options_.pixelJitter ? rng.uniformDouble() : 0.5;
+        const render::Ray cr = camera.generateAt(x + jx, y + jy);
+        Ray ray{cr.origin, cr.direction};
+        glm::dvec3 L(0.0), beta(1.0);
+        double covered = 0.0, phasePdf = 0.0;
+        for (int bounce = 0;; ++bounce) {
+            double t0 = 0.0, t1 = INFINITY;
+            const std::optional<double> hit = im.keptInterval(ray, t0, t1)
+                                                  ? im.freeFlight(view, ray, t0, t1, rng, n)
+                                                  : std::nullopt;
+            if (!hit) {
+                if (bounce == 0) {
+                    L += bg;  // the camera sees the background through the volume
+                } else {
+                    // The phase-sampled direction meets the lights a ray can hit (MIS with NEE).
+                    const glm::vec3 wi(ray.direction);
+                    for (const auto& light : lightList) {
+                        if (light->isDelta()) continue;
+                        const glm::dvec3 le(light->radiance(ray.origin, wi));
+                        if (le == glm::dvec3(0.0)) continue;
+                        L += beta * le * powerHeuristic(phasePdf, light->pdf(ray.origin, wi));
+                    }
+                }
+                break;
+            }
+            if (bounce == 0) covered = 1.0;
+            const glm::dvec3 x3 = ray.origin + *hit * ray.direction;
+            const glm::dvec3 ijk = im.indexOf(x3);
+            const optics::TfSample ts =
+                im.table->lookup(view.sample(float(ijk.x), float(ijk.y), float(ijk.z)));
+            const glm::dvec3 albedo(ts.albedo);
+            L += beta * (1.0 - albedo) * glm::dvec3(ts.emission);  // ARCHITECTURE §1: (1 − a)·e
+            beta *= albedo;
+            if (beta == glm::dvec3(0.0)) break;
+            const bool continues = bounce + 1 < options_.maxBounces;
+            // Next-event estimation towards every light; MIS weights only when the path also
+            // continues by phase sampling (which can then hit the same area/environment light).
+            for (const auto& light : lightList) {
+                const glm::vec2 u(rng.uniform(), rng.uniform());
+                const lights::LightSample ls = light->sample(x3, u);
+                if (!(ls.pdf > 0.f)) continue;
+                const glm::dvec3 wi(ls.wi);
+                const double phase = henyeyGreenstein(float(glm::dot(ray.direction, wi)), g);
+                double st0 = 0.0, st1 = double(ls.distance);
+                const Ray sr{x3, wi};
+                const double T = im.keptInterval(sr, st0, st1)
+                                     ? im.ratioTracking(view, sr, st0, st1, rng, n)
+                                     : 1.0;
+                if (!(T > 0.0)) continue;
+                glm::dvec3 c = beta * (phase * T) * glm::dvec3(ls.value);
+                if (!ls.delta) {
+                    c /= double(ls.pdf);
+                    if (continues) c *= powerHeuristic(ls.pdf, phase);
+                }
+                L += c;
+            }
+            if (!continues) break;
+            if (bounce + 1 >= options_.rouletteAfter) {
+                const double q = std::clamp(std::max({beta.x, beta.y, beta.z}), 0.05, 1.0);
+                if (rng.uniformDouble() >= q) break;
+                beta /= q;
+            }
+            const glm::dvec3 next =
+                sampleHenyeyGreenstein(ray.direction, g, rng.uniform(), rng.uniform());
+            phasePdf = henyeyGreenstein(float(glm::dot(ray.direction, next)), g);
+            ray = Ray{x3, next};
+        }
+        for (int c = 0; c < 3; ++c) {
+            const double v = std::isfinite(L[c]) ? L[c] : 0.0;
+            sum[p * 3 + c] += v;
+            sumSq[p * 3 + c] += v * v;
+        }
+        alpha[p] += covered;
+    };
+
+    std::unique_ptr<tbb::global_control> limit;
+    if (options_.threads > 0)
+        limit = std::make_unique<tbb::global_control>(
+            tbb::global_control::max_allowed_parallelism, std::size_t(options_.threads));
+    int done = 0;
+    while (done < options_.samplesPerPixel) {
+        const int s0 = done, s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
+        tbb::parallel_for(tbb::blocked_range2d<int>(0, h, 8, 0, w, 8), [&](const auto& r) {
+            Counters n;
+            im.volume->visit([&](const auto& view) {
+                for (int y = r.rows().begin(); y < r.rows().end(); ++y)
+                    for (int x = r.cols().begin(); x < r.cols().end(); ++x)
+                        for (int s = s0; s < s1; ++s) trace(view, x, y, s, n);
+            });
+            paths += std::uint64_t(r.rows().size()) * r.cols().size() * std::uint64_t(s1 - s0);
+            real += n.real, null += n.null, shadow += n.shadow, violations += n.violations;
+            budget += n.budget;
+        });
+        progress.report("pathtrace " + std::to_string(s1) + " spp",
+                        double(s1) / options_.samplesPerPixel);
+        done = s1;
+        if (options_.maxSeconds > 0.0 && clock.seconds() >= options_.maxSeconds) break;
+    }
+
+    core::ImageRGBA film(w, h);
+    if (stdError) *stdError = core::ImageRGBA(w, h);
+    double relSum = 0.0;
+    std::size_t relCount = 0;
+    const double n = done;
+    for (std::size_t p = 0; p < pixels; ++p) {
+        float* out = film.pixels.data() + p * 4;
+        double lumMean = 0.0, lumVar = 0.0;
+        for (int c = 0; c < 3; ++c) {
+            const double mean = sum[p * 3 + c] / n;
+            const double var = std::max(0.0, sumSq[p * 3 + c] / n - mean * mean) / std::max(1.0, n - 1.0);
+            out[c] = float(mean);
+            if (stdError) stdError->pixels[p * 4 + c] = float(std::sqrt(var));
+            const double wgt = c == 0 ? 0.2126 : c == 1 ? 0.7152 : 0.0722;
+            lumMean += wgt * mean;
+            lumVar += wgt * wgt * var;  // channels treated as independent (an estimate)
+        }
+        out[3] = float(alpha[p] / n);
+        if (stdError) stdError->pixels[p * 4 + 3] = 1.f;
+        if (out[3] > 0.f && lumMean > 1e-6) {
+            relSum += std::sqrt(lumVar) / lumMean;
+            ++relCount;
+        }
+    }
+    if (stats) {
+        stats->samplesPerPixel = done;
+        stats->paths = paths;
+        stats->realCollisions = real;
+        stats->nullCollisions = null;
+        stats->shadowRays = shadow;
+        stats->majorantViolations = violations;
+        stats->budgetExceeded = budget;
+        stats->seconds = clock.seconds();
+        stats->relativeStdError = relCount ? relSum / double(relCount) : 0.0;
+    }
+    return film;
+}
+
+}  // namespace voxlight::pathtrace

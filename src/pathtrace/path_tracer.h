@@ -1,0 +1,117 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Monte-Carlo volume path tracer of ARCHITECTURE.md §1 (Exposure Render, Kroes et al. 2012, with
+// the majorant grid it lacked): the reference every fast method is measured against.
+//
+// Free flights by delta (Woodcock) tracking through the skip cells' majorants (per-cell maximum σt
+// under the TF, a DDA through the cell grid, so empty and thin cells cost one step instead of many
+// null collisions under one global maximum); shadow rays by ratio tracking with Russian roulette
+// on small transmittance. At a real collision the estimator adds (1 − a)·emission, multiplies the
+// throughput by the albedo a and estimates in-scattering by next-event estimation towards every
+// light (MIS, power heuristic, with phase sampling for the lights a ray can hit: area and
+// environment) and — for multiple scattering — continues in a direction drawn from the phase
+// function (isotropic or Henyey–Greenstein), with Russian roulette after a few bounces.
+// max_bounces = 1 is single scattering, the optical model the SH methods approximate.
+//
+// Camera rays that escape see the background (radiance + T·background, alpha = 1 − T in
+// expectation, as the ray caster's film); scattered rays that escape see the environment and area
+// lights. Clip planes and the crop box cut camera rays and shadow rays alike (removed matter is
+// gone for the light too). No lights in the scene: the ray caster's headlight.
+//
+// Determinism: every sample's random numbers are a pure function of (pixel, sample index, seed),
+// and each pixel sums its samples in order, so the image is the same for any thread count.
+#include <memory>
+#include <optional>
+#include <vector>
+
+#include "core/image.h"
+#include "core/progress.h"
+#include "core/rng.h"
+#include "core/volume.h"
+#include "grid/brick_traversal.h"
+#include "lights/light.h"
+#include "optics/transfer_function.h"
+#include "render/camera.h"
+#include "render/ray_caster.h"
+
+namespace voxlight::pathtrace {
+
+struct Options {
+    int samplesPerPixel = 64;
+    double maxSeconds = 0.0;  ///< > 0: stop after the pass that crosses this many seconds
+    int maxBounces = 1;       ///< scattering events per path (1 = single scattering)
+    float phaseG = 0.f;       ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
+    int rouletteAfter = 3;    ///< bounces before Russian roulette may end a path
+    bool majorantGrid = true; ///< false: one global majorant (Exposure Render's scheme)
+    /// Samples spread over each pixel's area (antialiased photo); false: through its centre, as
+    /// the ray caster and the SH methods sample — for pixel-by-pixel references.
+    bool pixelJitter = true;
+    std::uint64_t seed = 1;
+    int threads = 0;
+    glm::vec3 background{0.f};
+    std::vector<render::ClipPlane> clipPlanes;
+    std::optional<render::CropBox> cropBox;
+    std::vector<std::shared_ptr<const lights::Light>> lights;
+};
+
+struct Stats {
+    int samplesPerPixel = 0;  ///< passes completed × samples per pass
+    std::uint64_t paths = 0, realCollisions = 0, nullCollisions = 0, shadowRays = 0;
+    /// Samples whose σt exceeded the cell's majorant (would bias delta tracking): 0 when the
+    /// majorants are right; counted, never silently ignored.
+    std::uint64_t majorantViolations = 0;
+    /// Flights and shadow rays that hit the null-collision budget (a partly empty cell under an
+    /// extreme σt): taken as blocked there. 0 for ordinary TFs.
+    std::uint64_t budgetExceeded = 0;
+    double seconds = 0.0;
+    /// Mean over covered pixels of (standard error / mean) of the luminance.
+    double relativeStdError = 0.0;
+};
+
+/// A ray in world millimetres.
+struct Ray {
+    glm::dvec3 origin;
+    glm::dvec3 direction;  ///< unit
+};
+
+class PathTracer {
+  public:
+    /// `cells`: majorant σt per skip cell under `table`'s TF (render::buildSkipCells with an
+    /// emission-absorption or gradient mode). Throws InputError (source "pathtrace") on bad
+    /// options.
+    PathTracer(std::shared_ptr<const core::Volume> volume,
+               std::shared_ptr<const optics::TfTable> table,
+               std::shared_ptr<const grid::BrickMajorants> cells, Options options);
+
+    /// Progressive render: passes of samples until samplesPerPixel (or maxSeconds). RGB = mean
+    /// radiance (linear), alpha = mean coverage. `stdError`, when given, receives the per-pixel
+    /// standard error of the RGB mean.
+    core::ImageRGBA render(const render::Camera& camera, const core::Progress& progress,
+                           Stats* stats = nullptr, core::ImageRGBA* stdError = nullptr) const;
+
+    // Building blocks, public for the unbiasedness tests.
+    /// The part [t0, t1] of `ray` inside the volume box and the kept region; false when empty.
+    bool keptInterval(const Ray& ray, double& t0, double& t1) const;
+    /// Delta tracking from t0: the distance of the first real collision before t1, or nullopt.
+    std::optional<double> freeFlight(const Ray& ray, double t0, double t1,
+                                     core::CounterRng& rng) const;
+    /// Ratio-tracking estimate of the transmittance along `ray` over [0, maxT] (clipped to the
+    /// kept region).
+    double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
+    /// σt at a world point (TF table lookup of the trilinear value).
+    float extinctionAt(const glm::dvec3& p) const;
+
+    const Options& options() const { return options_; }
+
+  private:
+    struct Impl;
+    std::shared_ptr<const Impl> impl_;
+    Options options_;
+};
+
+/// Henyey–Greenstein phase function value for cos θ between the propagation directions.
+float henyeyGreenstein(float cosTheta, float g);
+/// Draws a direction from HG around `forward` (unit) with u ∈ [0,1)².
+glm::dvec3 sampleHenyeyGreenstein(const glm::dvec3& forward, float g, float u1, float u2);
+
+}  // namespace voxlight::pathtrace
