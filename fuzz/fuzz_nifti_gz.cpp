@@ -15,7 +15,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     clearScratch();
     const std::filesystem::path path = scratchDir() / "in.nii.gz";
     gzFile gz = gzopen(path.c_str(), "wb1");
-    if (!gz || (size > 0 && gzwrite(gz, data, unsigned(size)) != int(size)) || gzclose(gz) != Z_OK) {
+    if (!gz || (size > 0 && gzwrite(gz, data, unsigned(size)) != int(size)) ||
+        gzclose(gz) != Z_OK) {
         std::fprintf(stderr, "voxlight fuzz: cannot write %s\n", path.c_str());
         std::abort();
     }

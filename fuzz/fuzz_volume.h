@@ -14,9 +14,8 @@ inline void loadLikeInfo(const std::filesystem::path& path, const io::ReadOption
     runLoader([&] {
         const core::Volume v = io::readVolume(path, options);
         const auto range = v.physicalRange();
-        const nlohmann::json j = {{"description", v.description},
-                                  {"format", v.format},
-                                  {"range", {range[0], range[1]}}};
+        const nlohmann::json j = {
+            {"description", v.description}, {"format", v.format}, {"range", {range[0], range[1]}}};
         (void)j.dump();
     });
 }

@@ -157,6 +157,42 @@ std::size_t limitAddressSpace(std::size_t extra) {
 #endif
 }
 
+/// Test seam (tests/io_dicom/test_dicom_hostile.cpp): VOXLIGHT_DICOM_CHILD_FAULT makes the child
+/// fail in each way GDCM and OpenJPEG were seen to fail, so that the containment is tested apart
+/// from the checks that now keep the known damaged files away from GDCM.
+void injectFault(const fs::path& path) {
+    const char* fault = std::getenv("VOXLIGHT_DICOM_CHILD_FAULT");
+    if (!fault) return;
+    const std::string f = fault;
+    if (f == "abort") {
+        std::fprintf(stderr,
+                     "voxlight: ./Source/Fake/gdcmFake.h:236: void gdcm::Fake::Read(): Assertion "
+                     "`Fragments.size()' failed.\n");
+        std::abort();
+    } else if (f == "segv") {
+        ::raise(SIGSEGV);
+    } else if (f == "hang") {
+        for (;;) ::pause();
+    } else if (f == "alloc") {
+        auto* p = new char[std::size_t(64) << 30];  // what OpenJPEG asked for, times 16
+        p[0] = 1;
+        delete[] p;
+    } else if (f == "noise") {  // OpenJPEG's habit: error lines on stderr, then GDCM returns false
+        std::fprintf(stderr, "[ERROR] Stream too short\n[ERROR] Failed to decode the codestream\n");
+        throw InputError(path.string(), "PixelData", "GDCM cannot decode the pixel data");
+    }
+}
+
+/// Seconds without news from the child before it is taken as hung (VOXLIGHT_DICOM_STALL_SECONDS
+/// overrides kStallLimit, for tests).
+std::chrono::seconds stallLimit() {
+    if (const char* s = std::getenv("VOXLIGHT_DICOM_STALL_SECONDS")) {
+        const int v = std::atoi(s);
+        if (v > 0) return std::chrono::seconds(v);
+    }
+    return kStallLimit;
+}
+
 /// The child: run the module, report through `msgFd`, never return.
 [[noreturn]] void runChild(const mod::Api& api, const fs::path& path, const ReadOptions& options,
                            int msgFd, int errFd, int memFd) {
@@ -193,6 +229,7 @@ std::size_t limitAddressSpace(std::size_t extra) {
         },
         nullptr);
     try {
+        injectFault(path);
         const core::Volume v = api.readSeries(path, options, progress, hooks);
         VolumeHeader h{v.geometry(),        v.type(),
                        v.modality,          v.mapping.slope,
@@ -371,18 +408,18 @@ core::Volume readIsolated(const mod::Api& api, const fs::path& path, const ReadO
     fs::path reading = path;
     bool msgOpen = true, errOpen = true;
     auto lastNews = std::chrono::steady_clock::now();
+    const auto stall = stallLimit();
     while (msgOpen || errOpen) {
         pollfd fds[2] = {{msgOpen ? child.msg : -1, POLLIN, 0},
                          {errOpen ? child.err : -1, POLLIN, 0}};
         const int n = ::poll(fds, 2, 100);
         progress.checkCancel();  // CancelledError: the guard kills the child
         if (n < 0 && errno != EINTR) systemFailure(path, "poll");
-        if (std::chrono::steady_clock::now() - lastNews > kStallLimit) {
+        if (std::chrono::steady_clock::now() - lastNews > stall) {
             throw InputError(
                 reading.string(), "PixelData",
                 "DICOM decoding failed (GDCM made no progress for " +
-                    std::to_string(std::chrono::seconds(kStallLimit).count()) +
-                    " s and was stopped)",
+                    std::to_string(stall.count()) + " s and was stopped)",
                 "the file is probably damaged; remove it from the folder or copy the series again");
         }
         char buf[65536];

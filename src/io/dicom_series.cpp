@@ -1257,7 +1257,12 @@ core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const Re
     std::map<fs::path, PixelDataInfo> pixelData;
     for (const auto& f : candidates) {
         if (hooks.reading) hooks.reading(f);
-        pixelData[f] = FramingCheck::check(f);
+        const PixelDataInfo& info = pixelData[f] = FramingCheck::check(f);
+        // GDCM's header scan already fails (or asserts) on a transfer syntax it does not know.
+        if (codecOf(info.syntax) == Codec::Unknown)
+            throw InputError(str(f), "TransferSyntaxUID",
+                             "\"" + info.syntax + "\" is not a transfer syntax GDCM decodes",
+                             "convert the file with gdcmconv --raw (or dcmdjpeg) first");
     }
     progress.checkCancel();
 
