@@ -69,15 +69,15 @@ run_one() {
               -detect_leaks=0 -print_final_stats=1 -artifact_prefix="$findings/")
   if [ -n "$dict" ]; then args+=(-dict="$dict"); fi
   # Leaks are not findings: VTK and GDCM keep process-wide singletons.
-  local rc=0
+  local rc=0 start=$SECONDS
   ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:symbolize=1 UBSAN_OPTIONS=print_stacktrace=1 \
     nice -n 19 "$build/fuzz/fuzz_$t" "${args[@]}" "$@" "$corpus" "$seeds/$t" >"$log" 2>&1 || rc=$?
-  local execs rate found
+  local elapsed=$((SECONDS - start)) execs rate found
   execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
   rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
   found=$(find "$findings" -maxdepth 1 -type f -newer "$log.start" 2>/dev/null | wc -l)
   printf '%-14s %9s executions in %5s s, %6s exec/s, %d finding(s)%s\n' "$t" "${execs:-?}" \
-    "$seconds" "${rate:-?}" "$found" "$([ $rc -ne 0 ] && echo " (exit $rc; see $log)")"
+    "$elapsed" "${rate:-?}" "$found" "$([ $rc -ne 0 ] && echo " (exit $rc; see $log)")"
   [ $rc -eq 0 ] && [ "$found" -eq 0 ]
 }
 

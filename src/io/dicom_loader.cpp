@@ -174,9 +174,9 @@ void injectFault(const fs::path& path) {
     } else if (f == "hang") {
         for (;;) ::pause();
     } else if (f == "alloc") {
-        auto* p = new char[std::size_t(64) << 30];  // what OpenJPEG asked for, times 16
-        p[0] = 1;
-        delete[] p;
+        static char* volatile sink;  // volatile: the allocation must not be optimised away
+        sink = new char[std::size_t(64) << 30];  // what OpenJPEG asked for, times 16
+        delete[] sink;
     } else if (f == "noise") {  // OpenJPEG's habit: error lines on stderr, then GDCM returns false
         std::fprintf(stderr, "[ERROR] Stream too short\n[ERROR] Failed to decode the codestream\n");
         throw InputError(path.string(), "PixelData", "GDCM cannot decode the pixel data");

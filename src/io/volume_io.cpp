@@ -328,6 +328,8 @@ vtkImageData* runImageReader(vtkImageReader2* r, const fs::path& path,
 /// the file: VTK 9.1 crashes on a datatype it does not know and takes NaN spacing at face value.
 /// Offsets from nifti1.h / nifti2.h.
 constexpr std::int32_t kNifti1HeaderSize = 348, kNifti2HeaderSize = 540;
+/// descrip: char[80] in both versions, NUL-terminated only when shorter.
+constexpr std::ptrdiff_t kNiftiDescripBytes = 80;
 /// Datatype codes fromImageData converts: uint8, int16, int32, float32, float64, int8, uint16,
 /// uint32, int64, uint64 (NIfTI's DT_* codes) with their bits per voxel.
 const std::map<int, int>& niftiDatatypes() {
@@ -507,8 +509,11 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     }
     // descrip is 80 bytes of anything: keep printable ASCII, escape the rest (\xNN), so that
     // `info --json` and the stats stay valid UTF-8.
+    // VTK keeps all 80 bytes: a descrip without a NUL is not terminated (fuzz_nifti_gz read past
+    // it).
     std::string descrip;
-    for (const char* c = h->GetDescrip() ? h->GetDescrip() : ""; *c; ++c) {
+    const char* text = h->GetDescrip() ? h->GetDescrip() : "";
+    for (const char* c = text; c < text + kNiftiDescripBytes && *c; ++c) {
         const auto b = static_cast<unsigned char>(*c);
         if (b >= 0x20 && b < 0x7f) {
             descrip += char(b);

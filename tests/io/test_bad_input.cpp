@@ -536,3 +536,15 @@ TEST(BadInput, FuzzVtiAppendedDataWithoutMarkerIsRefusedQuickly) {
     expectInputError(tmp / "k.vti", "AppendedData", {"'_' marker"});
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }
+
+TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
+    // fuzz_nifti_gz: 80 non-NUL descrip bytes were read past their end (ASan heap-buffer-overflow).
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("torso", o), tmp / "d.nii");
+    const std::string full(80, 'x'), aux(24, 'y');
+    patchBytes(tmp / "d.nii", kNiftiDescrip, full.data(), full.size());
+    patchBytes(tmp / "d.nii", kNiftiDescrip + 80, aux.data(), aux.size());  // aux_file follows
+    EXPECT_EQ(io::readVolume(tmp / "d.nii").description, full);
+}

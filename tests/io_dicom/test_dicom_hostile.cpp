@@ -182,7 +182,8 @@ void expectRefused(const std::string& bytes, std::initializer_list<const char*> 
     std::cout << "[InputError] " << message << "\n";
     ASSERT_FALSE(message.empty()) << "accepted";
     EXPECT_NE(message.find("slice.dcm"), std::string::npos) << message;
-    for (const char* k : keys) EXPECT_NE(message.find(k), std::string::npos) << k << ": " << message;
+    for (const char* k : keys)
+        EXPECT_NE(message.find(k), std::string::npos) << k << ": " << message;
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;
     EXPECT_EQ(printed, "") << "printed on stderr";
     EXPECT_LT(seconds, 5.0);
@@ -315,7 +316,8 @@ TEST(DicomHostile, HugeAllocationInGdcmIsRefused) {
 
 TEST(DicomHostile, DecoderNoiseJoinsTheErrorLine) {
     ScopedEnv fault("VOXLIGHT_DICOM_CHILD_FAULT", "noise");
-    expectRefused(validSlice(), {"GDCM cannot decode", "[ERROR] Stream too short [+1 more line(s)]"});
+    expectRefused(validSlice(),
+                  {"GDCM cannot decode", "[ERROR] Stream too short [+1 more line(s)]"});
 }
 
 TEST(DicomHostile, CancelKillsTheDecoder) {
