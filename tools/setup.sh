@@ -9,6 +9,7 @@ packages=(
   libcgal-dev libopenmesh-dev libglfw3-dev libglm-dev libopenimageio-dev openimageio-tools
   libtbb-dev libeigen3-dev zlib1g-dev nlohmann-json3-dev libcli11-dev libimgui-dev libstb-dev
   libgtest-dev libgmock-dev libbenchmark-dev clang-format
+  clang-14 libclang-rt-14-dev
   xvfb xauth mesa-utils libgl1-mesa-dri libgl-dev libegl-dev
   python3-numpy python3-matplotlib python3-vtk9 python3-nibabel mricron-data
 )

@@ -20,6 +20,9 @@ namespace voxlight {
 /// "a, b, c": the allowed names an InputError's fix lists.
 std::string joinNames(const std::vector<std::string>& names);
 
+/// Bad input: "source: field: problem (fix)". what() is one line of valid UTF-8 whatever the parts
+/// hold (control characters and bytes that are not UTF-8, e.g. quoted from a damaged file, appear as
+/// \xNN); the accessors return the parts as given.
 class InputError : public std::runtime_error {
   public:
     InputError(std::string source, std::string field, std::string problem, std::string fix = {});

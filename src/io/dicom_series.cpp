@@ -156,6 +156,19 @@ struct SliceHeader {
     double along = 0.0;  ///< position projected on the slice normal (mm), filled when sorting
 };
 
+/// What the framing check saw of a file's top-level Pixel Data element, for checkPixelData().
+struct PixelDataInfo {
+    bool followed = false;        ///< the walk reached the end of the data set (else: unknown)
+    bool present = false;         ///< (7FE0,0010) at the top level
+    bool encapsulated = false;    ///< undefined length: a basic offset table item, then fragments
+    std::string syntax;           ///< Transfer Syntax UID ("" = no meta header: implicit VR LE)
+    std::string vr;               ///< explicit VR of the element ("" when implicit)
+    std::uint64_t length = 0;     ///< native: the value length in bytes
+    std::uint64_t fragments = 0;  ///< encapsulated: fragments after the basic offset table
+    std::string firstFragment;    ///< encapsulated: the first fragment's first bytes (≤ 4 KiB)
+    std::uint64_t firstFragmentLength = 0;
+};
+
 /// Step 0: framing check. Debian's GDCM is built with assertions on and *aborts the process*
 /// (assert(is.good())) on a file cut short inside its header, and silently accepts one cut inside
 /// the pixel data. So before GDCM sees a file, walk its data elements — tag and length only, no
@@ -166,12 +179,13 @@ class FramingCheck {
   public:
     /// Throws InputError naming the file and the element that runs past its end; silent when the
     /// framing is complete or cannot be followed.
-    static void check(const fs::path& file) {
+    static PixelDataInfo check(const fs::path& file) {
         FramingCheck c(file);
         const std::string cut = c.ok_ ? c.run() : std::string("cannot be opened");
         if (!cut.empty())
             throw InputError(str(file), c.field_, "is truncated or damaged: " + cut,
                              "copy the series again, or remove this file from the folder");
+        return c.pixelData_;
     }
 
   private:
@@ -247,6 +261,7 @@ class FramingCheck {
         }
         // Data set encoding from the transfer syntax; bare data sets: guess from the first
         // element's VR bytes.
+        pixelData_.syntax = syntax;
         if (syntax == "1.2.840.10008.1.2.1.99")
             return {};  // deflated: GDCM inflates, nothing to walk
         bigEndian_ = syntax == "1.2.840.10008.1.2.2";
@@ -287,6 +302,52 @@ class FramingCheck {
         for (const char* v : kLong)
             if (a == v[0] && b == v[1]) return true;
         return false;
+    }
+
+    /// Image attributes GDCM reads with gdcm::Attribute<>, which asserts (aborts) when the file's VR
+    /// differs from the dictionary's, and the binary ones' value length (US: VM 1).
+    static const char* expectedVr(std::uint16_t g, std::uint16_t e, std::uint32_t* binaryLength) {
+        struct Known {
+            std::uint16_t g, e;
+            const char* vr;
+            std::uint32_t length;  ///< exact length of a binary value, 0 for strings
+        };
+        static const Known kKnown[] = {
+            {0x0028, 0x0002, "US", 2}, {0x0028, 0x0004, "CS", 0}, {0x0028, 0x0006, "US", 2},
+            {0x0028, 0x0008, "IS", 0}, {0x0028, 0x0010, "US", 2}, {0x0028, 0x0011, "US", 2},
+            {0x0028, 0x0030, "DS", 0}, {0x0028, 0x0100, "US", 2}, {0x0028, 0x0101, "US", 2},
+            {0x0028, 0x0102, "US", 2}, {0x0028, 0x0103, "US", 2}, {0x0028, 0x1050, "DS", 0},
+            {0x0028, 0x1051, "DS", 0}, {0x0028, 0x1052, "DS", 0}, {0x0028, 0x1053, "DS", 0},
+            {0x0020, 0x0032, "DS", 0}, {0x0020, 0x0037, "DS", 0}, {0x0018, 0x0050, "DS", 0},
+            {0x0018, 0x0088, "DS", 0}, {0x0020, 0x0013, "IS", 0}, {0x0008, 0x0060, "CS", 0},
+            {0x0020, 0x000e, "UI", 0}, {0x0008, 0x0016, "UI", 0}, {0x0028, 0x0034, "IS", 0},
+        };
+        for (const Known& k : kKnown)
+            if (k.g == g && k.e == e) {
+                *binaryLength = k.length;
+                return k.vr;
+            }
+        return nullptr;
+    }
+    /// VR and length of a top-level image attribute: a mismatch is refused (GDCM would abort).
+    std::string checkAttribute(std::uint16_t g, std::uint16_t e, const unsigned char* vr,
+                               std::uint32_t len) {
+        std::uint32_t binaryLength = 0;
+        const char* expected = expectedVr(g, e, &binaryLength);
+        if (!expected) return {};
+        if (vr && !(vr[0] == expected[0] && vr[1] == expected[1]) &&
+            !(vr[0] == 'U' && vr[1] == 'N')) {
+            field_ = tagName(g, e);
+            return "element " + tagName(g, e) + " has value representation " +
+                   std::string(reinterpret_cast<const char*>(vr), 2) + ", DICOM defines " +
+                   expected;
+        }
+        if (binaryLength && len != binaryLength) {
+            field_ = tagName(g, e);
+            return "element " + tagName(g, e) + " (" + expected + ") is " + std::to_string(len) +
+                   " bytes long, expected " + std::to_string(binaryLength);
+        }
+        return {};
     }
 
     /// Outcome of walking a part: complete, cut short / overrunning (a message), or not followable
@@ -360,9 +421,21 @@ class FramingCheck {
             }
             const std::uint64_t start = pos;
             pos += head;
+            const bool pixelData = depth == 0 && g == 0x7fe0 && e == 0x0010;
+            if (depth == 0 && len != kUndefinedLength) {
+                const std::string bad = checkAttribute(g, e, explicitVr_ ? h + 4 : nullptr, len);
+                if (!bad.empty()) return {true, bad};
+            }
+            if (pixelData) {
+                pixelData_.present = true;
+                pixelData_.encapsulated = len == kUndefinedLength;
+                pixelData_.length = len;
+                if (explicitVr_) pixelData_.vr = std::string(reinterpret_cast<char*>(h + 4), 2);
+            }
             Result r;
             if (len == kUndefinedLength) {
-                r = sequence ? walkItems(pos, end, true, depth + 1) : walkFragments(pos, end);
+                r = sequence ? walkItems(pos, end, true, depth + 1)
+                             : walkFragments(pos, end, pixelData ? &pixelData_ : nullptr);
                 if (r.problem == "open") r = neverClosed(g, e, start);
             } else if (pos + len > end) {
                 return damaged(g, e, len, pos, end);
@@ -410,8 +483,10 @@ class FramingCheck {
         return delimited ? Result{true, "open"} : Result{};
     }
 
-    /// Fragments of encapsulated pixel data (items holding compressed bytes) up to the delimiter.
-    Result walkFragments(std::uint64_t& pos, std::uint64_t end) {
+    /// Fragments of encapsulated pixel data (items holding compressed bytes) up to the delimiter;
+    /// with `info`, counts them and keeps the head of the first after the basic offset table.
+    Result walkFragments(std::uint64_t& pos, std::uint64_t end, PixelDataInfo* info) {
+        std::uint64_t items = 0;
         while (pos < end) {
             unsigned char h[8];
             if (!header(pos, end, h))
@@ -421,8 +496,27 @@ class FramingCheck {
             const std::uint32_t len = u32(h + 4);
             pos += 8;
             if (g == 0xfffe && e == 0xe0dd) return {};
+            if (info && (g != 0xfffe || e != 0xe000 || len == kUndefinedLength || len % 2 ||
+                         (items == 0 && len % 4))) {
+                // The image's own fragments: GDCM's repairs of odd or shifted items assert
+                // (SequenceOfFragments::ReadValue), so a malformed one is refused here.
+                field_ = "PixelData";
+                return {true, "the encapsulated pixel data holds a malformed " +
+                                  std::string(items == 0 ? "basic offset table" : "fragment") +
+                                  " at offset " + std::to_string(pos - 8) + ": " + tagName(g, e) +
+                                  " of length " + std::to_string(len) +
+                                  " (items must be (FFFE,E000) of even length" +
+                                  (items == 0 ? ", the offset table a multiple of 4" : "") + ")"};
+            }
             if (g != 0xfffe || e != 0xe000 || len == kUndefinedLength) return unfollowable();
             if (pos + len > end) return damaged(0x7fe0, 0x0010, len, pos, end);
+            if (info && items++ > 0 && info->fragments++ == 0) {
+                info->firstFragmentLength = len;
+                info->firstFragment.resize(std::min<std::uint64_t>(len, 4096));
+                if (!read(info->firstFragment.data(), info->firstFragment.size()))
+                    return {true,
+                            "the file ends inside a fragment at offset " + std::to_string(pos)};
+            }
             pos += len;
         }
         return {true, "open"};
@@ -430,6 +524,7 @@ class FramingCheck {
 
     std::string walk(std::uint64_t pos) {
         const Result r = walkDataSet(pos, size_, false, 0);
+        pixelData_.followed = r.followable && r.problem.empty();
         return r.followable ? r.problem : std::string();
     }
 
@@ -437,7 +532,203 @@ class FramingCheck {
     std::uint64_t size_ = 0;
     bool ok_ = false, bigEndian_ = false, explicitVr_ = true;
     std::string field_;  ///< the element cut short, for InputError::field
+    PixelDataInfo pixelData_;
 };
+
+/// Transfer syntaxes GDCM decodes: native ones, and the encapsulated ones with the codec family.
+enum class Codec { Native, Jpeg, JpegLs, Jpeg2000, Rle, Unknown };
+Codec codecOf(const std::string& syntax) {
+    static const std::map<std::string, Codec> kSyntaxes = {
+        {"", Codec::Native},  // no meta header: implicit VR little endian
+        {"1.2.840.10008.1.2", Codec::Native},
+        {"1.2.840.10008.1.2.1", Codec::Native},
+        {"1.2.840.10008.1.2.2", Codec::Native},
+        {"1.2.840.10008.1.2.1.99", Codec::Native},
+        {"1.2.840.10008.1.2.4.50", Codec::Jpeg},
+        {"1.2.840.10008.1.2.4.51", Codec::Jpeg},
+        {"1.2.840.10008.1.2.4.57", Codec::Jpeg},
+        {"1.2.840.10008.1.2.4.70", Codec::Jpeg},
+        {"1.2.840.10008.1.2.4.80", Codec::JpegLs},
+        {"1.2.840.10008.1.2.4.81", Codec::JpegLs},
+        {"1.2.840.10008.1.2.4.90", Codec::Jpeg2000},
+        {"1.2.840.10008.1.2.4.91", Codec::Jpeg2000},
+        {"1.2.840.10008.1.2.5", Codec::Rle},
+    };
+    const auto it = kSyntaxes.find(syntax);
+    return it == kSyntaxes.end() ? Codec::Unknown : it->second;
+}
+
+std::uint32_t be32(const std::string& s, std::size_t at) {
+    const auto b = [&](std::size_t i) {
+        return std::uint32_t(static_cast<unsigned char>(s[at + i]));
+    };
+    return b(0) << 24 | b(1) << 16 | b(2) << 8 | b(3);
+}
+std::uint16_t be16(const std::string& s, std::size_t at) {
+    return std::uint16_t(static_cast<unsigned char>(s[at]) << 8 |
+                         static_cast<unsigned char>(s[at + 1]));
+}
+
+/// Pixel data checked against the image attributes before GDCM decodes it: the value length of
+/// native data against rows × columns × samples × bits × frames (GDCM's RAW codec reads past a
+/// short one), the transfer syntax against the codecs GDCM has, and the first fragment's own image
+/// size (JPEG 2000 SIZ, JPEG/JPEG-LS SOF, RLE header) against Rows/Columns: a damaged codestream
+/// claiming a huge image makes OpenJPEG allocate gigabytes before it fails.
+void checkPixelData(const SliceHeader& h, const PixelDataInfo& pd) {
+    if (!pd.followed) return;  // the framing walk could not follow the file: GDCM decides
+    const std::string src = str(h.file);
+    const std::string fix = "the file is damaged; copy the series again or re-export it";
+    if (!pd.present)
+        throw InputError(src, "PixelData", "the image has no Pixel Data element (7FE0,0010)", fix);
+    const Codec codec = codecOf(pd.syntax);
+    if (codec == Codec::Unknown)
+        throw InputError(src, "TransferSyntaxUID",
+                         "\"" + pd.syntax + "\" is not a transfer syntax GDCM decodes",
+                         "convert the file with gdcmconv --raw (or dcmdjpeg) first");
+    const std::uint64_t bytesPerSample = std::uint64_t(std::max(h.bitsAllocated, 0) + 7) / 8;
+    const std::uint64_t pixels = std::uint64_t(std::max(h.rows, 0)) *
+                                 std::uint64_t(std::max(h.columns, 0)) *
+                                 std::uint64_t(std::max(h.samplesPerPixel, 1));
+    const std::uint64_t frames = std::uint64_t(std::max(h.frames, 1));
+    if (codec == Codec::Native) {
+        if (pd.encapsulated)
+            throw InputError(src, "PixelData",
+                             "is encapsulated (compressed fragments) but the transfer syntax " +
+                                 pd.syntax + " says uncompressed",
+                             fix);
+        if (!pd.vr.empty() && pd.vr != "OB" && pd.vr != "OW" && pd.vr != "UN")
+            throw InputError(src, "PixelData",
+                             "has value representation " + pd.vr + ", expected OB or OW", fix);
+        const std::uint64_t need = pixels * bytesPerSample * frames;
+        if (pd.length < need)
+            throw InputError(src, "PixelData",
+                             "holds " + std::to_string(pd.length) + " bytes but " +
+                                 std::to_string(h.columns) + "x" + std::to_string(h.rows) +
+                                 " pixels of " + std::to_string(h.bitsAllocated) + " bits (" +
+                                 std::to_string(frames) + " frame(s), " +
+                                 std::to_string(std::max(h.samplesPerPixel, 1)) +
+                                 " sample(s)) need " + std::to_string(need),
+                             "the file is truncated or damaged; copy the series again");
+        return;
+    }
+    if (!pd.encapsulated)
+        throw InputError(src, "PixelData",
+                         "is not encapsulated (a plain value of " + std::to_string(pd.length) +
+                             " bytes) but the transfer syntax " + pd.syntax + " is compressed",
+                         fix);
+    if (pd.fragments == 0)
+        throw InputError(src, "PixelData", "holds no compressed fragment after its offset table",
+                         fix);
+    const std::string& f = pd.firstFragment;
+    const auto mismatch = [&](const char* what, std::uint64_t width, std::uint64_t height,
+                              std::uint64_t components) {
+        if (width == std::uint64_t(h.columns) && height == std::uint64_t(h.rows) &&
+            components == std::uint64_t(std::max(h.samplesPerPixel, 1)))
+            return;
+        throw InputError(src, "PixelData",
+                         std::string("the ") + what + " codestream is " + std::to_string(width) +
+                             "x" + std::to_string(height) + " with " + std::to_string(components) +
+                             " component(s) but the header says " + std::to_string(h.columns) +
+                             "x" + std::to_string(h.rows) + " with " +
+                             std::to_string(std::max(h.samplesPerPixel, 1)),
+                         fix);
+    };
+    if (codec == Codec::Jpeg2000) {
+        // The codestream (possibly inside JP2 boxes) starts with SOC FF4F and SIZ FF51.
+        const std::size_t at = f.find("\xff\x4f\xff\x51");
+        if (at == std::string::npos || at + 4 + 38 > f.size())
+            throw InputError(src, "PixelData",
+                             "the first fragment holds no JPEG 2000 codestream header (SOC, SIZ)",
+                             fix);
+        const std::size_t siz = at + 4;  // Lsiz
+        const std::uint64_t xsiz = be32(f, siz + 4), ysiz = be32(f, siz + 8);
+        const std::uint64_t xo = be32(f, siz + 12), yo = be32(f, siz + 16);
+        const std::uint64_t xt = be32(f, siz + 20), yt = be32(f, siz + 24);
+        const std::uint64_t xto = be32(f, siz + 28), yto = be32(f, siz + 32);
+        const std::uint64_t csiz = be16(f, siz + 36);
+        if (xo >= xsiz || yo >= ysiz || xt == 0 || yt == 0 || xto > xo || yto > yo ||
+            be16(f, siz) != 38 + 3 * csiz)
+            throw InputError(src, "PixelData",
+                             "the JPEG 2000 image header (SIZ) is inconsistent (image " +
+                                 std::to_string(xsiz) + "x" + std::to_string(ysiz) + ", offset " +
+                                 std::to_string(xo) + "," + std::to_string(yo) + ", tiles " +
+                                 std::to_string(xt) + "x" + std::to_string(yt) + ")",
+                             fix);
+        mismatch("JPEG 2000", xsiz - xo, ysiz - yo, csiz);
+        const std::uint64_t tiles = ((xsiz - xto + xt - 1) / xt) * ((ysiz - yto + yt - 1) / yt);
+        if (tiles > 65535)
+            throw InputError(src, "PixelData",
+                             "the JPEG 2000 codestream claims " + std::to_string(tiles) +
+                                 " tiles (the format allows 65535)",
+                             fix);
+        if (at + 4 + 38 + 3 * csiz <= f.size())
+            for (std::uint64_t c = 0; c < csiz; ++c) {
+                const std::size_t comp = siz + 38 + 3 * c;
+                const unsigned bits = (static_cast<unsigned char>(f[comp]) & 0x7f) + 1;
+                if (bits > 38 || static_cast<unsigned char>(f[comp + 1]) == 0 ||
+                    static_cast<unsigned char>(f[comp + 2]) == 0)
+                    throw InputError(src, "PixelData",
+                                     "the JPEG 2000 component header (SIZ) is invalid", fix);
+            }
+    } else if (codec == Codec::Jpeg || codec == Codec::JpegLs) {
+        // SOI, then markers up to the frame header (SOFn, or SOF55 for JPEG-LS).
+        if (f.size() < 4 || be16(f, 0) != 0xffd8)
+            throw InputError(src, "PixelData",
+                             "the first fragment does not start a JPEG stream (no SOI marker)",
+                             fix);
+        std::size_t p = 2;
+        while (p + 4 <= f.size()) {
+            if (static_cast<unsigned char>(f[p]) != 0xff) break;
+            const unsigned marker = be16(f, p);
+            const std::size_t len = be16(f, p + 2);
+            const bool sof = (marker >= 0xffc0 && marker <= 0xffcf && marker != 0xffc4 &&
+                              marker != 0xffc8 && marker != 0xffcc) ||
+                             marker == 0xfff7;
+            if (sof) {
+                if (p + 10 > f.size()) break;
+                const std::uint64_t height = be16(f, p + 5), width = be16(f, p + 7);
+                const std::uint64_t comps = static_cast<unsigned char>(f[p + 9]);
+                if (height != 0)
+                    mismatch(codec == Codec::Jpeg ? "JPEG" : "JPEG-LS", width, height, comps);
+                return;
+            }
+            if (len < 2) break;
+            p += 2 + len;
+        }
+        // No frame header within the first 4 KiB: unusual but not proof of damage; GDCM decides.
+    } else if (codec == Codec::Rle) {
+        // RLE header: 16 little-endian uint32, the segment count (1..15) and their offsets.
+        if (f.size() < 64)
+            throw InputError(src, "PixelData",
+                             "the RLE fragment is shorter than its 64-byte header", fix);
+        const auto le32 = [&](std::size_t i) {
+            const auto b = [&](std::size_t k) {
+                return std::uint32_t(static_cast<unsigned char>(f[4 * i + k]));
+            };
+            return b(0) | b(1) << 8 | b(2) << 16 | b(3) << 24;
+        };
+        const std::uint32_t segments = le32(0);
+        const std::uint64_t expected =
+            std::uint64_t(std::max(h.samplesPerPixel, 1)) * bytesPerSample;
+        if (segments != expected)
+            throw InputError(src, "PixelData",
+                             "the RLE header lists " + std::to_string(segments) + " segments; " +
+                                 std::to_string(h.bitsAllocated) + "-bit pixels need " +
+                                 std::to_string(expected),
+                             fix);
+        std::uint64_t previous = 0;
+        for (std::uint32_t i = 1; i <= segments && i < 16; ++i) {
+            const std::uint64_t off = le32(i);
+            if (off < 64 || off <= previous || off >= pd.firstFragmentLength)
+                throw InputError(src, "PixelData",
+                                 "the RLE header's segment offset " + std::to_string(off) +
+                                     " lies outside the fragment of " +
+                                     std::to_string(pd.firstFragmentLength) + " bytes",
+                                 fix);
+            previous = off;
+        }
+    }
+}
 
 std::vector<fs::path> listFiles(const fs::path& dir) {
     std::vector<fs::path> files;
@@ -927,7 +1218,8 @@ void readSlicePixels(const SliceHeader& h, const PixelPlan& plan, core::Volume& 
 }  // namespace
 
 core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const ReadOptions& options,
-                                     const core::Progress& progress) {
+                                     const core::Progress& progress,
+                                     const dicom_module::Hooks& hooks) {
     silenceGdcm();
     progress.report("dicom", 0.0);
 
@@ -962,10 +1254,20 @@ core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const Re
                          "point to the folder that holds the slices of one series");
     // Step 1b: refuse truncated files before GDCM reads them (it asserts on some; see
     // FramingCheck).
-    for (const auto& f : candidates) FramingCheck::check(f);
+    std::map<fs::path, PixelDataInfo> pixelData;
+    for (const auto& f : candidates) {
+        if (hooks.reading) hooks.reading(f);
+        const PixelDataInfo& info = pixelData[f] = FramingCheck::check(f);
+        // GDCM's header scan already fails (or asserts) on a transfer syntax it does not know.
+        if (codecOf(info.syntax) == Codec::Unknown)
+            throw InputError(str(f), "TransferSyntaxUID",
+                             "\"" + info.syntax + "\" is not a transfer syntax GDCM decodes",
+                             "convert the file with gdcmconv --raw (or dcmdjpeg) first");
+    }
     progress.checkCancel();
 
     // Step 2: scan headers and group by Series Instance UID; pick the series.
+    if (hooks.reading) hooks.reading(candidates.size() == 1 ? candidates.front() : dir);
     std::vector<SliceHeader> headers = scanHeaders(candidates);
     if (headers.empty())
         throw InputError(str(dir), "Rows",
@@ -1066,11 +1368,18 @@ core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const Re
                          "load a part of the series or downsample it");
 
     const PixelPlan plan = planPixels(slices);
-    core::Volume volume(g, plan.stored);
+    // Step 5b: every slice's pixel data against its header, before GDCM decodes any.
+    for (const SliceHeader& h : slices) checkPixelData(h, pixelData[h.file]);
+    const std::size_t volumeBytes = std::size_t(g.voxelCount()) * core::voxelBytes(plan.stored);
+    core::Volume volume =
+        hooks.allocate
+            ? core::Volume(g, plan.stored, hooks.allocate(volumeBytes, volumeBytes / slices.size()))
+            : core::Volume(g, plan.stored);
 
     // Step 6: decode slice by slice into the volume (one decoded slice alive at a time).
     std::vector<char> scratch;
     for (std::size_t s = 0; s < slices.size(); ++s) {
+        if (hooks.reading) hooks.reading(slices[s].file);
         readSlicePixels(slices[s], plan, volume, int(s), scratch);
         progress.report("dicom", double(s + 1) / double(slices.size()));
     }

@@ -328,6 +328,8 @@ vtkImageData* runImageReader(vtkImageReader2* r, const fs::path& path,
 /// the file: VTK 9.1 crashes on a datatype it does not know and takes NaN spacing at face value.
 /// Offsets from nifti1.h / nifti2.h.
 constexpr std::int32_t kNifti1HeaderSize = 348, kNifti2HeaderSize = 540;
+/// descrip: char[80] in both versions, NUL-terminated only when shorter.
+constexpr std::ptrdiff_t kNiftiDescripBytes = 80;
 /// Datatype codes fromImageData converts: uint8, int16, int32, float32, float64, int8, uint16,
 /// uint32, int64, uint64 (NIfTI's DT_* codes) with their bits per voxel.
 const std::map<int, int>& niftiDatatypes() {
@@ -351,7 +353,13 @@ void checkNiftiHeader(const fs::path& path) {
     };
     const bool v1 = i32(0, false) == kNifti1HeaderSize || i32(0, true) == kNifti1HeaderSize;
     const bool v2 = i32(0, false) == kNifti2HeaderSize || i32(0, true) == kNifti2HeaderSize;
-    if (!v1 && !v2) return;  // not a NIfTI/Analyze header: the reader says so
+    // VTK reads a header whose sizeof_hdr is neither (it looks at the magic and dim[0]) and takes
+    // what follows at face value: zero spacing, garbage sizes.
+    if (!v1 && !v2)
+        throw InputError(path.string(), "sizeof_hdr",
+                         "is " + std::to_string(i32(0, false)) +
+                             ", not 348 (NIfTI-1/Analyze) or 540 (NIfTI-2): not a NIfTI header",
+                         "the file is damaged or not NIfTI");
     const bool swap = i32(0, false) != (v1 ? kNifti1HeaderSize : kNifti2HeaderSize);
     if (got < (v1 ? kNifti1HeaderSize : kNifti2HeaderSize))
         throw InputError(path.string(), "header",
@@ -395,6 +403,51 @@ void checkNiftiHeader(const fs::path& path) {
             throw InputError(path.string(), "pixdim[" + std::to_string(a) + "]",
                              "voxel spacing is NaN or infinite", "repair the header");
     }
+    // dim[0] outside 1..7 is how VTK detects a byte-swapped header: with sizeof_hdr saying
+    // otherwise it reads every field swapped and crashes on the result.
+    auto i64 = [&](int off) {
+        std::uint64_t bits;
+        std::memcpy(&bits, h + off, 8);
+        if (swap) bits = __builtin_bswap64(bits);
+        return std::int64_t(bits);
+    };
+    auto dim = [&](int a) -> std::int64_t { return v1 ? i16(40 + 2 * a) : i64(16 + 8 * a); };
+    const std::int64_t rank = dim(0);
+    if (rank < 1 || rank > 7)
+        throw InputError(path.string(), "dim[0]",
+                         "is " + std::to_string(rank) + ", must be 1..7 (the number of dimensions)",
+                         "the header is damaged; repair it (e.g. with nibabel)");
+    std::uint64_t voxels = 1;
+    for (int a = 1; a <= rank; ++a) {
+        const std::int64_t n = dim(a);
+        if (n < 1 || n > std::int64_t(core::kMaxVoxels))
+            throw InputError(path.string(), "dim[" + std::to_string(a) + "]",
+                             "is " + std::to_string(n) + ", must be at least 1",
+                             "the header is damaged; repair it (e.g. with nibabel)");
+        voxels = std::min<std::uint64_t>(voxels * std::uint64_t(n), std::uint64_t(1) << 62);
+    }
+    // Single-file NIfTI (magic n+1 / n+2): the data must fit in the file after vox_offset. (A .gz
+    // is checked by the reader, which fails on a short stream.)
+    const bool single =
+        v1 ? std::memcmp(h + 344, "n+1", 4) == 0 : std::memcmp(h + 4, "n+2", 4) == 0;
+    const double offset = v1 ? f32(108) : double(i64(168));
+    std::error_code ec;
+    const std::uintmax_t fileSize = fs::file_size(path, ec);
+    if (single && !ec && !hasExtension(path, {".gz"})) {
+        const std::uint64_t headerSize = v1 ? kNifti1HeaderSize : kNifti2HeaderSize;
+        if (!std::isfinite(offset) || offset < double(headerSize) || offset > double(fileSize))
+            throw InputError(path.string(), "vox_offset",
+                             "is " + std::to_string(offset) + ", outside the file of " +
+                                 std::to_string(fileSize) + " bytes",
+                             "the header is damaged; repair it (e.g. with nibabel)");
+        const std::uint64_t need = voxels * std::uint64_t(it->second) / 8;
+        if (std::uint64_t(offset) + need > fileSize)
+            throw InputError(path.string(), "data",
+                             "the file holds " + std::to_string(fileSize) +
+                                 " bytes but the header claims " + std::to_string(need) +
+                                 " data bytes from offset " + std::to_string(std::uint64_t(offset)),
+                             "the file is truncated or its dims are damaged");
+    }
 }
 
 Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
@@ -415,6 +468,12 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     img->GetSpacing(sp);
     img->GetOrigin(org);
     g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
+    for (int c = 0; c < 3; ++c)
+        if (!std::isfinite(g.spacing[c]) || !(g.spacing[c] > 0.0))
+            throw InputError(
+                path.string(), "pixdim[" + std::to_string(c + 1) + "]",
+                "voxel spacing " + std::to_string(sp[c]) + " is not a positive size in mm",
+                "repair the header (e.g. with nibabel)");
     if (m) {
         glm::dmat3 rot;
         glm::dvec3 t;
@@ -450,8 +509,11 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
     }
     // descrip is 80 bytes of anything: keep printable ASCII, escape the rest (\xNN), so that
     // `info --json` and the stats stay valid UTF-8.
+    // VTK keeps all 80 bytes: a descrip without a NUL is not terminated (fuzz_nifti_gz read past
+    // it).
     std::string descrip;
-    for (const char* c = h->GetDescrip() ? h->GetDescrip() : ""; *c; ++c) {
+    const char* text = h->GetDescrip() ? h->GetDescrip() : "";
+    for (const char* c = text; c < text + kNiftiDescripBytes && *c; ++c) {
         const auto b = static_cast<unsigned char>(*c);
         if (b >= 0x20 && b < 0x7f) {
             descrip += char(b);
@@ -814,8 +876,16 @@ void checkVtiFile(const fs::path& path) {
     tail.read(block.data(), std::streamsize(block.size()));
     block.resize(std::size_t(tail.gcount()));
     const bool base64 = xmlAttribute(block, 0, "encoding") == "base64";
-    const std::size_t underscore = block.find('_');
-    if (underscore == std::string::npos) return;
+    // The data starts after '_' (only white space between the tag and it). VTK searches the rest
+    // of the file for one and, without it, spent minutes on a 1 KB file.
+    const std::size_t tagEnd = block.find('>');
+    const std::size_t underscore = tagEnd == std::string::npos
+                                       ? std::string::npos
+                                       : block.find_first_not_of(" \t\r\n", tagEnd + 1);
+    if (underscore == std::string::npos || block[underscore] != '_')
+        throw InputError(path.string(), "AppendedData",
+                         "does not start with the '_' marker before its data",
+                         "the file is damaged or not a VTK image file");
     const std::uint64_t dataStart = appended + underscore + 1;
     std::uint64_t voxels = 1;
     {
@@ -917,6 +987,13 @@ Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& p
 }
 
 Volume readRaw(const fs::path& path, const RawLayout& layout) {
+    for (int a = 0; a < 3; ++a)
+        if (layout.dims[a] < 1 || layout.dims[a] > core::kMaxDim)
+            throw InputError(path.string(), "dims",
+                             std::to_string(layout.dims.x) + "," + std::to_string(layout.dims.y) +
+                                 "," + std::to_string(layout.dims.z) + " is not 1.." +
+                                 std::to_string(core::kMaxDim) + " voxels per axis",
+                             "pass --dims X,Y,Z");
     Geometry g;
     g.dims = layout.dims;
     g.spacing = layout.spacing;

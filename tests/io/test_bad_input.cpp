@@ -3,6 +3,7 @@
 // These run under ASan/UBSan in CI (the `asan` preset).
 #include <gtest/gtest.h>
 
+#include <chrono>
 #include <fstream>
 #include <limits>
 
@@ -474,4 +475,76 @@ TEST(BadInput, VtiDeepNestingAndEditedAppendedDataAreRefusedBeforeVtk) {
     expectInputError(tmp / "cut.vti", "cut.vti", {});
     // The untouched file still loads.
     EXPECT_EQ(io::readVolume(tmp / "s.vti").voxelCount(), 24u * 24u * 24u);
+}
+
+// --- Found by the fuzz targets (fuzz/; tools/fuzz.sh) -------------------------------------------
+
+TEST(BadInput, FuzzNrrdValueWithControlAndNonUtf8BytesIsOneLine) {
+    // fuzz_nrrd: a header value holding a CR and binary bytes was quoted raw into the message.
+    test::TempDir tmp;
+    writeText(tmp / "e.nrrd", std::string("NRRD0004\ntype: float\ndimension: 3\nsizes: 10 2 2\n") +
+                                  "endian: little\xff\r\x01junk\nencoding: raw\n\n" +
+                                  std::string(160, '\0'));
+    expectInputError(tmp / "e.nrrd", "endian", {"\\xFF\\x0D\\x01junk"});
+}
+
+TEST(BadInput, FuzzNiftiHeaderSizeRankAndDataLengthCheckedBeforeVtk) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    // fuzz_nifti: dim[0] = 768 made VTK read the header as byte-swapped and dereference null.
+    io::writeVolume(core::makePhantom("torso", o), tmp / "rank.nii");
+    const std::int16_t rank = 768;
+    patchBytes(tmp / "rank.nii", 40, &rank, sizeof rank);
+    expectInputError(tmp / "rank.nii", "dim[0]", {"768", "1..7"});
+    // fuzz_nifti_gz: sizeof_hdr neither 348 nor 540; VTK read on and returned zero spacing
+    // (an internal check failure, exit 1).
+    io::writeVolume(core::makePhantom("torso", o), tmp / "size.nii");
+    const std::int32_t sizeofHdr = 0x60021c;
+    patchBytes(tmp / "size.nii", 0, &sizeofHdr, sizeof sizeofHdr);
+    expectInputError(tmp / "size.nii", "sizeof_hdr", {"not a NIfTI header"});
+    // dims larger than the data the file holds.
+    io::writeVolume(core::makePhantom("torso", o), tmp / "dims.nii");
+    const std::int16_t big = 30000;
+    patchBytes(tmp / "dims.nii", 40 + 2 * 3, &big, sizeof big);
+    expectInputError(tmp / "dims.nii", "data", {"header claims"});
+}
+
+TEST(BadInput, FuzzRawWithNegativeDims) {
+    // fuzz_raw: dims of -2^31 overflowed computing the extent (UBSan).
+    test::TempDir tmp;
+    writeText(tmp / "v.raw", std::string(64, '\0'));
+    io::ReadOptions opt;
+    opt.raw = io::RawLayout{};
+    opt.raw->dims = {std::numeric_limits<int>::min(), 4, 4};
+    opt.raw->type = core::VoxelType::UInt8;
+    expectInputError(tmp / "v.raw", "dims", {"voxels per axis"}, opt);
+}
+
+TEST(BadInput, FuzzVtiAppendedDataWithoutMarkerIsRefusedQuickly) {
+    // fuzz_vti: appended data without its '_' marker kept VTK busy for 90 s on a 1 KB file.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("kronander", o), tmp / "k.vti");
+    std::string text = readAll(tmp / "k.vti");
+    const std::size_t marker = text.find('_', text.find("<AppendedData"));
+    ASSERT_NE(marker, std::string::npos);
+    text[marker] = ' ';
+    writeText(tmp / "k.vti", text);
+    const auto start = std::chrono::steady_clock::now();
+    expectInputError(tmp / "k.vti", "AppendedData", {"'_' marker"});
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
+}
+
+TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
+    // fuzz_nifti_gz: 80 non-NUL descrip bytes were read past their end (ASan heap-buffer-overflow).
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("torso", o), tmp / "d.nii");
+    const std::string full(80, 'x'), aux(24, 'y');
+    patchBytes(tmp / "d.nii", kNiftiDescrip, full.data(), full.size());
+    patchBytes(tmp / "d.nii", kNiftiDescrip + 80, aux.data(), aux.size());  // aux_file follows
+    EXPECT_EQ(io::readVolume(tmp / "d.nii").description, full);
 }

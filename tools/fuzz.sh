@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# Runs libFuzzer targets of fuzz/ for a bounded time each:
+#
+#   tools/fuzz.sh TARGET|all SECONDS [libFuzzer options...]
+#
+# e.g. `tools/fuzz.sh dicom 3600` or `tools/fuzz.sh all 20` (what .ci/run does). Builds the `fuzz`
+# preset (clang-14, ASan+UBSan) if needed, makes the seed corpora with tools/make_fuzz_corpus.py,
+# and keeps what the fuzzer learns in build-fuzz/corpus/TARGET (the next run starts from there).
+# Findings (crash-*, timeout-*, oom-*, leak-*) land in build-fuzz/findings/TARGET/; reproduce one
+# with `build-fuzz/fuzz/fuzz_TARGET FILE`. Runs at nice 19 with -timeout=5 (a hang) and
+# -rss_limit_mb=2048 (the memory budget). Prints one summary line per target (executions, time,
+# exec/s, findings) and exits non-zero if any target found something.
+# VOXLIGHT_FUZZ_JOBS=N runs N targets at once (default 1).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+targets_all=(nifti nifti_gz nrrd nrrd_detached metaimage metaimage_mhd vti raw dicom dicom_series scene)
+if [ $# -lt 2 ]; then
+  echo "usage: tools/fuzz.sh TARGET|all SECONDS [libFuzzer options...]" >&2
+  echo "targets: ${targets_all[*]}" >&2
+  exit 2
+fi
+which=$1
+seconds=$2
+shift 2
+if [ "$which" = all ]; then targets=("${targets_all[@]}"); else targets=("$which"); fi
+
+build=build-fuzz
+need_build=()
+for t in "${targets[@]}"; do
+  case " ${targets_all[*]} " in *" $t "*) ;; *) echo "tools/fuzz.sh: unknown target '$t' (${targets_all[*]})" >&2; exit 2 ;; esac
+  need_build+=("fuzz_$t")
+done
+if [ ! -f "$build/build.ninja" ]; then cmake --preset fuzz >/dev/null; fi
+nice -n 19 cmake --build --preset fuzz --target "${need_build[@]}" >/dev/null
+
+# Seeds: voxlight's phantom writer needs a built CLI (any preset's).
+seeds=$build/corpus-seeds
+if [ ! -d "$seeds/scene" ]; then
+  voxlight=build/voxlight
+  if [ ! -x "$voxlight" ]; then
+    nice -n 19 cmake --build --preset fuzz --target voxlight >/dev/null
+    voxlight=$build/voxlight
+  fi
+  ASAN_OPTIONS=detect_leaks=0 /usr/bin/python3 tools/make_fuzz_corpus.py "$seeds" --voxlight "$voxlight" >/dev/null
+fi
+
+dict_for() {
+  case $1 in
+    nifti|nifti_gz) echo fuzz/nifti.dict ;;
+    nrrd|nrrd_detached) echo fuzz/nrrd.dict ;;
+    metaimage|metaimage_mhd) echo fuzz/metaimage.dict ;;
+    vti) echo fuzz/vti.dict ;;
+    dicom|dicom_series) echo fuzz/dicom.dict ;;
+    scene) echo fuzz/json.dict ;;
+    *) echo "" ;;
+  esac
+}
+
+run_one() {
+  local t=$1
+  shift
+  local corpus=$build/corpus/$t findings=$build/findings/$t log=$build/findings/$t.log
+  mkdir -p "$corpus" "$findings"
+  local dict
+  dict=$(dict_for "$t")
+  local args=(-max_total_time="$seconds" -timeout=5 -rss_limit_mb=2048 -max_len=16384
+              -detect_leaks=0 -print_final_stats=1 -artifact_prefix="$findings/")
+  if [ -n "$dict" ]; then args+=(-dict="$dict"); fi
+  # Leaks are not findings: VTK and GDCM keep process-wide singletons.
+  local rc=0 start=$SECONDS
+  ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:symbolize=1 UBSAN_OPTIONS=print_stacktrace=1 \
+    nice -n 19 "$build/fuzz/fuzz_$t" "${args[@]}" "$@" "$corpus" "$seeds/$t" >"$log" 2>&1 || rc=$?
+  local elapsed=$((SECONDS - start)) execs rate found
+  execs=$(sed -n 's/^stat::number_of_executed_units: *//p' "$log" | tail -1)
+  rate=$(sed -n 's/^stat::average_exec_per_sec: *//p' "$log" | tail -1)
+  found=$(find "$findings" -maxdepth 1 -type f -newer "$log.start" 2>/dev/null | wc -l)
+  printf '%-14s %9s executions in %5s s, %6s exec/s, %d finding(s)%s\n' "$t" "${execs:-?}" \
+    "$elapsed" "${rate:-?}" "$found" "$([ $rc -ne 0 ] && echo " (exit $rc; see $log)")"
+  [ $rc -eq 0 ] && [ "$found" -eq 0 ]
+}
+
+jobs=${VOXLIGHT_FUZZ_JOBS:-1}
+status=0
+pids=()
+for t in "${targets[@]}"; do
+  mkdir -p "$build/findings"
+  touch "$build/findings/$t.log.start"
+  run_one "$t" "$@" &
+  pids+=($!)
+  if [ ${#pids[@]} -ge "$jobs" ]; then
+    wait "${pids[0]}" || status=1
+    pids=("${pids[@]:1}")
+  fi
+done
+for p in "${pids[@]}"; do wait "$p" || status=1; done
+exit $status
