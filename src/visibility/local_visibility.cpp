@@ -45,26 +45,71 @@ double boxExit(const glm::vec3& origin, const glm::dvec3& dirIndex, const glm::i
     return std::max(t, 0.0);
 }
 
+/// σt at every stored sample of the selection (pre-classified: the TF applied to each block's
+/// selected-level samples), laid out like MultiresGrid::levelData.
+struct SigmaField {
+    const MultiresGrid& grid;
+    std::vector<float> sigma;
+    std::vector<const float*> block;  ///< per block, nullptr at kNone
+
+    SigmaField(const MultiresGrid& g, const optics::TfTable& table) : grid(g) {
+        const std::size_t n = g.pyramid().blockCount();
+        std::vector<std::size_t> offset(n, 0);
+        std::size_t total = 0;
+        for (std::size_t b = 0; b < n; ++b) {
+            offset[b] = total;
+            if (g.level(b) != kNone) total += std::size_t(std::pow(levelResolution(g.level(b)), 3));
+        }
+        sigma.resize(total);
+        block.assign(n, nullptr);
+        for (std::size_t b = 0; b < n; ++b) {
+            const int l = g.level(b);
+            if (l == kNone) continue;
+            const std::size_t m = std::size_t(std::pow(levelResolution(l), 3));
+            const float* v = g.levelData(b);
+            for (std::size_t i = 0; i < m; ++i) sigma[offset[b] + i] = table.extinction(v[i]);
+            block[b] = sigma.data() + offset[b];
+        }
+    }
+
+    /// σt at p from the block that owns p alone, clamped to its sample box; level of that block
+    /// (kNone: σt 0).
+    [[gnu::always_inline]] float at(const glm::vec3& p, int& level) const {
+        const glm::ivec3 b = grid.ownerCoord(p);
+        const std::size_t idx = grid.indexOf(b);
+        level = grid.level(idx);
+        if (level == kNone) return 0.f;
+        const int n = levelResolution(level);
+        const float top = float(n - 1);
+        const glm::vec3 u = glm::clamp(
+            (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) / float(levelSpacing(level)) - 0.5f,
+            glm::vec3(0.f), glm::vec3(top));
+        float v = 0.f;
+        addTrilinear(block[idx], n, 1, u, 1.f, &v);
+        return v;
+    }
+};
+
 /// The march of rayTransmittance with the index-space direction and step length precomputed.
 /// Returns the optical depth.
-double opticalDepth(const MultiresGrid& grid, const optics::TfTable& table, const glm::vec3& origin,
-                    const glm::dvec3& dirIndex, double lengthMm, double voxelMm,
-                    std::uint64_t& samples) {
+double opticalDepth(const SigmaField& field, const glm::vec3& origin, const glm::dvec3& dirIndex,
+                    double lengthMm, double voxelMm, std::uint64_t& samples) {
     double tau = 0.0;
     float t = 0.f;
     const float length = float(lengthMm), h = float(voxelMm);
     const glm::vec3 d(dirIndex);
     std::uint64_t n = 0;
+    const MultiresGrid& grid = field.grid;
     while (t < length) {
         const int level = grid.level(grid.ownerBlock(origin + t * d));
         const float stepVoxels =
             level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
         const float dt = std::min(stepVoxels * h, length - t);
-        if (level != kNone) {
-            const float v = grid.sample(origin + (t + 0.5f * dt) * d, NAN);
+        int at = kNone;
+        const float sigma = field.at(origin + (t + 0.5f * dt) * d, at);
+        if (at != kNone) {
             ++n;
-            // NaN (no stored block near) is empty space.
-            if (v == v) tau += double(table.extinction(v)) * double(dt);
+            tau += double(sigma) * double(dt);
             if (tau > kOpaqueDepth) break;
         }
         t += dt;
@@ -114,7 +159,8 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     const glm::dvec3 dirIndex = (glm::transpose(g.direction) * dir) / g.spacing;
     const double length = std::min(radiusVoxels * h, boxExit(origin, dirIndex, grid.dims()));
     std::uint64_t n = 0;
-    const double tau = opticalDepth(grid, table, origin, dirIndex, length, h, n);
+    const SigmaField field(grid, table);
+    const double tau = opticalDepth(field, origin, dirIndex, length, h, n);
     if (samples) *samples += n;
     return std::exp(-tau);
 }
@@ -143,6 +189,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
             wy[std::size_t(k) * C + i] = dirs.weights[std::size_t(k)] * y[std::size_t(i)];
     }
 
+    const SigmaField sigma(grid, table);
     LocalVisibility out;
     out.grid_ = gridPtr;
     out.coefficients_ = C;
@@ -191,7 +238,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                                     const double length = std::min(
                                         options.radiusVoxels * h, boxExit(origin, di, grid.dims()));
                                     const double tau =
-                                        opticalDepth(grid, table, origin, di, length, h, samples);
+                                        opticalDepth(sigma, origin, di, length, h, samples);
                                     // Project this direction's transmittance onto the SH basis.
                                     const double T = std::exp(-tau);
                                     const double* w = wy.data() + std::size_t(d) * C;

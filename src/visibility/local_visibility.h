@@ -17,11 +17,15 @@
 //
 // Ray integration: midpoint rule in steps that follow the LOD (Kronander §4.2, "adaptive step size
 // according to the LOD selection"): the step inside a block at level l is min(2^l, kMaxStepVoxels)
-// voxels (one sample per reduced sample spacing), the last step shortened to end at R. σt comes from
-// the TF table at the value of the seamless multiresolution interpolation (MultiresGrid::sample);
-// inside a block at kNone σt is 0 without sampling (the TF is transparent over its whole range). A
-// ray stops once its optical depth exceeds kOpaqueDepth (transmittance < 1e-4: the rest changes V by
-// less than that).
+// voxels (one sample per reduced sample spacing), the last step shortened to end at R (or at the
+// volume's box: outside the volume is empty). σt is pre-classified: the TF is applied once to every
+// stored sample of the selection, and a ray sample reads σt trilinearly from the block that owns
+// it, clamped to that block's sample box — not the seamless blend of MultiresGrid::sample, which
+// costs several times more per sample; the two differ only within s/2 of a block face (within ½
+// voxel at level 0), by at most σt's variation across one sample spacing, and the ray integrates
+// that difference over at most s/2 of its length per face it crosses. Inside a block at kNone σt
+// is 0 (the TF is transparent over its whole range). A ray stops once its optical depth exceeds
+// kOpaqueDepth (transmittance < 1e-4: the rest changes V by less than that).
 //
 // Parallel over blocks with oneTBB; every sample point is computed alone with a fixed order of
 // operations, so the result is identical for any thread count.
