@@ -33,18 +33,6 @@ void checkOptions(const LocalVisibilityOptions& o) {
                          "give e.g. 16");
 }
 
-/// Parametric exit (mm) of the ray origin + t·dir from the box [0, d − 1] it starts in.
-double boxExit(const glm::vec3& origin, const glm::dvec3& dirIndex, const glm::ivec3& d) {
-    double t = INFINITY;
-    for (int a = 0; a < 3; ++a) {
-        if (dirIndex[a] > 0.0)
-            t = std::min(t, (double(d[a] - 1) - origin[a]) / dirIndex[a]);
-        else if (dirIndex[a] < 0.0)
-            t = std::min(t, -double(origin[a]) / dirIndex[a]);
-    }
-    return std::max(t, 0.0);
-}
-
 /// σt at every stored sample of the selection (pre-classified: the TF applied to each block's
 /// selected-level samples), laid out like MultiresGrid::levelData.
 struct SigmaField {
@@ -90,18 +78,53 @@ struct SigmaField {
     }
 };
 
-/// The march of rayTransmittance with the index-space direction and step length precomputed.
-/// Returns the optical depth.
-double opticalDepth(const SigmaField& field, const glm::vec3& origin, const glm::dvec3& dirIndex,
-                    double lengthMm, double voxelMm, std::uint64_t& samples) {
+/// A ray direction in index space with what the march needs per axis.
+struct RayDir {
+    glm::vec3 d;      ///< index units per mm
+    glm::vec3 inv;    ///< 1/d (∞ on an axis it does not move along)
+    glm::ivec3 next;  ///< 1 where d > 0: the cell face ahead is at 4·(c + next)
+    explicit RayDir(const glm::dvec3& dirIndex) : d(dirIndex) {
+        for (int a = 0; a < 3; ++a) {
+            inv[a] = d[a] != 0.f ? 1.f / d[a] : INFINITY;
+            next[a] = d[a] > 0.f ? 1 : 0;
+        }
+    }
+    /// Parametric exit (mm) from the box [0, dims − 1] of a ray starting inside it.
+    float boxExit(const glm::vec3& o, const glm::ivec3& dims) const {
+        float t = INFINITY;
+        for (int a = 0; a < 3; ++a)
+            if (inv[a] != INFINITY)
+                t = std::min(t, ((d[a] > 0.f ? float(dims[a] - 1) : 0.f) - o[a]) * inv[a]);
+        return std::max(t, 0.f);
+    }
+};
+
+/// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment).
+double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayDir& ray,
+                    float length, float h, std::uint64_t& samples) {
+    constexpr int kCell = BlockPyramid::kCellVoxels;
     double tau = 0.0;
     float t = 0.f;
-    const float length = float(lengthMm), h = float(voxelMm);
-    const glm::vec3 d(dirIndex);
+    const glm::vec3& d = ray.d;
     std::uint64_t n = 0;
     const MultiresGrid& grid = field.grid;
+    const glm::ivec3 cells = grid.pyramid().cells();
     while (t < length) {
-        const int level = grid.level(grid.ownerBlock(origin + t * d));
+        const glm::vec3 p = origin + t * d;
+        // Empty space: a cell whose value range the TF makes transparent holds σt = 0 (exactly,
+        // at every level-0 sample it covers), so the ray jumps to the cell's exit.
+        const glm::ivec3 c = glm::clamp(glm::ivec3(p * (1.f / kCell)), glm::ivec3(0), cells - 1);
+        if (!grid.cellVisible(std::size_t(c.x) +
+                              std::size_t(cells.x) * (c.y + std::size_t(cells.y) * c.z))) {
+            float exit = INFINITY;
+            for (int a = 0; a < 3; ++a)
+                if (ray.inv[a] != INFINITY)
+                    exit =
+                        std::min(exit, (float(kCell * (c[a] + ray.next[a])) - p[a]) * ray.inv[a]);
+            t += std::max(exit, 0.f) + 1e-3f * h;  // a thousandth of a voxel past the face
+            continue;
+        }
+        const int level = grid.level(grid.ownerBlock(p));
         const float stepVoxels =
             level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
         const float dt = std::min(stepVoxels * h, length - t);
@@ -116,6 +139,27 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const glm:
     }
     samples += n;
     return tau;
+}
+
+/// Whether V at voxel coordinate x (a sample of spacing s) can be read by a shaded sample: some
+/// visible cell within 2·s + 1 voxels (a shaded segment end lies within one render step ≤ 1 voxel
+/// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
+/// of ≤ s/2 into a neighbour).
+bool needed(const MultiresGrid& grid, const glm::vec3& x, int s) {
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    const glm::ivec3 cells = grid.pyramid().cells();
+    const float r = float(2 * s + 1);
+    const glm::ivec3 lo =
+        glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
+    const glm::ivec3 hi =
+        glm::clamp(glm::ivec3(glm::floor((x + r) / float(kCell))), glm::ivec3(0), cells - 1);
+    for (int z = lo.z; z <= hi.z; ++z)
+        for (int y = lo.y; y <= hi.y; ++y)
+            for (int c = lo.x; c <= hi.x; ++c)
+                if (grid.cellVisible(std::size_t(c) +
+                                     std::size_t(cells.x) * (y + std::size_t(cells.y) * z)))
+                    return true;
+    return false;
 }
 
 }  // namespace
@@ -156,11 +200,11 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                         std::uint64_t* samples) {
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
-    const glm::dvec3 dirIndex = (glm::transpose(g.direction) * dir) / g.spacing;
-    const double length = std::min(radiusVoxels * h, boxExit(origin, dirIndex, grid.dims()));
+    const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
+    const float length = std::min(float(radiusVoxels * h), ray.boxExit(origin, grid.dims()));
     std::uint64_t n = 0;
     const SigmaField field(grid, table);
-    const double tau = opticalDepth(field, origin, dirIndex, length, h, n);
+    const double tau = opticalDepth(field, origin, ray, length, float(h), n);
     if (samples) *samples += n;
     return std::exp(-tau);
 }
@@ -178,18 +222,19 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     const double h = core::minComponent(g.spacing);
 
     // Per direction: index-space direction and w_k·Y_i(ω_k).
-    std::vector<glm::dvec3> dirIndex(static_cast<std::size_t>(N));
+    std::vector<RayDir> rays;
     std::vector<double> wy(std::size_t(N) * C);
     std::vector<double> y(std::size_t(sh::kMaxCoeffs));
     for (int k = 0; k < N; ++k) {
-        dirIndex[std::size_t(k)] =
-            (glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) / g.spacing;
+        rays.emplace_back((glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) /
+                          g.spacing);
         sh::evalShUnitDouble(sh::shBandForCount(C), dirs.directions[std::size_t(k)], y);
         for (int i = 0; i < C; ++i)
             wy[std::size_t(k) * C + i] = dirs.weights[std::size_t(k)] * y[std::size_t(i)];
     }
 
     const SigmaField sigma(grid, table);
+    const float radius = float(options.radiusVoxels * h), hf = float(h);
     LocalVisibility out;
     out.grid_ = gridPtr;
     out.coefficients_ = C;
@@ -209,7 +254,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     }
     out.data_.assign(floats, 0.f);
 
-    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0};
+    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
     std::atomic<std::size_t> done{0};
     const std::thread::id caller = std::this_thread::get_id();
     progress.report("local visibility", 0.0);
@@ -218,7 +263,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, stored.size(), 1), [&](const auto& range) {
                 if (progress.cancelled()) return;
-                std::uint64_t samples = 0, rays = 0;
+                std::uint64_t samples = 0, traced = 0, skipped = 0;
                 double v[16];
                 for (std::size_t r = range.begin(); r != range.end(); ++r) {
                     const std::size_t b = stored[r];
@@ -232,24 +277,32 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                                 // Sample points of a partial edge block beyond the volume are clamped
                                 // onto it (their values are never read inside the volume).
                                 const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
+                                if (!needed(grid, origin, levelSpacing(l))) {
+                                    // Never read by a shaded sample: empty space's value.
+                                    dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
+                                    for (int c = 1; c < C; ++c) dst[c] = 0.f;
+                                    ++skipped;
+                                    continue;
+                                }
                                 std::fill(v, v + C, 0.0);
                                 for (int d = 0; d < N; ++d) {
-                                    const glm::dvec3& di = dirIndex[std::size_t(d)];
-                                    const double length = std::min(
-                                        options.radiusVoxels * h, boxExit(origin, di, grid.dims()));
+                                    const RayDir& ray = rays[std::size_t(d)];
+                                    const float length =
+                                        std::min(radius, ray.boxExit(origin, grid.dims()));
                                     const double tau =
-                                        opticalDepth(sigma, origin, di, length, h, samples);
+                                        opticalDepth(sigma, origin, ray, length, hf, samples);
                                     // Project this direction's transmittance onto the SH basis.
-                                    const double T = std::exp(-tau);
+                                    const double T = tau > 0.0 ? std::exp(-tau) : 1.0;
                                     const double* w = wy.data() + std::size_t(d) * C;
                                     for (int c = 0; c < C; ++c) v[c] += T * w[c];
                                 }
-                                rays += std::uint64_t(N);
+                                traced += std::uint64_t(N);
                                 for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                             }
                 }
                 samplesTotal += samples;
-                raysTotal += rays;
+                raysTotal += traced;
+                skippedTotal += skipped;
                 const std::size_t now = done.fetch_add(range.size()) + range.size();
                 if (std::this_thread::get_id() == caller)  // workers only stop taking blocks
                     progress.report("local visibility", double(now) / double(stored.size()));
@@ -259,6 +312,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     progress.report("local visibility", 1.0);
     out.samplesTaken_ = samplesTotal;
     out.raysTraced_ = raysTotal;
+    out.pointsSkipped_ = skippedTotal;
     return out;
 }
 

@@ -27,6 +27,13 @@
 // is 0 (the TF is transparent over its whole range). A ray stops once its optical depth exceeds
 // kOpaqueDepth (transmittance < 1e-4: the rest changes V by less than that).
 //
+// Empty space (exact): the BlockPyramid's 4³ cells whose value range the TF makes transparent
+// (LodSelection::cellVisible) hold σt = 0, so rays jump across them, and grid points with no
+// visible cell within 2·s + 1 voxels (s = their sample spacing) get empty space's value
+// (√(4π), 0, …) without rays: a shaded render sample lies within one render step (≤ 1 voxel; the
+// default is ½) of a visible cell, and its interpolation reads grid points within s + s/2 of it,
+// so such points are never read where anything is shaded.
+//
 // Parallel over blocks with oneTBB; every sample point is computed alone with a fixed order of
 // operations, so the result is identical for any thread count.
 #include <cstdint>
@@ -75,6 +82,8 @@ class LocalVisibility {
     std::size_t bytes() const { return data_.size() * sizeof(float); }
     std::uint64_t raysTraced() const { return raysTraced_; }
     std::uint64_t samplesTaken() const { return samplesTaken_; }
+    /// Grid points far from anything visible (set to empty space's value without rays).
+    std::uint64_t pointsSkipped() const { return pointsSkipped_; }
 
     /// V at continuous voxel index p by the grid's seamless interpolation, into out[0..C); empty
     /// space's value (√(4π), 0, …) where no stored block contributes.
@@ -90,7 +99,7 @@ class LocalVisibility {
     double radius_ = 0.0;
     std::vector<std::size_t> offset_;
     std::vector<float> data_;
-    std::uint64_t raysTraced_ = 0, samplesTaken_ = 0;
+    std::uint64_t raysTraced_ = 0, samplesTaken_ = 0, pointsSkipped_ = 0;
 };
 
 /// Computes V^L on `grid` under the TF `table` (InputError on bad options).

@@ -114,6 +114,30 @@ BlockPyramid BlockPyramid::build(const core::Volume& volume, const core::Progres
             }
         });
     });
+    // Cell ranges from the voxels (with the substitute for non-finite ones).
+    p.cells_ = (d + (BlockPyramid::kCellVoxels - 1)) / BlockPyramid::kCellVoxels;
+    const glm::ivec3 nc = p.cells_;
+    p.cellRange_.resize(std::size_t(nc.x) * nc.y * nc.z);
+    volume.visit([&](const auto& v) {
+        tbb::parallel_for(tbb::blocked_range<int>(0, nc.z), [&](const auto& range) {
+            constexpr int c4 = BlockPyramid::kCellVoxels;
+            for (int cz = range.begin(); cz != range.end(); ++cz)
+                for (int cy = 0; cy < nc.y; ++cy)
+                    for (int cx = 0; cx < nc.x; ++cx) {
+                        float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+                        for (int z = cz * c4; z <= std::min(cz * c4 + c4, d.z - 1); ++z)
+                            for (int y = cy * c4; y <= std::min(cy * c4 + c4, d.y - 1); ++y)
+                                for (int x = cx * c4; x <= std::min(cx * c4 + c4, d.x - 1); ++x) {
+                                    float val = v.at(x, y, z);
+                                    if (!std::isfinite(val)) val = substitute;
+                                    lo = std::min(lo, val);
+                                    hi = std::max(hi, val);
+                                }
+                        p.cellRange_[std::size_t(cx) +
+                                     std::size_t(nc.x) * (cy + std::size_t(nc.y) * cz)] = {lo, hi};
+                    }
+        });
+    });
     progress.report("block pyramid", 1.0);
     return p;
 }
@@ -211,6 +235,15 @@ LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFuncti
     }
     for (std::size_t b = 0; b < count; ++b)
         ++s.blocksPerLevel[s.level[b] == kNone ? kLevels : std::size_t(s.level[b])];
+    const float leak = table.cellWidth();
+    s.cellVisible.resize(pyramid.cellCount());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, s.cellVisible.size(), 4096),
+                      [&](const auto& range) {
+                          for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                              const auto& r = pyramid.cellRange(c);
+                              s.cellVisible[c] = !tf.transparentOver(r[0] - leak, r[1] + leak);
+                          }
+                      });
     return s;
 }
 
@@ -225,6 +258,8 @@ MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelec
     : pyramid_(std::move(pyramid)), selection_(std::move(selection)) {
     VL_CHECK(pyramid_ != nullptr);
     VL_CHECK_EQ(selection_.level.size(), pyramid_->blockCount());
+    if (selection_.cellVisible.empty()) selection_.cellVisible.assign(pyramid_->cellCount(), 1);
+    VL_CHECK_EQ(selection_.cellVisible.size(), pyramid_->cellCount());
     const glm::ivec3 nb = blocks();
     hi_ = glm::vec3(dims() - 1);
     last_ = nb - 1;

@@ -119,14 +119,23 @@ class BlockPyramid {
         return data_.data() + block * kPyramidFloats + levelOffset(level);
     }
     std::size_t bytes() const {
-        return data_.size() * sizeof(float) + stats_.size() * sizeof(BlockStats);
+        return data_.size() * sizeof(float) + stats_.size() * sizeof(BlockStats) +
+               cellRange_.size() * sizeof(cellRange_[0]);
     }
+
+    /// Value ranges of kCellVoxels³ cells (cell c spans voxels [4c, 4c + 4] per axis: the voxels
+    /// every trilinear sample inside it reads), for empty-space skipping of visibility rays.
+    static constexpr int kCellVoxels = 4;
+    const glm::ivec3& cells() const { return cells_; }
+    const std::array<float, 2>& cellRange(std::size_t cell) const { return cellRange_[cell]; }
+    std::size_t cellCount() const { return cellRange_.size(); }
 
   private:
     core::Geometry geometry_;
-    glm::ivec3 blocks_{0};
+    glm::ivec3 blocks_{0}, cells_{0};
     std::vector<BlockStats> stats_;
     std::vector<float> data_;  ///< kPyramidFloats per block
+    std::vector<std::array<float, 2>> cellRange_;
 };
 
 /// How many samples the selection may hold.
@@ -145,6 +154,9 @@ struct LodSelection {
     std::uint64_t points = 0;         ///< Σ n³ over stored blocks
     std::uint64_t budgetPoints = 0;   ///< the budget as applied (raised to the 1³ minimum)
     std::array<std::size_t, kLevels + 1> blocksPerLevel{};  ///< [0..4] levels, [5] kNone
+    /// Per BlockPyramid cell: 1 where the TF is not transparent over the cell's value range (its
+    /// table's one-cell leak included). Empty = every cell visible.
+    std::vector<std::uint8_t> cellVisible;
 };
 std::ostream& operator<<(std::ostream& os, const LodSelection& s);
 
@@ -220,6 +232,8 @@ class MultiresGrid {
     std::size_t indexOf(const glm::ivec3& b) const {
         return std::size_t(b.x) + stride_.y * std::size_t(b.y) + stride_.z * std::size_t(b.z);
     }
+    /// Whether a BlockPyramid cell is visible under the selection's TF (LodSelection::cellVisible).
+    bool cellVisible(std::size_t cell) const { return selection_.cellVisible[cell] != 0; }
     /// The selected level's n³ samples of a block (nullptr at kNone).
     const float* levelData(std::size_t block) const { return levelData_[block]; }
 
