@@ -56,7 +56,7 @@ TEST(LocalVisibility, EmptySpaceSeesEverything) {
     for (int c : {1, 4, 9, 16}) {
         LocalVisibilityOptions o;
         o.coefficients = c;
-        o.rays = 40;
+        o.rays = 2 * c + 8;
         const LocalVisibility vis =
             computeLocalVisibility(grid, optics::TfTable(test::rampTf(1.f)), o);
         ASSERT_GT(vis.raysTraced(), 0u);
@@ -73,22 +73,22 @@ TEST(LocalVisibility, EmptySpaceSeesEverything) {
 }
 
 TEST(LocalVisibility, InsideAHomogeneousSlabMatchesTheProjectedClosedForm) {
-    // Slab of value 1000 (σt = σ0) for voxel layers z ∈ [20, 39] in a 64³ volume of 0 (σt = 0).
-    // Trilinear interpolation ramps σt over one voxel at each face symmetrically, which
+    // Slab of value 1000 (σt = σ0) for voxel layers z ∈ [20, 39] in a 40×40×60 volume of 0 (σt = 0);
+    // the test point's rays stay inside it across x and y. Trilinear interpolation ramps σt over one voxel at each face symmetrically, which
     // integrates like sharp faces at z = 19.5 and 39.5.
     constexpr float kSigma = 0.05f;  // 1/mm, 1 mm voxels
     const core::Volume v = test::makeVolume(
-        {64, 64, 64}, [](int, int, int k) { return k >= 20 && k <= 39 ? 1000 : 0; });
+        {40, 40, 60}, [](int, int, int k) { return k >= 20 && k <= 39 ? 1000 : 0; });
     const optics::TransferFunction tf = test::rampTf(kSigma);
     const auto grid = fullGrid(v, tf);
     LocalVisibilityOptions o;
     o.coefficients = 16;
-    o.rays = 64;
+    o.rays = 32;
     o.radiusVoxels = 16.0;
     const LocalVisibility vis = computeLocalVisibility(grid, optics::TfTable(tf), o);
     // A grid point 4 voxels below the top face: upward rays leave the slab, downward rays are cut
     // by the radius.
-    const glm::vec3 x(32.f, 32.f, 35.f);
+    const glm::vec3 x(20.f, 20.f, 35.f);
     const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
     const auto expected = sh::projectFunction(3, dirs, [&](const glm::dvec3& w) {
         double d = 16.0;  // r_s
