@@ -13,6 +13,9 @@
 //   sh-local:             rays (32), coefficients (1/4/9/16; 4), radius (voxels; 16), and the LOD
 //                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
 //                         (MB of visibility coefficients; not both)
+//   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
+//                         volume's dims). Its local stages have the same keys as sh-local's, so
+//                         switching between the two recomputes nothing once both have run.
 // Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
 // directional, point and environment lights (render/sh_shading.h); the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
 // "specular" (an effects list without it turns the highlight off).
@@ -29,6 +32,7 @@
 #include "pipeline/scene_inputs.h"
 #include "render/ray_caster.h"
 #include "render/sh_shading.h"
+#include "visibility/global_visibility.h"
 #include "visibility/local_visibility.h"
 
 namespace voxlight::pipeline {
@@ -196,7 +200,7 @@ const Codec& irradianceCodec() {
 
 // ---- Method params -------------------------------------------------------------------------
 
-enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, ShLocal };
+enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, ShLocal, ShGlobal };
 
 render::Mode modeOf(Kind k) {
     switch (k) {
@@ -211,16 +215,19 @@ render::Mode modeOf(Kind k) {
         case Kind::Iso:
             return render::Mode::Isosurface;
         case Kind::ShLocal:  // DVR traversal and skip rule; shading by render/sh_shading.h
+        case Kind::ShGlobal:
             return render::Mode::EmissionAbsorption;
     }
     throw InternalError("unknown ray-caster method");
 }
 
-bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso || k == Kind::ShLocal; }
+bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
+bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso || isSh(k); }
 
-/// sh-local's own parameters (see the header comment).
+/// sh-local's and sh-global's own parameters (see the header comment).
 struct ShParams {
     visibility::LocalVisibilityOptions visibility;
+    visibility::GlobalVisibilityOptions global;  ///< sh-global
     double dataReduction = 8.0;
     double budgetMb = 0.0;  ///< > 0: the budget in MB instead of dataReduction
     visibility::LodBudget budget(std::uint64_t voxels) const {
@@ -234,7 +241,7 @@ struct ShParams {
     }
 };
 
-ShParams parseShParams(const io::Scene& scene, ParamReader& p) {
+ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
     ShParams s;
     s.visibility.coefficients = p.integer("coefficients", 4, 1, 16);
     const int c = s.visibility.coefficients;
@@ -251,6 +258,10 @@ ShParams parseShParams(const io::Scene& scene, ParamReader& p) {
         s.budgetMb = p.number("lod_budget_mb", 0.0, 1e-3, 1e6);
     else
         s.dataReduction = p.number("data_reduction", s.dataReduction, 1.0, 1e6);
+    if (kind == Kind::ShGlobal) {
+        s.global.resolution = p.integer("global_resolution", 64, 1, 1024);
+        s.global.threads = scene.render.threads;
+    }
     return s;
 }
 
@@ -354,7 +365,7 @@ std::string dims(const glm::ivec3& d) {
 
 /// block_pyramid ← volume (once per volume); multires_grid ← pyramid + TF + LOD budget;
 /// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
-void addVisibilityStages(Plan& plan, const ShParams& params) {
+void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
     Stage pyramid{"block_pyramid", StageKind::Precompute, {"load_volume"}};
     pyramid.key = [](const Run& run) {
         return KeyBuilder(run, "block_pyramid").stage("load_volume").value();
@@ -445,6 +456,35 @@ void addVisibilityStages(Plan& plan, const ShParams& params) {
         return os.str();
     };
     plan.stages.push_back(vis);
+    if (!global) return;
+
+    const visibility::GlobalVisibilityOptions go = params.global;
+    Stage gv{"global_visibility", StageKind::Precompute, {"local_visibility", "method"}};
+    gv.key = [go](const Run& run) {
+        return KeyBuilder(run, "global_visibility")
+            .stage("local_visibility")
+            .integer(std::uint64_t(go.resolution))
+            .value();
+    };
+    gv.compute = [go](Run& run) {
+        auto g = std::make_shared<const visibility::GlobalVisibility>(
+            visibility::computeGlobalVisibility(
+                run.get<visibility::LocalVisibility>("local_visibility"), go, run.progress()));
+        run.details()["global_visibility"] = {{"rays_traced", g->raysTraced()},
+                                              {"points_skipped", g->pointsSkipped()},
+                                              {"bytes", g->bytes()}};
+        const std::size_t bytes = g->bytes();
+        return Artifact::of<visibility::GlobalVisibility>(std::move(g), bytes);
+    };
+    gv.notOnDisk = "recomputed per transfer function; reading it back saves little";
+    gv.describe = [](const Run&, const Artifact& a) {
+        const auto& g = *a.as<visibility::GlobalVisibility>();
+        std::ostringstream os;
+        os << g.resolution().x << "x" << g.resolution().y << "x" << g.resolution().z << " points, "
+           << g.coefficients() << " SH coefficients, " << (g.bytes() >> 20) << " MB";
+        return os.str();
+    };
+    plan.stages.push_back(gv);
 }
 
 // ---- The plan ----------------------------------------------------------------------------------
@@ -452,7 +492,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params) {
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     const render::RenderOptions options = parseOptions(kind, scene, reader);
-    const ShParams shParams = kind == Kind::ShLocal ? parseShParams(scene, reader) : ShParams{};
+    const ShParams shParams = isSh(kind) ? parseShParams(kind, scene, reader) : ShParams{};
     Plan plan;
     plan.params = reader.used;
     const json optionsKey = {{"params", reader.used},
@@ -620,7 +660,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(grad);
 
-    if (kind == Kind::ShLocal) addVisibilityStages(plan, shParams);
+    if (isSh(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal);
 
     Stage lightsStage{"lights", StageKind::Input, {"lights"}};
     if (!isLit(kind)) lightsStage.skip = "not needed: method '" + scene.method.name + "' is unlit";
@@ -644,7 +684,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     Stage sh{"light_sh", StageKind::Precompute, {"lights"}};
     if (!isLit(kind))
         sh.skip = "not needed: method '" + scene.method.name + "' is unlit";
-    else if (kind == Kind::ShLocal)
+    else if (isSh(kind))
         sh.skip = "not needed: sh-local projects the lights' radiance SH itself, per frame";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
@@ -703,6 +743,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 {"load_volume", "transfer_function", "skip_cells", "gradients", "camera", "lights",
                  "light_sh", "method", "render", "clip_planes", "crop_box", "image"}};
     if (kind == Kind::ShLocal) frame.inputs.push_back("local_visibility");
+    if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
     frame.key = [optionsKey, kind](const Run& run) {
         KeyBuilder k(run, "render");
         k.stage("load_volume")
@@ -713,6 +754,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .stage("lights")
             .stage("light_sh");
         if (kind == Kind::ShLocal) k.stage("local_visibility");
+        if (kind == Kind::ShGlobal) k.stage("global_visibility");
         return k.json(optionsKey).value();
     };
     frame.compute = [options, kind](Run& run) {
@@ -738,9 +780,15 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
             core::Stopwatch sw;
             std::shared_ptr<core::ImageRGBA> film;
-            if (kind == Kind::ShLocal) {
-                const auto model = render::makeShVisibilityModel(
-                    caster, *camera, run.get<visibility::LocalVisibility>("local_visibility"));
+            if (isSh(kind)) {
+                const auto model =
+                    kind == Kind::ShLocal
+                        ? render::makeShVisibilityModel(
+                              caster, *camera,
+                              run.get<visibility::LocalVisibility>("local_visibility"))
+                        : render::makeShVisibilityModel(
+                              caster, *camera,
+                              run.get<visibility::GlobalVisibility>("global_visibility"));
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else {
@@ -840,6 +888,12 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "SH local visibility on a multiresolution grid (Kronander 2012): soft self-shadowing within "
     "a radius under directional, point and environment lights",
     {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb"}, {"local_shadows"}));
+const RegisterMethod kShGlobal(rayCasterMethod(
+    Kind::ShGlobal, "sh-global",
+    "SH global visibility (Kronander 2012 eq. 11): local visibility chained in steps of its radius "
+    "on a regular grid; shadows from matter anywhere toward the light",
+    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution"},
+    {"local_shadows", "global_shadows"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

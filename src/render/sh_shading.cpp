@@ -15,18 +15,10 @@ constexpr float kInv4Pi = float(1.0 / (4.0 * std::numbers::pi));
 const float kInvSqrt4Pi = float(1.0 / std::sqrt(4.0 * std::numbers::pi));
 }  // namespace
 
-ShVisibilityShader::ShVisibilityShader(std::shared_ptr<const visibility::LocalVisibility> field,
-                                       const core::Geometry& geometry,
-                                       std::span<const std::shared_ptr<const lights::Light>> lights)
-    : field_(std::move(field)) {
-    VL_CHECK(field_ != nullptr);
-    coefficients_ = field_->coefficients();
+ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights)
+    : coefficients_(coefficients) {
     const int band = sh::shBandForCount(coefficients_);
-    // world → index: diag(1/spacing) · Dᵀ · (x − origin)
-    worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
-    for (int c = 0; c < 3; ++c)
-        for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
-    origin_ = glm::vec3(geometry.origin);
+    VL_CHECK(coefficients_ <= 16);
     for (std::size_t n = 0; n < lights.size(); ++n) {
         const lights::Light* l = lights[n].get();
         VL_CHECK(l != nullptr);
@@ -45,10 +37,8 @@ ShVisibilityShader::ShVisibilityShader(std::shared_ptr<const visibility::LocalVi
     }
 }
 
-glm::vec3 ShVisibilityShader::inScattered(const glm::vec3& x) const {
+glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
     const int C = coefficients_;
-    float v[16];
-    field_->sample(worldToIndex_ * (x - origin_), v);
     glm::vec3 sum(0.f);
     for (int i = 0; i < C; ++i) sum += constant_[i] * v[i];
     for (const Point& p : points_) {
@@ -70,9 +60,9 @@ glm::vec3 ShVisibilityShader::inScattered(const glm::vec3& x) const {
     return glm::max(sum * kInv4Pi, glm::vec3(0.f));
 }
 
-std::unique_ptr<ShadingModel> makeShVisibilityModel(
-    const RayCaster& caster, const Camera& camera,
-    std::shared_ptr<const visibility::LocalVisibility> field) {
+namespace {
+std::vector<std::shared_ptr<const lights::Light>> lightsOrHeadlight(const RayCaster& caster,
+                                                                    const Camera& camera) {
     std::vector<std::shared_ptr<const lights::Light>> lights = caster.options().lights;
     if (lights.empty()) {
         // The same headlight as makeBuiltinModel.
@@ -80,9 +70,30 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
             glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
         lights.push_back(std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), -travel));
     }
-    return std::make_unique<detail::DvrModel<ShVisibilityShader>>(
-        "sh-local", ShVisibilityShader(std::move(field), caster.volume().geometry(), lights),
+    return lights;
+}
+
+template <class Field>
+std::unique_ptr<ShadingModel> makeModel(const char* name, const RayCaster& caster,
+                                        const Camera& camera, std::shared_ptr<const Field> field) {
+    return std::make_unique<detail::DvrModel<ShVisibilityShader<Field>>>(
+        name,
+        ShVisibilityShader<Field>(std::move(field), caster.volume().geometry(),
+                                  lightsOrHeadlight(caster, camera)),
         PixelFootprint(caster, camera));
+}
+}  // namespace
+
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::LocalVisibility> field) {
+    return makeModel("sh-local", caster, camera, std::move(field));
+}
+
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::GlobalVisibility> field) {
+    return makeModel("sh-global", caster, camera, std::move(field));
 }
 
 }  // namespace voxlight::render

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // SH visibility shading (Kronander et al. 2012 eq. 7, 10, 12): at a sample x with visibility
-// coefficients V_i(x) (visibility/local_visibility.h) and incident radiance coefficients L_i(x) of
+// coefficients V_i(x) (local or global: visibility/local_visibility.h, global_visibility.h) and incident radiance coefficients L_i(x) of
 // all lights added together (eq. 12),
 //   diffuse = 1/(4π) · Σ_i L_i(x) V_i(x)   (isotropic phase; the marcher multiplies by α and the
 //                                            TF albedo and adds the TF emission: ARCHITECTURE §1)
@@ -21,18 +21,45 @@
 #include <vector>
 
 #include "render/ray_caster.h"
+#include "visibility/global_visibility.h"
 #include "visibility/local_visibility.h"
 
 namespace voxlight::render {
 
+/// The lights of a scene as SH radiance for the per-sample product with a visibility field.
+class ShLights {
+  public:
+    /// Throws InputError for area lights.
+    ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights);
+    int coefficients() const { return coefficients_; }
+    /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
+    glm::vec3 shade(const glm::vec3& x, const float* v) const;
+
+  private:
+    struct Point {
+        glm::vec3 position, intensity;
+        float minDistance;
+    };
+    int coefficients_ = 0;
+    glm::vec3 constant_[16] = {};  ///< directional + environment L_i
+    std::vector<Point> points_;
+};
+
+/// The shader of a visibility field: LocalVisibility (sh-local) or GlobalVisibility (sh-global),
+/// anything with coefficients() and sample(voxel index, out).
+template <class Field>
 class ShVisibilityShader {
   public:
     static constexpr bool kNeedsNormal = false;
-    /// `field` gives V at a voxel index (LocalVisibility); no lights → none are added (callers add
-    /// a headlight when they want one). Throws InputError for area lights.
-    ShVisibilityShader(std::shared_ptr<const visibility::LocalVisibility> field,
-                       const core::Geometry& geometry,
-                       std::span<const std::shared_ptr<const lights::Light>> lights);
+    ShVisibilityShader(std::shared_ptr<const Field> field, const core::Geometry& geometry,
+                       std::span<const std::shared_ptr<const lights::Light>> lights)
+        : field_(std::move(field)), lights_(field_->coefficients(), lights) {
+        // world → index: diag(1/spacing) · Dᵀ · (x − origin)
+        worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
+        for (int c = 0; c < 3; ++c)
+            for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
+        origin_ = glm::vec3(geometry.origin);
+    }
 
     Scatter scatter(const ShadeInput& in) const {
         return {inScattered(in.position), glm::vec3(0.f)};
@@ -40,20 +67,18 @@ class ShVisibilityShader {
     const ShVisibilityShader& forRay(const glm::vec3&) const { return *this; }
 
     /// 1/(4π) Σ L_i V_i at world point x (mm), clamped at 0.
-    glm::vec3 inScattered(const glm::vec3& x) const;
-    int coefficients() const { return coefficients_; }
+    glm::vec3 inScattered(const glm::vec3& x) const {
+        float v[16];
+        field_->sample(worldToIndex_ * (x - origin_), v);
+        return lights_.shade(x, v);
+    }
+    int coefficients() const { return lights_.coefficients(); }
 
   private:
-    struct Point {
-        glm::vec3 position, intensity;
-        float minDistance;
-    };
-    std::shared_ptr<const visibility::LocalVisibility> field_;
-    int coefficients_ = 0;
+    std::shared_ptr<const Field> field_;
+    ShLights lights_;
     glm::mat3 worldToIndex_{1.f};
     glm::vec3 origin_{0.f};
-    glm::vec3 constant_[16] = {};  ///< directional + environment L_i
-    std::vector<Point> points_;
 };
 
 /// The DVR model with SH visibility shading for `caster` (its options' lights; none → one
@@ -61,5 +86,8 @@ class ShVisibilityShader {
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::LocalVisibility> field);
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::GlobalVisibility> field);
 
 }  // namespace voxlight::render

@@ -141,14 +141,16 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
     return tau;
 }
 
+}  // namespace
+
 /// Whether V at voxel coordinate x (a sample of spacing s) can be read by a shaded sample: some
 /// visible cell within 2·s + 1 voxels (a shaded segment end lies within one render step ≤ 1 voxel
 /// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
 /// of ≤ s/2 into a neighbour).
-bool needed(const MultiresGrid& grid, const glm::vec3& x, int s) {
+bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
     constexpr int kCell = BlockPyramid::kCellVoxels;
     const glm::ivec3 cells = grid.pyramid().cells();
-    const float r = float(2 * s + 1);
+    const float r = 2.f * s + 1.f;
     const glm::ivec3 lo =
         glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
     const glm::ivec3 hi =
@@ -161,8 +163,6 @@ bool needed(const MultiresGrid& grid, const glm::vec3& x, int s) {
                     return true;
     return false;
 }
-
-}  // namespace
 
 sh::SphereSamples visibilityDirections(int rays, int coefficients) {
     LocalVisibilityOptions o;
@@ -277,7 +277,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                                 // Sample points of a partial edge block beyond the volume are clamped
                                 // onto it (their values are never read inside the volume).
                                 const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
-                                if (!needed(grid, origin, levelSpacing(l))) {
+                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l)))) {
                                     // Never read by a shaded sample: empty space's value.
                                     dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
                                     for (int c = 1; c < C; ++c) dst[c] = 0.f;

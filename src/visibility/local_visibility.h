@@ -108,6 +108,11 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> grid,
                                        const LocalVisibilityOptions& options,
                                        const core::Progress& progress = core::Progress::none());
 
+/// Whether V at voxel coordinate x, stored at sample spacing s voxels, can be read by a shaded
+/// sample: some visible cell (LodSelection::cellVisible) within 2·s + 1 voxels (see the header
+/// comment).
+bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s);
+
 /// Transmittance of one ray from voxel index `origin` along the *world* unit direction `dir` over
 /// `radiusVoxels`, integrated as computeLocalVisibility does (exposed for tests). `samples` counts
 /// the σt evaluations.

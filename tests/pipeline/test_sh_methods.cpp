@@ -133,3 +133,29 @@ TEST(ShLocal, OpaqueAndTransparentTfsAndALightOnAGridPointStayFinite) {
     EXPECT_TRUE(allFinite(clear.image));
     EXPECT_FALSE(clear.warnings.empty());  // an empty image says why
 }
+
+TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility) {
+    Session session;
+    json d = shScene();
+    d["method"]["name"] = "sh-global";
+    const RunResult global = session.run(scene(d));
+    for (const char* s :
+         {"block_pyramid", "multires_grid", "local_visibility", "global_visibility"})
+        EXPECT_TRUE(global.stage(s).ran) << s;
+    EXPECT_TRUE(allFinite(global.image));
+    d["method"]["name"] = "sh-local";
+    const RunResult local = session.run(scene(d));
+    EXPECT_EQ(ranStages(local), (std::set<std::string>{"camera", "render"}));
+    EXPECT_NE(local.image.pixels, global.image.pixels);  // global shadows differ
+    for (const auto& s : local.stages) EXPECT_NE(s.name, "global_visibility");  // not planned
+    d["method"]["name"] = "sh-global";
+    EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
+    d["lights"][0]["position"] = {40, -200, 0};
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"lights", "camera", "render"}));
+    d["method"]["params"]["global_resolution"] = 8;  // the global grid only
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"global_visibility", "camera", "render"}));
+    d["method"]["name"] = "sh-local";  // sh-local has no global grid to size
+    EXPECT_THROW(session.run(scene(d)), InputError);
+}
