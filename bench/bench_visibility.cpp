@@ -9,6 +9,7 @@
 
 #include "core/phantoms.h"
 #include "optics/presets.h"
+#include "visibility/global_visibility.h"
 #include "visibility/local_visibility.h"
 
 using namespace voxlight;
@@ -63,8 +64,37 @@ BENCHMARK(BM_TfUpdate)
     ->ArgsProduct({{0, 1}, {16, 32, 64}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
-    ->Iterations(3)
+    ->Iterations(2)
     ->Repetitions(1);
+
+/// Global visibility alone (Kronander's "global" column) on the 64³ grid, from the local
+/// visibility of ct-bone at 1:16 (computed once).
+void BM_GlobalVisibility(benchmark::State& state) {
+    static const auto local = [] {
+        const auto pyramid = torsoPyramid();
+        const optics::TransferFunction tf = optics::makePreset("ct-bone");
+        const optics::TfTable table(tf);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, tf, table,
+                                           visibility::LodBudget::fromReduction(
+                                               16.0, pyramid->geometry().voxelCount())));
+        visibility::LocalVisibilityOptions o;
+        o.coefficients = 4;
+        o.rays = 32;
+        return std::make_shared<const visibility::LocalVisibility>(
+            visibility::computeLocalVisibility(grid, table, o));
+    }();
+    visibility::GlobalVisibilityOptions go;
+    go.resolution = 64;
+    std::uint64_t rays = 0;
+    for (auto _ : state) {
+        const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
+        rays += g.raysTraced();
+        benchmark::DoNotOptimize(g.at({0, 0, 0}));
+    }
+    state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_GlobalVisibility)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
 
 void BM_BlockPyramid(benchmark::State& state) {
     for (auto _ : state) benchmark::DoNotOptimize(visibility::BlockPyramid::build(torso()));

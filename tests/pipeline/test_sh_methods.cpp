@@ -10,6 +10,7 @@
 #include "core/phantoms.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/registry.h"
+#include "support/test_support.h"
 
 using namespace voxlight;
 using namespace voxlight::pipeline;
@@ -158,4 +159,18 @@ TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility)
               (std::set<std::string>{"global_visibility", "camera", "render"}));
     d["method"]["name"] = "sh-local";  // sh-local has no global grid to size
     EXPECT_THROW(session.run(scene(d)), InputError);
+}
+
+TEST(ShLocal, TurningAnEnvironmentMapRunsNoVisibilityStage) {
+    VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
+    Session session;
+    json d = shScene();
+    d["lights"] =
+        json::array({{{"type", "environment"}, {"path", env.string()}, {"rotation", {0, 0, 0}}}});
+    const RunResult a = session.run(scene(d));
+    EXPECT_TRUE(allFinite(a.image));
+    d["lights"][0]["rotation"] = {0, 0, 90};
+    const RunResult b = session.run(scene(d));
+    EXPECT_EQ(ranStages(b), (std::set<std::string>{"lights", "camera", "render"}));
+    EXPECT_NE(a.image.pixels, b.image.pixels);
 }
