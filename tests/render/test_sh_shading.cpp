@@ -3,9 +3,11 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
 
 #include "lights/area_light.h"
+#include "lights/environment_light.h"
 #include "lights/light.h"
 #include "render/sh_shading.h"
 
@@ -95,5 +97,26 @@ TEST(ShShading, AreaLightsAreRefusedByName) {
         FAIL() << "an area light was accepted";
     } catch (const InputError& e) {
         EXPECT_EQ(e.field(), "sphere") << e.what();
+    }
+}
+
+TEST(ShShading, UniformEnvironmentInEmptySpaceScattersItsRadiance) {
+    // A uniform map of radiance L projects to L_0 = L·√(4π) (exact pixel solid angles), so with
+    // V = (√(4π), 0, …) the isotropic phase scatters (1/4π)·L·4π = L: the furnace test.
+    constexpr float kL = 0.7f;
+    core::ImageRGBA image(64, 32);
+    for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = (i % 4 == 3) ? 1.f : kL;
+    // Float SH projection over 2048 pixels and float V: relative 1e-5.
+    constexpr float kRelTol = 1e-5f;
+    for (int c : {1, 4, 16}) {
+        core::Geometry g;
+        const auto vis = emptySpace(c, g);
+        lights::EnvironmentOptions eo;
+        eo.rotation = glm::dmat3(glm::rotate(glm::dmat4(1.0), 0.7, glm::dvec3(0.2, 1.0, 0.4)));
+        const std::vector<std::shared_ptr<const lights::Light>> ls = {
+            std::make_shared<lights::EnvironmentLight>(image, eo, "uniform")};
+        const render::ShVisibilityShader shader(vis, g, ls);
+        const glm::vec3 s = shader.inScattered({3.f, 1.f, -2.f});
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(s[k], kL, kRelTol * kL) << c;
     }
 }
