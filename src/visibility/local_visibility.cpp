@@ -124,7 +124,8 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
             t += std::max(exit, 0.f) + 1e-3f * h;  // a thousandth of a voxel past the face
             continue;
         }
-        const int level = grid.level(grid.ownerBlock(p));
+        // Step length from the level of the block holding the cell (blocks are 4 cells wide).
+        const int level = grid.level(grid.indexOf(c >> 2));
         const float stepVoxels =
             level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
         const float dt = std::min(stepVoxels * h, length - t);
@@ -292,7 +293,8 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                                     const double tau =
                                         opticalDepth(sigma, origin, ray, length, hf, samples);
                                     // Project this direction's transmittance onto the SH basis.
-                                    const double T = tau > 0.0 ? std::exp(-tau) : 1.0;
+                                    const double T = tau > 0.0 ? double(std::exp(-float(tau)))
+                                                               : 1.0;  // float: 1e-7
                                     const double* w = wy.data() + std::size_t(d) * C;
                                     for (int c = 0; c < C; ++c) v[c] += T * w[c];
                                 }
