@@ -152,3 +152,42 @@ TEST(LocalVisibility, FullyOpaqueTfGivesFiniteNonNegativeOcclusion) {
     vis.sample(glm::vec3(16.f), out);
     EXPECT_NEAR(out[0], 0.f, 1e-6f);
 }
+
+TEST(LocalVisibility, RaysRespectAnisotropicSpacingAndAnObliqueGrid) {
+    // A slab of σt = σ0 in index layers k ∈ [10, 19] of a grid with spacing (0.8, 1.0, 1.5) mm
+    // whose axes are rotated 30° about world z: the slab's faces are the index planes k = 9.5 and
+    // 19.5 (as in the slab test), crossed by a ray of world direction ω at a rate of
+    // (Dᵀω)_z / 1.5 index units per mm.
+    constexpr float kSigma = 0.05f;
+    core::Volume v = test::makeVolume(
+        {40, 40, 30}, [](int, int, int k) { return k >= 10 && k <= 19 ? 1000 : 0; });
+    core::Geometry& g = v.geometry();
+    g.spacing = {0.8, 1.0, 1.5};
+    const double a = 30.0 * std::numbers::pi / 180.0;
+    g.direction = glm::dmat3(std::cos(a), std::sin(a), 0, -std::sin(a), std::cos(a), 0, 0, 0, 1);
+    g.origin = {5.0, -3.0, 2.0};
+    const optics::TransferFunction tf = test::rampTf(kSigma);
+    const auto grid = fullGrid(v, tf);
+    const optics::TfTable table(tf);
+    const glm::vec3 x(20.f, 20.f, 16.f);           // 3.5 index layers (5.25 mm) below the top face
+    const double radius = 16.0, R = radius * 0.8;  // r_s in units of the smallest spacing, mm
+    // Midpoint rule at 0.8 mm steps on σt with kinks at the faces: |Δτ| ≤ σ0·Δ/4 (slab test).
+    constexpr double kRayTol = kSigma * 0.8 / 4.0;
+    int farFromIsotropic = 0;
+    for (const glm::dvec3 w : {glm::dvec3(0, 0, 1), glm::dvec3(0, 0, -1), glm::dvec3(0.6, 0.0, 0.8),
+                               glm::dvec3(-0.48, 0.6, 0.64), glm::dvec3(0.8, -0.6, 0.0)}) {
+        const double rate = (glm::transpose(g.direction) * w).z / g.spacing.z;  // index z per mm
+        double d = R;
+        if (rate > 0) d = std::min(d, (19.5 - x.z) / rate);
+        if (rate < 0) d = std::min(d, (9.5 - x.z) / rate);
+        const double expected = std::exp(-double(kSigma) * d);
+        EXPECT_NEAR(rayTransmittance(*grid, table, x, w, radius), expected, kRayTol)
+            << w.x << "," << w.y << "," << w.z;
+        // What a march that ignored spacing and orientation (1 mm voxels, identity axes) would get.
+        double dIso = radius;
+        if (w.z > 0) dIso = std::min(dIso, (19.5 - x.z) / w.z);
+        if (w.z < 0) dIso = std::min(dIso, (9.5 - x.z) / w.z);
+        if (std::abs(std::exp(-double(kSigma) * dIso) - expected) > 5 * kRayTol) ++farFromIsotropic;
+    }
+    EXPECT_GE(farFromIsotropic, 2);  // the test can tell the difference
+}
