@@ -493,6 +493,13 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     const render::RenderOptions options = parseOptions(kind, scene, reader);
     const ShParams shParams = isSh(kind) ? parseShParams(kind, scene, reader) : ShParams{};
+    if (isSh(kind))
+        for (std::size_t i = 0; i < scene.lights.size(); ++i)
+            if (scene.lights[i].type == "area")
+                throw InputError(scene.source, "lights[" + std::to_string(i) + "].type",
+                                 "area lights are not shaded by method '" + scene.method.name + "'",
+                                 "use directional, point or environment lights, or method "
+                                 "'gradient'");
     Plan plan;
     plan.params = reader.used;
     const json optionsKey = {{"params", reader.used},

@@ -102,6 +102,18 @@ TEST(ShLocal, ParamsAreReadStrictly) {
     EXPECT_THROW(planOf({{"data_reduction", 0.5}}), InputError);
     EXPECT_THROW(planOf({{"data_reduction", 4}, {"lod_budget_mb", 8}}), InputError);
     EXPECT_THROW(planOf({{"ray", 32}}), InputError);  // unknown key
+    json area = shScene();
+    area["lights"] = json::array({{{"type", "area"},
+                                   {"shape", "sphere"},
+                                   {"position", {0, 0, 300}},
+                                   {"radius", 20},
+                                   {"intensity", 5}}});
+    try {
+        Session().plan(scene(area));
+        ADD_FAILURE() << "an area light was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "lights[0].type");
+    }
     try {
         planOf({{"ray", 32}});
     } catch (const InputError& e) {
@@ -133,6 +145,12 @@ TEST(ShLocal, OpaqueAndTransparentTfsAndALightOnAGridPointStayFinite) {
     const RunResult clear = renderScene(scene(d));
     EXPECT_TRUE(allFinite(clear.image));
     EXPECT_FALSE(clear.warnings.empty());  // an empty image says why
+    d["method"]["name"] = "sh-global";
+    EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
+    d["transfer_function"] = {{"points",
+                               {{{"value", -2000}, {"color", {1, 1, 1}}, {"extinction", 50}},
+                                {{"value", 4000}, {"color", {1, 1, 1}}, {"extinction", 50}}}}};
+    EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
 }
 
 TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility) {
