@@ -70,7 +70,7 @@ struct SigmaField {
         const int n = levelResolution(level);
         const float top = float(n - 1);
         const glm::vec3 u = glm::clamp(
-            (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) / float(levelSpacing(level)) - 0.5f,
+            (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) * levelInvSpacing(level) - 0.5f,
             glm::vec3(0.f), glm::vec3(top));
         float v = 0.f;
         addTrilinear(block[idx], n, 1, u, 1.f, &v);

@@ -82,6 +82,8 @@ inline constexpr int kPyramidFloats = 4096 + 512 + 64 + 8 + 1;
 constexpr int levelResolution(int level) { return kBlockSize >> level; }
 /// Voxels between samples at a level (1 << level).
 constexpr int levelSpacing(int level) { return 1 << level; }
+/// 1 / levelSpacing(level), exact (a power of two): hot loops multiply instead of dividing.
+constexpr float levelInvSpacing(int level) { return 1.f / float(1 << level); }
 /// First float of a level inside a block's pyramid.
 constexpr int levelOffset(int level) {
     int o = 0;
@@ -246,8 +248,8 @@ class MultiresGrid {
         const std::size_t owner = indexOf(b);
         const int l = selection_.level[owner];
         if (l != kNone) {
-            const float s = float(levelSpacing(l));
-            const glm::vec3 u = (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) / s - 0.5f;
+            const glm::vec3 u =
+                (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) * levelInvSpacing(l) - 0.5f;
             const float top = float(levelResolution(l) - 1);
             if (u.x >= 0.f && u.y >= 0.f && u.z >= 0.f && u.x <= top && u.y <= top && u.z <= top) {
                 float v = 0.f;
