@@ -121,16 +121,16 @@ struct PathTracer::Impl {
         }
         double t = t0;
         while (t < t1) {
-            const int a = tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2)
-                                             : (tNext.y <= tNext.z ? 1 : 2);
+            const int a =
+                tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2) : (tNext.y <= tNext.z ? 1 : 2);
             const double tb = std::min(tNext[a], t1);
             if (tb > t && !f(t, tb, cells->majorant(cells->index(c.x, c.y, c.z)))) return;
             t = tb;
             if (!(tNext[a] < t1)) return;
             c[a] += step[a];
             if (c[a] < 0 || c[a] >= counts[a]) return;
-            tNext[a] = c[a] + step[a] >= 0 && c[a] + step[a] < counts[a] ? tNext[a] + tStep[a]
-                                                                       : INFINITY;
+            tNext[a] =
+                c[a] + step[a] >= 0 && c[a] + step[a] < counts[a] ? tNext[a] + tStep[a] : INFINITY;
         }
     }
 
@@ -161,8 +161,8 @@ struct PathTracer::Impl {
     }
 
     template <class View>
-    double ratioTracking(const View& v, const Ray& ray, double t0, double t1,
-                         core::CounterRng& rng, Counters& n) const {
+    double ratioTracking(const View& v, const Ray& ray, double t0, double t1, core::CounterRng& rng,
+                         Counters& n) const {
         double T = 1.0;
         ++n.shadow;
         const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
@@ -226,8 +226,7 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
                        std::shared_ptr<const optics::TfTable> table,
                        std::shared_ptr<const grid::BrickMajorants> cells, Options options)
     : options_(std::move(options)) {
-    if (options_.samplesPerPixel < 1)
-        throw InputError("pathtrace", "spp", "must be at least 1");
+    if (options_.samplesPerPixel < 1) throw InputError("pathtrace", "spp", "must be at least 1");
     if (options_.maxBounces < 1) throw InputError("pathtrace", "max_bounces", "must be at least 1");
     if (!(std::abs(options_.phaseG) < 1.f))
         throw InputError("pathtrace", "phase_g", "must lie strictly between -1 and 1");
@@ -390,8 +389,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
 
     std::unique_ptr<tbb::global_control> limit;
     if (options_.threads > 0)
-        limit = std::make_unique<tbb::global_control>(
-            tbb::global_control::max_allowed_parallelism, std::size_t(options_.threads));
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      std::size_t(options_.threads));
     int done = 0;
     while (done < options_.samplesPerPixel) {
         const int s0 = done, s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
@@ -422,7 +421,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
         double lumMean = 0.0, lumVar = 0.0;
         for (int c = 0; c < 3; ++c) {
             const double mean = sum[p * 3 + c] / n;
-            const double var = std::max(0.0, sumSq[p * 3 + c] / n - mean * mean) / std::max(1.0, n - 1.0);
+            const double var =
+                std::max(0.0, sumSq[p * 3 + c] / n - mean * mean) / std::max(1.0, n - 1.0);
             out[c] = float(mean);
             if (stdError) stdError->pixels[p * 4 + c] = float(std::sqrt(var));
             const double wgt = c == 0 ? 0.2126 : c == 1 ? 0.7152 : 0.0722;

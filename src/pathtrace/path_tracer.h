@@ -38,11 +38,11 @@ namespace voxlight::pathtrace {
 
 struct Options {
     int samplesPerPixel = 64;
-    double maxSeconds = 0.0;  ///< > 0: stop after the pass that crosses this many seconds
-    int maxBounces = 1;       ///< scattering events per path (1 = single scattering)
-    float phaseG = 0.f;       ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
-    int rouletteAfter = 3;    ///< bounces before Russian roulette may end a path
-    bool majorantGrid = true; ///< false: one global majorant (Exposure Render's scheme)
+    double maxSeconds = 0.0;   ///< > 0: stop after the pass that crosses this many seconds
+    int maxBounces = 1;        ///< scattering events per path (1 = single scattering)
+    float phaseG = 0.f;        ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
+    int rouletteAfter = 3;     ///< bounces before Russian roulette may end a path
+    bool majorantGrid = true;  ///< false: one global majorant (Exposure Render's scheme)
     /// Samples spread over each pixel's area (antialiased photo); false: through its centre, as
     /// the ray caster and the SH methods sample — for pixel-by-pixel references.
     bool pixelJitter = true;

@@ -10,8 +10,14 @@
 //   iso:                  iso_value (physical; default where the TF reaches 1/10 of its max σt),
 //                         ambient, diffuse
 //   mip, minip:           (window from the TF)
-// Lights: gradient and iso shade with every light type (render/shading.h says how); the other
-// three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
+//   sh-local:             rays (32), coefficients (1/4/9/16; 4), radius (voxels; 16), and the LOD
+//                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
+//                         (MB of visibility coefficients; not both)
+//   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
+//                         volume's dims). Its local stages have the same keys as sh-local's, so
+//                         switching between the two recomputes nothing once both have run.
+// Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
+// directional, point and environment lights (render/sh_shading.h); the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
 // "specular" (an effects list without it turns the highlight off).
 #include <cmath>
 #include <sstream>
@@ -27,6 +33,9 @@
 #include "pipeline/scene_inputs.h"
 #include "render/framing.h"
 #include "render/ray_caster.h"
+#include "render/sh_shading.h"
+#include "visibility/global_visibility.h"
+#include "visibility/local_visibility.h"
 
 namespace voxlight::pipeline {
 
@@ -200,7 +209,7 @@ const Codec& irradianceCodec() {
 
 // ---- Method params -------------------------------------------------------------------------
 
-enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, PathTrace };
+enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, ShLocal, ShGlobal, PathTrace };
 
 render::Mode modeOf(Kind k) {
     switch (k) {
@@ -215,11 +224,58 @@ render::Mode modeOf(Kind k) {
             return render::Mode::MinIp;
         case Kind::Iso:
             return render::Mode::Isosurface;
+        case Kind::ShLocal:  // DVR traversal and skip rule; shading by render/sh_shading.h
+        case Kind::ShGlobal:
+            return render::Mode::EmissionAbsorption;
     }
     throw InternalError("unknown ray-caster method");
 }
 
-bool isLit(Kind k) { return k == Kind::Gradient || k == Kind::Iso || k == Kind::PathTrace; }
+bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
+bool isLit(Kind k) {
+    return k == Kind::Gradient || k == Kind::Iso || isSh(k) || k == Kind::PathTrace;
+}
+
+/// sh-local's and sh-global's own parameters (see the header comment).
+struct ShParams {
+    visibility::LocalVisibilityOptions visibility;
+    visibility::GlobalVisibilityOptions global;  ///< sh-global
+    double dataReduction = 8.0;
+    double budgetMb = 0.0;  ///< > 0: the budget in MB instead of dataReduction
+    visibility::LodBudget budget(std::uint64_t voxels) const {
+        return budgetMb > 0.0 ? visibility::LodBudget::fromBytes(budgetMb * 1048576.0,
+                                                                 4.0 * visibility.coefficients)
+                              : visibility::LodBudget::fromReduction(dataReduction, voxels);
+    }
+    nlohmann::json budgetKey() const {
+        return budgetMb > 0.0 ? nlohmann::json{{"lod_budget_mb", budgetMb}}
+                              : nlohmann::json{{"data_reduction", dataReduction}};
+    }
+};
+
+ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
+    ShParams s;
+    s.visibility.coefficients = p.integer("coefficients", 4, 1, 16);
+    const int c = s.visibility.coefficients;
+    if (c != 1 && c != 4 && c != 9 && c != 16)
+        p.fail("coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(c),
+               "1 is ambient occlusion; 4, 9, 16 are SH bands 1, 2, 3");
+    s.visibility.rays = p.integer("rays", std::max(32, visibility::kMinRaysPerCoefficient * c),
+                                  visibility::kMinRaysPerCoefficient * c, 4096);
+    s.visibility.radiusVoxels = p.number("radius", 16.0, 0.5, 256.0);
+    s.visibility.threads = scene.render.threads;
+    if (p.has("lod_budget_mb") && p.has("data_reduction"))
+        p.fail("lod_budget_mb", "and data_reduction both set the LOD budget", "give one of them");
+    if (p.has("lod_budget_mb"))
+        s.budgetMb = p.number("lod_budget_mb", 0.0, 1e-3, 1e6);
+    else
+        s.dataReduction = p.number("data_reduction", s.dataReduction, 1.0, 1e6);
+    if (kind == Kind::ShGlobal) {
+        s.global.resolution = p.integer("global_resolution", 64, 1, 1024);
+        s.global.threads = scene.render.threads;
+    }
+    return s;
+}
 
 /// Options of the caster from the scene and the method params (read strictly).
 render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReader& p) {
@@ -427,6 +483,132 @@ Artifact renderPathTraced(Run& run, pathtrace::Options pt) {
     return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
 }
 
+// ---- SH visibility stages ----------------------------------------------------------------------
+
+/// block_pyramid ← volume (once per volume); multires_grid ← pyramid + TF + LOD budget;
+/// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
+void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
+    Stage pyramid{"block_pyramid", StageKind::Precompute, {"load_volume"}};
+    pyramid.key = [](const Run& run) {
+        return KeyBuilder(run, "block_pyramid").stage("load_volume").value();
+    };
+    pyramid.compute = [](Run& run) {
+        auto p = std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(
+            run.get<LoadedVolume>("load_volume")->volume, run.progress()));
+        const std::size_t bytes = p->bytes();
+        return Artifact::of<visibility::BlockPyramid>(std::move(p), bytes);
+    };
+    pyramid.notOnDisk = "rebuilt from the volume in one pass, faster than reading it back";
+    pyramid.describe = [](const Run&, const Artifact& a) {
+        const auto& p = *a.as<visibility::BlockPyramid>();
+        return std::to_string(p.blockCount()) + " blocks of 16^3 at 5 levels, " +
+               std::to_string(p.bytes() >> 20) + " MB";
+    };
+    plan.stages.push_back(pyramid);
+
+    const json budgetKey = params.budgetKey();
+    Stage grid{
+        "multires_grid", StageKind::Precompute, {"block_pyramid", "transfer_function", "method"}};
+    grid.key = [budgetKey](const Run& run) {
+        return KeyBuilder(run, "multires_grid")
+            .stage("block_pyramid")
+            .stage("transfer_function")
+            .json(budgetKey)
+            .value();
+    };
+    grid.compute = [params](Run& run) {
+        const auto pyr = run.get<visibility::BlockPyramid>("block_pyramid");
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        visibility::LodBudget budget;
+        try {
+            budget = params.budget(pyr->geometry().voxelCount());
+        } catch (const InputError& e) {
+            throw InputError(run.scene().source, "method.params." + e.field(), e.problem(),
+                             e.fix());
+        }
+        auto g = std::make_shared<const visibility::MultiresGrid>(
+            pyr, visibility::selectLod(*pyr, tfa->tf, *tfa->table, budget));
+        const std::size_t bytes = g->selection().level.size() * 5;
+        return Artifact::of<visibility::MultiresGrid>(std::move(g), bytes);
+    };
+    grid.notOnDisk = "the LOD selection takes milliseconds";
+    grid.describe = [](const Run& run, const Artifact& a) {
+        const auto& s = a.as<visibility::MultiresGrid>()->selection();
+        const auto voxels =
+            run.get<visibility::BlockPyramid>("block_pyramid")->geometry().voxelCount();
+        std::ostringstream os;
+        os << s.points << " samples (1:" << (s.points ? double(voxels) / double(s.points) : 0.0)
+           << "); blocks at 16^3/8^3/4^3/2^3/1^3/none: ";
+        for (int l = 0; l <= visibility::kLevels; ++l)
+            os << (l ? "/" : "") << s.blocksPerLevel[std::size_t(l)];
+        return os.str();
+    };
+    plan.stages.push_back(grid);
+
+    const visibility::LocalVisibilityOptions vo = params.visibility;
+    const json visKey = {
+        {"rays", vo.rays}, {"coefficients", vo.coefficients}, {"radius", vo.radiusVoxels}};
+    Stage vis{"local_visibility",
+              StageKind::Precompute,
+              {"multires_grid", "transfer_function", "method"}};
+    vis.key = [visKey](const Run& run) {
+        return KeyBuilder(run, "local_visibility")
+            .stage("multires_grid")
+            .stage("transfer_function")
+            .json(visKey)
+            .value();
+    };
+    vis.compute = [vo](Run& run) {
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        auto v = std::make_shared<const visibility::LocalVisibility>(
+            visibility::computeLocalVisibility(run.get<visibility::MultiresGrid>("multires_grid"),
+                                               *tfa->table, vo, run.progress()));
+        run.details()["local_visibility"] = {{"rays_traced", v->raysTraced()},
+                                             {"samples", v->samplesTaken()},
+                                             {"bytes", v->bytes()}};
+        const std::size_t bytes = v->bytes();
+        return Artifact::of<visibility::LocalVisibility>(std::move(v), bytes);
+    };
+    vis.notOnDisk = "recomputed per transfer function; reading it back saves little";
+    vis.describe = [](const Run&, const Artifact& a) {
+        const auto& v = *a.as<visibility::LocalVisibility>();
+        std::ostringstream os;
+        os << v.rays() << " rays, " << v.coefficients() << " SH coefficients, r_s "
+           << v.radiusVoxels() << " voxels, " << (v.bytes() >> 20) << " MB";
+        return os.str();
+    };
+    plan.stages.push_back(vis);
+    if (!global) return;
+
+    const visibility::GlobalVisibilityOptions go = params.global;
+    Stage gv{"global_visibility", StageKind::Precompute, {"local_visibility", "method"}};
+    gv.key = [go](const Run& run) {
+        return KeyBuilder(run, "global_visibility")
+            .stage("local_visibility")
+            .integer(std::uint64_t(go.resolution))
+            .value();
+    };
+    gv.compute = [go](Run& run) {
+        auto g = std::make_shared<const visibility::GlobalVisibility>(
+            visibility::computeGlobalVisibility(
+                run.get<visibility::LocalVisibility>("local_visibility"), go, run.progress()));
+        run.details()["global_visibility"] = {{"rays_traced", g->raysTraced()},
+                                              {"points_skipped", g->pointsSkipped()},
+                                              {"bytes", g->bytes()}};
+        const std::size_t bytes = g->bytes();
+        return Artifact::of<visibility::GlobalVisibility>(std::move(g), bytes);
+    };
+    gv.notOnDisk = "recomputed per transfer function; reading it back saves little";
+    gv.describe = [](const Run&, const Artifact& a) {
+        const auto& g = *a.as<visibility::GlobalVisibility>();
+        std::ostringstream os;
+        os << g.resolution().x << "x" << g.resolution().y << "x" << g.resolution().z << " points, "
+           << g.coefficients() << " SH coefficients, " << (g.bytes() >> 20) << " MB";
+        return os.str();
+    };
+    plan.stages.push_back(gv);
+}
+
 // ---- The plan ----------------------------------------------------------------------------------
 
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
@@ -434,6 +616,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     const render::RenderOptions options = parseOptions(kind, scene, reader);
     std::optional<pathtrace::Options> traced;
     if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader);
+    const ShParams shParams = isSh(kind) ? parseShParams(kind, scene, reader) : ShParams{};
+    if (isSh(kind))
+        for (std::size_t i = 0; i < scene.lights.size(); ++i)
+            if (scene.lights[i].type == "area")
+                throw InputError(scene.source, "lights[" + std::to_string(i) + "].type",
+                                 "area lights are not shaded by method '" + scene.method.name + "'",
+                                 "use directional, point or environment lights, or method "
+                                 "'gradient'");
     Plan plan;
     plan.params = reader.used;
     const json optionsKey = {{"params", reader.used},
@@ -609,6 +799,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(grad);
 
+    if (isSh(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal);
+
     Stage lightsStage{"lights", StageKind::Input, {"lights"}};
     if (!isLit(kind)) lightsStage.skip = "not needed: method '" + scene.method.name + "' is unlit";
     lightsStage.key = [](const Run& run) -> std::optional<std::uint64_t> {
@@ -633,6 +825,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         sh.skip = "not needed: method '" + scene.method.name + "' is unlit";
     else if (kind == Kind::PathTrace)
         sh.skip = "not needed: the path tracer samples environment maps directly";
+    else if (isSh(kind))
+        sh.skip = "not needed: sh-local projects the lights' radiance SH itself, per frame";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
     // Keyed on the environment lights alone: moving a directional light re-projects no map.
@@ -653,8 +847,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     // What the fitted camera frames: the hull of the visible matter (render/framing.h).
     const json cutDesc = {{"clip", scene.document.value("clip_planes", json::array())},
                           {"crop", scene.document.value("crop_box", json::object())}};
-    const bool voxelsByTf =
-        kind == Kind::Gradient || kind == Kind::EmissionAbsorption || kind == Kind::PathTrace;
+    const bool voxelsByTf = kind == Kind::Gradient || kind == Kind::EmissionAbsorption ||
+                            kind == Kind::PathTrace || isSh(kind);
     Stage framing{"framing", StageKind::Precompute,
                   voxelsByTf ? std::vector<std::string>{"skip_cells", "transfer_function",
                                                         "clip_planes", "crop_box"}
@@ -733,17 +927,20 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 StageKind::Frame,
                 {"load_volume", "transfer_function", "skip_cells", "gradients", "camera", "lights",
                  "light_sh", "method", "render", "clip_planes", "crop_box", "image"}};
-    frame.key = [optionsKey](const Run& run) {
-        return KeyBuilder(run, "render")
-            .stage("load_volume")
+    if (kind == Kind::ShLocal) frame.inputs.push_back("local_visibility");
+    if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
+    frame.key = [optionsKey, kind](const Run& run) {
+        KeyBuilder k(run, "render");
+        k.stage("load_volume")
             .stage("transfer_function")
             .stage("skip_cells")
             .stage("gradients")
             .stage("camera")
             .stage("lights")
-            .stage("light_sh")
-            .json(optionsKey)
-            .value();
+            .stage("light_sh");
+        if (kind == Kind::ShLocal) k.stage("local_visibility");
+        if (kind == Kind::ShGlobal) k.stage("global_visibility");
+        return k.json(optionsKey).value();
     };
     if (kind == Kind::PathTrace) {
         frame.compute = [pt = *traced](Run& run) { return renderPathTraced(run, pt); };
@@ -772,8 +969,22 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
                 std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
             core::Stopwatch sw;
-            auto film =
-                std::make_shared<core::ImageRGBA>(caster.render(*camera, run.progress(), &stats));
+            std::shared_ptr<core::ImageRGBA> film;
+            if (isSh(kind)) {
+                const auto model =
+                    kind == Kind::ShLocal
+                        ? render::makeShVisibilityModel(
+                              caster, *camera,
+                              run.get<visibility::LocalVisibility>("local_visibility"))
+                        : render::makeShVisibilityModel(
+                              caster, *camera,
+                              run.get<visibility::GlobalVisibility>("global_visibility"));
+                film = std::make_shared<core::ImageRGBA>(
+                    caster.render(*camera, *model, run.progress(), &stats));
+            } else {
+                film = std::make_shared<core::ImageRGBA>(
+                    caster.render(*camera, run.progress(), &stats));
+            }
             const double seconds = sw.seconds();
             json& d = run.details();
             d["render"] = {{"step_voxels", o.stepVoxels},
@@ -877,6 +1088,19 @@ const RegisterMethod kPathTrace([] {
     };
     return m;
 }());
+const RegisterMethod kShLocal(rayCasterMethod(
+    Kind::ShLocal, "sh-local",
+    "SH local visibility on a multiresolution grid (Kronander 2012): soft self-shadowing "
+    "within "
+    "a radius under directional, point and environment lights",
+    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb"}, {"local_shadows"}));
+const RegisterMethod kShGlobal(rayCasterMethod(
+    Kind::ShGlobal, "sh-global",
+    "SH global visibility (Kronander 2012 eq. 11): local visibility chained in steps of its "
+    "radius "
+    "on a regular grid; shadows from matter anywhere toward the light",
+    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution"},
+    {"local_shadows", "global_shadows"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

@@ -431,64 +431,9 @@ bool RayCaster::visibleRange(const RaySegment& r, float& t0, float& t1) const {
 
 namespace {
 
-void writeMiss(float* px, const glm::vec3& bg) {
-    px[0] = bg.r, px[1] = bg.g, px[2] = bg.b, px[3] = 0.f;
-}
-
-/// Guards the "never NaN pixels" promise at the last possible point.
-float finiteOr0(float v) { return std::isfinite(v) ? v : 0.f; }
-
-template <class Shader>
-class DvrModel final : public ShadingModel {
-  public:
-    /// `footprint`: the pixels that can see a non-empty cell; when the tiles are rendered with its
-    /// camera, the others get the background without a ray.
-    DvrModel(std::string name, Shader shader, PixelFootprint footprint)
-        : name_(std::move(name)), shader_(std::move(shader)), footprint_(std::move(footprint)) {}
-    std::string name() const override { return name_; }
-    void renderTile(const RayCaster& c, const Camera& cam, int x0, int y0, int x1, int y1,
-                    core::ImageRGBA& film, RenderStats& stats) const override {
-        const glm::vec3 bg = c.options().background;
-        const bool footprint = footprint_.builtFor(cam);
-        auto tile = [&](const auto& view, const auto* gradients) {
-            for (int y = y0; y < y1; ++y)
-                for (int x = x0; x < x1; ++x) {
-                    float* px = film.at(x, y);
-                    if (footprint && !footprint_.covers(x, y)) {
-                        writeMiss(px, bg);  // what marchDvr returns without a non-empty cell
-                        continue;
-                    }
-                    const RaySegment r = c.setupRay(cam, x, y);
-                    if (!r.hit()) {
-                        writeMiss(px, bg);
-                        continue;
-                    }
-                    const detail::RayResult res = detail::marchDvr(c, view, r, shader_, gradients);
-                    const float T = res.transmittance;
-                    for (int k = 0; k < 3; ++k) px[k] = finiteOr0(res.radiance[k] + T * bg[k]);
-                    px[3] = finiteOr0(1.f - T);
-                    ++stats.rays;
-                    stats.samples += res.samples;
-                    stats.terminatedEarly += res.terminated ? 1 : 0;
-                }
-        };
-        c.volume().visit([&](const auto& view) {
-            if constexpr (Shader::kNeedsNormal) {
-                if (const BrickedGradients* b = c.brickedGradients())
-                    tile(view, b);
-                else
-                    tile(view, c.voxelGradients());
-            } else {
-                tile(view, static_cast<const VoxelGradients*>(nullptr));
-            }
-        });
-    }
-
-  private:
-    std::string name_;
-    Shader shader_;
-    PixelFootprint footprint_;
-};
+using detail::DvrModel;
+using detail::finiteOr0;
+using detail::writeMiss;
 
 template <bool kMax>
 class ExtremumModel final : public ShadingModel {

@@ -41,7 +41,9 @@ struct Medium {
     std::shared_ptr<const core::Volume> volume;
     std::shared_ptr<const optics::TfTable> table;
     std::shared_ptr<const grid::BrickMajorants> cells;
-    PathTracer tracer(pathtrace::Options o = {}) const { return PathTracer(volume, table, cells, o); }
+    PathTracer tracer(pathtrace::Options o = {}) const {
+        return PathTracer(volume, table, cells, o);
+    }
 };
 
 Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf, int size = 32) {
@@ -51,7 +53,8 @@ Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf
     const grid::BrickGrid grid = grid::BrickGrid::build(*v);
     render::RenderOptions ro;
     ro.mode = render::Mode::EmissionAbsorption;
-    s.cells = std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
+    s.cells =
+        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
     s.volume = v;
     return s;
 }
@@ -63,7 +66,8 @@ double quadratureTransmittance(const PathTracer& t, const pathtrace::Ray& ray) {
     const int n = int(std::ceil((t1 - t0) / kQuadratureStepMm));
     const double dt = (t1 - t0) / n;
     double tau = 0.0;
-    for (int i = 0; i < n; ++i) tau += t.extinctionAt(ray.origin + (t0 + (i + 0.5) * dt) * ray.direction) * dt;
+    for (int i = 0; i < n; ++i)
+        tau += t.extinctionAt(ray.origin + (t0 + (i + 0.5) * dt) * ray.direction) * dt;
     return std::exp(-tau);
 }
 
@@ -72,8 +76,10 @@ std::vector<pathtrace::Ray> testRays(const core::Volume& v) {
     const glm::dvec3 c = 0.5 * (b[0] + b[1]);
     const double below = b[0].z - 10.0;
     return {{{c.x, c.y, below}, {0.0, 0.0, 1.0}},  // along the slab normal
-            {{c.x - 20.0, c.y - 10.0, below}, glm::normalize(glm::dvec3(0.35, 0.2, 0.9))},  // oblique, many cells
-            {{b[0].x - 5.0, c.y + 3.0, c.z + 1.0}, glm::normalize(glm::dvec3(1.0, 0.05, 0.02))}};  // along the slab
+            {{c.x - 20.0, c.y - 10.0, below},
+             glm::normalize(glm::dvec3(0.35, 0.2, 0.9))},  // oblique, many cells
+            {{b[0].x - 5.0, c.y + 3.0, c.z + 1.0},
+             glm::normalize(glm::dvec3(1.0, 0.05, 0.02))}};  // along the slab
 }
 
 }  // namespace
@@ -93,7 +99,8 @@ TEST(PathTracer, RatioTrackingAndDeltaTrackingAreUnbiasedWithAndWithoutTheMajora
             double sum = 0.0, sumSq = 0.0;
             int escaped = 0;
             for (int i = 0; i < kSamples; ++i) {
-                core::CounterRng rng(core::hashCounters(std::uint64_t(i), std::uint64_t(r), grid), 11);
+                core::CounterRng rng(core::hashCounters(std::uint64_t(i), std::uint64_t(r), grid),
+                                     11);
                 const double T = t.transmittance(ray, INFINITY, rng);
                 sum += T, sumSq += T * T;
                 double t0 = 0.0, t1 = INFINITY;
@@ -140,7 +147,8 @@ TEST(PathTracer, SingleScatteringFromAHomogeneousSlabMatchesTheClosedForm) {
             var += double(se.at(x, y)[0]) * se.at(x, y)[0] / 256.0;
             alpha += im.at(x, y)[3] / 16.0;
         }
-    const double expected = kAlbedo * (1.0 - std::exp(-2.0 * kSigma * D)) / (8.0 * std::numbers::pi);
+    const double expected =
+        kAlbedo * (1.0 - std::exp(-2.0 * kSigma * D)) / (8.0 * std::numbers::pi);
     EXPECT_NEAR(mean, expected, kZ * std::sqrt(var) + 1e-4 * expected) << "D = " << D;
     const double cover = 1.0 - std::exp(-kSigma * D);
     EXPECT_NEAR(alpha, cover, kZ * std::sqrt(cover * (1 - cover) / (16.0 * 4096)));
@@ -149,12 +157,12 @@ TEST(PathTracer, SingleScatteringFromAHomogeneousSlabMatchesTheClosedForm) {
 }
 
 TEST(PathTracer, TheImageIsTheSameForAnyThreadCount) {
-    const Medium s = makeMedium("torso", optics::TransferFunction(
-                                           {{-200.f, {0.9f, 0.8f, 0.7f}, 0.f, {}},
-                                            {300.f, {0.9f, 0.8f, 0.7f}, 0.3f, {}},
-                                            {2000.f, {0.9f, 0.9f, 0.9f}, 0.5f, {}}},
-                                           {900.f, 2200.f}, "bone"),
-                              40);
+    const Medium s = makeMedium("torso",
+                                optics::TransferFunction({{-200.f, {0.9f, 0.8f, 0.7f}, 0.f, {}},
+                                                          {300.f, {0.9f, 0.8f, 0.7f}, 0.3f, {}},
+                                                          {2000.f, {0.9f, 0.9f, 0.9f}, 0.5f, {}}},
+                                                         {900.f, 2200.f}, "bone"),
+                                40);
     pathtrace::Options o;
     o.samplesPerPixel = 4;
     o.maxBounces = 4;
@@ -189,7 +197,8 @@ TEST(PathTracer, HardCasesGiveNoNaNOrInfinity) {
         if (inside) spec.eye = c + glm::dvec3(0.3, 0.2, 0.1), spec.target = c + glm::dvec3(5, 1, 0);
         const render::Camera cam(spec, b[0], b[1], 12, 12);
         const core::ImageRGBA im = s.tracer(o).render(cam, core::Progress::none());
-        for (float v : im.pixels) ASSERT_TRUE(std::isfinite(v) && v >= 0.f) << (inside ? "inside" : "outside");
+        for (float v : im.pixels)
+            ASSERT_TRUE(std::isfinite(v) && v >= 0.f) << (inside ? "inside" : "outside");
     }
 }
 
@@ -209,11 +218,10 @@ TEST(PathTracer, EmissionOnlyEqualsTheRayCastersEmissionAbsorption) {
     // No light reaches anything (one directional light of zero irradiance): the path tracer's
     // image is ∫ T σt (1 − a) e dt + T·background, which the ray caster's emission-absorption mode
     // with no ambient light integrates by pre-integrated marching.
-    const optics::TransferFunction tf(
-        {{-300.f, {0.5f, 0.5f, 0.5f}, 0.f, {0.f, 0.f, 0.f}},
-         {200.f, {0.5f, 0.4f, 0.3f}, 0.05f, {0.8f, 0.3f, 0.1f}},
-         {1500.f, {0.2f, 0.2f, 0.2f}, 0.2f, {0.2f, 0.6f, 0.9f}}},
-        {600.f, 1800.f}, "glow");
+    const optics::TransferFunction tf({{-300.f, {0.5f, 0.5f, 0.5f}, 0.f, {0.f, 0.f, 0.f}},
+                                       {200.f, {0.5f, 0.4f, 0.3f}, 0.05f, {0.8f, 0.3f, 0.1f}},
+                                       {1500.f, {0.2f, 0.2f, 0.2f}, 0.2f, {0.2f, 0.6f, 0.9f}}},
+                                      {600.f, 1800.f}, "glow");
     const Medium s = makeMedium("torso", tf, 40);
     const auto b = s.volume->geometry().worldBounds();
     const render::Camera cam(render::CameraSpec{}, b[0], b[1], 16, 16);

@@ -17,13 +17,13 @@ namespace {
 io::Scene scene(const json& doc) { return io::parseScene(doc, "test.json", "."); }
 
 json tracedScene() {
-    return {{"volume", {{"phantom", "torso"}, {"size", 32}}},
-            {"transfer_function", "ct-bone"},
-            {"method", {{"name", "pathtrace"}, {"params", {{"spp", 4}}}}},
-            {"lights", json::array({{{"type", "directional"},
-                                     {"direction", {0, 1, -0.3}},
-                                     {"intensity", 12}}})},
-            {"image", {{"width", 16}, {"height", 16}}}};
+    return {
+        {"volume", {{"phantom", "torso"}, {"size", 32}}},
+        {"transfer_function", "ct-bone"},
+        {"method", {{"name", "pathtrace"}, {"params", {{"spp", 4}}}}},
+        {"lights",
+         json::array({{{"type", "directional"}, {"direction", {0, 1, -0.3}}, {"intensity", 12}}})},
+        {"image", {{"width", 16}, {"height", 16}}}};
 }
 
 std::set<std::string> ranStages(const RunResult& r) {

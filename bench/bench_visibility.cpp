@@ -1,0 +1,106 @@
+// SPDX-License-Identifier: MIT
+// SH visibility TF-update time (Kronander 2012 Table 1's "TF update"): LOD selection + local
+// visibility on the 256³ torso phantom, 4 SH coefficients, 32 rays, r_s 16 voxels, at several
+// data-reduction ratios (1:16, 1:32, 1:64), for the CT presets ct-bone and ct-soft-tissue. The block pyramid is built
+// once per volume (reported separately as BM_BlockPyramid). Counters: visibility rays/s and
+// σt samples/s, grid samples and the visibility's MB.
+// bench-deps: visibility optics core
+#include <benchmark/benchmark.h>
+
+#include "core/phantoms.h"
+#include "optics/presets.h"
+#include "visibility/global_visibility.h"
+#include "visibility/local_visibility.h"
+
+using namespace voxlight;
+
+namespace {
+
+const core::Volume& torso() {
+    static const core::Volume v = core::makePhantom("torso");
+    return v;
+}
+
+std::shared_ptr<const visibility::BlockPyramid> torsoPyramid() {
+    static const auto p =
+        std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(torso()));
+    return p;
+}
+
+const char* const kPresets[] = {"ct-bone", "ct-soft-tissue"};
+
+void BM_TfUpdate(benchmark::State& state) {
+    const auto pyramid = torsoPyramid();
+    const optics::TransferFunction tf = optics::makePreset(kPresets[state.range(0)]);
+    const double ratio = double(state.range(1));
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 32;
+    o.radiusVoxels = 16.0;
+    std::uint64_t rays = 0, samples = 0, points = 0, bytes = 0, skipped = 0;
+    for (auto _ : state) {
+        // A TF change: table, LOD selection, local visibility.
+        const optics::TfTable table(tf);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, tf, table,
+                                           visibility::LodBudget::fromReduction(
+                                               ratio, pyramid->geometry().voxelCount())));
+        const visibility::LocalVisibility vis = visibility::computeLocalVisibility(grid, table, o);
+        rays += vis.raysTraced();
+        samples += vis.samplesTaken();
+        points = grid->selection().points;
+        bytes = vis.bytes();
+        skipped = vis.pointsSkipped();
+        benchmark::DoNotOptimize(vis.blockData(0));
+    }
+    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)));
+    state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
+    state.counters["samples/s"] = benchmark::Counter(double(samples), benchmark::Counter::kIsRate);
+    state.counters["grid_points"] = double(points);
+    state.counters["vis_MB"] = double(bytes) / 1048576.0;
+    state.counters["points_skipped"] = double(skipped);
+}
+BENCHMARK(BM_TfUpdate)
+    ->ArgsProduct({{0, 1}, {16, 32, 64}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2)
+    ->Repetitions(1);
+
+/// Global visibility alone (Kronander's "global" column) on the 64³ grid, from the local
+/// visibility of ct-bone at 1:16 (computed once).
+void BM_GlobalVisibility(benchmark::State& state) {
+    static const auto local = [] {
+        const auto pyramid = torsoPyramid();
+        const optics::TransferFunction tf = optics::makePreset("ct-bone");
+        const optics::TfTable table(tf);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, tf, table,
+                                           visibility::LodBudget::fromReduction(
+                                               16.0, pyramid->geometry().voxelCount())));
+        visibility::LocalVisibilityOptions o;
+        o.coefficients = 4;
+        o.rays = 32;
+        return std::make_shared<const visibility::LocalVisibility>(
+            visibility::computeLocalVisibility(grid, table, o));
+    }();
+    visibility::GlobalVisibilityOptions go;
+    go.resolution = 64;
+    std::uint64_t rays = 0;
+    for (auto _ : state) {
+        const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
+        rays += g.raysTraced();
+        benchmark::DoNotOptimize(g.at({0, 0, 0}));
+    }
+    state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
+}
+BENCHMARK(BM_GlobalVisibility)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+void BM_BlockPyramid(benchmark::State& state) {
+    for (auto _ : state) benchmark::DoNotOptimize(visibility::BlockPyramid::build(torso()));
+}
+BENCHMARK(BM_BlockPyramid)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+
+}  // namespace
+
+BENCHMARK_MAIN();

@@ -1,0 +1,93 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// SH visibility shading (Kronander et al. 2012 eq. 7, 10, 12): at a sample x with visibility
+// coefficients V_i(x) (local or global: visibility/local_visibility.h, global_visibility.h) and incident radiance coefficients L_i(x) of
+// all lights added together (eq. 12),
+//   diffuse = 1/(4π) · Σ_i L_i(x) V_i(x)   (isotropic phase; the marcher multiplies by α and the
+//                                            TF albedo and adds the TF emission: ARCHITECTURE §1)
+// clamped at 0 (a truncated SH product can ring below 0; radiance never does).
+// Lights (lights/light.h conventions):
+//   directional  L_i = E · Y_i(ω_l)                                    (eq. 10, once per frame)
+//   environment  L_i = its SH projection (EnvironmentLight: projected once in the map frame,
+//                rotated by SH rotation when the light turns; once per frame here)
+//   point        per sample: L_i = E(x) · Y_i(ω(x)) with E = I / max(d, minDistance)², blending to
+//                a uniform radiance of the same irradiance within minDistance, exactly as
+//                PointLight::shCoefficients does (so a light inside the volume or on a grid point
+//                stays finite)
+// Area lights are not shaded by this model (InputError naming the light): their SH differs per
+// sample and would need the light's virtual projection per sample.
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "render/ray_caster.h"
+#include "visibility/global_visibility.h"
+#include "visibility/local_visibility.h"
+
+namespace voxlight::render {
+
+/// The lights of a scene as SH radiance for the per-sample product with a visibility field.
+class ShLights {
+  public:
+    /// Throws InputError for area lights.
+    ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights);
+    int coefficients() const { return coefficients_; }
+    /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
+    glm::vec3 shade(const glm::vec3& x, const float* v) const;
+
+  private:
+    struct Point {
+        glm::vec3 position, intensity;
+        float minDistance;
+    };
+    int coefficients_ = 0;
+    glm::vec3 constant_[16] = {};  ///< directional + environment L_i
+    std::vector<Point> points_;
+};
+
+/// The shader of a visibility field: LocalVisibility (sh-local) or GlobalVisibility (sh-global),
+/// anything with coefficients() and sample(voxel index, out).
+template <class Field>
+class ShVisibilityShader {
+  public:
+    static constexpr bool kNeedsNormal = false;
+    ShVisibilityShader(std::shared_ptr<const Field> field, const core::Geometry& geometry,
+                       std::span<const std::shared_ptr<const lights::Light>> lights)
+        : field_(std::move(field)), lights_(field_->coefficients(), lights) {
+        // world → index: diag(1/spacing) · Dᵀ · (x − origin)
+        worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
+        for (int c = 0; c < 3; ++c)
+            for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
+        origin_ = glm::vec3(geometry.origin);
+    }
+
+    Scatter scatter(const ShadeInput& in) const {
+        return {inScattered(in.position), glm::vec3(0.f)};
+    }
+    const ShVisibilityShader& forRay(const glm::vec3&) const { return *this; }
+
+    /// 1/(4π) Σ L_i V_i at world point x (mm), clamped at 0.
+    glm::vec3 inScattered(const glm::vec3& x) const {
+        float v[16];
+        field_->sample(worldToIndex_ * (x - origin_), v);
+        return lights_.shade(x, v);
+    }
+    int coefficients() const { return lights_.coefficients(); }
+
+  private:
+    std::shared_ptr<const Field> field_;
+    ShLights lights_;
+    glm::mat3 worldToIndex_{1.f};
+    glm::vec3 origin_{0.f};
+};
+
+/// The DVR model with SH visibility shading for `caster` (its options' lights; none → one
+/// headlight like makeBuiltinModel's).
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::LocalVisibility> field);
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::GlobalVisibility> field);
+
+}  // namespace voxlight::render

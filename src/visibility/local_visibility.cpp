@@ -1,0 +1,335 @@
+// SPDX-License-Identifier: MIT
+#include "visibility/local_visibility.h"
+
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <Eigen/Dense>
+#include <atomic>
+#include <cmath>
+#include <numbers>
+#include <thread>
+
+#include "core/error.h"
+#include "sh/sh_basis.h"
+
+namespace voxlight::visibility {
+
+namespace {
+
+void checkOptions(const LocalVisibilityOptions& o) {
+    if (o.coefficients != 1 && o.coefficients != 4 && o.coefficients != 9 && o.coefficients != 16)
+        throw InputError("local visibility", "coefficients",
+                         "must be 1, 4, 9 or 16, got " + std::to_string(o.coefficients),
+                         "choose 1 (ambient occlusion), 4, 9 or 16");
+    if (o.rays < kMinRaysPerCoefficient * o.coefficients || o.rays > 65536)
+        throw InputError("local visibility", "rays",
+                         "must be in [" + std::to_string(kMinRaysPerCoefficient * o.coefficients) +
+                             ", 65536] for " + std::to_string(o.coefficients) +
+                             " coefficients, got " + std::to_string(o.rays),
+                         "use more rays or fewer coefficients");
+    if (!(o.radiusVoxels > 0.0) || !std::isfinite(o.radiusVoxels))
+        throw InputError("local visibility", "radius", "must be a finite number of voxels > 0",
+                         "give e.g. 16");
+}
+
+/// σt at every stored sample of the selection (pre-classified: the TF applied to each block's
+/// selected-level samples), laid out like MultiresGrid::levelData.
+struct SigmaField {
+    const MultiresGrid& grid;
+    std::vector<float> sigma;
+    std::vector<const float*> block;  ///< per block, nullptr at kNone
+
+    SigmaField(const MultiresGrid& g, const optics::TfTable& table) : grid(g) {
+        const std::size_t n = g.pyramid().blockCount();
+        std::vector<std::size_t> offset(n, 0);
+        std::size_t total = 0;
+        for (std::size_t b = 0; b < n; ++b) {
+            offset[b] = total;
+            if (g.level(b) != kNone) total += std::size_t(std::pow(levelResolution(g.level(b)), 3));
+        }
+        sigma.resize(total);
+        block.assign(n, nullptr);
+        for (std::size_t b = 0; b < n; ++b) {
+            const int l = g.level(b);
+            if (l == kNone) continue;
+            const std::size_t m = std::size_t(std::pow(levelResolution(l), 3));
+            const float* v = g.levelData(b);
+            for (std::size_t i = 0; i < m; ++i) sigma[offset[b] + i] = table.extinction(v[i]);
+            block[b] = sigma.data() + offset[b];
+        }
+    }
+
+    /// σt at p from the block that owns p alone, clamped to its sample box; level of that block
+    /// (kNone: σt 0).
+    [[gnu::always_inline]] float at(const glm::vec3& p, int& level) const {
+        const glm::ivec3 b = grid.ownerCoord(p);
+        const std::size_t idx = grid.indexOf(b);
+        level = grid.level(idx);
+        if (level == kNone) return 0.f;
+        const int n = levelResolution(level);
+        const float top = float(n - 1);
+        const glm::vec3 u = glm::clamp(
+            (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) * levelInvSpacing(level) - 0.5f,
+            glm::vec3(0.f), glm::vec3(top));
+        float v = 0.f;
+        addTrilinear(block[idx], n, 1, u, 1.f, &v);
+        return v;
+    }
+};
+
+/// A ray direction in index space with what the march needs per axis.
+struct RayDir {
+    glm::vec3 d;      ///< index units per mm
+    glm::vec3 inv;    ///< 1/d (∞ on an axis it does not move along)
+    glm::ivec3 next;  ///< 1 where d > 0: the cell face ahead is at 4·(c + next)
+    explicit RayDir(const glm::dvec3& dirIndex) : d(dirIndex) {
+        for (int a = 0; a < 3; ++a) {
+            inv[a] = d[a] != 0.f ? 1.f / d[a] : INFINITY;
+            next[a] = d[a] > 0.f ? 1 : 0;
+        }
+    }
+    /// Parametric exit (mm) from the box [0, dims − 1] of a ray starting inside it.
+    float boxExit(const glm::vec3& o, const glm::ivec3& dims) const {
+        float t = INFINITY;
+        for (int a = 0; a < 3; ++a)
+            if (inv[a] != INFINITY)
+                t = std::min(t, ((d[a] > 0.f ? float(dims[a] - 1) : 0.f) - o[a]) * inv[a]);
+        return std::max(t, 0.f);
+    }
+};
+
+/// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment).
+double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayDir& ray,
+                    float length, float h, std::uint64_t& samples) {
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    double tau = 0.0;
+    float t = 0.f;
+    const glm::vec3& d = ray.d;
+    std::uint64_t n = 0;
+    const MultiresGrid& grid = field.grid;
+    const glm::ivec3 cells = grid.pyramid().cells();
+    while (t < length) {
+        const glm::vec3 p = origin + t * d;
+        // Empty space: a cell whose value range the TF makes transparent holds σt = 0 (exactly,
+        // at every level-0 sample it covers), so the ray jumps to the cell's exit.
+        const glm::ivec3 c = glm::clamp(glm::ivec3(p * (1.f / kCell)), glm::ivec3(0), cells - 1);
+        if (!grid.cellVisible(std::size_t(c.x) +
+                              std::size_t(cells.x) * (c.y + std::size_t(cells.y) * c.z))) {
+            float exit = INFINITY;
+            for (int a = 0; a < 3; ++a)
+                if (ray.inv[a] != INFINITY)
+                    exit =
+                        std::min(exit, (float(kCell * (c[a] + ray.next[a])) - p[a]) * ray.inv[a]);
+            t += std::max(exit, 0.f) + 1e-3f * h;  // a thousandth of a voxel past the face
+            continue;
+        }
+        // Step length from the level of the block holding the cell (blocks are 4 cells wide).
+        const int level = grid.level(grid.indexOf(c >> 2));
+        const float stepVoxels =
+            level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
+        const float dt = std::min(stepVoxels * h, length - t);
+        int at = kNone;
+        const float sigma = field.at(origin + (t + 0.5f * dt) * d, at);
+        if (at != kNone) {
+            ++n;
+            tau += double(sigma) * double(dt);
+            if (tau > kOpaqueDepth) break;
+        }
+        t += dt;
+    }
+    samples += n;
+    return tau;
+}
+
+}  // namespace
+
+/// Whether V at voxel coordinate x (a sample of spacing s) can be read by a shaded sample: some
+/// visible cell within 2·s + 1 voxels (a shaded segment end lies within one render step ≤ 1 voxel
+/// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
+/// of ≤ s/2 into a neighbour).
+bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    const glm::ivec3 cells = grid.pyramid().cells();
+    const float r = 2.f * s + 1.f;
+    const glm::ivec3 lo =
+        glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
+    const glm::ivec3 hi =
+        glm::clamp(glm::ivec3(glm::floor((x + r) / float(kCell))), glm::ivec3(0), cells - 1);
+    for (int z = lo.z; z <= hi.z; ++z)
+        for (int y = lo.y; y <= hi.y; ++y)
+            for (int c = lo.x; c <= hi.x; ++c)
+                if (grid.cellVisible(std::size_t(c) +
+                                     std::size_t(cells.x) * (y + std::size_t(cells.y) * z)))
+                    return true;
+    return false;
+}
+
+sh::SphereSamples visibilityDirections(int rays, int coefficients) {
+    LocalVisibilityOptions o;
+    o.rays = rays;
+    o.coefficients = coefficients;
+    checkOptions(o);
+    sh::SphereSamples s = sh::fibonacciSamples(rays);
+    // Minimum-norm change of the weights so that Σ_k w_k Y_i(ω_k) = √(4π) δ_i0 for i < C:
+    // w = w0 + Aᵀ (A Aᵀ)⁻¹ (b − A w0), A_ik = Y_i(ω_k).
+    const int n = rays, c = coefficients;
+    Eigen::MatrixXd A(c, n);
+    std::vector<double> y(std::size_t(sh::kMaxCoeffs));
+    for (int k = 0; k < n; ++k) {
+        sh::evalShUnitDouble(sh::shBandForCount(c), s.directions[std::size_t(k)], y);
+        for (int i = 0; i < c; ++i) A(i, k) = y[std::size_t(i)];
+    }
+    Eigen::VectorXd w0(n);
+    for (int k = 0; k < n; ++k) w0(k) = s.weights[std::size_t(k)];
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(c);
+    b(0) = std::sqrt(4.0 * std::numbers::pi);
+    const Eigen::MatrixXd gram = A * A.transpose();
+    const Eigen::VectorXd w = w0 + A.transpose() * gram.ldlt().solve(b - A * w0);
+    for (int k = 0; k < n; ++k) {
+        if (!(w(k) > 0.0))
+            throw InternalError("visibility weight " + std::to_string(k) + " of " +
+                                std::to_string(n) + " rays is not positive (" +
+                                std::to_string(w(k)) + ")");
+        s.weights[std::size_t(k)] = w(k);
+    }
+    return s;
+}
+
+double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
+                        const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
+                        std::uint64_t* samples) {
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
+    const float length = std::min(float(radiusVoxels * h), ray.boxExit(origin, grid.dims()));
+    std::uint64_t n = 0;
+    const SigmaField field(grid, table);
+    const double tau = opticalDepth(field, origin, ray, length, float(h), n);
+    if (samples) *samples += n;
+    return std::exp(-tau);
+}
+
+LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridPtr,
+                                       const optics::TfTable& table,
+                                       const LocalVisibilityOptions& options,
+                                       const core::Progress& progress) {
+    checkOptions(options);
+    VL_CHECK(gridPtr != nullptr);
+    const MultiresGrid& grid = *gridPtr;
+    const sh::SphereSamples dirs = visibilityDirections(options.rays, options.coefficients);
+    const int C = options.coefficients, N = options.rays;
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+
+    // Per direction: index-space direction and w_k·Y_i(ω_k).
+    std::vector<RayDir> rays;
+    std::vector<double> wy(std::size_t(N) * C);
+    std::vector<double> y(std::size_t(sh::kMaxCoeffs));
+    for (int k = 0; k < N; ++k) {
+        rays.emplace_back((glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) /
+                          g.spacing);
+        sh::evalShUnitDouble(sh::shBandForCount(C), dirs.directions[std::size_t(k)], y);
+        for (int i = 0; i < C; ++i)
+            wy[std::size_t(k) * C + i] = dirs.weights[std::size_t(k)] * y[std::size_t(i)];
+    }
+
+    const SigmaField sigma(grid, table);
+    const float radius = float(options.radiusVoxels * h), hf = float(h);
+    LocalVisibility out;
+    out.grid_ = gridPtr;
+    out.coefficients_ = C;
+    out.rays_ = N;
+    out.radius_ = options.radiusVoxels;
+    const std::size_t blocks = grid.pyramid().blockCount();
+    out.offset_.assign(blocks, 0);
+    std::vector<std::size_t> stored;
+    std::size_t floats = 0;
+    for (std::size_t b = 0; b < blocks; ++b) {
+        const int l = grid.level(b);
+        if (l == kNone) continue;
+        out.offset_[b] = floats;
+        const std::size_t n = std::size_t(levelResolution(l));
+        floats += n * n * n * std::size_t(C);
+        stored.push_back(b);
+    }
+    out.data_.assign(floats, 0.f);
+
+    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
+    std::atomic<std::size_t> done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    progress.report("local visibility", 0.0);
+    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, stored.size(), 1), [&](const auto& range) {
+                if (progress.cancelled()) return;
+                std::uint64_t samples = 0, traced = 0, skipped = 0;
+                double v[16];
+                for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                    const std::size_t b = stored[r];
+                    const int l = grid.level(b);
+                    const int n = levelResolution(l);
+                    float* dst = out.data_.data() + out.offset_[b];
+                    for (int k = 0; k < n; ++k)
+                        for (int j = 0; j < n; ++j)
+                            for (int i = 0; i < n; ++i, dst += C) {
+                                const glm::vec3 x = grid.samplePosition(b, l, i, j, k);
+                                // Sample points of a partial edge block beyond the volume are clamped
+                                // onto it (their values are never read inside the volume).
+                                const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
+                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l)))) {
+                                    // Never read by a shaded sample: empty space's value.
+                                    dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
+                                    for (int c = 1; c < C; ++c) dst[c] = 0.f;
+                                    ++skipped;
+                                    continue;
+                                }
+                                std::fill(v, v + C, 0.0);
+                                for (int d = 0; d < N; ++d) {
+                                    const RayDir& ray = rays[std::size_t(d)];
+                                    const float length =
+                                        std::min(radius, ray.boxExit(origin, grid.dims()));
+                                    const double tau =
+                                        opticalDepth(sigma, origin, ray, length, hf, samples);
+                                    // Project this direction's transmittance onto the SH basis.
+                                    const double T = tau > 0.0 ? double(std::exp(-float(tau)))
+                                                               : 1.0;  // float: 1e-7
+                                    const double* w = wy.data() + std::size_t(d) * C;
+                                    for (int c = 0; c < C; ++c) v[c] += T * w[c];
+                                }
+                                traced += std::uint64_t(N);
+                                for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                            }
+                }
+                samplesTotal += samples;
+                raysTotal += traced;
+                skippedTotal += skipped;
+                const std::size_t now = done.fetch_add(range.size()) + range.size();
+                if (std::this_thread::get_id() == caller)  // workers only stop taking blocks
+                    progress.report("local visibility", double(now) / double(stored.size()));
+            });
+    });
+    if (progress.cancelled()) throw CancelledError();
+    progress.report("local visibility", 1.0);
+    out.samplesTaken_ = samplesTotal;
+    out.raysTraced_ = raysTotal;
+    out.pointsSkipped_ = skippedTotal;
+    return out;
+}
+
+void LocalVisibility::sample(const glm::vec3& p, float* out) const {
+    const int C = coefficients_;
+    std::fill(out, out + C, 0.f);
+    BlockWeights w;
+    grid_->weights(p, w);
+    if (w.count == 0) {
+        out[0] = float(std::sqrt(4.0 * std::numbers::pi));
+        return;
+    }
+    for (int k = 0; k < w.count; ++k)
+        addTrilinear(blockData(w.block[k]), levelResolution(w.level[k]), C, w.local[k], w.weight[k],
+                     out);
+}
+
+}  // namespace voxlight::visibility

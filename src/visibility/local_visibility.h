@@ -1,0 +1,123 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Local visibility V^L (Kronander et al. 2012 §4.2): at every sample point of the multiresolution
+// grid (each stored block's n³ samples at its selected level — Kronander computes and stores V^L
+// "for each grid point in the multiresolution structure", so the visibility has the grid's
+// adaptive resolution), N rays in the directions of a sphere sample set integrate absorption only,
+//   V(x, ω_k) = exp(−∫_0^R σt(s(x + t·ω_k)) dt),   R = radius · h   (h = smallest spacing, mm),
+// and the transmittances are projected onto real SH (sh/sh_basis.h conventions):
+//   V_i(x) = Σ_k w_k V(x, ω_k) Y_i(ω_k),   i < coefficients ∈ {1, 4, 9, 16}.
+//
+// Directions: the spherical Fibonacci set of N directions (any N, nearly uniform; Kronander's
+// subdivided polyhedra exist only for N = 2f²+2, 4f²+2, 10f²+2). Weights: the equal 4π/N changed
+// by the least amount (minimum norm) that makes the rule integrate the first `coefficients` basis
+// functions exactly (Σ_k w_k Y_i(ω_k) = √(4π) δ_i0). Hence empty space gives exactly
+// V = (√(4π), 0, …) and a light sees no spurious directional bias from the quadrature; weights stay
+// positive for N ≥ kMinRaysPerCoefficient · coefficients (checked when built).
+//
+// Ray integration: midpoint rule in steps that follow the LOD (Kronander §4.2, "adaptive step size
+// according to the LOD selection"): the step inside a block at level l is min(2^l, kMaxStepVoxels)
+// voxels (one sample per reduced sample spacing), the last step shortened to end at R (or at the
+// volume's box: outside the volume is empty). σt is pre-classified: the TF is applied once to every
+// stored sample of the selection, and a ray sample reads σt trilinearly from the block that owns
+// it, clamped to that block's sample box — not the seamless blend of MultiresGrid::sample, which
+// costs several times more per sample; the two differ only within s/2 of a block face (within ½
+// voxel at level 0), by at most σt's variation across one sample spacing, and the ray integrates
+// that difference over at most s/2 of its length per face it crosses. Inside a block at kNone σt
+// is 0 (the TF is transparent over its whole range). A ray stops once its optical depth exceeds
+// kOpaqueDepth (transmittance < 1e-4: the rest changes V by less than that).
+//
+// Empty space (exact): the BlockPyramid's 4³ cells whose value range the TF makes transparent
+// (LodSelection::cellVisible) hold σt = 0, so rays jump across them, and grid points with no
+// visible cell within 2·s + 1 voxels (s = their sample spacing) get empty space's value
+// (√(4π), 0, …) without rays: a shaded render sample lies within one render step (≤ 1 voxel; the
+// default is ½) of a visible cell, and its interpolation reads grid points within s + s/2 of it,
+// so such points are never read where anything is shaded.
+//
+// Parallel over blocks with oneTBB; every sample point is computed alone with a fixed order of
+// operations, so the result is identical for any thread count.
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "core/progress.h"
+#include "optics/transfer_function.h"
+#include "sh/sphere_samples.h"
+#include "visibility/multires_grid.h"
+
+namespace voxlight::visibility {
+
+/// Longest ray step (voxels): at least four samples within the default radius of 16 voxels, so a
+/// fine block entered from a coarse one is never stepped over by more than 4 voxels.
+inline constexpr float kMaxStepVoxels = 4.f;
+/// Optical depth at which a visibility ray stops (e^−9.21 = 1e-4).
+inline constexpr double kOpaqueDepth = 9.21;
+/// Fewest rays per SH coefficient for which the corrected weights are guaranteed positive (checked
+/// for every allowed count by tests/visibility).
+inline constexpr int kMinRaysPerCoefficient = 2;
+
+struct LocalVisibilityOptions {
+    int rays = 32;               ///< N ≥ kMinRaysPerCoefficient · coefficients
+    int coefficients = 4;        ///< 1, 4, 9 or 16
+    double radiusVoxels = 16.0;  ///< r_s in units of the smallest spacing, > 0
+    int threads = 0;             ///< 0 = all hardware threads
+};
+
+/// The N directions and their corrected weights (see header comment). InputError when N or the
+/// coefficient count is not allowed.
+sh::SphereSamples visibilityDirections(int rays, int coefficients);
+
+/// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
+/// x fastest, then coefficient).
+class LocalVisibility {
+  public:
+    LocalVisibility() = default;
+    int coefficients() const { return coefficients_; }
+    double radiusVoxels() const { return radius_; }
+    int rays() const { return rays_; }
+    const MultiresGrid& grid() const { return *grid_; }
+    std::shared_ptr<const MultiresGrid> gridPtr() const { return grid_; }
+    /// First float of a block's coefficients (meaningless for kNone blocks).
+    const float* blockData(std::size_t block) const { return data_.data() + offset_[block]; }
+    std::size_t bytes() const { return data_.size() * sizeof(float); }
+    std::uint64_t raysTraced() const { return raysTraced_; }
+    std::uint64_t samplesTaken() const { return samplesTaken_; }
+    /// Grid points far from anything visible (set to empty space's value without rays).
+    std::uint64_t pointsSkipped() const { return pointsSkipped_; }
+
+    /// V at continuous voxel index p by the grid's seamless interpolation, into out[0..C); empty
+    /// space's value (√(4π), 0, …) where no stored block contributes.
+    void sample(const glm::vec3& p, float* out) const;
+
+  private:
+    friend LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid>,
+                                                  const optics::TfTable&,
+                                                  const LocalVisibilityOptions&,
+                                                  const core::Progress&);
+    std::shared_ptr<const MultiresGrid> grid_;
+    int coefficients_ = 0, rays_ = 0;
+    double radius_ = 0.0;
+    std::vector<std::size_t> offset_;
+    std::vector<float> data_;
+    std::uint64_t raysTraced_ = 0, samplesTaken_ = 0, pointsSkipped_ = 0;
+};
+
+/// Computes V^L on `grid` under the TF `table` (InputError on bad options).
+LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> grid,
+                                       const optics::TfTable& table,
+                                       const LocalVisibilityOptions& options,
+                                       const core::Progress& progress = core::Progress::none());
+
+/// Whether V at voxel coordinate x, stored at sample spacing s voxels, can be read by a shaded
+/// sample: some visible cell (LodSelection::cellVisible) within 2·s + 1 voxels (see the header
+/// comment).
+bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s);
+
+/// Transmittance of one ray from voxel index `origin` along the *world* unit direction `dir` over
+/// `radiusVoxels`, integrated as computeLocalVisibility does (exposed for tests). `samples` counts
+/// the σt evaluations.
+double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
+                        const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
+                        std::uint64_t* samples = nullptr);
+
+}  // namespace voxlight::visibility

@@ -1,0 +1,370 @@
+// SPDX-License-Identifier: MIT
+#include "visibility/multires_grid.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <ostream>
+#include <queue>
+
+#include "core/error.h"
+
+namespace voxlight::visibility {
+
+namespace {
+
+/// Lowest finite physical value of a float volume (the stand-in for its non-finite voxels).
+float lowestFinite(const core::Volume& volume) {
+    float lo = std::numeric_limits<float>::infinity();
+    volume.visit([&](const auto& v) {
+        const std::size_t n = std::size_t(volume.voxelCount());
+        for (std::size_t i = 0; i < n; ++i) {
+            const float x = v.slope * float(v.data[i]) + v.intercept;
+            if (std::isfinite(x)) lo = std::min(lo, x);
+        }
+    });
+    return std::isfinite(lo) ? lo : 0.f;
+}
+
+/// CIE L*u*v* (D65 white, Y_n = 1) of a linear sRGB colour.
+glm::vec3 linearRgbToLuv(const glm::vec3& c) {
+    const double X = 0.4124 * c.r + 0.3576 * c.g + 0.1805 * c.b;
+    const double Y = 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b;
+    const double Z = 0.0193 * c.r + 0.1192 * c.g + 0.9505 * c.b;
+    constexpr double kUn = 0.19784, kVn = 0.46834;  // u', v' of D65
+    const double L = Y > 0.008856 ? 116.0 * std::cbrt(Y) - 16.0 : 903.3 * Y;
+    const double d = X + 15.0 * Y + 3.0 * Z;
+    if (!(d > 0.0)) return {float(L), 0.f, 0.f};
+    const double u = 4.0 * X / d, v = 9.0 * Y / d;
+    return {float(L), float(13.0 * L * (u - kUn)), float(13.0 * L * (v - kVn))};
+}
+
+}  // namespace
+
+glm::ivec3 BlockPyramid::blockCoord(std::size_t index) const {
+    const std::size_t bx = std::size_t(blocks_.x), by = std::size_t(blocks_.y);
+    return {int(index % bx), int((index / bx) % by), int(index / (bx * by))};
+}
+
+BlockPyramid BlockPyramid::build(const core::Volume& volume, const core::Progress& progress) {
+    VL_CHECK(!volume.empty());
+    BlockPyramid p;
+    p.geometry_ = volume.geometry();
+    const glm::ivec3 d = volume.dims();
+    p.blocks_ = (d + (kBlockSize - 1)) / kBlockSize;
+    const std::size_t count = std::size_t(p.blocks_.x) * p.blocks_.y * p.blocks_.z;
+    p.stats_.resize(count);
+    p.data_.resize(count * kPyramidFloats);
+    const bool mayBeNonFinite =
+        volume.type() == core::VoxelType::Float32 && volume.countNonFinite() > 0;
+    const float substitute = mayBeNonFinite ? lowestFinite(volume) : 0.f;
+    progress.report("block pyramid", 0.0);
+    volume.visit([&](const auto& v) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, count, 8), [&](const auto& range) {
+            for (std::size_t b = range.begin(); b != range.end(); ++b) {
+                const glm::ivec3 bc = p.blockCoord(b);
+                float* level0 = p.data_.data() + b * kPyramidFloats;
+                // Level 0: the voxels, the edge voxel repeated past the volume's end.
+                BlockStats& st = p.stats_[b];
+                float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+                for (int k = 0; k < kBlockSize; ++k)
+                    for (int j = 0; j < kBlockSize; ++j)
+                        for (int i = 0; i < kBlockSize; ++i) {
+                            const int x = std::min(bc.x * kBlockSize + i, d.x - 1);
+                            const int y = std::min(bc.y * kBlockSize + j, d.y - 1);
+                            const int z = std::min(bc.z * kBlockSize + k, d.z - 1);
+                            float val = v.at(x, y, z);
+                            if (!std::isfinite(val)) val = substitute;
+                            level0[i + kBlockSize * (j + kBlockSize * k)] = val;
+                            lo = std::min(lo, val);
+                            hi = std::max(hi, val);
+                        }
+                // Levels 1..4: means of 2×2×2 samples of the level below (= box means of s³
+                // voxels, as every level halves exactly).
+                for (int l = 1; l < kLevels; ++l) {
+                    const int n = levelResolution(l), m = 2 * n;
+                    const float* src = level0 + levelOffset(l - 1);
+                    float* dst = level0 + levelOffset(l);
+                    for (int k = 0; k < n; ++k)
+                        for (int j = 0; j < n; ++j)
+                            for (int i = 0; i < n; ++i) {
+                                double s = 0.0;
+                                for (int c = 0; c < 8; ++c)
+                                    s += src[(2 * i + (c & 1)) + m * ((2 * j + ((c >> 1) & 1)) +
+                                                                      m * (2 * k + (c >> 2)))];
+                                dst[i + n * (j + n * k)] = float(s / 8.0);
+                            }
+                }
+                // Range and histogram over the owned voxels (a padded copy counts once).
+                st.min = lo;
+                st.max = hi;
+                st.mean = level0[levelOffset(kLevels - 1)];
+                st.histogram.fill(0);
+                const float scale = hi > lo ? float(kHistogramBins) / (hi - lo) : 0.f;
+                const glm::ivec3 own = glm::min(glm::ivec3(kBlockSize), d - bc * kBlockSize);
+                for (int k = 0; k < own.z; ++k)
+                    for (int j = 0; j < own.y; ++j)
+                        for (int i = 0; i < own.x; ++i) {
+                            const float val = level0[i + kBlockSize * (j + kBlockSize * k)];
+                            const int bin = std::min(int((val - lo) * scale), kHistogramBins - 1);
+                            ++st.histogram[std::size_t(bin)];
+                        }
+            }
+        });
+    });
+    // Cell ranges from the voxels (with the substitute for non-finite ones).
+    p.cells_ = (d + (BlockPyramid::kCellVoxels - 1)) / BlockPyramid::kCellVoxels;
+    const glm::ivec3 nc = p.cells_;
+    p.cellRange_.resize(std::size_t(nc.x) * nc.y * nc.z);
+    volume.visit([&](const auto& v) {
+        tbb::parallel_for(tbb::blocked_range<int>(0, nc.z), [&](const auto& range) {
+            constexpr int c4 = BlockPyramid::kCellVoxels;
+            for (int cz = range.begin(); cz != range.end(); ++cz)
+                for (int cy = 0; cy < nc.y; ++cy)
+                    for (int cx = 0; cx < nc.x; ++cx) {
+                        float lo = std::numeric_limits<float>::infinity(), hi = -lo;
+                        for (int z = cz * c4; z <= std::min(cz * c4 + c4, d.z - 1); ++z)
+                            for (int y = cy * c4; y <= std::min(cy * c4 + c4, d.y - 1); ++y)
+                                for (int x = cx * c4; x <= std::min(cx * c4 + c4, d.x - 1); ++x) {
+                                    float val = v.at(x, y, z);
+                                    if (!std::isfinite(val)) val = substitute;
+                                    lo = std::min(lo, val);
+                                    hi = std::max(hi, val);
+                                }
+                        p.cellRange_[std::size_t(cx) +
+                                     std::size_t(nc.x) * (cy + std::size_t(nc.y) * cz)] = {lo, hi};
+                    }
+        });
+    });
+    progress.report("block pyramid", 1.0);
+    return p;
+}
+
+LodBudget LodBudget::fromReduction(double ratio, std::uint64_t voxels) {
+    if (!(ratio >= 1.0) || !std::isfinite(ratio))
+        throw InputError("lod budget", "data_reduction", "must be a finite ratio ≥ 1",
+                         "give e.g. 8 for one sample per 8 voxels");
+    return {std::uint64_t(double(voxels) / ratio)};
+}
+
+LodBudget LodBudget::fromBytes(double bytes, double bytesPerPoint) {
+    if (!(bytes > 0.0) || !std::isfinite(bytes) || !(bytesPerPoint > 0.0))
+        throw InputError("lod budget", "bytes", "must be a finite size > 0", "give e.g. 64 MB");
+    return {std::uint64_t(bytes / bytesPerPoint)};
+}
+
+std::vector<float> blockSignificance(const BlockPyramid& pyramid,
+                                     const optics::TransferFunction& tf,
+                                     const optics::TfTable& table) {
+    const double h = core::minComponent(pyramid.geometry().spacing);
+    const float leak = table.cellWidth();
+    auto colour = [&](float value) {
+        const optics::TfSample s = table.lookup(value);
+        const float alpha = float(1.0 - std::exp(-double(s.extinction) * h));
+        return linearRgbToLuv(alpha * (s.albedo + s.emission));
+    };
+    std::vector<float> sig(pyramid.blockCount());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, sig.size(), 64), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            const BlockStats& st = pyramid.stats(b);
+            if (tf.transparentOver(st.min - leak, st.max + leak)) {
+                sig[b] = -1.f;
+                continue;
+            }
+            const glm::vec3 mean = colour(st.mean);
+            double total = 0.0, sum = 0.0;
+            const double width = double(st.max - st.min) / kHistogramBins;
+            for (int j = 0; j < kHistogramBins; ++j) {
+                const std::uint32_t c = st.histogram[std::size_t(j)];
+                if (c == 0) continue;
+                const float centre = float(st.min + (j + 0.5) * width);
+                sum += double(c) * glm::length(colour(centre) - mean);
+                total += double(c);
+            }
+            sig[b] = total > 0.0 ? float(sum / total) : 0.f;
+        }
+    });
+    return sig;
+}
+
+LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFunction& tf,
+                       const optics::TfTable& table, const LodBudget& budget) {
+    LodSelection s;
+    s.significance = blockSignificance(pyramid, tf, table);
+    const std::size_t count = pyramid.blockCount();
+    s.level.assign(count, std::int8_t(kNone));
+    // Start: every visible block at 1³.
+    for (std::size_t b = 0; b < count; ++b)
+        if (s.significance[b] >= 0.f) {
+            s.level[b] = std::int8_t(kLevels - 1);
+            s.points += 1;
+        } else {
+            s.significance[b] = 0.f;
+        }
+    s.budgetPoints = std::max(budget.maxPoints, s.points);
+    // Refine by gain per sample (see header): the distortion model gains S/4 per level.
+    struct Entry {
+        double priority;
+        std::uint32_t block;
+        bool operator<(const Entry& o) const {
+            return priority < o.priority || (priority == o.priority && block > o.block);
+        }
+    };
+    auto cost = [](int level) {  // samples added by refining from `level` to level − 1
+        const std::uint64_t a = std::uint64_t(levelResolution(level - 1)),
+                            b = std::uint64_t(levelResolution(level));
+        return a * a * a - b * b * b;
+    };
+    auto priority = [&](std::size_t b) {
+        const double gain = std::max(double(s.significance[b]) / 4.0, kZeroSignificanceGain);
+        return gain / double(cost(s.level[b]));
+    };
+    std::priority_queue<Entry> queue;
+    for (std::size_t b = 0; b < count; ++b)
+        if (s.level[b] != kNone) queue.push({priority(b), std::uint32_t(b)});
+    while (!queue.empty()) {
+        const Entry e = queue.top();
+        queue.pop();
+        const std::uint64_t c = cost(s.level[e.block]);
+        if (s.points + c > s.budgetPoints) continue;  // too dear now, and only dearer later
+        s.points += c;
+        --s.level[e.block];
+        if (s.level[e.block] > 0) queue.push({priority(e.block), e.block});
+    }
+    for (std::size_t b = 0; b < count; ++b)
+        ++s.blocksPerLevel[s.level[b] == kNone ? kLevels : std::size_t(s.level[b])];
+    const float leak = table.cellWidth();
+    s.cellVisible.resize(pyramid.cellCount());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, s.cellVisible.size(), 4096),
+                      [&](const auto& range) {
+                          for (std::size_t c = range.begin(); c != range.end(); ++c) {
+                              const auto& r = pyramid.cellRange(c);
+                              s.cellVisible[c] = !tf.transparentOver(r[0] - leak, r[1] + leak);
+                          }
+                      });
+    return s;
+}
+
+std::ostream& operator<<(std::ostream& os, const LodSelection& s) {
+    os << "LodSelection{points=" << s.points << "/" << s.budgetPoints
+       << ", blocks 16^3/8^3/4^3/2^3/1^3/none=";
+    for (int l = 0; l <= kLevels; ++l) os << (l ? "/" : "") << s.blocksPerLevel[std::size_t(l)];
+    return os << "}";
+}
+
+MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelection selection)
+    : pyramid_(std::move(pyramid)), selection_(std::move(selection)) {
+    VL_CHECK(pyramid_ != nullptr);
+    VL_CHECK_EQ(selection_.level.size(), pyramid_->blockCount());
+    if (selection_.cellVisible.empty()) selection_.cellVisible.assign(pyramid_->cellCount(), 1);
+    VL_CHECK_EQ(selection_.cellVisible.size(), pyramid_->cellCount());
+    const glm::ivec3 nb = blocks();
+    hi_ = glm::vec3(dims() - 1);
+    last_ = nb - 1;
+    stride_ = glm::ivec3(1, nb.x, nb.x * nb.y);
+    levelData_.assign(selection_.level.size(), nullptr);
+    for (std::size_t b = 0; b < levelData_.size(); ++b)
+        if (selection_.level[b] != kNone) levelData_[b] = pyramid_->data(b, selection_.level[b]);
+    // Ramp widths: the finest spacing among a block and its stored neighbours.
+    ramp_.assign(selection_.level.size(), 1.f);
+    for (std::size_t b = 0; b < ramp_.size(); ++b) {
+        if (selection_.level[b] == kNone) continue;
+        const glm::ivec3 c = pyramid_->blockCoord(b);
+        int w = levelSpacing(selection_.level[b]);
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const glm::ivec3 n = c + glm::ivec3(dx, dy, dz);
+                    if (glm::any(glm::lessThan(n, glm::ivec3(0))) ||
+                        glm::any(glm::greaterThanEqual(n, nb)))
+                        continue;
+                    const int l = selection_.level[pyramid_->blockIndex(n.x, n.y, n.z)];
+                    if (l != kNone) w = std::min(w, levelSpacing(l));
+                }
+        ramp_[b] = float(w);
+    }
+}
+
+glm::vec3 MultiresGrid::samplePosition(std::size_t block, int level, int i, int j, int k) const {
+    const glm::ivec3 b = pyramid_->blockCoord(block);
+    const float s = float(levelSpacing(level));
+    return glm::vec3(b * kBlockSize) + (glm::vec3(i, j, k) + 0.5f) * s - 0.5f;
+}
+
+void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
+    const glm::ivec3& d = dims();
+    const glm::ivec3& nb = blocks();
+    glm::vec3 p;
+    for (int a = 0; a < 3; ++a) p[a] = std::min(std::max(pIn[a], 0.f), float(d[a] - 1));
+    out.count = 0;
+    const std::size_t owner = ownerBlock(p);
+    // Fast path: inside the owner's sample box on every axis only the owner contributes.
+    {
+        const int l = selection_.level[owner];
+        if (l != kNone) {
+            const glm::ivec3 b = pyramid_->blockCoord(owner);
+            const float s = float(levelSpacing(l));
+            const glm::vec3 lo = glm::vec3(b * kBlockSize) + 0.5f * s - 0.5f;
+            const glm::vec3 hi = glm::vec3(b * kBlockSize) + float(kBlockSize) - 0.5f * s - 0.5f;
+            if (p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z &&
+                p.z <= hi.z) {
+                out.count = 1;
+                out.block[0] = std::uint32_t(owner);
+                out.weight[0] = 1.f;
+                out.level[0] = std::int8_t(l);
+                out.local[0] = (p - glm::vec3(b * kBlockSize) + 0.5f) / s - 0.5f;
+                return;
+            }
+        }
+    }
+    // Candidates: per axis the owner's column and the neighbouring column on p's side of the
+    // owner's centre (no ramp reaches farther than 8 voxels past its block's face).
+    const glm::ivec3 oc = pyramid_->blockCoord(owner);
+    int col[3][2];
+    for (int a = 0; a < 3; ++a) {
+        col[a][0] = oc[a];
+        const int other = p[a] < float(oc[a] * kBlockSize) + 7.5f ? oc[a] - 1 : oc[a] + 1;
+        col[a][1] = other >= 0 && other < nb[a] ? other : -1;
+    }
+    float sum = 0.f;
+    for (int c = 0; c < 8; ++c) {
+        const int x = col[0][c & 1], y = col[1][(c >> 1) & 1], z = col[2][c >> 2];
+        if (x < 0 || y < 0 || z < 0) continue;
+        const std::size_t idx = pyramid_->blockIndex(x, y, z);
+        const int l = selection_.level[idx];
+        if (l == kNone) continue;
+        const glm::vec3 lo = glm::vec3(x, y, z) * float(kBlockSize) - 0.5f;
+        const glm::vec3 past = glm::max(lo - p, p - (lo + float(kBlockSize)));  // < 0 inside
+        const glm::vec3 psi = glm::clamp(0.5f - past / ramp_[idx], glm::vec3(0.f), glm::vec3(1.f));
+        const float w = psi.x * psi.y * psi.z;
+        if (!(w > 0.f)) continue;
+        const int n = levelResolution(l);
+        const float s = float(levelSpacing(l));
+        glm::vec3 u = (p - lo) / s - 0.5f;
+        u = glm::min(glm::max(u, glm::vec3(0.f)), glm::vec3(float(n - 1)));
+        const int k = out.count++;
+        out.block[k] = std::uint32_t(idx);
+        out.weight[k] = w;
+        out.level[k] = std::int8_t(l);
+        out.local[k] = u;
+        sum += w;
+    }
+    if (out.count == 0) return;
+    const float inv = 1.f / sum;
+    for (int k = 0; k < out.count; ++k) out.weight[k] *= inv;
+}
+
+float MultiresGrid::sampleBlend(const glm::vec3& p, float empty) const {
+    BlockWeights w;
+    weights(p, w);
+    if (w.count == 0) return empty;
+    float v = 0.f;
+    for (int k = 0; k < w.count; ++k)
+        addTrilinear(levelData_[w.block[k]], levelResolution(w.level[k]), 1, w.local[k],
+                     w.weight[k], &v);
+    return v;
+}
+
+}  // namespace voxlight::visibility

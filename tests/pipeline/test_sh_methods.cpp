@@ -1,0 +1,194 @@
+// SPDX-License-Identifier: MIT
+// The sh-local method in the pipeline: what reruns after which change (a light or camera change
+// runs no visibility stage), strict params, and robustness (opaque/transparent TFs, a point light
+// inside the volume on a grid point).
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <set>
+
+#include "core/phantoms.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/registry.h"
+#include "support/test_support.h"
+
+using namespace voxlight;
+using namespace voxlight::pipeline;
+using nlohmann::json;
+
+namespace {
+
+io::Scene scene(const json& doc) { return io::parseScene(doc, "test.json", "."); }
+
+json shScene() {
+    return {{"volume", {{"phantom", "torso"}, {"size", 32}}},
+            {"transfer_function", "ct-bone"},
+            {"method", {{"name", "sh-local"}, {"params", {{"rays", 24}, {"data_reduction", 2}}}}},
+            {"lights",
+             json::array({{{"type", "point"}, {"position", {0, -300, 100}}, {"intensity", 9e5}}})},
+            {"image", {{"width", 24}, {"height", 20}}}};
+}
+
+std::set<std::string> ranStages(const RunResult& r) {
+    std::set<std::string> s;
+    for (const auto& st : r.stages)
+        if (st.ran) s.insert(st.name);
+    return s;
+}
+
+bool allFinite(const core::ImageRGBA& im) {
+    for (float v : im.pixels)
+        if (!std::isfinite(v) || v < 0.f) return false;
+    return true;
+}
+
+const std::set<std::string> kVisibilityStages = {"block_pyramid", "multires_grid",
+                                                 "local_visibility"};
+
+}  // namespace
+
+TEST(ShLocal, ALightOrCameraChangeRunsNoVisibilityStage) {
+    Session session;
+    json d = shScene();
+    const RunResult base = session.run(scene(d));
+    for (const auto& s : kVisibilityStages) EXPECT_TRUE(base.stage(s).ran) << s;
+    EXPECT_TRUE(allFinite(base.image));
+    d["lights"][0]["position"] = {40, -200, 0};
+    const RunResult moved = session.run(scene(d));
+    EXPECT_EQ(ranStages(moved), (std::set<std::string>{"lights", "camera", "render"}));
+    EXPECT_NE(base.image.pixels, moved.image.pixels);
+    d["lights"].push_back({{"type", "directional"}, {"direction", {0, 1, -1}}, {"intensity", 2}});
+    const RunResult two = session.run(scene(d));
+    EXPECT_EQ(ranStages(two), (std::set<std::string>{"lights", "camera", "render"}));
+    EXPECT_NE(two.image.pixels, moved.image.pixels);
+    d["camera"] = {{"azimuth", 75}};
+    const RunResult turned = session.run(scene(d));
+    EXPECT_EQ(ranStages(turned), (std::set<std::string>{"camera", "render"}));
+    EXPECT_NE(turned.image.pixels, two.image.pixels);
+}
+
+TEST(ShLocal, TfAndParamChangesRerunOnlyWhatDependsOnThem) {
+    Session session;
+    json d = shScene();
+    session.run(scene(d));
+    d["transfer_function"] = {{"preset", "ct-bone"}, {"extinction_scale", 2.0}};
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"transfer_function", "skip_cells", "framing",
+                                     "multires_grid", "local_visibility", "camera", "render"}));
+    d["method"]["params"]["rays"] = 40;  // visibility only
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"local_visibility", "camera", "render"}));
+    d["method"]["params"]["data_reduction"] = 4;  // LOD and visibility
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"multires_grid", "local_visibility", "camera", "render"}));
+    const RunResult r = session.run(scene(d));
+    EXPECT_EQ(r.stage("light_sh").reason.rfind("not needed", 0), 0u);
+    EXPECT_EQ(r.stage("gradients").reason.rfind("not needed", 0), 0u);
+    EXPECT_EQ(r.params["coefficients"], 4);
+    EXPECT_EQ(r.params["radius"], 16.0);
+}
+
+TEST(ShLocal, ParamsAreReadStrictly) {
+    auto planOf = [](const json& params) {
+        json d = shScene();
+        d["method"]["params"] = params;
+        return Session().plan(scene(d));
+    };
+    EXPECT_NO_THROW(planOf({{"coefficients", 16}, {"rays", 32}, {"radius", 12}}));
+    EXPECT_NO_THROW(planOf({{"lod_budget_mb", 8}}));
+    EXPECT_THROW(planOf({{"coefficients", 5}}), InputError);
+    EXPECT_THROW(planOf({{"coefficients", 16}, {"rays", 31}}), InputError);  // < 2 per coefficient
+    EXPECT_THROW(planOf({{"radius", 0}}), InputError);
+    EXPECT_THROW(planOf({{"data_reduction", 0.5}}), InputError);
+    EXPECT_THROW(planOf({{"data_reduction", 4}, {"lod_budget_mb", 8}}), InputError);
+    EXPECT_THROW(planOf({{"ray", 32}}), InputError);  // unknown key
+    json area = shScene();
+    area["lights"] = json::array({{{"type", "area"},
+                                   {"shape", "sphere"},
+                                   {"position", {0, 0, 300}},
+                                   {"radius", 20},
+                                   {"intensity", 5}}});
+    try {
+        Session().plan(scene(area));
+        ADD_FAILURE() << "an area light was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "lights[0].type");
+    }
+    try {
+        planOf({{"ray", 32}});
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.ray");
+        EXPECT_NE(e.fix().find("rays"), std::string::npos) << e.fix();
+    }
+}
+
+TEST(ShLocal, OpaqueAndTransparentTfsAndALightOnAGridPointStayFinite) {
+    json d = shScene();
+    // The phantom is centred on the world origin: voxel 16 of 32 lies half a spacing past it. Put
+    // the point light there, inside the volume on a grid sample point (full budget: level 0).
+    d["method"]["params"]["data_reduction"] = 1;
+    const auto volume = core::makePhantom("torso", {32});
+    const double half = 0.5 * volume.geometry().spacing.x;
+    ASSERT_EQ(volume.geometry().indexToWorld({16, 16, 16}), glm::dvec3(half));
+    d["lights"] =
+        json::array({{{"type", "point"}, {"position", {half, half, half}}, {"intensity", 1e4}}});
+    const RunResult inside = renderScene(scene(d));
+    EXPECT_TRUE(allFinite(inside.image));
+    d["transfer_function"] = {{"points",
+                               {{{"value", -2000}, {"color", {1, 1, 1}}, {"extinction", 50}},
+                                {{"value", 4000}, {"color", {1, 1, 1}}, {"extinction", 50}}}}};
+    const RunResult opaque = renderScene(scene(d));
+    EXPECT_TRUE(allFinite(opaque.image));
+    d["transfer_function"] = {{"points",
+                               {{{"value", -2000}, {"color", {1, 1, 1}}, {"extinction", 0}},
+                                {{"value", 4000}, {"color", {1, 1, 1}}, {"extinction", 0}}}}};
+    const RunResult clear = renderScene(scene(d));
+    EXPECT_TRUE(allFinite(clear.image));
+    EXPECT_FALSE(clear.warnings.empty());  // an empty image says why
+    d["method"]["name"] = "sh-global";
+    EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
+    d["transfer_function"] = {{"points",
+                               {{{"value", -2000}, {"color", {1, 1, 1}}, {"extinction", 50}},
+                                {{"value", 4000}, {"color", {1, 1, 1}}, {"extinction", 50}}}}};
+    EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
+}
+
+TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility) {
+    Session session;
+    json d = shScene();
+    d["method"]["name"] = "sh-global";
+    const RunResult global = session.run(scene(d));
+    for (const char* s :
+         {"block_pyramid", "multires_grid", "local_visibility", "global_visibility"})
+        EXPECT_TRUE(global.stage(s).ran) << s;
+    EXPECT_TRUE(allFinite(global.image));
+    d["method"]["name"] = "sh-local";
+    const RunResult local = session.run(scene(d));
+    EXPECT_EQ(ranStages(local), (std::set<std::string>{"camera", "render"}));
+    EXPECT_NE(local.image.pixels, global.image.pixels);  // global shadows differ
+    for (const auto& s : local.stages) EXPECT_NE(s.name, "global_visibility");  // not planned
+    d["method"]["name"] = "sh-global";
+    EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
+    d["lights"][0]["position"] = {40, -200, 0};
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"lights", "camera", "render"}));
+    d["method"]["params"]["global_resolution"] = 8;  // the global grid only
+    EXPECT_EQ(ranStages(session.run(scene(d))),
+              (std::set<std::string>{"global_visibility", "camera", "render"}));
+    d["method"]["name"] = "sh-local";  // sh-local has no global grid to size
+    EXPECT_THROW(session.run(scene(d)), InputError);
+}
+
+TEST(ShLocal, TurningAnEnvironmentMapRunsNoVisibilityStage) {
+    VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
+    Session session;
+    json d = shScene();
+    d["lights"] =
+        json::array({{{"type", "environment"}, {"path", env.string()}, {"rotation", {0, 0, 0}}}});
+    const RunResult a = session.run(scene(d));
+    EXPECT_TRUE(allFinite(a.image));
+    d["lights"][0]["rotation"] = {0, 0, 90};
+    const RunResult b = session.run(scene(d));
+    EXPECT_EQ(ranStages(b), (std::set<std::string>{"lights", "camera", "render"}));
+    EXPECT_NE(a.image.pixels, b.image.pixels);
+}

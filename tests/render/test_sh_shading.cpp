@@ -1,0 +1,122 @@
+// SPDX-License-Identifier: MIT
+// SH visibility shading (render/sh_shading.h) against closed forms and the lights' own SH.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <glm/gtc/matrix_transform.hpp>
+#include <numbers>
+
+#include "lights/area_light.h"
+#include "lights/environment_light.h"
+#include "lights/light.h"
+#include "render/sh_shading.h"
+
+using namespace voxlight;
+
+namespace {
+
+/// Local visibility of a 32³ volume whose TF is transparent at its only value: V = (√(4π), 0…)
+/// everywhere (tests/visibility proves it), so shading sees every light unoccluded.
+std::shared_ptr<const visibility::LocalVisibility> emptySpace(int coefficients,
+                                                              core::Geometry& geometry) {
+    geometry.dims = glm::ivec3(32);
+    geometry.spacing = glm::dvec3(2.0);
+    geometry.origin = glm::dvec3(-31.0);
+    static std::vector<std::shared_ptr<core::Volume>> keep;
+    auto v = std::make_shared<core::Volume>(geometry, core::VoxelType::Int16);
+    keep.push_back(v);
+    const optics::TransferFunction tf(
+        {{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)}, {1000.f, glm::vec3(1.f), 1.f, glm::vec3(0.f)}},
+        {500.f, 1000.f});
+    const optics::TfTable table(tf);
+    auto pyr =
+        std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(*v));
+    auto grid = std::make_shared<const visibility::MultiresGrid>(
+        pyr,
+        visibility::selectLod(*pyr, tf, table, visibility::LodBudget::fromReduction(64, 32768)));
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = coefficients;
+    o.rays = 2 * coefficients + 8;
+    return std::make_shared<const visibility::LocalVisibility>(
+        visibility::computeLocalVisibility(grid, table, o));
+}
+
+constexpr double kInv4Pi = 1.0 / (4.0 * std::numbers::pi);
+
+}  // namespace
+
+TEST(ShShading, UnoccludedDirectionalLightScattersEOver4Pi) {
+    // Σ L_i V_i = E·Y_0·√(4π) = E exactly for V = (√(4π), 0, …): the isotropic phase gives E/(4π).
+    // Float storage of V and of the SH constants: a few 1e-7 relative.
+    constexpr float kFloatTol = 1e-6f;
+    for (int c : {1, 4, 9, 16}) {
+        core::Geometry g;
+        const auto vis = emptySpace(c, g);
+        const std::vector<std::shared_ptr<const lights::Light>> ls = {
+            std::make_shared<lights::DirectionalLight>(glm::vec3(2.f, 3.f, 4.f),
+                                                       glm::vec3(0.3f, -0.5f, 0.8f))};
+        const render::ShVisibilityShader shader(vis, g, ls);
+        const glm::vec3 s = shader.inScattered({5.f, -7.f, 12.f});
+        for (int k = 0; k < 3; ++k)
+            EXPECT_NEAR(s[k], float((k + 2) * kInv4Pi), kFloatTol * (k + 2)) << c;
+    }
+}
+
+TEST(ShShading, PointLightsMatchTheLightsOwnShProjectionInsideAndOutsideTheClamp) {
+    core::Geometry g;
+    const auto vis = emptySpace(9, g);
+    const auto light = std::make_shared<lights::PointLight>(glm::vec3(100.f), glm::dvec3(1, 2, 3),
+                                                            /*minDistance*/ 4.0);
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {light};
+    const render::ShVisibilityShader shader(vis, g, ls);
+    // Float (shader) against double (light): relative 1e-5 of the result.
+    constexpr float kRelTol = 1e-5f;
+    for (glm::dvec3 x : {glm::dvec3(1, 2, 3), glm::dvec3(2, 2, 3), glm::dvec3(1, 2, 6.5),
+                         glm::dvec3(-20, 11, -9)}) {
+        const std::vector<glm::vec3> l = light->shCoefficients(x, 2);
+        float v[9];
+        vis->sample(glm::vec3(g.worldToIndex(x)), v);
+        glm::dvec3 expected(0.0);
+        for (int i = 0; i < 9; ++i) expected += glm::dvec3(l[std::size_t(i)]) * double(v[i]);
+        expected *= kInv4Pi;
+        const glm::vec3 got = shader.inScattered(glm::vec3(x));
+        EXPECT_TRUE(std::isfinite(got.x));
+        EXPECT_NEAR(got.x, expected.x, kRelTol * expected.x + 1e-7) << x.x << "," << x.z;
+    }
+    // At the light: isotropic, E = I / minDistance², scattered E/(4π).
+    EXPECT_NEAR(shader.inScattered({1.f, 2.f, 3.f}).x, 100.0 / 16.0 * kInv4Pi, 1e-5);
+}
+
+TEST(ShShading, AreaLightsAreRefusedByName) {
+    core::Geometry g;
+    const auto vis = emptySpace(4, g);
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {
+        std::make_shared<lights::SphereLight>(glm::vec3(1.f), glm::dvec3(0, 0, 100), 5.0)};
+    try {
+        render::ShVisibilityShader(vis, g, ls);
+        FAIL() << "an area light was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "sphere") << e.what();
+    }
+}
+
+TEST(ShShading, UniformEnvironmentInEmptySpaceScattersItsRadiance) {
+    // A uniform map of radiance L projects to L_0 = L·√(4π) (exact pixel solid angles), so with
+    // V = (√(4π), 0, …) the isotropic phase scatters (1/4π)·L·4π = L: the furnace test.
+    constexpr float kL = 0.7f;
+    core::ImageRGBA image(64, 32);
+    for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = (i % 4 == 3) ? 1.f : kL;
+    // Float SH projection over 2048 pixels and float V: relative 1e-5.
+    constexpr float kRelTol = 1e-5f;
+    for (int c : {1, 4, 16}) {
+        core::Geometry g;
+        const auto vis = emptySpace(c, g);
+        lights::EnvironmentOptions eo;
+        eo.rotation = glm::dmat3(glm::rotate(glm::dmat4(1.0), 0.7, glm::dvec3(0.2, 1.0, 0.4)));
+        const std::vector<std::shared_ptr<const lights::Light>> ls = {
+            std::make_shared<lights::EnvironmentLight>(image, eo, "uniform")};
+        const render::ShVisibilityShader shader(vis, g, ls);
+        const glm::vec3 s = shader.inScattered({3.f, 1.f, -2.f});
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(s[k], kL, kRelTol * kL) << c;
+    }
+}

@@ -1,0 +1,224 @@
+// SPDX-License-Identifier: MIT
+// The multiresolution block grid: exact at full budget, empty under a transparent TF, budgets
+// respected, and no seams between blocks of different levels.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "core/rng.h"
+#include "visibility/multires_grid.h"
+#include "visibility/vis_test_util.h"
+
+using namespace voxlight;
+using namespace voxlight::visibility;
+
+namespace {
+
+/// Deterministic pseudo-random value in [lo, hi] for a voxel.
+int noise(int i, int j, int k, int lo, int hi) {
+    const std::uint64_t h =
+        core::hashCounters(std::uint64_t(i), std::uint64_t(j), std::uint64_t(k), 7);
+    return lo + int(h % std::uint64_t(hi - lo + 1));
+}
+
+/// Values of magnitude ≤ 1000: the product-form trilinear weights of the grid and the lerp chain
+/// of core::VolumeView::sample round differently, by a few float ulps of the values (1000·2⁻²³
+/// ≈ 1.2e-4 per ulp); 1e-3 allows 8 ulps.
+constexpr float kRoundingTol = 1e-3f;
+
+MultiresGrid gridWith(const core::Volume& v, const optics::TransferFunction& tf,
+                      const LodBudget& budget) {
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const optics::TfTable table(tf);
+    return MultiresGrid(pyr, selectLod(*pyr, tf, table, budget));
+}
+
+}  // namespace
+
+TEST(MultiresGrid, FullBudgetEqualsTheUnreducedGrid) {
+    // Partial edge blocks on every axis (40 = 2·16 + 8, ...).
+    const core::Volume v = test::makeVolume(
+        {40, 35, 18}, [](int i, int j, int k) { return noise(i, j, k, 100, 900); });
+    const MultiresGrid g = gridWith(v, test::rampTf(0.1f), LodBudget::unlimited());
+    for (std::size_t b = 0; b < g.pyramid().blockCount(); ++b) ASSERT_EQ(g.level(b), 0) << b;
+    // Level 0 holds the voxels bit for bit.
+    for (std::size_t b = 0; b < g.pyramid().blockCount(); ++b) {
+        const glm::ivec3 bc = g.pyramid().blockCoord(b);
+        const float* d = g.pyramid().data(b, 0);
+        for (int k = 0; k < kBlockSize; ++k)
+            for (int j = 0; j < kBlockSize; ++j)
+                for (int i = 0; i < kBlockSize; ++i) {
+                    const glm::ivec3 x = bc * kBlockSize + glm::ivec3(i, j, k);
+                    if (x.x >= 40 || x.y >= 35 || x.z >= 18) continue;
+                    ASSERT_EQ(d[i + 16 * (j + 16 * k)], v.at(x.x, x.y, x.z)) << x.x << "," << x.y;
+                }
+    }
+    // Sampling is trilinear interpolation of the voxels, block borders included.
+    for (int n = 0; n < 4000; ++n) {
+        const glm::vec3 p(core::toUnitFloat(core::hashCounters(n, 1, 0, 3)) * 39.f,
+                          core::toUnitFloat(core::hashCounters(n, 2, 0, 3)) * 34.f,
+                          core::toUnitFloat(core::hashCounters(n, 3, 0, 3)) * 17.f);
+        ASSERT_NEAR(g.sample(p), v.sampleIndex(glm::dvec3(p)), kRoundingTol) << p.x << "," << p.y;
+    }
+    // Exactly on the block faces and corners too.
+    for (float x : {15.f, 15.5f, 16.f, 31.25f, 32.f})
+        for (float y : {15.f, 15.75f, 16.f})
+            EXPECT_NEAR(g.sample({x, y, 15.5f}), v.sampleIndex({x, y, 15.5}), kRoundingTol);
+}
+
+TEST(MultiresGrid, FullyTransparentTfStoresNoBlock) {
+    const core::Volume v = test::makeVolume(
+        {32, 32, 32}, [](int i, int j, int k) { return noise(i, j, k, 100, 900); });
+    const optics::TransferFunction clear(
+        {{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)}, {1000.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)}},
+        {500.f, 1000.f});
+    const MultiresGrid g = gridWith(v, clear, LodBudget::unlimited());
+    for (std::size_t b = 0; b < g.pyramid().blockCount(); ++b) EXPECT_EQ(g.level(b), kNone);
+    EXPECT_EQ(g.selection().points, 0u);
+    EXPECT_EQ(g.selection().blocksPerLevel[kLevels], g.pyramid().blockCount());
+    EXPECT_EQ(g.sample({10.f, 10.f, 10.f}, -7.f), -7.f);  // the caller's empty value
+}
+
+TEST(MultiresGrid, SelectionRespectsTheBudgetAndGrowsWithIt) {
+    // A sphere of "bone" in "tissue": blocks differ in significance.
+    const core::Volume v = test::makeVolume({64, 64, 64}, [](int i, int j, int k) {
+        const double r = std::hypot(i - 30.0, j - 33.0, k - 29.0);
+        return (r < 18.0 ? 800 : 200) + noise(i, j, k, -40, 40);
+    });
+    const optics::TransferFunction tf({{0.f, glm::vec3(0.8f, 0.3f, 0.2f), 0.f, glm::vec3(0.f)},
+                                       {500.f, glm::vec3(0.8f, 0.3f, 0.2f), 0.01f, glm::vec3(0.f)},
+                                       {700.f, glm::vec3(1.f), 0.5f, glm::vec3(0.f)}},
+                                      {350.f, 700.f});
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const optics::TfTable table(tf);
+    std::uint64_t previous = 0;
+    for (double ratio : {4096.0, 512.0, 64.0, 16.0, 8.0, 4.0, 2.0, 1.0}) {
+        const LodBudget budget = LodBudget::fromReduction(ratio, v.voxelCount());
+        const LodSelection s = selectLod(*pyr, tf, table, budget);
+        std::uint64_t points = 0;
+        for (auto l : s.level)
+            if (l != kNone) points += std::uint64_t(std::pow(levelResolution(l), 3));
+        EXPECT_EQ(points, s.points);
+        EXPECT_EQ(s.budgetPoints,
+                  std::max<std::uint64_t>(budget.maxPoints, 64));  // 64 blocks at 1³
+        EXPECT_LE(s.points, s.budgetPoints) << ratio;
+        EXPECT_GE(s.points, previous) << ratio;
+        previous = s.points;
+    }
+    EXPECT_EQ(previous, v.voxelCount());  // ratio 1: everything at 16³
+    // At a tight budget the blocks holding the sphere's surface refine first.
+    const LodSelection s =
+        selectLod(*pyr, tf, table, LodBudget::fromReduction(16.0, v.voxelCount()));
+    const std::size_t surface = pyr->blockIndex(2, 2, 2);  // voxels 32..47: crosses r = 18
+    const std::size_t inside = pyr->blockIndex(1, 1, 1);   // voxels 16..31: all bone
+    EXPECT_GT(s.significance[surface], s.significance[inside]);
+    EXPECT_LT(s.level[surface], s.level[inside]);
+}
+
+TEST(MultiresGrid, ConstantBlocksHaveNoSignificance) {
+    const core::Volume v = test::makeVolume(
+        {32, 16, 16}, [](int i, int, int) { return i < 16 ? 600 : (i % 2 ? 100 : 900); });
+    auto pyr = BlockPyramid::build(v);
+    const optics::TransferFunction tf = test::rampTf(0.2f);
+    const std::vector<float> s = blockSignificance(pyr, tf, optics::TfTable(tf));
+    EXPECT_EQ(s[0], 0.f);
+    EXPECT_GT(s[1], 1.f);  // ΔE units: alternating 100/900 against their mean is clearly visible
+}
+
+namespace {
+/// Largest jump between successive samples of `f` along p0 + u·dir, u ∈ [0, len], steps of δ.
+template <class F>
+float largestJump(F&& f, glm::vec3 p0, glm::vec3 dir, float len, float delta) {
+    float worst = 0.f, prev = f(p0);
+    for (float u = delta; u <= len; u += delta) {
+        const float v = f(p0 + u * dir);
+        worst = std::max(worst, std::abs(v - prev));
+        prev = v;
+    }
+    return worst;
+}
+}  // namespace
+
+TEST(MultiresGrid, NoSeamsBetweenBlocksOfDifferentLevels) {
+    // A smooth but non-linear field: each level's box means differ from the voxels.
+    const core::Volume v = test::makeVolume({48, 48, 48}, [](int i, int j, int k) {
+        return int(500 + 300 * std::sin(0.35 * i) * std::cos(0.21 * j) + 2 * k);
+    });
+    const optics::TransferFunction tf = test::rampTf(0.1f);
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    // Every block at a pseudo-random level, some not stored.
+    LodSelection sel;
+    sel.level.resize(pyr->blockCount());
+    sel.significance.assign(pyr->blockCount(), 0.f);
+    for (std::size_t b = 0; b < sel.level.size(); ++b)
+        sel.level[b] = std::int8_t(core::hashCounters(b, 0, 0, 11) % kLevels);
+    sel.level[pyr->blockIndex(1, 1, 1)] = 0;  // a 16³ block …
+    sel.level[pyr->blockIndex(2, 1, 1)] = 3;  // … next to a 2³ block
+    const MultiresGrid g(pyr, sel);
+    // Lipschitz bound of the blend: ramps rise at most 1 per voxel (widths ≥ 1), Σ ω ≥ 1/8 (the
+    // owner's ψ ≥ ½ per axis), and each block's clamped data changes by ≤ √3·R per voxel of path,
+    // so |df/du| ≤ √3·R·(8·8 + 1) with R ≤ 700 the values' spread: successive samples δ apart
+    // differ by less than kSeamTol. A seam (a jump) would not shrink with δ; a continuous blend's
+    // largest step shrinks ~10× when δ does (checked below with a factor-5 margin).
+    constexpr float kDelta = 1e-3f;
+    const float kSeamTol = std::sqrt(3.f) * 700.f * 65.f * kDelta;
+    auto seamless = [&](const glm::vec3& p) { return g.sample(p); };
+    auto continuous = [&](const glm::vec3& p0, const glm::vec3& dir, float len) {
+        const float coarse = largestJump(seamless, p0, dir, len, kDelta);
+        const float fine = largestJump(seamless, p0, dir, len, kDelta / 10.f);
+        EXPECT_LE(coarse, kSeamTol);
+        EXPECT_LE(fine, coarse / 5.f + 1e-3f);  // + float rounding of values ≤ 1000
+    };
+    // Across the face between the 16³ and the 2³ block (x = 31.5), at several heights.
+    for (float y : {16.3f, 20.f, 24.9f, 31.2f}) continuous({24.f, y, 23.f}, {1.f, 0.f, 0.f}, 16.f);
+    // Along random lines through the whole volume.
+    for (int n = 0; n < 12; ++n) {
+        const glm::vec3 p0(core::toUnitFloat(core::hashCounters(n, 1, 0, 5)) * 47.f, 0.f,
+                           core::toUnitFloat(core::hashCounters(n, 2, 0, 5)) * 47.f);
+        const glm::vec3 dir =
+            glm::normalize(glm::vec3(core::toUnitFloat(core::hashCounters(n, 3, 0, 5)) - 0.5f, 1.f,
+                                     core::toUnitFloat(core::hashCounters(n, 4, 0, 5)) - 0.5f));
+        continuous(p0, dir, 47.f);
+    }
+    // The test can fail: sampling only the block that owns the point (clamped to its box) jumps.
+    auto ownerOnly = [&](const glm::vec3& p) {
+        const std::size_t b = g.ownerBlock(p);
+        const int l = g.level(b);
+        const float s = float(levelSpacing(l));
+        glm::vec3 u = (p - glm::vec3(pyr->blockCoord(b) * kBlockSize) + 0.5f) / s - 0.5f;
+        u = glm::clamp(u, glm::vec3(0.f), glm::vec3(float(levelResolution(l) - 1)));
+        float out = 0.f;
+        addTrilinear(pyr->data(b, l), levelResolution(l), 1, u, 1.f, &out);
+        return out;
+    };
+    const float naive = largestJump(ownerOnly, {24.f, 20.f, 23.f}, {1.f, 0.f, 0.f}, 16.f, kDelta);
+    EXPECT_GT(largestJump(ownerOnly, {24.f, 20.f, 23.f}, {1.f, 0.f, 0.f}, 16.f, kDelta / 10.f),
+              naive / 2.f);  // a jump: it does not shrink with the step
+    EXPECT_GT(naive, 5.f);
+}
+
+TEST(MultiresGrid, InsideItsSampleBoxABlockIsInterpolatedAlone) {
+    const core::Volume v =
+        test::makeVolume({32, 32, 32}, [](int i, int j, int k) { return noise(i, j, k, 0, 1000); });
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    LodSelection sel;
+    sel.level = {2, 0, 4, 1, 0, 3, 2, 0};  // 2×2×2 blocks at mixed levels
+    sel.significance.assign(8, 0.f);
+    const MultiresGrid g(pyr, sel);
+    // Block 0 at level 2 (4³, spacing 4): its box is [1.5, 13.5]³.
+    BlockWeights w;
+    g.weights({1.5f, 7.f, 13.5f}, w);
+    ASSERT_EQ(w.count, 1);
+    EXPECT_EQ(w.block[0], 0u);
+    EXPECT_EQ(w.weight[0], 1.f);
+    EXPECT_EQ(w.local[0], glm::vec3(0.f, 1.375f, 3.f));
+    // Block 1 (level 0) makes every ramp width 1: past the box block 0 is clamped, and the two
+    // blocks blend only within half a voxel of their face at x = 15.5.
+    g.weights({14.9f, 7.f, 7.f}, w);
+    ASSERT_EQ(w.count, 1);
+    EXPECT_EQ(w.local[0].x, 3.f);
+    g.weights({15.7f, 7.f, 7.f}, w);
+    ASSERT_EQ(w.count, 2);
+    EXPECT_NEAR(w.weight[0] + w.weight[1], 1.f, 1e-6f);
+    EXPECT_NEAR(std::min(w.weight[0], w.weight[1]), 0.3f, 1e-5f);
+}
