@@ -31,27 +31,27 @@ constexpr double kCoverageLo = 0.85, kCoverageHi = 0.95;
 /// Alpha above which a pixel shows something (one 8-bit display level).
 constexpr float kShown = 1.f / 255.f;
 
-/// Fraction of the limiting image dimension the shown pixels span: max(span x / width,
-/// span y / height).
-double coverage(const core::ImageRGBA& im) {
-    int x0 = im.width, x1 = -1, y0 = im.height, y1 = -1;
+/// Box of the shown pixels {x0, x1, y0, y1} (inclusive); x1 < 0 when nothing shows.
+std::array<int, 4> shownBox(const core::ImageRGBA& im) {
+    std::array<int, 4> b{im.width, -1, im.height, -1};
     for (int y = 0; y < im.height; ++y)
         for (int x = 0; x < im.width; ++x)
             if (im.at(x, y)[3] > kShown)
-                x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y),
-                y1 = std::max(y1, y);
+                b = {std::min(b[0], x), std::max(b[1], x), std::min(b[2], y), std::max(b[3], y)};
+    return b;
+}
+
+/// Fraction of the limiting image dimension the shown pixels span: max(span x / width,
+/// span y / height).
+double coverage(const core::ImageRGBA& im) {
+    const auto [x0, x1, y0, y1] = shownBox(im);
     if (x1 < 0) return 0.0;
     return std::max(double(x1 - x0 + 1) / im.width, double(y1 - y0 + 1) / im.height);
 }
 
 /// Centre of the shown pixels' box, in pixels from the image centre (x, y).
 std::array<double, 2> offCentre(const core::ImageRGBA& im) {
-    int x0 = im.width, x1 = -1, y0 = im.height, y1 = -1;
-    for (int y = 0; y < im.height; ++y)
-        for (int x = 0; x < im.width; ++x)
-            if (im.at(x, y)[3] > kShown)
-                x0 = std::min(x0, x), x1 = std::max(x1, x), y0 = std::min(y0, y),
-                y1 = std::max(y1, y);
+    const auto [x0, x1, y0, y1] = shownBox(im);
     return {0.5 * (x0 + x1 + 1) - 0.5 * im.width, 0.5 * (y0 + y1 + 1) - 0.5 * im.height};
 }
 

@@ -73,8 +73,8 @@ TEST(ShLocal, TfAndParamChangesRerunOnlyWhatDependsOnThem) {
     session.run(scene(d));
     d["transfer_function"] = {{"preset", "ct-bone"}, {"extinction_scale", 2.0}};
     EXPECT_EQ(ranStages(session.run(scene(d))),
-              (std::set<std::string>{"transfer_function", "skip_cells", "framing",
-                                     "multires_grid", "local_visibility", "camera", "render"}));
+              (std::set<std::string>{"transfer_function", "skip_cells", "framing", "multires_grid",
+                                     "local_visibility", "camera", "render"}));
     d["method"]["params"]["rays"] = 40;  // visibility only
     EXPECT_EQ(ranStages(session.run(scene(d))),
               (std::set<std::string>{"local_visibility", "camera", "render"}));
