@@ -175,7 +175,7 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients) {
     // w = w0 + Aᵀ (A Aᵀ)⁻¹ (b − A w0), A_ik = Y_i(ω_k).
     const int n = rays, c = coefficients;
     Eigen::MatrixXd A(c, n);
-    std::vector<double> y(std::size_t(sh::kMaxCoeffs));
+    std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
     for (int k = 0; k < n; ++k) {
         sh::evalShUnitDouble(sh::shBandForCount(c), s.directions[std::size_t(k)], y);
         for (int i = 0; i < c; ++i) A(i, k) = y[std::size_t(i)];
@@ -225,7 +225,7 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     // Per direction: index-space direction and w_k·Y_i(ω_k).
     std::vector<RayDir> rays;
     std::vector<double> wy(std::size_t(N) * C);
-    std::vector<double> y(std::size_t(sh::kMaxCoeffs));
+    std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
     for (int k = 0; k < N; ++k) {
         rays.emplace_back((glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) /
                           g.spacing);
