@@ -42,6 +42,7 @@
 #include <mutex>
 #include <sstream>
 
+#include "core/text.h"
 #include "io/dicom_series.h"
 #include "io/nrrd_header.h"
 #include "io/volume_module.h"
@@ -1162,6 +1163,9 @@ Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& option
     }
     applyNonFinitePolicy(v, path, options.nonFinite);
     v.geometry().validate();
+    // Text from the file (a DICOM SeriesDescription in Latin-1, binary garbage) is printed by
+    // `info --json` and written into the stats: one line of valid UTF-8 (fuzz_dicom).
+    v.description = oneLine(v.description);
     return v;
 }
 
