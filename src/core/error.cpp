@@ -1,11 +1,10 @@
 // SPDX-License-Identifier: MIT
 #include "core/error.h"
 
+#include "core/text.h"
+
 namespace voxlight {
 
-namespace {
-/// `text` as one line of valid UTF-8: control characters (a CR or LF from a damaged header line) and
-/// bytes that are not UTF-8 (binary garbage quoted from a file) become \xNN.
 std::string oneLine(const std::string& text) {
     std::string out;
     out.reserve(text.size());
@@ -42,6 +41,7 @@ std::string oneLine(const std::string& text) {
     return out;
 }
 
+namespace {
 std::string composeMessage(const std::string& source, const std::string& field,
                            const std::string& problem, const std::string& fix) {
     std::string msg = source.empty() ? std::string() : source + ": ";

@@ -42,6 +42,7 @@
 #include <mutex>
 #include <sstream>
 
+#include "core/text.h"
 #include "io/dicom_series.h"
 #include "io/nrrd_header.h"
 #include "io/volume_module.h"
@@ -433,6 +434,18 @@ void checkNiftiHeader(const fs::path& path) {
     const double offset = v1 ? f32(108) : double(i64(168));
     std::error_code ec;
     const std::uintmax_t fileSize = fs::file_size(path, ec);
+    // Compressed: deflate cannot expand beyond 1032:1, so a small .nii.gz claiming gigabytes is
+    // refused before VTK allocates them (fuzz_nifti_gz: 4.2 GB for a 600-byte file).
+    const std::uint64_t claimed = voxels * std::uint64_t(it->second) / 8;
+    constexpr std::uint64_t kMaxDeflateRatio = 1032;
+    if (!ec && hasExtension(path, {".gz"}) &&
+        claimed > kMaxDeflateRatio * std::uint64_t(fileSize) + (std::uint64_t(1) << 16))
+        throw InputError(path.string(), "data",
+                         "the header claims " + std::to_string(claimed) +
+                             " data bytes but the compressed file of " + std::to_string(fileSize) +
+                             " bytes cannot hold more than " +
+                             std::to_string(kMaxDeflateRatio * std::uint64_t(fileSize)),
+                         "the file is truncated or its dims are damaged");
     if (single && !ec && !hasExtension(path, {".gz"})) {
         const std::uint64_t headerSize = v1 ? kNifti1HeaderSize : kNifti2HeaderSize;
         if (!std::isfinite(offset) || offset < double(headerSize) || offset > double(fileSize))
@@ -440,7 +453,7 @@ void checkNiftiHeader(const fs::path& path) {
                              "is " + std::to_string(offset) + ", outside the file of " +
                                  std::to_string(fileSize) + " bytes",
                              "the header is damaged; repair it (e.g. with nibabel)");
-        const std::uint64_t need = voxels * std::uint64_t(it->second) / 8;
+        const std::uint64_t need = claimed;
         if (std::uint64_t(offset) + need > fileSize)
             throw InputError(path.string(), "data",
                              "the file holds " + std::to_string(fileSize) +
@@ -1162,6 +1175,9 @@ Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& option
     }
     applyNonFinitePolicy(v, path, options.nonFinite);
     v.geometry().validate();
+    // Text from the file (a DICOM SeriesDescription in Latin-1, binary garbage) is printed by
+    // `info --json` and written into the stats: one line of valid UTF-8 (fuzz_dicom).
+    v.description = oneLine(v.description);
     return v;
 }
 

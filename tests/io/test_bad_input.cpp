@@ -2,6 +2,7 @@
 // Malformed files: one clear InputError naming the file, never a crash or a half-filled volume.
 // These run under ASan/UBSan in CI (the `asan` preset).
 #include <gtest/gtest.h>
+#include <zlib.h>
 
 #include <chrono>
 #include <fstream>
@@ -547,4 +548,22 @@ TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
     patchBytes(tmp / "d.nii", kNiftiDescrip, full.data(), full.size());
     patchBytes(tmp / "d.nii", kNiftiDescrip + 80, aux.data(), aux.size());  // aux_file follows
     EXPECT_EQ(io::readVolume(tmp / "d.nii").description, full);
+}
+
+TEST(BadInput, FuzzNiftiGzClaimingMoreThanItCanHold) {
+    // fuzz_nifti_gz: a 600-byte .nii.gz whose dims claim 4.2 GB made VTK allocate them first.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("torso", o), tmp / "big.nii");
+    const std::int16_t dims[3] = {2000, 2000, 500};
+    patchBytes(tmp / "big.nii", 40 + 2, dims, sizeof dims);
+    const std::string plain = readAll(tmp / "big.nii");
+    gzFile gz = gzopen((tmp / "big.nii.gz").c_str(), "wb");
+    ASSERT_TRUE(gz);
+    gzwrite(gz, plain.data(), unsigned(plain.size()));
+    gzclose(gz);
+    const auto start = std::chrono::steady_clock::now();
+    expectInputError(tmp / "big.nii.gz", "data", {"cannot hold more than"});
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }

@@ -17,6 +17,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <string>
 #include <thread>
 
@@ -334,4 +335,16 @@ TEST(DicomHostile, CancelKillsTheDecoder) {
     EXPECT_THROW((void)readDicomSeries(tmp / "slice.dcm", {}, progress), CancelledError);
     stopper.join();
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 3.0);
+}
+
+TEST(DicomHostile, DescriptionThatIsNotUtf8IsEscaped) {
+    // fuzz_dicom: a SeriesDescription in Latin-1 (or garbage) made `info --json` an internal error.
+    std::string s = validSlice();
+    const std::size_t at = find(s, tag(0x20, 0xd) + "UI");
+    s.insert(at, element(8, 0x103e, "LO", "Th\xe9r\x01x"));
+    TempDir tmp;
+    writeFile(tmp / "slice.dcm", s);
+    const auto v = voxlight::io::readVolume(tmp / "slice.dcm");
+    EXPECT_EQ(v.description.substr(0, 13), "Th\\xE9r\\x01x ") << v.description;
+    EXPECT_NO_THROW((void)nlohmann::json(v.description).dump());
 }
