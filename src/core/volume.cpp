@@ -106,10 +106,23 @@ void checkVolumeSize(const Geometry& geometry) {
         throw InputError("", "dims", os.str(), "crop or downsample the volume");
     }
 }
+
+/// A direction matrix that is not a rotation (a damaged sform/qform or space directions, found by
+/// fuzz_nifti_gz) is bad input, not an internal fault: readers name the file when they rethrow.
+void checkOrientation(const Geometry& g) {
+    const glm::dmat3 gram = glm::transpose(g.direction) * g.direction;
+    for (int r = 0; r < 3; ++r)
+        for (int c = 0; c < 3; ++c)
+            if (!(std::abs(gram[c][r] - (r == c ? 1.0 : 0.0)) < 1e-4))
+                throw InputError("volume", "orientation",
+                                 "axes are not orthonormal (a sheared or scaled direction matrix)",
+                                 "fix the header's orientation (sform/qform, space directions)");
+}
 }  // namespace
 
 Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), type_(type) {
     checkVolumeSize(geometry);
+    checkOrientation(geometry);
     geometry_.validate();
     data_ = std::shared_ptr<std::byte>(new std::byte[sizeBytes()](),
                                        std::default_delete<std::byte[]>());
@@ -118,6 +131,7 @@ Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), 
 Volume::Volume(const Geometry& geometry, VoxelType type, std::shared_ptr<std::byte> storage)
     : geometry_(geometry), type_(type), data_(std::move(storage)) {
     checkVolumeSize(geometry);
+    checkOrientation(geometry);
     geometry_.validate();
     VL_CHECK(data_ != nullptr);
 }

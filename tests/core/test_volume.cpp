@@ -113,3 +113,18 @@ TEST(Volume, MemoryOfLargeCtIsItsVoxelsOnly) {
     g.dims = {512, 512, 880};
     EXPECT_EQ(g.voxelCount() * core::voxelBytes(VoxelType::Int16), 461373440u);
 }
+
+TEST(Volume, ASkewedOrientationIsBadInputNotAnInternalFault) {
+    // A damaged NIfTI sform (fuzz_nifti_gz) gave a direction matrix that is not a rotation; the
+    // volume refuses it as input, which the CLI reports in one line with exit code 2.
+    core::Geometry g;
+    g.dims = {4, 4, 4};
+    g.direction = glm::dmat3(1.0);
+    g.direction[1] = glm::dvec3(0.5, 1.0, 0.0);  // second axis sheared toward the first
+    try {
+        core::Volume v(g, core::VoxelType::UInt8);
+        FAIL() << "a sheared direction matrix must be refused";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "orientation");
+    }
+}
