@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-// voxlight render SCENE.json|VOLUME -o OUT.png [--view V] [--exr OUT.exr] [--stats STATS.json]
-//                 [--set key=value]... [--cache DIR] [--frames N] [--explain]
+// voxlight render SCENE.json|VOLUME -o OUT.png [--view V] [--exr OUT.exr] [--std-error E.exr]
+//                 [--stats STATS.json] [--set key=value]... [--cache DIR] [--frames N] [--explain]
 // Renders a scene through the pipeline (its method's plan of stages): display-mapped PNG, linear
 // EXR, stats JSON. A volume file or DICOM folder is a scene on its own (io::volumeScene: the
 // modality's preset, an anterior view fitted to what it shows, a headlight). --explain prints the
@@ -22,6 +22,12 @@ namespace voxlight::app {
 namespace {
 namespace fs = std::filesystem;
 
+std::string fixed(double v, int decimals) {
+    char b[32];
+    std::snprintf(b, sizeof b, "%.*f", decimals, v);
+    return b;
+}
+
 /// The record of an output stage (written after the pipeline's stages, by this command).
 pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
                                    const std::string& option) {
@@ -39,6 +45,7 @@ Command addRenderCommand(CLI::App& app) {
     auto scene = std::make_shared<std::string>();
     auto out = std::make_shared<std::string>();
     auto exr = std::make_shared<std::string>();
+    auto stdErr = std::make_shared<std::string>();
     auto stats = std::make_shared<std::string>();
     auto sets = std::make_shared<std::vector<std::string>>();
     auto quiet = std::make_shared<bool>(false);
@@ -57,6 +64,9 @@ Command addRenderCommand(CLI::App& app) {
                      "Look from this side of the patient (replaces the scene's camera placement)")
         ->check(CLI::IsMember(viewNames()));
     c.sub->add_option("--exr", *exr, "Also write the linear radiance (+ alpha) as OpenEXR");
+    c.sub->add_option("--std-error", *stdErr,
+                      "Also write the per-pixel standard error of the radiance as OpenEXR "
+                      "(method pathtrace)");
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
@@ -81,6 +91,7 @@ Command addRenderCommand(CLI::App& app) {
             std::vector<pipeline::StageRecord> plan = session.explain(s);
             plan.push_back(outputRecord("write_image", *out, "-o"));
             plan.push_back(outputRecord("write_exr", *exr, "--exr"));
+            plan.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
             for (const auto& r : plan) {
                 std::string inputs;
                 for (const auto& i : r.inputs) inputs += (inputs.empty() ? "" : ", ") + i;
@@ -97,8 +108,13 @@ Command addRenderCommand(CLI::App& app) {
         // (output_files.h): a bad path fails now, and a failure or Ctrl-C leaves nothing behind.
         checkOutputs({{"--output", *out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}},
                       {"--exr", *exr, {".exr"}},
+                      {"--std-error", *stdErr, {".exr"}},
                       {"--stats", *stats, {".json"}}});
         const io::Scene s = loadInput(*scene, *sets, *view);
+        if (!stdErr->empty() && s.method.name != "pathtrace")
+            throw InputError("command line", "--std-error",
+                             "method '" + s.method.name + "' makes no standard-error image",
+                             "use --std-error with --set method.name=pathtrace, or leave it out");
         pipeline::RunResult r = session.run(s, {.frames = *frames}, terminalProgress(*quiet));
 
         OutputFiles files;
@@ -118,6 +134,17 @@ Command addRenderCommand(CLI::App& app) {
         }
         r.stages.push_back(outputRecord("write_exr", *exr, "--exr"));
         r.stages.back().seconds = sw.seconds();
+        sw.restart();
+        if (!stdErr->empty()) {
+            throwIfCancelled();
+            const auto it = r.images.find("std_error");
+            if (it == r.images.end())
+                throw InternalError("method '" + r.method + "' made no std_error image");
+            files.write(*stdErr, "--std-error",
+                        [&](const fs::path& p) { io::writeImage(it->second, p); });
+        }
+        r.stages.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
+        r.stages.back().seconds = sw.seconds();
         if (!stats->empty()) {
             throwIfCancelled();
             nlohmann::json j = pipeline::statsJson(r, total.seconds());
@@ -130,10 +157,16 @@ Command addRenderCommand(CLI::App& app) {
         throwIfCancelled();
         files.commit();
         for (const auto& w : r.warnings) std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
-        if (!*quiet)
-            std::fprintf(stderr, "wrote %s (%dx%d, %s, render %.3f s, total %.2f s)\n",
-                         out->c_str(), r.image.width, r.image.height, s.method.name.c_str(),
-                         r.stage(r.imageStage).seconds, total.seconds());
+        if (!*quiet) {
+            // The image's own time: a cached reference's frame only copies it, so name that.
+            std::string when = "render " + fixed(r.stage(r.imageStage).seconds, 3) + " s";
+            for (const auto& st : r.stages)
+                if (st.name == "reference")
+                    when = st.ran ? "reference " + fixed(st.seconds, 1) + " s" : "reference cached";
+            std::fprintf(stderr, "wrote %s (%dx%d, %s, %s, total %.2f s)\n", out->c_str(),
+                         r.image.width, r.image.height, s.method.name.c_str(), when.c_str(),
+                         total.seconds());
+        }
         return kExitOk;
     };
     return c;

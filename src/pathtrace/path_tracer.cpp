@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 
 #include "core/error.h"
@@ -31,6 +32,8 @@ constexpr int kSamplesPerPass = 4;
 /// Irradiance of the headlight used when a scene has no light: 4π, so that a fully lit scatterer
 /// of albedo a under isotropic single scattering shows radiance a (comparable to the ray caster).
 constexpr float kHeadlightIrradiance = float(4.0 * std::numbers::pi);
+/// Rec. 709 luminance weights (linear RGB), for the error estimate.
+constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 
 struct HalfSpace {
     glm::dvec3 point, normal;
@@ -293,8 +296,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
     const Impl& im = *impl_;
     const int w = camera.width(), h = camera.height();
     const std::size_t pixels = std::size_t(w) * std::size_t(h);
-    // Per pixel, in double: Σ rgb, Σ rgb², Σ alpha.
-    std::vector<double> sum(pixels * 3, 0.0), sumSq(pixels * 3, 0.0), alpha(pixels, 0.0);
+    // Per pixel, in double: Σ rgb, Σ rgb², Σ luminance², Σ alpha.
+    std::vector<double> sum(pixels * 3, 0.0), sumSq(pixels * 3, 0.0), lumSq(pixels, 0.0),
+        alpha(pixels, 0.0);
     std::vector<std::shared_ptr<const lights::Light>> lightList = options_.lights;
     if (lightList.empty()) {
         // The ray caster's headlight: travels along the view, from above-left of the camera.
@@ -379,11 +383,14 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
             phasePdf = henyeyGreenstein(float(glm::dot(ray.direction, next)), g);
             ray = Ray{x3, next};
         }
+        double lum = 0.0;
         for (int c = 0; c < 3; ++c) {
             const double v = std::isfinite(L[c]) ? L[c] : 0.0;
             sum[p * 3 + c] += v;
             sumSq[p * 3 + c] += v * v;
+            lum += kLuminance[c] * v;
         }
+        lumSq[p] += lum * lum;
         alpha[p] += covered;
     };
 
@@ -391,7 +398,27 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
     if (options_.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       std::size_t(options_.threads));
+    // The image's relative error after n samples (Stats::relativeStdError): the variance of each
+    // covered pixel's luminance mean, from its own samples (channels summed per sample, so their
+    // correlation counts), averaged, over the mean covered luminance.
+    auto relativeError = [&](int n) {
+        double var = 0.0, mean = 0.0;
+        std::size_t covered = 0;
+        for (std::size_t p = 0; p < pixels; ++p) {
+            if (!(alpha[p] > 0.0)) continue;
+            double m = 0.0;
+            for (int c = 0; c < 3; ++c) m += kLuminance[c] * sum[p * 3 + c];
+            m /= n;
+            var += std::max(0.0, lumSq[p] / n - m * m) / std::max(1.0, n - 1.0);
+            mean += m;
+            ++covered;
+        }
+        return covered && mean > 0.0 ? std::sqrt(var / double(covered)) / (mean / double(covered))
+                                     : 0.0;
+    };
     int done = 0;
+    double error = 0.0;
+    bool reached = false;
     while (done < options_.samplesPerPixel) {
         const int s0 = done, s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
         tbb::parallel_for(tbb::blocked_range2d<int>(0, h, 8, 0, w, 8), [&](const auto& r) {
@@ -405,36 +432,39 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
             real += n.real, null += n.null, shadow += n.shadow, violations += n.violations;
             budget += n.budget;
         });
-        progress.report("pathtrace " + std::to_string(s1) + " spp",
-                        double(s1) / options_.samplesPerPixel);
         done = s1;
+        error = relativeError(done);
+        // Progress: the larger of the spp fraction and the error's (error ∝ 1/√n, so the target
+        // needs about n·(error/target)² samples).
+        double fraction = double(done) / options_.samplesPerPixel;
+        if (options_.targetError > 0.0 && error > 0.0)
+            fraction = std::max(fraction, std::min(1.0, (options_.targetError / error) *
+                                                            (options_.targetError / error)));
+        char text[96];
+        std::snprintf(text, sizeof text, "pathtrace %d spp, error %.2f%%", done, 100.0 * error);
+        progress.report(text, fraction);
+        if (options_.targetError > 0.0 && done >= kMinSamplesForErrorStop &&
+            error <= options_.targetError) {
+            reached = true;
+            break;
+        }
         if (options_.maxSeconds > 0.0 && clock.seconds() >= options_.maxSeconds) break;
     }
 
     core::ImageRGBA film(w, h);
     if (stdError) *stdError = core::ImageRGBA(w, h);
-    double relSum = 0.0;
-    std::size_t relCount = 0;
     const double n = done;
     for (std::size_t p = 0; p < pixels; ++p) {
         float* out = film.pixels.data() + p * 4;
-        double lumMean = 0.0, lumVar = 0.0;
         for (int c = 0; c < 3; ++c) {
             const double mean = sum[p * 3 + c] / n;
             const double var =
                 std::max(0.0, sumSq[p * 3 + c] / n - mean * mean) / std::max(1.0, n - 1.0);
             out[c] = float(mean);
             if (stdError) stdError->pixels[p * 4 + c] = float(std::sqrt(var));
-            const double wgt = c == 0 ? 0.2126 : c == 1 ? 0.7152 : 0.0722;
-            lumMean += wgt * mean;
-            lumVar += wgt * wgt * var;  // channels treated as independent (an estimate)
         }
         out[3] = float(alpha[p] / n);
         if (stdError) stdError->pixels[p * 4 + 3] = 1.f;
-        if (out[3] > 0.f && lumMean > 1e-6) {
-            relSum += std::sqrt(lumVar) / lumMean;
-            ++relCount;
-        }
     }
     if (stats) {
         stats->samplesPerPixel = done;
@@ -445,7 +475,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
         stats->majorantViolations = violations;
         stats->budgetExceeded = budget;
         stats->seconds = clock.seconds();
-        stats->relativeStdError = relCount ? relSum / double(relCount) : 0.0;
+        stats->relativeStdError = error;
+        stats->targetReached = reached;
     }
     return film;
 }

@@ -37,8 +37,11 @@
 namespace voxlight::pathtrace {
 
 struct Options {
-    int samplesPerPixel = 64;
+    int samplesPerPixel = 64;  ///< the most samples per pixel (a target error may stop sooner)
     double maxSeconds = 0.0;   ///< > 0: stop after the pass that crosses this many seconds
+    /// > 0: stop after the pass whose estimated relative error (Stats::relativeStdError) is at
+    /// most this, once kMinSamplesForErrorStop samples are in.
+    double targetError = 0.0;
     int maxBounces = 1;        ///< scattering events per path (1 = single scattering)
     float phaseG = 0.f;        ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
     int rouletteAfter = 3;     ///< bounces before Russian roulette may end a path
@@ -64,9 +67,16 @@ struct Stats {
     /// extreme σt): taken as blocked there. 0 for ordinary TFs.
     std::uint64_t budgetExceeded = 0;
     double seconds = 0.0;
-    /// Mean over covered pixels of (standard error / mean) of the luminance.
+    /// The image's estimated relative error: √(mean over covered pixels of the variance of the
+    /// luminance mean) / (mean covered luminance) — the NRMS error against the converged image
+    /// that the samples predict (noise only; the estimator has no bias). 0 for a black image.
     double relativeStdError = 0.0;
+    bool targetReached = false;  ///< a target error was given and met
 };
+
+/// Fewer samples than this do not trust their own variance estimate (a pixel whose first few
+/// paths all missed the light looks noise-free): the target-error stop waits for them.
+inline constexpr int kMinSamplesForErrorStop = 16;
 
 /// A ray in world millimetres.
 struct Ray {

@@ -261,6 +261,7 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                             "'");
     res.image = *run.get<core::ImageRGBA>(plan.imageStage);
     res.imageStage = plan.imageStage;
+    for (const auto& [name, image] : run.images_) res.images[name] = *image;
     res.details = run.details();
     for (const auto& w : run.warnings())  // a Frame stage may warn once per frame
         if (std::find(res.warnings.begin(), res.warnings.end(), w) == res.warnings.end())

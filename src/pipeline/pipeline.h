@@ -116,6 +116,11 @@ class Run {
     /// what happened, why, and what to do — e.g. an image that shows nothing.
     void warn(const std::string& message) { warnings_.push_back(message); }
     const std::vector<std::string>& warnings() const { return warnings_; }
+    /// A further image the method makes beside the main one, by name (pathtrace: "std_error",
+    /// the per-pixel standard error of the radiance); the CLI writes it on request.
+    void addImage(const std::string& name, std::shared_ptr<const core::ImageRGBA> image) {
+        images_[name] = std::move(image);
+    }
 
   private:
     friend class Session;
@@ -126,6 +131,7 @@ class Run {
     std::map<std::string, Artifact> artifacts_;
     nlohmann::json details_ = nlohmann::json::object();
     std::vector<std::string> warnings_;
+    std::map<std::string, std::shared_ptr<const core::ImageRGBA>> images_;
 };
 
 /// Builds a key from named parts; unknown (nullopt) as soon as one upstream key is unknown.
@@ -160,6 +166,8 @@ struct RunResult {
     nlohmann::json params;              ///< as used
     nlohmann::json details;             ///< method details + "frame_seconds" when frames > 1
     std::vector<std::string> warnings;  ///< Run::warn() messages, each once
+    /// Further images by name (Run::addImage): pathtrace's "std_error".
+    std::map<std::string, core::ImageRGBA> images;
     /// The record of a stage by name (InternalError when absent).
     const StageRecord& stage(const std::string& name) const;
 };

@@ -16,6 +16,11 @@
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims). Its local stages have the same keys as sh-local's, so
 //                         switching between the two recomputes nothing once both have run.
+//   pathtrace:            spp (64; the most when a target error is set), seconds, target_error
+//                         (relative NRMS the samples predict; 0 = off), reference (false; true:
+//                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
+//                         becomes the cached `reference` stage), max_bounces (1, or 16 with the
+//                         multiple_scattering effect), phase_g, majorant_grid, antialias
 // Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
 // directional, point and environment lights (render/sh_shading.h); the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
 // "specular" (an effects list without it turns the highlight off).
@@ -317,13 +322,21 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     return o;
 }
 
+/// Reference mode's defaults: traced until the image's estimated relative error (NRMS against the
+/// converged image) is 1 % — at mid-grey about one 8-bit display step, under the 2/255 the
+/// accuracy tables count — or this many spp. A study that needs less noise sets target_error.
+constexpr double kReferenceTargetError = 0.01;
+constexpr int kReferenceMaxSpp = 1 << 14;
+
 /// The path tracer's options from the scene and method.params. Multiple scattering is the
 /// "multiple_scattering" effect: without it paths stop after one scattering event.
 pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::RenderOptions& o,
-                                         ParamReader& p) {
+                                         ParamReader& p, bool& reference) {
     pathtrace::Options t;
-    t.samplesPerPixel = p.integer("spp", 64, 1, 1 << 20);
+    reference = p.boolean("reference", false);
+    t.samplesPerPixel = p.integer("spp", reference ? kReferenceMaxSpp : 64, 1, 1 << 20);
     t.maxSeconds = p.number("seconds", 0.0, 0.0, 1e6);
+    t.targetError = p.number("target_error", reference ? kReferenceTargetError : 0.0, 0.0, 1.0);
     const bool multiple = wantsEffect(scene, "multiple_scattering");
     if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
         p.fail("max_bounces",
@@ -333,7 +346,7 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
     t.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
     t.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
     t.majorantGrid = p.boolean("majorant_grid", true);
-    t.pixelJitter = p.boolean("antialias", true);
+    t.pixelJitter = p.boolean("antialias", !reference);
     t.seed = o.seed;
     t.threads = o.threads;
     t.background = o.background;
@@ -435,31 +448,81 @@ std::string dims(const glm::ivec3& d) {
     return std::to_string(d.x) + "x" + std::to_string(d.y) + "x" + std::to_string(d.z);
 }
 
-/// The pathtrace method's image stage: the path tracer over the same volume, TF table, majorant
-/// cells, lights and camera as the ray caster's stages.
-Artifact renderPathTraced(Run& run, pathtrace::Options pt) {
+/// A path-traced image with what it says about itself: kept together so that a cached reference
+/// reports its spp, error and warnings like a fresh one.
+struct TracedImage {
+    core::ImageRGBA image, stdError;
+    json details;
+    std::vector<std::string> warnings;
+    std::size_t bytes() const { return (image.pixels.size() + stdError.pixels.size()) * 4; }
+};
+
+/// Largest cached image side (guards the read allocation against a damaged header).
+constexpr std::uint64_t kMaxCachedImagePixels = std::uint64_t(1) << 28;
+
+const Codec& tracedImageCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& t = *a.as<TracedImage>();
+            w.pod(std::int32_t(t.image.width));
+            w.pod(std::int32_t(t.image.height));
+            w.array(t.image.pixels);
+            w.array(t.stdError.pixels);
+            w.string(t.details.dump());
+            w.pod(std::uint64_t(t.warnings.size()));
+            for (const auto& s : t.warnings) w.string(s);
+        },
+        [](ByteReader& r) {
+            auto t = std::make_shared<TracedImage>();
+            const int wd = r.pod<std::int32_t>(), ht = r.pod<std::int32_t>();
+            if (wd < 1 || ht < 1 || std::uint64_t(wd) * std::uint64_t(ht) > kMaxCachedImagePixels)
+                badPayload("image size does not fit");
+            const std::uint64_t floats = std::uint64_t(wd) * std::uint64_t(ht) * 4;
+            t->image = core::ImageRGBA(wd, ht);
+            t->stdError = core::ImageRGBA(wd, ht);
+            t->image.pixels = r.array<float>(floats);
+            t->stdError.pixels = r.array<float>(floats);
+            if (t->image.pixels.size() != floats || t->stdError.pixels.size() != floats)
+                badPayload("image pixels do not fit its size");
+            t->details = json::parse(r.string(), nullptr, false);
+            if (t->details.is_discarded()) badPayload("details are not JSON");
+            const auto n = r.pod<std::uint64_t>();
+            if (n > r.remaining()) badPayload("warning count does not fit");
+            for (std::uint64_t i = 0; i < n; ++i) t->warnings.push_back(r.string());
+            const std::size_t bytes = t->bytes();
+            return Artifact::of<TracedImage>(std::move(t), bytes);
+        }};
+    return c;
+}
+
+/// Runs the path tracer over the same volume, TF table, majorant cells, lights and camera as the
+/// ray caster's stages.
+std::shared_ptr<const TracedImage> tracePath(Run& run, pathtrace::Options pt) {
     const auto loaded = run.get<LoadedVolume>("load_volume");
     const auto tfa = run.get<TfArtifact>("transfer_function");
     if (run.has("lights")) pt.lights = *run.get<LightList>("lights");
     const auto camera = run.get<render::Camera>("camera");
     pathtrace::Stats st;
-    std::shared_ptr<core::ImageRGBA> film;
+    auto out = std::make_shared<TracedImage>();
     try {
         const pathtrace::PathTracer tracer(
             std::shared_ptr<const core::Volume>(loaded, &loaded->volume), tfa->table,
             run.get<grid::BrickMajorants>("skip_cells"), pt);
-        film = std::make_shared<core::ImageRGBA>(tracer.render(*camera, run.progress(), &st));
+        out->image = tracer.render(*camera, run.progress(), &st, &out->stdError);
     } catch (const InputError& e) {
         if (e.source() == "pathtrace")
             throw InputError(run.scene().source, "method.params." + e.field(), e.problem(),
                              e.fix());
         throw;
     }
-    json& d = run.details();
+    json& d = out->details;
     d["pathtrace"] = {{"spp", st.samplesPerPixel},
                       {"seconds", st.seconds},
                       {"paths_per_second", st.seconds > 0 ? double(st.paths) / st.seconds : 0.0},
                       {"relative_std_error", st.relativeStdError},
+                      {"target_error", pt.targetError},
+                      {"target_reached", st.targetReached},
                       {"real_collisions", st.realCollisions},
                       {"null_collisions", st.nullCollisions},
                       {"shadow_rays", st.shadowRays},
@@ -468,17 +531,34 @@ Artifact renderPathTraced(Run& run, pathtrace::Options pt) {
                       {"max_bounces", pt.maxBounces},
                       {"majorant_grid", pt.majorantGrid}};
     if (st.budgetExceeded > 0)
-        run.warn(std::to_string(st.budgetExceeded) +
-                 " flights met a cell so dense (sigma_t x length > 4096) that they were taken as "
-                 "blocked there: lower transfer_function.extinction_scale if this is not meant");
+        out->warnings.push_back(
+            std::to_string(st.budgetExceeded) +
+            " flights met a cell so dense (sigma_t x length > 4096) that they were taken as "
+            "blocked there: lower transfer_function.extinction_scale if this is not meant");
     if (st.majorantViolations > 0)
-        run.warn(
+        out->warnings.push_back(
             std::to_string(st.majorantViolations) +
             " samples exceeded their cell's majorant: the image may be biased (please report)");
+    if (pt.targetError > 0.0 && !st.targetReached)
+        out->warnings.push_back(
+            "the path tracer stopped at " + std::to_string(st.samplesPerPixel) +
+            " spp with an estimated error of " + std::to_string(100.0 * st.relativeStdError) +
+            " % above method.params.target_error (" + std::to_string(100.0 * pt.targetError) +
+            " %): raise method.params.spp or method.params.seconds");
     const render::Camera& cam = *camera;
     d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
                    {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
                    {"up", {cam.up().x, cam.up().y, cam.up().z}}};
+    return out;
+}
+
+/// The pathtrace method's image stage: a traced image (fresh, or the cached reference) with its
+/// details, warnings and standard-error image handed to the run.
+Artifact publishTraced(Run& run, const TracedImage& t) {
+    for (auto it = t.details.begin(); it != t.details.end(); ++it) run.details()[it.key()] = *it;
+    for (const auto& w : t.warnings) run.warn(w);
+    run.addImage("std_error", std::make_shared<const core::ImageRGBA>(t.stdError));
+    auto film = std::make_shared<const core::ImageRGBA>(t.image);
     const std::size_t bytes = film->pixels.size() * sizeof(float);
     return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
 }
@@ -615,7 +695,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     const render::RenderOptions options = parseOptions(kind, scene, reader);
     std::optional<pathtrace::Options> traced;
-    if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader);
+    bool reference = false;
+    if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader, reference);
     const ShParams shParams = isSh(kind) ? parseShParams(kind, scene, reader) : ShParams{};
     if (isSh(kind))
         for (std::size_t i = 0; i < scene.lights.size(); ++i)
@@ -943,7 +1024,40 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return k.json(optionsKey).value();
     };
     if (kind == Kind::PathTrace) {
-        frame.compute = [pt = *traced](Run& run) { return renderPathTraced(run, pt); };
+        if (!reference) {
+            frame.compute = [pt = *traced](Run& run) {
+                return publishTraced(run, *tracePath(run, pt));
+            };
+            plan.stages.push_back(frame);
+            return plan;
+        }
+        // Reference mode: the traced image is a precomputed artifact (memory and disk cache), so
+        // every method and test that measures itself against this scene traces it once.
+        Stage ref = frame;
+        ref.name = "reference";
+        ref.kind = StageKind::Precompute;
+        ref.key = [key = frame.key](const Run& run) { return key(run); };
+        ref.compute = [pt = *traced](Run& run) {
+            auto t = tracePath(run, pt);
+            const std::size_t bytes = t->bytes();
+            return Artifact::of<TracedImage>(std::move(t), bytes);
+        };
+        ref.codec = &tracedImageCodec();
+        ref.describe = [](const Run&, const Artifact& a) {
+            const auto& t = *a.as<TracedImage>();
+            std::ostringstream os;
+            os << t.details["pathtrace"].value("spp", 0) << " spp, estimated error "
+               << 100.0 * t.details["pathtrace"].value("relative_std_error", 0.0) << " %";
+            return os.str();
+        };
+        plan.stages.push_back(ref);
+        frame.inputs = {"reference"};
+        frame.key = [](const Run& run) {
+            return KeyBuilder(run, "render").stage("reference").value();
+        };
+        frame.compute = [](Run& run) {
+            return publishTraced(run, *run.get<TracedImage>("reference"));
+        };
         plan.stages.push_back(frame);
         return plan;
     }
@@ -1082,7 +1196,8 @@ const RegisterMethod kPathTrace([] {
         "Monte-Carlo path tracer: delta tracking over the majorant grid, exact shadows, "
         "single or multiple scattering (the reference)";
     m.effects = {"local_shadows", "global_shadows", "multiple_scattering"};
-    m.params = {"spp", "seconds", "max_bounces", "phase_g", "majorant_grid", "antialias"};
+    m.params = {"spp",         "seconds", "target_error",  "reference",
+                "max_bounces", "phase_g", "majorant_grid", "antialias"};
     m.plan = [](const io::Scene& scene, ParamReader& reader) {
         return planRayCaster(Kind::PathTrace, scene, reader);
     };

@@ -392,3 +392,24 @@ TEST(Cli, ViewReplacesTheScenesCameraPlacement) {
             tmp.path());
     EXPECT_EQ(bad.code, 2);
 }
+
+TEST(Cli, ThePathTracersStandardErrorImageIsWrittenOnRequestAndRefusedElsewhere) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "method": {"name": "pathtrace", "params": {"spp": 8}}, "effects": ["global_shadows"],
+        "image": {"width": 16, "height": 16}})";
+    Result r = run("render -q " + q(tmp / "scene.json") + " -o " + q(tmp / "a.png") +
+                       " --std-error " + q(tmp / "e.exr"),
+                   tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::exists(tmp / "e.exr"));
+    // Another method makes no such image: refused before any work, nothing written.
+    r = run("render -q " + q(tmp / "scene.json") + " --set method.name=gradient -o " +
+                q(tmp / "b.png") + " --std-error " + q(tmp / "f.exr"),
+            tmp.path());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+    EXPECT_NE(r.err.find("--std-error"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp / "b.png"));
+    EXPECT_FALSE(fs::exists(tmp / "f.exr"));
+}

@@ -4,6 +4,8 @@
 // light change reruns.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <filesystem>
 #include <set>
 
 #include "pipeline/pipeline.h"
@@ -70,4 +72,119 @@ TEST(PathTraceMethod, SingleScatteringUnlessTheSceneAsksForMultiple) {
         EXPECT_EQ(e.field(), "method.params.sp");
         EXPECT_NE(std::string(e.what()).find("spp"), std::string::npos) << e.what();
     }
+}
+
+namespace {
+/// RMS over pixels of the luminance of a − b.
+double rmsLuminanceDifference(const core::ImageRGBA& a, const core::ImageRGBA& b) {
+    double s = 0.0;
+    const std::size_t n = a.pixels.size() / 4;
+    for (std::size_t p = 0; p < n; ++p) {
+        double d = 0.0;
+        const double w[3] = {0.2126, 0.7152, 0.0722};
+        for (int c = 0; c < 3; ++c) d += w[c] * (a.pixels[p * 4 + c] - b.pixels[p * 4 + c]);
+        s += d * d;
+    }
+    return std::sqrt(s / double(n));
+}
+double meanCoveredLuminance(const core::ImageRGBA& a) {
+    double s = 0.0;
+    std::size_t n = 0;
+    for (std::size_t p = 0; p < a.pixels.size() / 4; ++p) {
+        if (!(a.pixels[p * 4 + 3] > 0.f)) continue;
+        s += 0.2126 * a.pixels[p * 4] + 0.7152 * a.pixels[p * 4 + 1] + 0.0722 * a.pixels[p * 4 + 2];
+        ++n;
+    }
+    return n ? s / double(n) : 0.0;
+}
+}  // namespace
+
+TEST(PathTraceMethod, ItsErrorEstimatePredictsTheDifferenceOfTwoIndependentRenders) {
+    // Two renders that differ only in seed differ by noise alone: their RMS difference is √2 × the
+    // RMS standard error each predicts. Independent truth for the estimate the target stop uses.
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["image"] = {{"width", 32}, {"height", 32}};
+    d["method"]["params"] = {{"spp", 32}, {"antialias", false}};
+    const RunResult a = Session().run(scene(d));
+    d["render"] = {{"seed", 2}};
+    const RunResult b = Session().run(scene(d));
+    const double predicted = a.details["pathtrace"]["relative_std_error"].get<double>() *
+                             meanCoveredLuminance(a.image) * std::sqrt(2.0);
+    const double measured = rmsLuminanceDifference(a.image, b.image);
+    ASSERT_GT(predicted, 0.0);
+    // Covered pixels only enter the prediction; empty ones differ by 0 in both. The ratio's own
+    // sampling noise over ~1000 pixels × 32 spp is a few %; 25 % catches a wrong formula (a
+    // missing √n, per-channel instead of per-luminance variance) without flaking.
+    constexpr double kEstimateTolerance = 0.25;
+    const double covered = [&] {
+        std::size_t n = 0;
+        for (std::size_t p = 0; p < a.image.pixels.size() / 4; ++p)
+            n += a.image.pixels[p * 4 + 3] > 0;
+        return double(n) / double(a.image.pixels.size() / 4);
+    }();
+    EXPECT_NEAR(measured / (predicted * std::sqrt(covered)), 1.0, kEstimateTolerance)
+        << "measured " << measured << ", predicted " << predicted << ", covered " << covered;
+}
+
+TEST(PathTraceMethod, StopsAtTheTargetErrorAndSaysWhenItDoesNot) {
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["method"]["params"] = {{"spp", 4096}, {"target_error", 0.05}};
+    const RunResult r = Session().run(scene(d));
+    const json& pt = r.details["pathtrace"];
+    EXPECT_TRUE(pt["target_reached"].get<bool>());
+    EXPECT_LE(pt["relative_std_error"].get<double>(), 0.05);
+    EXPECT_LT(pt["spp"].get<int>(), 4096);
+    EXPECT_GE(pt["spp"].get<int>(), 16) << "kMinSamplesForErrorStop";
+    EXPECT_TRUE(r.warnings.empty());
+    d["method"]["params"] = {{"spp", 4}, {"target_error", 0.001}};
+    const RunResult s = Session().run(scene(d));
+    EXPECT_FALSE(s.details["pathtrace"]["target_reached"].get<bool>());
+    ASSERT_EQ(s.warnings.size(), 1u);
+    EXPECT_NE(s.warnings[0].find("method.params.spp"), std::string::npos) << s.warnings[0];
+}
+
+TEST(PathTraceMethod, ReferenceModeIsACachedStageThatKeepsItsStatsAndErrorImage) {
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["method"]["params"] = {{"reference", true}, {"target_error", 0.05}};
+    Session session;
+    const RunResult a = session.run(scene(d));
+    EXPECT_TRUE(a.stage("reference").ran);
+    EXPECT_EQ(a.params["antialias"], false) << "references sample pixel centres, as the methods do";
+    ASSERT_EQ(a.images.count("std_error"), 1u);
+    EXPECT_EQ(a.images.at("std_error").width, 16);
+    const RunResult b = session.run(scene(d));
+    EXPECT_FALSE(b.stage("reference").ran);
+    EXPECT_EQ(b.stage("reference").reason.rfind("cached", 0), 0u) << b.stage("reference").reason;
+    EXPECT_EQ(b.details["pathtrace"], a.details["pathtrace"]);
+    EXPECT_EQ(b.image.pixels, a.image.pixels);
+    EXPECT_EQ(b.images.at("std_error").pixels, a.images.at("std_error").pixels);
+}
+
+TEST(PathTraceMethod, AReferenceSurvivesTheDiskCacheBitForBit) {
+    const auto dir = std::filesystem::temp_directory_path() / "voxlight-test-reference-cache";
+    std::filesystem::remove_all(dir);
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["method"]["params"] = {{"reference", true}, {"spp", 8}};
+    RunResult a, b;
+    {
+        Session s;
+        s.cache().setDirectory(dir);
+        a = s.run(scene(d));
+    }
+    {
+        Session s;
+        s.cache().setDirectory(dir);
+        b = s.run(scene(d));
+    }
+    EXPECT_EQ(b.stage("reference").reason.find("(disk)") != std::string::npos, true)
+        << b.stage("reference").reason;
+    EXPECT_EQ(b.image.pixels, a.image.pixels);
+    EXPECT_EQ(b.images.at("std_error").pixels, a.images.at("std_error").pixels);
+    EXPECT_EQ(b.details["pathtrace"], a.details["pathtrace"]);
+    EXPECT_EQ(b.warnings, a.warnings) << "the not-reached warning comes back from the disk too";
+    std::filesystem::remove_all(dir);
 }
