@@ -32,7 +32,14 @@ const mod::Api& volumeModule(const std::string& source) {
 
 core::Volume readVolume(const std::filesystem::path& path, const ReadOptions& options,
                         const core::Progress& progress) {
-    return volumeModule(path.string()).readVolume(path, options, progress);
+    try {
+        return volumeModule(path.string()).readVolume(path, options, progress);
+    } catch (const InputError& e) {
+        // core::Volume's own checks (orientation, sizes) know no file: name it here.
+        if (e.source() == "volume")
+            throw InputError(path.string(), e.field(), e.problem(), e.fix());
+        throw;
+    }
 }
 
 void writeVolume(const core::Volume& volume, const std::filesystem::path& path) {

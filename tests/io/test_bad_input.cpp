@@ -413,6 +413,20 @@ TEST(BadInput, NiftiWithNonFiniteSformIsRefused) {
     }
 }
 
+TEST(BadInput, NiftiWithAShearedSformIsRefusedNamingTheFile) {
+    // A finite sform whose axes are not orthogonal (a damaged header, or gantry tilt): one line
+    // naming the file and the field.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 16;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "s.nii");
+    const std::int16_t code = 1;
+    patchBytes(tmp / "s.nii", kNiftiSformCode, &code, sizeof code);
+    const float sheared[4] = {1.f, 0.9f, 0.f, 0.f};  // x axis leans into y: not a rotation
+    patchBytes(tmp / "s.nii", kNiftiSrowX, sheared, sizeof sheared);
+    expectInputError(tmp / "s.nii", "sform", {"s.nii", "orthonormal"});
+}
+
 TEST(BadInput, NiftiDescriptionBytesThatAreNotTextAreEscaped) {
     test::TempDir tmp;
     core::PhantomOptions o;
