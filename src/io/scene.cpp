@@ -347,7 +347,7 @@ CameraDesc parseCamera(const Field& f) {
     CameraDesc c;
     if (f.raw().is_null()) return c;
     f.allowOnly({"projection", "view", "azimuth", "elevation", "roll", "distance", "fov_y",
-                 "ortho_height", "target", "eye", "up", "margin"});
+                 "ortho_height", "target", "eye", "up", "margin", "aperture", "focus_distance"});
     if (f.has("view")) {
         std::vector<std::string> names;
         for (const NamedView& v : namedViews()) names.push_back(v.name);
@@ -367,6 +367,18 @@ CameraDesc parseCamera(const Field& f) {
     f.get("fov_y", c.fovYDeg, 1.0, 170.0);
     f.get("ortho_height", c.orthoHeight, 0.0, kMaxCoord);
     f.get("margin", c.margin, 0.0, 0.45);
+    f.get("aperture", c.apertureMm, 0.0, kMaxCoord);
+    if (f.has("focus_distance")) {
+        const Field fd = f.child("focus_distance");
+        if (fd.raw().is_string()) {
+            std::string v;
+            f.get("focus_distance", v, {"auto"});
+        } else {
+            double mm = 0.0;
+            f.get("focus_distance", mm, 1e-3, kMaxCoord);
+            c.focusMm = mm;
+        }
+    }
     if (f.has("target")) c.target = f.child("target").vec3(-kMaxCoord, kMaxCoord);
     if (f.has("eye")) c.eye = f.child("eye").vec3(-kMaxCoord, kMaxCoord);
     f.getDirection("up", c.up);
@@ -679,6 +691,8 @@ json sceneDocument(const Scene& s) {
     cam["fov_y"] = c.fovYDeg;
     cam["ortho_height"] = c.orthoHeight;
     cam["margin"] = c.margin;
+    cam["aperture"] = c.apertureMm;
+    cam["focus_distance"] = c.focusMm ? json(*c.focusMm) : json("auto");
     if (c.target) cam["target"] = vec(*c.target);
     d["camera"] = cam;
     d["lights"] = json::array();

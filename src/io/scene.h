@@ -21,7 +21,10 @@
 //              "azimuth": deg, "elevation": deg,
 //              "distance": mm (0 = fit), "fov_y": deg, "ortho_height": mm (0 = fit),
 //              "target": [x,y,z] mm, "eye": [x,y,z], "up": [x,y,z], "roll": deg,
-//              "margin": 0.05 (fitting: fraction of the image left empty on each side)},
+//              "margin": 0.05 (fitting: fraction of the image left empty on each side),
+//              "aperture": mm (thin-lens diameter; 0 = pinhole, everything sharp; rendered by
+//                          pathtrace, other methods warn), "focus_distance": mm along the view
+//                          or "auto" (the first visible surface at the image centre)},
 //   "lights": [{"type": "directional", "direction": [x,y,z] (the direction the light travels),
 //               "color": [r,g,b], "intensity": W/m²},
 //              {"type": "point", "position": [x,y,z], "color": ..., "intensity": W/sr,
@@ -98,8 +101,10 @@ struct CameraDesc {
     double orthoHeight = 0.0;          ///< orthographic view height, mm; 0 = fit
     std::optional<glm::dvec3> target;  ///< default: volume centre
     std::optional<glm::dvec3> eye;  ///< set → explicit look-at (azimuth/elevation/distance ignored)
-    glm::dvec3 up{0.0, 0.0, 1.0};  ///< LPS +z = superior
-    double margin = 0.05;          ///< fitting: image fraction left empty on each side
+    glm::dvec3 up{0.0, 0.0, 1.0};   ///< LPS +z = superior
+    double margin = 0.05;           ///< fitting: image fraction left empty on each side
+    double apertureMm = 0.0;        ///< thin-lens diameter; 0 = pinhole
+    std::optional<double> focusMm;  ///< along the view from the eye; unset = autofocus
 };
 
 struct LightDesc {

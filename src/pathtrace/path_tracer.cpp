@@ -32,6 +32,8 @@ constexpr int kSamplesPerPass = 4;
 /// Irradiance of the headlight used when a scene has no light: 4π, so that a fully lit scatterer
 /// of albedo a under isotropic single scattering shows radiance a (comparable to the ray caster).
 constexpr float kHeadlightIrradiance = float(4.0 * std::numbers::pi);
+/// Autofocus marches the centre ray at this many voxels (of the smallest spacing) per step.
+constexpr double kAutofocusStepVoxels = 0.25;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 
@@ -290,8 +292,37 @@ float PathTracer::extinctionAt(const glm::dvec3& p) const {
     return impl_->volume->visit([&](const auto& v) { return impl_->sigma(v, impl_->indexOf(p)); });
 }
 
-core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Progress& progress,
+double PathTracer::autofocus(const render::Camera& camera) const {
+    const render::Ray c = camera.generateAt(0.5 * camera.width(), 0.5 * camera.height());
+    const Ray ray{c.origin, c.direction};
+    const double along = glm::dot(c.direction, camera.forward());
+    const core::Geometry& g = impl_->volume->geometry();
+    double t0 = 0.0, t1 = INFINITY;
+    if (impl_->keptInterval(ray, t0, t1)) {
+        const double step =
+            kAutofocusStepVoxels * std::min({g.spacing.x, g.spacing.y, g.spacing.z});
+        double tau = 0.0;
+        for (double t = t0; t < t1; t += step) {
+            const double dt = std::min(step, t1 - t);
+            const double s = extinctionAt(ray.origin + (t + 0.5 * dt) * ray.direction);
+            if (tau + s * dt >= std::numbers::ln2)
+                return (t + (std::numbers::ln2 - tau) / s) * along;
+            tau += s * dt;
+        }
+    }
+    const auto b = g.worldBounds();
+    return std::max(glm::dot(0.5 * (b[0] + b[1]) - camera.eye(), camera.forward()), 1e-3);
+}
+
+core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Progress& progress,
                                    Stats* stats, core::ImageRGBA* stdError) const {
+    render::Camera camera = pinhole;
+    double focus = options_.focusMm;
+    const bool lens = options_.apertureMm > 0.0;
+    if (lens) {
+        if (!(focus > 0.0)) focus = autofocus(pinhole);
+        camera.setLens(options_.apertureMm, focus);
+    }
     core::Stopwatch clock;
     const Impl& im = *impl_;
     const int w = camera.width(), h = camera.height();
@@ -317,7 +348,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
         core::CounterRng rng(core::hashCounters(p, std::uint64_t(s), 0x7074, options_.seed));
         const double jx = options_.pixelJitter ? rng.uniformDouble() : 0.5;
         const double jy = options_.pixelJitter ? rng.uniformDouble() : 0.5;
-        const render::Ray cr = camera.generateAt(x + jx, y + jy);
+        // Lens samples only with a lens: a pinhole image keeps its random numbers (and pixels).
+        const double lu = lens ? rng.uniformDouble() : 0.0, lv = lens ? rng.uniformDouble() : 0.0;
+        const render::Ray cr = camera.generateThroughLens(x + jx, y + jy, lu, lv);
         Ray ray{cr.origin, cr.direction};
         glm::dvec3 L(0.0), beta(1.0);
         double covered = 0.0, phasePdf = 0.0;
@@ -477,6 +510,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& camera, const core::Pro
         stats->seconds = clock.seconds();
         stats->relativeStdError = error;
         stats->targetReached = reached;
+        stats->focusMm = lens ? focus : 0.0;
+        stats->autofocused = lens && !(options_.focusMm > 0.0);
     }
     return film;
 }

@@ -49,6 +49,10 @@ struct Options {
     /// Samples spread over each pixel's area (antialiased photo); false: through its centre, as
     /// the ray caster and the SH methods sample — for pixel-by-pixel references.
     bool pixelJitter = true;
+    /// Thin lens: diameter (mm; 0 = pinhole) and focus distance along the view (mm; 0 = autofocus
+    /// on the first visible surface at the image centre — PathTracer::autofocus).
+    double apertureMm = 0.0;
+    double focusMm = 0.0;
     std::uint64_t seed = 1;
     int threads = 0;
     glm::vec3 background{0.f};
@@ -72,6 +76,8 @@ struct Stats {
     /// that the samples predict (noise only; the estimator has no bias). 0 for a black image.
     double relativeStdError = 0.0;
     bool targetReached = false;  ///< a target error was given and met
+    double focusMm = 0.0;        ///< the plane in focus (aperture > 0)
+    bool autofocused = false;    ///< focusMm came from autofocus
 };
 
 /// Fewer samples than this do not trust their own variance estimate (a pixel whose first few
@@ -110,6 +116,10 @@ class PathTracer {
     double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
     /// σt at a world point (TF table lookup of the trilinear value).
     float extinctionAt(const glm::dvec3& p) const;
+    /// Autofocus: the depth along the view (mm) where the ray through the image centre has lost
+    /// half its light (optical depth ln 2, marched at a quarter voxel in the kept region) — the
+    /// first visible surface; the depth of the volume's centre when that ray stays clear.
+    double autofocus(const render::Camera& camera) const;
 
     const Options& options() const { return options_; }
 

@@ -352,6 +352,8 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
     t.background = o.background;
     t.clipPlanes = o.clipPlanes;
     t.cropBox = o.cropBox;
+    t.apertureMm = scene.camera.apertureMm;
+    t.focusMm = scene.camera.focusMm.value_or(0.0);
     return t;
 }
 
@@ -549,6 +551,11 @@ std::shared_ptr<const TracedImage> tracePath(Run& run, pathtrace::Options pt) {
     d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
                    {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
                    {"up", {cam.up().x, cam.up().y, cam.up().z}}};
+    if (pt.apertureMm > 0.0) {
+        d["camera"]["aperture_mm"] = pt.apertureMm;
+        d["camera"]["focus_distance_mm"] = st.focusMm;
+        d["camera"]["autofocus"] = st.autofocused;
+    }
     return out;
 }
 
@@ -974,11 +981,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .number(im.height)
             .value();
     };
-    camera.compute = [](Run& run) {
+    camera.compute = [kind](Run& run) {
         // Fitted to what the TF makes visible and the clip planes / crop box keep (clinical
         // viewers frame the anatomy, not the air), in this view's image plane.
         const std::vector<glm::dvec3>& points = *run.get<std::vector<glm::dvec3>>("framing");
         const io::Scene& s = run.scene();
+        if (s.camera.apertureMm > 0.0 && kind != Kind::PathTrace)
+            run.warn("camera.aperture: depth of field is rendered by method 'pathtrace' only; '" +
+                     s.method.name + "' shows everything in focus");
         io::CameraDesc desc = s.camera;
         if (desc.view == "auto") {
             const io::NamedView* view = io::findView(resolveView(desc, points));

@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 #include <ostream>
 
 #include "core/error.h"
@@ -162,6 +163,39 @@ Ray Camera::generateAt(double px, double py) const {
         r.origin = eye_ + sx * rightStep_ + sy * upStep_;
         r.direction = forward_;
     }
+    return r;
+}
+
+void Camera::setLens(double apertureMm, double focusMm) {
+    if (!(apertureMm >= 0.0) || !std::isfinite(apertureMm))
+        throw InputError("camera", "aperture", "must be a finite diameter >= 0 mm");
+    if (apertureMm > 0.0 && !(focusMm > 0.0 && std::isfinite(focusMm)))
+        throw InputError("camera", "focus_distance", "must be a finite distance > 0 mm");
+    aperture_ = apertureMm;
+    focus_ = apertureMm > 0.0 ? focusMm : 1.0;
+}
+
+Ray Camera::generateThroughLens(double px, double py, double u1, double u2) const {
+    Ray r = generateAt(px, py);
+    if (!(aperture_ > 0.0)) return r;
+    // Where this pixel's pinhole ray meets the plane in focus: every lens point aims there.
+    const glm::dvec3 focusPoint =
+        projection_ == Projection::Perspective
+            ? r.origin + r.direction * (focus_ / glm::dot(r.direction, forward_))
+            : r.origin + forward_ * focus_;
+    // Concentric mapping of the unit square onto the unit disk (Shirley & Chiu 1997): uniform
+    // in area, continuous, so stratified samples stay stratified.
+    const double a = 2.0 * u1 - 1.0, b = 2.0 * u2 - 1.0;
+    double dx = 0.0, dy = 0.0;
+    if (a != 0.0 || b != 0.0) {
+        constexpr double kQuarterPi = 0.25 * std::numbers::pi;
+        const bool wide = std::abs(a) > std::abs(b);
+        const double radius = wide ? a : b;
+        const double phi = wide ? kQuarterPi * (b / a) : 2.0 * kQuarterPi - kQuarterPi * (a / b);
+        dx = radius * std::cos(phi), dy = radius * std::sin(phi);
+    }
+    r.origin += 0.5 * aperture_ * (dx * right_ + dy * up_);
+    r.direction = glm::normalize(focusPoint - r.origin);
     return r;
 }
 

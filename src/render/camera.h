@@ -60,6 +60,15 @@ class Camera {
     /// The ray through continuous pixel coordinates (px, py) ∈ [0, width) × [0, height) (pixel
     /// (x, y)'s centre is (x + 0.5, y + 0.5)): for sub-pixel samples.
     Ray generateAt(double px, double py) const;
+    /// Thin lens (depth of field, the path tracer's): lens diameter and the distance of the plane
+    /// in focus, both mm, the plane perpendicular to forward(). Aperture 0 = pinhole.
+    void setLens(double apertureMm, double focusMm);
+    double aperture() const { return aperture_; }
+    double focusDistance() const { return focus_; }
+    /// generateAt's ray, but leaving from the lens point (u1, u2) ∈ [0,1)² (concentric disk
+    /// mapping) towards where the pinhole ray meets the plane in focus; generateAt's ray when the
+    /// aperture is 0.
+    Ray generateThroughLens(double px, double py, double u1, double u2) const;
     /// Inverse of generate(): the continuous pixel coordinates (x, y) of world point p, so that
     /// the ray of pixel (i, j) passes through p exactly when p projects to (i, j). False when p is
     /// not in front of a perspective camera (depth along forward() ≤ 0), where nothing is returned.
@@ -96,6 +105,7 @@ class Camera {
     // generate()'s per-pixel constants: 2/width, 2/height, and right/up scaled to one unit of the
     // normalised image coordinate (image-plane half-extent at unit distance, or in mm for ortho).
     double pixelScaleX_ = 1.0, pixelScaleY_ = 1.0;
+    double aperture_ = 0.0, focus_ = 1.0;
     glm::dvec3 rightStep_{0.0}, upStep_{0.0};
 };
 std::ostream& operator<<(std::ostream& os, const Camera& c);

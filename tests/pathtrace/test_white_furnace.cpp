@@ -36,10 +36,11 @@ Furnace makeFurnace() {
     Furnace f;
     auto v = std::make_shared<core::Volume>(core::makePhantom("sphere", {.size = 24}));
     const glm::vec3 white(1.f);
-    const optics::TransferFunction tf(
-        {{0.f, white, 0.f, {}}, {0.499f, white, 0.f, {}}, {0.501f, white, kSigma, {}},
-         {1.f, white, kSigma, {}}},
-        {0.5f, 1.f}, "white");
+    const optics::TransferFunction tf({{0.f, white, 0.f, {}},
+                                       {0.499f, white, 0.f, {}},
+                                       {0.501f, white, kSigma, {}},
+                                       {1.f, white, kSigma, {}}},
+                                      {0.5f, 1.f}, "white");
     f.table = std::make_shared<optics::TfTable>(tf);
     const grid::BrickGrid grid = grid::BrickGrid::build(*v);
     render::RenderOptions ro;

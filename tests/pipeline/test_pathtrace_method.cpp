@@ -188,3 +188,31 @@ TEST(PathTraceMethod, AReferenceSurvivesTheDiskCacheBitForBit) {
     EXPECT_EQ(b.warnings, a.warnings) << "the not-reached warning comes back from the disk too";
     std::filesystem::remove_all(dir);
 }
+
+TEST(PathTraceMethod, DepthOfFieldFromTheSceneWithAutofocusAndAWarningElsewhere) {
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["camera"] = {{"aperture", 20.0}};
+    const RunResult r = Session().run(scene(d));
+    EXPECT_EQ(r.details["camera"]["aperture_mm"], 20.0);
+    EXPECT_TRUE(r.details["camera"]["autofocus"].get<bool>());
+    EXPECT_GT(r.details["camera"]["focus_distance_mm"].get<double>(), 0.0);
+    d["camera"]["focus_distance"] = 300.0;
+    const RunResult f = Session().run(scene(d));
+    EXPECT_EQ(f.details["camera"]["focus_distance_mm"], 300.0);
+    EXPECT_FALSE(f.details["camera"]["autofocus"].get<bool>());
+    d["method"] = {{"name", "gradient"}};
+    d.erase("effects");
+    const RunResult g = Session().run(scene(d));
+    ASSERT_EQ(g.warnings.size(), 1u);
+    EXPECT_NE(g.warnings[0].find("camera.aperture"), std::string::npos) << g.warnings[0];
+    d["camera"]["focus_distance"] = "near";
+    try {
+        (void)scene(d);
+        FAIL() << "focus_distance must be a distance or \"auto\"";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "camera.focus_distance");
+    }
+    d["camera"]["focus_distance"] = "auto";
+    EXPECT_FALSE(scene(d).camera.focusMm.has_value());
+}
