@@ -108,8 +108,9 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
                     for (int x = 0; x < d0.x; ++x) {
                         const std::size_t b =
                             pyramid.blockIndex(x / kBlockSize, y / kBlockSize, z / kBlockSize);
-                        const int local = x % kBlockSize +
-                                          kBlockSize * (y % kBlockSize + kBlockSize * (z % kBlockSize));
+                        const int local =
+                            x % kBlockSize +
+                            kBlockSize * (y % kBlockSize + kBlockSize * (z % kBlockSize));
                         s0[std::size_t(x) + std::size_t(d0.x) * (y + std::size_t(d0.y) * z)] =
                             table.extinction(pyramid.data(b, 0)[local]);
                     }
@@ -132,11 +133,11 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
                         for (int k = 2 * z; k < std::min(2 * z + 2, dc.z); ++k)
                             for (int j = 2 * y; j < std::min(2 * y + 2, dc.y); ++j)
                                 for (int i = 2 * x; i < std::min(2 * x + 2, dc.x); ++i) {
-                                    sum += std::exp(
-                                        -double(child[std::size_t(i) +
-                                                      std::size_t(dc.x) *
-                                                          (j + std::size_t(dc.y) * k)]) *
-                                        L);
+                                    sum +=
+                                        std::exp(-double(child[std::size_t(i) +
+                                                               std::size_t(dc.x) *
+                                                                   (j + std::size_t(dc.y) * k)]) *
+                                                 L);
                                     ++count;
                                 }
                         const double meanT = std::max(sum / count, minMeanT);
@@ -339,8 +340,8 @@ void HierarchicalVisibility::sample(const glm::vec3& p, float* out) const {
     float corner[16];
     for (int k = 0; k < 8; ++k) {
         const glm::ivec3 c((k & 1) ? i1.x : i0.x, (k & 2) ? i1.y : i0.y, (k & 4) ? i1.z : i0.z);
-        const float w = ((k & 1) ? f.x : 1.f - f.x) * ((k & 2) ? f.y : 1.f - f.y) *
-                        ((k & 4) ? f.z : 1.f - f.z);
+        const float w =
+            ((k & 1) ? f.x : 1.f - f.x) * ((k & 2) ? f.y : 1.f - f.y) * ((k & 4) ? f.z : 1.f - f.z);
         if (w == 0.f) continue;
         at(c, corner);
         for (int i = 0; i < C; ++i) out[i] += w * corner[i];
@@ -348,13 +349,13 @@ void HierarchicalVisibility::sample(const glm::vec3& p, float* out) const {
 }
 
 double hierarchicalTransmittance(const OpacityPyramid& pyramid, const glm::vec3& origin,
-                                 const glm::dvec3& dir, double maxDistanceVoxels,
-                                 bool hierarchical, std::uint64_t* samples) {
+                                 const glm::dvec3& dir, double maxDistanceVoxels, bool hierarchical,
+                                 std::uint64_t* samples) {
     const core::Geometry& g = pyramid.geometry();
     const float h = float(core::minComponent(g.spacing));
     const IndexRay ray(g, dir);
-    const float length = std::min(float(std::min(maxDistanceVoxels * h, 1e30)),
-                                  ray.boxExit(origin, g.dims));
+    const float length =
+        std::min(float(std::min(maxDistanceVoxels * h, 1e30)), ray.boxExit(origin, g.dims));
     std::uint64_t n = 0;
     const double tau = opticalDepth(pyramid, origin, ray.d, length, h, hierarchical, n);
     if (samples) *samples += n;

@@ -89,8 +89,8 @@ class OpacityPyramid {
     /// Effective extinction σ_k of a cell [1/mm].
     float at(int level, const glm::ivec3& c) const {
         const glm::ivec3& d = dims_[std::size_t(level)];
-        return data_[std::size_t(level)][std::size_t(c.x) +
-                                         std::size_t(d.x) * (c.y + std::size_t(d.y) * c.z)];
+        return data_[std::size_t(level)]
+                    [std::size_t(c.x) + std::size_t(d.x) * (c.y + std::size_t(d.y) * c.z)];
     }
     /// σ_k at continuous voxel coordinate p, trilinear between level-k cell centres (clamped).
     float sample(int level, const glm::vec3& p) const;
@@ -153,9 +153,9 @@ class HierarchicalVisibility {
     }
     int coefficients_ = 0, rays_ = 0, patterns_ = 0, subsample_ = 1;
     glm::ivec3 res_{0};
-    std::vector<float> data_;         ///< float storage
-    std::vector<std::uint8_t> q_;     ///< 8-bit storage (coefficient 0 unsigned, others signed)
-    std::vector<float> scale_;        ///< per coefficient, 8-bit storage only
+    std::vector<float> data_;      ///< float storage
+    std::vector<std::uint8_t> q_;  ///< 8-bit storage (coefficient 0 unsigned, others signed)
+    std::vector<float> scale_;     ///< per coefficient, 8-bit storage only
     std::uint64_t raysTraced_ = 0, samplesTaken_ = 0, pointsSkipped_ = 0;
 };
 
@@ -170,7 +170,7 @@ HierarchicalVisibility computeHierarchicalVisibility(
 /// Transmittance of one ray from voxel index `origin` along the world unit direction `dir`,
 /// marched as computeHierarchicalVisibility does (exposed for tests). `samples` counts σ reads.
 double hierarchicalTransmittance(const OpacityPyramid& pyramid, const glm::vec3& origin,
-                                 const glm::dvec3& dir, double maxDistanceVoxels,
-                                 bool hierarchical, std::uint64_t* samples = nullptr);
+                                 const glm::dvec3& dir, double maxDistanceVoxels, bool hierarchical,
+                                 std::uint64_t* samples = nullptr);
 
 }  // namespace voxlight::visibility

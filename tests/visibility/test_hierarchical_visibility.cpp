@@ -54,9 +54,8 @@ double slabDistance(const glm::dvec3& x, const glm::dvec3& w, double maxDistance
 TEST(OpacityPyramid, MinifiesByTheProductOfChildPairs) {
     // A homogeneous volume keeps its σt on every level; one opaque voxel among 8 gives the parent
     // −ln(mean T)/L with the opaque child's T = 0.
-    const core::Volume v = test::makeVolume({16, 16, 16}, [](int i, int j, int k) {
-        return i == 0 && j == 0 && k == 0 ? 1000 : 500;
-    });
+    const core::Volume v = test::makeVolume(
+        {16, 16, 16}, [](int i, int j, int k) { return i == 0 && j == 0 && k == 0 ? 1000 : 500; });
     const optics::TransferFunction tf({{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
                                        {600.f, glm::vec3(1.f), 0.1f, glm::vec3(0.f)},
                                        {900.f, glm::vec3(1.f), 0.1f, glm::vec3(0.f)},
@@ -127,8 +126,8 @@ TEST(HierarchicalVisibility, SlabRaysBruteForceTightlyAndThePyramidWithinItsAppr
         worst = std::max(worst, std::abs(fast - expected));
         spread = std::max(spread, 1.0 - expected);
     }
-    EXPECT_GT(spread, 10 * kPyramidTol);            // the slab matters against the tolerance
-    EXPECT_LT(pyrSamples * 2, bruteSamples);        // and the pyramid saves most samples
+    EXPECT_GT(spread, 10 * kPyramidTol);      // the slab matters against the tolerance
+    EXPECT_LT(pyrSamples * 2, bruteSamples);  // and the pyramid saves most samples
     RecordProperty("worst_pyramid_error", std::to_string(worst));
 }
 
