@@ -319,3 +319,17 @@ TEST(Ritschel, RendersFiniteAndAgreesWithShLocalWhereBothAreAccurate) {
                                 {{"value", 4000}, {"color", {1, 1, 1}}, {"extinction", 0}}}}};
     EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
 }
+
+TEST(Ritschel, TurningAnEnvironmentMapRunsNoVisibilityStage) {
+    VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
+    Session session;
+    json d = ritschelScene();
+    d["lights"] =
+        json::array({{{"type", "environment"}, {"path", env.string()}, {"rotation", {0, 0, 0}}}});
+    const RunResult a = session.run(scene(d));
+    EXPECT_TRUE(allFinite(a.image));
+    d["lights"][0]["rotation"] = {0, 0, 90};
+    const RunResult b = session.run(scene(d));
+    EXPECT_EQ(ranStages(b), (std::set<std::string>{"lights", "camera", "render"}));
+    EXPECT_NE(a.image.pixels, b.image.pixels);
+}
