@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // The CPU ray caster's methods (render/ray_caster.h): emission-absorption, gradient, mip, minip,
-// iso. One module: their params, their stages and their codecs. Params (all optional; unknown keys
+// iso, and the SH visibility methods sh-local, sh-global, ritschel. One module: their params, their stages and their codecs. Params (all optional; unknown keys
 // are an InputError naming the allowed ones):
 //   every method:         step (voxels; default render.step), preintegrated, empty_space_skipping,
 //                         early_termination, jitter (booleans)
@@ -24,9 +24,11 @@
 //                         hierarchical (true; false = 1-voxel steps on level 0, the brute-force
 //                         reference). Stages opacity_pyramid ← block_pyramid + TF and
 //                         hierarchical_visibility ← opacity_pyramid + these params (+ seed).
-// Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
-// directional, point and environment lights (render/sh_shading.h), as do sh-global and ritschel; the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
-// "specular" (an effects list without it turns the highlight off).
+// Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local,
+// sh-global and ritschel with directional, point and environment lights (render/sh_shading.h);
+// the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient
+// simulates "specular" (an effects list without it turns the highlight off); sh-global and
+// ritschel local_shadows and global_shadows, sh-local local_shadows.
 #include <cmath>
 #include <sstream>
 
