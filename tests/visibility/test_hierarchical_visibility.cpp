@@ -4,6 +4,7 @@
 // float within the stated bound, thread-count invariance, bad options.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <cmath>
 #include <numbers>
 
@@ -266,4 +267,24 @@ TEST(HierarchicalVisibility, BadOptionsNameTheirField) {
     o = {};
     o.maxDistanceVoxels = 0.0;
     EXPECT_EQ(fieldOf(o), "max_distance");
+}
+
+TEST(HierarchicalVisibility, CancelsBetweenSlicesAndReportsProgress) {
+    const core::Volume v = test::makeVolume({32, 32, 48}, [](int i, int, int) { return 400 + i; });
+    const auto pyr = opacity(v, test::rampTf(0.1f));
+    HierarchicalVisibilityOptions o;
+    o.subsample = 1;
+    o.threads = 1;  // the caller runs every slice: reports come in order
+    std::atomic<bool> cancel{false};
+    double last = -1.0;
+    const core::Progress progress(
+        [&](const std::string& stage, double fraction) {
+            EXPECT_EQ(stage, "hierarchical visibility");
+            last = fraction;
+            if (fraction > 0.0) cancel = true;  // after the first finished slices
+        },
+        &cancel);
+    EXPECT_THROW(computeHierarchicalVisibility(pyr, o, progress), CancelledError);
+    EXPECT_GT(last, 0.0);
+    EXPECT_LT(last, 1.0);
 }
