@@ -309,6 +309,12 @@ TEST(Ritschel, RendersFiniteAndAgreesWithShLocalWhereBothAreAccurate) {
     // To the boundary (the default) the field darkens: shadows from farther matter.
     d["method"]["params"].erase("max_distance");
     EXPECT_LT(meanRgb(renderScene(scene(d)).image), meanRgb(ritschel.image));
+    // A point light inside the volume, exactly on a 1:1 grid point (voxel 16 of 32: see
+    // ShLocal.OpaqueAndTransparentTfsAndALightOnAGridPointStayFinite), stays finite.
+    const double half = 0.5 * core::makePhantom("torso", {32}).geometry().spacing.x;
+    d["lights"] =
+        json::array({{{"type", "point"}, {"position", {half, half, half}}, {"intensity", 1e4}}});
+    EXPECT_TRUE(allFinite(renderScene(scene(d)).image));
     // Opaque and transparent TFs stay finite.
     d["transfer_function"] = {{"points",
                                {{{"value", -2000}, {"color", {1, 1, 1}}, {"extinction", 50}},
