@@ -4,12 +4,22 @@
 // data-reduction ratios (1:16, 1:32, 1:64), for the CT presets ct-bone and ct-soft-tissue. The block pyramid is built
 // once per volume (reported separately as BM_BlockPyramid). Counters: visibility rays/s and
 // σt samples/s, grid samples and the visibility's MB.
+// BM_VsLocal: Ritschel's hierarchical visibility (opacity pyramid + field, to the volume's
+// boundary) against Kronander's local visibility (LOD + field, r_s 16) on the same volume and TF
+// (ct-bone), 32 rays, 4 coefficients, at equal numbers of visibility points: Ritschel 1:2 / 1:4
+// sub-sampling (one point per 8 / 64 voxels) vs local data reduction 1:8 / 1:64. Medians of 3
+// runs; the end of the run prints the ratio of the medians (Ritschel / local).
 // bench-deps: visibility optics core
 #include <benchmark/benchmark.h>
+
+#include <cstdio>
+#include <map>
+#include <string>
 
 #include "core/phantoms.h"
 #include "optics/presets.h"
 #include "visibility/global_visibility.h"
+#include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
 
 using namespace voxlight;
@@ -101,6 +111,93 @@ void BM_BlockPyramid(benchmark::State& state) {
 }
 BENCHMARK(BM_BlockPyramid)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
 
+/// Voxels per visibility point of each compared pair (arg 1 of BM_VsLocal).
+constexpr int kPairs[] = {8, 64};
+
+/// arg 0: 0 = local (Kronander), 1 = Ritschel; arg 1: voxels per visibility point.
+void BM_VsLocal(benchmark::State& state) {
+    const auto pyramid = torsoPyramid();
+    const optics::TransferFunction tf = optics::makePreset("ct-bone");
+    const bool ritschel = state.range(0) == 1;
+    const int voxelsPerPoint = int(state.range(1));
+    std::uint64_t rays = 0, bytes = 0;
+    for (auto _ : state) {
+        // A TF change: table, then each method's TF-dependent stages.
+        const optics::TfTable table(tf);
+        if (ritschel) {
+            auto op = std::make_shared<const visibility::OpacityPyramid>(
+                visibility::OpacityPyramid::build(*pyramid, tf, table));
+            visibility::HierarchicalVisibilityOptions o;
+            o.coefficients = 4;
+            o.rays = 32;
+            o.subsample = int(std::lround(std::cbrt(double(voxelsPerPoint))));
+            const visibility::HierarchicalVisibility v =
+                visibility::computeHierarchicalVisibility(op, o);
+            rays += v.raysTraced();
+            bytes = v.bytes() + op->bytes();
+            benchmark::DoNotOptimize(v.raysTraced());
+        } else {
+            auto grid = std::make_shared<const visibility::MultiresGrid>(
+                pyramid, visibility::selectLod(
+                             *pyramid, tf, table,
+                             visibility::LodBudget::fromReduction(
+                                 double(voxelsPerPoint), pyramid->geometry().voxelCount())));
+            visibility::LocalVisibilityOptions o;
+            o.coefficients = 4;
+            o.rays = 32;
+            o.radiusVoxels = 16.0;
+            const visibility::LocalVisibility v =
+                visibility::computeLocalVisibility(grid, table, o);
+            rays += v.raysTraced();
+            bytes = v.bytes();
+            benchmark::DoNotOptimize(v.blockData(0));
+        }
+    }
+    state.SetLabel(std::string(ritschel ? "ritschel" : "local") +
+                   " 1:" + std::to_string(voxelsPerPoint));
+    state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
+    state.counters["vis_MB"] = double(bytes) / 1048576.0;
+}
+BENCHMARK(BM_VsLocal)
+    ->ArgsProduct({{0, 1}, {kPairs[0], kPairs[1]}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
+/// The console reporter that also keeps BM_VsLocal's medians, to print their ratios at the end.
+class RatioReporter : public benchmark::ConsoleReporter {
+  public:
+    void ReportRuns(const std::vector<Run>& runs) override {
+        for (const Run& r : runs)
+            if (r.aggregate_name == "median" &&
+                r.run_name.function_name.find("BM_VsLocal") != std::string::npos)
+                median_[r.run_name.args] = r.GetAdjustedRealTime();
+        ConsoleReporter::ReportRuns(runs);
+    }
+    void printRatios() const {
+        for (int v : kPairs) {
+            const auto local = median_.find("0/" + std::to_string(v));
+            const auto rit = median_.find("1/" + std::to_string(v));
+            if (local == median_.end() || rit == median_.end()) continue;
+            std::printf("Ritschel / local visibility at 1:%d: %.0f / %.0f ms = %.3f\n", v,
+                        rit->second, local->second, rit->second / local->second);
+        }
+    }
+
+  private:
+    std::map<std::string, double> median_;
+};
+
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+    benchmark::Initialize(&argc, argv);
+    if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+    RatioReporter reporter;
+    benchmark::RunSpecifiedBenchmarks(&reporter);
+    reporter.printRatios();
+    benchmark::Shutdown();
+    return 0;
+}

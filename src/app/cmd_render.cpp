@@ -5,6 +5,7 @@
 // EXR, stats JSON. A volume file or DICOM folder is a scene on its own (io::volumeScene: the
 // modality's preset, an anterior view fitted to what it shows, a headlight). --explain prints the
 // plan and what each stage would do, and renders nothing.
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -27,6 +28,8 @@ std::string fixed(double v, int decimals) {
     std::snprintf(b, sizeof b, "%.*f", decimals, v);
     return b;
 }
+/// Narrowest stage column of --explain (the names of the ray caster's own stages fit).
+constexpr int kExplainNameWidth = 18;
 
 /// The record of an output stage (written after the pipeline's stages, by this command).
 pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
@@ -87,15 +90,19 @@ Command addRenderCommand(CLI::App& app) {
         if (!cacheDir->empty()) session.cache().setDirectory(*cacheDir);
         if (*explain) {
             const io::Scene s = loadInput(*scene, *sets, *view);
-            std::printf("%-18s %-10s %-8s %-16s %s\n", "stage", "kind", "runs", "key", "reason");
             std::vector<pipeline::StageRecord> plan = session.explain(s);
             plan.push_back(outputRecord("write_image", *out, "-o"));
             plan.push_back(outputRecord("write_exr", *exr, "--exr"));
             plan.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
+            // The stage column fits the longest name (hierarchical_visibility is 23 characters).
+            int width = kExplainNameWidth;
+            for (const auto& r : plan) width = std::max(width, int(r.name.size()));
+            std::printf("%-*s %-10s %-8s %-16s %s\n", width, "stage", "kind", "runs", "key",
+                        "reason");
             for (const auto& r : plan) {
                 std::string inputs;
                 for (const auto& i : r.inputs) inputs += (inputs.empty() ? "" : ", ") + i;
-                std::printf("%-18s %-10s %-8s %-16s %s  [reads: %s]\n", r.name.c_str(),
+                std::printf("%-*s %-10s %-8s %-16s %s  [reads: %s]\n", width, r.name.c_str(),
                             pipeline::toString(r.kind).c_str(), r.ran ? "yes" : "no",
                             r.key.empty() ? "-" : r.key.c_str(), r.reason.c_str(), inputs.c_str());
             }

@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // The CPU ray caster's methods (render/ray_caster.h): emission-absorption, gradient, mip, minip,
-// iso. One module: their params, their stages and their codecs. Params (all optional; unknown keys
+// iso, and the SH visibility methods sh-local, sh-global, ritschel. One module: their params, their stages and their codecs. Params (all optional; unknown keys
 // are an InputError naming the allowed ones):
 //   every method:         step (voxels; default render.step), preintegrated, empty_space_skipping,
 //                         early_termination, jitter (booleans)
@@ -16,14 +16,24 @@
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims). Its local stages have the same keys as sh-local's, so
 //                         switching between the two recomputes nothing once both have run.
+//   ritschel:             hierarchical visibility (Ritschel 2007; visibility/
+//                         hierarchical_visibility.h): rays (32), coefficients (1/4/9/16; 4),
+//                         patterns (M jittered direction sets; 16), subsample (1:s grid, 1…8;
+//                         2), quantize_8bit (false), max_distance (voxels; absent = to the
+//                         volume's boundary: growing steps make the far part cheap),
+//                         hierarchical (true; false = 1-voxel steps on level 0, the brute-force
+//                         reference). Stages opacity_pyramid ← block_pyramid + TF and
+//                         hierarchical_visibility ← opacity_pyramid + these params (+ seed).
 //   pathtrace:            spp (64; the most when a target error is set), seconds, target_error
 //                         (relative NRMS the samples predict; 0 = off), reference (false; true:
 //                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
 //                         becomes the cached `reference` stage), max_bounces (1, or 16 with the
 //                         multiple_scattering effect), phase_g, majorant_grid, antialias
-// Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
-// directional, point and environment lights (render/sh_shading.h); the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
-// "specular" (an effects list without it turns the highlight off).
+// Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local,
+// sh-global and ritschel with directional, point and environment lights (render/sh_shading.h);
+// the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient
+// simulates "specular" (an effects list without it turns the highlight off); sh-global and
+// ritschel local_shadows and global_shadows, sh-local local_shadows.
 #include <cmath>
 #include <sstream>
 
@@ -40,6 +50,7 @@
 #include "render/ray_caster.h"
 #include "render/sh_shading.h"
 #include "visibility/global_visibility.h"
+#include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
 
 namespace voxlight::pipeline {
@@ -214,7 +225,17 @@ const Codec& irradianceCodec() {
 
 // ---- Method params -------------------------------------------------------------------------
 
-enum class Kind { EmissionAbsorption, Gradient, Mip, MinIp, Iso, ShLocal, ShGlobal, PathTrace };
+enum class Kind {
+    EmissionAbsorption,
+    Gradient,
+    Mip,
+    MinIp,
+    Iso,
+    ShLocal,
+    ShGlobal,
+    Ritschel,
+    PathTrace
+};
 
 render::Mode modeOf(Kind k) {
     switch (k) {
@@ -231,12 +252,16 @@ render::Mode modeOf(Kind k) {
             return render::Mode::Isosurface;
         case Kind::ShLocal:  // DVR traversal and skip rule; shading by render/sh_shading.h
         case Kind::ShGlobal:
+        case Kind::Ritschel:
             return render::Mode::EmissionAbsorption;
     }
     throw InternalError("unknown ray-caster method");
 }
 
-bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
+/// Methods shaded by an SH visibility field (render/sh_shading.h).
+bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal || k == Kind::Ritschel; }
+/// The two on Kronander's multiresolution grid.
+bool isKronander(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
 bool isLit(Kind k) {
     return k == Kind::Gradient || k == Kind::Iso || isSh(k) || k == Kind::PathTrace;
 }
@@ -280,6 +305,28 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
         s.global.threads = scene.render.threads;
     }
     return s;
+}
+
+/// ritschel's own parameters (see the header comment).
+visibility::HierarchicalVisibilityOptions parseRitschelParams(const io::Scene& scene,
+                                                              ParamReader& p) {
+    visibility::HierarchicalVisibilityOptions o;
+    o.coefficients = p.integer("coefficients", 4, 1, 16);
+    const int c = o.coefficients;
+    if (c != 1 && c != 4 && c != 9 && c != 16)
+        p.fail("coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(c),
+               "1 is ambient occlusion; 4, 9, 16 are SH bands 1, 2, 3");
+    o.rays = p.integer("rays", std::max(32, visibility::kMinRaysPerCoefficient * c),
+                       visibility::kMinRaysPerCoefficient * c, 4096);
+    o.patterns = p.integer("patterns", o.patterns, 1, visibility::kMaxPatterns);
+    o.subsample = p.integer("subsample", o.subsample, 1, visibility::kMaxSubsample);
+    o.quantize8 = p.boolean("quantize_8bit", false);
+    o.hierarchical = p.boolean("hierarchical", true);
+    // Absent: to the volume's boundary (hierarchical_visibility.h says why).
+    if (p.has("max_distance")) o.maxDistanceVoxels = p.number("max_distance", 0.0, 0.5, 1e6);
+    o.seed = scene.render.seed;
+    o.threads = scene.render.threads;
+    return o;
 }
 
 /// Options of the caster from the scene and the method params (read strictly).
@@ -574,7 +621,7 @@ Artifact publishTraced(Run& run, const TracedImage& t) {
 
 /// block_pyramid ← volume (once per volume); multires_grid ← pyramid + TF + LOD budget;
 /// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
-void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
+Stage blockPyramidStage() {
     Stage pyramid{"block_pyramid", StageKind::Precompute, {"load_volume"}};
     pyramid.key = [](const Run& run) {
         return KeyBuilder(run, "block_pyramid").stage("load_volume").value();
@@ -591,7 +638,11 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
         return std::to_string(p.blockCount()) + " blocks of 16^3 at 5 levels, " +
                std::to_string(p.bytes() >> 20) + " MB";
     };
-    plan.stages.push_back(pyramid);
+    return pyramid;
+}
+
+void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
+    plan.stages.push_back(blockPyramidStage());
 
     const json budgetKey = params.budgetKey();
     Stage grid{
@@ -696,6 +747,87 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
     plan.stages.push_back(gv);
 }
 
+/// block_pyramid ← volume (shared with sh-local/sh-global); opacity_pyramid ← pyramid + TF;
+/// hierarchical_visibility ← opacity pyramid + rays/coefficients/patterns/subsample/quantize_8bit/
+/// max_distance/hierarchical + seed. A light or camera change reruns none.
+void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptions& vo) {
+    plan.stages.push_back(blockPyramidStage());
+
+    Stage opacity{"opacity_pyramid", StageKind::Precompute, {"block_pyramid", "transfer_function"}};
+    opacity.key = [](const Run& run) {
+        return KeyBuilder(run, "opacity_pyramid")
+            .stage("block_pyramid")
+            .stage("transfer_function")
+            .value();
+    };
+    opacity.compute = [](Run& run) {
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        core::Stopwatch sw;
+        auto o = std::make_shared<const visibility::OpacityPyramid>(
+            visibility::OpacityPyramid::build(*run.get<visibility::BlockPyramid>("block_pyramid"),
+                                              tfa->tf, *tfa->table, run.progress()));
+        run.details()["opacity_pyramid"] = {{"levels", o->levels()},
+                                            {"seconds", sw.seconds()},
+                                            {"memory_mb", double(o->bytes()) / 1048576.0}};
+        const std::size_t bytes = o->bytes();
+        return Artifact::of<visibility::OpacityPyramid>(std::move(o), bytes);
+    };
+    opacity.notOnDisk = "recomputed per transfer function in one pass over the voxels";
+    opacity.describe = [](const Run&, const Artifact& a) {
+        const auto& o = *a.as<visibility::OpacityPyramid>();
+        return std::to_string(o.levels()) + " levels of product-minified extinction, " +
+               std::to_string(o.bytes() >> 20) + " MB";
+    };
+    plan.stages.push_back(opacity);
+
+    const json visKey = {
+        {"rays", vo.rays},
+        {"coefficients", vo.coefficients},
+        {"patterns", vo.patterns},
+        {"subsample", vo.subsample},
+        {"quantize_8bit", vo.quantize8},
+        {"hierarchical", vo.hierarchical},
+        {"max_distance",
+         std::isfinite(vo.maxDistanceVoxels) ? json(vo.maxDistanceVoxels) : json("volume")},
+        {"seed", vo.seed}};
+    Stage vis{"hierarchical_visibility", StageKind::Precompute, {"opacity_pyramid", "method"}};
+    vis.key = [visKey](const Run& run) {
+        return KeyBuilder(run, "hierarchical_visibility")
+            .stage("opacity_pyramid")
+            .json(visKey)
+            .value();
+    };
+    vis.compute = [vo](Run& run) {
+        core::Stopwatch sw;
+        auto v = std::make_shared<const visibility::HierarchicalVisibility>(
+            visibility::computeHierarchicalVisibility(
+                run.get<visibility::OpacityPyramid>("opacity_pyramid"), vo, run.progress()));
+        const double seconds = sw.seconds();
+        run.details()["hierarchical_visibility"] = {
+            {"rays_traced", v->raysTraced()},
+            {"samples", v->samplesTaken()},
+            {"points_skipped", v->pointsSkipped()},
+            {"grid", {v->resolution().x, v->resolution().y, v->resolution().z}},
+            {"seconds", seconds},
+            {"rays_per_second", seconds > 0 ? double(v->raysTraced()) / seconds : 0.0},
+            {"memory_mb", double(v->bytes()) / 1048576.0},
+            {"quantize_8bit", v->quantized()}};
+        const std::size_t bytes = v->bytes();
+        return Artifact::of<visibility::HierarchicalVisibility>(std::move(v), bytes);
+    };
+    vis.notOnDisk = "recomputed per transfer function; reading it back saves little";
+    vis.describe = [](const Run&, const Artifact& a) {
+        const auto& v = *a.as<visibility::HierarchicalVisibility>();
+        std::ostringstream os;
+        os << v.rays() << " rays x " << v.patterns() << " patterns, " << v.coefficients()
+           << " SH coefficients" << (v.quantized() ? " (8 bit)" : "") << ", 1:" << v.subsample()
+           << " grid " << v.resolution().x << "x" << v.resolution().y << "x" << v.resolution().z
+           << ", " << (v.bytes() >> 20) << " MB";
+        return os.str();
+    };
+    plan.stages.push_back(vis);
+}
+
 // ---- The plan ----------------------------------------------------------------------------------
 
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
@@ -704,7 +836,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     std::optional<pathtrace::Options> traced;
     bool reference = false;
     if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader, reference);
-    const ShParams shParams = isSh(kind) ? parseShParams(kind, scene, reader) : ShParams{};
+    const ShParams shParams = isKronander(kind) ? parseShParams(kind, scene, reader) : ShParams{};
+    const visibility::HierarchicalVisibilityOptions ritschelParams =
+        kind == Kind::Ritschel ? parseRitschelParams(scene, reader)
+                               : visibility::HierarchicalVisibilityOptions{};
     if (isSh(kind))
         for (std::size_t i = 0; i < scene.lights.size(); ++i)
             if (scene.lights[i].type == "area")
@@ -887,7 +1022,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(grad);
 
-    if (isSh(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal);
+    if (isKronander(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal);
+    if (kind == Kind::Ritschel) addRitschelStages(plan, ritschelParams);
 
     Stage lightsStage{"lights", StageKind::Input, {"lights"}};
     if (!isLit(kind)) lightsStage.skip = "not needed: method '" + scene.method.name + "' is unlit";
@@ -914,7 +1050,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     else if (kind == Kind::PathTrace)
         sh.skip = "not needed: the path tracer samples environment maps directly";
     else if (isSh(kind))
-        sh.skip = "not needed: sh-local projects the lights' radiance SH itself, per frame";
+        sh.skip = "not needed: " + scene.method.name +
+                  " projects the lights' radiance SH itself, per frame";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
     // Keyed on the environment lights alone: moving a directional light re-projects no map.
@@ -1020,6 +1157,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                  "light_sh", "method", "render", "clip_planes", "crop_box", "image"}};
     if (kind == Kind::ShLocal) frame.inputs.push_back("local_visibility");
     if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
+    if (kind == Kind::Ritschel) frame.inputs.push_back("hierarchical_visibility");
     frame.key = [optionsKey, kind](const Run& run) {
         KeyBuilder k(run, "render");
         k.stage("load_volume")
@@ -1031,6 +1169,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .stage("light_sh");
         if (kind == Kind::ShLocal) k.stage("local_visibility");
         if (kind == Kind::ShGlobal) k.stage("global_visibility");
+        if (kind == Kind::Ritschel) k.stage("hierarchical_visibility");
         return k.json(optionsKey).value();
     };
     if (kind == Kind::PathTrace) {
@@ -1100,9 +1239,13 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                         ? render::makeShVisibilityModel(
                               caster, *camera,
                               run.get<visibility::LocalVisibility>("local_visibility"))
-                        : render::makeShVisibilityModel(
+                    : kind == Kind::ShGlobal
+                        ? render::makeShVisibilityModel(
                               caster, *camera,
-                              run.get<visibility::GlobalVisibility>("global_visibility"));
+                              run.get<visibility::GlobalVisibility>("global_visibility"))
+                        : render::makeShVisibilityModel(caster, *camera,
+                                                        run.get<visibility::HierarchicalVisibility>(
+                                                            "hierarchical_visibility"));
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else {
@@ -1225,6 +1368,14 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution"},
+    {"local_shadows", "global_shadows"}));
+const RegisterMethod kRitschel(rayCasterMethod(
+    Kind::Ritschel, "ritschel",
+    "hierarchical SH visibility (Ritschel 2007): rays with growing steps through a "
+    "product-minified extinction pyramid, to the volume's boundary, on a 1:s grid; shadows "
+    "from matter anywhere toward the light",
+    {"rays", "coefficients", "patterns", "subsample", "quantize_8bit", "max_distance",
+     "hierarchical"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

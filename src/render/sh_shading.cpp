@@ -96,4 +96,10 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
     return makeModel("sh-global", caster, camera, std::move(field));
 }
 
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::HierarchicalVisibility> field) {
+    return makeModel("ritschel", caster, camera, std::move(field));
+}
+
 }  // namespace voxlight::render

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // SH visibility shading (Kronander et al. 2012 eq. 7, 10, 12): at a sample x with visibility
-// coefficients V_i(x) (local or global: visibility/local_visibility.h, global_visibility.h) and incident radiance coefficients L_i(x) of
+// coefficients V_i(x) (local, global or hierarchical: visibility/local_visibility.h,
+// global_visibility.h, hierarchical_visibility.h) and incident radiance coefficients L_i(x) of
 // all lights added together (eq. 12),
 //   diffuse = 1/(4π) · Σ_i L_i(x) V_i(x)   (isotropic phase; the marcher multiplies by α and the
 //                                            TF albedo and adds the TF emission: ARCHITECTURE §1)
@@ -22,6 +23,7 @@
 
 #include "render/ray_caster.h"
 #include "visibility/global_visibility.h"
+#include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
 
 namespace voxlight::render {
@@ -45,8 +47,8 @@ class ShLights {
     std::vector<Point> points_;
 };
 
-/// The shader of a visibility field: LocalVisibility (sh-local) or GlobalVisibility (sh-global),
-/// anything with coefficients() and sample(voxel index, out).
+/// The shader of a visibility field: LocalVisibility (sh-local), GlobalVisibility (sh-global) or
+/// HierarchicalVisibility (ritschel), anything with coefficients() and sample(voxel index, out).
 template <class Field>
 class ShVisibilityShader {
   public:
@@ -89,5 +91,8 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::GlobalVisibility> field);
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::HierarchicalVisibility> field);
 
 }  // namespace voxlight::render

@@ -149,8 +149,13 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
 /// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
 /// of ≤ s/2 into a neighbour).
 bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
+    return visibilityNeeded(grid.pyramid().cells(), grid.selection().cellVisible, x, s);
+}
+
+bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& cellVisible,
+                      const glm::vec3& x, float s) {
+    if (cellVisible.empty()) return true;
     constexpr int kCell = BlockPyramid::kCellVoxels;
-    const glm::ivec3 cells = grid.pyramid().cells();
     const float r = 2.f * s + 1.f;
     const glm::ivec3 lo =
         glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
@@ -159,8 +164,8 @@ bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
     for (int z = lo.z; z <= hi.z; ++z)
         for (int y = lo.y; y <= hi.y; ++y)
             for (int c = lo.x; c <= hi.x; ++c)
-                if (grid.cellVisible(std::size_t(c) +
-                                     std::size_t(cells.x) * (y + std::size_t(cells.y) * z)))
+                if (cellVisible[std::size_t(c) +
+                                std::size_t(cells.x) * (y + std::size_t(cells.y) * z)])
                     return true;
     return false;
 }
@@ -171,9 +176,14 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients) {
     o.coefficients = coefficients;
     checkOptions(o);
     sh::SphereSamples s = sh::fibonacciSamples(rays);
+    correctVisibilityWeights(s, coefficients);
+    return s;
+}
+
+void correctVisibilityWeights(sh::SphereSamples& s, int coefficients) {
     // Minimum-norm change of the weights so that Σ_k w_k Y_i(ω_k) = √(4π) δ_i0 for i < C:
     // w = w0 + Aᵀ (A Aᵀ)⁻¹ (b − A w0), A_ik = Y_i(ω_k).
-    const int n = rays, c = coefficients;
+    const int n = int(s.size()), c = coefficients;
     Eigen::MatrixXd A(c, n);
     std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
     for (int k = 0; k < n; ++k) {
@@ -193,7 +203,6 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients) {
                                 std::to_string(w(k)) + ")");
         s.weights[std::size_t(k)] = w(k);
     }
-    return s;
 }
 
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,

@@ -67,6 +67,11 @@ struct LocalVisibilityOptions {
 /// coefficient count is not allowed.
 sh::SphereSamples visibilityDirections(int rays, int coefficients);
 
+/// Corrects the weights of any direction set in place as visibilityDirections does (minimum-norm
+/// change so Σ_k w_k Y_i(ω_k) = √(4π) δ_i0 for i < coefficients); InternalError if a weight ends
+/// up ≤ 0.
+void correctVisibilityWeights(sh::SphereSamples& samples, int coefficients);
+
 /// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
 /// x fastest, then coefficient).
 class LocalVisibility {
@@ -112,6 +117,9 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> grid,
 /// sample: some visible cell (LodSelection::cellVisible) within 2·s + 1 voxels (see the header
 /// comment).
 bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s);
+/// The same test on a cell-visibility mask over BlockPyramid's `cells` (empty mask: all visible).
+bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& cellVisible,
+                      const glm::vec3& x, float s);
 
 /// Transmittance of one ray from voxel index `origin` along the *world* unit direction `dir` over
 /// `radiusVoxels`, integrated as computeLocalVisibility does (exposed for tests). `samples` counts

@@ -235,16 +235,23 @@ LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFuncti
     }
     for (std::size_t b = 0; b < count; ++b)
         ++s.blocksPerLevel[s.level[b] == kNone ? kLevels : std::size_t(s.level[b])];
+    s.cellVisible = visibleCells(pyramid, tf, table);
+    return s;
+}
+
+std::vector<std::uint8_t> visibleCells(const BlockPyramid& pyramid,
+                                       const optics::TransferFunction& tf,
+                                       const optics::TfTable& table) {
     const float leak = table.cellWidth();
-    s.cellVisible.resize(pyramid.cellCount());
-    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, s.cellVisible.size(), 4096),
+    std::vector<std::uint8_t> visible(pyramid.cellCount());
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, visible.size(), 4096),
                       [&](const auto& range) {
                           for (std::size_t c = range.begin(); c != range.end(); ++c) {
                               const auto& r = pyramid.cellRange(c);
-                              s.cellVisible[c] = !tf.transparentOver(r[0] - leak, r[1] + leak);
+                              visible[c] = !tf.transparentOver(r[0] - leak, r[1] + leak);
                           }
                       });
-    return s;
+    return visible;
 }
 
 std::ostream& operator<<(std::ostream& os, const LodSelection& s) {

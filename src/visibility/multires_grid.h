@@ -168,6 +168,12 @@ std::vector<float> blockSignificance(const BlockPyramid& pyramid,
                                      const optics::TransferFunction& tf,
                                      const optics::TfTable& table);
 
+/// Per BlockPyramid cell: 1 where the TF is not transparent over the cell's value range, its
+/// table's one-cell leak included (LodSelection::cellVisible).
+std::vector<std::uint8_t> visibleCells(const BlockPyramid& pyramid,
+                                       const optics::TransferFunction& tf,
+                                       const optics::TfTable& table);
+
 /// The priority-queue selection under `budget` (see header comment).
 LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFunction& tf,
                        const optics::TfTable& table, const LodBudget& budget);

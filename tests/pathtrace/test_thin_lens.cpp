@@ -58,7 +58,8 @@ TEST(ThinLens, LensRaysMeetThePinholeRayInThePlaneInFocus) {
             // Meets the pinhole ray where that one crosses the plane in focus.
             const double tp = focus / glm::dot(pin.direction, c.forward());
             const glm::dvec3 p = pin.origin + tp * pin.direction;
-            const double tr = glm::dot(p - r.origin, c.forward()) / glm::dot(r.direction, c.forward());
+            const double tr =
+                glm::dot(p - r.origin, c.forward()) / glm::dot(r.direction, c.forward());
             EXPECT_LT(glm::length(r.origin + tr * r.direction - p), kFocusTolMm);
             EXPECT_NEAR(glm::length(r.direction), 1.0, 1e-12);
         }
