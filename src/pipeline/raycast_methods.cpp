@@ -312,8 +312,11 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     o.threads = scene.render.threads;
     o.terminationTransmittance = float(scene.render.termination);
     o.background = glm::vec3(scene.image.background);
-    for (const auto& c : scene.clipPlanes) o.clipPlanes.push_back({c.point, c.normal});
-    if (scene.cropBox) o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max};
+    for (const auto& c : scene.clipPlanes)
+        o.clipPlanes.push_back({c.point, c.normal, c.shadowsFromRemoved});
+    if (scene.cropBox)
+        o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max,
+                                    scene.cropBox->shadowsFromRemoved};
     return o;
 }
 
