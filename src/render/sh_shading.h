@@ -20,6 +20,7 @@
 #include <span>
 #include <vector>
 
+#include "core/half_space.h"
 #include "render/ray_caster.h"
 #include "visibility/global_visibility.h"
 #include "visibility/local_visibility.h"
@@ -81,6 +82,41 @@ class ShVisibilityShader {
     glm::vec3 origin_{0.f};
 };
 
+/// Global visibility with local visibility near cut faces (Kronander et al. 2012 §6, Fig. 15:
+/// "local visibility is used for clip-plane renderings"). Within `bandMm` of a clip plane or crop
+/// face (on the kept side) the coefficients blend linearly from the local field (at the face) to
+/// the global one (at bandMm and beyond): V = w·V^G + (1 − w)·V^L, w = clamp(d / bandMm, 0, 1),
+/// d = the distance to the nearest face. Why: the global grid is coarse (one point per
+/// spacingVoxels()), so at a cut face its trilinear interpolation mixes points in front of and
+/// behind the face, while the face exposes detail at the block grid's resolution, which the local
+/// field has. The two fields must describe the same light (both clip-aware, or both unclipped).
+class ShCutFaceShader {
+  public:
+    static constexpr bool kNeedsNormal = false;
+    ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibility> global,
+                    std::shared_ptr<const visibility::LocalVisibility> local,
+                    std::span<const core::HalfSpace> faces, float bandMm,
+                    const core::Geometry& geometry,
+                    std::span<const std::shared_ptr<const lights::Light>> lights);
+    Scatter scatter(const ShadeInput& in) const;
+    const ShCutFaceShader& forRay(const glm::vec3&) const { return *this; }
+
+  private:
+    struct Face {
+        glm::vec3 point, normal;
+    };
+    std::shared_ptr<const visibility::GlobalVisibility> global_;
+    std::shared_ptr<const visibility::LocalVisibility> local_;
+    std::vector<Face> faces_;
+    float invBand_ = 0.f;
+    ShLights lights_;
+    glm::mat3 worldToIndex_{1.f};
+    glm::vec3 origin_{0.f};
+};
+
+/// The cut faces (kept half-spaces) of the caster's clip planes and crop box.
+std::vector<core::HalfSpace> cutFaces(const RenderOptions& options);
+
 /// The DVR model with SH visibility shading for `caster` (its options' lights; none → one
 /// headlight like makeBuiltinModel's).
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
@@ -89,5 +125,11 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::GlobalVisibility> field);
+/// sh-global with clip planes: ShCutFaceShader within `bandMm` of the caster's cut faces (the
+/// plain global shader when it has none).
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::GlobalVisibility> global,
+    std::shared_ptr<const visibility::LocalVisibility> local, float bandMm);
 
 }  // namespace voxlight::render
