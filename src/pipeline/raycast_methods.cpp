@@ -23,8 +23,8 @@
 // clip_local_visibility (visibility/local_visibility.h: only the points within r_s of such a face
 // are traced again), and sh-global's global stage then integrates that field. Both keys cover the
 // removing planes only, so a section-view plane (true), or moving one, reruns no visibility stage.
-// sh-global shades from local visibility near every cut face (render/sh_shading.h
-// ShCutFaceShader, within one global grid spacing).
+// sh-global shades from local visibility near the faces that remove matter for the light
+// (render/sh_shading.h ShCutFaceShader, within one global grid spacing).
 // Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local with
 // directional, point and environment lights (render/sh_shading.h); the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient simulates
 // "specular" (an effects list without it turns the highlight off).
@@ -1077,7 +1077,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 if (kind == Kind::ShLocal) {
                     model = render::makeShVisibilityModel(caster, *camera, local);
                 } else {
-                    // Local visibility within one global grid spacing of a cut face.
+                    // Local visibility within one global grid spacing of a removing face.
                     const auto global = run.get<visibility::GlobalVisibility>("global_visibility");
                     const float band = global->spacingVoxels() *
                                        float(core::minComponent(loaded->volume.geometry().spacing));

@@ -98,10 +98,11 @@ Scatter ShCutFaceShader::scatter(const ShadeInput& in) const {
     return {lights_.shade(x, v), glm::vec3(0.f)};
 }
 
-std::vector<core::HalfSpace> cutFaces(const RenderOptions& options) {
+std::vector<core::HalfSpace> lightCutFaces(const RenderOptions& options) {
     std::vector<core::HalfSpace> faces;
-    for (const ClipPlane& c : options.clipPlanes) faces.push_back({c.point, c.normal});
-    if (options.cropBox)
+    for (const ClipPlane& c : options.clipPlanes)
+        if (!c.shadowsFromRemoved) faces.push_back({c.point, c.normal});
+    if (options.cropBox && !options.cropBox->shadowsFromRemoved)
         for (const core::HalfSpace& f :
              core::boxHalfSpaces(options.cropBox->min, options.cropBox->max))
             faces.push_back(f);
@@ -152,7 +153,7 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::GlobalVisibility> global,
     std::shared_ptr<const visibility::LocalVisibility> local, float bandMm) {
-    const std::vector<core::HalfSpace> faces = cutFaces(caster.options());
+    const std::vector<core::HalfSpace> faces = lightCutFaces(caster.options());
     if (faces.empty() || !(bandMm > 0.f))
         return makeShVisibilityModel(caster, camera, std::move(global));
     return std::make_unique<detail::DvrModel<ShCutFaceShader>>(
