@@ -428,11 +428,12 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                                     outside = outside || dist0[q] <= -radius;
                                 }
                                 if (inside) continue;  // rays stay in the kept region
+                                // Never read by a shaded sample: empty in the unclipped field too.
+                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l))))
+                                    continue;
                                 anyChanged = true;
-                                if (outside ||
-                                    !visibilityNeeded(grid, origin, float(levelSpacing(l)))) {
-                                    // Rays never reach the kept region (or the point is never
-                                    // read, as in the unclipped field): empty space's value.
+                                if (outside) {
+                                    // Rays never reach the kept region: empty space's value.
                                     setEmpty(dst, C);
                                     ++cleared;
                                     continue;
