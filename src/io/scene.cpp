@@ -128,6 +128,11 @@ class Field {
         if (!j_.is_string()) fail("must be a string, got " + typeName(j_) + " " + shortDump(j_));
         return j_.get<std::string>();
     }
+    bool boolean(const std::string& fix = "write true or false, without quotes") const {
+        if (!j_.is_boolean())
+            fail("must be true or false, got " + typeName(j_) + " " + shortDump(j_), fix);
+        return j_.get<bool>();
+    }
     std::string oneOf(const std::vector<std::string>& allowed) const {
         const std::string s = string();
         if (std::find(allowed.begin(), allowed.end(), s) == allowed.end())
@@ -159,6 +164,9 @@ class Field {
              double hi = HUGE_VAL) const {
         if (has(k)) out = child(k).vec3(lo, hi);
     }
+    void get(const std::string& k, bool& out, const std::string& fix) const {
+        if (has(k)) out = child(k).boolean(fix);
+    }
     void getDirection(const std::string& k, glm::dvec3& out) const {
         if (has(k)) out = child(k).unitVec3();
     }
@@ -174,6 +182,11 @@ class Field {
 };
 
 constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
+
+/// What an invalid shadows_from_removed should become.
+constexpr const char* kShadowsFromRemovedFix =
+    "write true (section view: removed matter still casts shadows) or false (removed matter is "
+    "gone for the light too), without quotes";
 
 /// Containers (arrays/objects) nested deeper than this are refused. nlohmann-json copies, compares
 /// and dumps a document recursively, one stack frame per level, so ~100k levels overflow the
@@ -510,23 +523,25 @@ Scene parseValidDepth(const json& doc, const std::string& source, const fs::path
     }
     if (root.has("clip_planes")) {
         const Field cs = root.child("clip_planes");
-        if (!cs.isArray()) cs.fail("must be an array of {point, normal}");
+        if (!cs.isArray()) cs.fail("must be an array of {point, normal, shadows_from_removed}");
         for (std::size_t i = 0; i < cs.size(); ++i) {
             const Field c = cs.at(i);
-            c.allowOnly({"point", "normal"});
+            c.allowOnly({"point", "normal", "shadows_from_removed"});
             ClipPlaneDesc p;
             c.get("point", p.point, -kMaxCoord, kMaxCoord);
             if (!c.has("normal")) c.fail("needs a 'normal'");
             p.normal = c.child("normal").unitVec3();
+            c.get("shadows_from_removed", p.shadowsFromRemoved, kShadowsFromRemovedFix);
             s.clipPlanes.push_back(p);
         }
     }
     if (root.has("crop_box")) {
         const Field c = root.child("crop_box");
-        c.allowOnly({"min", "max"});
+        c.allowOnly({"min", "max", "shadows_from_removed"});
         if (!c.has("min") || !c.has("max")) c.fail("needs 'min' and 'max' corners in mm");
         CropBoxDesc b{c.child("min").vec3(-kMaxCoord, kMaxCoord),
                       c.child("max").vec3(-kMaxCoord, kMaxCoord)};
+        c.get("shadows_from_removed", b.shadowsFromRemoved, kShadowsFromRemovedFix);
         for (int a = 0; a < 3; ++a)
             if (!(b.min[a] < b.max[a])) c.child("min").fail("must be below 'max' on every axis");
         s.cropBox = b;
@@ -716,8 +731,13 @@ json sceneDocument(const Scene& s) {
     }
     d["clip_planes"] = json::array();
     for (const auto& p : s.clipPlanes)
-        d["clip_planes"].push_back({{"point", vec(p.point)}, {"normal", vec(p.normal)}});
-    if (s.cropBox) d["crop_box"] = {{"min", vec(s.cropBox->min)}, {"max", vec(s.cropBox->max)}};
+        d["clip_planes"].push_back({{"point", vec(p.point)},
+                                    {"normal", vec(p.normal)},
+                                    {"shadows_from_removed", p.shadowsFromRemoved}});
+    if (s.cropBox)
+        d["crop_box"] = {{"min", vec(s.cropBox->min)},
+                         {"max", vec(s.cropBox->max)},
+                         {"shadows_from_removed", s.cropBox->shadowsFromRemoved}};
     d["method"] = {{"name", s.method.name}, {"params", s.method.params}};
     d["image"] = {{"width", s.image.width},
                   {"height", s.image.height},

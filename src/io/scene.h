@@ -34,9 +34,15 @@
 //              {"type": "environment", "path": "sky.hdr", "intensity": 1,
 //               "rotation": [x,y,z] deg (about the world x, then y, then z axis; the map's
 //               frame is lights/environment_light.h's), "layout": "equirect"|"probe"}],
-//   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z]}]  (keeps the side the normal points to,
-//                                                            as VTK),
-//   "crop_box": {"min": [x,y,z], "max": [x,y,z]}            (world mm),
+//   "clip_planes": [{"point": [x,y,z], "normal": [x,y,z],    (keeps the side the normal points to,
+//                    "shadows_from_removed": false}],        as VTK),
+//   "crop_box": {"min": [x,y,z], "max": [x,y,z],            (world mm),
+//                "shadows_from_removed": false},
+//             shadows_from_removed (per plane, and once for the whole crop box; default false):
+//             camera rays never see removed matter, in every method. false: removed matter is
+//             gone for the light too (no shadow, no scattering; the SH methods run a clip-aware
+//             visibility update, pipeline/raycast_methods.cpp). true: a section view — removed
+//             matter still casts shadows (it occludes light but never scatters or emits).
 //   "method": "gradient" | {"name": "gradient", "params": {...}},
 //   "image": {"width": 512, "height": 512, "background": [r,g,b], "exposure": 0.0 (stops),
 //             "display": "clinical"|"srgb"|"filmic" (PNG display transform, render/tonemap.h;
@@ -126,10 +132,12 @@ struct LightDesc {
 struct ClipPlaneDesc {
     glm::dvec3 point{0.0};
     glm::dvec3 normal{0.0, 0.0, 1.0};  ///< unit; the kept half-space is dot(x − point, normal) ≥ 0
+    bool shadowsFromRemoved = false;  ///< removed matter still occludes the light (section view)
 };
 
 struct CropBoxDesc {
     glm::dvec3 min{0.0}, max{0.0};
+    bool shadowsFromRemoved = false;  ///< as ClipPlaneDesc, for everything outside the box
 };
 
 struct MethodDesc {

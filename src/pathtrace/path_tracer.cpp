@@ -81,7 +81,8 @@ struct PathTracer::Impl {
     glm::dmat3 toIndex;  ///< world direction → index units (Dᵀ / spacing)
     glm::dvec3 origin;
     glm::dvec3 boxLo, boxHi;  ///< volume box in index space (voxel centres; ±0.5 on a 1-voxel axis)
-    std::vector<HalfSpace> keep;
+    std::vector<HalfSpace> keep;       ///< every plane and box face: where paths collide
+    std::vector<HalfSpace> lightKeep;  ///< those with shadowsFromRemoved false: what occludes
     float globalMajorant = 0.f;
     bool majorantGrid = true;
     int cellSize = 1;
@@ -199,6 +200,15 @@ struct PathTracer::Impl {
     }
 
     bool keptInterval(const Ray& ray, double& t0, double& t1) const {
+        return cut(keep, ray, t0, t1);
+    }
+    bool lightInterval(const Ray& ray, double& t0, double& t1) const {
+        return cut(lightKeep, ray, t0, t1);
+    }
+
+    /// Narrows [t0, t1] to the volume box and the half-spaces `halfSpaces`.
+    bool cut(const std::vector<HalfSpace>& halfSpaces, const Ray& ray, double& t0,
+             double& t1) const {
         const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
         for (int a = 0; a < 3; ++a) {
             if (std::abs(d[a]) < 1e-15) {
@@ -210,7 +220,7 @@ struct PathTracer::Impl {
             t0 = std::max(t0, ta);
             t1 = std::min(t1, tb);
         }
-        for (const HalfSpace& h : keep) {
+        for (const HalfSpace& h : halfSpaces) {
             const double dn = glm::dot(ray.direction, h.normal);
             const double s = glm::dot(ray.origin - h.point, h.normal);  // ≥ 0 kept
             if (std::abs(dn) < 1e-15) {
@@ -253,13 +263,21 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
         impl->boxLo[a] = n > 1 ? 0.0 : -0.5;
         impl->boxHi[a] = n > 1 ? double(n - 1) : 0.5;
     }
-    for (const auto& p : options_.clipPlanes) impl->keep.push_back({p.point, p.normal});
+    for (const auto& p : options_.clipPlanes) {
+        impl->keep.push_back({p.point, p.normal});
+        if (!p.shadowsFromRemoved) impl->lightKeep.push_back({p.point, p.normal});
+    }
     if (options_.cropBox)
         for (int a = 0; a < 3; ++a) {
             glm::dvec3 n(0.0);
             n[a] = 1.0;
-            impl->keep.push_back({options_.cropBox->min, n});
-            impl->keep.push_back({options_.cropBox->max, -n});
+            const HalfSpace lo{options_.cropBox->min, n}, hi{options_.cropBox->max, -n};
+            impl->keep.push_back(lo);
+            impl->keep.push_back(hi);
+            if (!options_.cropBox->shadowsFromRemoved) {
+                impl->lightKeep.push_back(lo);
+                impl->lightKeep.push_back(hi);
+            }
         }
     impl->cellSize = impl->cells->cellSize();
     impl->counts = impl->cells->counts();
@@ -273,6 +291,10 @@ bool PathTracer::keptInterval(const Ray& ray, double& t0, double& t1) const {
     return impl_->keptInterval(ray, t0, t1);
 }
 
+bool PathTracer::lightInterval(const Ray& ray, double& t0, double& t1) const {
+    return impl_->lightInterval(ray, t0, t1);
+}
+
 std::optional<double> PathTracer::freeFlight(const Ray& ray, double t0, double t1,
                                              core::CounterRng& rng) const {
     Counters n;
@@ -282,7 +304,7 @@ std::optional<double> PathTracer::freeFlight(const Ray& ray, double t0, double t
 
 double PathTracer::transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const {
     double t0 = 0.0, t1 = maxT;
-    if (!impl_->keptInterval(ray, t0, t1)) return 1.0;
+    if (!impl_->lightInterval(ray, t0, t1)) return 1.0;
     Counters n;
     return impl_->volume->visit(
         [&](const auto& v) { return impl_->ratioTracking(v, ray, t0, t1, rng, n); });
@@ -356,20 +378,33 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         double covered = 0.0, phasePdf = 0.0;
         for (int bounce = 0;; ++bounce) {
             double t0 = 0.0, t1 = INFINITY;
-            const std::optional<double> hit = im.keptInterval(ray, t0, t1)
-                                                  ? im.freeFlight(view, ray, t0, t1, rng, n)
-                                                  : std::nullopt;
+            const bool kept = im.keptInterval(ray, t0, t1);
+            const std::optional<double> hit =
+                kept ? im.freeFlight(view, ray, t0, t1, rng, n) : std::nullopt;
             if (!hit) {
                 if (bounce == 0) {
                     L += bg;  // the camera sees the background through the volume
                 } else {
                     // The phase-sampled direction meets the lights a ray can hit (MIS with NEE).
+                    // Past the kept region, removed matter that still occludes (section view)
+                    // attenuates it, as it does the shadow rays.
                     const glm::vec3 wi(ray.direction);
+                    double T = 1.0;
+                    bool occluderTested = false;
                     for (const auto& light : lightList) {
                         if (light->isDelta()) continue;
                         const glm::dvec3 le(light->radiance(ray.origin, wi));
                         if (le == glm::dvec3(0.0)) continue;
-                        L += beta * le * powerHeuristic(phasePdf, light->pdf(ray.origin, wi));
+                        if (!occluderTested) {
+                            occluderTested = true;
+                            double l0 = 0.0, l1 = INFINITY;
+                            if (im.lightInterval(ray, l0, l1)) {
+                                const double from = kept ? std::max(l0, t1) : l0;
+                                if (l1 > from) T = im.ratioTracking(view, ray, from, l1, rng, n);
+                            }
+                        }
+                        if (!(T > 0.0)) break;
+                        L += beta * le * (T * powerHeuristic(phasePdf, light->pdf(ray.origin, wi)));
                     }
                 }
                 break;
@@ -394,7 +429,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 const double phase = henyeyGreenstein(float(glm::dot(ray.direction, wi)), g);
                 double st0 = 0.0, st1 = double(ls.distance);
                 const Ray sr{x3, wi};
-                const double T = im.keptInterval(sr, st0, st1)
+                const double T = im.lightInterval(sr, st0, st1)
                                      ? im.ratioTracking(view, sr, st0, st1, rng, n)
                                      : 1.0;
                 if (!(T > 0.0)) continue;

@@ -15,8 +15,19 @@
 //
 // Camera rays that escape see the background (radiance + T·background, alpha = 1 − T in
 // expectation, as the ray caster's film); scattered rays that escape see the environment and area
-// lights. Clip planes and the crop box cut camera rays and shadow rays alike (removed matter is
-// gone for the light too). No lights in the scene: the ray caster's headlight.
+// lights. No lights in the scene: the ray caster's headlight.
+//
+// Clip planes and the crop box (render::ClipPlane, render::CropBox) cut camera rays always: the
+// camera never sees removed matter, nor scatters off it. For the light each keeps its own
+// shadowsFromRemoved:
+//   false  the removed matter is gone for the light too: shadow rays and scattered rays ignore it.
+//   true   section view: the removed matter only *occludes*. Shadow rays (next-event estimation)
+//          are attenuated by it, and a scattered ray that leaves the kept region is attenuated by
+//          it on its way to an area or environment light; but no path collides, scatters or emits
+//          inside it (it is not part of the picture, only of the light's path), so free flights
+//          stay in the kept region.
+// Both estimators of the light a scattered ray reaches (next-event and phase sampling) therefore
+// see the same transmittance, and MIS stays unbiased.
 //
 // Determinism: every sample's random numbers are a pure function of (pixel, sample index, seed),
 // and each pixel sums its samples in order, so the image is the same for any thread count.
@@ -106,13 +117,18 @@ class PathTracer {
                            Stats* stats = nullptr, core::ImageRGBA* stdError = nullptr) const;
 
     // Building blocks, public for the unbiasedness tests.
-    /// The part [t0, t1] of `ray` inside the volume box and the kept region; false when empty.
+    /// The part [t0, t1] of `ray` inside the volume box and the kept region (every clip plane and
+    /// the crop box: where paths may collide); false when empty.
     bool keptInterval(const Ray& ray, double& t0, double& t1) const;
+    /// The part [t0, t1] of `ray` inside the volume box and the region whose matter occludes
+    /// light: only the planes (and crop box) with shadowsFromRemoved false cut it. Contains the
+    /// kept region. False when empty.
+    bool lightInterval(const Ray& ray, double& t0, double& t1) const;
     /// Delta tracking from t0: the distance of the first real collision before t1, or nullopt.
     std::optional<double> freeFlight(const Ray& ray, double t0, double t1,
                                      core::CounterRng& rng) const;
-    /// Ratio-tracking estimate of the transmittance along `ray` over [0, maxT] (clipped to the
-    /// kept region).
+    /// Ratio-tracking estimate of the transmittance toward a light along `ray` over [0, maxT]
+    /// (clipped to lightInterval: matter removed with shadowsFromRemoved true still occludes).
     double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
     /// σt at a world point (TF table lookup of the trilinear value).
     float extinctionAt(const glm::dvec3& p) const;

@@ -29,6 +29,16 @@
 //                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
 //                         becomes the cached `reference` stage), max_bounces (1, or 16 with the
 //                         multiple_scattering effect), phase_g, majorant_grid, antialias
+// Clip planes and the crop box (io/scene.h shadows_from_removed): camera rays never see removed
+// matter in any method. The ray caster's own modes cast no shadow rays; the path tracer reads each
+// plane's choice itself (pathtrace/path_tracer.h). sh-local/sh-global: the unclipped local
+// visibility stays cached; planes (and the box) with shadows_from_removed false add the stage
+// clip_local_visibility (visibility/local_visibility.h: only the points within r_s of such a face
+// are traced again), and sh-global's global stage then integrates that field. Both keys cover the
+// removing planes only, so a section-view plane (true), or moving one, reruns no visibility stage.
+// sh-global shades from local visibility near the faces that remove matter for the light
+// (render/sh_shading.h ShCutFaceShader, within one global grid spacing). ritschel's field is
+// not clip-aware: it shades every plane as a section view and warns when one says false.
 // Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local,
 // sh-global and ritschel with directional, point and environment lights (render/sh_shading.h);
 // the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient
@@ -364,8 +374,11 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     o.threads = scene.render.threads;
     o.terminationTransmittance = float(scene.render.termination);
     o.background = glm::vec3(scene.image.background);
-    for (const auto& c : scene.clipPlanes) o.clipPlanes.push_back({c.point, c.normal});
-    if (scene.cropBox) o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max};
+    for (const auto& c : scene.clipPlanes)
+        o.clipPlanes.push_back({c.point, c.normal, c.shadowsFromRemoved});
+    if (scene.cropBox)
+        o.cropBox = render::CropBox{scene.cropBox->min, scene.cropBox->max,
+                                    scene.cropBox->shadowsFromRemoved};
     return o;
 }
 
@@ -619,6 +632,38 @@ Artifact publishTraced(Run& run, const TracedImage& t) {
 
 // ---- SH visibility stages ----------------------------------------------------------------------
 
+/// What removes matter for the light too (shadows_from_removed false): the kept half-spaces of
+/// those clip planes and of the crop box, and the scene's description of them (the cache key).
+struct LightCuts {
+    std::vector<core::HalfSpace> kept;
+    json key = json::array();
+    bool any() const { return !kept.empty(); }
+};
+
+LightCuts lightCuts(const render::RenderOptions& o) {
+    LightCuts c;
+    for (const render::ClipPlane& p : o.clipPlanes) {
+        if (p.shadowsFromRemoved) continue;
+        c.kept.push_back({p.point, p.normal});
+        c.key.push_back({{"point", {p.point.x, p.point.y, p.point.z}},
+                         {"normal", {p.normal.x, p.normal.y, p.normal.z}}});
+    }
+    if (o.cropBox && !o.cropBox->shadowsFromRemoved) {
+        for (const core::HalfSpace& f : core::boxHalfSpaces(o.cropBox->min, o.cropBox->max))
+            c.kept.push_back(f);
+        const glm::dvec3 &lo = o.cropBox->min, &hi = o.cropBox->max;
+        c.key.push_back({{"crop_min", {lo.x, lo.y, lo.z}}, {"crop_max", {hi.x, hi.y, hi.z}}});
+    }
+    return c;
+}
+
+/// The local visibility field the light sees: clip-aware when something removes matter for it.
+std::shared_ptr<const visibility::LocalVisibility> lightLocalVisibility(const Run& run,
+                                                                        bool clipped) {
+    return run.get<visibility::LocalVisibility>(clipped ? "clip_local_visibility"
+                                                        : "local_visibility");
+}
+
 /// block_pyramid ← volume (once per volume); multires_grid ← pyramid + TF + LOD budget;
 /// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
 Stage blockPyramidStage() {
@@ -641,7 +686,7 @@ Stage blockPyramidStage() {
     return pyramid;
 }
 
-void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
+void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const LightCuts& cuts) {
     plan.stages.push_back(blockPyramidStage());
 
     const json budgetKey = params.budgetKey();
@@ -716,20 +761,68 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global) {
         return os.str();
     };
     plan.stages.push_back(vis);
+
+    // The clip-aware update: keyed on the unclipped field and the removing planes alone.
+    Stage clip{"clip_local_visibility",
+               StageKind::Precompute,
+               {"local_visibility", "transfer_function", "clip_planes", "crop_box"}};
+    if (!cuts.any())
+        clip.skip =
+            "not needed: no clip plane or crop box removes matter for the light (none, or "
+            "shadows_from_removed true)";
+    clip.key = [cutKey = cuts.key](const Run& run) {
+        return KeyBuilder(run, "clip_local_visibility")
+            .stage("local_visibility")
+            .stage("transfer_function")
+            .json(cutKey)
+            .value();
+    };
+    clip.compute = [kept = cuts.kept, threads = vo.threads](Run& run) {
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        visibility::ClipUpdateStats st;
+        auto v = std::make_shared<const visibility::LocalVisibility>(
+            visibility::clipAwareLocalVisibility(
+                *run.get<visibility::LocalVisibility>("local_visibility"), *tfa->table, kept,
+                threads, run.progress(), &st));
+        run.details()["clip_local_visibility"] = {{"blocks", st.blocks},
+                                                  {"blocks_touched", st.blocksTouched},
+                                                  {"points", st.points},
+                                                  {"points_traced", st.pointsTraced},
+                                                  {"points_cleared", st.pointsCleared},
+                                                  {"rays_traced", st.raysTraced},
+                                                  {"seconds", st.seconds}};
+        const std::size_t bytes = v->bytes();
+        return Artifact::of<visibility::LocalVisibility>(std::move(v), bytes);
+    };
+    clip.notOnDisk = "recomputed per clip plane position; only the points near a cut face";
+    clip.describe = [](const Run& run, const Artifact&) {
+        const json& d = run.details().value("clip_local_visibility", json::object());
+        if (d.empty()) return std::string("clip-aware local visibility");
+        std::ostringstream os;
+        os << d["points_traced"].get<std::uint64_t>() << " of " << d["points"].get<std::uint64_t>()
+           << " points traced again (" << d["points_cleared"].get<std::uint64_t>()
+           << " cleared) in " << d["blocks_touched"].get<std::size_t>() << " of "
+           << d["blocks"].get<std::size_t>() << " blocks";
+        return os.str();
+    };
+    plan.stages.push_back(clip);
     if (!global) return;
 
     const visibility::GlobalVisibilityOptions go = params.global;
-    Stage gv{"global_visibility", StageKind::Precompute, {"local_visibility", "method"}};
-    gv.key = [go](const Run& run) {
+    const bool clipped = cuts.any();
+    Stage gv{"global_visibility",
+             StageKind::Precompute,
+             {clipped ? "clip_local_visibility" : "local_visibility", "method"}};
+    gv.key = [go, clipped](const Run& run) {
         return KeyBuilder(run, "global_visibility")
-            .stage("local_visibility")
+            .stage(clipped ? "clip_local_visibility" : "local_visibility")
             .integer(std::uint64_t(go.resolution))
             .value();
     };
-    gv.compute = [go](Run& run) {
+    gv.compute = [go, clipped](Run& run) {
         auto g = std::make_shared<const visibility::GlobalVisibility>(
-            visibility::computeGlobalVisibility(
-                run.get<visibility::LocalVisibility>("local_visibility"), go, run.progress()));
+            visibility::computeGlobalVisibility(lightLocalVisibility(run, clipped), go,
+                                                run.progress()));
         run.details()["global_visibility"] = {{"rays_traced", g->raysTraced()},
                                               {"points_skipped", g->pointsSkipped()},
                                               {"bytes", g->bytes()}};
@@ -1022,7 +1115,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(grad);
 
-    if (isKronander(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal);
+    const LightCuts cuts = lightCuts(options);
+    const bool clipped = isKronander(kind) && cuts.any();
+    if (isKronander(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal, cuts);
     if (kind == Kind::Ritschel) addRitschelStages(plan, ritschelParams);
 
     Stage lightsStage{"lights", StageKind::Input, {"lights"}};
@@ -1070,8 +1165,15 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     plan.stages.push_back(sh);
 
     // What the fitted camera frames: the hull of the visible matter (render/framing.h).
-    const json cutDesc = {{"clip", scene.document.value("clip_planes", json::array())},
-                          {"crop", scene.document.value("crop_box", json::object())}};
+    // The cut's geometry only: whether removed matter still shadows does not change the framing.
+    json cutDesc = {{"clip", json::array()}, {"crop", json::object()}};
+    for (const render::ClipPlane& c : options.clipPlanes)
+        cutDesc["clip"].push_back(
+            {c.point.x, c.point.y, c.point.z, c.normal.x, c.normal.y, c.normal.z});
+    if (options.cropBox)
+        cutDesc["crop"] = {
+            {"min", {options.cropBox->min.x, options.cropBox->min.y, options.cropBox->min.z}},
+            {"max", {options.cropBox->max.x, options.cropBox->max.y, options.cropBox->max.z}}};
     const bool voxelsByTf = kind == Kind::Gradient || kind == Kind::EmissionAbsorption ||
                             kind == Kind::PathTrace || isSh(kind);
     Stage framing{"framing", StageKind::Precompute,
@@ -1155,10 +1257,11 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 StageKind::Frame,
                 {"load_volume", "transfer_function", "skip_cells", "gradients", "camera", "lights",
                  "light_sh", "method", "render", "clip_planes", "crop_box", "image"}};
-    if (kind == Kind::ShLocal) frame.inputs.push_back("local_visibility");
+    if (isKronander(kind))
+        frame.inputs.push_back(clipped ? "clip_local_visibility" : "local_visibility");
     if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
     if (kind == Kind::Ritschel) frame.inputs.push_back("hierarchical_visibility");
-    frame.key = [optionsKey, kind](const Run& run) {
+    frame.key = [optionsKey, kind, clipped](const Run& run) {
         KeyBuilder k(run, "render");
         k.stage("load_volume")
             .stage("transfer_function")
@@ -1167,7 +1270,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .stage("camera")
             .stage("lights")
             .stage("light_sh");
-        if (kind == Kind::ShLocal) k.stage("local_visibility");
+        if (isKronander(kind)) k.stage(clipped ? "clip_local_visibility" : "local_visibility");
         if (kind == Kind::ShGlobal) k.stage("global_visibility");
         if (kind == Kind::Ritschel) k.stage("hierarchical_visibility");
         return k.json(optionsKey).value();
@@ -1210,7 +1313,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         plan.stages.push_back(frame);
         return plan;
     }
-    frame.compute = [options, kind](Run& run) {
+    frame.compute = [options, kind, clipped](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -1234,18 +1337,27 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             core::Stopwatch sw;
             std::shared_ptr<core::ImageRGBA> film;
             if (isSh(kind)) {
-                const auto model =
-                    kind == Kind::ShLocal
-                        ? render::makeShVisibilityModel(
-                              caster, *camera,
-                              run.get<visibility::LocalVisibility>("local_visibility"))
-                    : kind == Kind::ShGlobal
-                        ? render::makeShVisibilityModel(
-                              caster, *camera,
-                              run.get<visibility::GlobalVisibility>("global_visibility"))
-                        : render::makeShVisibilityModel(caster, *camera,
-                                                        run.get<visibility::HierarchicalVisibility>(
-                                                            "hierarchical_visibility"));
+                std::unique_ptr<render::ShadingModel> model;
+                if (kind == Kind::Ritschel) {
+                    if (lightCuts(o).any())
+                        run.warn(
+                            "method 'ritschel' keeps removed matter in its visibility: every "
+                            "clip plane and the crop box shade as a section view "
+                            "(shadows_from_removed true); use sh-local or sh-global for false");
+                    model = render::makeShVisibilityModel(
+                        caster, *camera,
+                        run.get<visibility::HierarchicalVisibility>("hierarchical_visibility"));
+                } else if (kind == Kind::ShLocal) {
+                    model = render::makeShVisibilityModel(caster, *camera,
+                                                          lightLocalVisibility(run, clipped));
+                } else {
+                    // Local visibility within one global grid spacing of a removing face.
+                    const auto global = run.get<visibility::GlobalVisibility>("global_visibility");
+                    const float band = global->spacingVoxels() *
+                                       float(core::minComponent(loaded->volume.geometry().spacing));
+                    model = render::makeShVisibilityModel(caster, *camera, global,
+                                                          lightLocalVisibility(run, clipped), band);
+                }
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else {

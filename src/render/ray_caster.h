@@ -50,12 +50,19 @@ namespace voxlight::render {
 enum class Mode { EmissionAbsorption, Gradient, Mip, MinIp, Isosurface };
 std::string toString(Mode m);
 
+/// Camera rays never see what a clip plane or the crop box removes. Whether the *light* still
+/// does is `shadowsFromRemoved` (io/scene.h): true = section view, the removed matter keeps
+/// occluding light; false = it is gone for the light too. The ray caster's own modes cast no
+/// shadow rays, so it reads only the geometry; the path tracer and the SH methods' visibility
+/// (pipeline) read the flag.
 struct ClipPlane {
     glm::dvec3 point{0.0};
     glm::dvec3 normal{0.0, 0.0, 1.0};  ///< unit; keeps dot(x − point, normal) ≥ 0
+    bool shadowsFromRemoved = false;
 };
 struct CropBox {
     glm::dvec3 min{0.0}, max{0.0};  ///< world mm, axis-aligned
+    bool shadowsFromRemoved = false;
 };
 
 /// Transmittance below which a ray stops: what is behind contributes < 0.1 % (below one 8-bit

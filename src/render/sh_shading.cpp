@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "render/sh_shading.h"
 
+#include <algorithm>
 #include <numbers>
 
 #include "core/error.h"
@@ -60,6 +61,54 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
     return glm::max(sum * kInv4Pi, glm::vec3(0.f));
 }
 
+ShCutFaceShader::ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibility> global,
+                                 std::shared_ptr<const visibility::LocalVisibility> local,
+                                 std::span<const core::HalfSpace> faces, float bandMm,
+                                 const core::Geometry& geometry,
+                                 std::span<const std::shared_ptr<const lights::Light>> lights)
+    : global_(std::move(global)),
+      local_(std::move(local)),
+      invBand_(bandMm > 0.f ? 1.f / bandMm : 0.f),
+      lights_(global_->coefficients(), lights) {
+    VL_CHECK(global_ && local_);
+    VL_CHECK(global_->coefficients() == local_->coefficients());
+    for (const core::HalfSpace& f : faces)
+        faces_.push_back({glm::vec3(f.point), glm::vec3(f.normal)});
+    worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
+    origin_ = glm::vec3(geometry.origin);
+}
+
+Scatter ShCutFaceShader::scatter(const ShadeInput& in) const {
+    const glm::vec3& x = in.position;
+    float d = INFINITY;
+    for (const Face& f : faces_) d = std::min(d, glm::dot(x - f.point, f.normal));
+    const float w = std::clamp(d * invBand_, 0.f, 1.f);
+    const glm::vec3 p = worldToIndex_ * (x - origin_);
+    const int C = lights_.coefficients();
+    float v[16];
+    global_->sample(p, v);
+    if (w < 1.f) {
+        // Near a cut face: toward the local field.
+        float vl[16];
+        local_->sample(p, vl);
+        for (int i = 0; i < C; ++i) v[i] = w * v[i] + (1.f - w) * vl[i];
+    }
+    return {lights_.shade(x, v), glm::vec3(0.f)};
+}
+
+std::vector<core::HalfSpace> lightCutFaces(const RenderOptions& options) {
+    std::vector<core::HalfSpace> faces;
+    for (const ClipPlane& c : options.clipPlanes)
+        if (!c.shadowsFromRemoved) faces.push_back({c.point, c.normal});
+    if (options.cropBox && !options.cropBox->shadowsFromRemoved)
+        for (const core::HalfSpace& f :
+             core::boxHalfSpaces(options.cropBox->min, options.cropBox->max))
+            faces.push_back(f);
+    return faces;
+}
+
 namespace {
 std::vector<std::shared_ptr<const lights::Light>> lightsOrHeadlight(const RayCaster& caster,
                                                                     const Camera& camera) {
@@ -100,6 +149,24 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::HierarchicalVisibility> field) {
     return makeModel("ritschel", caster, camera, std::move(field));
+}
+
+}  // namespace voxlight::render
+
+namespace voxlight::render {
+
+std::unique_ptr<ShadingModel> makeShVisibilityModel(
+    const RayCaster& caster, const Camera& camera,
+    std::shared_ptr<const visibility::GlobalVisibility> global,
+    std::shared_ptr<const visibility::LocalVisibility> local, float bandMm) {
+    const std::vector<core::HalfSpace> faces = lightCutFaces(caster.options());
+    if (faces.empty() || !(bandMm > 0.f))
+        return makeShVisibilityModel(caster, camera, std::move(global));
+    return std::make_unique<detail::DvrModel<ShCutFaceShader>>(
+        "sh-global",
+        ShCutFaceShader(std::move(global), std::move(local), faces, bandMm,
+                        caster.volume().geometry(), lightsOrHeadlight(caster, camera)),
+        PixelFootprint(caster, camera));
 }
 
 }  // namespace voxlight::render

@@ -16,6 +16,7 @@
 // (clamped at the ends). Points with nothing visible within 2·spacing + 1 voxels are set to empty
 // space's value without rays (as in local_visibility.h: never read by a shaded sample).
 // Parallel over z-slices with oneTBB; identical results for any thread count.
+#include <algorithm>
 #include <memory>
 #include <vector>
 
@@ -44,6 +45,8 @@ class GlobalVisibility {
                (std::size_t(g.x) + std::size_t(res_.x) * (g.y + std::size_t(res_.y) * g.z)) *
                    std::size_t(coefficients_);
     }
+    /// Voxels between neighbouring grid points (the largest over the axes).
+    float spacingVoxels() const { return std::max({scale_.x, scale_.y, scale_.z}); }
     /// Voxel coordinate of grid point g.
     glm::vec3 position(const glm::ivec3& g) const { return (glm::vec3(g) + 0.5f) * scale_ - 0.5f; }
     /// V^G at continuous voxel index p (trilinear between grid points), into out[0..C).

@@ -11,6 +11,7 @@
 #include <thread>
 
 #include "core/error.h"
+#include "core/timing.h"
 #include "sh/sh_basis.h"
 
 namespace voxlight::visibility {
@@ -142,6 +143,55 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
     return tau;
 }
 
+/// The N directions of a field in index space with w_k·Y_i(ω_k) (the projection weights).
+struct RaySet {
+    int n = 0, c = 0;
+    std::vector<glm::dvec3> world;  ///< ω_k, world unit vectors
+    std::vector<RayDir> rays;
+    std::vector<double> wy;  ///< n × c
+    RaySet(const core::Geometry& g, int rayCount, int coefficients) : n(rayCount), c(coefficients) {
+        const sh::SphereSamples dirs = visibilityDirections(rayCount, coefficients);
+        wy.resize(std::size_t(n) * c);
+        std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
+        for (int k = 0; k < n; ++k) {
+            world.push_back(dirs.directions[std::size_t(k)]);
+            rays.emplace_back((glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) /
+                              g.spacing);
+            sh::evalShUnitDouble(sh::shBandForCount(c), dirs.directions[std::size_t(k)], y);
+            for (int i = 0; i < c; ++i)
+                wy[std::size_t(k) * c + i] = dirs.weights[std::size_t(k)] * y[std::size_t(i)];
+        }
+    }
+};
+
+/// V at one point into v[0..C): N rays from `origin`, ray k integrated over the part [ta, tb] of
+/// [0, length] that `narrow(k, ta, tb)` leaves (returns false: nothing of it counts).
+template <class Narrow>
+void pointVisibility(const SigmaField& sigma, const RaySet& set, const glm::vec3& origin,
+                     const glm::ivec3& dims, float radius, float h, Narrow&& narrow, double* v,
+                     std::uint64_t& samples) {
+    const int C = set.c;
+    std::fill(v, v + C, 0.0);
+    for (int d = 0; d < set.n; ++d) {
+        const RayDir& ray = set.rays[std::size_t(d)];
+        float ta = 0.f, tb = std::min(radius, ray.boxExit(origin, dims));
+        double tau = 0.0;
+        if (narrow(d, ta, tb) && tb > ta)
+            tau = ta > 0.f ? opticalDepth(sigma, origin + ta * ray.d, ray, tb - ta, h, samples)
+                           : opticalDepth(sigma, origin, ray, tb, h, samples);
+        // Project this direction's transmittance onto the SH basis.
+        const double T = tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // float: 1e-7
+        const double* w = set.wy.data() + std::size_t(d) * C;
+        for (int c = 0; c < C; ++c) v[c] += T * w[c];
+    }
+}
+
+/// Empty space's coefficients (√(4π), 0, …).
+void setEmpty(float* dst, int C) {
+    dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
+    for (int c = 1; c < C; ++c) dst[c] = 0.f;
+}
+
 }  // namespace
 
 /// Whether V at voxel coordinate x (a sample of spacing s) can be read by a shaded sample: some
@@ -226,22 +276,10 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     checkOptions(options);
     VL_CHECK(gridPtr != nullptr);
     const MultiresGrid& grid = *gridPtr;
-    const sh::SphereSamples dirs = visibilityDirections(options.rays, options.coefficients);
     const int C = options.coefficients, N = options.rays;
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
-
-    // Per direction: index-space direction and w_k·Y_i(ω_k).
-    std::vector<RayDir> rays;
-    std::vector<double> wy(std::size_t(N) * C);
-    std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
-    for (int k = 0; k < N; ++k) {
-        rays.emplace_back((glm::transpose(g.direction) * dirs.directions[std::size_t(k)]) /
-                          g.spacing);
-        sh::evalShUnitDouble(sh::shBandForCount(C), dirs.directions[std::size_t(k)], y);
-        for (int i = 0; i < C; ++i)
-            wy[std::size_t(k) * C + i] = dirs.weights[std::size_t(k)] * y[std::size_t(i)];
-    }
+    const RaySet set(g, N, C);
 
     const SigmaField sigma(grid, table);
     const float radius = float(options.radiusVoxels * h), hf = float(h);
@@ -289,24 +327,13 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                                 const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
                                 if (!visibilityNeeded(grid, origin, float(levelSpacing(l)))) {
                                     // Never read by a shaded sample: empty space's value.
-                                    dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
-                                    for (int c = 1; c < C; ++c) dst[c] = 0.f;
+                                    setEmpty(dst, C);
                                     ++skipped;
                                     continue;
                                 }
-                                std::fill(v, v + C, 0.0);
-                                for (int d = 0; d < N; ++d) {
-                                    const RayDir& ray = rays[std::size_t(d)];
-                                    const float length =
-                                        std::min(radius, ray.boxExit(origin, grid.dims()));
-                                    const double tau =
-                                        opticalDepth(sigma, origin, ray, length, hf, samples);
-                                    // Project this direction's transmittance onto the SH basis.
-                                    const double T = tau > 0.0 ? double(std::exp(-float(tau)))
-                                                               : 1.0;  // float: 1e-7
-                                    const double* w = wy.data() + std::size_t(d) * C;
-                                    for (int c = 0; c < C; ++c) v[c] += T * w[c];
-                                }
+                                pointVisibility(
+                                    sigma, set, origin, grid.dims(), radius, hf,
+                                    [](int, float&, float&) { return true; }, v, samples);
                                 traced += std::uint64_t(N);
                                 for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                             }
@@ -324,6 +351,147 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     out.samplesTaken_ = samplesTotal;
     out.raysTraced_ = raysTotal;
     out.pointsSkipped_ = skippedTotal;
+    return out;
+}
+
+LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const optics::TfTable& table,
+                                         std::span<const core::HalfSpace> kept, int threads,
+                                         const core::Progress& progress, ClipUpdateStats* stats) {
+    core::Stopwatch clock;
+    const MultiresGrid& grid = base.grid();
+    const int C = base.coefficients(), N = base.rays();
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RaySet set(g, N, C);
+    const float radius = float(base.radiusVoxels() * h), hf = float(h);
+
+    // Each half-space in index space: distance(i) = dot(grad, i) + offset (mm, exact: the world
+    // distance of the voxel coordinate i); along ray k it changes by slope[k] per mm.
+    struct Face {
+        glm::dvec3 grad;
+        double offset;
+        std::vector<float> slope;
+    };
+    std::vector<Face> faces;
+    for (const core::HalfSpace& hs : kept) {
+        Face f;
+        f.grad = g.spacing * (glm::transpose(g.direction) * hs.normal);
+        f.offset = glm::dot(g.origin - hs.point, hs.normal);
+        for (const glm::dvec3& w : set.world) f.slope.push_back(float(glm::dot(hs.normal, w)));
+        faces.push_back(std::move(f));
+    }
+    auto distance = [](const Face& f, const glm::dvec3& i) {
+        return glm::dot(f.grad, i) + f.offset;
+    };
+
+    const SigmaField sigma(grid, table);
+    LocalVisibility out = base;  // the unclipped values wherever the cut cannot reach
+    out.raysTraced_ = out.samplesTaken_ = 0;
+    const std::size_t blocks = grid.pyramid().blockCount();
+    std::vector<std::size_t> stored;
+    for (std::size_t b = 0; b < blocks; ++b)
+        if (grid.level(b) != kNone) stored.push_back(b);
+
+    std::atomic<std::uint64_t> samplesTotal{0}, tracedTotal{0}, clearedTotal{0}, pointsTotal{0};
+    std::atomic<std::size_t> touchedTotal{0}, done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    progress.report("clip-aware local visibility", 0.0);
+    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, stored.size(), 1), [&](const auto& range) {
+                if (progress.cancelled()) return;
+                std::uint64_t samples = 0, traced = 0, cleared = 0, points = 0;
+                std::size_t touched = 0;
+                double v[16];
+                std::vector<double> dist0(faces.size());
+                for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                    const std::size_t b = stored[r];
+                    const int l = grid.level(b);
+                    const int n = levelResolution(l);
+                    points += std::uint64_t(n) * n * n;
+                    // The block's owned box: when every face is ≥ R away on the kept side for all
+                    // 8 corners, no point of it can change.
+                    const glm::dvec3 lo =
+                        glm::dvec3(grid.pyramid().blockCoord(b) * kBlockSize) - 0.5;
+                    bool far = true;
+                    for (const Face& f : faces)
+                        for (int c = 0; c < 8 && far; ++c) {
+                            const glm::dvec3 corner =
+                                lo + glm::dvec3(c & 1, (c >> 1) & 1, c >> 2) * double(kBlockSize);
+                            far = distance(f, corner) >= radius;
+                        }
+                    if (far) continue;
+                    bool anyChanged = false;
+                    float* dst = out.data_.data() + out.offset_[b];
+                    for (int k = 0; k < n; ++k)
+                        for (int j = 0; j < n; ++j)
+                            for (int i = 0; i < n; ++i, dst += C) {
+                                const glm::vec3 x = grid.samplePosition(b, l, i, j, k);
+                                const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
+                                // Classify by the distance to every face (the origin as traced).
+                                bool inside = true, outside = false;
+                                for (std::size_t q = 0; q < faces.size(); ++q) {
+                                    dist0[q] = distance(faces[q], glm::dvec3(origin));
+                                    inside = inside && dist0[q] >= radius;
+                                    outside = outside || dist0[q] <= -radius;
+                                }
+                                if (inside) continue;  // rays stay in the kept region
+                                // Never read by a shaded sample: empty in the unclipped field too.
+                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l))))
+                                    continue;
+                                anyChanged = true;
+                                if (outside) {
+                                    // Rays never reach the kept region: empty space's value.
+                                    setEmpty(dst, C);
+                                    ++cleared;
+                                    continue;
+                                }
+                                // Ray k keeps the t where every face's distance stays ≥ 0.
+                                auto narrow = [&](int d, float& ta, float& tb) {
+                                    for (std::size_t q = 0; q < faces.size(); ++q) {
+                                        const float s = faces[q].slope[std::size_t(d)];
+                                        const float d0 = float(dist0[q]);
+                                        if (s > 0.f)
+                                            ta = std::max(ta, -d0 / s);
+                                        else if (s < 0.f)
+                                            tb = std::min(tb, -d0 / s);
+                                        else if (d0 < 0.f)
+                                            return false;
+                                    }
+                                    return true;
+                                };
+                                pointVisibility(sigma, set, origin, grid.dims(), radius, hf, narrow,
+                                                v, samples);
+                                ++traced;
+                                for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                            }
+                    touched += anyChanged;
+                }
+                samplesTotal += samples;
+                tracedTotal += traced;
+                clearedTotal += cleared;
+                pointsTotal += points;
+                touchedTotal += touched;
+                const std::size_t now = done.fetch_add(range.size()) + range.size();
+                if (std::this_thread::get_id() == caller)
+                    progress.report("clip-aware local visibility",
+                                    double(now) / double(stored.size()));
+            });
+    });
+    if (progress.cancelled()) throw CancelledError();
+    progress.report("clip-aware local visibility", 1.0);
+    out.samplesTaken_ = samplesTotal;
+    out.raysTraced_ = tracedTotal * std::uint64_t(N);
+    if (stats) {
+        stats->blocks = stored.size();
+        stats->blocksTouched = touchedTotal;
+        stats->points = pointsTotal;
+        stats->pointsTraced = tracedTotal;
+        stats->pointsCleared = clearedTotal;
+        stats->raysTraced = out.raysTraced_;
+        stats->seconds = clock.seconds();
+    }
     return out;
 }
 

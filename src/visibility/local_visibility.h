@@ -36,10 +36,23 @@
 //
 // Parallel over blocks with oneTBB; every sample point is computed alone with a fixed order of
 // operations, so the result is identical for any thread count.
+//
+// Clip-aware update (clipAwareLocalVisibility): the same field with the matter outside a kept
+// region (the intersection of half-spaces: the clip planes and crop box that remove matter for the
+// light too, io/scene.h `shadows_from_removed: false`) treated as empty. Only points within
+// R = r_s·h of a cut face can change: a point whose distance to every face is ≥ R on the kept side
+// sends rays that never leave the kept region (its value is copied from the unclipped field), and a
+// point ≥ R outside some face sends rays that never enter it (empty space's value, no rays). The
+// rest — the blocks and points within R of a cut face — are traced again, each ray integrated only
+// over its part inside the kept region (one interval: the region is convex). So moving a plane
+// costs rays in a slab of width 2R around it, not the whole field, and the unclipped field stays
+// cached for the next move.
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
+#include "core/half_space.h"
 #include "core/progress.h"
 #include "optics/transfer_function.h"
 #include "sh/sphere_samples.h"
@@ -72,6 +85,17 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients);
 /// up ≤ 0.
 void correctVisibilityWeights(sh::SphereSamples& samples, int coefficients);
 
+/// What a clip-aware update did (the pipeline's stats report it).
+struct ClipUpdateStats {
+    std::size_t blocks = 0;           ///< stored blocks
+    std::size_t blocksTouched = 0;    ///< blocks with at least one point recomputed or cleared
+    std::uint64_t points = 0;         ///< stored sample points
+    std::uint64_t pointsTraced = 0;   ///< points whose rays were traced again
+    std::uint64_t pointsCleared = 0;  ///< points ≥ R outside a face: empty space's value, no rays
+    std::uint64_t raysTraced = 0;
+    double seconds = 0.0;
+};
+
 /// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
 /// x fastest, then coefficient).
 class LocalVisibility {
@@ -99,6 +123,9 @@ class LocalVisibility {
                                                   const optics::TfTable&,
                                                   const LocalVisibilityOptions&,
                                                   const core::Progress&);
+    friend LocalVisibility clipAwareLocalVisibility(const LocalVisibility&, const optics::TfTable&,
+                                                    std::span<const core::HalfSpace>, int,
+                                                    const core::Progress&, ClipUpdateStats*);
     std::shared_ptr<const MultiresGrid> grid_;
     int coefficients_ = 0, rays_ = 0;
     double radius_ = 0.0;
@@ -112,6 +139,15 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> grid,
                                        const optics::TfTable& table,
                                        const LocalVisibilityOptions& options,
                                        const core::Progress& progress = core::Progress::none());
+
+/// V^L of `base`'s grid, rays, coefficients and radius with the matter outside `kept` (world
+/// half-spaces; their intersection is kept) treated as empty, recomputing only the points within
+/// R of a face (see the header comment); `base` must have been computed under `table`. With no
+/// half-spaces the result equals `base`. `threads` 0 = all hardware threads.
+LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const optics::TfTable& table,
+                                         std::span<const core::HalfSpace> kept, int threads = 0,
+                                         const core::Progress& progress = core::Progress::none(),
+                                         ClipUpdateStats* stats = nullptr);
 
 /// Whether V at voxel coordinate x, stored at sample spacing s voxels, can be read by a shaded
 /// sample: some visible cell (LodSelection::cellVisible) within 2·s + 1 voxels (see the header

@@ -72,6 +72,8 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
             << R"({"volume": {"phantom": "torso"}, "transfer_function": "ct-bonez"})";
         std::ofstream(tmp / "param.json") << R"({"volume": {"phantom": "torso"},
             "method": {"name": "gradient", "params": {"shinyness": 30}}})";
+        std::ofstream(tmp / "clip.json") << R"({"volume": {"phantom": "torso"},
+            "clip_planes": [{"normal": [0, 1, 0], "shadows_from_removed": "yes"}]})";
     }
     // A truncated .nii.gz: VTK's pipeline logs its own failure to stderr unless silenced.
     ASSERT_EQ(
@@ -90,6 +92,7 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
          "image.width"},
         {"scene '" + (tmp / "preset.json").string() + "'", "transfer_function.preset"},
         {"scene '" + (tmp / "param.json").string() + "'", "shinyness"},
+        {"scene '" + (tmp / "clip.json").string() + "'", "clip_planes[0].shadows_from_removed"},
         {"info --dims 1,2 '" + (tmp / "junk.nii").string() + "'", "--dims"},
         {"frobnicate", "frobnicate"},
     };

@@ -104,6 +104,40 @@ TEST(Scene, ErrorsNameTheKeyPath) {
     expectBad(json::parse(R"({"volume": "a.nii", "effects": "specular"})"), "effects", {"array"});
 }
 
+TEST(Scene, ShadowsFromRemovedParsesDefaultsToFalseAndRoundTrips) {
+    const io::Scene s = parse(json::parse(R"({"volume": "a.nii",
+      "clip_planes": [{"normal": [0, 0, 1]}, {"normal": [1, 0, 0], "shadows_from_removed": true}],
+      "crop_box": {"min": [-1, -1, -1], "max": [1, 1, 1], "shadows_from_removed": true}})"));
+    ASSERT_EQ(s.clipPlanes.size(), 2u);
+    EXPECT_FALSE(s.clipPlanes[0].shadowsFromRemoved);  // default: gone for the light too
+    EXPECT_TRUE(s.clipPlanes[1].shadowsFromRemoved);
+    ASSERT_TRUE(s.cropBox.has_value());
+    EXPECT_TRUE(s.cropBox->shadowsFromRemoved);
+    EXPECT_FALSE(parse(json::parse(R"({"volume": "a.nii",
+      "crop_box": {"min": [-1, -1, -1], "max": [1, 1, 1]}})"))
+                     .cropBox->shadowsFromRemoved);
+    // The complete document writes every plane's choice, and reads back the same.
+    json d = io::sceneDocument(s);
+    EXPECT_EQ(d["clip_planes"][0]["shadows_from_removed"], false);
+    EXPECT_EQ(d["clip_planes"][1]["shadows_from_removed"], true);
+    EXPECT_EQ(d["crop_box"]["shadows_from_removed"], true);
+    d["transfer_function"]["preset"] = "ct-bone";  // as `scene --init` fills it from the data
+    const io::Scene back = parse(d);
+    EXPECT_EQ(back.clipPlanes[1].shadowsFromRemoved, true);
+    EXPECT_EQ(io::sceneDocument(back)["clip_planes"], d["clip_planes"]);
+    EXPECT_EQ(io::sceneDocument(back)["crop_box"], d["crop_box"]);
+    // A wrong type names the key and says what to write.
+    expectBad(json::parse(R"({"volume": "a.nii",
+      "clip_planes": [{"normal": [0, 0, 1], "shadows_from_removed": "true"}]})"),
+              "clip_planes[0].shadows_from_removed", {"true or false", "section view"});
+    expectBad(json::parse(R"({"volume": "a.nii",
+      "crop_box": {"min": [0, 0, 0], "max": [1, 1, 1], "shadows_from_removed": 1}})"),
+              "crop_box.shadows_from_removed", {"true or false", "a number"});
+    expectBad(json::parse(R"({"volume": "a.nii",
+      "clip_planes": [{"normal": [0, 0, 1], "shadow_from_removed": true}]})"),
+              "clip_planes[0].shadow_from_removed", {"did you mean 'shadows_from_removed'"});
+}
+
 TEST(Scene, OverridesApplyBeforeValidation) {
     json j = json::parse(R"({"volume": "a.nii", "lights": [{"type": "directional"}]})");
     io::applyOverride(j, "camera.azimuth=45");

@@ -120,3 +120,48 @@ TEST(ShShading, UniformEnvironmentInEmptySpaceScattersItsRadiance) {
         for (int k = 0; k < 3; ++k) EXPECT_NEAR(s[k], kL, kRelTol * kL) << c;
     }
 }
+
+TEST(ShShading, CutFaceShaderBlendsFromLocalAtARemovingFaceToGlobalOneBandAway) {
+    // Local field: empty space (unoccluded); global field: chained from an opaque volume (nearly
+    // fully occluded), on the same geometry. A plane x ≥ 0 that removes matter for the light.
+    core::Geometry g;
+    const auto local = emptySpace(4, g);
+    auto opaque = std::make_shared<core::Volume>(g, core::VoxelType::Int16);
+    std::fill_n(opaque->dataAs<std::int16_t>(), opaque->voxelCount(), std::int16_t(1000));
+    const optics::TransferFunction tf(
+        {{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)}, {1000.f, glm::vec3(1.f), 1.f, glm::vec3(0.f)}},
+        {500.f, 1000.f});
+    const optics::TfTable table(tf);
+    auto pyr =
+        std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(*opaque));
+    auto grid = std::make_shared<const visibility::MultiresGrid>(
+        pyr, visibility::selectLod(*pyr, tf, table, visibility::LodBudget::unlimited()));
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 16;
+    auto occluded = std::make_shared<const visibility::LocalVisibility>(
+        visibility::computeLocalVisibility(grid, table, o));
+    auto global = std::make_shared<const visibility::GlobalVisibility>(
+        visibility::computeGlobalVisibility(occluded, {}));
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {
+        std::make_shared<lights::DirectionalLight>(glm::vec3(4.f), glm::vec3(0.f, 0.f, 1.f))};
+    constexpr float kBand = 10.f;  // mm
+    const std::vector<core::HalfSpace> faces = {{glm::dvec3(0.0), glm::dvec3(1.0, 0.0, 0.0)}};
+    const render::ShCutFaceShader cut(global, local, faces, kBand, g, ls);
+    const render::ShVisibilityShader<visibility::LocalVisibility> localOnly(local, g, ls);
+    const render::ShVisibilityShader<visibility::GlobalVisibility> globalOnly(global, g, ls);
+    auto shade = [&](const auto& s, float x) {
+        render::ShadeInput in{};
+        in.position = {x, 3.f, -5.f};
+        return s.scatter(in).diffuse.x;
+    };
+    EXPECT_EQ(shade(cut, 0.f), shade(localOnly, 0.f));       // at the face: local
+    EXPECT_EQ(shade(cut, kBand), shade(globalOnly, kBand));  // a band away: global
+    EXPECT_EQ(shade(cut, 2 * kBand), shade(globalOnly, 2 * kBand));
+    // Halfway: the mean of the two (SH is linear; shading clamps at 0 only, both are ≥ 0 here).
+    constexpr float kFloatTol = 1e-5f;
+    const float half = 0.5f * kBand;
+    EXPECT_NEAR(shade(cut, half), 0.5f * (shade(localOnly, half) + shade(globalOnly, half)),
+                kFloatTol);
+    EXPECT_GT(shade(localOnly, half), shade(globalOnly, half) + 0.1f) << "the fields must differ";
+}
