@@ -70,6 +70,9 @@ def scenes(work):
                 {"transfer_function": "generic", "camera": {"view": "oblique"}}))
     out.append(("torso", torso, ["phantom", "torso", "--size", "128", "-q", "-o", torso],
                 {"transfer_function": "ct-bone", "camera": {"view": "anterior"}}))
+    # Soft tissue: optically thin within a voxel, where grid visibility should be accurate.
+    out.append(("torso-soft-tissue", torso, None,
+                {"transfer_function": "ct-soft-tissue", "camera": {"view": "anterior"}}))
     if os.path.exists(ENVIRONMENT):  # SH's own regime: smooth light from everywhere
         out.append(("torso-environment", torso, None,
                     {"transfer_function": "ct-bone", "camera": {"view": "anterior"},
@@ -198,8 +201,29 @@ def main():
         err = np.stack([heat * 255, np.zeros_like(heat), (1 - heat) * 40], axis=2).astype(np.uint8)
         pictures.append([Image.open(p).convert("RGB") for p in (ref_png, png_l, png_g, png_b)] +
                         [Image.fromarray(err)])
+        row = Image.new("RGB", (SIZE * 5, SIZE))
+        for col, im in enumerate(pictures[-1]):
+            row.paste(im.resize((SIZE, SIZE)), (col * SIZE, 0))
+        row.save(os.path.join(args.work, name + "-pictures.png"))
 
-    with open(os.path.join(args.work, "results.csv"), "w", newline="") as f:
+    # Scenes not run this time keep their rows from an earlier run in the same work directory.
+    csv_path = os.path.join(args.work, "results.csv")
+    if args.scenes and os.path.exists(csv_path):
+        ran = {r["scene"] for r in rows}
+        with open(csv_path) as f:
+            old = [r for r in csv.DictReader(f) if r["scene"] not in ran]
+        for r in old:
+            for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
+                      "reference_nrms"):
+                r[k] = float(r[k])
+        rows = old + rows
+        for name in sorted({r["scene"] for r in old}):
+            sheet = os.path.join(args.work, name + "-pictures.png")
+            if os.path.exists(sheet):
+                im = Image.open(sheet).convert("RGB")
+                w = im.size[0] // 5
+                pictures.insert(0, [im.crop((i * w, 0, (i + 1) * w, im.size[1])) for i in range(5)])
+    with open(csv_path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()
         w.writerows(rows)

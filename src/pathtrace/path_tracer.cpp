@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/timing.h"
+#include "render/shading.h"
 
 namespace voxlight::pathtrace {
 
@@ -29,9 +30,6 @@ constexpr double kRouletteTransmittance = 0.1;
 constexpr int kNullCollisionBudget = 4096;
 /// Samples per progressive pass (the stop criteria are checked between passes).
 constexpr int kSamplesPerPass = 4;
-/// Irradiance of the headlight used when a scene has no light: 4π, so that a fully lit scatterer
-/// of albedo a under isotropic single scattering shows radiance a (comparable to the ray caster).
-constexpr float kHeadlightIrradiance = float(4.0 * std::numbers::pi);
 /// Autofocus marches the centre ray at this many voxels (of the smallest spacing) per step.
 constexpr double kAutofocusStepVoxels = 0.25;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
@@ -353,13 +351,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     std::vector<double> sum(pixels * 3, 0.0), sumSq(pixels * 3, 0.0), lumSq(pixels, 0.0),
         alpha(pixels, 0.0);
     std::vector<std::shared_ptr<const lights::Light>> lightList = options_.lights;
-    if (lightList.empty()) {
-        // The ray caster's headlight: travels along the view, from above-left of the camera.
-        const glm::vec3 travel = glm::normalize(
-            glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
-        lightList.push_back(
-            std::make_shared<lights::DirectionalLight>(glm::vec3(kHeadlightIrradiance), -travel));
-    }
+    if (lightList.empty())
+        lightList.push_back(render::headlight(camera, render::kVolumetricHeadlightIrradiance));
     const float g = options_.phaseG;
     const glm::dvec3 bg(options_.background);
     std::atomic<std::uint64_t> paths{0}, real{0}, null{0}, shadow{0}, violations{0}, budget{0};

@@ -523,12 +523,7 @@ std::array<glm::dvec3, 2> visibleWorldBounds(const core::Geometry& g,
 std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Camera& camera) {
     const RenderOptions& o = caster.options();
     std::vector<std::shared_ptr<const lights::Light>> lights = o.lights;
-    if (lights.empty()) {
-        // Travels along the view direction, from just above-left of the camera.
-        const glm::vec3 travel = glm::normalize(
-            glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
-        lights.push_back(std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), -travel));
-    }
+    if (lights.empty()) lights.push_back(headlight(camera, 1.f));
     switch (o.mode) {
         case Mode::EmissionAbsorption:
             return std::make_unique<DvrModel<EmissionAbsorptionShader>>(

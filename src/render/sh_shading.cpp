@@ -113,12 +113,7 @@ namespace {
 std::vector<std::shared_ptr<const lights::Light>> lightsOrHeadlight(const RayCaster& caster,
                                                                     const Camera& camera) {
     std::vector<std::shared_ptr<const lights::Light>> lights = caster.options().lights;
-    if (lights.empty()) {
-        // The same headlight as makeBuiltinModel.
-        const glm::vec3 travel = glm::normalize(
-            glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
-        lights.push_back(std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), -travel));
-    }
+    if (lights.empty()) lights.push_back(headlight(camera, kVolumetricHeadlightIrradiance));
     return lights;
 }
 

@@ -83,4 +83,10 @@ BlinnPhongShader::BlinnPhongShader(const BlinnPhongParams& params,
     }
 }
 
+std::shared_ptr<const lights::Light> headlight(const Camera& camera, float irradiance) {
+    const glm::vec3 travel =
+        glm::normalize(glm::vec3(camera.forward() - 0.35 * camera.up() + 0.25 * camera.right()));
+    return std::make_shared<lights::DirectionalLight>(glm::vec3(irradiance), -travel);
+}
+
 }  // namespace voxlight::render

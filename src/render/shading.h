@@ -23,10 +23,12 @@
 #include <cmath>
 #include <glm/glm.hpp>
 #include <memory>
+#include <numbers>
 #include <span>
 #include <vector>
 
 #include "lights/light.h"
+#include "render/camera.h"
 #include "sh/sh_basis.h"
 
 namespace voxlight::render {
@@ -67,6 +69,17 @@ struct BlinnPhongParams {
 inline constexpr int kSpecularTableCells = 2048;
 inline constexpr float kMinTableShininess = 2.f;
 inline constexpr float kMaxTableShininess = 256.f;
+
+/// Irradiance of the headlight for the volumetric methods (sh-local, sh-global, ritschel,
+/// pathtrace): 4π, so that a fully lit scatterer of albedo a under the isotropic phase 1/(4π)
+/// shows radiance a, as a lit diffuse surface of colour a does under the surface-like shading
+/// (gradient, iso) with irradiance 1.
+inline constexpr float kVolumetricHeadlightIrradiance = float(4.0 * std::numbers::pi);
+
+/// The light of a scene without lights: directional, travelling along the view from just above
+/// and left of the camera (shapes read as in clinical viewers), of the given irradiance (1 for the
+/// surface-like shading, kVolumetricHeadlightIrradiance for the volumetric methods).
+std::shared_ptr<const lights::Light> headlight(const Camera& camera, float irradiance);
 
 /// Irradiance SH of the lights that are neither delta nor area lights (environment maps): 9 RGB
 /// coefficients E_lm = Â_l L_lm (Ramamoorthi & Hanrahan 2001; Â = π, 2π/3, π/4 for bands 0..2),
