@@ -3,7 +3,7 @@
 """What SH visibility's accuracy costs in time: sh-local / sh-global against the path tracer.
 
 For each scene (Kronander's corner case, the torso phantom under a directional light and under an
-environment map, one real chest CT) the single-scattering
+environment map and under a soft-tissue TF, one real abdominal CT in HU) the single-scattering
 ground truth is traced once by the path tracer's reference mode (cached on disk in WORK/cache), then
 sh-local and sh-global are rendered with one setting varied at a time from the defaults:
 rays 16…256, coefficients 1/4/9/16, LOD data reduction 64/8/1, radius r_s 4…32 voxels and (global)
@@ -77,12 +77,13 @@ def scenes(work):
         out.append(("torso-environment", torso, None,
                     {"transfer_function": "ct-bone", "camera": {"view": "anterior"},
                      "lights": [{"type": "environment", "path": ENVIRONMENT, "intensity": 1}]}))
-    chest = os.path.join(DATASETS, "ct", "lidc2-chest.mha")
-    if os.path.exists(chest):
-        out.append(("lidc2-chest", chest, None,
+    # A real CT in Hounsfield units (lidc2-chest.mha is already windowed to uint8).
+    ct = os.path.join(DATASETS, "ct", "abdomen-totalseg", "example_ct.nii.gz")
+    if os.path.exists(ct):
+        out.append(("abdomen-ct", ct, None,
                     {"transfer_function": "ct-bone", "camera": {"view": "oblique"}}))
     else:
-        print("skipping the real CT: %s is absent" % chest, file=sys.stderr)
+        print("skipping the real CT: %s is absent" % ct, file=sys.stderr)
     return out
 
 
@@ -211,7 +212,8 @@ def main():
     if args.scenes and os.path.exists(csv_path):
         ran = {r["scene"] for r in rows}
         with open(csv_path) as f:
-            old = [r for r in csv.DictReader(f) if r["scene"] not in ran]
+            known = {name for name, _, _, _ in scenes(args.work)}
+            old = [r for r in csv.DictReader(f) if r["scene"] not in ran and r["scene"] in known]
         for r in old:
             for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
                       "reference_nrms"):

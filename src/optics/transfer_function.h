@@ -120,7 +120,18 @@ class TfTable {
         s.emission = a.emission + f * (b.emission - a.emission);
         return s;
     }
-    float extinction(float value) const { return lookup(value).extinction; }
+    /// lookup(value).extinction without the colours (the trackers' and visibility rays' inner
+    /// loops read only σt).
+    float extinction(float value) const {
+        float u = (value - lo_) * invCell_;
+        u = u > 0.f ? u : 0.f;
+        u = u < float(kTableCells) ? u : float(kTableCells);
+        int i = int(u);
+        i = i < kTableCells ? i : kTableCells - 1;
+        const float f = u - float(i);
+        const float a = nodes_[std::size_t(i)].sigma, b = nodes_[std::size_t(i) + 1].sigma;
+        return a + f * (b - a);
+    }
 
     /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.
     struct Segment {

@@ -90,7 +90,7 @@ struct PathTracer::Impl {
 
     template <class View>
     float sigma(const View& v, const glm::dvec3& ijk) const {
-        return table->lookup(v.sample(float(ijk.x), float(ijk.y), float(ijk.z))).extinction;
+        return table->extinction(v.sample(float(ijk.x), float(ijk.y), float(ijk.z)));
     }
 
     /// Calls f(ta, tb, majorant) for consecutive pieces of [t0, t1] with a constant majorant

@@ -80,6 +80,9 @@ TEST(TfTable, LookupMatchesExactEvaluation) {
         EXPECT_NEAR(a.albedo.r, b.albedo.r, 0.02f) << v;
     }
     EXPECT_FLOAT_EQ(table.lookup(NAN).extinction, table.lookup(-1e9f).extinction);
+    // The σt-only fast path is the same number, bit for bit, everywhere (clamps and NaN too).
+    for (float v : {-1e9f, -1100.f, -3.7f, 0.f, 411.2f, 3199.f, 1e9f, float(NAN)})
+        EXPECT_EQ(table.extinction(v), table.lookup(v).extinction) << v;
 }
 
 TEST(TfTable, PreintegratedSegmentIsTheExactMeanOverTheValueRange) {
