@@ -141,7 +141,11 @@ def main():
     ap.add_argument("--work", default="/tmp/sh-accuracy")
     ap.add_argument("--docs", default=None)
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rebuild the docs from WORK/results.csv and WORK/*-pictures.png")
     args = ap.parse_args()
+    if args.report_only:
+        args.scenes = "-"  # run no scene; keep every earlier one
     voxlight = os.path.abspath(args.voxlight)
     os.makedirs(args.work, exist_ok=True)
     cache = os.path.join(args.work, "cache")
@@ -219,17 +223,23 @@ def main():
                       "reference_nrms"):
                 r[k] = float(r[k])
         rows = old + rows
-        for name in sorted({r["scene"] for r in old}):
-            sheet = os.path.join(args.work, name + "-pictures.png")
-            if os.path.exists(sheet):
-                im = Image.open(sheet).convert("RGB")
-                w = im.size[0] // 5
-                pictures.insert(0, [im.crop((i * w, 0, (i + 1) * w, im.size[1])) for i in range(5)])
+    # The pictures in the order of the scene list, one saved row per scene.
+    pictures = []
+    for name, _, _, _ in scenes(args.work):
+        sheet = os.path.join(args.work, name + "-pictures.png")
+        if any(r["scene"] == name for r in rows) and os.path.exists(sheet):
+            im = Image.open(sheet).convert("RGB")
+            w = im.size[0] // 5
+            pictures.append([im.crop((i * w, 0, (i + 1) * w, im.size[1])) for i in range(5)])
     with open(csv_path, "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()
         w.writerows(rows)
     report(rows, pictures, args.docs)
+
+
+def scenes_list():
+    return scenes("/tmp")
 
 
 def monotone(series):
@@ -269,9 +279,12 @@ def report(rows, pictures, docs):
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    scenes_ = sorted({r["scene"] for r in rows})
-    fig, axes = plt.subplots(1, len(scenes_), figsize=(5 * len(scenes_), 4), squeeze=False)
-    for ax, scene in zip(axes[0], scenes_):
+    scenes_ = [n for n, _, _, _ in scenes_list() if any(r["scene"] == n for r in rows)]
+    cols = 3
+    nrows = (len(scenes_) + 1 + cols - 1) // cols  # one panel more for the legend
+    fig, axes = plt.subplots(nrows, cols, figsize=(5.5 * cols, 4.2 * nrows), squeeze=False)
+    flat = [a for row in axes for a in row]
+    for ax, scene in zip(flat, scenes_):
         for method, param, _ in SWEEPS:
             s = [r for r in rows if r["scene"] == scene and r["method"] == method and
                  r["param"] == param]
@@ -283,7 +296,10 @@ def report(rows, pictures, docs):
         ax.set_ylabel("RMSE vs path tracer (1/255)")
         ax.set_title(scene)
         ax.grid(True, alpha=0.3)
-    axes[0][0].legend(fontsize=6)
+    handles, labels = flat[0].get_legend_handles_labels()
+    for ax in flat[len(scenes_):]:
+        ax.axis("off")
+    flat[len(scenes_)].legend(handles, labels, loc="center", fontsize=9)
     fig.tight_layout()
     fig.savefig(os.path.join(docs, "accuracy-vs-time.png"), dpi=110)
     if pictures:
