@@ -52,7 +52,10 @@ SWEEPS = [  # (method, param, values) — one at a time from DEFAULTS
     ("sh-global", "data_reduction", [64, 8, 1]),
     ("sh-global", "radius", [4, 8, 16, 32]),
     ("sh-global", "global_resolution", [16, 32, 64, 128]),
+    ("ritschel", "subsample", [4, 2, 1]),
+    ("ritschel", "coefficients", [4, 16]),
 ]
+RITSCHEL_DEFAULTS = {"rays": 32, "coefficients": 4, "subsample": 2}
 BEST = {"rays": 128, "coefficients": 16, "radius": 16, "data_reduction": 1,
         "global_resolution": 128, "step": 0.1}
 # A sweep's error "falls as settings grow" unless a later value is worse than the best so far by
@@ -141,6 +144,8 @@ def main():
     ap.add_argument("--work", default="/tmp/sh-accuracy")
     ap.add_argument("--docs", default=None)
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
+    ap.add_argument("--methods", default=None,
+                    help="comma-separated subset of methods to sweep (rows of the others are kept)")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the docs from WORK/results.csv and WORK/*-pictures.png")
     args = ap.parse_args()
@@ -170,9 +175,12 @@ def main():
               (name, ref_st["pathtrace"]["spp"], 100 * floor, ref_wall), flush=True)
         done = {}
         for method, param, values in SWEEPS:
+            if args.methods and method not in args.methods.split(","):
+                continue
             for v in values:
-                params = {k: val for k, val in DEFAULTS.items()
-                          if k != "global_resolution" or method == "sh-global"}
+                params = dict(RITSCHEL_DEFAULTS) if method == "ritschel" else {
+                    k: val for k, val in DEFAULTS.items()
+                    if k != "global_resolution" or method == "sh-global"}
                 params[param] = v
                 key = (method, tuple(sorted(params.items())))
                 if key not in done:
@@ -189,6 +197,8 @@ def main():
                              "reference_nrms": round(floor, 4)})
                 print("  %-9s %-17s %4s  RMSE %6.2f/255  off>2/255 %5.1f %%  NRMSE %.3f  "
                       "precompute %6.2f s" % (method, param, v, rmse, off, nrmse, pre), flush=True)
+        if args.methods:  # a partial run: the picture and the best row need sh-local/-global
+            continue
         # The picture: reference | sh-local | sh-global (defaults) | sh-global (best) | error map.
         best = dict(BEST)
         png_l = os.path.join(args.work, "%s-sh-local-rays-32.png" % name)
@@ -213,11 +223,12 @@ def main():
 
     # Scenes not run this time keep their rows from an earlier run in the same work directory.
     csv_path = os.path.join(args.work, "results.csv")
-    if args.scenes and os.path.exists(csv_path):
-        ran = {r["scene"] for r in rows}
+    if (args.scenes or args.methods) and os.path.exists(csv_path):
+        ran = {(r["scene"], r["method"]) for r in rows}
         with open(csv_path) as f:
             known = {name for name, _, _, _ in scenes(args.work)}
-            old = [r for r in csv.DictReader(f) if r["scene"] not in ran and r["scene"] in known]
+            old = [r for r in csv.DictReader(f)
+                   if (r["scene"], r["method"]) not in ran and r["scene"] in known]
         for r in old:
             for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
                       "reference_nrms"):
@@ -263,8 +274,8 @@ def report(rows, pictures, docs):
         for method, param, _ in SWEEPS:
             s = [r for r in rows if r["scene"] == scene and r["method"] == method and
                  r["param"] == param]
-            if param in ("radius",):  # r_s: larger reaches farther, also trades LOD detail
-                pass
+            if not s:
+                continue
             rise = monotone(s)
             verdicts.append("%s %s %s: %s" % (scene, method, param,
                                               "falls" if rise <= MONOTONE_SLACK else
@@ -288,8 +299,10 @@ def report(rows, pictures, docs):
         for method, param, _ in SWEEPS:
             s = [r for r in rows if r["scene"] == scene and r["method"] == method and
                  r["param"] == param]
-            ax.plot([r["precompute_s"] for r in s], [r["rmse_255"] for r in s],
-                    "-o" if method == "sh-global" else "--s", ms=3,
+            if not s:
+                continue
+            style = {"sh-global": "-o", "sh-local": "--s", "ritschel": ":^"}[method]
+            ax.plot([r["precompute_s"] for r in s], [r["rmse_255"] for r in s], style, ms=3,
                     label="%s %s" % (method, param))
         ax.set_xscale("log")
         ax.set_xlabel("precompute seconds (TF change)")

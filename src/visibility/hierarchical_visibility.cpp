@@ -6,6 +6,7 @@
 
 #include <atomic>
 #include <cmath>
+#include <glm/gtc/quaternion.hpp>
 #include <numbers>
 #include <thread>
 
@@ -18,6 +19,14 @@
 namespace voxlight::visibility {
 
 namespace {
+
+/// A rotation uniform over SO(3) from three uniforms in [0, 1) (Shoemake 1992).
+glm::dquat uniformRotation(double u1, double u2, double u3) {
+    constexpr double kTwoPi = 2.0 * std::numbers::pi;
+    const double a = std::sqrt(1.0 - u1), b = std::sqrt(u1);
+    return glm::normalize(glm::dquat(b * std::cos(kTwoPi * u3), a * std::sin(kTwoPi * u2),
+                                     a * std::cos(kTwoPi * u2), b * std::sin(kTwoPi * u3)));
+}
 
 const float kSqrt4Pi = float(std::sqrt(4.0 * std::numbers::pi));
 /// 8-bit code ranges: coefficient 0 unsigned, the others signed symmetric.
@@ -215,7 +224,19 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
     std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
     for (int m = 0; m < M; ++m) {
         sh::SphereSamples dirs = sh::jitteredSamples(N, options.seed, std::uint64_t(m));
-        correctVisibilityWeights(dirs, C);
+        if (!tryCorrectVisibilityWeights(dirs, C)) {
+            // Too uneven for a positive correction (few rays per coefficient, e.g. 32 for 16):
+            // the Fibonacci set under a random rotation instead. Its corrected weights are
+            // positive (sh-local's own set) and stay so under any rotation, since the constraints
+            // span whole SH bands, which rotations map onto themselves.
+            dirs = sh::fibonacciSamples(N);
+            core::CounterRng rng(core::hashCounters(std::uint64_t(m), std::uint64_t(N), 0x524f54u),
+                                 options.seed);
+            const glm::dquat q =
+                uniformRotation(rng.uniformDouble(), rng.uniformDouble(), rng.uniformDouble());
+            for (auto& d : dirs.directions) d = q * d;
+            correctVisibilityWeights(dirs, C);
+        }
         for (int k = 0; k < N; ++k) {
             rays.emplace_back(g, dirs.directions[std::size_t(k)]);
             sh::evalShUnitDouble(sh::shBandForCount(C), dirs.directions[std::size_t(k)], y);

@@ -230,7 +230,7 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients) {
     return s;
 }
 
-void correctVisibilityWeights(sh::SphereSamples& s, int coefficients) {
+bool tryCorrectVisibilityWeights(sh::SphereSamples& s, int coefficients) {
     // Minimum-norm change of the weights so that Σ_k w_k Y_i(ω_k) = √(4π) δ_i0 for i < C:
     // w = w0 + Aᵀ (A Aᵀ)⁻¹ (b − A w0), A_ik = Y_i(ω_k).
     const int n = int(s.size()), c = coefficients;
@@ -246,13 +246,17 @@ void correctVisibilityWeights(sh::SphereSamples& s, int coefficients) {
     b(0) = std::sqrt(4.0 * std::numbers::pi);
     const Eigen::MatrixXd gram = A * A.transpose();
     const Eigen::VectorXd w = w0 + A.transpose() * gram.ldlt().solve(b - A * w0);
-    for (int k = 0; k < n; ++k) {
-        if (!(w(k) > 0.0))
-            throw InternalError("visibility weight " + std::to_string(k) + " of " +
-                                std::to_string(n) + " rays is not positive (" +
-                                std::to_string(w(k)) + ")");
-        s.weights[std::size_t(k)] = w(k);
-    }
+    for (int k = 0; k < n; ++k)
+        if (!(w(k) > 0.0)) return false;
+    for (int k = 0; k < n; ++k) s.weights[std::size_t(k)] = w(k);
+    return true;
+}
+
+void correctVisibilityWeights(sh::SphereSamples& s, int coefficients) {
+    if (!tryCorrectVisibilityWeights(s, coefficients))
+        throw InternalError("a visibility weight of " + std::to_string(s.size()) +
+                            " rays is not positive after the correction for " +
+                            std::to_string(coefficients) + " coefficients");
 }
 
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,

@@ -84,6 +84,9 @@ sh::SphereSamples visibilityDirections(int rays, int coefficients);
 /// change so Σ_k w_k Y_i(ω_k) = √(4π) δ_i0 for i < coefficients); InternalError if a weight ends
 /// up ≤ 0.
 void correctVisibilityWeights(sh::SphereSamples& samples, int coefficients);
+/// The same, but false (samples unchanged) instead of an error when a weight would end up ≤ 0 —
+/// a jittered set with few rays per coefficient can be too uneven for a positive correction.
+bool tryCorrectVisibilityWeights(sh::SphereSamples& samples, int coefficients);
 
 /// What a clip-aware update did (the pipeline's stats report it).
 struct ClipUpdateStats {
