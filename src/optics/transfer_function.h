@@ -106,31 +106,21 @@ class TfTable {
     /// Linear interpolation of the resampled TF; values outside the range (and NaN, mapped to the
     /// low end) clamp.
     TfSample lookup(float value) const {
-        float u = (value - lo_) * invCell_;
-        u = u > 0.f ? u : 0.f;  // also maps NaN to the low end
-        u = u < float(kTableCells) ? u : float(kTableCells);
-        int i = int(u);
-        i = i < kTableCells ? i : kTableCells - 1;
-        const float f = u - float(i);
-        const Node& a = nodes_[std::size_t(i)];
-        const Node& b = nodes_[std::size_t(i) + 1];
+        const Position at = position(value);
+        const Node& a = nodes_[at.cell];
+        const Node& b = nodes_[at.cell + 1];
         TfSample s;
-        s.extinction = a.sigma + f * (b.sigma - a.sigma);
-        s.albedo = a.albedo + f * (b.albedo - a.albedo);
-        s.emission = a.emission + f * (b.emission - a.emission);
+        s.extinction = a.sigma + at.f * (b.sigma - a.sigma);
+        s.albedo = a.albedo + at.f * (b.albedo - a.albedo);
+        s.emission = a.emission + at.f * (b.emission - a.emission);
         return s;
     }
     /// lookup(value).extinction without the colours (the trackers' and visibility rays' inner
     /// loops read only σt).
     float extinction(float value) const {
-        float u = (value - lo_) * invCell_;
-        u = u > 0.f ? u : 0.f;
-        u = u < float(kTableCells) ? u : float(kTableCells);
-        int i = int(u);
-        i = i < kTableCells ? i : kTableCells - 1;
-        const float f = u - float(i);
-        const float a = nodes_[std::size_t(i)].sigma, b = nodes_[std::size_t(i) + 1].sigma;
-        return a + f * (b - a);
+        const Position at = position(value);
+        const float a = nodes_[at.cell].sigma, b = nodes_[at.cell + 1].sigma;
+        return a + at.f * (b - a);
     }
 
     /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.
@@ -226,6 +216,20 @@ class TfTable {
     float hi() const { return hi_; }
 
   private:
+    /// Where a value falls in the table: its cell and the fraction across it (values outside the
+    /// range, and NaN, clamp to the ends).
+    struct Position {
+        std::size_t cell;
+        float f;
+    };
+    Position position(float value) const {
+        float u = (value - lo_) * invCell_;
+        u = u > 0.f ? u : 0.f;  // also maps NaN to the low end
+        u = u < float(kTableCells) ? u : float(kTableCells);
+        int i = int(u);
+        i = i < kTableCells ? i : kTableCells - 1;
+        return {std::size_t(i), u - float(i)};
+    }
     Segment segmentSlow(float sf, float sb, SegmentCache* cache = nullptr) const;
     /// Entry of `cache` for `value` (computing σ's integral into the slot `other` does not use).
     Cumulative& cumulative(float value, SegmentCache& cache, const Cumulative* other) const;

@@ -13,10 +13,13 @@
 #include "grid/brick_grid.h"
 #include "lights/area_light.h"
 #include "pathtrace/path_tracer.h"
+#include "pathtrace_test_util.h"
 #include "render/ray_caster.h"
 
 using namespace voxlight;
 using pathtrace::PathTracer;
+using test::makeMedium;
+using test::Medium;
 
 namespace {
 
@@ -32,32 +35,7 @@ constexpr float kSigma = 0.05f;  ///< 1/mm inside the slab
 constexpr float kAlbedo = 0.8f;
 
 optics::TransferFunction slabTf(float sigma = kSigma) {
-    const glm::vec3 a(kAlbedo);
-    return optics::TransferFunction(
-        {{0.f, a, 0.f, {}}, {0.499f, a, 0.f, {}}, {0.501f, a, sigma, {}}, {1.f, a, sigma, {}}},
-        {0.5f, 1.f}, "slab");
-}
-
-struct Medium {
-    std::shared_ptr<const core::Volume> volume;
-    std::shared_ptr<const optics::TfTable> table;
-    std::shared_ptr<const grid::BrickMajorants> cells;
-    PathTracer tracer(pathtrace::Options o = {}) const {
-        return PathTracer(volume, table, cells, o);
-    }
-};
-
-Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf, int size = 32) {
-    Medium s;
-    auto v = std::make_shared<core::Volume>(core::makePhantom(phantom, {.size = size}));
-    s.table = std::make_shared<optics::TfTable>(tf);
-    const grid::BrickGrid grid = grid::BrickGrid::build(*v);
-    render::RenderOptions ro;
-    ro.mode = render::Mode::EmissionAbsorption;
-    s.cells =
-        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
-    s.volume = v;
-    return s;
+    return test::stepTf(sigma, glm::vec3(kAlbedo), "slab");
 }
 
 /// exp(−∫σt) along the kept part of `ray` by a fine midpoint rule.

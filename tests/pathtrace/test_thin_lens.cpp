@@ -8,10 +8,9 @@
 #include <cmath>
 #include <numbers>
 
-#include "core/phantoms.h"
 #include "core/rng.h"
-#include "grid/brick_grid.h"
 #include "pathtrace/path_tracer.h"
+#include "pathtrace_test_util.h"
 #include "render/camera.h"
 #include "render/ray_caster.h"
 
@@ -78,33 +77,15 @@ TEST(ThinLens, BadLensSettingsAreInputErrors) {
 }
 
 namespace {
-struct Slab {
-    std::shared_ptr<const core::Volume> volume;
-    std::shared_ptr<const optics::TfTable> table;
-    std::shared_ptr<const grid::BrickMajorants> cells;
-};
 constexpr float kSigma = 0.2f;  // 1/mm inside the slab
-Slab makeSlab() {
-    Slab s;
-    auto v = std::make_shared<core::Volume>(core::makePhantom("slab", {.size = 32}));
-    const glm::vec3 a(0.8f);
-    const optics::TransferFunction tf(
-        {{0.f, a, 0.f, {}}, {0.499f, a, 0.f, {}}, {0.501f, a, kSigma, {}}, {1.f, a, kSigma, {}}},
-        {0.5f, 1.f}, "slab");
-    s.table = std::make_shared<optics::TfTable>(tf);
-    const grid::BrickGrid grid = grid::BrickGrid::build(*v);
-    render::RenderOptions ro;
-    ro.mode = render::Mode::EmissionAbsorption;
-    s.cells =
-        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
-    s.volume = v;
-    return s;
+test::Medium makeSlab() {
+    return test::makeMedium("slab", test::stepTf(kSigma, glm::vec3(0.8f), "slab"), 32);
 }
 }  // namespace
 
 TEST(ThinLens, AutofocusFindsWhereTheCentreRayHasLostHalfItsLight) {
-    const Slab s = makeSlab();
-    const pathtrace::PathTracer t(s.volume, s.table, s.cells, {});
+    const test::Medium s = makeSlab();
+    const pathtrace::PathTracer t = s.tracer();
     // Looking straight down (superior view) onto the slab's top face.
     render::CameraSpec spec;
     spec.elevationDeg = 90.0;
@@ -130,7 +111,7 @@ TEST(ThinLens, ThePlaneInFocusStaysSharpAndAPlaneOutOfFocusBlurs) {
     // Seen from above, the slab's top face is an edge against the background at the image's
     // sides. Focused on it, a wide aperture keeps the edge pixels' coverage as the pinhole's; focused
     // far behind it, the edge spreads over more pixels.
-    const Slab s = makeSlab();
+    const test::Medium s = makeSlab();
     render::CameraSpec spec;
     spec.azimuthDeg = 0.0, spec.elevationDeg = 0.0;  // side view: the slab is a horizontal band
     const auto b = s.volume->geometry().worldBounds();
@@ -141,7 +122,7 @@ TEST(ThinLens, ThePlaneInFocusStaysSharpAndAPlaneOutOfFocusBlurs) {
         o.apertureMm = aperture;
         o.focusMm = focus;
         o.maxBounces = 1;
-        const pathtrace::PathTracer t(s.volume, s.table, s.cells, o);
+        const pathtrace::PathTracer t = s.tracer(o);
         const core::ImageRGBA im = t.render(cam, core::Progress::none());
         std::vector<double> column;
         for (int y = 0; y < 32; ++y) column.push_back(im.pixels[(std::size_t(y) * 16 + 8) * 4 + 3]);

@@ -8,10 +8,9 @@
 
 #include <cmath>
 
-#include "core/phantoms.h"
-#include "grid/brick_grid.h"
 #include "lights/environment_light.h"
 #include "pathtrace/path_tracer.h"
+#include "pathtrace_test_util.h"
 #include "render/ray_caster.h"
 
 using namespace voxlight;
@@ -26,28 +25,13 @@ constexpr float kSigma = 0.5f;
 constexpr int kMaxBounces = 1000;  // albedo 1 never plays roulette: paths end by escaping
 
 struct Furnace {
-    std::shared_ptr<const core::Volume> volume;
-    std::shared_ptr<const optics::TfTable> table;
-    std::shared_ptr<const grid::BrickMajorants> cells;
+    test::Medium medium;
     std::shared_ptr<const lights::Light> environment;
 };
 
 Furnace makeFurnace() {
     Furnace f;
-    auto v = std::make_shared<core::Volume>(core::makePhantom("sphere", {.size = 24}));
-    const glm::vec3 white(1.f);
-    const optics::TransferFunction tf({{0.f, white, 0.f, {}},
-                                       {0.499f, white, 0.f, {}},
-                                       {0.501f, white, kSigma, {}},
-                                       {1.f, white, kSigma, {}}},
-                                      {0.5f, 1.f}, "white");
-    f.table = std::make_shared<optics::TfTable>(tf);
-    const grid::BrickGrid grid = grid::BrickGrid::build(*v);
-    render::RenderOptions ro;
-    ro.mode = render::Mode::EmissionAbsorption;
-    f.cells =
-        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *f.table, ro));
-    f.volume = v;
+    f.medium = test::makeMedium("sphere", test::stepTf(kSigma, glm::vec3(1.f), "white"), 24);
     core::ImageRGBA sky(16, 8);
     for (std::size_t p = 0; p < sky.pixels.size(); ++p) sky.pixels[p] = 1.f;
     f.environment = std::make_shared<lights::EnvironmentLight>(sky, lights::EnvironmentOptions{});
@@ -68,8 +52,8 @@ Outcome furnace(float g, int maxBounces) {
     o.pixelJitter = false;
     o.background = glm::vec3(1.f);
     o.lights = {f.environment};
-    const pathtrace::PathTracer tracer(f.volume, f.table, f.cells, o);
-    const auto b = f.volume->geometry().worldBounds();
+    const pathtrace::PathTracer tracer = f.medium.tracer(o);
+    const auto b = f.medium.volume->geometry().worldBounds();
     const render::Camera cam(render::CameraSpec{}, b[0], b[1], 8, 8);
     core::ImageRGBA se;
     const core::ImageRGBA im = tracer.render(cam, core::Progress::none(), nullptr, &se);
@@ -93,9 +77,8 @@ Outcome furnace(float g, int maxBounces) {
 
 TEST(WhiteFurnace, TheMediumIsThickEnoughToMatter) {
     const Furnace f = makeFurnace();
-    pathtrace::Options o;
-    const pathtrace::PathTracer tracer(f.volume, f.table, f.cells, o);
-    const auto b = f.volume->geometry().worldBounds();
+    const pathtrace::PathTracer tracer = f.medium.tracer();
+    const auto b = f.medium.volume->geometry().worldBounds();
     const glm::dvec3 c = 0.5 * (b[0] + b[1]);
     core::CounterRng rng(7);
     double T = 0.0;

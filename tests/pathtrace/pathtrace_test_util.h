@@ -1,0 +1,49 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// A phantom under a TF, ready for the path tracer: the volume, its TF table and the majorant
+// cells the pipeline's skip_cells stage would build (emission-absorption skip rule).
+#include <memory>
+#include <string>
+
+#include "core/phantoms.h"
+#include "grid/brick_grid.h"
+#include "pathtrace/path_tracer.h"
+#include "render/ray_caster.h"
+
+namespace voxlight::test {
+
+struct Medium {
+    std::shared_ptr<const core::Volume> volume;
+    std::shared_ptr<const optics::TfTable> table;
+    std::shared_ptr<const grid::BrickMajorants> cells;
+    pathtrace::PathTracer tracer(pathtrace::Options o = {}) const {
+        return pathtrace::PathTracer(volume, table, cells, std::move(o));
+    }
+};
+
+inline Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf,
+                         int size = 32) {
+    Medium s;
+    auto v = std::make_shared<core::Volume>(core::makePhantom(phantom, {.size = size}));
+    s.table = std::make_shared<optics::TfTable>(tf);
+    const grid::BrickGrid grid = grid::BrickGrid::build(*v);
+    render::RenderOptions ro;
+    ro.mode = render::Mode::EmissionAbsorption;
+    s.cells =
+        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
+    s.volume = v;
+    return s;
+}
+
+/// A TF that is empty below value 0.5 and holds σt = `sigma` with albedo `albedo` above (a sharp
+/// step: the phantoms' matter is 1, their background 0).
+inline optics::TransferFunction stepTf(float sigma, glm::vec3 albedo,
+                                       const std::string& name = "step") {
+    return optics::TransferFunction({{0.f, albedo, 0.f, {}},
+                                     {0.499f, albedo, 0.f, {}},
+                                     {0.501f, albedo, sigma, {}},
+                                     {1.f, albedo, sigma, {}}},
+                                    {0.5f, 1.f}, name);
+}
+
+}  // namespace voxlight::test
