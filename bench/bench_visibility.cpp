@@ -9,11 +9,18 @@
 // (ct-bone), 32 rays, 4 coefficients, at equal numbers of visibility points: Ritschel 1:2 / 1:4
 // sub-sampling (one point per 8 / 64 voxels) vs local data reduction 1:8 / 1:64. Medians of 3
 // runs; the end of the run prints the ratio of the medians (Ritschel / local).
+// BM_TfEdit: a user's TF edit in the viewer — the field under the preset exists, one control point
+// changes — computed in full (LOD + local visibility) against updateLocalVisibility from the
+// previous field (LOD + only the blocks the edit reaches), 1:16, 32 rays, 4 coefficients, r_s 16.
+// Edits: ct-bone's rim point (250 HU, σt ×2: values 140…450 change), ct-soft-tissue's bone point
+// (600 HU, ×2: 220…3071), its fat point (−90 HU, ×2: −160…−30), and a colour-only change. Counters: blocks recomputed / stored, and how many changed level. Medians of 3; the end
+// prints the ratio per edit (update / full).
 // bench-deps: visibility optics core
 #include <benchmark/benchmark.h>
 
 #include <cstdio>
 #include <map>
+#include <optional>
 #include <string>
 
 #include "core/phantoms.h"
@@ -166,14 +173,86 @@ BENCHMARK(BM_VsLocal)
     ->Repetitions(3)
     ->ReportAggregatesOnly(true);
 
+struct TfEdit {
+    const char* name;
+    const char* preset;
+    float value;   ///< the control point edited
+    float factor;  ///< σt × factor (1: colour only)
+};
+constexpr TfEdit kEdits[] = {{"ct-bone rim 250 HU x2", "ct-bone", 250.f, 2.f},
+                             {"ct-soft-tissue bone 600 HU x2", "ct-soft-tissue", 600.f, 2.f},
+                             {"ct-soft-tissue fat -90 HU x2", "ct-soft-tissue", -90.f, 2.f},
+                             {"ct-bone colour of 450 HU", "ct-bone", 450.f, 1.f}};
+
+optics::TransferFunction edited(const TfEdit& e) {
+    const optics::TransferFunction base = optics::makePreset(e.preset);
+    std::vector<optics::TfPoint> pts = base.points();
+    for (optics::TfPoint& p : pts)
+        if (p.value == e.value) {
+            p.extinction *= e.factor;
+            if (e.factor == 1.f) p.color = glm::vec3(0.9f, 0.2f, 0.2f);
+        }
+    return optics::TransferFunction(pts, base.window(), "edited");
+}
+
+/// arg 0: edit (kEdits); arg 1: 0 = full computation, 1 = update from the preset's field.
+void BM_TfEdit(benchmark::State& state) {
+    constexpr double kReduction = 16.0;
+    const TfEdit& e = kEdits[state.range(0)];
+    const bool update = state.range(1) == 1;
+    const auto pyramid = torsoPyramid();
+    const auto budget =
+        visibility::LodBudget::fromReduction(kReduction, pyramid->geometry().voxelCount());
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 32;
+    o.radiusVoxels = 16.0;
+    const optics::TransferFunction before = optics::makePreset(e.preset), after = edited(e);
+    std::optional<visibility::LocalVisibility> previous;
+    if (update) {
+        const optics::TfTable table(before);
+        previous = visibility::computeLocalVisibility(
+            std::make_shared<const visibility::MultiresGrid>(
+                pyramid, visibility::selectLod(*pyramid, before, table, budget)),
+            table, o);
+    }
+    visibility::TfUpdateStats st;
+    for (auto _ : state) {
+        const optics::TfTable table(after);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, after, table, budget));
+        const visibility::LocalVisibility v =
+            update ? visibility::updateLocalVisibility(*previous, grid, table, o,
+                                                       core::Progress::none(), &st)
+                   : visibility::computeLocalVisibility(grid, table, o);
+        benchmark::DoNotOptimize(v.blockData(0));
+    }
+    state.SetLabel(std::string(e.name) + (update ? " update" : " full"));
+    if (update) {
+        state.counters["blocks_recomputed"] = double(st.blocksRecomputed);
+        state.counters["blocks"] = double(st.blocks);
+        state.counters["blocks_new_level"] = double(st.blocksLevelChanged);
+    }
+}
+BENCHMARK(BM_TfEdit)
+    ->ArgsProduct({{0, 1, 2, 3}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(1)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
 /// The console reporter that also keeps BM_VsLocal's medians, to print their ratios at the end.
 class RatioReporter : public benchmark::ConsoleReporter {
   public:
     void ReportRuns(const std::vector<Run>& runs) override {
         for (const Run& r : runs)
-            if (r.aggregate_name == "median" &&
-                r.run_name.function_name.find("BM_VsLocal") != std::string::npos)
-                median_[r.run_name.args] = r.GetAdjustedRealTime();
+            if (r.aggregate_name == "median") {
+                if (r.run_name.function_name.find("BM_VsLocal") != std::string::npos)
+                    median_[r.run_name.args] = r.GetAdjustedRealTime();
+                if (r.run_name.function_name.find("BM_TfEdit") != std::string::npos)
+                    edit_[r.run_name.args] = r.GetAdjustedRealTime();
+            }
         ConsoleReporter::ReportRuns(runs);
     }
     void printRatios() const {
@@ -184,10 +263,17 @@ class RatioReporter : public benchmark::ConsoleReporter {
             std::printf("Ritschel / local visibility at 1:%d: %.0f / %.0f ms = %.3f\n", v,
                         rit->second, local->second, rit->second / local->second);
         }
+        for (std::size_t e = 0; e < std::size(kEdits); ++e) {
+            const auto full = edit_.find(std::to_string(e) + "/0");
+            const auto upd = edit_.find(std::to_string(e) + "/1");
+            if (full == edit_.end() || upd == edit_.end()) continue;
+            std::printf("TF edit '%s': update / full = %.0f / %.0f ms = %.3f\n", kEdits[e].name,
+                        upd->second, full->second, upd->second / full->second);
+        }
     }
 
   private:
-    std::map<std::string, double> median_;
+    std::map<std::string, double> median_, edit_;
 };
 
 }  // namespace

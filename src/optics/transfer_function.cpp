@@ -2,7 +2,9 @@
 #include "optics/transfer_function.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <cstdint>
 #include <ostream>
 #include <sstream>
 
@@ -273,6 +275,26 @@ TfTable::Segment TfTable::segmentSlow(float sf, float sb, SegmentCache* cache) c
         g.emission[c] = float(std::max((wb[3 + c] - wa[3 + c]) * w, 0.0));
     }
     return g;
+}
+
+ValueInterval extinctionChange(const TfTable::ExtinctionProfile& before,
+                               const TfTable::ExtinctionProfile& after) {
+    if (before.lo != after.lo || before.hi != after.hi || before.sigma.size() != after.sigma.size())
+        return {-INFINITY, INFINITY};
+    const std::size_t n = after.sigma.size();
+    std::size_t first = n, last = 0;
+    for (std::size_t i = 0; i < n; ++i)
+        if (std::bit_cast<std::uint32_t>(before.sigma[i]) !=
+            std::bit_cast<std::uint32_t>(after.sigma[i])) {
+            first = std::min(first, i);
+            last = i;
+        }
+    if (first == n) return {};
+    const double cell = (double(after.hi) - double(after.lo)) / double(n - 1);
+    ValueInterval v;
+    v.lo = first == 0 ? -INFINITY : float(double(after.lo) + cell * (double(first) - 2.0));
+    v.hi = last == n - 1 ? INFINITY : float(double(after.lo) + cell * (double(last) + 2.0));
+    return v;
 }
 
 }  // namespace voxlight::optics

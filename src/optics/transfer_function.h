@@ -215,6 +215,13 @@ class TfTable {
     float lo() const { return lo_; }
     float hi() const { return hi_; }
 
+    /// σt at the table's nodes and the value range they span: all a visibility field depends on.
+    struct ExtinctionProfile {
+        float lo = 0.f, hi = 0.f;
+        std::vector<float> sigma;  ///< kTableCells + 1 nodes
+    };
+    ExtinctionProfile extinctionProfile() const { return {lo_, hi_, sigma_}; }
+
   private:
     /// Where a value falls in the table: its cell and the fraction across it (values outside the
     /// range, and NaN, clamp to the ends).
@@ -260,5 +267,22 @@ class TfTable {
     };
     std::vector<FusedNode> fused_;  // kTableCells + 1, interleaved for integrals()
 };
+
+/// A closed interval of values; empty when lo > hi (the default).
+struct ValueInterval {
+    float lo = INFINITY, hi = -INFINITY;
+    bool empty() const { return !(lo <= hi); }
+    /// Whether [a, b] meets the interval.
+    bool meets(float a, float b) const { return a <= hi && b >= lo; }
+};
+
+/// The values whose σt may differ between two tables (TfTable::extinction, which interpolates
+/// between nodes and clamps outside the range): empty when every node agrees; from one cell below
+/// the first differing node to one cell above the last, widened by one more cell against rounding,
+/// and unbounded on a side whose end node differs (values beyond the range clamp to it); the whole
+/// line when the tables span different value ranges. A TF change that moves only interior points
+/// or only colours gives the interval the change touched (or none).
+ValueInterval extinctionChange(const TfTable::ExtinctionProfile& before,
+                               const TfTable::ExtinctionProfile& after);
 
 }  // namespace voxlight::optics

@@ -289,13 +289,14 @@ std::optional<std::uint64_t> ArtifactCache::record(const std::string& kind, std:
     return std::nullopt;
 }
 
-void ArtifactCache::putRecord(const std::string& kind, std::uint64_t key, std::uint64_t value) {
+void ArtifactCache::putRecord(const std::string& kind, std::uint64_t key, std::uint64_t value,
+                              bool onDisk) {
     {
         std::lock_guard lock(mutex_);
         records_[{kind, key}] = value;
     }
     // Always rewritten (atomically): a damaged or stale record is repaired by the next load.
-    if (dir_)
+    if (dir_ && onDisk)
         writeDisk(kind, key, recordCodec(),
                   Artifact::of(std::make_shared<const std::uint64_t>(value), 8));
 }

@@ -107,9 +107,11 @@ class ArtifactCache {
                    const Artifact& artifact);
     std::filesystem::path fileFor(const std::string& stage, std::uint64_t key) const;
 
-    /// Small records (memory, and disk when a directory is set).
+    /// Small records (memory, and disk when a directory is set and `onDisk`; a record that only
+    /// points at a memory-only artifact — the last field of a lineage — is kept in memory only).
     std::optional<std::uint64_t> record(const std::string& kind, std::uint64_t key);
-    void putRecord(const std::string& kind, std::uint64_t key, std::uint64_t value);
+    void putRecord(const std::string& kind, std::uint64_t key, std::uint64_t value,
+                   bool onDisk = true);
 
   private:
     using Id = std::pair<std::string, std::uint64_t>;

@@ -734,30 +734,71 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
     Stage vis{"local_visibility",
               StageKind::Precompute,
               {"multires_grid", "transfer_function", "method"}};
-    vis.key = [visKey](const Run& run) {
+    const auto visStageKey = [visKey](const Run& run) {
         return KeyBuilder(run, "local_visibility")
             .stage("multires_grid")
             .stage("transfer_function")
             .json(visKey)
             .value();
     };
-    vis.compute = [vo](Run& run) {
+    vis.key = visStageKey;
+    vis.compute = [vo, visKey, visStageKey](Run& run) {
         const auto tfa = run.get<TfArtifact>("transfer_function");
+        const auto grid = run.get<visibility::MultiresGrid>("multires_grid");
+        // A TF change on the same volume with the same rays, coefficients and radius starts from
+        // the last field computed (if the cache still holds it) and recomputes only the blocks
+        // the change reaches — the same field bit for bit (visibility/local_visibility.h).
+        const std::optional<std::uint64_t> lineage =
+            KeyBuilder(run, "local_visibility_lineage").stage("block_pyramid").json(visKey).value();
+        std::shared_ptr<const visibility::LocalVisibility> previous;
+        if (lineage)
+            if (const auto k = run.cache().record("local_visibility_last", *lineage))
+                if (const auto a = run.cache().findInMemory("local_visibility", *k))
+                    previous = a->as<visibility::LocalVisibility>();
+        visibility::TfUpdateStats st;
         auto v = std::make_shared<const visibility::LocalVisibility>(
-            visibility::computeLocalVisibility(run.get<visibility::MultiresGrid>("multires_grid"),
-                                               *tfa->table, vo, run.progress()));
-        run.details()["local_visibility"] = {{"rays_traced", v->raysTraced()},
-                                             {"samples", v->samplesTaken()},
-                                             {"bytes", v->bytes()}};
+            previous ? visibility::updateLocalVisibility(*previous, grid, *tfa->table, vo,
+                                                         run.progress(), &st)
+                     : visibility::computeLocalVisibility(grid, *tfa->table, vo, run.progress()));
+        if (const auto own = visStageKey(run); own && lineage)
+            run.cache().putRecord("local_visibility_last", *lineage, *own, false);
+        json d = {{"rays_traced", v->raysTraced()},
+                  {"samples", v->samplesTaken()},
+                  {"bytes", v->bytes()}};
+        if (previous) {
+            const auto bound = [](float x) { return std::isfinite(x) ? json(x) : json(nullptr); };
+            d["tf_update"] = {
+                {"incremental", st.incremental},
+                {"reason", st.reason},
+                {"sigma_changed_over",
+                 st.changed.empty() ? json(nullptr)
+                                    : json::array({bound(st.changed.lo), bound(st.changed.hi)})},
+                {"blocks", st.blocks},
+                {"blocks_level_changed", st.blocksLevelChanged},
+                {"blocks_recomputed", st.blocksRecomputed},
+                {"points", st.points},
+                {"points_recomputed", st.pointsRecomputed}};
+        }
+        run.details()["local_visibility"] = d;
         const std::size_t bytes = v->bytes();
         return Artifact::of<visibility::LocalVisibility>(std::move(v), bytes);
     };
     vis.notOnDisk = "recomputed per transfer function; reading it back saves little";
-    vis.describe = [](const Run&, const Artifact& a) {
+    vis.describe = [](const Run& run, const Artifact& a) {
         const auto& v = *a.as<visibility::LocalVisibility>();
         std::ostringstream os;
         os << v.rays() << " rays, " << v.coefficients() << " SH coefficients, r_s "
            << v.radiusVoxels() << " voxels, " << (v.bytes() >> 20) << " MB";
+        const json& u =
+            run.details().value("local_visibility", json::object()).value("tf_update", json());
+        if (u.is_object()) {
+            if (u["incremental"].get<bool>())
+                os << "; TF update: " << u["blocks_recomputed"].get<std::size_t>() << " of "
+                   << u["blocks"].get<std::size_t>() << " blocks recomputed ("
+                   << u["blocks_level_changed"].get<std::size_t>() << " at a new level)";
+            else
+                os << "; computed in full: " << u["reason"].get<std::string>();
+        }
         return os.str();
     };
     plan.stages.push_back(vis);

@@ -273,38 +273,43 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     return std::exp(-tau);
 }
 
-LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridPtr,
-                                       const optics::TfTable& table,
-                                       const LocalVisibilityOptions& options,
-                                       const core::Progress& progress) {
-    checkOptions(options);
-    VL_CHECK(gridPtr != nullptr);
-    const MultiresGrid& grid = *gridPtr;
-    const int C = options.coefficients, N = options.rays;
-    const core::Geometry& g = grid.pyramid().geometry();
-    const double h = core::minComponent(g.spacing);
-    const RaySet set(g, N, C);
+namespace {
 
-    const SigmaField sigma(grid, table);
-    const float radius = float(options.radiusVoxels * h), hf = float(h);
-    LocalVisibility out;
-    out.grid_ = gridPtr;
-    out.coefficients_ = C;
-    out.rays_ = N;
-    out.radius_ = options.radiusVoxels;
+/// Offsets of the stored blocks of `grid` into a field of C floats per sample point; returns the
+/// total float count and the stored blocks in index order.
+std::size_t layoutBlocks(const MultiresGrid& grid, int C, std::vector<std::size_t>& offset,
+                         std::vector<std::size_t>& stored) {
     const std::size_t blocks = grid.pyramid().blockCount();
-    out.offset_.assign(blocks, 0);
-    std::vector<std::size_t> stored;
+    offset.assign(blocks, 0);
+    stored.clear();
     std::size_t floats = 0;
     for (std::size_t b = 0; b < blocks; ++b) {
         const int l = grid.level(b);
         if (l == kNone) continue;
-        out.offset_[b] = floats;
+        offset[b] = floats;
         const std::size_t n = std::size_t(levelResolution(l));
         floats += n * n * n * std::size_t(C);
         stored.push_back(b);
     }
-    out.data_.assign(floats, 0.f);
+    return floats;
+}
+
+struct TraceCounts {
+    std::uint64_t samples = 0, rays = 0, skipped = 0;
+};
+
+/// V^L at every sample point of `blocks` (stored blocks of `grid`), written at data + offset[b];
+/// parallel over blocks, each point alone with a fixed order of operations.
+TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
+                        const LocalVisibilityOptions& options,
+                        const std::vector<std::size_t>& blocks, float* data,
+                        const std::vector<std::size_t>& offset, const core::Progress& progress) {
+    const int C = options.coefficients, N = options.rays;
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RaySet set(g, N, C);
+    const SigmaField sigma(grid, table);
+    const float radius = float(options.radiusVoxels * h), hf = float(h);
 
     std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
     std::atomic<std::size_t> done{0};
@@ -313,15 +318,15 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
     arena.execute([&] {
         tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, stored.size(), 1), [&](const auto& range) {
+            tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
                 if (progress.cancelled()) return;
                 std::uint64_t samples = 0, traced = 0, skipped = 0;
                 double v[16];
                 for (std::size_t r = range.begin(); r != range.end(); ++r) {
-                    const std::size_t b = stored[r];
+                    const std::size_t b = blocks[r];
                     const int l = grid.level(b);
                     const int n = levelResolution(l);
-                    float* dst = out.data_.data() + out.offset_[b];
+                    float* dst = data + offset[b];
                     for (int k = 0; k < n; ++k)
                         for (int j = 0; j < n; ++j)
                             for (int i = 0; i < n; ++i, dst += C) {
@@ -347,14 +352,177 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                 skippedTotal += skipped;
                 const std::size_t now = done.fetch_add(range.size()) + range.size();
                 if (std::this_thread::get_id() == caller)  // workers only stop taking blocks
-                    progress.report("local visibility", double(now) / double(stored.size()));
+                    progress.report("local visibility", double(now) / double(blocks.size()));
             });
     });
     if (progress.cancelled()) throw CancelledError();
     progress.report("local visibility", 1.0);
-    out.samplesTaken_ = samplesTotal;
-    out.raysTraced_ = raysTotal;
-    out.pointsSkipped_ = skippedTotal;
+    return {samplesTotal, raysTotal, skippedTotal};
+}
+
+/// Per block of the pyramid: whether a TF change from `before` to `after` (selections; `changed`:
+/// the values whose σt differs) can change what a visibility ray reads inside it — its level, the
+/// σt of one of its stored samples, or the visibility flag of one of its cells (see the header
+/// comment).
+std::vector<std::uint8_t> changeSources(const MultiresGrid& before, const MultiresGrid& after,
+                                        const optics::ValueInterval& changed) {
+    const BlockPyramid& pyr = after.pyramid();
+    std::vector<std::uint8_t> source(pyr.blockCount(), 0);
+    for (std::size_t b = 0; b < pyr.blockCount(); ++b) {
+        const int l = after.level(b);
+        if (before.level(b) != l) {
+            source[b] = 1;
+            continue;
+        }
+        if (l == kNone || changed.empty()) continue;
+        const BlockStats& st = pyr.stats(b);
+        if (!changed.meets(st.min, st.max)) continue;
+        const float* v = after.levelData(b);
+        const int n = levelResolution(l);
+        for (int i = 0; i < n * n * n && !source[b]; ++i) source[b] = changed.meets(v[i], v[i]);
+    }
+    const glm::ivec3 cells = pyr.cells();
+    const std::vector<std::uint8_t>& visA = before.selection().cellVisible;
+    const std::vector<std::uint8_t>& visB = after.selection().cellVisible;
+    constexpr int kCellsPerBlock = kBlockSize / BlockPyramid::kCellVoxels;
+    for (int z = 0; z < cells.z; ++z)
+        for (int y = 0; y < cells.y; ++y)
+            for (int x = 0; x < cells.x; ++x) {
+                const std::size_t c =
+                    std::size_t(x) + std::size_t(cells.x) * (y + std::size_t(cells.y) * z);
+                if ((visA.empty() ? 1 : visA[c]) != (visB.empty() ? 1 : visB[c]))
+                    source[pyr.blockIndex(x / kCellsPerBlock, y / kCellsPerBlock,
+                                          z / kCellsPerBlock)] = 1;
+            }
+    return source;
+}
+
+}  // namespace
+
+LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridPtr,
+                                       const optics::TfTable& table,
+                                       const LocalVisibilityOptions& options,
+                                       const core::Progress& progress) {
+    checkOptions(options);
+    VL_CHECK(gridPtr != nullptr);
+    LocalVisibility out;
+    out.grid_ = gridPtr;
+    out.extinction_ =
+        std::make_shared<const optics::TfTable::ExtinctionProfile>(table.extinctionProfile());
+    out.coefficients_ = options.coefficients;
+    out.rays_ = options.rays;
+    out.radius_ = options.radiusVoxels;
+    std::vector<std::size_t> stored;
+    out.data_.assign(layoutBlocks(*gridPtr, options.coefficients, out.offset_, stored), 0.f);
+    const TraceCounts n =
+        traceBlocks(*gridPtr, table, options, stored, out.data_.data(), out.offset_, progress);
+    out.samplesTaken_ = n.samples;
+    out.raysTraced_ = n.rays;
+    out.pointsSkipped_ = n.skipped;
+    return out;
+}
+
+LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
+                                      std::shared_ptr<const MultiresGrid> gridPtr,
+                                      const optics::TfTable& table,
+                                      const LocalVisibilityOptions& options,
+                                      const core::Progress& progress, TfUpdateStats* stats) {
+    core::Stopwatch clock;
+    checkOptions(options);
+    VL_CHECK(gridPtr != nullptr);
+    const MultiresGrid& grid = *gridPtr;
+    TfUpdateStats st;
+    auto full = [&](const std::string& why) {
+        LocalVisibility v = computeLocalVisibility(gridPtr, table, options, progress);
+        st.reason = why;
+        for (std::size_t b = 0; b < grid.pyramid().blockCount(); ++b)
+            if (grid.level(b) != kNone) {
+                const std::uint64_t n = std::uint64_t(levelResolution(grid.level(b)));
+                ++st.blocks;
+                st.points += n * n * n;
+            }
+        st.blocksRecomputed = st.blocks;
+        st.pointsRecomputed = st.points;
+        st.blocksLevelChanged = st.blocks;
+        st.changed = {-INFINITY, INFINITY};
+        st.seconds = clock.seconds();
+        if (stats) *stats = st;
+        return v;
+    };
+    if (!previous.grid_ || !previous.extinction_) return full("no previous field");
+    if (&previous.grid().pyramid() != &grid.pyramid())
+        return full("the previous field belongs to another volume");
+    if (previous.rays_ != options.rays || previous.coefficients_ != options.coefficients ||
+        previous.radius_ != options.radiusVoxels)
+        return full("the previous field has other rays, coefficients or radius");
+
+    const MultiresGrid& before = previous.grid();
+    const auto profile =
+        std::make_shared<const optics::TfTable::ExtinctionProfile>(table.extinctionProfile());
+    st.changed = optics::extinctionChange(*previous.extinction_, *profile);
+    const std::vector<std::uint8_t> source = changeSources(before, grid, st.changed);
+
+    // The blocks to trace again: a changed level, or a source within reach.
+    const BlockPyramid& pyr = grid.pyramid();
+    const core::Geometry& g = pyr.geometry();
+    const double h = core::minComponent(g.spacing);
+    std::vector<glm::ivec3> sources;
+    for (std::size_t b = 0; b < source.size(); ++b)
+        if (source[b]) sources.push_back(pyr.blockCoord(b));
+    LocalVisibility out;
+    out.grid_ = gridPtr;
+    out.extinction_ = profile;
+    out.coefficients_ = options.coefficients;
+    out.rays_ = options.rays;
+    out.radius_ = options.radiusVoxels;
+    std::vector<std::size_t> stored;
+    out.data_.assign(layoutBlocks(grid, options.coefficients, out.offset_, stored), 0.f);
+    std::vector<std::size_t> trace;
+    const std::size_t C = std::size_t(options.coefficients);
+    for (const std::size_t b : stored) {
+        const int l = grid.level(b);
+        const std::uint64_t n = std::uint64_t(levelResolution(l));
+        ++st.blocks;
+        st.points += n * n * n;
+        bool redo = before.level(b) != l;
+        st.blocksLevelChanged += redo;
+        if (!redo) {
+            // Reach per axis in block units: a source whose voxel extent lies within it.
+            const glm::ivec3 bc = pyr.blockCoord(b);
+            glm::dvec3 reach;
+            for (int a = 0; a < 3; ++a)
+                reach[a] =
+                    std::max(options.radiusVoxels * h / g.spacing[a], 2.0 * levelSpacing(l) + 1.0) +
+                    kUpdateMarginVoxels;
+            for (const glm::ivec3& sc : sources) {
+                bool within = true;
+                for (int a = 0; a < 3 && within; ++a) {
+                    const int d = std::abs(sc[a] - bc[a]);
+                    within = double(kBlockSize) * double(std::max(d - 1, 0)) <= reach[a];
+                }
+                if (within) {
+                    redo = true;
+                    break;
+                }
+            }
+        }
+        if (redo) {
+            trace.push_back(b);
+            ++st.blocksRecomputed;
+            st.pointsRecomputed += n * n * n;
+        } else {
+            const std::size_t m = n * n * n * C;
+            std::copy_n(previous.blockData(b), m, out.data_.data() + out.offset_[b]);
+        }
+    }
+    const TraceCounts counts =
+        traceBlocks(grid, table, options, trace, out.data_.data(), out.offset_, progress);
+    out.samplesTaken_ = counts.samples;
+    out.raysTraced_ = counts.rays;
+    out.pointsSkipped_ = counts.skipped;
+    st.incremental = true;
+    st.seconds = clock.seconds();
+    if (stats) *stats = st;
     return out;
 }
 

@@ -47,9 +47,27 @@
 // over its part inside the kept region (one interval: the region is convex). So moving a plane
 // costs rays in a slab of width 2R around it, not the whole field, and the unclipped field stays
 // cached for the next move.
+//
+// TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
+// new TF from the one computed under the previous TF on the same block pyramid, recomputing only
+// the blocks the change can reach, with a result identical bit for bit to computeLocalVisibility.
+// What a point's value reads: σt of the blocks owning its ray samples (all within R of it) at their
+// selected levels, the step lengths those levels give, and the cell-visibility flags of the cells
+// its rays cross and of those within 2·s + 1 voxels (visibilityNeeded). A block is a *source of
+// change* when its level differs between the two selections, one of its cells changed visibility,
+// or one of its stored samples (at its selected level) has a value whose σt differs between the
+// two tables (optics::extinctionChange — σt only: a colour-only edit changes no value). A stored
+// block is recomputed when its own level changed or a source block lies within its reach — per
+// axis, the gap between the two blocks' voxel extents within max(R / spacing_a, 2·s + 1) +
+// kUpdateMarginVoxels; every other block copies its
+// previous coefficients (same level, same samples, same σt along every ray). So a TF edit over a
+// narrow value range (moving the soft-tissue ramp) recomputes the blocks near the tissue it touches,
+// and the LOD selection's own reshuffling (the budget is global) is what else it costs; the stats
+// report both.
 #include <cstdint>
 #include <memory>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "core/half_space.h"
@@ -99,6 +117,23 @@ struct ClipUpdateStats {
     double seconds = 0.0;
 };
 
+/// What a TF update did (the pipeline's stats report it).
+struct TfUpdateStats {
+    bool incremental = false;  ///< false: computed in full, `reason` says why
+    std::string reason;
+    optics::ValueInterval changed;       ///< values whose σt differs between the two TFs
+    std::size_t blocks = 0;              ///< stored blocks of the new selection
+    std::size_t blocksLevelChanged = 0;  ///< of those, at another level than before (or new)
+    std::size_t blocksRecomputed = 0;    ///< traced again (the rest copied)
+    std::uint64_t points = 0;            ///< stored sample points
+    std::uint64_t pointsRecomputed = 0;  ///< in the recomputed blocks
+    double seconds = 0.0;
+};
+
+/// Voxels added to a block's reach in a TF update: ownership (nearest voxel) and cell (voxels
+/// [4c, 4c + 4]) boundaries sit up to one voxel from a block's extent; one more against rounding.
+inline constexpr double kUpdateMarginVoxels = 2.0;
+
 /// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
 /// x fastest, then coefficient).
 class LocalVisibility {
@@ -121,15 +156,24 @@ class LocalVisibility {
     /// space's value (√(4π), 0, …) where no stored block contributes.
     void sample(const glm::vec3& p, float* out) const;
 
+    /// σt of the TF the field was computed under (what a TF update compares against).
+    const optics::TfTable::ExtinctionProfile& extinction() const { return *extinction_; }
+
   private:
     friend LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid>,
                                                   const optics::TfTable&,
                                                   const LocalVisibilityOptions&,
                                                   const core::Progress&);
+    friend LocalVisibility updateLocalVisibility(const LocalVisibility&,
+                                                 std::shared_ptr<const MultiresGrid>,
+                                                 const optics::TfTable&,
+                                                 const LocalVisibilityOptions&,
+                                                 const core::Progress&, TfUpdateStats*);
     friend LocalVisibility clipAwareLocalVisibility(const LocalVisibility&, const optics::TfTable&,
                                                     std::span<const core::HalfSpace>, int,
                                                     const core::Progress&, ClipUpdateStats*);
     std::shared_ptr<const MultiresGrid> grid_;
+    std::shared_ptr<const optics::TfTable::ExtinctionProfile> extinction_;
     int coefficients_ = 0, rays_ = 0;
     double radius_ = 0.0;
     std::vector<std::size_t> offset_;
@@ -142,6 +186,17 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> grid,
                                        const optics::TfTable& table,
                                        const LocalVisibilityOptions& options,
                                        const core::Progress& progress = core::Progress::none());
+
+/// V^L on `grid` under `table`, identical to computeLocalVisibility(grid, table, options), from
+/// `previous` (computed under another TF on the same BlockPyramid object with the same rays,
+/// coefficients and radius), recomputing only the blocks the change reaches (see the header
+/// comment). When `previous` does not qualify it computes in full and says why in the stats.
+LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
+                                      std::shared_ptr<const MultiresGrid> grid,
+                                      const optics::TfTable& table,
+                                      const LocalVisibilityOptions& options,
+                                      const core::Progress& progress = core::Progress::none(),
+                                      TfUpdateStats* stats = nullptr);
 
 /// V^L of `base`'s grid, rays, coefficients and radius with the matter outside `kept` (world
 /// half-spaces; their intersection is kept) treated as empty, recomputing only the points within

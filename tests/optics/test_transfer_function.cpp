@@ -171,3 +171,45 @@ TEST(Presets, RobustRangeOfTheTorsoCoversAirToBone) {
     EXPECT_GT(r[1], 40.f);
     EXPECT_EQ(optics::defaultPresetName(v), "ct-bone");
 }
+
+TEST(TfTable, ExtinctionChangeCoversEveryValueWhoseSigmaDiffers) {
+    // Brute force: σt through the tables at 200 001 values from far below to far above the range;
+    // every value where the two differ lies in the interval, and a colour-only edit gives none.
+    const auto tf = [](float mid, float sigma, glm::vec3 c, float first) {
+        return TransferFunction({{first, c, 0.f, glm::vec3(0.f)},
+                                 {-100.f, c, 0.f, glm::vec3(0.f)},
+                                 {mid, c, sigma, glm::vec3(0.f)},
+                                 {900.f, c, 0.1f, glm::vec3(0.f)},
+                                 {3000.f, c, 0.5f, glm::vec3(0.f)}},
+                                {0.f, 1000.f});
+    };
+    const glm::vec3 grey(0.5f), red(1.f, 0.f, 0.f);
+    struct Edit {
+        TransferFunction before, after;
+        bool none;
+    };
+    const std::vector<Edit> edits = {
+        {tf(300.f, 0.05f, grey, -1000.f), tf(300.f, 0.2f, grey, -1000.f), false},   // σt at 300
+        {tf(300.f, 0.05f, grey, -1000.f), tf(420.f, 0.05f, grey, -1000.f), false},  // point moved
+        {tf(300.f, 0.05f, grey, -1000.f), tf(300.f, 0.05f, red, -1000.f), true},    // colour only
+        {tf(300.f, 0.05f, grey, -1000.f), tf(300.f, 0.05f, grey, -1200.f), false},  // end moved
+    };
+    for (const Edit& e : edits) {
+        const optics::TfTable a(e.before), b(e.after);
+        const optics::ValueInterval changed =
+            optics::extinctionChange(a.extinctionProfile(), b.extinctionProfile());
+        EXPECT_EQ(changed.empty(), e.none);
+        int differing = 0;
+        for (int i = 0; i <= 200000; ++i) {
+            const float v = -2000.f + 0.03f * float(i);
+            if (a.extinction(v) != b.extinction(v)) {
+                ++differing;
+                EXPECT_TRUE(changed.meets(v, v)) << "σt differs at " << v << " outside ["
+                                                 << changed.lo << ", " << changed.hi << "]";
+            }
+        }
+        EXPECT_EQ(differing == 0, e.none);
+        if (!e.none && std::isfinite(changed.lo))  // tight: within the edit's span ± 3 cells
+            EXPECT_GT(changed.lo, -100.f - 3.f * a.cellWidth());
+    }
+}

@@ -88,6 +88,42 @@ TEST(ShLocal, TfAndParamChangesRerunOnlyWhatDependsOnThem) {
     EXPECT_EQ(r.params["radius"], 16.0);
 }
 
+TEST(ShLocal, ATfEditOverAValueIntervalRecomputesOnlyTheBlocksItReaches) {
+    // A CT-like TF by points; the edit changes σt over 1300…1900 HU only (dense bone: the
+    // torso's spine and rib cores). The session keeps the last field, so the update traces only
+    // blocks near such values — and the image is bit for bit the one a fresh session renders.
+    const auto tf = [](double dense) {
+        const json white = {1, 1, 1};
+        return json{{"points",
+                     {{{"value", -1000}, {"color", white}, {"extinction", 0}},
+                      {{"value", 150}, {"color", white}, {"extinction", 0}},
+                      {{"value", 300}, {"color", white}, {"extinction", 0.05}},
+                      {{"value", 1300}, {"color", white}, {"extinction", 0.5}},
+                      {{"value", 1600}, {"color", white}, {"extinction", dense}},
+                      {{"value", 1900}, {"color", white}, {"extinction", 0.5}},
+                      {{"value", 3000}, {"color", white}, {"extinction", 2}}}}};
+    };
+    json d = shScene();
+    d["volume"]["size"] = 64;
+    d["method"]["params"] = {{"rays", 8}, {"data_reduction", 1}, {"radius", 8}};
+    d["transfer_function"] = tf(0.5);
+    Session session;
+    const RunResult first = session.run(scene(d));
+    EXPECT_FALSE(first.details["local_visibility"].contains("tf_update"));  // nothing before
+    d["transfer_function"] = tf(3.0);
+    const RunResult edited = session.run(scene(d));
+    ASSERT_TRUE(edited.stage("local_visibility").ran);
+    const json& u = edited.details["local_visibility"]["tf_update"];
+    EXPECT_TRUE(u["incremental"].get<bool>()) << u;
+    EXPECT_EQ(u["blocks_level_changed"], 0) << u;  // data reduction 1: every stored block at 16³
+    EXPECT_GT(u["blocks_recomputed"].get<int>(), 0) << u;
+    EXPECT_LT(u["blocks_recomputed"].get<int>(), u["blocks"].get<int>()) << u;
+    EXPECT_NE(edited.stage("local_visibility").reason.find("blocks recomputed"), std::string::npos)
+        << edited.stage("local_visibility").reason;
+    const RunResult fresh = Session().run(scene(d));
+    EXPECT_EQ(edited.image.pixels, fresh.image.pixels);
+}
+
 TEST(ShLocal, ParamsAreReadStrictly) {
     auto planOf = [](const json& params) {
         json d = shScene();
