@@ -59,6 +59,8 @@
 #include "render/framing.h"
 #include "render/ray_caster.h"
 #include "render/sh_shading.h"
+#include "sh/sh_basis.h"
+#include "sh/sh_window.h"
 #include "visibility/global_visibility.h"
 #include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
@@ -315,6 +317,20 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
         s.global.threads = scene.render.threads;
     }
     return s;
+}
+
+/// The SH methods' ringing window (render/sh_shading.h): `window` none|hanning|lanczos|gaussian,
+/// `window_strength` (Gaussian λ only). Band factors for `coefficients`, empty for none.
+std::vector<double> parseShWindowParams(ParamReader& p, int coefficients) {
+    const std::string name = p.choice("window", "none", {"none", "hanning", "lanczos", "gaussian"});
+    double strength = 0.0;
+    if (name == "gaussian")
+        strength = p.number("window_strength", 0.02, 0.0, 10.0);
+    else if (p.has("window_strength"))
+        p.fail("window_strength", "applies to window 'gaussian' only",
+               "remove it, or set window to \"gaussian\"");
+    if (name == "none") return {};
+    return sh::windowFactors(sh::parseShWindow(name), sh::shBandForCount(coefficients), strength);
 }
 
 /// ritschel's own parameters (see the header comment).
@@ -966,7 +982,7 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
 
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
-    const render::RenderOptions options = parseOptions(kind, scene, reader);
+    render::RenderOptions options = parseOptions(kind, scene, reader);
     std::optional<pathtrace::Options> traced;
     bool reference = false;
     if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader, reference);
@@ -974,6 +990,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     const visibility::HierarchicalVisibilityOptions ritschelParams =
         kind == Kind::Ritschel ? parseRitschelParams(scene, reader)
                                : visibility::HierarchicalVisibilityOptions{};
+    if (isSh(kind))
+        options.shWindow =
+            parseShWindowParams(reader, kind == Kind::Ritschel ? ritschelParams.coefficients
+                                                               : shParams.visibility.coefficients);
     if (isSh(kind))
         for (std::size_t i = 0; i < scene.lights.size(); ++i)
             if (scene.lights[i].type == "area")
@@ -1514,13 +1534,16 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "SH local visibility on a multiresolution grid (Kronander 2012): soft self-shadowing "
     "within "
     "a radius under directional, point and environment lights",
-    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb"}, {"local_shadows"}));
+    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "window",
+     "window_strength"},
+    {"local_shadows"}));
 const RegisterMethod kShGlobal(rayCasterMethod(
     Kind::ShGlobal, "sh-global",
     "SH global visibility (Kronander 2012 eq. 11): local visibility chained in steps of its "
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
-    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution"},
+    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution",
+     "window", "window_strength"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",
@@ -1528,7 +1551,7 @@ const RegisterMethod kRitschel(rayCasterMethod(
     "product-minified extinction pyramid, to the volume's boundary, on a 1:s grid; shadows "
     "from matter anywhere toward the light",
     {"rays", "coefficients", "patterns", "subsample", "quantize_8bit", "max_distance",
-     "hierarchical"},
+     "hierarchical", "window", "window_strength"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

@@ -121,6 +121,9 @@ struct RenderOptions {
     GradientTable gradientTable = GradientTable::Auto;
     std::optional<float> isoValue;  ///< Isosurface: physical value; default TF surfaceValue()
     int tileSize = 16;              ///< pixels per tile side
+    /// SH visibility shading (render/sh_shading.h): band factors w_0..w_L applied to the lights'
+    /// coefficients (sh/sh_window.h windowFactors; w_0 = 1); empty = no window.
+    std::vector<double> shWindow;
 };
 
 struct RenderStats {

@@ -16,10 +16,25 @@ constexpr float kInv4Pi = float(1.0 / (4.0 * std::numbers::pi));
 const float kInvSqrt4Pi = float(1.0 / std::sqrt(4.0 * std::numbers::pi));
 }  // namespace
 
-ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights)
+double ringingBound(int coefficients, std::span<const double> window) {
+    const int bands = sh::shBandForCount(coefficients);
+    double sum = 0.0;
+    for (int l = 0; l <= bands; ++l) {
+        const double w = std::size_t(l) < window.size() ? window[std::size_t(l)] : 1.0;
+        sum += w * w * double(2 * l + 1);
+    }
+    return std::sqrt(sum);
+}
+
+ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights,
+                   std::span<const double> window)
     : coefficients_(coefficients) {
     const int band = sh::shBandForCount(coefficients_);
     VL_CHECK(coefficients_ <= 16);
+    VL_CHECK(window.empty() || int(window.size()) > band);
+    for (int l = 0, i = 0; l <= band; ++l)
+        for (int m = -l; m <= l; ++m, ++i)
+            window_[i] = window.empty() ? 1.f : float(window[std::size_t(l)]);
     for (std::size_t n = 0; n < lights.size(); ++n) {
         const lights::Light* l = lights[n].get();
         VL_CHECK(l != nullptr);
@@ -29,7 +44,7 @@ ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const light
                    dynamic_cast<const lights::EnvironmentLight*>(l)) {
             // Position-independent: project once.
             const std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), band);
-            for (int i = 0; i < coefficients_; ++i) constant_[i] += c[std::size_t(i)];
+            for (int i = 0; i < coefficients_; ++i) constant_[i] += window_[i] * c[std::size_t(i)];
         } else {
             throw InputError("lights", std::string(l->kind()),
                              "is a light type SH visibility shading does not know",
@@ -52,7 +67,7 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
             float y[16];
             sh::evalShFixed<3>(d / dist, y);
             float dot = 0.f;
-            for (int i = 0; i < C; ++i) dot += y[i] * v[i];
+            for (int i = 0; i < C; ++i) dot += window_[i] * y[i] * v[i];
             sum += (directional * dot) * e;
         }
         // The uniform part inside minDistance: c_0 = E/√(4π).
@@ -65,11 +80,12 @@ ShCutFaceShader::ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibil
                                  std::shared_ptr<const visibility::LocalVisibility> local,
                                  std::span<const core::HalfSpace> faces, float bandMm,
                                  const core::Geometry& geometry,
-                                 std::span<const std::shared_ptr<const lights::Light>> lights)
+                                 std::span<const std::shared_ptr<const lights::Light>> lights,
+                                 std::span<const double> window)
     : global_(std::move(global)),
       local_(std::move(local)),
       invBand_(bandMm > 0.f ? 1.f / bandMm : 0.f),
-      lights_(global_->coefficients(), lights) {
+      lights_(global_->coefficients(), lights, window) {
     VL_CHECK(global_ && local_);
     VL_CHECK(global_->coefficients() == local_->coefficients());
     for (const core::HalfSpace& f : faces)
@@ -123,7 +139,7 @@ std::unique_ptr<ShadingModel> makeModel(const char* name, const RayCaster& caste
     return std::make_unique<detail::DvrModel<ShVisibilityShader<Field>>>(
         name,
         ShVisibilityShader<Field>(std::move(field), caster.volume().geometry(),
-                                  lightsOrHeadlight(caster, camera)),
+                                  lightsOrHeadlight(caster, camera), caster.options().shWindow),
         PixelFootprint(caster, camera));
 }
 }  // namespace
@@ -160,7 +176,8 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
     return std::make_unique<detail::DvrModel<ShCutFaceShader>>(
         "sh-global",
         ShCutFaceShader(std::move(global), std::move(local), faces, bandMm,
-                        caster.volume().geometry(), lightsOrHeadlight(caster, camera)),
+                        caster.volume().geometry(), lightsOrHeadlight(caster, camera),
+                        caster.options().shWindow),
         PixelFootprint(caster, camera));
 }
 

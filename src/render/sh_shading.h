@@ -7,6 +7,20 @@
 //   diffuse = 1/(4π) · Σ_i L_i(x) V_i(x)   (isotropic phase; the marcher multiplies by α and the
 //                                            TF albedo and adds the TF emission: ARCHITECTURE §1)
 // clamped at 0 (a truncated SH product can ring below 0; radiance never does).
+//
+// Ringing and its bound. For a directional light of irradiance E the product is (E/4π)·Ṽ(ω_l),
+// where Ṽ(ω) = Σ_l w_l Σ_m V_lm Y_lm(ω) is the (windowed) reconstruction of the visibility, whose
+// true value lies in [0, 1]. Cauchy–Schwarz with Σ_m Y_lm(ω)² = (2l+1)/(4π) and Σ V_lm² ≤ ∫V² ≤ 4π
+// (Bessel) give |Ṽ(ω)| ≤ B = √(Σ_l w_l² (2l+1)) (ringingBound()): without a window 2, 3 and 4 for
+// 4, 9 and 16 coefficients — a sample can look up to B times brighter than unshadowed ("bright
+// spots", Kronander §5) before the clamp at 0 removes the negative side. A window (method param
+// `window`: hanning, lanczos or gaussian with `window_strength`) multiplies band l of the lights'
+// coefficients by w_l ≤ 1 (w_0 = 1: an unshadowed sample keeps its brightness), which lowers B —
+// Hanning: 1.32, 1.73, 2.14 — and the undershoot the clamp hides, at the price of softer shadows.
+// Measured on Kronander's corner case (hard shadows of an opaque sphere and torus; 64 rays, full
+// resolution, every grid point × 400 directions; tests/render/test_sh_ringing.cpp): without a
+// window Ṽ ∈ [−0.33, 1.34] (4 coefficients) and [−0.41, 1.39] (16), with Hanning [−0.04, 1.04]
+// and [−0.09, 1.09] — far inside B, which holds for any visibility in [0, 1].
 // Lights (lights/light.h conventions):
 //   directional  L_i = E · Y_i(ω_l)                                    (eq. 10, once per frame)
 //   environment  L_i = its SH projection (EnvironmentLight: projected once in the map frame,
@@ -32,8 +46,9 @@ namespace voxlight::render {
 /// The lights of a scene as SH radiance for the per-sample product with a visibility field.
 class ShLights {
   public:
-    /// Throws InputError for area lights.
-    ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights);
+    /// Throws InputError for area lights. `window`: band factors w_0..w_L (empty = none).
+    ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights,
+             std::span<const double> window = {});
     int coefficients() const { return coefficients_; }
     /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
     glm::vec3 shade(const glm::vec3& x, const float* v) const;
@@ -44,9 +59,14 @@ class ShLights {
         float minDistance;
     };
     int coefficients_ = 0;
-    glm::vec3 constant_[16] = {};  ///< directional + environment L_i
+    glm::vec3 constant_[16] = {};  ///< directional + environment L_i, windowed
+    float window_[16] = {};        ///< w_l of each coefficient (1 without a window)
     std::vector<Point> points_;
 };
+
+/// B = √(Σ_l w_l² (2l+1)) over the bands of `coefficients` (see the header comment): the largest
+/// |Ṽ(ω)| a visibility in [0, 1] can reconstruct to. Empty window = all factors 1.
+double ringingBound(int coefficients, std::span<const double> window = {});
 
 /// The shader of a visibility field: LocalVisibility (sh-local), GlobalVisibility (sh-global) or
 /// HierarchicalVisibility (ritschel), anything with coefficients() and sample(voxel index, out).
@@ -55,8 +75,9 @@ class ShVisibilityShader {
   public:
     static constexpr bool kNeedsNormal = false;
     ShVisibilityShader(std::shared_ptr<const Field> field, const core::Geometry& geometry,
-                       std::span<const std::shared_ptr<const lights::Light>> lights)
-        : field_(std::move(field)), lights_(field_->coefficients(), lights) {
+                       std::span<const std::shared_ptr<const lights::Light>> lights,
+                       std::span<const double> window = {})
+        : field_(std::move(field)), lights_(field_->coefficients(), lights, window) {
         // world → index: diag(1/spacing) · Dᵀ · (x − origin)
         worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
         for (int c = 0; c < 3; ++c)
@@ -104,7 +125,8 @@ class ShCutFaceShader {
                     std::shared_ptr<const visibility::LocalVisibility> local,
                     std::span<const core::HalfSpace> faces, float bandMm,
                     const core::Geometry& geometry,
-                    std::span<const std::shared_ptr<const lights::Light>> lights);
+                    std::span<const std::shared_ptr<const lights::Light>> lights,
+                    std::span<const double> window = {});
     Scatter scatter(const ShadeInput& in) const;
     const ShCutFaceShader& forRay(const glm::vec3&) const { return *this; }
 

@@ -124,6 +124,39 @@ TEST(ShLocal, ATfEditOverAValueIntervalRecomputesOnlyTheBlocksItReaches) {
     EXPECT_EQ(edited.image.pixels, fresh.image.pixels);
 }
 
+TEST(ShLocal, ARingingWindowIsAFrameSettingReadStrictly) {
+    // Kronander's corner case with 16 coefficients and a point light inside the volume: a window
+    // changes the frame only (no visibility stage reruns), the image stays finite and ≥ 0, and
+    // it differs from the unwindowed one (tests/render/test_sh_ringing.cpp has the bound).
+    json d = {{"volume", {{"phantom", "kronander"}, {"size", 32}}},
+              {"transfer_function", "generic"},
+              {"method", {{"name", "sh-local"}, {"params", {{"coefficients", 16}}}}},
+              {"lights",
+               json::array({{{"type", "point"}, {"position", {0, 0, 10}}, {"intensity", 4e4}}})},
+              {"image", {{"width", 24}, {"height", 24}}}};
+    Session session;
+    const RunResult none = session.run(scene(d));
+    for (const char* w : {"hanning", "lanczos", "gaussian"}) {
+        d["method"]["params"]["window"] = w;
+        const RunResult windowed = session.run(scene(d));
+        EXPECT_EQ(ranStages(windowed), (std::set<std::string>{"camera", "render"})) << w;
+        EXPECT_TRUE(allFinite(windowed.image)) << w;
+        EXPECT_NE(windowed.image.pixels, none.image.pixels) << w;
+    }
+    d["method"]["params"]["window_strength"] = 0.1;  // gaussian's λ
+    EXPECT_NO_THROW(session.plan(scene(d)));
+    d["method"]["params"]["window"] = "hanning";
+    try {
+        session.plan(scene(d));
+        ADD_FAILURE() << "window_strength accepted for hanning";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.window_strength");
+    }
+    d["method"]["params"].erase("window_strength");
+    d["method"]["params"]["window"] = "blackman";
+    EXPECT_THROW(session.plan(scene(d)), InputError);
+}
+
 TEST(ShLocal, ParamsAreReadStrictly) {
     auto planOf = [](const json& params) {
         json d = shScene();
