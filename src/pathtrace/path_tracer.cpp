@@ -115,6 +115,8 @@ struct PathTracer::Impl {
     std::vector<glm::ivec3> fineFirst, fineLast;  ///< per block: its fine cells (inclusive)
     std::vector<std::uint8_t> fineUniform;        ///< per block: all its entries are equal
     std::vector<float> fine;
+    /// Index-space box of the non-empty skip cells (empty when lo > hi).
+    glm::vec3 busyLo{1.f}, busyHi{0.f};
 
     glm::dvec3 indexOf(const glm::dvec3& world) const { return toIndex * (world - origin); }
 
@@ -207,7 +209,21 @@ struct PathTracer::Impl {
             f(0.f, k.length, globalMajorant);
             return;
         }
-        grid::CellDda dda(*cells, k.o, k.d, 0.f, k.length);
+        // Only the part inside the box of the non-empty skip cells (outside it every cell is
+        // empty; widened a little against rounding, which costs nothing there).
+        float s0 = 0.f, s1 = k.length;
+        for (int a = 0; a < 3; ++a) {
+            if (k.d[a] == 0.f) {
+                if (k.o[a] < busyLo[a] || k.o[a] > busyHi[a]) return;
+                continue;
+            }
+            float ta = (busyLo[a] - k.o[a]) * k.invD[a], tb = (busyHi[a] - k.o[a]) * k.invD[a];
+            if (ta > tb) std::swap(ta, tb);
+            s0 = std::max(s0, ta);
+            s1 = std::min(s1, tb);
+        }
+        if (!(s1 > s0)) return;
+        grid::CellDda dda(*cells, k.o, k.d, s0, s1);
         const std::uint8_t* dist = cells->skipDistances();
         float sa, sb;
         std::size_t i;
@@ -439,6 +455,12 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     impl->fineSize = impl->cellSize % kFineVoxels == 0 ? kFineVoxels : impl->cellSize;
     impl->fineCells = impl->cellSize / impl->fineSize;
     if (impl->majorantGrid) impl->buildFine();
+    const auto& busy = impl->cells->nonEmptyCellRange();
+    if (glm::all(glm::lessThanEqual(busy[0], busy[1]))) {
+        constexpr float kPad = 1e-3f;  // voxels
+        impl->busyLo = glm::vec3(busy[0] * impl->cellSize) - kPad;
+        impl->busyHi = glm::vec3((busy[1] + 1) * impl->cellSize) + kPad;
+    }
     impl_ = std::move(impl);
 }
 
