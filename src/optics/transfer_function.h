@@ -122,6 +122,14 @@ class TfTable {
         const float a = nodes_[at.cell].sigma, b = nodes_[at.cell + 1].sigma;
         return a + at.f * (b - a);
     }
+    /// The largest extinction(v) over v ∈ [lo, hi] (lo ≤ hi), exactly as extinction() evaluates
+    /// it: the ends and every table node between them (the path tracer's fine majorants).
+    float maxExtinction(float lo, float hi) const {
+        const Position a = position(lo), b = position(hi);
+        float m = std::max(extinction(lo), extinction(hi));
+        for (std::size_t k = a.cell + 1; k <= b.cell; ++k) m = std::max(m, nodes_[k].sigma);
+        return m;
+    }
 
     /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.
     struct Segment {

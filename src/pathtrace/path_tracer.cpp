@@ -13,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/timing.h"
+#include "grid/brick_traversal.h"
 #include "render/shading.h"
 
 namespace voxlight::pathtrace {
@@ -34,6 +35,15 @@ constexpr int kSamplesPerPass = 4;
 constexpr double kAutofocusStepVoxels = 0.25;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
+/// Voxels per fine-majorant cell side. On the 128³ torso under ct-bone (256², 32 spp): 1 voxel
+/// 5.7·10⁶ null collisions, 2 voxels 14.4·10⁶, the 4³ skip cells alone 34.8·10⁶; 1 was the fastest.
+constexpr int kFineVoxels = 1;
+/// Fine majorants widen each voxel cell's value range by one table cell (a sample a float rounding
+/// past the cell's face, in a steep neighbour) and by this fraction of its span and magnitude
+/// (rounding of the trilinear interpolation) ...
+constexpr float kFineValuePad = 1e-4f;
+/// ... and scale the table's maximum by this (rounding of the table's own interpolation).
+constexpr float kFineSigmaPad = 1.f + 1e-5f;
 
 struct HalfSpace {
     glm::dvec3 point, normal;
@@ -72,6 +82,16 @@ glm::dvec3 sampleHenyeyGreenstein(const glm::dvec3& forward, float g, float u1, 
     return glm::normalize(sinT * std::cos(phi) * t1 + sinT * std::sin(phi) * t2 + cosT * forward);
 }
 
+/// A ray's part [t0, t1] in index space, in float: p(s) = o + s·d for s ∈ [0, length] (mm from
+/// t0). Starting at t0 keeps float precision where the volume is (camera rays start far away).
+struct Track {
+    glm::vec3 o, d, invD;
+    float length = 0.f;
+};
+
+/// An exponential step of unit rate: −ln(1 − ξ) from a 53-bit ξ (no truncated tail in float).
+float exponentialStep(core::CounterRng& rng) { return float(-std::log(1.0 - rng.uniformDouble())); }
+
 struct PathTracer::Impl {
     std::shared_ptr<const core::Volume> volume;
     std::shared_ptr<const optics::TfTable> table;
@@ -85,6 +105,18 @@ struct PathTracer::Impl {
     bool majorantGrid = true;
     int cellSize = 1;
     glm::ivec3 counts{1};
+    glm::ivec3 dims{1};
+    /// Fine majorants: per fine cell (fineSize³ voxel cells) of every non-empty skip cell, the
+    /// largest σt the table gives over the value range of its voxels (trilinear values stay
+    /// within the range of the corners). fineSlot: per skip cell its block ((cellSize /
+    /// fineSize)³ entries, x fastest) or −1 when empty.
+    int fineSize = 1, fineCells = 1;
+    std::vector<std::int32_t> fineSlot;
+    std::vector<glm::ivec3> fineFirst, fineLast;  ///< per block: its fine cells (inclusive)
+    std::vector<std::uint8_t> fineUniform;        ///< per block: all its entries are equal
+    std::vector<float> fine;
+    /// Index-space box of the non-empty skip cells (empty when lo > hi).
+    glm::vec3 busyLo{1.f}, busyHi{0.f};
 
     glm::dvec3 indexOf(const glm::dvec3& world) const { return toIndex * (world - origin); }
 
@@ -92,106 +124,243 @@ struct PathTracer::Impl {
     float sigma(const View& v, const glm::dvec3& ijk) const {
         return table->extinction(v.sample(float(ijk.x), float(ijk.y), float(ijk.z)));
     }
+    template <class View>
+    float sigma(const View& v, const glm::vec3& ijk) const {
+        return table->extinction(v.sample(ijk.x, ijk.y, ijk.z));
+    }
 
-    /// Calls f(ta, tb, majorant) for consecutive pieces of [t0, t1] with a constant majorant
-    /// (cells of the grid, or one piece under the global maximum) until f returns false.
+    Track track(const Ray& ray, double t0, double t1) const {
+        Track k;
+        k.o = glm::vec3(indexOf(ray.origin + t0 * ray.direction));
+        k.d = glm::vec3(toIndex * ray.direction);
+        for (int a = 0; a < 3; ++a) k.invD[a] = k.d[a] != 0.f ? 1.f / k.d[a] : 0.f;
+        k.length = float(t1 - t0);
+        return k;
+    }
+
+    /// Fills the fine majorants of every non-empty skip cell.
+    void buildFine() {
+        const int fs = fineSize, fc = fineCells;
+        const std::size_t block = std::size_t(fc) * fc * fc;
+        fineSlot.assign(cells->size(), -1);
+        for (int z = 0; z < counts.z; ++z)
+            for (int y = 0; y < counts.y; ++y)
+                for (int x = 0; x < counts.x; ++x) {
+                    const std::size_t i = cells->index(x, y, z);
+                    if (!(cells->majorant(i) > 0.f)) continue;
+                    fineSlot[i] = std::int32_t(fineFirst.size());
+                    const glm::ivec3 first = glm::ivec3(x, y, z) * fc;
+                    fineFirst.push_back(first);
+                    fineLast.push_back(glm::min(first + fc, (dims + fs - 1) / fs) - 1);
+                }
+        fine.assign(fineFirst.size() * block, 0.f);
+        fineUniform.assign(fineFirst.size(), 0);
+        const float widen = table->cellWidth();
+        volume->visit([&](const auto& v) {
+            tbb::parallel_for(std::size_t(0), fineFirst.size(), [&](std::size_t b) {
+                const glm::ivec3 first = fineFirst[b], last = fineLast[b];
+                const float coarse =
+                    cells->majorant(cells->index(first.x / fc, first.y / fc, first.z / fc));
+                float* out = fine.data() + b * block;
+                for (std::size_t e = 0; e < block; ++e) out[e] = coarse;  // cells past the grid
+                for (int k = first.z; k <= last.z; ++k)
+                    for (int j = first.y; j <= last.y; ++j)
+                        for (int i = first.x; i <= last.x; ++i) {
+                            // The voxels of fine cell (i, j, k) and its far faces.
+                            const glm::ivec3 lo3 = glm::ivec3(i, j, k) * fs;
+                            const glm::ivec3 hi3 = glm::min(lo3 + fs, dims - 1);
+                            float lo = INFINITY, hi = -INFINITY;
+                            bool finite = true;
+                            for (int z = lo3.z; z <= hi3.z; ++z)
+                                for (int y = lo3.y; y <= hi3.y; ++y)
+                                    for (int x = lo3.x; x <= hi3.x; ++x) {
+                                        const float val = v.sample(float(x), float(y), float(z));
+                                        finite = finite && std::isfinite(val);
+                                        lo = std::min(lo, val);
+                                        hi = std::max(hi, val);
+                                    }
+                            // NaN voxels: the skip cell's majorant, as before.
+                            if (!finite) continue;
+                            // Widened against float rounding of positions and interpolation.
+                            const float pad = widen + kFineValuePad * (hi - lo) +
+                                              kFineValuePad * std::max(std::abs(lo), std::abs(hi));
+                            float& m =
+                                out[std::size_t(i - first.x) +
+                                    std::size_t(fc) * (std::size_t(j - first.y) +
+                                                       std::size_t(fc) * std::size_t(k - first.z))];
+                            // Never above the skip cell's own majorant (also a bound).
+                            m = std::min(coarse,
+                                         table->maxExtinction(lo - pad, hi + pad) * kFineSigmaPad);
+                        }
+                fineUniform[b] =
+                    std::all_of(out, out + block, [&](float m) { return m == out[0]; });
+            });
+        });
+    }
+
+    /// Calls f(sa, sb, majorant) for consecutive pieces of the track with a constant majorant
+    /// until f returns false: the skip cells by a DDA (Amanatides & Woo), empty ones crossed in
+    /// jumps (their skip distances), non-empty ones in voxel cells with the fine majorants. Under
+    /// one global majorant: one piece.
     template <class F>
-    void traverse(const Ray& ray, double t0, double t1, F&& f) const {
-        if (!(t1 > t0)) return;
+    void traverse(const Track& k, F&& f) const {
+        if (!(k.length > 0.f)) return;
         if (!majorantGrid) {
-            f(t0, t1, globalMajorant);
+            f(0.f, k.length, globalMajorant);
             return;
         }
-        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
-        const glm::dvec3 start = o + d * (t0 + 1e-9 * (1.0 + std::abs(t0)));
-        glm::ivec3 c;
-        glm::dvec3 tNext, tStep;
-        glm::ivec3 step;
+        // Only the part inside the box of the non-empty skip cells (outside it every cell is
+        // empty; widened a little against rounding, which costs nothing there).
+        float s0 = 0.f, s1 = k.length;
         for (int a = 0; a < 3; ++a) {
-            c[a] = std::clamp(int(std::floor(start[a] / cellSize)), 0, counts[a] - 1);
-            if (d[a] > 0.0) {
-                step[a] = 1;
-                tNext[a] = c[a] + 1 < counts[a] ? ((c[a] + 1) * cellSize - o[a]) / d[a] : INFINITY;
-                tStep[a] = cellSize / d[a];
-            } else if (d[a] < 0.0) {
-                step[a] = -1;
-                tNext[a] = c[a] > 0 ? (c[a] * cellSize - o[a]) / d[a] : INFINITY;
-                tStep[a] = -cellSize / d[a];
-            } else {
-                step[a] = 0;
-                tNext[a] = INFINITY;
-                tStep[a] = INFINITY;
+            if (k.d[a] == 0.f) {
+                if (k.o[a] < busyLo[a] || k.o[a] > busyHi[a]) return;
+                continue;
             }
+            float ta = (busyLo[a] - k.o[a]) * k.invD[a], tb = (busyHi[a] - k.o[a]) * k.invD[a];
+            if (ta > tb) std::swap(ta, tb);
+            s0 = std::max(s0, ta);
+            s1 = std::min(s1, tb);
         }
-        double t = t0;
-        while (t < t1) {
-            const int a =
-                tNext.x <= tNext.y ? (tNext.x <= tNext.z ? 0 : 2) : (tNext.y <= tNext.z ? 1 : 2);
-            const double tb = std::min(tNext[a], t1);
-            if (tb > t && !f(t, tb, cells->majorant(cells->index(c.x, c.y, c.z)))) return;
-            t = tb;
-            if (!(tNext[a] < t1)) return;
-            c[a] += step[a];
-            if (c[a] < 0 || c[a] >= counts[a]) return;
-            tNext[a] =
-                c[a] + step[a] >= 0 && c[a] + step[a] < counts[a] ? tNext[a] + tStep[a] : INFINITY;
+        if (!(s1 > s0)) return;
+        grid::CellDda dda(*cells, k.o, k.d, s0, s1);
+        const std::uint8_t* dist = cells->skipDistances();
+        float sa, sb;
+        std::size_t i;
+        while (dda.step(sa, sb, i)) {
+            const int d = dist[i];
+            if (d == 0) {
+                if (!voxelCells(k, sa, sb, i, f)) return;
+                continue;
+            }
+            // An empty cell at the centre of an empty cube of radius d − 1 (as forEachNonEmptyRun).
+            if (d >= 3) dda.jump(d - 2);
         }
     }
 
+    /// The piece [sa, sb] of the track inside non-empty skip cell `cell`, by a DDA over its fine
+    /// cells; false when f stopped.
+    template <class F>
+    bool voxelCells(const Track& k, float sa, float sb, std::size_t cell, F&& f) const {
+        const std::int32_t slot = fineSlot[cell];
+        const float coarse = cells->majorant(cell);
+        if (slot < 0) return f(sa, sb, coarse);
+        const std::size_t b = std::size_t(slot);
+        const float* m = fine.data() + b * std::size_t(fineCells * fineCells * fineCells);
+        if (fineUniform[b]) return f(sa, sb, m[0]);
+        const glm::ivec3 first = fineFirst[b], last = fineLast[b];
+        const float fs = float(fineSize), invFs = 1.f / fs;
+        const glm::vec3 p = k.o + sa * k.d;
+        const int stride[3] = {1, fineCells, fineCells * fineCells};
+        int v[3], step[3];
+        float tNext[3], tDelta[3];
+        int at = 0;
+        for (int a = 0; a < 3; ++a) {
+            v[a] = std::clamp(int(std::floor(p[a] * invFs)), first[a], last[a]);
+            at += (v[a] - first[a]) * stride[a];
+            if (k.d[a] > 0.f) {
+                step[a] = 1;
+                tNext[a] = (float(v[a] + 1) * fs - k.o[a]) * k.invD[a];
+                tDelta[a] = fs * k.invD[a];
+            } else if (k.d[a] < 0.f) {
+                step[a] = -1;
+                tNext[a] = (float(v[a]) * fs - k.o[a]) * k.invD[a];
+                tDelta[a] = -fs * k.invD[a];
+            } else {
+                step[a] = 0;
+                tNext[a] = INFINITY;
+                tDelta[a] = INFINITY;
+            }
+        }
+        float s = sa;
+        while (true) {
+            const int a = tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2)
+                                               : (tNext[1] <= tNext[2] ? 1 : 2);
+            const float e = std::min(tNext[a], sb);
+            if (e > s) {
+                if (!f(s, e, m[at])) return false;
+                s = e;
+            }
+            if (!(tNext[a] < sb)) return true;
+            v[a] += step[a];
+            // Float rounding left the cell before sb: the rest under the skip cell's majorant.
+            if (v[a] < first[a] || v[a] > last[a]) return !(sb > s) || f(s, sb, coarse);
+            at += step[a] * stride[a];
+            tNext[a] += tDelta[a];
+        }
+    }
+
+    /// Delta tracking: one exponential optical depth ("budget") is spent across the pieces, each
+    /// piece taking majorant × length, so a piece without a collision costs no logarithm; a null
+    /// collision draws a fresh one (memoryless).
     template <class View>
     std::optional<double> freeFlight(const View& v, const Ray& ray, double t0, double t1,
                                      core::CounterRng& rng, Counters& n) const {
         std::optional<double> hit;
-        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        const Track k = track(ray, t0, t1);
+        float tau = exponentialStep(rng);
         int nulls = 0;
-        traverse(ray, t0, t1, [&](double ta, double tb, float m) {
+        traverse(k, [&](float sa, float sb, float m) {
             if (!(m > 0.f)) return true;
-            double t = ta;
+            float s = sa;
             while (true) {
-                t -= std::log(1.0 - rng.uniformDouble()) / m;
-                if (t >= tb) return true;
-                const float s = sigma(v, o + t * d);
-                if (s > m) ++n.violations;
-                if (rng.uniform() * m < s || ++nulls > kNullCollisionBudget) {
+                const float room = (sb - s) * m;
+                if (tau >= room) {
+                    tau -= room;
+                    return true;
+                }
+                s = std::min(s + tau / m, sb);
+                const float sig = sigma(v, k.o + s * k.d);
+                if (sig > m) ++n.violations;
+                if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
                     if (nulls > kNullCollisionBudget) ++n.budget;
-                    hit = t;
+                    hit = t0 + double(s);
                     ++n.real;
                     return false;
                 }
                 ++n.null;
+                tau = exponentialStep(rng);
             }
         });
         return hit;
     }
 
+    /// Ratio tracking with the same budgeted steps; stops when the estimate reaches 0 and plays
+    /// Russian roulette below kRouletteTransmittance.
     template <class View>
     double ratioTracking(const View& v, const Ray& ray, double t0, double t1, core::CounterRng& rng,
                          Counters& n) const {
         double T = 1.0;
         ++n.shadow;
-        const glm::dvec3 o = indexOf(ray.origin), d = toIndex * ray.direction;
+        const Track k = track(ray, t0, t1);
+        float tau = exponentialStep(rng);
         int steps = 0;
-        traverse(ray, t0, t1, [&](double ta, double tb, float m) {
+        traverse(k, [&](float sa, float sb, float m) {
             if (!(m > 0.f)) return true;
-            double t = ta;
+            float s = sa;
             while (true) {
-                t -= std::log(1.0 - rng.uniformDouble()) / m;
-                if (t >= tb) return true;
+                const float room = (sb - s) * m;
+                if (tau >= room) {
+                    tau -= room;
+                    return true;
+                }
+                s = std::min(s + tau / m, sb);
                 if (++steps > kNullCollisionBudget) {
                     ++n.budget;
                     T = 0.0;
                     return false;
                 }
-                const float s = sigma(v, o + t * d);
-                if (s > m) ++n.violations;
-                T *= std::max(0.0, 1.0 - double(s) / m);
+                const float sig = sigma(v, k.o + s * k.d);
+                if (sig > m) ++n.violations;
+                T *= std::max(0.0, 1.0 - double(sig) / m);
                 if (T < kRouletteTransmittance) {
-                    if (rng.uniform() < 0.5f) {
+                    if (!(T > 0.0) || rng.uniform() < 0.5f) {
                         T = 0.0;
                         return false;
                     }
                     T *= 2.0;
                 }
+                tau = exponentialStep(rng);
             }
         });
         return T;
@@ -282,6 +451,16 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     for (std::size_t i = 0; i < impl->cells->size(); ++i)
         impl->globalMajorant = std::max(impl->globalMajorant, impl->cells->majorant(i));
     impl->majorantGrid = options_.majorantGrid;
+    impl->dims = g.dims;
+    impl->fineSize = impl->cellSize % kFineVoxels == 0 ? kFineVoxels : impl->cellSize;
+    impl->fineCells = impl->cellSize / impl->fineSize;
+    if (impl->majorantGrid) impl->buildFine();
+    const auto& busy = impl->cells->nonEmptyCellRange();
+    if (glm::all(glm::lessThanEqual(busy[0], busy[1]))) {
+        constexpr float kPad = 1e-3f;  // voxels
+        impl->busyLo = glm::vec3(busy[0] * impl->cellSize) - kPad;
+        impl->busyHi = glm::vec3((busy[1] + 1) * impl->cellSize) + kPad;
+    }
     impl_ = std::move(impl);
 }
 

@@ -3,10 +3,13 @@
 // Monte-Carlo volume path tracer of ARCHITECTURE.md §1 (Exposure Render, Kroes et al. 2012, with
 // the majorant grid it lacked): the reference every fast method is measured against.
 //
-// Free flights by delta (Woodcock) tracking through the skip cells' majorants (per-cell maximum σt
-// under the TF, a DDA through the cell grid, so empty and thin cells cost one step instead of many
-// null collisions under one global maximum); shadow rays by ratio tracking with Russian roulette
-// on small transmittance. At a real collision the estimator adds (1 − a)·emission, multiplies the
+// Free flights by delta (Woodcock) tracking through a majorant grid: a DDA through the skip cells
+// (empty ones crossed in jumps over their skip distances) and, inside each non-empty one, through
+// its voxel cells, each with its own majorant — the largest σt the TF table gives over the value
+// range of the cell's 8 corners (trilinear values stay within it), built when the tracer is
+// made. One exponential optical depth is spent across the cells (majorant × length each), so a
+// cell crossed without a collision costs no logarithm. Shadow rays by ratio tracking over the
+// same pieces, stopping at zero and with Russian roulette on small transmittance. At a real collision the estimator adds (1 − a)·emission, multiplies the
 // throughput by the albedo a and estimates in-scattering by next-event estimation towards every
 // light (MIS, power heuristic, with phase sampling for the lights a ray can hit: area and
 // environment) and — for multiple scattering — continues in a direction drawn from the phase
