@@ -1535,7 +1535,7 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "within "
     "a radius under directional, point and environment lights",
     {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "window",
-     "window_strength"},
+     "window_strength", "ambient"},
     {"local_shadows"}));
 const RegisterMethod kShGlobal(rayCasterMethod(
     Kind::ShGlobal, "sh-global",
@@ -1543,7 +1543,7 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution",
-     "window", "window_strength"},
+     "window", "window_strength", "ambient"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",
@@ -1551,7 +1551,7 @@ const RegisterMethod kRitschel(rayCasterMethod(
     "product-minified extinction pyramid, to the volume's boundary, on a 1:s grid; shadows "
     "from matter anywhere toward the light",
     {"rays", "coefficients", "patterns", "subsample", "quantize_8bit", "max_distance",
-     "hierarchical", "window", "window_strength"},
+     "hierarchical", "window", "window_strength", "ambient"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

@@ -124,6 +124,9 @@ struct RenderOptions {
     /// SH visibility shading (render/sh_shading.h): band factors w_0..w_L applied to the lights'
     /// coefficients (sh/sh_window.h windowFactors; w_0 = 1); empty = no window.
     std::vector<double> shWindow;
+    /// SH visibility shading: radiance of a uniform white sky added to the lights, shadowed by the
+    /// same visibility (ambient occlusion: A·V_0/√(4π), A in empty space); 0 = none.
+    float shAmbient = 0.f;
 };
 
 struct RenderStats {

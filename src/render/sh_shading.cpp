@@ -27,7 +27,7 @@ double ringingBound(int coefficients, std::span<const double> window) {
 }
 
 ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights,
-                   std::span<const double> window)
+                   std::span<const double> window, float ambient)
     : coefficients_(coefficients) {
     const int band = sh::shBandForCount(coefficients_);
     VL_CHECK(coefficients_ <= 16);
@@ -35,6 +35,8 @@ ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const light
     for (int l = 0, i = 0; l <= band; ++l)
         for (int m = -l; m <= l; ++m, ++i)
             window_[i] = window.empty() ? 1.f : float(window[std::size_t(l)]);
+    VL_CHECK(ambient >= 0.f);
+    constant_[0] += glm::vec3(ambient * float(std::sqrt(4.0 * std::numbers::pi)));  // w_0 = 1
     for (std::size_t n = 0; n < lights.size(); ++n) {
         const lights::Light* l = lights[n].get();
         VL_CHECK(l != nullptr);
@@ -81,11 +83,11 @@ ShCutFaceShader::ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibil
                                  std::span<const core::HalfSpace> faces, float bandMm,
                                  const core::Geometry& geometry,
                                  std::span<const std::shared_ptr<const lights::Light>> lights,
-                                 std::span<const double> window)
+                                 std::span<const double> window, float ambient)
     : global_(std::move(global)),
       local_(std::move(local)),
       invBand_(bandMm > 0.f ? 1.f / bandMm : 0.f),
-      lights_(global_->coefficients(), lights, window) {
+      lights_(global_->coefficients(), lights, window, ambient) {
     VL_CHECK(global_ && local_);
     VL_CHECK(global_->coefficients() == local_->coefficients());
     for (const core::HalfSpace& f : faces)
@@ -139,7 +141,8 @@ std::unique_ptr<ShadingModel> makeModel(const char* name, const RayCaster& caste
     return std::make_unique<detail::DvrModel<ShVisibilityShader<Field>>>(
         name,
         ShVisibilityShader<Field>(std::move(field), caster.volume().geometry(),
-                                  lightsOrHeadlight(caster, camera), caster.options().shWindow),
+                                  lightsOrHeadlight(caster, camera), caster.options().shWindow,
+                                  caster.options().shAmbient),
         PixelFootprint(caster, camera));
 }
 }  // namespace
@@ -177,7 +180,7 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
         "sh-global",
         ShCutFaceShader(std::move(global), std::move(local), faces, bandMm,
                         caster.volume().geometry(), lightsOrHeadlight(caster, camera),
-                        caster.options().shWindow),
+                        caster.options().shWindow, caster.options().shAmbient),
         PixelFootprint(caster, camera));
 }
 

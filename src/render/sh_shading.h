@@ -29,6 +29,8 @@
 //                a uniform radiance of the same irradiance within minDistance, exactly as
 //                PointLight::shCoefficients does (so a light inside the volume or on a grid point
 //                stays finite)
+//   ambient      optional (method param `ambient`, default 0): a uniform sky of radiance A,
+//                L_0 += A·√(4π), shadowed like any light (A·V_0/√(4π): ambient occlusion)
 // Area lights are not shaded by this model (InputError naming the light): their SH differs per
 // sample and would need the light's virtual projection per sample.
 #include <memory>
@@ -47,8 +49,9 @@ namespace voxlight::render {
 class ShLights {
   public:
     /// Throws InputError for area lights. `window`: band factors w_0..w_L (empty = none).
+    /// `ambient`: radiance of a uniform sky added to the lights (L_0 += A·√(4π)).
     ShLights(int coefficients, std::span<const std::shared_ptr<const lights::Light>> lights,
-             std::span<const double> window = {});
+             std::span<const double> window = {}, float ambient = 0.f);
     int coefficients() const { return coefficients_; }
     /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
     glm::vec3 shade(const glm::vec3& x, const float* v) const;
@@ -76,8 +79,8 @@ class ShVisibilityShader {
     static constexpr bool kNeedsNormal = false;
     ShVisibilityShader(std::shared_ptr<const Field> field, const core::Geometry& geometry,
                        std::span<const std::shared_ptr<const lights::Light>> lights,
-                       std::span<const double> window = {})
-        : field_(std::move(field)), lights_(field_->coefficients(), lights, window) {
+                       std::span<const double> window = {}, float ambient = 0.f)
+        : field_(std::move(field)), lights_(field_->coefficients(), lights, window, ambient) {
         // world → index: diag(1/spacing) · Dᵀ · (x − origin)
         worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
         for (int c = 0; c < 3; ++c)
@@ -126,7 +129,7 @@ class ShCutFaceShader {
                     std::span<const core::HalfSpace> faces, float bandMm,
                     const core::Geometry& geometry,
                     std::span<const std::shared_ptr<const lights::Light>> lights,
-                    std::span<const double> window = {});
+                    std::span<const double> window = {}, float ambient = 0.f);
     Scatter scatter(const ShadeInput& in) const;
     const ShCutFaceShader& forRay(const glm::vec3&) const { return *this; }
 

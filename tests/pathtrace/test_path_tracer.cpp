@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <numbers>
+#include <string>
 
 #include "core/phantoms.h"
 #include "grid/brick_grid.h"
@@ -63,11 +64,35 @@ std::vector<pathtrace::Ray> testRays(const core::Volume& v) {
              glm::normalize(glm::dvec3(1.0, 0.05, 0.02))}};  // along the slab
 }
 
+/// Ratio tracking's mean transmittance and delta tracking's escape probability along `ray` over
+/// kSamples counter-based streams (sample i: hashCounters(i, b, c), stream `stream`), each within
+/// kZ standard errors (plus the quadrature's own tolerance) of `truth`.
+void expectTrackingUnbiased(const PathTracer& t, const pathtrace::Ray& ray, double truth,
+                            std::uint64_t b, std::uint64_t c, std::uint64_t stream,
+                            const std::string& what) {
+    constexpr int kSamples = 100000;
+    double sum = 0.0, sumSq = 0.0;
+    int escaped = 0;
+    for (int i = 0; i < kSamples; ++i) {
+        core::CounterRng rng(core::hashCounters(std::uint64_t(i), b, c), stream);
+        const double T = t.transmittance(ray, INFINITY, rng);
+        sum += T, sumSq += T * T;
+        double t0 = 0.0, t1 = INFINITY;
+        ASSERT_TRUE(t.keptInterval(ray, t0, t1));
+        escaped += !t.freeFlight(ray, t0, t1, rng).has_value();
+    }
+    const double mean = sum / kSamples;
+    const double se = std::sqrt(std::max(0.0, sumSq / kSamples - mean * mean) / kSamples);
+    EXPECT_NEAR(mean, truth, kZ * se + kQuadratureTol) << "ratio tracking, " << what;
+    const double p = double(escaped) / kSamples;
+    EXPECT_NEAR(p, truth, kZ * std::sqrt(truth * (1.0 - truth) / kSamples) + kQuadratureTol)
+        << "delta tracking, " << what;
+}
+
 }  // namespace
 
 TEST(PathTracer, RatioTrackingAndDeltaTrackingAreUnbiasedWithAndWithoutTheMajorantGrid) {
     const Medium s = makeMedium("slab", slabTf());
-    constexpr int kSamples = 100000;
     for (bool grid : {true, false}) {
         pathtrace::Options o;
         o.majorantGrid = grid;
@@ -77,24 +102,9 @@ TEST(PathTracer, RatioTrackingAndDeltaTrackingAreUnbiasedWithAndWithoutTheMajora
             const double truth = quadratureTransmittance(t, ray);
             ASSERT_GT(truth, 0.05) << "the rays must see some matter and some light";
             ASSERT_LT(truth, 0.95);
-            double sum = 0.0, sumSq = 0.0;
-            int escaped = 0;
-            for (int i = 0; i < kSamples; ++i) {
-                core::CounterRng rng(core::hashCounters(std::uint64_t(i), std::uint64_t(r), grid),
-                                     11);
-                const double T = t.transmittance(ray, INFINITY, rng);
-                sum += T, sumSq += T * T;
-                double t0 = 0.0, t1 = INFINITY;
-                ASSERT_TRUE(t.keptInterval(ray, t0, t1));
-                escaped += !t.freeFlight(ray, t0, t1, rng).has_value();
-            }
-            const double mean = sum / kSamples;
-            const double se = std::sqrt(std::max(0.0, sumSq / kSamples - mean * mean) / kSamples);
-            EXPECT_NEAR(mean, truth, kZ * se + kQuadratureTol)
-                << "ratio tracking, ray " << r << (grid ? ", grid" : ", global majorant");
-            const double p = double(escaped) / kSamples;
-            EXPECT_NEAR(p, truth, kZ * std::sqrt(truth * (1.0 - truth) / kSamples) + kQuadratureTol)
-                << "delta tracking, ray " << r << (grid ? ", grid" : ", global majorant");
+            expectTrackingUnbiased(
+                t, ray, truth, std::uint64_t(r), grid, 11,
+                "ray " + std::to_string(r) + (grid ? ", grid" : ", global majorant"));
             ++r;
         }
     }
@@ -334,25 +344,9 @@ TEST(PathTracer, TrackingIsUnbiasedThroughBoneUnderTheFineMajorants) {
         if (rough > 0.2 && rough < 0.8) rays.push_back({ray, quadratureTransmittance(t, ray)});
     }
     ASSERT_EQ(rays.size(), 3u) << "the scan finds rays that graze bone";
-    constexpr int kSamples = 100000;
     int r = 0;
     for (const auto& [ray, truth] : rays) {
-        double sum = 0.0, sumSq = 0.0;
-        int escaped = 0;
-        for (int i = 0; i < kSamples; ++i) {
-            core::CounterRng rng(core::hashCounters(std::uint64_t(i), std::uint64_t(r), 7), 13);
-            const double T = t.transmittance(ray, INFINITY, rng);
-            sum += T, sumSq += T * T;
-            double t0 = 0.0, t1 = INFINITY;
-            ASSERT_TRUE(t.keptInterval(ray, t0, t1));
-            escaped += !t.freeFlight(ray, t0, t1, rng).has_value();
-        }
-        const double mean = sum / kSamples;
-        const double se = std::sqrt(std::max(0.0, sumSq / kSamples - mean * mean) / kSamples);
-        EXPECT_NEAR(mean, truth, kZ * se + kQuadratureTol) << "ratio tracking, ray " << r;
-        const double p = double(escaped) / kSamples;
-        EXPECT_NEAR(p, truth, kZ * std::sqrt(truth * (1.0 - truth) / kSamples) + kQuadratureTol)
-            << "delta tracking, ray " << r;
+        expectTrackingUnbiased(t, ray, truth, std::uint64_t(r), 7, 13, "ray " + std::to_string(r));
         ++r;
     }
     // A render: every σt sample within its (fine) majorant.

@@ -10,6 +10,8 @@
 #include "lights/environment_light.h"
 #include "lights/light.h"
 #include "render/sh_shading.h"
+#include "sh/sh_basis.h"
+#include "sh/sh_window.h"
 
 using namespace voxlight;
 
@@ -59,6 +61,29 @@ TEST(ShShading, UnoccludedDirectionalLightScattersEOver4Pi) {
         const glm::vec3 s = shader.inScattered({5.f, -7.f, 12.f});
         for (int k = 0; k < 3; ++k)
             EXPECT_NEAR(s[k], float((k + 2) * kInv4Pi), kFloatTol * (k + 2)) << c;
+    }
+}
+
+TEST(ShShading, AnAmbientSkyAddsItsRadianceInEmptySpaceAndIsShadowedByV0) {
+    // A uniform sky of radiance A: L_0 = A·√(4π), so (1/4π)·L_0·V_0 = A·V_0/√(4π) — A where
+    // nothing occludes, and a window (w_0 = 1) leaves it alone.
+    constexpr float kFloatTol = 1e-6f;
+    const float A = 0.7f;
+    for (int c : {1, 4, 16}) {
+        core::Geometry g;
+        const auto vis = emptySpace(c, g);
+        const std::vector<std::shared_ptr<const lights::Light>> ls = {
+            std::make_shared<lights::DirectionalLight>(glm::vec3(2.f), glm::vec3(0, 0, 1))};
+        const render::ShVisibilityShader plain(vis, g, ls);
+        const auto window = sh::windowFactors(sh::ShWindow::Hanning, sh::shBandForCount(c));
+        const render::ShVisibilityShader sky(vis, g, ls, window, A);
+        const glm::vec3 x(1.f, 2.f, 3.f);
+        EXPECT_NEAR(sky.inScattered(x).g - plain.inScattered(x).g, A, kFloatTol) << c;
+        // Half the directions occluded (V_0 halved, the rest 0): half the sky.
+        float half[16] = {};
+        half[0] = float(std::sqrt(std::numbers::pi));
+        const render::ShLights skyOnly(c, {}, {}, A);
+        EXPECT_NEAR(skyOnly.shade(x, half).r, 0.5f * A, kFloatTol) << c;
     }
 }
 
