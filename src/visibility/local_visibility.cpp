@@ -186,6 +186,22 @@ void pointVisibility(const SigmaField& sigma, const RaySet& set, const glm::vec3
     }
 }
 
+/// Calls f(origin, dst, s) for every sample point of stored block b, x fastest: origin = the
+/// point's voxel coordinate, clamped onto the volume (sample points of a partial edge block beyond
+/// it are never read inside it), dst = its C floats starting at `data`, s = the block's sample
+/// spacing in voxels. f returns nothing; the order is fixed, so results never depend on threads.
+template <class F>
+void forEachSamplePoint(const MultiresGrid& grid, std::size_t b, int C, float* data, F&& f) {
+    const int l = grid.level(b);
+    const int n = levelResolution(l);
+    const float s = float(levelSpacing(l));
+    const glm::vec3 top(grid.dims() - 1);
+    for (int k = 0; k < n; ++k)
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i, data += C)
+                f(glm::min(grid.samplePosition(b, l, i, j, k), top), data, s);
+}
+
 /// Empty space's coefficients (√(4π), 0, …).
 void setEmpty(float* dst, int C) {
     dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
@@ -324,28 +340,21 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 double v[16];
                 for (std::size_t r = range.begin(); r != range.end(); ++r) {
                     const std::size_t b = blocks[r];
-                    const int l = grid.level(b);
-                    const int n = levelResolution(l);
-                    float* dst = data + offset[b];
-                    for (int k = 0; k < n; ++k)
-                        for (int j = 0; j < n; ++j)
-                            for (int i = 0; i < n; ++i, dst += C) {
-                                const glm::vec3 x = grid.samplePosition(b, l, i, j, k);
-                                // Sample points of a partial edge block beyond the volume are clamped
-                                // onto it (their values are never read inside the volume).
-                                const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
-                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l)))) {
-                                    // Never read by a shaded sample: empty space's value.
-                                    setEmpty(dst, C);
-                                    ++skipped;
-                                    continue;
-                                }
-                                pointVisibility(
-                                    sigma, set, origin, grid.dims(), radius, hf,
-                                    [](int, float&, float&) { return true; }, v, samples);
-                                traced += std::uint64_t(N);
-                                for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                            }
+                    forEachSamplePoint(grid, b, C, data + offset[b],
+                                       [&](const glm::vec3& origin, float* dst, float spacing) {
+                                           if (!visibilityNeeded(grid, origin, spacing)) {
+                                               // Never read by a shaded sample: empty space's value.
+                                               setEmpty(dst, C);
+                                               ++skipped;
+                                               return;
+                                           }
+                                           pointVisibility(
+                                               sigma, set, origin, grid.dims(), radius, hf,
+                                               [](int, float&, float&) { return true; }, v,
+                                               samples);
+                                           traced += std::uint64_t(N);
+                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                                       });
                 }
                 samplesTotal += samples;
                 raysTotal += traced;
@@ -595,49 +604,44 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         }
                     if (far) continue;
                     bool anyChanged = false;
-                    float* dst = out.data_.data() + out.offset_[b];
-                    for (int k = 0; k < n; ++k)
-                        for (int j = 0; j < n; ++j)
-                            for (int i = 0; i < n; ++i, dst += C) {
-                                const glm::vec3 x = grid.samplePosition(b, l, i, j, k);
-                                const glm::vec3 origin = glm::min(x, glm::vec3(grid.dims() - 1));
-                                // Classify by the distance to every face (the origin as traced).
-                                bool inside = true, outside = false;
-                                for (std::size_t q = 0; q < faces.size(); ++q) {
-                                    dist0[q] = distance(faces[q], glm::dvec3(origin));
-                                    inside = inside && dist0[q] >= radius;
-                                    outside = outside || dist0[q] <= -radius;
-                                }
-                                if (inside) continue;  // rays stay in the kept region
-                                // Never read by a shaded sample: empty in the unclipped field too.
-                                if (!visibilityNeeded(grid, origin, float(levelSpacing(l))))
-                                    continue;
-                                anyChanged = true;
-                                if (outside) {
-                                    // Rays never reach the kept region: empty space's value.
-                                    setEmpty(dst, C);
-                                    ++cleared;
-                                    continue;
-                                }
-                                // Ray k keeps the t where every face's distance stays ≥ 0.
-                                auto narrow = [&](int d, float& ta, float& tb) {
-                                    for (std::size_t q = 0; q < faces.size(); ++q) {
-                                        const float s = faces[q].slope[std::size_t(d)];
-                                        const float d0 = float(dist0[q]);
-                                        if (s > 0.f)
-                                            ta = std::max(ta, -d0 / s);
-                                        else if (s < 0.f)
-                                            tb = std::min(tb, -d0 / s);
-                                        else if (d0 < 0.f)
-                                            return false;
-                                    }
-                                    return true;
-                                };
-                                pointVisibility(sigma, set, origin, grid.dims(), radius, hf, narrow,
-                                                v, samples);
-                                ++traced;
-                                for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                            }
+                    forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b],
+                                       [&](const glm::vec3& origin, float* dst, float spacing) {
+                                           // Classify by the distance to every face (the origin as traced).
+                                           bool inside = true, outside = false;
+                                           for (std::size_t q = 0; q < faces.size(); ++q) {
+                                               dist0[q] = distance(faces[q], glm::dvec3(origin));
+                                               inside = inside && dist0[q] >= radius;
+                                               outside = outside || dist0[q] <= -radius;
+                                           }
+                                           if (inside) return;  // rays stay in the kept region
+                                           // Never read by a shaded sample: empty in the unclipped field too.
+                                           if (!visibilityNeeded(grid, origin, spacing)) return;
+                                           anyChanged = true;
+                                           if (outside) {
+                                               // Rays never reach the kept region: empty space's value.
+                                               setEmpty(dst, C);
+                                               ++cleared;
+                                               return;
+                                           }
+                                           // Ray k keeps the t where every face's distance stays ≥ 0.
+                                           auto narrow = [&](int d, float& ta, float& tb) {
+                                               for (std::size_t q = 0; q < faces.size(); ++q) {
+                                                   const float sl = faces[q].slope[std::size_t(d)];
+                                                   const float d0 = float(dist0[q]);
+                                                   if (sl > 0.f)
+                                                       ta = std::max(ta, -d0 / sl);
+                                                   else if (sl < 0.f)
+                                                       tb = std::min(tb, -d0 / sl);
+                                                   else if (d0 < 0.f)
+                                                       return false;
+                                               }
+                                               return true;
+                                           };
+                                           pointVisibility(sigma, set, origin, grid.dims(), radius,
+                                                           hf, narrow, v, samples);
+                                           ++traced;
+                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                                       });
                     touched += anyChanged;
                 }
                 samplesTotal += samples;
