@@ -290,16 +290,14 @@ struct PathTracer::Impl {
         }
     }
 
-    /// Delta tracking: one exponential optical depth ("budget") is spent across the pieces, each
-    /// piece taking majorant × length, so a piece without a collision costs no logarithm; a null
-    /// collision draws a fresh one (memoryless).
-    template <class View>
-    std::optional<double> freeFlight(const View& v, const Ray& ray, double t0, double t1,
-                                     core::CounterRng& rng, Counters& n) const {
-        std::optional<double> hit;
-        const Track k = track(ray, t0, t1);
+    /// The tentative collisions along a track: one exponential optical depth ("budget") is spent
+    /// across the pieces, each piece taking majorant × length, so a piece without a collision costs
+    /// no logarithm; after each collision a fresh one is drawn (memoryless). f(s, σt, majorant) at
+    /// each; returning false stops the walk.
+    template <class View, class F>
+    void tentativeCollisions(const View& v, const Track& k, core::CounterRng& rng, Counters& n,
+                             F&& f) const {
         float tau = exponentialStep(rng);
-        int nulls = 0;
         traverse(k, [&](float sa, float sb, float m) {
             if (!(m > 0.f)) return true;
             float s = sa;
@@ -312,56 +310,54 @@ struct PathTracer::Impl {
                 s = std::min(s + tau / m, sb);
                 const float sig = sigma(v, k.o + s * k.d);
                 if (sig > m) ++n.violations;
-                if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
-                    if (nulls > kNullCollisionBudget) ++n.budget;
-                    hit = t0 + double(s);
-                    ++n.real;
-                    return false;
-                }
-                ++n.null;
+                if (!f(s, sig, m)) return false;
                 tau = exponentialStep(rng);
             }
+        });
+    }
+
+    /// Delta tracking over the tentative collisions: real with probability σt / majorant.
+    template <class View>
+    std::optional<double> freeFlight(const View& v, const Ray& ray, double t0, double t1,
+                                     core::CounterRng& rng, Counters& n) const {
+        std::optional<double> hit;
+        int nulls = 0;
+        tentativeCollisions(v, track(ray, t0, t1), rng, n, [&](float s, float sig, float m) {
+            if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
+                if (nulls > kNullCollisionBudget) ++n.budget;
+                hit = t0 + double(s);
+                ++n.real;
+                return false;
+            }
+            ++n.null;
+            return true;
         });
         return hit;
     }
 
-    /// Ratio tracking with the same budgeted steps; stops when the estimate reaches 0 and plays
-    /// Russian roulette below kRouletteTransmittance.
+    /// Ratio tracking over the same tentative collisions: T ×= 1 − σt / majorant; stops when the
+    /// estimate reaches 0 and plays Russian roulette below kRouletteTransmittance.
     template <class View>
     double ratioTracking(const View& v, const Ray& ray, double t0, double t1, core::CounterRng& rng,
                          Counters& n) const {
         double T = 1.0;
         ++n.shadow;
-        const Track k = track(ray, t0, t1);
-        float tau = exponentialStep(rng);
         int steps = 0;
-        traverse(k, [&](float sa, float sb, float m) {
-            if (!(m > 0.f)) return true;
-            float s = sa;
-            while (true) {
-                const float room = (sb - s) * m;
-                if (tau >= room) {
-                    tau -= room;
-                    return true;
-                }
-                s = std::min(s + tau / m, sb);
-                if (++steps > kNullCollisionBudget) {
-                    ++n.budget;
+        tentativeCollisions(v, track(ray, t0, t1), rng, n, [&](float, float sig, float m) {
+            if (++steps > kNullCollisionBudget) {
+                ++n.budget;
+                T = 0.0;
+                return false;
+            }
+            T *= std::max(0.0, 1.0 - double(sig) / m);
+            if (T < kRouletteTransmittance) {
+                if (!(T > 0.0) || rng.uniform() < 0.5f) {
                     T = 0.0;
                     return false;
                 }
-                const float sig = sigma(v, k.o + s * k.d);
-                if (sig > m) ++n.violations;
-                T *= std::max(0.0, 1.0 - double(sig) / m);
-                if (T < kRouletteTransmittance) {
-                    if (!(T > 0.0) || rng.uniform() < 0.5f) {
-                        T = 0.0;
-                        return false;
-                    }
-                    T *= 2.0;
-                }
-                tau = exponentialStep(rng);
+                T *= 2.0;
             }
+            return true;
         });
         return T;
     }
