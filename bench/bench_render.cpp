@@ -6,10 +6,11 @@
 // BM_ShFrame512 (issue #12, "frame time at 512²: ≤ 2× the gradient mode on the same view"): the
 // steady-state frames of sh-local, sh-global and ritschel (visibility computed once beforehand,
 // at the pipeline's default params) against gradient on the same caster, view and light, 256³
-// torso and the abdominal CT (ct-bone), one directional or one point light. Every iteration
-// renders one frame of each method in turn, so that load on the shared machine hits all alike;
-// counters are the medians of wall and process-CPU milliseconds per method and the median of the
-// per-iteration ratios method / gradient, and the run prints them as a table at the end.
+// torso and the abdominal CT (ct-bone), one directional or one point light, 2 and 1 render
+// threads (the SH frame's CPU time grew with two threads at once; gradient's did not). Every
+// iteration renders one frame of each method in turn, so that load on the shared machine hits all
+// alike; counters are the medians of wall and process-CPU milliseconds per method and the median
+// of the per-iteration ratios method / gradient, and the run prints them as a table at the end.
 // bench-deps: render io visibility
 #include <benchmark/benchmark.h>
 #include <time.h>
@@ -164,7 +165,8 @@ std::vector<std::string>& shTable() {
     return t;
 }
 
-/// arg 0: 0 = 256³ torso, 1 = abdominal CT; arg 1: 0 = directional light, 1 = point light.
+/// arg 0: 0 = 256³ torso, 1 = abdominal CT; arg 1: 0 = directional light, 1 = point light;
+/// arg 2: render threads.
 void BM_ShFrame512(benchmark::State& state) {
     const bool ct = state.range(0) == 1;
     const Prepared* p = ct ? abdomen() : &torso();
@@ -178,6 +180,7 @@ void BM_ShFrame512(benchmark::State& state) {
 
     render::RenderOptions o;
     o.mode = render::Mode::Gradient;
+    o.threads = int(state.range(2));
     // Both lights sit anterior, superior and to the patient's right of the volume's centre.
     const glm::dvec3 centre =
         p->volume.geometry().indexToWorld(glm::dvec3(p->volume.dims() - glm::ivec3(1)) * 0.5);
@@ -211,8 +214,9 @@ void BM_ShFrame512(benchmark::State& state) {
         for (int m = 1; m < kMethods; ++m) ratio[m].push_back(w[m] / w[0]);
     }
     char line[512];
-    int n = std::snprintf(line, sizeof line, "%-11s %-11s", ct ? "abdomen CT" : "torso 256^3",
-                          point ? "point" : "directional");
+    int n =
+        std::snprintf(line, sizeof line, "%-11s %-11s %d thr", ct ? "abdomen CT" : "torso 256^3",
+                      point ? "point" : "directional", o.threads);
     for (int m = 0; m < kMethods; ++m) {
         state.counters[std::string(names[m]) + "_ms"] = 1e3 * median(wall[m]);
         state.counters[std::string(names[m]) + "_cpu_ms"] = 1e3 * median(cpu[m]);
@@ -234,7 +238,7 @@ void BM_ShFrame512(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_ShFrame512)
-    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->ArgsProduct({{0, 1}, {0, 1}, {2, 1}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(15);
@@ -252,7 +256,7 @@ int main(int argc, char** argv) {
         std::printf(
             "\nBM_ShFrame512: median wall ms (process CPU ms) per 512² frame; ratio to gradient: "
             "median [range] of the per-iteration ratios\n"
-            "case                    | gradient                | sh-local                  "
+            "case                          | gradient                | sh-local                  "
             "             | sh-global                              | ritschel\n");
         for (const std::string& l : shTable()) std::printf("%s\n", l.c_str());
     }
