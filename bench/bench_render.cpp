@@ -7,7 +7,7 @@
 // steady-state frames of sh-local, sh-global and ritschel (visibility computed once beforehand,
 // at the pipeline's default params) against gradient on the same caster, view and light, 256³
 // torso and the abdominal CT (ct-bone), one directional or one point light, 2 and 1 render
-// threads (with both cores free the SH frames' CPU time grew with two threads; gradient's not). Every
+// threads (with both cores free, two threads cost the SH frames more CPU; gradient not). Every
 // iteration renders one frame of each method in turn, so that load on the shared machine hits all
 // alike; counters are the medians of wall and process-CPU milliseconds per method and the median
 // of the per-iteration ratios method / gradient, and the run prints them as a table at the end.
