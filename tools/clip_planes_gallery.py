@@ -6,7 +6,7 @@ tracer (the reference) in both modes, for the torso phantom and a real CT. Write
 volume (PNG, labelled tiles) and the seconds and clip-aware update cost of each render (JSON).
 
     /usr/bin/python3 tools/clip_planes_gallery.py [--build build] [--out docs/clip-planes]
-        [--size 256] [--spp 64]
+        [--size 256] [--spp 64] [--datasets ../shared/datasets]
 
 The light shines through the removed part onto the cut face: with shadows_from_removed true
 (section view) the removed matter still shadows the face; with false the face is lit.
@@ -14,14 +14,12 @@ The light shines through the removed part onto the cut face: with shadows_from_r
 import argparse
 import json
 import os
-import subprocess
 import sys
 import tempfile
 
-from PIL import Image, ImageDraw
+from PIL import Image
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-DATASETS = os.path.join(ROOT, "..", "shared", "datasets")
+from voxlight_cli import DATASETS, ROOT, centre, mosaic, render
 
 # name → (volume or None for the phantom, transfer function, clip plane normal, light position
 # relative to the volume's centre (mm, LPS), view). The plane passes through the centre and keeps
@@ -34,25 +32,6 @@ CASES = {
 TILES = [("sh-global", True), ("sh-global", False), ("pathtrace", True), ("pathtrace", False)]
 
 
-def centre(exe, volume):
-    """World centre of a volume file (mm) from `voxlight info --json`."""
-    r = subprocess.run([exe, "info", "--json", volume], capture_output=True, text=True, check=True)
-    info = json.loads(r.stdout)
-    half = [e / 2 for e in info["extent_mm"]]
-    cols = info["direction_columns"]
-    return [info["origin_mm"][row] + sum(cols[c][row] * half[c] for c in range(3))
-            for row in range(3)]
-
-
-def render(exe, scene, out_png, stats):
-    r = subprocess.run([exe, "render", scene, "-o", out_png, "--stats", stats, "-q"],
-                       capture_output=True, text=True)
-    if r.returncode != 0:
-        sys.exit(f"{scene}: exit {r.returncode}: {r.stderr.strip()}")
-    with open(stats) as f:
-        return json.load(f)
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -61,6 +40,7 @@ def main():
     ap.add_argument("--size", type=int, default=256)
     ap.add_argument("--spp", type=int, default=64)
     ap.add_argument("--phantom-size", type=int, default=128)
+    ap.add_argument("--datasets", default=DATASETS, help="the shared datasets directory")
     args = ap.parse_args()
     exe = os.path.join(args.build, "voxlight")
     os.makedirs(args.out, exist_ok=True)
@@ -71,7 +51,7 @@ def main():
             vol = {"phantom": "torso", "size": args.phantom_size}
             c = [0.0, 0.0, 0.0]  # the phantoms are centred on the world origin
         else:
-            vol = os.path.join(DATASETS, volume)
+            vol = os.path.join(args.datasets, volume)
             if not os.path.exists(vol):
                 print(f"note: {volume} absent, skipped", file=sys.stderr)
                 continue
@@ -103,14 +83,7 @@ def main():
                           f"{method}, shadows_from_removed: {'true' if shadows else 'false'}"))
             print(tag, rows[-1], file=sys.stderr)
         report[name] = rows
-        label = 18
-        w, h = tiles[0][0].size
-        sheet = Image.new("RGB", (w * len(tiles), h + label), "black")
-        draw = ImageDraw.Draw(sheet)
-        for i, (im, text) in enumerate(tiles):
-            sheet.paste(im, (i * w, label))
-            draw.text((i * w + 4, 3), text, fill="white")
-        sheet.save(os.path.join(args.out, f"{name}.png"))
+        mosaic([tiles], os.path.join(args.out, f"{name}.png"))
     with open(os.path.join(args.out, "renders.json"), "w") as f:
         json.dump(report, f, indent=1)
 
