@@ -50,6 +50,26 @@ inline constexpr float kOpacitySeriesTau = 0.01f;
     return 1.f - expInline(-tau);
 }
 
+/// Mean depth of the first scattering event inside a homogeneous segment of length dt and optical
+/// depth τ: the α-weighted mean of t, ∫₀^dt t σ e^(−σt) dt / α = dt·(1/τ − 1/(e^τ − 1)) — dt/2 for
+/// a thin segment (series 1/2 − τ/12 below τ = 0.01), 1/σt for a dense one. A visibility that
+/// varies linearly along the segment has its α-weighted mean exactly there.
+[[gnu::always_inline]] inline float meanScatterDepth(float tau, float dt) {
+    if (tau < kOpacitySeriesTau) return dt * (0.5f - tau * (1.f / 12.f));
+    if (tau > 80.f) return dt / tau;  // e^τ overflows float near 88
+    return dt * (1.f / tau - 1.f / std::expm1(tau));
+}
+
+/// Whether shader S wants its segments shaded at the mean scattering depth (S::kScatterAtMeanDepth;
+/// default false: at the segment's back end, where the gradient normal is taken).
+template <class S>
+constexpr bool scattersAtMeanDepth() {
+    if constexpr (requires { S::kScatterAtMeanDepth; })
+        return S::kScatterAtMeanDepth;
+    else
+        return false;
+}
+
 /// Sample points of a ray: t_0 = tNear, t_i = tNear + (j + i − 1)·Δ clamped to tFar, last = tFar.
 struct SampleLattice {
     float tNear, tFar, step, jitter;
@@ -522,7 +542,10 @@ struct DvrMarcher {
     }
 
     /// One segment of the optical model: opacity from its (pre-integrated) extinction, shading at
-    /// its back end.
+    /// its back end — or, for a shader that asks (volumetric scattering with a visibility field,
+    /// render/sh_shading.h), at the mean depth of the first scattering inside it: in a dense
+    /// segment (bone: σt·Δ of several) the light is scattered within 1/σt of the front, where the
+    /// visibility toward the outside is still high, not at the back end deep inside.
     [[gnu::always_inline]] void composite(float t0, float s0, float t1, float s1) {
         const float dt = t1 - t0;
         const optics::TfTable::Segment seg =
@@ -531,7 +554,10 @@ struct DvrMarcher {
         if (!(tau > 0.f)) return;
         const float alpha = opacity(tau);
         ShadeInput in;
-        in.position = r.originWorld + t1 * r.dirWorld;
+        if constexpr (scattersAtMeanDepth<S>())
+            in.position = r.originWorld + (t0 + meanScatterDepth(tau, dt)) * r.dirWorld;
+        else
+            in.position = r.originWorld + t1 * r.dirWorld;
         in.toEye = toEye;
         in.value = s1;
         in.normal = toEye;

@@ -77,6 +77,8 @@ template <class Field>
 class ShVisibilityShader {
   public:
     static constexpr bool kNeedsNormal = false;
+    /// Segments are shaded where their light is scattered (render/dvr_march.h meanScatterDepth).
+    static constexpr bool kScatterAtMeanDepth = true;
     ShVisibilityShader(std::shared_ptr<const Field> field, const core::Geometry& geometry,
                        std::span<const std::shared_ptr<const lights::Light>> lights,
                        std::span<const double> window = {}, float ambient = 0.f)
@@ -124,6 +126,7 @@ class ShVisibilityShader {
 class ShCutFaceShader {
   public:
     static constexpr bool kNeedsNormal = false;
+    static constexpr bool kScatterAtMeanDepth = true;
     ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibility> global,
                     std::shared_ptr<const visibility::LocalVisibility> local,
                     std::span<const core::HalfSpace> faces, float bandMm,
