@@ -19,7 +19,7 @@ import tempfile
 
 from PIL import Image
 
-from voxlight_cli import DATASETS, ROOT, centre, mosaic, render
+from voxlight_cli import DATASETS, ROOT, mosaic, render, resolve_volume
 
 # name → (volume or None for the phantom, transfer function, clip plane normal, light position
 # relative to the volume's centre (mm, LPS), view). The plane passes through the centre and keeps
@@ -47,15 +47,9 @@ def main():
     work = tempfile.mkdtemp(prefix="voxlight-clip-")
     report = {}
     for name, (volume, tf, normal, light, view) in CASES.items():
-        if volume is None:
-            vol = {"phantom": "torso", "size": args.phantom_size}
-            c = [0.0, 0.0, 0.0]  # the phantoms are centred on the world origin
-        else:
-            vol = os.path.join(args.datasets, volume)
-            if not os.path.exists(vol):
-                print(f"note: {volume} absent, skipped", file=sys.stderr)
-                continue
-            c = centre(exe, vol)
+        vol, c = resolve_volume(exe, volume, args.datasets, args.phantom_size)
+        if vol is None:
+            continue
         plane = {"point": c, "normal": normal}
         light_at = [c[i] + light[i] for i in range(3)]
         tiles, rows = [], []

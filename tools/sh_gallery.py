@@ -26,7 +26,7 @@ import tempfile
 import numpy as np
 from PIL import Image
 
-from voxlight_cli import DATASETS, ROOT, centre, mosaic, render, stage_seconds
+from voxlight_cli import DATASETS, ROOT, mosaic, render, resolve_volume, stage_seconds
 
 # name → (volume file under the datasets directory, or None for the torso phantom; TF; view)
 VOLUMES = {
@@ -88,15 +88,9 @@ def main():
     work = tempfile.mkdtemp(prefix="voxlight-sh-gallery-")
     report = {}
     for name, (volume, tf, view) in VOLUMES.items():
-        if volume is None:
-            vol = {"phantom": "torso", "size": args.phantom_size}
-            c = [0.0, 0.0, 0.0]  # the phantoms are centred on the world origin
-        else:
-            vol = os.path.join(args.datasets, volume)
-            if not os.path.exists(vol):
-                print(f"note: {vol} is absent; skipping the '{name}' mosaic", file=sys.stderr)
-                continue
-            c = centre(exe, vol)
+        vol, c = resolve_volume(exe, volume, args.datasets, args.phantom_size)
+        if vol is None:
+            continue
         light_at = [c[i] + POINT_OFFSET[i] for i in range(3)]
         rows, entries = [], []
         for tag, _, use_env, shadows in ROWS:

@@ -27,6 +27,18 @@ def centre(exe, volume):
             for row in range(3)]
 
 
+def resolve_volume(exe, volume, datasets, phantom_size):
+    """The scene's volume entry and its world centre: the torso phantom (centred on the origin)
+    when `volume` is None, else the file under `datasets`; (None, None) with a note when absent."""
+    if volume is None:
+        return {"phantom": "torso", "size": phantom_size}, [0.0, 0.0, 0.0]
+    path = os.path.join(datasets, volume)
+    if not os.path.exists(path):
+        print(f"note: {path} is absent; skipped", file=sys.stderr)
+        return None, None
+    return path, centre(exe, path)
+
+
 def render(exe, scene, out_png, stats, extra=()):
     """Renders `scene` (a path, or a dict written beside `stats` as .scene.json) to `out_png`;
     returns the stats. Exits with the CLI's message when it fails."""
