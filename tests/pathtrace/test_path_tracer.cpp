@@ -64,6 +64,22 @@ std::vector<pathtrace::Ray> testRays(const core::Volume& v) {
              glm::normalize(glm::dvec3(1.0, 0.05, 0.02))}};  // along the slab
 }
 
+/// Over a 4×4 image: the mean red radiance, the variance of that mean (from the per-pixel
+/// standard errors `se`) and the mean coverage.
+struct CentreStats {
+    double mean = 0.0, var = 0.0, alpha = 0.0;
+};
+CentreStats centreStats(const core::ImageRGBA& im, const core::ImageRGBA& se) {
+    CentreStats c;
+    for (int y = 0; y < 4; ++y)
+        for (int x = 0; x < 4; ++x) {
+            c.mean += im.at(x, y)[0] / 16.0;
+            c.var += double(se.at(x, y)[0]) * se.at(x, y)[0] / 256.0;
+            c.alpha += im.at(x, y)[3] / 16.0;
+        }
+    return c;
+}
+
 /// Ratio tracking's mean transmittance and delta tracking's escape probability along `ray` over
 /// kSamples counter-based streams (sample i: hashCounters(i, b, c), stream `stream`), each within
 /// kZ standard errors (plus the quadrature's own tolerance) of `truth`.
@@ -131,13 +147,7 @@ TEST(PathTracer, SingleScatteringFromAHomogeneousSlabMatchesTheClosedForm) {
     pathtrace::Stats st;
     core::ImageRGBA se;
     const core::ImageRGBA im = t.render(cam, core::Progress::none(), &st, &se);
-    double mean = 0.0, var = 0.0, alpha = 0.0;
-    for (int y = 0; y < 4; ++y)
-        for (int x = 0; x < 4; ++x) {
-            mean += im.at(x, y)[0] / 16.0;
-            var += double(se.at(x, y)[0]) * se.at(x, y)[0] / 256.0;
-            alpha += im.at(x, y)[3] / 16.0;
-        }
+    const auto [mean, var, alpha] = centreStats(im, se);
     const double expected =
         kAlbedo * (1.0 - std::exp(-2.0 * kSigma * D)) / (8.0 * std::numbers::pi);
     EXPECT_NEAR(mean, expected, kZ * std::sqrt(var) + 1e-4 * expected) << "D = " << D;
@@ -273,13 +283,7 @@ TEST(ClipShadows, PathTracerRemovedOccluderIsGoneOrStillShadowsByThePlanesChoice
         const PathTracer t = s.tracer(o);
         core::ImageRGBA se;
         const core::ImageRGBA im = t.render(cam, core::Progress::none(), nullptr, &se);
-        double mean = 0.0, var = 0.0, alpha = 0.0;
-        for (int y = 0; y < 4; ++y)
-            for (int x = 0; x < 4; ++x) {
-                mean += im.at(x, y)[0] / 16.0;
-                var += double(se.at(x, y)[0]) * se.at(x, y)[0] / 256.0;
-                alpha += im.at(x, y)[3] / 16.0;
-            }
+        const auto [mean, var, alpha] = centreStats(im, se);
         const double expected = kAlbedo / (4.0 * std::numbers::pi) * kSigma * d1 *
                                 std::exp(-kSigma * (shadows ? d1 + d2 : d1));
         EXPECT_NEAR(mean, expected, kZ * std::sqrt(var) + 1e-4 * expected)

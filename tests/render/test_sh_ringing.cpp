@@ -8,6 +8,7 @@
 
 #include <cmath>
 #include <iostream>
+#include <numbers>
 
 #include "core/phantoms.h"
 #include "lights/light.h"
@@ -106,6 +107,26 @@ TEST(ShRinging, OnTheCornerCaseTheReconstructionStaysWithinTheBoundAndAWindowLow
         EXPECT_LT(raw.lo, 0.0);
         EXPECT_GT(win.lo, raw.lo);
         EXPECT_LT(win.hi, raw.hi);
+        // The renderer's lights apply the same window: for a directional light of irradiance E,
+        // ShLights::shade = E/(4π)·max(0, Ṽ_windowed(ω_l)) at every grid point.
+        const glm::vec3 toLight = glm::normalize(glm::vec3(0.3f, -0.4f, 0.87f));
+        const std::vector<std::shared_ptr<const lights::Light>> sun = {
+            std::make_shared<lights::DirectionalLight>(glm::vec3(2.f), toLight)};
+        const render::ShLights windowed(c, sun, hanning);
+        std::vector<double> y(std::size_t(sh::kMaxCoeffs));
+        sh::evalShUnitDouble(L, glm::dvec3(toLight), y);
+        for (std::size_t b = 0, checked = 0; b < grid->pyramid().blockCount() && checked < 200;
+             ++b) {
+            if (grid->level(b) == visibility::kNone) continue;
+            const float* v = vis.blockData(b);
+            double r = 0.0;
+            for (int l = 0, i = 0; l <= L; ++l)
+                for (int m = -l; m <= l; ++m, ++i)
+                    r += hanning[std::size_t(l)] * y[std::size_t(i)] * v[i];
+            const double expected = 2.0 / (4.0 * std::numbers::pi) * std::max(0.0, r);
+            EXPECT_NEAR(windowed.shade(glm::vec3(0.f), v).g, expected, 1e-5) << "block " << b;
+            ++checked;
+        }
         // What the header states as measured (−0.04 / −0.09 and 1.04 / 1.09), with a margin.
         constexpr double kHanningUndershoot = 0.1, kHanningOvershoot = 1.1;
         EXPECT_GT(win.lo, -kHanningUndershoot);

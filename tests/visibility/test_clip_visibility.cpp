@@ -24,14 +24,6 @@ constexpr double kRadius = 8.0;  // voxels
 /// The removed half-space is x < kCutX (index = world mm: unit spacing, origin 0).
 constexpr double kCutX = 19.5;
 
-std::shared_ptr<const MultiresGrid> fullGrid(const core::Volume& v,
-                                             const optics::TransferFunction& tf) {
-    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
-    const optics::TfTable table(tf);
-    return std::make_shared<const MultiresGrid>(pyr,
-                                                selectLod(*pyr, tf, table, LodBudget::unlimited()));
-}
-
 LocalVisibilityOptions options() {
     LocalVisibilityOptions o;
     o.coefficients = kCoefficients;
@@ -50,12 +42,13 @@ TEST(ClipAwareVisibility, EqualsTheLocalVisibilityOfTheVolumeWithTheRemovedMatte
     const core::Volume full = test::makeVolume(dims, [](int, int, int) { return 1000; });
     const core::Volume zeroed =
         test::makeVolume(dims, [](int i, int, int) { return i < kCutX ? 0 : 1000; });
-    const auto base = computeLocalVisibility(fullGrid(full, tf), table, options());
+    const auto base = computeLocalVisibility(test::fullGrid(full, tf), table, options());
     const std::vector<core::HalfSpace> kept = {{{kCutX, 0.0, 0.0}, {1.0, 0.0, 0.0}}};
     ClipUpdateStats st;
     const LocalVisibility clipped =
         clipAwareLocalVisibility(base, table, kept, 0, core::Progress::none(), &st);
-    const LocalVisibility truth = computeLocalVisibility(fullGrid(zeroed, tf), table, options());
+    const LocalVisibility truth =
+        computeLocalVisibility(test::fullGrid(zeroed, tf), table, options());
     // The zeroed volume ramps σt linearly over the voxel layer 19..20, which integrates like the
     // sharp cut at 19.5 along any ray crossing it; the midpoint rule (1-voxel steps) on the
     // ramp's two kinks errs by ≤ σ0·Δ/8 per kink in τ, so |ΔV_i| ≤ (σ0/4)·√(4π) (as the slab test

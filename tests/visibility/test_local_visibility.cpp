@@ -19,14 +19,6 @@ namespace {
 
 const double kSqrt4Pi = std::sqrt(4.0 * std::numbers::pi);
 
-std::shared_ptr<const MultiresGrid> fullGrid(const core::Volume& v,
-                                             const optics::TransferFunction& tf) {
-    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
-    const optics::TfTable table(tf);
-    return std::make_shared<const MultiresGrid>(pyr,
-                                                selectLod(*pyr, tf, table, LodBudget::unlimited()));
-}
-
 }  // namespace
 
 TEST(VisibilityDirections, IntegrateTheFirstCoefficientsExactlyWithPositiveWeights) {
@@ -52,7 +44,7 @@ TEST(LocalVisibility, EmptySpaceSeesEverything) {
     // Value 0 everywhere: σt(0) = 0 exactly, but the TF's table may leak σt within one cell of 0,
     // so every block is stored and computed.
     const core::Volume v = test::makeVolume({32, 32, 32}, [](int, int, int) { return 0; });
-    const auto grid = fullGrid(v, test::rampTf(1.f));
+    const auto grid = test::fullGrid(v, test::rampTf(1.f));
     for (int c : {1, 4, 9, 16}) {
         LocalVisibilityOptions o;
         o.coefficients = c;
@@ -80,7 +72,7 @@ TEST(LocalVisibility, InsideAHomogeneousSlabMatchesTheProjectedClosedForm) {
     const core::Volume v = test::makeVolume(
         {40, 40, 60}, [](int, int, int k) { return k >= 20 && k <= 39 ? 1000 : 0; });
     const optics::TransferFunction tf = test::rampTf(kSigma);
-    const auto grid = fullGrid(v, tf);
+    const auto grid = test::fullGrid(v, tf);
     LocalVisibilityOptions o;
     o.coefficients = 16;
     o.rays = 32;
@@ -138,7 +130,7 @@ TEST(LocalVisibility, FullyOpaqueTfGivesFiniteNonNegativeOcclusion) {
     const optics::TransferFunction opaque({{0.f, glm::vec3(1.f), 1e4f, glm::vec3(0.f)},
                                            {1000.f, glm::vec3(1.f), 1e4f, glm::vec3(0.f)}},
                                           {500.f, 1000.f});
-    const auto grid = fullGrid(v, opaque);
+    const auto grid = test::fullGrid(v, opaque);
     LocalVisibilityOptions o;
     o.coefficients = 4;
     const LocalVisibility vis = computeLocalVisibility(grid, optics::TfTable(opaque), o);
@@ -167,7 +159,7 @@ TEST(LocalVisibility, RaysRespectAnisotropicSpacingAndAnObliqueGrid) {
     g.direction = glm::dmat3(std::cos(a), std::sin(a), 0, -std::sin(a), std::cos(a), 0, 0, 0, 1);
     g.origin = {5.0, -3.0, 2.0};
     const optics::TransferFunction tf = test::rampTf(kSigma);
-    const auto grid = fullGrid(v, tf);
+    const auto grid = test::fullGrid(v, tf);
     const optics::TfTable table(tf);
     const glm::vec3 x(20.f, 20.f, 16.f);           // 3.5 index layers (5.25 mm) below the top face
     const double radius = 16.0, R = radius * 0.8;  // r_s in units of the smallest spacing, mm

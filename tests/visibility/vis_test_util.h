@@ -2,10 +2,12 @@
 #pragma once
 // Small volumes and TFs for the visibility tests.
 #include <functional>
+#include <memory>
 
 #include "core/hash.h"
 #include "core/volume.h"
 #include "optics/transfer_function.h"
+#include "visibility/multires_grid.h"
 
 namespace voxlight::test {
 
@@ -26,6 +28,16 @@ inline optics::TransferFunction rampTf(float sigma) {
     return optics::TransferFunction({{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
                                      {1000.f, glm::vec3(1.f), sigma, glm::vec3(0.f)}},
                                     {500.f, 1000.f}, "ramp");
+}
+
+/// The multiresolution grid of `v` under `tf` at full budget (every visible block at 16³).
+inline std::shared_ptr<const visibility::MultiresGrid> fullGrid(
+    const core::Volume& v, const optics::TransferFunction& tf) {
+    using namespace visibility;
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const optics::TfTable table(tf);
+    return std::make_shared<const MultiresGrid>(pyr,
+                                                selectLod(*pyr, tf, table, LodBudget::unlimited()));
 }
 
 }  // namespace voxlight::test
