@@ -187,6 +187,31 @@ class TfTable {
         for (int c = 0; c < 4; ++c) out.v[c] = e.cum[c] + double(e.f[c]) * x;
         return out;
     }
+    /// integrals(value).v[0] alone: ∫σt from lo() to the value (the visibility rays' steps).
+    [[gnu::always_inline]] double sigmaIntegral(float value) const {
+        const double u = (double(value) - double(lo_)) * invCellD_;
+        if (u > 0.0 && u < double(kTableCells)) {
+            const int cell = int(u);
+            const double x = (u - double(cell)) * cell_;
+            const FusedNode& a = fused_[std::size_t(cell)];
+            const FusedNode& b = fused_[std::size_t(cell) + 1];
+            return a.cum[0] + double(a.f[0]) * x +
+                   (double(b.f[0]) - double(a.f[0])) * x * x * (0.5 * invCellD_);
+        }
+        const FusedNode& e = u > 0.0 ? fused_.back() : fused_.front();
+        const double x =
+            u > 0.0 ? (u - double(kTableCells)) * cell_ : (std::isnan(u) ? 0.0 : u * cell_);
+        return e.cum[0] + double(e.f[0]) * x;
+    }
+    /// Mean σt over values varying linearly from sf to sb, from the integrals at both ends
+    /// (sigmaIntegral): exact for the table; below kPointSampleFraction of a cell apart, σt at the
+    /// mid value.
+    [[gnu::always_inline]] float meanExtinction(float sf, double integralF, float sb,
+                                                double integralB) const {
+        if (!(std::abs(sb - sf) * invCell_ > kPointSampleFraction))
+            return extinction(0.5f * (sf + sb));
+        return float(std::max((integralB - integralF) / (double(sb) - double(sf)), 0.0));
+    }
     /// segment(sf, sb) from the integrals at both ends (see integrals()).
     [[gnu::always_inline]] Segment segment(float sf, const Integrals& a, float sb,
                                            const Integrals& b) const {

@@ -5,6 +5,7 @@
 #include <tbb/task_arena.h>
 
 #include <Eigen/Dense>
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <numbers>
@@ -34,48 +35,27 @@ void checkOptions(const LocalVisibilityOptions& o) {
                          "give e.g. 16");
 }
 
-/// σt at every stored sample of the selection (pre-classified: the TF applied to each block's
-/// selected-level samples), laid out like MultiresGrid::levelData.
-struct SigmaField {
+/// The value a visibility ray reads at a point: the grid's seamless interpolation of the selected
+/// levels (MultiresGrid::sample: exactly trilinear in the voxels where neighbouring blocks are at
+/// level 0, so a dense surface on a block face sits where the continuous model puts it); where no
+/// stored block contributes (inside a block at kNone, away from stored ones: the TF is transparent
+/// over every value read there) the owner's mean, flagged as not stored. With the TF table for the
+/// steps' pre-integrated σt.
+struct ValueField {
     const MultiresGrid& grid;
-    std::vector<float> sigma;
-    std::vector<const float*> block;  ///< per block, nullptr at kNone
+    const optics::TfTable& table;
+    std::vector<float> mean;  ///< per block: its 1³ level
 
-    SigmaField(const MultiresGrid& g, const optics::TfTable& table) : grid(g) {
-        const std::size_t n = g.pyramid().blockCount();
-        std::vector<std::size_t> offset(n, 0);
-        std::size_t total = 0;
-        for (std::size_t b = 0; b < n; ++b) {
-            offset[b] = total;
-            if (g.level(b) != kNone) total += std::size_t(std::pow(levelResolution(g.level(b)), 3));
-        }
-        sigma.resize(total);
-        block.assign(n, nullptr);
-        for (std::size_t b = 0; b < n; ++b) {
-            const int l = g.level(b);
-            if (l == kNone) continue;
-            const std::size_t m = std::size_t(std::pow(levelResolution(l), 3));
-            const float* v = g.levelData(b);
-            for (std::size_t i = 0; i < m; ++i) sigma[offset[b] + i] = table.extinction(v[i]);
-            block[b] = sigma.data() + offset[b];
-        }
+    ValueField(const MultiresGrid& g, const optics::TfTable& t) : grid(g), table(t) {
+        const BlockPyramid& pyr = g.pyramid();
+        mean.resize(pyr.blockCount());
+        for (std::size_t b = 0; b < mean.size(); ++b) mean[b] = pyr.data(b, kLevels - 1)[0];
     }
 
-    /// σt at p from the block that owns p alone, clamped to its sample box; level of that block
-    /// (kNone: σt 0).
-    [[gnu::always_inline]] float at(const glm::vec3& p, int& level) const {
-        const glm::ivec3 b = grid.ownerCoord(p);
-        const std::size_t idx = grid.indexOf(b);
-        level = grid.level(idx);
-        if (level == kNone) return 0.f;
-        const int n = levelResolution(level);
-        const float top = float(n - 1);
-        const glm::vec3 u = glm::clamp(
-            (p - (glm::vec3(b) * float(kBlockSize) - 0.5f)) * levelInvSpacing(level) - 0.5f,
-            glm::vec3(0.f), glm::vec3(top));
-        float v = 0.f;
-        addTrilinear(block[idx], n, 1, u, 1.f, &v);
-        return v;
+    [[gnu::always_inline]] float at(const glm::vec3& p, bool& stored) const {
+        const float v = grid.sample(p, NAN);  // the pyramid holds finite values only
+        stored = !std::isnan(v);
+        return stored ? v : mean[grid.ownerBlock(p)];
     }
 };
 
@@ -101,7 +81,7 @@ struct RayDir {
 };
 
 /// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment).
-double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayDir& ray,
+double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayDir& ray,
                     float length, float h, std::uint64_t& samples) {
     constexpr int kCell = BlockPyramid::kCellVoxels;
     double tau = 0.0;
@@ -109,7 +89,12 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
     const glm::vec3& d = ray.d;
     std::uint64_t n = 0;
     const MultiresGrid& grid = field.grid;
+    const optics::TfTable& table = field.table;
     const glm::ivec3 cells = grid.pyramid().cells();
+    // The value at the front of the step and its σt integral (valid once read).
+    bool haveFront = false, frontStored = false;
+    float sFront = 0.f;
+    double iFront = 0.0;
     while (t < length) {
         const glm::vec3 p = origin + t * d;
         // Empty space: a cell whose value range the TF makes transparent holds σt = 0 (exactly,
@@ -123,6 +108,7 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
                     exit =
                         std::min(exit, (float(kCell * (c[a] + ray.next[a])) - p[a]) * ray.inv[a]);
             t += std::max(exit, 0.f) + 1e-3f * h;  // a thousandth of a voxel past the face
+            haveFront = false;
             continue;
         }
         // Step length from the level of the block holding the cell (blocks are 4 cells wide).
@@ -130,13 +116,44 @@ double opticalDepth(const SigmaField& field, const glm::vec3& origin, const RayD
         const float stepVoxels =
             level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
         const float dt = std::min(stepVoxels * h, length - t);
-        int at = kNone;
-        const float sigma = field.at(origin + (t + 0.5f * dt) * d, at);
-        if (at != kNone) {
+        if (!haveFront) {
+            sFront = field.at(p, frontStored);
+            iFront = table.sigmaIntegral(sFront);
+            haveFront = true;
+        }
+        bool backStored = false;
+        const float sBack = field.at(origin + (t + dt) * d, backStored);
+        const double iBack = table.sigmaIntegral(sBack);
+        // Pre-integrated: the value varies linearly across the step (between two blocks at kNone
+        // nothing is stored and σt is 0).
+        if (frontStored || backStored) {
             ++n;
-            tau += double(sigma) * double(dt);
+            const double step = double(table.meanExtinction(sFront, iFront, sBack, iBack)) * dt;
+            if (step <= kRefineDepth) {
+                tau += step;
+            } else {
+                // Dense: the value is linear only within a voxel, so a step across a surface
+                // (where it kinks) is split into sub-steps, each pre-integrated.
+                const int k = std::min(int(std::ceil(step / kRefineDepth)), kMaxSubSteps);
+                const float sub = dt / float(k);
+                float s0 = sFront;
+                double i0 = iFront;
+                for (int j = 1; j <= k; ++j) {
+                    bool st = false;
+                    const float s1 =
+                        j == k ? sBack : field.at(origin + (t + float(j) * sub) * d, st);
+                    const double i1 = j == k ? iBack : table.sigmaIntegral(s1);
+                    tau += double(table.meanExtinction(s0, i0, s1, i1)) * double(sub);
+                    s0 = s1;
+                    i0 = i1;
+                }
+                n += std::uint64_t(k - 1);
+            }
             if (tau > kOpaqueDepth) break;
         }
+        sFront = sBack;
+        iFront = iBack;
+        frontStored = backStored;
         t += dt;
     }
     samples += n;
@@ -167,7 +184,7 @@ struct RaySet {
 /// V at one point into v[0..C): N rays from `origin`, ray k integrated over the part [ta, tb] of
 /// [0, length] that `narrow(k, ta, tb)` leaves (returns false: nothing of it counts).
 template <class Narrow>
-void pointVisibility(const SigmaField& sigma, const RaySet& set, const glm::vec3& origin,
+void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3& origin,
                      const glm::ivec3& dims, float radius, float h, Narrow&& narrow, double* v,
                      std::uint64_t& samples) {
     const int C = set.c;
@@ -283,7 +300,7 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
     const float length = std::min(float(radiusVoxels * h), ray.boxExit(origin, grid.dims()));
     std::uint64_t n = 0;
-    const SigmaField field(grid, table);
+    const ValueField field(grid, table);
     const double tau = opticalDepth(field, origin, ray, length, float(h), n);
     if (samples) *samples += n;
     return std::exp(-tau);
@@ -324,7 +341,7 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
     const RaySet set(g, N, C);
-    const SigmaField sigma(grid, table);
+    const ValueField sigma(grid, table);
     const float radius = float(options.radiusVoxels * h), hf = float(h);
 
     std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
@@ -371,24 +388,56 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
 
 /// Per block of the pyramid: whether a TF change from `before` to `after` (selections; `changed`:
 /// the values whose σt differs) can change what a visibility ray reads inside it — its level, the
-/// σt of one of its stored samples, or the visibility flag of one of its cells (see the header
-/// comment).
+/// σt integrated over a step that ends inside it, or the visibility flag of one of its cells (see
+/// the header comment).
 std::vector<std::uint8_t> changeSources(const MultiresGrid& before, const MultiresGrid& after,
                                         const optics::ValueInterval& changed) {
     const BlockPyramid& pyr = after.pyramid();
-    std::vector<std::uint8_t> source(pyr.blockCount(), 0);
-    for (std::size_t b = 0; b < pyr.blockCount(); ++b) {
-        const int l = after.level(b);
-        if (before.level(b) != l) {
-            source[b] = 1;
-            continue;
+    const std::size_t count = pyr.blockCount();
+    std::vector<std::uint8_t> source(count, 0);
+    for (std::size_t b = 0; b < count; ++b) source[b] = before.level(b) != after.level(b);
+    if (!changed.empty()) {
+        // The values a ray reads: a block's own samples' range, or its mean at kNone (ValueField),
+        // blended within half a sample spacing of a face with its neighbours' (MultiresGrid::
+        // sample) — so a point owned by b reads values in the hull of b's and its 26 neighbours'
+        // ranges (reach 1). A step (≤ kMaxStepVoxels < kBlockSize, sub-steps included) from a
+        // point owned by b ends in b or a neighbour and integrates σt over the values between its
+        // ends: inside the hull over b's neighbourhood of those hulls (reach 2).
+        std::vector<optics::ValueInterval> range(count);
+        for (std::size_t b = 0; b < count; ++b) {
+            const int l = after.level(b);
+            if (l == kNone) {
+                const float m = pyr.data(b, kLevels - 1)[0];
+                range[b] = {m, m};
+                continue;
+            }
+            const float* v = after.levelData(b);
+            const int n = levelResolution(l);
+            const auto [lo, hi] = std::minmax_element(v, v + std::size_t(n) * n * n);
+            range[b] = {*lo, *hi};
         }
-        if (l == kNone || changed.empty()) continue;
-        const BlockStats& st = pyr.stats(b);
-        if (!changed.meets(st.min, st.max)) continue;
-        const float* v = after.levelData(b);
-        const int n = levelResolution(l);
-        for (int i = 0; i < n * n * n && !source[b]; ++i) source[b] = changed.meets(v[i], v[i]);
+        const glm::ivec3 nb = pyr.blocks();
+        auto dilate = [&](const std::vector<optics::ValueInterval>& in) {
+            std::vector<optics::ValueInterval> out(count);
+            for (std::size_t b = 0; b < count; ++b) {
+                const glm::ivec3 bc = pyr.blockCoord(b);
+                const glm::ivec3 lo = glm::max(bc - 1, glm::ivec3(0));
+                const glm::ivec3 hi = glm::min(bc + 1, nb - 1);
+                optics::ValueInterval r;
+                for (int z = lo.z; z <= hi.z; ++z)
+                    for (int y = lo.y; y <= hi.y; ++y)
+                        for (int x = lo.x; x <= hi.x; ++x) {
+                            const optics::ValueInterval& o = in[pyr.blockIndex(x, y, z)];
+                            r.lo = std::min(r.lo, o.lo);
+                            r.hi = std::max(r.hi, o.hi);
+                        }
+                out[b] = r;
+            }
+            return out;
+        };
+        const std::vector<optics::ValueInterval> reach2 = dilate(dilate(range));
+        for (std::size_t b = 0; b < count; ++b)
+            source[b] = source[b] || changed.meets(reach2[b].lo, reach2[b].hi);
     }
     const glm::ivec3 cells = pyr.cells();
     const std::vector<std::uint8_t>& visA = before.selection().cellVisible;
@@ -565,7 +614,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
         return glm::dot(f.grad, i) + f.offset;
     };
 
-    const SigmaField sigma(grid, table);
+    const ValueField sigma(grid, table);
     LocalVisibility out = base;  // the unclipped values wherever the cut cannot reach
     out.raysTraced_ = out.samplesTaken_ = 0;
     const std::size_t blocks = grid.pyramid().blockCount();

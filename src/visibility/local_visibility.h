@@ -15,17 +15,22 @@
 // V = (√(4π), 0, …) and a light sees no spurious directional bias from the quadrature; weights stay
 // positive for N ≥ kMinRaysPerCoefficient · coefficients (checked when built).
 //
-// Ray integration: midpoint rule in steps that follow the LOD (Kronander §4.2, "adaptive step size
+// Ray integration: pre-integrated steps that follow the LOD (Kronander §4.2, "adaptive step size
 // according to the LOD selection"): the step inside a block at level l is min(2^l, kMaxStepVoxels)
 // voxels (one sample per reduced sample spacing), the last step shortened to end at R (or at the
-// volume's box: outside the volume is empty). σt is pre-classified: the TF is applied once to every
-// stored sample of the selection, and a ray sample reads σt trilinearly from the block that owns
-// it, clamped to that block's sample box — not the seamless blend of MultiresGrid::sample, which
-// costs several times more per sample; the two differ only within s/2 of a block face (within ½
-// voxel at level 0), by at most σt's variation across one sample spacing, and the ray integrates
-// that difference over at most s/2 of its length per face it crosses. Inside a block at kNone σt
-// is 0 (the TF is transparent over its whole range). A ray stops once its optical depth exceeds
-// kOpaqueDepth (transmittance < 1e-4: the rest changes V by less than that).
+// volume's box: outside the volume is empty). The value is read at both ends of a step through the
+// grid's seamless interpolation (MultiresGrid::sample: exactly trilinear in the voxels between
+// level-0 blocks, across block faces too) and the step's optical depth is Δ · mean σt over the
+// values between them, from the TF table's cumulative integral (TfTable::sigmaIntegral; exact for
+// a value linear along the step, as in the renderer). A step deeper than kRefineDepth is split
+// into sub-steps, each pre-integrated: the value is linear only within a voxel, and a dense surface
+// crossed mid-step would otherwise be smeared over the step. (A midpoint rule with the σt of the
+// owner block alone took a step across a bone surface at its midpoint's full σt, or dropped the
+// half voxel past a block face: V 0.37 instead of e^−1 … 1 instead of e^−1 next to a face.)
+// Inside a block at kNone, away from stored ones, σt is 0 (the TF is transparent over every value
+// read there); a step from a stored block into one integrates towards the block's mean. A ray
+// stops once its optical depth exceeds kOpaqueDepth (transmittance < 1e-4: the rest changes V by
+// less than that).
 //
 // Empty space (exact): the BlockPyramid's 4³ cells whose value range the TF makes transparent
 // (LodSelection::cellVisible) hold σt = 0, so rays jump across them, and grid points with no
@@ -51,12 +56,14 @@
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only
 // the blocks the change can reach, with a result identical bit for bit to computeLocalVisibility.
-// What a point's value reads: σt of the blocks owning its ray samples (all within R of it) at their
-// selected levels, the step lengths those levels give, and the cell-visibility flags of the cells
-// its rays cross and of those within 2·s + 1 voxels (visibilityNeeded). A block is a *source of
-// change* when its level differs between the two selections, one of its cells changed visibility,
-// or one of its stored samples (at its selected level) has a value whose σt differs between the
-// two tables (optics::extinctionChange — σt only: a colour-only edit changes no value). A stored
+// What a point's value reads: the values the grid's interpolation gives along its rays (all
+// within R of it; near a block face they blend the block's samples with its neighbours'), the
+// step lengths the selected levels give, and the cell-visibility flags of the cells its rays cross
+// and of those within 2·s + 1 voxels (visibilityNeeded). A block is a *source of change* when its
+// level differs between the two selections, one of its cells changed visibility, or σt changed
+// (optics::extinctionChange — σt only: a colour-only edit changes no value) somewhere in the hull
+// of the values of the blocks within two of it (a value read in b lies in the hull of b's and its
+// neighbours' ranges, and a pre-integrated step from b ends in b or a neighbour). A stored
 // block is recomputed when its own level changed or a source block lies within its reach — per
 // axis, the gap between the two blocks' voxel extents within max(R / spacing_a, 2·s + 1) +
 // kUpdateMarginVoxels; every other block copies its
@@ -81,6 +88,12 @@ namespace voxlight::visibility {
 /// Longest ray step (voxels): at least four samples within the default radius of 16 voxels, so a
 /// fine block entered from a coarse one is never stepped over by more than 4 voxels.
 inline constexpr float kMaxStepVoxels = 4.f;
+/// Optical depth above which one ray step is split into sub-steps (up to kMaxSubSteps): the value
+/// is linear along a ray only within a voxel, so a pre-integrated step across a dense surface errs
+/// by up to its whole optical depth; sub-steps of depth ≤ ¼ keep T within a few % of the continuous
+/// model at a surface (tested) and cost samples only where rays are about to stop anyway.
+inline constexpr double kRefineDepth = 0.25;
+inline constexpr int kMaxSubSteps = 16;
 /// Optical depth at which a visibility ray stops (e^−9.21 = 1e-4).
 inline constexpr double kOpaqueDepth = 9.21;
 /// Fewest rays per SH coefficient for which the corrected weights are guaranteed positive (checked

@@ -193,7 +193,29 @@ LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFuncti
                        const optics::TfTable& table, const LodBudget& budget) {
     LodSelection s;
     s.significance = blockSignificance(pyramid, tf, table);
+    s.cellVisible = visibleCells(pyramid, tf, table);
     const std::size_t count = pyramid.blockCount();
+    // A block whose own voxels are transparent is still stored when a visible cell overlaps its
+    // owned extent: trilinear samples inside it read its neighbours' voxels one voxel past its
+    // faces (a dense surface on a block face), and visibility must be stored there.
+    {
+        constexpr int kCellsPerBlock = kBlockSize / BlockPyramid::kCellVoxels;
+        const glm::ivec3 cells = pyramid.cells();
+        for (std::size_t b = 0; b < count; ++b) {
+            if (s.significance[b] >= 0.f) continue;
+            const glm::ivec3 bc = pyramid.blockCoord(b);
+            const glm::ivec3 lo = glm::max(bc * kCellsPerBlock - 1, glm::ivec3(0));
+            const glm::ivec3 hi = glm::min(bc * kCellsPerBlock + kCellsPerBlock - 1, cells - 1);
+            bool apron = false;
+            for (int z = lo.z; z <= hi.z && !apron; ++z)
+                for (int y = lo.y; y <= hi.y && !apron; ++y)
+                    for (int x = lo.x; x <= hi.x && !apron; ++x)
+                        apron =
+                            s.cellVisible[std::size_t(x) + std::size_t(cells.x) *
+                                                               (y + std::size_t(cells.y) * z)] != 0;
+            if (apron) s.significance[b] = 0.f;
+        }
+    }
     s.level.assign(count, std::int8_t(kNone));
     // Start: every visible block at 1³.
     for (std::size_t b = 0; b < count; ++b)
@@ -235,7 +257,6 @@ LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFuncti
     }
     for (std::size_t b = 0; b < count; ++b)
         ++s.blocksPerLevel[s.level[b] == kNone ? kLevels : std::size_t(s.level[b])];
-    s.cellVisible = visibleCells(pyramid, tf, table);
     return s;
 }
 

@@ -9,7 +9,9 @@
 // per axis (clipped at the volume edge; a partial edge block is padded by repeating the edge voxel,
 // so every block has full 16³ data). Each block is kept at one level of detail:
 //   level 0..4 → n = 16, 8, 4, 2, 1 samples per axis, spacing s = 16/n voxels, or kNone (not
-//   stored: the TF is transparent over the block's whole value range).
+//   stored: the TF is transparent over every value a trilinear sample inside the block's owned
+//   extent reads — its own voxels and the one-voxel apron around them, judged by the cells that
+//   overlap the extent, so the air block above a bone surface lying on its face is stored).
 // Sample j of a level-l block lies at voxel coordinate 16·b + (j + ½)·s − ½ (cell centred), and
 // its value is the mean of the s³ voxels it covers (box filter), so level 0 is the voxels
 // themselves (bit for bit) and level 4 the block mean.
@@ -25,8 +27,8 @@
 // premultiplied by the opacity of one voxel step, α·(albedo + emission) with α = 1 − exp(−σt·h)
 // (h = smallest spacing), in CIE L*u*v* (D65); ΔE is the Euclidean L*u*v* distance.
 //
-// Selection (Ljung 2004's adaptive priority queue): every block the TF does not make transparent
-// starts at 1³; the distortion of block b at level l is modelled as S_b·l/4 (full data at level 0,
+// Selection (Ljung 2004's adaptive priority queue): every block not at kNone (above) starts at 1³
+// (an apron-only block, transparent over its own voxels, with significance 0); the distortion of block b at level l is modelled as S_b·l/4 (full data at level 0,
 // S_b at 1³), so each refinement step gains S_b/4 and costs n_new³ − n_old³ samples; the queue
 // always refines the block with the largest gain per sample (ties: lower block index) while the
 // budget allows. Blocks with S_b = 0 gain kZeroSignificanceGain per step, so they refine last but do
@@ -69,7 +71,7 @@ namespace voxlight::visibility {
 
 inline constexpr int kBlockSize = 16;
 inline constexpr int kLevels = 5;  ///< 16³, 8³, 4³, 2³, 1³
-inline constexpr int kNone = -1;   ///< block not stored (transparent under the TF)
+inline constexpr int kNone = -1;   ///< block not stored (transparent under the TF, apron included)
 inline constexpr int kHistogramBins = 32;
 /// Gain per refinement step of a block whose significance is 0 (ΔE units): far below any visible
 /// colour difference (ΔE ≈ 1 is a just-noticeable difference), so such blocks refine only after

@@ -16,15 +16,16 @@ using namespace voxlight::visibility;
 
 namespace {
 
-/// 112×48×64 voxels at 1.5 × 1 × 1 mm: air, a soft-tissue ellipsoid (40, textured), a bone ball
-/// (700) near one end and a contrast-filled plate (220) across the other end at z = 32…34 — just
+/// 112×48×64 voxels at 1.5 × 1 × 1 mm: air, a soft-tissue ellipsoid (40, textured), a dense
+/// nodule (120: below the contrast interval, so no step from it to the tissue integrates σt over
+/// that interval) near one end and a contrast-filled plate (220) across the other end at z = 32…34 — just
 /// past a block face, so blocks two apart in z (z ≤ 15, 17 voxels below) see it within r_s 20.
 core::Volume phantom() {
     core::Volume v = test::makeVolume({112, 48, 64}, [](int i, int j, int k) {
         const double x = (i - 55.5) / 56.0, y = (j - 23.5) / 26.0, z = (k - 31.5) / 34.0;
         if (x * x + y * y + z * z > 1.0) return -1000;
         const double bx = (i - 20.0) * 1.5, by = j - 18.0, bz = k - 14.0;
-        if (bx * bx + by * by + bz * bz < 49.0) return 700;
+        if (bx * bx + by * by + bz * bz < 49.0) return 120;
         if (i > 76 && k >= 32 && k <= 34) return 220;
         return 40 + (i * 7 + j * 3 + k) % 11;  // texture: blocks are not constant
     });
@@ -106,13 +107,39 @@ TEST(TfUpdate, AnEditOverAValueIntervalEqualsAFullComputationAndRecomputesOnlyNe
     EXPECT_GT(st.changed.hi, 299.f);
     EXPECT_LT(st.changed.hi, 310.f);
     EXPECT_EQ(st.blocksLevelChanged, 0u);  // unlimited budget: every stored block at 16³
-    // Blocks holding 150…300 are the vessel's and the bone ball's rim (partial volume); the far
-    // side of the body is out of reach.
+    // Sources: the vessel's blocks and their neighbours (a step between two blocks integrates σt
+    // over the values between its ends); the nodule's end of the body is out of reach.
     EXPECT_GT(st.blocksRecomputed, 0u);
     EXPECT_LT(st.blocksRecomputed, st.blocks);
     EXPECT_LT(st.pointsRecomputed, st.points);
     std::cout << "recomputed " << st.blocksRecomputed << " of " << st.blocks << " blocks, "
               << st.pointsRecomputed << " of " << st.points << " points\n";
+}
+
+TEST(TfUpdate, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
+    // Tissue (40) meets bone (700) exactly on a block face: neither block holds a value in the
+    // edited interval (150…300), but a ray step from one to the other integrates σt over the
+    // values between its ends, so the edit changes V on both sides and both blocks are sources.
+    Field f;
+    f.pyramid = std::make_shared<const BlockPyramid>(BlockPyramid::build(test::makeVolume(
+        {48, 16, 16}, [](int i, int, int) { return i < 16   ? 40
+                                                   : i < 32 ? 700
+                                                            : -1000; })));
+    f.options.rays = 8;
+    f.options.coefficients = 4;
+    f.options.radiusVoxels = 4.0;
+    const LocalVisibility before = f.full(ctTf(0.f));
+    const LocalVisibility expected = f.full(ctTf(2.f));
+    // The edit does change the field next to the face (else the test proves nothing).
+    float a[4], b[4];
+    before.sample(glm::vec3(15.f, 8.f, 8.f), a);
+    expected.sample(glm::vec3(15.f, 8.f, 8.f), b);
+    EXPECT_GT(std::abs(a[0] - b[0]), 1e-3f);
+    TfUpdateStats st;
+    const LocalVisibility after = f.update(before, ctTf(2.f), st);
+    EXPECT_TRUE(st.incremental) << st.reason;
+    EXPECT_GE(st.blocksRecomputed, 2u);
+    expectIdentical(after, expected);
 }
 
 TEST(TfUpdate, AColourOnlyEditChangesNoValueAndTracesNothing) {
