@@ -61,13 +61,13 @@
 // them, see it gone. A coarse cell that straddles a cut face mixes kept matter with the emptied
 // part as it mixes matter with any gap beside it. Unlike sh-local's radius-bounded rays
 // (local_visibility.h: only points within r_s of a face change), these rays run to the volume's
-// box, so a cut changes V̄ wherever a ray from the kept side reaches the removed side: the whole
-// field is traced again per cut, except the points more than (s + 1)·|spacing| mm outside some
-// face — never read by a shaded sample (camera rays only shade the kept region, and a sample
-// reads the 8 grid points of its 1:s cell, within s·|spacing| of it) — which get empty space's
-// value without rays. A cut that removes only matter the TF shows transparent changes no cell
-// and the result equals computeHierarchicalVisibility on the same pyramid but for those cleared
-// points.
+// box, so a cut changes V̄ wherever a ray from the kept side reaches the removed side: the field
+// is traced again per cut, except the points more than (s + 1)·|spacing| mm outside some face —
+// never read by a shaded sample (camera rays only shade the kept region, and a sample reads the
+// 8 grid points of its 1:s cell, within s·|spacing| of it) — which get empty space's value
+// without rays. A cut that removes only matter the TF shows transparent changes no cell and the
+// result equals computeHierarchicalVisibility on the same pyramid but for those cleared points.
+// Memory: the clipped pyramid is a copy of the base (as large) while the field is traced.
 //
 // Parallel over z-slices of grid points with oneTBB; each point is computed alone in a fixed
 // order, so the field is identical for any thread count.
