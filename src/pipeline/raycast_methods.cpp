@@ -23,7 +23,9 @@
 //                         volume's boundary: growing steps make the far part cheap),
 //                         hierarchical (true; false = 1-voxel steps on level 0, the brute-force
 //                         reference). Stages opacity_pyramid ← block_pyramid + TF and
-//                         hierarchical_visibility ← opacity_pyramid + these params (+ seed).
+//                         hierarchical_visibility ← opacity_pyramid + these params (+ seed), or
+//                         clip_hierarchical_visibility ← the same + the planes that remove matter
+//                         for the light (see below).
 //   pathtrace:            spp (64; the most when a target error is set), seconds, target_error
 //                         (relative NRMS the samples predict; 0 = off), reference (false; true:
 //                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
@@ -37,8 +39,11 @@
 // are traced again), and sh-global's global stage then integrates that field. Both keys cover the
 // removing planes only, so a section-view plane (true), or moving one, reruns no visibility stage.
 // sh-global shades from local visibility near the faces that remove matter for the light
-// (render/sh_shading.h ShCutFaceShader, within one global grid spacing). ritschel's field is
-// not clip-aware: it shades every plane as a section view and warns when one says false.
+// (render/sh_shading.h ShCutFaceShader, within one global grid spacing). ritschel: the same
+// planes add clip_hierarchical_visibility in place of hierarchical_visibility (visibility/
+// hierarchical_visibility.h: the removed matter zeroed at the opacity pyramid's base, the rays
+// traced again — they reach the whole volume, so a move of such a plane retraces the field's kept
+// side, not a slab); its key covers the removing planes only, as above.
 // Lights: gradient and iso shade with every light type (render/shading.h says how); sh-local,
 // sh-global and ritschel with directional, point and environment lights (render/sh_shading.h);
 // the other three are unlit, so their plans mark the light stages "not needed". Effects: gradient
@@ -899,8 +904,11 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
 
 /// block_pyramid ← volume (shared with sh-local/sh-global); opacity_pyramid ← pyramid + TF;
 /// hierarchical_visibility ← opacity pyramid + rays/coefficients/patterns/subsample/quantize_8bit/
-/// max_distance/hierarchical + seed. A light or camera change reruns none.
-void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptions& vo) {
+/// max_distance/hierarchical + seed; or, when a plane or the box removes matter for the light,
+/// clip_hierarchical_visibility ← the same + the removing planes (the section-view ones are not
+/// in its key). A light or camera change reruns none.
+void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptions& vo,
+                       const LightCuts& cuts) {
     plan.stages.push_back(blockPyramidStage());
 
     Stage opacity{"opacity_pyramid", StageKind::Precompute, {"block_pyramid", "transfer_function"}};
@@ -941,6 +949,11 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
          std::isfinite(vo.maxDistanceVoxels) ? json(vo.maxDistanceVoxels) : json("volume")},
         {"seed", vo.seed}};
     Stage vis{"hierarchical_visibility", StageKind::Precompute, {"opacity_pyramid", "method"}};
+    if (cuts.any())
+        vis.skip =
+            "not needed: a clip plane or the crop box removes matter for the light "
+            "(shadows_from_removed false), and clip_hierarchical_visibility computes the field "
+            "with it gone";
     vis.key = [visKey](const Run& run) {
         return KeyBuilder(run, "hierarchical_visibility")
             .stage("opacity_pyramid")
@@ -976,6 +989,57 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
         return os.str();
     };
     plan.stages.push_back(vis);
+
+    // The clip-aware field: the removed matter zeroed at the pyramid's base, the rays traced
+    // again (they reach the whole volume, so a cut is not local; hierarchical_visibility.h).
+    Stage clip{"clip_hierarchical_visibility",
+               StageKind::Precompute,
+               {"opacity_pyramid", "method", "clip_planes", "crop_box"}};
+    if (!cuts.any())
+        clip.skip =
+            "not needed: no clip plane or crop box removes matter for the light (none, or "
+            "shadows_from_removed true)";
+    clip.key = [visKey, cutKey = cuts.key](const Run& run) {
+        return KeyBuilder(run, "clip_hierarchical_visibility")
+            .stage("opacity_pyramid")
+            .json(visKey)
+            .json(cutKey)
+            .value();
+    };
+    clip.compute = [vo, kept = cuts.kept](Run& run) {
+        core::Stopwatch sw;
+        visibility::HierarchicalClipStats st;
+        auto v = std::make_shared<const visibility::HierarchicalVisibility>(
+            visibility::clipAwareHierarchicalVisibility(
+                *run.get<visibility::OpacityPyramid>("opacity_pyramid"), kept, vo, run.progress(),
+                &st));
+        run.details()["clip_hierarchical_visibility"] = {
+            {"voxels_removed", st.voxelsRemoved},
+            {"pyramid_cells_changed", st.cellsChanged},
+            {"points", st.points},
+            {"points_traced", st.pointsTraced},
+            {"points_cleared", st.pointsCleared},
+            {"points_skipped", st.pointsSkipped},
+            {"rays_traced", st.raysTraced},
+            {"pyramid_seconds", st.pyramidSeconds},
+            {"visibility_seconds", st.visibilitySeconds},
+            {"seconds", sw.seconds()},
+            {"memory_mb", double(v->bytes()) / 1048576.0}};
+        const std::size_t bytes = v->bytes();
+        return Artifact::of<visibility::HierarchicalVisibility>(std::move(v), bytes);
+    };
+    clip.notOnDisk = "recomputed per position of a plane that removes matter for the light";
+    clip.describe = [](const Run& run, const Artifact&) {
+        const json& d = run.details().value("clip_hierarchical_visibility", json::object());
+        if (d.empty()) return std::string("clip-aware hierarchical visibility");
+        std::ostringstream os;
+        os << d["voxels_removed"].get<std::uint64_t>() << " voxels removed for the light; "
+           << d["points_traced"].get<std::uint64_t>() << " of " << d["points"].get<std::uint64_t>()
+           << " points traced (" << d["points_cleared"].get<std::uint64_t>()
+           << " cleared on the removed side)";
+        return os.str();
+    };
+    plan.stages.push_back(clip);
 }
 
 // ---- The plan ----------------------------------------------------------------------------------
@@ -1177,9 +1241,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     plan.stages.push_back(grad);
 
     const LightCuts cuts = lightCuts(options);
-    const bool clipped = isKronander(kind) && cuts.any();
+    const bool clipped = isSh(kind) && cuts.any();
     if (isKronander(kind)) addVisibilityStages(plan, shParams, kind == Kind::ShGlobal, cuts);
-    if (kind == Kind::Ritschel) addRitschelStages(plan, ritschelParams);
+    if (kind == Kind::Ritschel) addRitschelStages(plan, ritschelParams, cuts);
 
     Stage lightsStage{"lights", StageKind::Input, {"lights"}};
     if (!isLit(kind)) lightsStage.skip = "not needed: method '" + scene.method.name + "' is unlit";
@@ -1321,7 +1385,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     if (isKronander(kind))
         frame.inputs.push_back(clipped ? "clip_local_visibility" : "local_visibility");
     if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
-    if (kind == Kind::Ritschel) frame.inputs.push_back("hierarchical_visibility");
+    if (kind == Kind::Ritschel)
+        frame.inputs.push_back(clipped ? "clip_hierarchical_visibility"
+                                       : "hierarchical_visibility");
     frame.key = [optionsKey, kind, clipped](const Run& run) {
         KeyBuilder k(run, "render");
         k.stage("load_volume")
@@ -1333,7 +1399,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .stage("light_sh");
         if (isKronander(kind)) k.stage(clipped ? "clip_local_visibility" : "local_visibility");
         if (kind == Kind::ShGlobal) k.stage("global_visibility");
-        if (kind == Kind::Ritschel) k.stage("hierarchical_visibility");
+        if (kind == Kind::Ritschel)
+            k.stage(clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility");
         return k.json(optionsKey).value();
     };
     if (kind == Kind::PathTrace) {
@@ -1400,14 +1467,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             if (isSh(kind)) {
                 std::unique_ptr<render::ShadingModel> model;
                 if (kind == Kind::Ritschel) {
-                    if (lightCuts(o).any())
-                        run.warn(
-                            "method 'ritschel' keeps removed matter in its visibility: every "
-                            "clip plane and the crop box shade as a section view "
-                            "(shadows_from_removed true); use sh-local or sh-global for false");
                     model = render::makeShVisibilityModel(
                         caster, *camera,
-                        run.get<visibility::HierarchicalVisibility>("hierarchical_visibility"));
+                        run.get<visibility::HierarchicalVisibility>(
+                            clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility"));
                 } else if (kind == Kind::ShLocal) {
                     model = render::makeShVisibilityModel(caster, *camera,
                                                           lightLocalVisibility(run, clipped));

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <glm/gtc/quaternion.hpp>
@@ -12,6 +13,7 @@
 
 #include "core/error.h"
 #include "core/rng.h"
+#include "core/timing.h"
 #include "sh/sh_basis.h"
 #include "sh/sphere_samples.h"
 #include "visibility/local_visibility.h"
@@ -93,6 +95,42 @@ double opticalDepth(const OpacityPyramid& pyr, const glm::vec3& origin, const gl
 /// Grid points per axis of the 1:s grid.
 glm::ivec3 gridResolution(const glm::ivec3& dims, int s) { return (dims - 1 + (s - 1)) / s + 1; }
 
+/// σ_{k+1} of parent cell (x, y, z) from its children on level k (cells of L mm; header comment).
+float minifyCell(const std::vector<float>& child, const glm::ivec3& dc, int x, int y, int z,
+                 double L) {
+    const double minMeanT = std::exp(-0.5 * kMaxCellDepth);  // T_{k+1} = mean² ≥ e^−cap
+    double sum = 0.0;
+    int count = 0;
+    for (int k = 2 * z; k < std::min(2 * z + 2, dc.z); ++k)
+        for (int j = 2 * y; j < std::min(2 * y + 2, dc.y); ++j)
+            for (int i = 2 * x; i < std::min(2 * x + 2, dc.x); ++i) {
+                sum += std::exp(
+                    -double(
+                        child[std::size_t(i) + std::size_t(dc.x) * (j + std::size_t(dc.y) * k)]) *
+                    L);
+                ++count;
+            }
+    const double meanT = std::max(sum / count, minMeanT);
+    return float(-std::log(meanT) / L);
+}
+
+/// A world half-space in index space: distance(i) = dot(grad, i) + offset (mm, exact: the world
+/// distance of voxel coordinate i).
+struct IndexFace {
+    glm::dvec3 grad;
+    double offset;
+    IndexFace(const core::Geometry& g, const core::HalfSpace& hs)
+        : grad(g.spacing * (glm::transpose(g.direction) * hs.normal)),
+          offset(glm::dot(g.origin - hs.point, hs.normal)) {}
+    double distance(const glm::dvec3& i) const { return glm::dot(grad, i) + offset; }
+};
+
+std::vector<IndexFace> indexFaces(const core::Geometry& g, std::span<const core::HalfSpace> kept) {
+    std::vector<IndexFace> faces;
+    for (const core::HalfSpace& hs : kept) faces.emplace_back(g, hs);
+    return faces;
+}
+
 }  // namespace
 
 // ---- Opacity pyramid ---------------------------------------------------------------------------
@@ -132,27 +170,12 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
         const glm::ivec3 dp = (dc + 1) / 2;
         std::vector<float> parent(std::size_t(dp.x) * dp.y * dp.z);
         const std::vector<float>& child = o.data_.back();
-        const double minMeanT = std::exp(-0.5 * kMaxCellDepth);  // T_{k+1} = mean² ≥ e^−cap
         tbb::parallel_for(tbb::blocked_range<int>(0, dp.z), [&](const auto& range) {
             for (int z = range.begin(); z != range.end(); ++z)
                 for (int y = 0; y < dp.y; ++y)
-                    for (int x = 0; x < dp.x; ++x) {
-                        double sum = 0.0;
-                        int count = 0;
-                        for (int k = 2 * z; k < std::min(2 * z + 2, dc.z); ++k)
-                            for (int j = 2 * y; j < std::min(2 * y + 2, dc.y); ++j)
-                                for (int i = 2 * x; i < std::min(2 * x + 2, dc.x); ++i) {
-                                    sum +=
-                                        std::exp(-double(child[std::size_t(i) +
-                                                               std::size_t(dc.x) *
-                                                                   (j + std::size_t(dc.y) * k)]) *
-                                                 L);
-                                    ++count;
-                                }
-                        const double meanT = std::max(sum / count, minMeanT);
+                    for (int x = 0; x < dp.x; ++x)
                         parent[std::size_t(x) + std::size_t(dp.x) * (y + std::size_t(dp.y) * z)] =
-                            float(-std::log(meanT) / L);
-                    }
+                            minifyCell(child, dc, x, y, z, L);
         });
         o.dims_.push_back(dp);
         o.data_.push_back(std::move(parent));
@@ -161,6 +184,74 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
     o.cellVisible_ = visibleCells(pyramid, tf, table);
     o.cells_ = pyramid.cells();
     progress.report("opacity pyramid", 1.0);
+    return o;
+}
+
+OpacityPyramid OpacityPyramid::withRemoved(std::span<const core::HalfSpace> kept,
+                                           std::uint64_t* voxelsChanged,
+                                           std::uint64_t* cellsChanged) const {
+    OpacityPyramid o = *this;
+    std::uint64_t voxels = 0, cells = 0;
+    if (!kept.empty()) {
+        const std::vector<IndexFace> faces = indexFaces(geometry_, kept);
+        // Level 0: zero the voxels outside some half-space, marking those that held matter.
+        const glm::ivec3 d0 = dims_[0];
+        std::vector<std::uint8_t> changed(o.data_[0].size(), 0);
+        std::atomic<std::uint64_t> zeroed{0};
+        tbb::parallel_for(tbb::blocked_range<int>(0, d0.z), [&](const auto& range) {
+            std::uint64_t n = 0;
+            for (int z = range.begin(); z != range.end(); ++z)
+                for (int y = 0; y < d0.y; ++y)
+                    for (int x = 0; x < d0.x; ++x) {
+                        const std::size_t i =
+                            std::size_t(x) + std::size_t(d0.x) * (y + std::size_t(d0.y) * z);
+                        if (o.data_[0][i] == 0.f) continue;
+                        const glm::dvec3 p(x, y, z);
+                        for (const IndexFace& f : faces)
+                            if (f.distance(p) < 0.0) {
+                                o.data_[0][i] = 0.f;
+                                changed[i] = 1;
+                                ++n;
+                                break;
+                            }
+                    }
+            zeroed += n;
+        });
+        voxels = zeroed;
+        // Coarser levels: a parent changes only when a child did; minify those again.
+        double L = core::minComponent(geometry_.spacing);
+        for (std::size_t l = 1; l < o.data_.size() && voxels > 0; ++l) {
+            const glm::ivec3 dc = dims_[l - 1], dp = dims_[l];
+            std::vector<std::uint8_t> parentChanged(o.data_[l].size(), 0);
+            std::atomic<std::uint64_t> redone{0};
+            tbb::parallel_for(tbb::blocked_range<int>(0, dp.z), [&](const auto& range) {
+                std::uint64_t n = 0;
+                for (int z = range.begin(); z != range.end(); ++z)
+                    for (int y = 0; y < dp.y; ++y)
+                        for (int x = 0; x < dp.x; ++x) {
+                            bool any = false;
+                            for (int k = 2 * z; k < std::min(2 * z + 2, dc.z) && !any; ++k)
+                                for (int j = 2 * y; j < std::min(2 * y + 2, dc.y) && !any; ++j)
+                                    for (int i = 2 * x; i < std::min(2 * x + 2, dc.x) && !any; ++i)
+                                        any = changed[std::size_t(i) +
+                                                      std::size_t(dc.x) *
+                                                          (j + std::size_t(dc.y) * k)] != 0;
+                            if (!any) continue;
+                            const std::size_t p =
+                                std::size_t(x) + std::size_t(dp.x) * (y + std::size_t(dp.y) * z);
+                            o.data_[l][p] = minifyCell(o.data_[l - 1], dc, x, y, z, L);
+                            parentChanged[p] = 1;
+                            ++n;
+                        }
+                redone += n;
+            });
+            cells += redone;
+            changed = std::move(parentChanged);
+            L *= 2.0;
+        }
+    }
+    if (voxelsChanged) *voxelsChanged = voxels;
+    if (cellsChanged) *cellsChanged = cells;
     return o;
 }
 
@@ -205,18 +296,24 @@ void checkHierarchicalOptions(const HierarchicalVisibilityOptions& o) {
                          "give e.g. 64, or leave it out to reach the volume's boundary");
 }
 
-HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const OpacityPyramid> pyrPtr,
-                                                     const HierarchicalVisibilityOptions& options,
-                                                     const core::Progress& progress) {
+/// The field on `pyr` (computeHierarchicalVisibility), with the grid points more than
+/// (s + 1)·|spacing| mm outside some half-space of `kept` cleared to empty space's value without
+/// rays (clipAwareHierarchicalVisibility); `cleared` (optional) counts them.
+HierarchicalVisibility computeField(const OpacityPyramid& pyr,
+                                    const HierarchicalVisibilityOptions& options,
+                                    std::span<const core::HalfSpace> kept,
+                                    const core::Progress& progress, std::uint64_t* cleared) {
     checkHierarchicalOptions(options);
-    VL_CHECK(pyrPtr != nullptr);
-    const OpacityPyramid& pyr = *pyrPtr;
     const int C = options.coefficients, N = options.rays, M = options.patterns;
     const int s = options.subsample;
     const core::Geometry& g = pyr.geometry();
     const glm::ivec3 dims = g.dims;
     const float h = float(core::minComponent(g.spacing));
     const float maxLength = float(std::min(options.maxDistanceVoxels * h, 1e30));
+    // Never read by a shaded sample beyond this distance outside a face (header comment); one
+    // voxel more than a 1:s cell's diagonal, for samples a rounding error outside.
+    const std::vector<IndexFace> faces = indexFaces(g, kept);
+    const double clearBeyond = double(s + 1) * glm::length(g.spacing);
 
     // The M jittered patterns: index-space directions and w_k·Y_i(ω_k) per direction.
     std::vector<IndexRay> rays;
@@ -256,7 +353,7 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
     const std::size_t points = std::size_t(res.x) * res.y * res.z;
     out.data_.assign(points * C, 0.f);
 
-    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
+    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0}, clearedTotal{0};
     std::atomic<int> done{0};
     const std::thread::id caller = std::this_thread::get_id();
     progress.report("hierarchical visibility", 0.0);
@@ -264,7 +361,7 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<int>(0, res.z, 1), [&](const auto& range) {
             if (progress.cancelled()) return;
-            std::uint64_t samples = 0, traced = 0, skipped = 0;
+            std::uint64_t samples = 0, traced = 0, skipped = 0, outside = 0;
             double v[16];
             for (int gz = range.begin(); gz != range.end(); ++gz) {
                 for (int gy = 0; gy < res.y; ++gy)
@@ -277,6 +374,14 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
                             // Never read by a shaded sample: empty space's value.
                             dst[0] = kSqrt4Pi;
                             ++skipped;
+                            continue;
+                        }
+                        if (std::any_of(faces.begin(), faces.end(), [&](const IndexFace& f) {
+                                return f.distance(glm::dvec3(origin)) < -clearBeyond;
+                            })) {
+                            // Far on the removed side: never read either.
+                            dst[0] = kSqrt4Pi;
+                            ++outside;
                             continue;
                         }
                         // This point's pattern: neighbours use different directions.
@@ -300,6 +405,7 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
             samplesTotal += samples;
             raysTotal += traced;
             skippedTotal += skipped;
+            clearedTotal += outside;
             const int now = done.fetch_add(int(range.size())) + int(range.size());
             if (std::this_thread::get_id() == caller)  // workers only stop taking slices
                 progress.report("hierarchical visibility", double(now) / double(res.z));
@@ -309,6 +415,7 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
     out.samplesTaken_ = samplesTotal;
     out.raysTraced_ = raysTotal;
     out.pointsSkipped_ = skippedTotal;
+    if (cleared) *cleared = clearedTotal;
 
     if (options.quantize8) {
         // One scale per coefficient from the largest magnitude (header comment).
@@ -334,6 +441,37 @@ HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const Opaci
         std::vector<float>().swap(out.data_);
     }
     progress.report("hierarchical visibility", 1.0);
+    return out;
+}
+
+HierarchicalVisibility computeHierarchicalVisibility(std::shared_ptr<const OpacityPyramid> pyramid,
+                                                     const HierarchicalVisibilityOptions& options,
+                                                     const core::Progress& progress) {
+    VL_CHECK(pyramid != nullptr);
+    return computeField(*pyramid, options, {}, progress, nullptr);
+}
+
+HierarchicalVisibility clipAwareHierarchicalVisibility(const OpacityPyramid& base,
+                                                       std::span<const core::HalfSpace> kept,
+                                                       const HierarchicalVisibilityOptions& options,
+                                                       const core::Progress& progress,
+                                                       HierarchicalClipStats* stats) {
+    checkHierarchicalOptions(options);
+    HierarchicalClipStats st;
+    core::Stopwatch clock;
+    progress.report("clip-aware opacity pyramid", 0.0);
+    const OpacityPyramid clipped = base.withRemoved(kept, &st.voxelsRemoved, &st.cellsChanged);
+    st.pyramidSeconds = clock.seconds();
+    progress.report("clip-aware opacity pyramid", 1.0);
+    core::Stopwatch rays;
+    HierarchicalVisibility out = computeField(clipped, options, kept, progress, &st.pointsCleared);
+    st.visibilitySeconds = rays.seconds();
+    const glm::ivec3 r = out.resolution();
+    st.points = std::uint64_t(r.x) * std::uint64_t(r.y) * std::uint64_t(r.z);
+    st.pointsSkipped = out.pointsSkipped();
+    st.pointsTraced = st.points - st.pointsSkipped - st.pointsCleared;
+    st.raysTraced = out.raysTraced();
+    if (stats) *stats = st;
     return out;
 }
 

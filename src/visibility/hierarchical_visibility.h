@@ -52,12 +52,31 @@
 // corrected weights), the error is at most √(4π)/510 ≈ 0.0070 for V_0 and √(4π)/254 ≈ 0.014 for the
 // others (V_0 of empty space is √(4π) ≈ 3.54). Memory: C bytes per point instead of 4·C.
 //
+// Clip-aware field (clipAwareHierarchicalVisibility; io/scene.h `shadows_from_removed: false`):
+// the matter outside a kept region (the intersection of half-spaces: the clip planes and crop box
+// that remove matter for the light too) is gone for the light. It is removed where Ritschel's
+// method sees matter, at the pyramid's base (OpacityPyramid::withRemoved): σt = 0 at every voxel
+// whose centre lies outside some half-space, and every coarser cell above such a voxel (one with
+// σt > 0) minified again — the other cells are copied — so all levels, and every ray that reads
+// them, see it gone. A coarse cell that straddles a cut face mixes kept matter with the emptied
+// part as it mixes matter with any gap beside it. Unlike sh-local's radius-bounded rays
+// (local_visibility.h: only points within r_s of a face change), these rays run to the volume's
+// box, so a cut changes V̄ wherever a ray from the kept side reaches the removed side: the field
+// is traced again per cut, except the points more than (s + 1)·|spacing| mm outside some face —
+// never read by a shaded sample (camera rays only shade the kept region, and a sample reads the
+// 8 grid points of its 1:s cell, within s·|spacing| of it) — which get empty space's value
+// without rays. A cut that removes only matter the TF shows transparent changes no cell and the
+// result equals computeHierarchicalVisibility on the same pyramid but for those cleared points.
+// Memory: the clipped pyramid is a copy of the base (as large) while the field is traced.
+//
 // Parallel over z-slices of grid points with oneTBB; each point is computed alone in a fixed
 // order, so the field is identical for any thread count.
 #include <cstdint>
 #include <memory>
+#include <span>
 #include <vector>
 
+#include "core/half_space.h"
 #include "core/progress.h"
 #include "optics/transfer_function.h"
 #include "visibility/multires_grid.h"
@@ -82,6 +101,14 @@ class OpacityPyramid {
     static OpacityPyramid build(const BlockPyramid& pyramid, const optics::TransferFunction& tf,
                                 const optics::TfTable& table,
                                 const core::Progress& progress = core::Progress::none());
+    /// This pyramid with the matter outside `kept` (world half-spaces; their intersection is kept)
+    /// removed: σt = 0 at every voxel whose centre lies outside some half-space, and the coarser
+    /// cells above a voxel that changed (σt > 0 before) minified again, the rest copied (see the
+    /// header comment). `voxelsChanged`/`cellsChanged` (optional) count the zeroed voxels and the
+    /// re-minified cells of levels ≥ 1. With no half-spaces: a copy.
+    OpacityPyramid withRemoved(std::span<const core::HalfSpace> kept,
+                               std::uint64_t* voxelsChanged = nullptr,
+                               std::uint64_t* cellsChanged = nullptr) const;
 
     int levels() const { return int(dims_.size()); }
     const glm::ivec3& dims(int level) const { return dims_[std::size_t(level)]; }
@@ -145,9 +172,10 @@ class HierarchicalVisibility {
     void sample(const glm::vec3& p, float* out) const;
 
   private:
-    friend HierarchicalVisibility computeHierarchicalVisibility(
-        std::shared_ptr<const OpacityPyramid>, const HierarchicalVisibilityOptions&,
-        const core::Progress&);
+    friend HierarchicalVisibility computeField(const OpacityPyramid&,
+                                               const HierarchicalVisibilityOptions&,
+                                               std::span<const core::HalfSpace>,
+                                               const core::Progress&, std::uint64_t*);
     std::size_t index(const glm::ivec3& g) const {
         return std::size_t(g.x) + std::size_t(res_.x) * (g.y + std::size_t(res_.y) * g.z);
     }
@@ -166,6 +194,29 @@ void checkHierarchicalOptions(const HierarchicalVisibilityOptions& options);
 HierarchicalVisibility computeHierarchicalVisibility(
     std::shared_ptr<const OpacityPyramid> pyramid, const HierarchicalVisibilityOptions& options,
     const core::Progress& progress = core::Progress::none());
+
+/// What a clip-aware field cost (the pipeline's stats report it).
+struct HierarchicalClipStats {
+    std::uint64_t voxelsRemoved = 0;  ///< voxels with σt > 0 outside the kept region (zeroed)
+    std::uint64_t cellsChanged = 0;   ///< pyramid cells of levels ≥ 1 minified again
+    std::uint64_t points = 0;         ///< grid points of the field
+    std::uint64_t pointsTraced = 0;   ///< points whose rays were traced
+    std::uint64_t pointsCleared = 0;  ///< > (s + 1)·|spacing| outside a face: empty, no rays
+    std::uint64_t pointsSkipped = 0;  ///< no visible cell near (as computeHierarchicalVisibility)
+    std::uint64_t raysTraced = 0;
+    double pyramidSeconds = 0.0;     ///< OpacityPyramid::withRemoved
+    double visibilitySeconds = 0.0;  ///< the rays
+};
+
+/// V̄ with the matter outside `kept` (world half-spaces; their intersection is kept) gone for the
+/// light: computeHierarchicalVisibility on base.withRemoved(kept), with the points far outside
+/// the kept region cleared instead of traced (see the header comment). With no half-spaces it
+/// equals computeHierarchicalVisibility(base). Cancellable through `progress`.
+HierarchicalVisibility clipAwareHierarchicalVisibility(
+    const OpacityPyramid& base, std::span<const core::HalfSpace> kept,
+    const HierarchicalVisibilityOptions& options,
+    const core::Progress& progress = core::Progress::none(),
+    HierarchicalClipStats* stats = nullptr);
 
 /// Transmittance of one ray from voxel index `origin` along the world unit direction `dir`,
 /// marched as computeHierarchicalVisibility does (exposed for tests). `samples` counts σ reads.
