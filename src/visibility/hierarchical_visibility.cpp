@@ -75,9 +75,48 @@ double opticalDepth(const OpacityPyramid& pyr, const glm::vec3& origin, const gl
     int level = 0, inLevel = 0;
     const int top = pyr.levels() - 1;
     std::uint64_t n = 0;
+    const optics::TfTable& table = pyr.table();
+    // Level 0: the value at the front of the step and its σt integral (NaN: not read yet).
+    float sFront = NAN;
+    double iFront = 0.0;
     while (t < length) {
         const float dt = std::min(step, length - t);
-        tau += double(pyr.sample(level, origin + (t + 0.5f * dt) * d)) * double(dt);
+        if (level == 0) {
+            if (std::isnan(sFront)) {
+                sFront = pyr.value(origin + t * d);
+                iFront = table.sigmaIntegral(sFront);
+            }
+            const float sBack = pyr.value(origin + (t + dt) * d);
+            const double iBack = table.sigmaIntegral(sBack);
+            double depth = 0.0;
+            if (std::isnan(sFront) || std::isnan(sBack)) {
+                // A removed voxel: the clipped pyramid's midpoint read.
+                depth = double(pyr.sample(0, origin + (t + 0.5f * dt) * d)) * double(dt);
+            } else {
+                depth = double(table.meanExtinction(sFront, iFront, sBack, iBack)) * double(dt);
+                if (depth > kRefineDepth) {  // split as local_visibility.h does
+                    const int k = std::min(int(std::ceil(depth / kRefineDepth)), kMaxSubSteps);
+                    const float sub = dt / float(k);
+                    depth = 0.0;
+                    float s0 = sFront;
+                    double i0 = iFront;
+                    for (int j = 1; j <= k; ++j) {
+                        const float s1 =
+                            j == k ? sBack : pyr.value(origin + (t + float(j) * sub) * d);
+                        const double i1 = j == k ? iBack : table.sigmaIntegral(s1);
+                        depth += double(table.meanExtinction(s0, i0, s1, i1)) * double(sub);
+                        s0 = s1;
+                        i0 = i1;
+                    }
+                    n += std::uint64_t(k - 1);
+                }
+            }
+            tau += depth;
+            sFront = sBack;
+            iFront = iBack;
+        } else {
+            tau += double(pyr.sample(level, origin + (t + 0.5f * dt) * d)) * double(dt);
+        }
         ++n;
         if (tau > kOpaqueDepth) break;
         t += dt;
@@ -147,6 +186,8 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
     // already replaced there).
     o.dims_.push_back(d0);
     o.data_.emplace_back(std::size_t(o.geometry_.voxelCount()));
+    o.values_.resize(o.data_.back().size());
+    o.table_ = std::make_shared<const optics::TfTable>(table);
     {
         std::vector<float>& s0 = o.data_.back();
         tbb::parallel_for(tbb::blocked_range<int>(0, d0.z), [&](const auto& range) {
@@ -158,8 +199,11 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
                         const int local =
                             x % kBlockSize +
                             kBlockSize * (y % kBlockSize + kBlockSize * (z % kBlockSize));
-                        s0[std::size_t(x) + std::size_t(d0.x) * (y + std::size_t(d0.y) * z)] =
-                            table.extinction(pyramid.data(b, 0)[local]);
+                        const float v = pyramid.data(b, 0)[local];
+                        const std::size_t i =
+                            std::size_t(x) + std::size_t(d0.x) * (y + std::size_t(d0.y) * z);
+                        s0[i] = table.extinction(v);
+                        o.values_[i] = v;
                     }
         });
     }
@@ -210,6 +254,7 @@ OpacityPyramid OpacityPyramid::withRemoved(std::span<const core::HalfSpace> kept
                         for (const IndexFace& f : faces)
                             if (f.distance(p) < 0.0) {
                                 o.data_[0][i] = 0.f;
+                                o.values_[i] = NAN;
                                 changed[i] = 1;
                                 ++n;
                                 break;
@@ -261,8 +306,12 @@ float OpacityPyramid::sample(int level, const glm::vec3& p) const {
                      (p + 0.5f) * inv - 0.5f);
 }
 
+float OpacityPyramid::value(const glm::vec3& p) const {
+    return trilinear(values_.data(), dims_[0], p);
+}
+
 std::size_t OpacityPyramid::bytes() const {
-    std::size_t b = cellVisible_.size();
+    std::size_t b = cellVisible_.size() + values_.size() * sizeof(float);
     for (const auto& l : data_) b += l.size() * sizeof(float);
     return b;
 }

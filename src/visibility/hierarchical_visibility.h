@@ -25,9 +25,15 @@
 // on level k is L_k mm, kStepsPerLevel steps per level, then one level coarser (at the coarsest
 // level the step stays): segment j covers [t_j, t_j + Δ_j] and adds σ_k(midpoint)·Δ_j to the
 // optical depth, σ_k read trilinearly between level-k cell centres (clamped to the level's
-// lattice). Ending: at the volume's box (outside is empty), at max_distance, or when the optical
-// depth exceeds kOpaqueDepth. With `hierarchical = false` every step is one voxel on level 0: the
-// brute-force march (midpoint rule on trilinear pre-classified σt) the pyramid approximates.
+// lattice). Steps on level 0 are instead pre-integrated between the voxel values at their ends
+// (trilinear, TfTable::meanExtinction, split where deeper than kRefineDepth — the continuous model,
+// as local_visibility.h): a midpoint read of pre-classified σt puts a partial-volume surface up to
+// half a voxel off (on the anti-aliased slab phantom T from the last dense voxel e^−1 instead of
+// e^−½, and 30–40 % darker images than the path tracer); a step that reads a removed voxel falls
+// back to that midpoint read of the clipped pyramid. Ending: at the volume's box (outside is
+// empty), at max_distance, or when the optical depth exceeds kOpaqueDepth. With `hierarchical =
+// false` every step is one voxel on level 0: the brute-force march the pyramid approximates.
+// Memory: the values add one float per voxel beside level 0.
 //
 // Directions: M patterns (sh::jitteredSamples: N stratified jittered directions each, counter-based
 // from (pattern, seed)); grid point g uses pattern hash(g, seed) mod M, so neighbours use different
@@ -121,6 +127,10 @@ class OpacityPyramid {
     }
     /// σ_k at continuous voxel coordinate p, trilinear between level-k cell centres (clamped).
     float sample(int level, const glm::vec3& p) const;
+    /// The voxel value at p, trilinear (clamped); NaN where it reads a removed voxel (withRemoved).
+    float value(const glm::vec3& p) const;
+    /// The TF the pyramid was built under (the level-0 steps' pre-integrated σt).
+    const optics::TfTable& table() const { return *table_; }
     std::size_t bytes() const;
     /// Per BlockPyramid 4³ cell: whether the TF shows anything there (LodSelection::cellVisible).
     const std::vector<std::uint8_t>& cellVisible() const { return cellVisible_; }
@@ -132,6 +142,8 @@ class OpacityPyramid {
     std::vector<std::vector<float>> data_;
     std::vector<std::uint8_t> cellVisible_;
     glm::ivec3 cells_{0};
+    std::vector<float> values_;  ///< level-0 voxel values (NaN: removed)
+    std::shared_ptr<const optics::TfTable> table_;
 };
 
 struct HierarchicalVisibilityOptions {

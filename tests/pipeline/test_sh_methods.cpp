@@ -90,8 +90,11 @@ TEST(ShLocal, TfAndParamChangesRerunOnlyWhatDependsOnThem) {
 
 TEST(ShLocal, ATfEditOverAValueIntervalRecomputesOnlyTheBlocksItReaches) {
     // A CT-like TF by points; the edit changes σt over 1300…1900 HU only (dense bone: the
-    // torso's spine and rib cores). The session keeps the last field, so the update traces only
-    // blocks near such values — and the image is bit for bit the one a fresh session renders.
+    // torso's spine and rib cores). The session keeps the last field and updates it — on this
+    // 64³ torso (4 blocks per axis) the pre-integrated steps' reach (values within two blocks,
+    // local_visibility.h) covers every stored block; tests/visibility/test_tf_update.cpp shows
+    // the locality on a larger volume — and the image is bit for bit the one a fresh session
+    // renders. A colour-only edit then traces nothing.
     const auto tf = [](double dense) {
         const json white = {1, 1, 1};
         return json{{"points",
@@ -117,11 +120,18 @@ TEST(ShLocal, ATfEditOverAValueIntervalRecomputesOnlyTheBlocksItReaches) {
     EXPECT_TRUE(u["incremental"].get<bool>()) << u;
     EXPECT_EQ(u["blocks_level_changed"], 0) << u;  // data reduction 1: every stored block at 16³
     EXPECT_GT(u["blocks_recomputed"].get<int>(), 0) << u;
-    EXPECT_LT(u["blocks_recomputed"].get<int>(), u["blocks"].get<int>()) << u;
+    EXPECT_LE(u["blocks_recomputed"].get<int>(), u["blocks"].get<int>()) << u;
     EXPECT_NE(edited.stage("local_visibility").reason.find("blocks recomputed"), std::string::npos)
         << edited.stage("local_visibility").reason;
     const RunResult fresh = Session().run(scene(d));
     EXPECT_EQ(edited.image.pixels, fresh.image.pixels);
+    // Colours only: no σt changed, nothing traced, the image still a fresh session's.
+    for (auto& p : d["transfer_function"]["points"]) p["color"] = json{0.9, 0.6, 0.5};
+    const RunResult tinted = session.run(scene(d));
+    const json& t = tinted.details["local_visibility"]["tf_update"];
+    EXPECT_TRUE(t["incremental"].get<bool>()) << t;
+    EXPECT_EQ(t["blocks_recomputed"], 0) << t;
+    EXPECT_EQ(tinted.image.pixels, Session().run(scene(d)).image.pixels);
 }
 
 TEST(ShLocal, ARingingWindowIsAFrameSettingReadStrictly) {
@@ -380,12 +390,15 @@ TEST(Ritschel, ParamsAreReadStrictly) {
 
 TEST(Ritschel, RendersFiniteAndAgreesWithShLocalWhereBothAreAccurate) {
     // Both at every voxel with rays to 16 voxels: sh-local at data_reduction 1 and ritschel at
-    // 1:1 with max_distance 16 see the same matter; they differ by their directions (Fibonacci vs
-    // 16 jittered patterns), sh-local's block-clamped σt reads and, with the pyramid, its coarse
-    // far steps. Mean |Δ| relative to the mean pixel, measured on this 32³ torso (where a level-3
-    // cell is a quarter of the volume): 5.2 % brute force, 8.3 % with the pyramid; sh-local at
-    // 64 vs 256 rays itself differs by 2.7 %. Tolerances ≈ 1.4× the measurements.
-    constexpr double kBruteRelTol = 0.07, kPyramidRelTol = 0.12;
+    // 1:1 with max_distance 16 see the same matter, both with pre-integrated level-0 steps; they
+    // differ by their directions (Fibonacci vs 16 jittered patterns) and, with the pyramid, its
+    // coarse far steps (pre-classified σt, minified). Mean |Δ| relative to the mean pixel,
+    // measured on this 32³ torso (3 mm voxels, where a level-3 cell is a quarter of the volume):
+    // 3.9 % brute force (5.2 % when both read pre-classified σt at midpoints), 15.6 % with the
+    // pyramid (darker: the coarse cells of a bone surface
+    // hold its voxels' full σt); sh-local at 64 vs 256 rays itself differs by 2.7 %. Tolerances
+    // ≈ 1.4× the measurements.
+    constexpr double kBruteRelTol = 0.055, kPyramidRelTol = 0.22;
     json d = shScene();
     d["method"] = {{"name", "sh-local"},
                    {"params", {{"rays", 64}, {"data_reduction", 1}, {"radius", 16}}}};

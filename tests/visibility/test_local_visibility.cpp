@@ -10,6 +10,7 @@
 
 #include "sh/sh_basis.h"
 #include "sh/sh_projection.h"
+#include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
 #include "visibility/vis_test_util.h"
 
@@ -186,14 +187,17 @@ TEST(LocalVisibility, RaysRespectAnisotropicSpacingAndAnObliqueGrid) {
 }
 
 TEST(LocalVisibility, ADenseSurfaceOnABlockFaceAttenuatesAsTheContinuousModel) {
-    // Bone-like σt (2/mm above value 510) for k ≤ 15, air above: the surface (value 500) lies at
-    // k = 15.5, on the face between two blocks of 16. Trilinear samples in the half voxel past the
-    // face still read the dense voxel, so (i) the block above must be stored (its own voxels are
-    // all transparent), and (ii) a ray from just under the surface must integrate σt across it as
-    // the continuous model does, not drop the half voxel past the face (which gave T = 1 from
-    // k = 15 instead of e^−1) nor take the full σt of a midpoint.
-    const core::Volume v =
-        test::makeVolume({16, 16, 48}, [](int, int, int k) { return k <= 15 ? 1000 : 0; });
+    // Bone-like σt (2/mm above value 510) for k ≤ 15, a partial-volume voxel (600) at k = 16, air
+    // above: the surface (value 500) lies at k = 16.17, just past the face between two blocks of
+    // 16 (k = 15.5). Trilinear samples near the face read both blocks' voxels, so (i) the block
+    // above must be stored although its own voxels are mostly transparent, and (ii) a ray from
+    // under the surface must integrate σt as the continuous model does (value trilinear, then
+    // the TF) — not drop the part past the block face (which gave T = 1 from k = 15), nor read
+    // pre-classified σt at step midpoints (a surface moved by up to half a voxel). Ritschel's
+    // brute-force march (level-0 steps only) must agree too.
+    const core::Volume v = test::makeVolume({16, 16, 48}, [](int, int, int k) {
+        return k <= 15 ? 1000 : k == 16 ? 600 : 0;
+    });
     const optics::TransferFunction tf({{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
                                        {490.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
                                        {510.f, glm::vec3(1.f), 2.f, glm::vec3(0.f)},
@@ -201,31 +205,37 @@ TEST(LocalVisibility, ADenseSurfaceOnABlockFaceAttenuatesAsTheContinuousModel) {
                                       {500.f, 1000.f});
     const auto grid = test::fullGrid(v, tf);
     const optics::TfTable table(tf);
-    EXPECT_NE(grid->level(grid->ownerBlock(glm::vec3(8.f, 8.f, 16.f))), kNone);
+    EXPECT_NE(grid->level(grid->ownerBlock(glm::vec3(8.f, 8.f, 20.f))), kNone);
     EXPECT_EQ(grid->level(grid->ownerBlock(glm::vec3(8.f, 8.f, 40.f))), kNone);
-    // Brute force: value linear between voxel centres, σt from the TF, 10⁵ midpoint steps.
+    const OpacityPyramid opacity = OpacityPyramid::build(grid->pyramid(), tf, table);
+    // Brute force: value linear between voxel centres along z, σt from the TF, 10⁵ midpoint steps.
+    auto voxel = [](int k) { return k <= 15 ? 1000.0 : k == 16 ? 600.0 : 0.0; };
     auto exact = [&](double z0, const glm::dvec3& w, double length) {
         constexpr int kSteps = 100000;
         double tau = 0.0;
         for (int s = 0; s < kSteps; ++s) {
             const double z = z0 + w.z * (s + 0.5) * length / kSteps;
-            const double value = 1000.0 * std::clamp(16.0 - z, 0.0, 1.0);
+            const int k = int(std::floor(z));
+            const double value = voxel(k) + (z - k) * (voxel(k + 1) - voxel(k));
             tau += double(tf.eval(float(value)).extinction) * length / kSteps;
         }
         return std::exp(-tau);
     };
     // Pre-integrated steps are exact while the value is linear along the step; it kinks where the
     // ray crosses a voxel plane, and a step across the surface is split into sub-steps of optical
-    // depth ≤ kRefineDepth. Measured: ≤ 0.005 (a thin step at 15.5 whose kink at 16 the split
-    // does not reach); the old midpoint steps, which dropped the half voxel past the block face,
-    // were off by 0.63 at k = 15.
+    // depth ≤ kRefineDepth. Measured: ≤ 0.006; the old midpoint steps were off by up to 0.63.
     constexpr double kPreIntegratedTol = 0.01;
-    for (const double z : {13.0, 14.0, 15.0, 15.25, 15.5}) {
-        for (const glm::dvec3 w : {glm::dvec3(0, 0, 1), glm::normalize(glm::dvec3(0.6, 0, 0.8))}) {
-            const double radius = 8.0;
-            EXPECT_NEAR(rayTransmittance(*grid, table, glm::vec3(8.f, 8.f, float(z)), w, radius),
-                        exact(z, w, radius), kPreIntegratedTol)
-                << "z " << z << " w.x " << w.x;
+    const double radius = 8.0;
+    for (const double z : {13.0, 14.0, 15.0, 15.25, 15.5, 16.0}) {
+        for (const glm::dvec3 w : {glm::dvec3(0, 0, 1), glm::normalize(glm::dvec3(0.6, 0, 0.8)),
+                                   glm::normalize(glm::dvec3(0.9, 0.2, 0.3))}) {
+            const glm::vec3 x(8.f, 8.f, float(z));
+            const double expected = exact(z, w, radius);
+            EXPECT_NEAR(rayTransmittance(*grid, table, x, w, radius), expected, kPreIntegratedTol)
+                << "sh-local: z " << z << " w " << w.x << "," << w.y << "," << w.z;
+            EXPECT_NEAR(hierarchicalTransmittance(opacity, x, w, radius, false), expected,
+                        kPreIntegratedTol)
+                << "ritschel: z " << z << " w " << w.x << "," << w.y << "," << w.z;
         }
     }
 }
