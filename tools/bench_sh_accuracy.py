@@ -146,9 +146,15 @@ def main():
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
     ap.add_argument("--methods", default=None,
                     help="comma-separated subset of methods to sweep (rows of the others are kept)")
+    ap.add_argument("--quick", action="store_true",
+                    help="defaults and 16 coefficients per method only, no best-settings run "
+                         "(minutes instead of an hour; for a check after a change)")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the docs from WORK/results.csv and WORK/*-pictures.png")
     args = ap.parse_args()
+    if args.quick:
+        global SWEEPS
+        SWEEPS = [(m, "coefficients", [4, 16]) for m in ("sh-local", "sh-global", "ritschel")]
     if args.report_only:
         args.scenes = "-"  # run no scene; keep every earlier one
     voxlight = os.path.abspath(args.voxlight)
@@ -197,7 +203,7 @@ def main():
                              "reference_nrms": round(floor, 4)})
                 print("  %-9s %-17s %4s  RMSE %6.2f/255  off>2/255 %5.1f %%  NRMSE %.3f  "
                       "precompute %6.2f s" % (method, param, v, rmse, off, nrmse, pre), flush=True)
-        if args.methods:  # a partial run: the picture and the best row need sh-local/-global
+        if args.methods or args.quick:  # partial: the picture and best row need the full sweep
             continue
         # The picture: reference | sh-local | sh-global (defaults) | sh-global (best) | error map.
         best = dict(BEST)
