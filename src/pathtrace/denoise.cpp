@@ -117,23 +117,31 @@ core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdE
             slope[p] = {std::isfinite(dx) ? dx : 0.f, std::isfinite(dy) ? dy : 0.f};
         });
 
-        // À-trous passes, ping-ponging colour and variance.
-        std::vector<float> cur = mean.pixels, next(cur.size());
-        std::vector<float> curVar = smoothVar, nextVar(n);
         const float invA = 1.f / (o.sigmaAlbedo * o.sigmaAlbedo);
         const float invN = 1.f / (o.sigmaNormal * o.sigmaNormal);
         std::vector<float> normalLen(n), lum(n);
         rows([&](int, int, std::size_t p) { normalLen[p] = glm::length(guides.normal[p]); });
+        // The guides' part of a tap's exponent: q at offset (dx, dy) pixels from p.
+        auto guideExponent = [&](std::size_t p, std::size_t q, int dx, int dy) {
+            const glm::vec3 da = guides.albedo[q] - guides.albedo[p];
+            const float zTol = o.sigmaDepth * (slope[p].x * float(std::abs(dx)) +
+                                               slope[p].y * float(std::abs(dy))) +
+                               o.depthFloorMm;
+            return glm::dot(da, da) * invA +
+                   2.f *
+                       (normalLen[p] * normalLen[q] -
+                        glm::dot(guides.normal[p], guides.normal[q])) *
+                       invN +
+                   std::abs(guides.depth[q] - guides.depth[p]) / zTol;
+        };
+        // À-trous passes, ping-ponging colour and variance.
+        std::vector<float> cur = mean.pixels, next(cur.size());
+        std::vector<float> curVar = smoothVar, nextVar(n);
         for (int it = 0; it < o.iterations; ++it) {
             const int step = 1 << it;
             rows([&](int, int, std::size_t p) { lum[p] = luminance(cur.data() + 4 * p); });
             rows([&](int x, int y, std::size_t p) {
                 const float lp = lum[p];
-                const float lumScale =
-                    1.f / (o.sigmaLuminance * std::sqrt(curVar[p]) + kLumEpsilon);
-                const glm::vec3 ap = guides.albedo[p], np = guides.normal[p];
-                const float npLen = normalLen[p];
-                const float zp = guides.depth[p];
                 float acc[4] = {0.f, 0.f, 0.f, 0.f};
                 float wsum = 0.f, vsum = 0.f;
                 for (int j = -2; j <= 2; ++j) {
@@ -144,13 +152,12 @@ core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdE
                         if (qx < 0 || qx >= w) continue;
                         const std::size_t q = std::size_t(qy) * w + qx;
                         const float* cq = cur.data() + 4 * q;
-                        const glm::vec3 da = guides.albedo[q] - ap, nq = guides.normal[q];
-                        const float zTol = o.sigmaDepth * (slope[p].x * float(std::abs(i * step)) +
-                                                           slope[p].y * float(std::abs(j * step))) +
-                                           o.depthFloorMm;
-                        const float e = std::abs(lum[q] - lp) * lumScale + glm::dot(da, da) * invA +
-                                        2.f * (npLen * normalLen[q] - glm::dot(np, nq)) * invN +
-                                        std::abs(guides.depth[q] - zp) / zTol;
+                        // The difference of two estimates, in standard errors of
+                        // that difference.
+                        const float e = std::abs(lum[q] - lp) /
+                                            (o.sigmaLuminance * std::sqrt(curVar[p] + curVar[q]) +
+                                             kLumEpsilon) +
+                                        guideExponent(p, q, i * step, j * step);
                         const float wq = kB3[i + 2] * kB3[j + 2] * std::exp(-e);
                         for (int c = 0; c < 4; ++c) acc[c] += wq * cq[c];
                         wsum += wq;

@@ -540,10 +540,15 @@ Guides PathTracer::guides(const render::Camera& camera) const {
     if (options_.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       std::size_t(options_.threads));
+    // The expectations along the rays through the pixel corners, (w + 1) × (h + 1).
+    const int cw = w + 1, ch = h + 1;
+    const std::size_t cn = std::size_t(cw) * std::size_t(ch);
+    std::vector<glm::vec3> cAlbedo(cn), cNormal(cn);
+    std::vector<float> cDepth(cn);
     im.volume->visit([&](const auto& view) {
-        tbb::parallel_for(0, h, [&](int y) {
-            for (int x = 0; x < w; ++x) {
-                const render::Ray cr = camera.generateAt(x + 0.5, y + 0.5);
+        tbb::parallel_for(0, ch, [&](int y) {
+            for (int x = 0; x < cw; ++x) {
+                const render::Ray cr = camera.generateAt(x, y);
                 const Ray ray{cr.origin, cr.direction};
                 const double along = glm::dot(cr.direction, camera.forward());
                 glm::dvec3 albedo(0.0), normal(0.0);
@@ -578,12 +583,29 @@ Guides PathTracer::guides(const render::Camera& camera) const {
                         return true;
                     });
                 }
-                const std::size_t p = std::size_t(y) * w + x;
-                g.albedo[p] = glm::vec3(albedo);
-                g.normal[p] = glm::vec3(normal);
-                g.depth[p] = float(depth + std::max(T, 0.0) * far);
+                const std::size_t c = std::size_t(y) * cw + x;
+                cAlbedo[c] = glm::vec3(albedo);
+                cNormal[c] = glm::vec3(normal);
+                cDepth[c] = float(depth + std::max(T, 0.0) * far);
             }
         });
+    });
+    // Each pixel: the mean of its four corners.
+    tbb::parallel_for(0, h, [&](int y) {
+        for (int x = 0; x < w; ++x) {
+            const std::size_t p = std::size_t(y) * w + x, c = std::size_t(y) * cw + x;
+            const std::size_t q[4] = {c, c + 1, c + cw, c + cw + 1};
+            glm::vec3 a(0.f), nn(0.f);
+            float z = 0.f;
+            for (std::size_t k : q) {
+                a += cAlbedo[k];
+                nn += cNormal[k];
+                z += cDepth[k];
+            }
+            g.albedo[p] = 0.25f * a;
+            g.normal[p] = 0.25f * nn;
+            g.depth[p] = 0.25f * z;
+        }
     });
     return g;
 }

@@ -223,8 +223,8 @@ TEST(Denoise, AtLowSppItIsCloserToTheConvergedTorsoThanTheRawEstimate) {
     o.seed = 1;
     const pathtrace::PathTracer tracer = s.tracer(o);
     const Guides g = tracer.guides(cam);
-    // Denoised NRMSE at most this fraction of the raw one (measured: see the README's table).
-    constexpr double kImprovement = 0.7;
+    // Denoised NRMSE at most this fraction of the raw one (measured 0.33 at 4 spp, 0.40 at 16).
+    constexpr double kImprovement = 0.5;
     for (int spp : {4, 16}) {
         o.samplesPerPixel = spp;
         core::ImageRGBA se;
