@@ -141,6 +141,12 @@ core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdE
             const int step = 1 << it;
             rows([&](int, int, std::size_t p) { lum[p] = luminance(cur.data() + 4 * p); });
             rows([&](int x, int y, std::size_t p) {
+                // No noise within 3×3 (the background, mostly): passed through, not filtered.
+                if (!(smoothVar[p] > 0.f)) {
+                    std::copy_n(cur.data() + 4 * p, 4, next.data() + 4 * p);
+                    nextVar[p] = 0.f;
+                    return;
+                }
                 const float lp = lum[p];
                 float acc[4] = {0.f, 0.f, 0.f, 0.f};
                 float wsum = 0.f, vsum = 0.f;

@@ -26,6 +26,8 @@
 //     0 (the pixel is untouched, bit for bit) at or below targetError, 1 from fullStrengthFactor ×
 //     targetError up. Output: (1 − s_p)·mean_p + s_p·F(mean)_p. As samples accumulate r_p falls as
 //     1/√n and the filter fades out by itself; zero variance everywhere returns the input.
+// A pixel without noise in its 3×3 neighbourhood (the background, mostly) passes through every
+// pass unfiltered (it is exact already, and the filter costs nothing there).
 // All four channels (radiance and coverage) are filtered with the same weights. Deterministic:
 // every output pixel is a pure function of the inputs (rows in parallel), so the result is the
 // same for any thread count.

@@ -34,9 +34,10 @@ constexpr int kSamplesPerPass = 4;
 /// Autofocus marches the centre ray at this many voxels (of the smallest spacing) per step.
 constexpr double kAutofocusStepVoxels = 0.25;
 /// The guides' quadrature step (voxels of the smallest spacing) and the transmittance where it
-/// stops (the rest of the ray weighs less than this).
-constexpr double kGuideStepVoxels = 0.5;
-constexpr double kGuideTransmittance = 1e-3;
+/// stops (the rest of the ray weighs less than this). Against 0.5 and 10⁻³: half the time, and
+/// the denoised torso's NRMSE moved from 0.2763 to 0.2776 (4 spp).
+constexpr double kGuideStepVoxels = 1.0;
+constexpr double kGuideTransmittance = 1e-2;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 /// Voxels per fine-majorant cell side. On the 128³ torso under ct-bone (256², 32 spp): 1 voxel
