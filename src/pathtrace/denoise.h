@@ -7,7 +7,9 @@
 //   - the filter F: `iterations` passes of the à-trous wavelet transform (Dammertz et al. 2010:
 //     5×5 B3-spline taps h = (1, 4, 6, 4, 1)/16 per axis, spacing 2^i in pass i) with the
 //     edge-stopping weights of SVGF (Schied et al. 2017). A tap q of pixel p weighs
-//         h · exp(−|ℓp − ℓq| / (σℓ·√var_p + ε)          luminance, scaled by p's noise
+//         h · exp(−|ℓp − ℓq| / (σℓ·√(var_p + var_q) + ε)   luminance, in standard errors of
+//                                                         the difference (symmetric: a pixel whose
+//                                                         few paths all agreed still takes taps)
 //                 − |ap − aq|² / σa²                     first-hit albedo guide
 //                 − |np|·|nq|·|n̂p − n̂q|² / σn²          first-hit normal guide: only normals
 //                                                         that are coherent (long) stop it

@@ -409,8 +409,6 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
 constexpr double kReferenceTargetError = 0.01;
 constexpr int kReferenceMaxSpp = 1 << 14;
 
-/// The path tracer's options from the scene and method.params. Multiple scattering is the
-/// "multiple_scattering" effect: without it paths stop after one scattering event.
 /// The denoiser's settings from method.params `denoise` / `denoise_target`; nullopt = off.
 /// Reference mode never denoises: `denoise: true` there is an error, and an absent key stays out
 /// of the params as used (so the reference's cache key is what it was before the denoiser).
@@ -449,6 +447,8 @@ std::optional<pathtrace::DenoiseOptions> parseDenoiseParams(const io::Scene& sce
     return d;
 }
 
+/// The path tracer's options from the scene and method.params. Multiple scattering is the
+/// "multiple_scattering" effect: without it paths stop after one scattering event.
 pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::RenderOptions& o,
                                          ParamReader& p, bool& reference) {
     pathtrace::Options t;
@@ -576,7 +576,9 @@ struct TracedImage {
     core::ImageRGBA denoised;  ///< the display image when denoised (never cached: not in reference)
     json details;
     std::vector<std::string> warnings;
-    std::size_t bytes() const { return (image.pixels.size() + stdError.pixels.size()) * 4; }
+    std::size_t bytes() const {
+        return (image.pixels.size() + stdError.pixels.size() + denoised.pixels.size()) * 4;
+    }
 };
 
 /// Largest cached image side (guards the read allocation against a damaged header).
