@@ -41,11 +41,11 @@ struct Noisy {
     core::ImageRGBA mean, stdError;
 };
 template <class Truth>
-Noisy noisyImage(Truth truth, float sigma, std::uint64_t seed = 7) {
-    Noisy n{core::ImageRGBA(kW, kH), core::ImageRGBA(kW, kH)};
-    for (int y = 0; y < kH; ++y)
-        for (int x = 0; x < kW; ++x) {
-            core::CounterRng rng(core::hashCounters(std::uint64_t(y) * kW + x, seed));
+Noisy noisyImage(Truth truth, float sigma, int w = kW, int h = kH, std::uint64_t seed = 7) {
+    Noisy n{core::ImageRGBA(w, h), core::ImageRGBA(w, h)};
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            core::CounterRng rng(core::hashCounters(std::uint64_t(y) * w + x, seed));
             // Box–Muller.
             const double u1 = 1.0 - rng.uniformDouble(), u2 = rng.uniformDouble();
             const float g =
@@ -170,8 +170,10 @@ TEST(Denoise, TheStrengthFadesAsTheErrorFalls) {
 }
 
 TEST(Denoise, TheSameForAnyThreadCount) {
-    const Noisy n = noisyImage([](int x, int) { return x < 20 ? 0.3f : 1.f; }, 0.2f);
-    Guides g = flatGuides();
+    // Large enough that both threads take rows.
+    constexpr int kSide = 512;
+    const Noisy n = noisyImage([](int x, int) { return x < 20 ? 0.3f : 1.f; }, 0.2f, kSide, kSide);
+    Guides g = flatGuides(kSide, kSide);
     for (std::size_t p = 0; p < g.depth.size(); ++p) g.depth[p] = 100.f + float(p % 17);
     DenoiseOptions o;
     o.threads = 1;
@@ -195,7 +197,8 @@ test::Medium torso() {
 TEST(Denoise, GuidesAreTheSameForAnyThreadCountAndSeeTheVolume) {
     const test::Medium s = torso();
     const auto b = s.volume->geometry().worldBounds();
-    const render::Camera cam(render::CameraSpec{}, b[0], b[1], 32, 24);
+    // Large enough that both threads take rows.
+    const render::Camera cam(render::CameraSpec{}, b[0], b[1], 128, 96);
     pathtrace::Options o;
     o.threads = 1;
     const Guides one = s.tracer(o).guides(cam);
@@ -205,7 +208,7 @@ TEST(Denoise, GuidesAreTheSameForAnyThreadCountAndSeeTheVolume) {
     EXPECT_EQ(one.normal, two.normal);
     EXPECT_EQ(one.depth, two.depth);
     // The centre sees matter (albedo ≈ 0.8–0.9, a normal), a corner the background (0).
-    const std::size_t centre = std::size_t(12) * 32 + 16;
+    const std::size_t centre = std::size_t(48) * 128 + 64;
     EXPECT_GT(one.albedo[centre].x, 0.5f);
     EXPECT_GT(glm::length(one.normal[centre]), 0.1f);
     EXPECT_EQ(one.albedo[0], glm::vec3(0.f));
