@@ -54,7 +54,8 @@ def main():
         light_at = [c[i] + light[i] for i in range(3)]
         tiles, rows = [], []
         for method, shadows in TILES:
-            params = {"spp": args.spp} if method == "pathtrace" else {}
+            # The tracer's tile is the ground truth: its raw estimate, not the denoised display.
+            params = {"spp": args.spp, "denoise": False} if method == "pathtrace" else {}
             scene = {"volume": vol, "transfer_function": tf,
                      "camera": {"view": view},
                      "lights": [{"type": "point", "position": light_at, "intensity": 2e6}],

@@ -127,8 +127,12 @@ Command addRenderCommand(CLI::App& app) {
         OutputFiles files;
         core::Stopwatch sw;
         throwIfCancelled();
+        // The display image: pathtrace's denoised one when it made one (the EXR stays the raw
+        // linear estimate).
+        const auto denoised = r.images.find("denoised");
+        const core::ImageRGBA& shown = denoised != r.images.end() ? denoised->second : r.image;
         files.write(*out, "--output", [&](const fs::path& p) {
-            io::writeImage(render::toDisplay(r.image, float(s.image.exposureStops),
+            io::writeImage(render::toDisplay(shown, float(s.image.exposureStops),
                                              render::displayFromString(s.image.display)),
                            p);
         });

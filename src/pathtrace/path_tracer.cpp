@@ -33,6 +33,11 @@ constexpr int kNullCollisionBudget = 4096;
 constexpr int kSamplesPerPass = 4;
 /// Autofocus marches the centre ray at this many voxels (of the smallest spacing) per step.
 constexpr double kAutofocusStepVoxels = 0.25;
+/// The guides' quadrature step (voxels of the smallest spacing) and the transmittance where it
+/// stops (the rest of the ray weighs less than this). Against 0.5 and 10⁻³: half the time, and
+/// the denoised torso's NRMSE moved from 0.2763 to 0.2776 (4 spp).
+constexpr double kGuideStepVoxels = 1.0;
+constexpr double kGuideTransmittance = 1e-2;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
 constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
 /// Voxels per fine-majorant cell side. On the 128³ torso under ct-bone (256², 32 spp): 1 voxel
@@ -507,6 +512,103 @@ double PathTracer::autofocus(const render::Camera& camera) const {
     }
     const auto b = g.worldBounds();
     return std::max(glm::dot(0.5 * (b[0] + b[1]) - camera.eye(), camera.forward()), 1e-3);
+}
+
+Guides PathTracer::guides(const render::Camera& camera) const {
+    const Impl& im = *impl_;
+    const int w = camera.width(), h = camera.height();
+    const std::size_t n = std::size_t(w) * std::size_t(h);
+    Guides g;
+    g.width = w;
+    g.height = h;
+    g.albedo.assign(n, glm::vec3(0.f));
+    g.normal.assign(n, glm::vec3(0.f));
+    g.depth.assign(n, 0.f);
+    const core::Geometry& geo = im.volume->geometry();
+    const double stepMm =
+        kGuideStepVoxels * std::min({geo.spacing.x, geo.spacing.y, geo.spacing.z});
+    // Escaping rays count at the depth of the volume box's farthest corner.
+    double far = 0.0;
+    const auto b = geo.worldBounds();
+    for (int c = 0; c < 8; ++c) {
+        const glm::dvec3 corner((c & 1) ? b[1].x : b[0].x, (c & 2) ? b[1].y : b[0].y,
+                                (c & 4) ? b[1].z : b[0].z);
+        far = std::max(far, glm::dot(corner - camera.eye(), camera.forward()));
+    }
+    // ∇ in world = toIndexᵀ · ∇ in index space.
+    const glm::dmat3 gradToWorld = glm::transpose(im.toIndex);
+    std::unique_ptr<tbb::global_control> limit;
+    if (options_.threads > 0)
+        limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
+                                                      std::size_t(options_.threads));
+    // The expectations along the rays through the pixel corners, (w + 1) × (h + 1).
+    const int cw = w + 1, ch = h + 1;
+    const std::size_t cn = std::size_t(cw) * std::size_t(ch);
+    std::vector<glm::vec3> cAlbedo(cn), cNormal(cn);
+    std::vector<float> cDepth(cn);
+    im.volume->visit([&](const auto& view) {
+        tbb::parallel_for(0, ch, [&](int y) {
+            for (int x = 0; x < cw; ++x) {
+                const render::Ray cr = camera.generateAt(x, y);
+                const Ray ray{cr.origin, cr.direction};
+                const double along = glm::dot(cr.direction, camera.forward());
+                glm::dvec3 albedo(0.0), normal(0.0);
+                double depth = 0.0, T = 1.0;
+                double t0 = 0.0, t1 = INFINITY;
+                if (im.keptInterval(ray, t0, t1)) {
+                    const Track k = im.track(ray, t0, t1);
+                    im.traverse(k, [&](float sa, float sb, float m) {
+                        if (!(m > 0.f)) return true;
+                        const int steps = std::max(1, int(std::ceil((sb - sa) / stepMm)));
+                        const double dt = double(sb - sa) / steps;
+                        for (int i = 0; i < steps; ++i) {
+                            const double s = sa + (i + 0.5) * dt;
+                            const glm::vec3 p = k.o + float(s) * k.d;
+                            const optics::TfSample ts =
+                                im.table->lookup(view.sample(p.x, p.y, p.z));
+                            if (!(ts.extinction > 0.f)) continue;
+                            const double wgt = T * -std::expm1(-double(ts.extinction) * dt);
+                            const glm::dvec3 grad(
+                                view.sample(p.x + 1.f, p.y, p.z) - view.sample(p.x - 1.f, p.y, p.z),
+                                view.sample(p.x, p.y + 1.f, p.z) - view.sample(p.x, p.y - 1.f, p.z),
+                                view.sample(p.x, p.y, p.z + 1.f) -
+                                    view.sample(p.x, p.y, p.z - 1.f));
+                            const glm::dvec3 gw = gradToWorld * grad;
+                            const double len = glm::length(gw);
+                            albedo += wgt * glm::dvec3(ts.albedo);
+                            if (len > 0.0) normal += (wgt / len) * gw;
+                            depth += wgt * (t0 + s) * along;
+                            T -= wgt;
+                            if (T < kGuideTransmittance) return false;
+                        }
+                        return true;
+                    });
+                }
+                const std::size_t c = std::size_t(y) * cw + x;
+                cAlbedo[c] = glm::vec3(albedo);
+                cNormal[c] = glm::vec3(normal);
+                cDepth[c] = float(depth + std::max(T, 0.0) * far);
+            }
+        });
+    });
+    // Each pixel: the mean of its four corners.
+    tbb::parallel_for(0, h, [&](int y) {
+        for (int x = 0; x < w; ++x) {
+            const std::size_t p = std::size_t(y) * w + x, c = std::size_t(y) * cw + x;
+            const std::size_t q[4] = {c, c + 1, c + cw, c + cw + 1};
+            glm::vec3 a(0.f), nn(0.f);
+            float z = 0.f;
+            for (std::size_t k : q) {
+                a += cAlbedo[k];
+                nn += cNormal[k];
+                z += cDepth[k];
+            }
+            g.albedo[p] = 0.25f * a;
+            g.normal[p] = 0.25f * nn;
+            g.depth[p] = 0.25f * z;
+        }
+    });
+    return g;
 }
 
 core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Progress& progress,

@@ -45,6 +45,7 @@
 #include "grid/brick_traversal.h"
 #include "lights/light.h"
 #include "optics/transfer_function.h"
+#include "pathtrace/denoise.h"
 #include "render/camera.h"
 #include "render/ray_caster.h"
 
@@ -139,6 +140,16 @@ class PathTracer {
     /// half its light (optical depth ln 2, marched at a quarter voxel in the kept region) — the
     /// first visible surface; the depth of the volume's centre when that ray stays clear.
     double autofocus(const render::Camera& camera) const;
+    /// The denoiser's first-hit guides (denoise.h Guides) for `camera`'s pixels: the mean of the
+    /// pinhole rays through the pixel's four corners (shared with its neighbours: one ray per
+    /// pixel; the radiance averages over the pixel's area too, so a pixel on a silhouette gets a
+    /// mixed guide like its neighbours along the silhouette, not a unique one; with a lens the
+    /// guides stay in focus everywhere), each the expectations over its first collision by
+    /// quadrature — T·(1 − e^{−σt·Δ}) per step of at most
+    /// kGuideStepVoxels voxels through the pieces of non-zero majorant, in the kept region, until
+    /// T < kGuideTransmittance — with the gradient by central differences (world). Deterministic
+    /// and noise-free; costs about one ray-cast frame.
+    Guides guides(const render::Camera& camera) const;
 
     const Options& options() const { return options_; }
 

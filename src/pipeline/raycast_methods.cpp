@@ -30,7 +30,12 @@
 //                         (relative NRMS the samples predict; 0 = off), reference (false; true:
 //                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
 //                         becomes the cached `reference` stage), max_bounces (1, or 16 with the
-//                         multiple_scattering effect), phase_g, majorant_grid, antialias
+//                         multiple_scattering effect), phase_g, majorant_grid, antialias,
+//                         denoise (true | false | "auto" = on unless reference; never in
+//                         reference mode: true there is an error) and denoise_target (0.01: the
+//                         relative standard error at and below which a pixel is left as traced;
+//                         pathtrace/denoise.h). The denoised image is the display (PNG) only: the
+//                         main image (EXR, sweeps) and the std_error image stay the raw estimate.
 // Clip planes and the crop box (io/scene.h shadows_from_removed): camera rays never see removed
 // matter in any method. The ray caster's own modes cast no shadow rays; the path tracer reads each
 // plane's choice itself (pathtrace/path_tracer.h). sh-local/sh-global: the unclipped local
@@ -409,6 +414,44 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
 constexpr double kReferenceTargetError = 0.01;
 constexpr int kReferenceMaxSpp = 1 << 14;
 
+/// The denoiser's settings from method.params `denoise` / `denoise_target`; nullopt = off.
+/// Reference mode never denoises: `denoise: true` there is an error, and an absent key stays out
+/// of the params as used (so the reference's cache key is what it was before the denoiser).
+std::optional<pathtrace::DenoiseOptions> parseDenoiseParams(const io::Scene& scene,
+                                                            const render::RenderOptions& o,
+                                                            ParamReader& p, bool reference) {
+    std::string mode = "auto";
+    if (p.has("denoise")) {
+        const json& v = scene.method.params["denoise"];
+        if (v.is_boolean())
+            mode = v.get<bool>() ? "true" : "false";
+        else if (!(v.is_string() && v.get<std::string>() == "auto"))
+            p.fail("denoise", "must be true, false or \"auto\", got " + v.dump(),
+                   "\"auto\" denoises unless reference is true");
+        p.used["denoise"] = v;
+    }
+    if (reference) {
+        if (mode == "true")
+            p.fail("denoise", "is true but reference renders are never denoised",
+                   "remove denoise or set it to false (or set reference to false)");
+        if (p.has("denoise_target"))
+            p.fail("denoise_target", "applies only when denoising, and reference renders never are",
+                   "remove denoise_target");
+        return std::nullopt;
+    }
+    if (!p.has("denoise")) p.used["denoise"] = "auto";
+    if (mode == "false") {
+        if (p.has("denoise_target"))
+            p.fail("denoise_target", "is set but denoise is false",
+                   "remove denoise_target or set denoise to true or \"auto\"");
+        return std::nullopt;
+    }
+    pathtrace::DenoiseOptions d;
+    d.targetError = p.number("denoise_target", d.targetError, 1e-4, 1.0);
+    d.threads = o.threads;
+    return d;
+}
+
 /// The path tracer's options from the scene and method.params. Multiple scattering is the
 /// "multiple_scattering" effect: without it paths stop after one scattering event.
 pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::RenderOptions& o,
@@ -535,9 +578,12 @@ std::string dims(const glm::ivec3& d) {
 /// reports its spp, error and warnings like a fresh one.
 struct TracedImage {
     core::ImageRGBA image, stdError;
+    core::ImageRGBA denoised;  ///< the display image when denoised (never cached: not in reference)
     json details;
     std::vector<std::string> warnings;
-    std::size_t bytes() const { return (image.pixels.size() + stdError.pixels.size()) * 4; }
+    std::size_t bytes() const {
+        return (image.pixels.size() + stdError.pixels.size() + denoised.pixels.size()) * 4;
+    }
 };
 
 /// Largest cached image side (guards the read allocation against a damaged header).
@@ -581,7 +627,9 @@ const Codec& tracedImageCodec() {
 
 /// Runs the path tracer over the same volume, TF table, majorant cells, lights and camera as the
 /// ray caster's stages.
-std::shared_ptr<const TracedImage> tracePath(Run& run, pathtrace::Options pt) {
+std::shared_ptr<const TracedImage> tracePath(
+    Run& run, pathtrace::Options pt,
+    std::optional<pathtrace::DenoiseOptions> denoise = std::nullopt) {
     const auto loaded = run.get<LoadedVolume>("load_volume");
     const auto tfa = run.get<TfArtifact>("transfer_function");
     if (run.has("lights")) pt.lights = *run.get<LightList>("lights");
@@ -593,6 +641,27 @@ std::shared_ptr<const TracedImage> tracePath(Run& run, pathtrace::Options pt) {
             std::shared_ptr<const core::Volume>(loaded, &loaded->volume), tfa->table,
             run.get<grid::BrickMajorants>("skip_cells"), pt);
         out->image = tracer.render(*camera, run.progress(), &st, &out->stdError);
+        if (denoise) {
+            // The guides' depth tolerance: one voxel of the smallest spacing.
+            const glm::dvec3 sp = loaded->volume.geometry().spacing;
+            denoise->depthFloorMm = float(std::min({sp.x, sp.y, sp.z}));
+            core::Stopwatch guideClock;
+            const pathtrace::Guides guides = tracer.guides(*camera);
+            const double guideSeconds = guideClock.seconds();
+            pathtrace::DenoiseStats ds;
+            out->denoised = pathtrace::denoise(out->image, out->stdError, guides, *denoise, &ds);
+            out->details["denoise"] = {{"applied", true},
+                                       {"target_error", denoise->targetError},
+                                       {"mean_strength", ds.meanStrength},
+                                       {"filtered_fraction", ds.filteredFraction},
+                                       {"full_strength_fraction", ds.fullFraction},
+                                       {"iterations", denoise->iterations},
+                                       {"guide_seconds", guideSeconds},
+                                       {"filter_seconds", ds.seconds}};
+        } else {
+            out->details["denoise"] = {{"applied", false},
+                                       {"reason", "method.params.denoise is false"}};
+        }
     } catch (const InputError& e) {
         if (e.source() == "pathtrace")
             throw InputError(run.scene().source, "method.params." + e.field(), e.problem(),
@@ -646,6 +715,8 @@ Artifact publishTraced(Run& run, const TracedImage& t) {
     for (auto it = t.details.begin(); it != t.details.end(); ++it) run.details()[it.key()] = *it;
     for (const auto& w : t.warnings) run.warn(w);
     run.addImage("std_error", std::make_shared<const core::ImageRGBA>(t.stdError));
+    if (!t.denoised.pixels.empty())
+        run.addImage("denoised", std::make_shared<const core::ImageRGBA>(t.denoised));
     auto film = std::make_shared<const core::ImageRGBA>(t.image);
     const std::size_t bytes = film->pixels.size() * sizeof(float);
     return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
@@ -1048,8 +1119,12 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     render::RenderOptions options = parseOptions(kind, scene, reader);
     std::optional<pathtrace::Options> traced;
+    std::optional<pathtrace::DenoiseOptions> denoise;
     bool reference = false;
-    if (kind == Kind::PathTrace) traced = parsePathTraceOptions(scene, options, reader, reference);
+    if (kind == Kind::PathTrace) {
+        traced = parsePathTraceOptions(scene, options, reader, reference);
+        denoise = parseDenoiseParams(scene, options, reader, reference);
+    }
     const ShParams shParams = isKronander(kind) ? parseShParams(kind, scene, reader) : ShParams{};
     const visibility::HierarchicalVisibilityOptions ritschelParams =
         kind == Kind::Ritschel ? parseRitschelParams(scene, reader)
@@ -1405,8 +1480,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     if (kind == Kind::PathTrace) {
         if (!reference) {
-            frame.compute = [pt = *traced](Run& run) {
-                return publishTraced(run, *tracePath(run, pt));
+            frame.compute = [pt = *traced, denoise](Run& run) {
+                return publishTraced(run, *tracePath(run, pt, denoise));
             };
             plan.stages.push_back(frame);
             return plan;
@@ -1436,7 +1511,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             return KeyBuilder(run, "render").stage("reference").value();
         };
         frame.compute = [](Run& run) {
-            return publishTraced(run, *run.get<TracedImage>("reference"));
+            Artifact film = publishTraced(run, *run.get<TracedImage>("reference"));
+            run.details()["denoise"] = {{"applied", false},
+                                        {"reason", "reference renders are never denoised"}};
+            return film;
         };
         plan.stages.push_back(frame);
         return plan;
@@ -1585,8 +1663,8 @@ const RegisterMethod kPathTrace([] {
         "Monte-Carlo path tracer: delta tracking over the majorant grid, exact shadows, "
         "single or multiple scattering (the reference)";
     m.effects = {"local_shadows", "global_shadows", "multiple_scattering"};
-    m.params = {"spp",         "seconds", "target_error",  "reference",
-                "max_bounces", "phase_g", "majorant_grid", "antialias"};
+    m.params = {"spp",     "seconds",       "target_error", "reference", "max_bounces",
+                "phase_g", "majorant_grid", "antialias",    "denoise",   "denoise_target"};
     m.plan = [](const io::Scene& scene, ParamReader& reader) {
         return planRayCaster(Kind::PathTrace, scene, reader);
     };

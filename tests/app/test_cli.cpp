@@ -416,3 +416,27 @@ TEST(Cli, ThePathTracersStandardErrorImageIsWrittenOnRequestAndRefusedElsewhere)
     EXPECT_FALSE(fs::exists(tmp / "b.png"));
     EXPECT_FALSE(fs::exists(tmp / "f.exr"));
 }
+
+TEST(Cli, ThePathTracersDenoiserChangesThePngOnlyAndABadValueIsOneLine) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "torso", "size": 32},
+        "transfer_function": "ct-bone",
+        "method": {"name": "pathtrace", "params": {"spp": 4}}, "effects": ["global_shadows"],
+        "image": {"width": 24, "height": 24}})";
+    const std::string base = "render -q " + q(tmp / "scene.json");
+    Result r = run(base + " -o " + q(tmp / "on.png") + " --exr " + q(tmp / "on.exr"), tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    r = run(base + " --set method.params.denoise=false -o " + q(tmp / "off.png") + " --exr " +
+                q(tmp / "off.exr"),
+            tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(io::readImage(tmp / "on.exr").pixels, io::readImage(tmp / "off.exr").pixels)
+        << "the EXR is the raw estimate";
+    EXPECT_NE(io::readImage(tmp / "on.png").pixels, io::readImage(tmp / "off.png").pixels)
+        << "the PNG is denoised";
+    r = run(base + " --set method.params.denoise=yes -o " + q(tmp / "bad.png"), tmp.path());
+    EXPECT_EQ(r.code, 2);
+    EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+    EXPECT_NE(r.err.find("method.params.denoise"), std::string::npos) << r.err;
+    EXPECT_FALSE(fs::exists(tmp / "bad.png"));
+}

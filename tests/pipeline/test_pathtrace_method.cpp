@@ -216,3 +216,45 @@ TEST(PathTraceMethod, DepthOfFieldFromTheSceneWithAutofocusAndAWarningElsewhere)
     d["camera"]["focus_distance"] = "auto";
     EXPECT_FALSE(scene(d).camera.focusMm.has_value());
 }
+
+TEST(PathTraceMethod, DenoisesTheDisplayImageOnlyAndNeverAReference) {
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    // Default ("auto"): a denoised display image beside the raw estimate, said in the details.
+    const RunResult a = Session().run(scene(d));
+    ASSERT_EQ(a.images.count("denoised"), 1u);
+    EXPECT_EQ(a.details["denoise"]["applied"], true);
+    EXPECT_GT(a.details["denoise"]["mean_strength"].get<double>(), 0.0) << "4 spp is noisy";
+    EXPECT_EQ(a.params["denoise"], "auto");
+    EXPECT_NE(a.images.at("denoised").pixels, a.image.pixels);
+    // Off: the same raw image and error image, nothing denoised.
+    d["method"]["params"]["denoise"] = false;
+    const RunResult off = Session().run(scene(d));
+    EXPECT_EQ(off.images.count("denoised"), 0u);
+    EXPECT_EQ(off.details["denoise"]["applied"], false);
+    EXPECT_EQ(off.image.pixels, a.image.pixels) << "the main image stays the raw estimate";
+    EXPECT_EQ(off.images.at("std_error").pixels, a.images.at("std_error").pixels);
+    // Reference mode: never denoised, and its image is the plain trace at the same settings.
+    d["method"]["params"] = {{"reference", true}, {"spp", 8}};
+    const RunResult ref = Session().run(scene(d));
+    EXPECT_EQ(ref.images.count("denoised"), 0u);
+    EXPECT_EQ(ref.details["denoise"]["applied"], false);
+    EXPECT_FALSE(ref.params.contains("denoise")) << "the reference's cache key is unchanged";
+    d["method"]["params"] = {{"spp", 8}, {"antialias", false}, {"target_error", 0.01}};
+    const RunResult plain = Session().run(scene(d));
+    EXPECT_EQ(ref.image.pixels, plain.image.pixels);
+    EXPECT_EQ(plain.images.count("denoised"), 1u);
+    // Wrong values and types, and denoise asked of a reference: one error naming the field.
+    for (const json& params :
+         {json{{"denoise", "yes"}}, json{{"denoise", 1}},
+          json{{"reference", true}, {"denoise", true}},
+          json{{"denoise", false}, {"denoise_target", 0.02}}, json{{"denoise_target", "0.02"}}}) {
+        d["method"]["params"] = params;
+        try {
+            Session().plan(scene(d));
+            FAIL() << params.dump();
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field().rfind("method.params.denoise", 0), 0u) << e.what();
+        }
+    }
+}
