@@ -100,7 +100,7 @@ double opticalDepth(const OpacityPyramid& pyr, const glm::vec3& origin, const gl
                     depth = 0.0;
                     float s0 = sFront;
                     double i0 = iFront;
-                    for (int j = 1; j <= k; ++j) {
+                    for (int j = 1; j <= k && tau + depth <= kOpaqueDepth; ++j) {
                         const float s1 =
                             j == k ? sBack : pyr.value(origin + (t + float(j) * sub) * d);
                         const double i1 = j == k ? iBack : table.sigmaIntegral(s1);

@@ -138,7 +138,7 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
                 const float sub = dt / float(k);
                 float s0 = sFront;
                 double i0 = iFront;
-                for (int j = 1; j <= k; ++j) {
+                for (int j = 1; j <= k && tau <= kOpaqueDepth; ++j) {
                     bool st = false;
                     const float s1 =
                         j == k ? sBack : field.at(origin + (t + float(j) * sub) * d, st);
@@ -147,7 +147,7 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
                     s0 = s1;
                     i0 = i1;
                 }
-                n += std::uint64_t(k - 1);
+                n += std::uint64_t(k - 1);  // at most: the loop stops once opaque (counted as k)
             }
             if (tau > kOpaqueDepth) break;
         }

@@ -88,11 +88,13 @@ namespace voxlight::visibility {
 /// Longest ray step (voxels): at least four samples within the default radius of 16 voxels, so a
 /// fine block entered from a coarse one is never stepped over by more than 4 voxels.
 inline constexpr float kMaxStepVoxels = 4.f;
-/// Optical depth above which one ray step is split into sub-steps (up to kMaxSubSteps): the value
-/// is linear along a ray only within a voxel, so a pre-integrated step across a dense surface errs
-/// by up to its whole optical depth; sub-steps of depth ≤ ¼ keep T within a few % of the continuous
-/// model at a surface (tested) and cost samples only where rays are about to stop anyway.
-inline constexpr double kRefineDepth = 0.25;
+/// Optical depth above which one ray step is split into sub-steps of at most this depth (up to
+/// kMaxSubSteps; the loop stops once the ray is opaque): the value is linear along a ray only
+/// within a voxel, so a pre-integrated step across a dense surface is smeared over the step.
+/// Depth 1 keeps T within 0.01 of the continuous model at a partial-volume surface (tested) and
+/// costs +7 % of the rays' CPU time on Kronander's phantom; ½ and ¼ gave the same slab and torso
+/// images (to 0.1 %) at +57 % and +130 %.
+inline constexpr double kRefineDepth = 1.0;
 inline constexpr int kMaxSubSteps = 16;
 /// Optical depth at which a visibility ray stops (e^−9.21 = 1e-4).
 inline constexpr double kOpaqueDepth = 9.21;
