@@ -566,7 +566,8 @@ core::Volume regularize(mod::SeriesResult r, const fs::path& path) {
       << "; outside the acquired slices: the series minimum " << background
       << (v.mapping.unit.empty() ? "" : " " + v.mapping.unit)
       << (v.modality == core::Modality::CT ? ", air" : "")
-      << "); use --strict-geometry to refuse such series instead";
+      << "); use --strict-geometry (scene: volume.strict_geometry) to refuse such series "
+         "instead";
     v.warnings.push_back(oneLine(w.str()));  // the path may hold any bytes
     return v;
 }

@@ -984,8 +984,9 @@ StackLayout sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceA
         return formatPoint(h.position) + " [" + h.file.filename().string() + "]";
     };
     const std::string strictFix =
-        "omit --strict-geometry (scene: \"strict_geometry\": false) to load it resampled onto a "
-        "regular grid, or reslice it to an orthogonal grid first (e.g. with dcm2niix)";
+        "omit --strict-geometry (or set the scene's volume.strict_geometry to false) to load it "
+        "resampled onto a regular grid with a warning, or reslice it to an orthogonal grid first "
+        "(e.g. with dcm2niix)";
 
     // Duplicate positions: two acquisitions (echoes, phases) or the same slice twice.
     for (std::size_t s = 0; s + 1 < n; ++s)
