@@ -551,10 +551,10 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
 
 /// Resamples an irregular stack (slice_stack.h) and says so in one warning line: what was found,
 /// what was done, and how to refuse instead.
-core::Volume regularize(mod::SeriesResult r, const fs::path& path) {
+core::Volume regularize(mod::SeriesResult r, const fs::path& path, const core::Progress& progress) {
     if (r.slicePositions.empty()) return std::move(r.stack);
     const glm::ivec3 acquired = r.stack.dims();
-    core::Volume v = resampleSliceStack(r.stack, r.slicePositions, path.string());
+    core::Volume v = resampleSliceStack(r.stack, r.slicePositions, path.string(), progress);
     r.stack = core::Volume();  // the acquired slices are no longer needed
     const core::Geometry& g = v.geometry();
     const double background = v.physicalRange()[0];  // every blend is ≥ the stack's minimum
@@ -579,8 +579,8 @@ core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOption
     const mod::Api& api = dicomModule(path);
     const char* inProcess = std::getenv("VOXLIGHT_DICOM_IN_PROCESS");
     if (inProcess && std::strcmp(inProcess, "1") == 0)
-        return regularize(api.readSeries(path, options, progress, mod::Hooks{}), path);
-    return regularize(readIsolated(api, path, options, progress), path);
+        return regularize(api.readSeries(path, options, progress, mod::Hooks{}), path, progress);
+    return regularize(readIsolated(api, path, options, progress), path, progress);
 }
 
 }  // namespace voxlight::io::detail

@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <limits>
@@ -92,7 +93,7 @@ namespace {
 
 template <class T>
 void resampleTyped(const core::Volume& stack, const std::vector<glm::dvec3>& positions,
-                   const SliceStackGrid& grid, core::Volume& out) {
+                   const SliceStackGrid& grid, core::Volume& out, const core::Progress& progress) {
     const core::Geometry& sg = stack.geometry();
     const glm::dvec3 i = sg.direction[0], j = sg.direction[1];
     const int nx = sg.dims.x, ny = sg.dims.y;
@@ -128,7 +129,9 @@ void resampleTyped(const core::Volume& stack, const std::vector<glm::dvec3>& pos
         value = c0 + fy * (c1 - c0);
         return true;
     };
+    std::atomic<int> done{0};
     tbb::parallel_for(0, od.z, [&](int c) {
+        progress.checkCancel();
         const int k = grid.below[std::size_t(c)];
         const double t = grid.t[std::size_t(c)];
         // A slice with weight 0 is not needed (an output slice on an input slice).
@@ -152,27 +155,30 @@ void resampleTyped(const core::Volume& stack, const std::vector<glm::dvec3>& pos
                 else
                     v = T(std::lround(f));  // a convex blend of stored values: in range
             }
+        const int d = ++done;
+        if (d % 16 == 0) progress.report("dicom resample", double(d) / od.z);
     });
+    progress.report("dicom resample", 1.0);
 }
 
 }  // namespace
 
 core::Volume resampleSliceStack(const core::Volume& stack, const std::vector<glm::dvec3>& positions,
-                                const std::string& source) {
+                                const std::string& source, const core::Progress& progress) {
     const SliceStackGrid grid = sliceStackGrid(stack.geometry(), positions, source);
     core::Volume out(grid.geometry, stack.type());
     switch (stack.type()) {
         case core::VoxelType::UInt8:
-            resampleTyped<std::uint8_t>(stack, positions, grid, out);
+            resampleTyped<std::uint8_t>(stack, positions, grid, out, progress);
             break;
         case core::VoxelType::Int16:
-            resampleTyped<std::int16_t>(stack, positions, grid, out);
+            resampleTyped<std::int16_t>(stack, positions, grid, out, progress);
             break;
         case core::VoxelType::UInt16:
-            resampleTyped<std::uint16_t>(stack, positions, grid, out);
+            resampleTyped<std::uint16_t>(stack, positions, grid, out, progress);
             break;
         case core::VoxelType::Float32:
-            resampleTyped<float>(stack, positions, grid, out);
+            resampleTyped<float>(stack, positions, grid, out, progress);
             break;
     }
     out.mapping = stack.mapping;

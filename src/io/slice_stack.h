@@ -30,6 +30,7 @@
 #include <string>
 #include <vector>
 
+#include "core/progress.h"
 #include "core/volume.h"
 
 namespace voxlight::io::detail {
@@ -48,8 +49,10 @@ SliceStackGrid sliceStackGrid(const core::Geometry& stack, const std::vector<glm
                               const std::string& source);
 
 /// Resamples `stack` onto sliceStackGrid(...). Metadata (mapping, modality, description, format,
-/// warnings) is copied.
+/// warnings) is copied. Reports progress as stage "dicom resample"; throws CancelledError when
+/// `progress` is cancelled.
 core::Volume resampleSliceStack(const core::Volume& stack, const std::vector<glm::dvec3>& positions,
-                                const std::string& source);
+                                const std::string& source,
+                                const core::Progress& progress = core::Progress::none());
 
 }  // namespace voxlight::io::detail

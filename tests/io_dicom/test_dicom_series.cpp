@@ -738,6 +738,22 @@ TEST(SliceStack, FloatStackResampledExactlyWithoutSharedData) {
             }
     EXPECT_GT(inside, 100);
     EXPECT_GT(outside, 10);
+
+    // Progress ends at 1 under its own stage name; a raised cancel flag stops the resampling.
+    std::atomic<bool> cancel{false};
+    std::vector<double> seen;
+    const Progress p(
+        [&](const std::string& stage, double f) {
+            EXPECT_EQ(stage, "dicom resample");
+            seen.push_back(f);
+        },
+        &cancel);
+    (void)voxlight::io::detail::resampleSliceStack(stack, pos, "stack", p);
+    ASSERT_FALSE(seen.empty());
+    EXPECT_DOUBLE_EQ(seen.back(), 1.0);
+    cancel = true;
+    EXPECT_THROW((void)voxlight::io::detail::resampleSliceStack(stack, pos, "stack", p),
+                 voxlight::CancelledError);
 }
 
 TEST(DicomSeries, RegularSeriesUntouchedAndSilent) {
