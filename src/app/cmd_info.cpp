@@ -35,6 +35,7 @@ nlohmann::json describe(const core::Volume& v, const std::string& path, double s
     j["range"] = {range[0], range[1]};
     j["modality"] = std::string(core::toString(v.modality));
     j["description"] = v.description;
+    if (!v.warnings.empty()) j["warnings"] = v.warnings;  // also on stderr
     j["voxels"] = v.voxelCount();
     j["memory_mib"] = double(v.sizeBytes()) / (1024.0 * 1024.0);
     j["load_seconds"] = seconds;
@@ -88,6 +89,7 @@ Command addInfoCommand(CLI::App& app) {
         core::Stopwatch sw;
         const core::Volume v =
             io::readVolume(*path, vopts->readOptions(), terminalProgress(*quiet || *json));
+        for (const auto& w : v.warnings) std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
         const nlohmann::json j = describe(v, *path, sw.seconds());
         if (*json)
             std::cout << j.dump(2) << "\n";

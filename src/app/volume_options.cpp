@@ -19,6 +19,9 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
     g->add_option("--series", o->series,
                   "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
                   "files without one)");
+    g->add_flag("--strict-geometry", o->strictGeometry,
+                "DICOM: refuse a gantry-tilted or variably spaced series instead of resampling it "
+                "onto a regular grid (with a warning)");
     g->add_option("--nonfinite", o->nonFinite,
                   "NaN/Inf voxels: reject (default) or replace by the minimum")
         ->check(CLI::IsMember({"reject", "min"}));
@@ -28,6 +31,7 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
 io::ReadOptions VolumeOptions::readOptions() const {
     io::ReadOptions r;
     r.dicomSeriesUid = series;
+    r.strictGeometry = strictGeometry;
     r.nonFinite =
         nonFinite == "min" ? io::NonFinitePolicy::ReplaceWithMin : io::NonFinitePolicy::Reject;
     const bool anyRaw =

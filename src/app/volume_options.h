@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// Command-line options that say how to read a volume (raw layout, DICOM series choice, non-finite
-// policy), shared by every subcommand that loads one.
+// Command-line options that say how to read a volume (raw layout, DICOM series choice and geometry
+// strictness, non-finite policy), shared by every subcommand that loads one.
 #include <CLI/CLI.hpp>
 #include <memory>
 #include <string>
@@ -24,6 +24,7 @@ class VolumeOptions {
     std::uint64_t headerBytes = 0;
     std::string series;
     std::string nonFinite = "reject";
+    bool strictGeometry = false;
 };
 
 std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub);

@@ -24,6 +24,7 @@
 #include <memory>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/error.h"
 
@@ -162,6 +163,10 @@ class Volume {
     Modality modality = Modality::Unknown;
     std::string description;  ///< free text: series description, phantom name, file name
     std::string format;       ///< where it came from: "NIfTI", "DICOM series", "phantom", ...
+    /// What the reader changed about the data that the user must be told, one line each (e.g. a
+    /// gantry-tilted DICOM series resampled onto a regular grid). Commands print each once on
+    /// stderr as "voxlight: warning: ..."; render stats list them under "warnings".
+    std::vector<std::string> warnings;
 
     void* data() { return data_.get(); }
     const void* data() const { return data_.get(); }

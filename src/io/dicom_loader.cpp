@@ -28,15 +28,19 @@
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
+#include <iomanip>
 #include <mutex>
 #include <new>
+#include <sstream>
 #include <string>
 #include <vector>
 
 #include "core/error.h"
+#include "core/text.h"
 #include "io/dicom_module.h"
 #include "io/dicom_series.h"
 #include "io/module_loader.h"
+#include "io/slice_stack.h"
 
 #if defined(__has_feature)
 #if __has_feature(address_sanitizer) || __has_feature(memory_sanitizer) || \
@@ -230,13 +234,17 @@ std::chrono::seconds stallLimit() {
         nullptr);
     try {
         injectFault(path);
-        const core::Volume v = api.readSeries(path, options, progress, hooks);
+        const mod::SeriesResult r = api.readSeries(path, options, progress, hooks);
+        const core::Volume& v = r.stack;
         VolumeHeader h{v.geometry(),        v.type(),
                        v.modality,          v.mapping.slope,
                        v.mapping.intercept, std::uint64_t(v.sizeBytes())};
         std::string payload(reinterpret_cast<const char*>(&h), sizeof h);
         Writer::field(payload, v.mapping.unit);
         Writer::field(payload, v.description);
+        Writer::field(payload, r.irregularity);
+        Writer::field(payload, std::string(reinterpret_cast<const char*>(r.slicePositions.data()),
+                                           r.slicePositions.size() * sizeof(glm::dvec3)));
         out.send(Msg::Volume, payload);
     } catch (const InputError& e) {
         std::string payload;
@@ -377,8 +385,8 @@ const mod::Api& dicomModule(const fs::path& path) {
         "check the system's limits on processes and memory");
 }
 
-core::Volume readIsolated(const mod::Api& api, const fs::path& path, const ReadOptions& options,
-                          const core::Progress& progress) {
+mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
+                               const ReadOptions& options, const core::Progress& progress) {
     ChildGuard child;
     child.mem = ::memfd_create("voxlight-dicom", MFD_CLOEXEC);
     if (child.mem < 0) systemFailure(path, "memfd_create");
@@ -515,6 +523,14 @@ core::Volume readIsolated(const mod::Api& api, const fs::path& path, const ReadO
     rd.at = sizeof h;
     const std::string unit = rd.field();
     const std::string description = rd.field();
+    mod::SeriesResult r;
+    r.irregularity = rd.field();
+    const std::string positions = rd.field();
+    if (positions.size() % sizeof(glm::dvec3) != 0)
+        throw InternalError("DICOM reader: short slice position list");
+    r.slicePositions.resize(positions.size() / sizeof(glm::dvec3));
+    if (!positions.empty())
+        std::memcpy(r.slicePositions.data(), positions.data(), positions.size());
     struct stat st {};
     if (::fstat(child.mem, &st) != 0 || std::uint64_t(st.st_size) != h.bytes || h.bytes == 0)
         throw InternalError("DICOM reader: the decoder's voxel buffer has the wrong size");
@@ -529,6 +545,30 @@ core::Volume readIsolated(const mod::Api& api, const fs::path& path, const ReadO
     v.mapping.intercept = h.intercept;
     v.mapping.unit = unit;
     v.description = description;
+    r.stack = std::move(v);
+    return r;
+}
+
+/// Resamples an irregular stack (slice_stack.h) and says so in one warning line: what was found,
+/// what was done, and how to refuse instead.
+core::Volume regularize(mod::SeriesResult r, const fs::path& path, const core::Progress& progress) {
+    if (r.slicePositions.empty()) return std::move(r.stack);
+    const glm::ivec3 acquired = r.stack.dims();
+    core::Volume v = resampleSliceStack(r.stack, r.slicePositions, path.string(), progress);
+    r.stack = core::Volume();  // the acquired slices are no longer needed
+    const core::Geometry& g = v.geometry();
+    const double background = v.physicalRange()[0];  // every blend is ≥ the stack's minimum
+    std::ostringstream w;
+    w << std::setprecision(4) << path.string() << ": DICOM series with " << r.irregularity
+      << "; resampled its " << acquired.z << " slices onto a regular grid of " << g.dims.z
+      << " slices at " << g.spacing.z << " mm along the slice normal (" << g.dims.x << "x"
+      << g.dims.y << " pixels, was " << acquired.x << "x" << acquired.y
+      << "; outside the acquired slices: the series minimum " << background
+      << (v.mapping.unit.empty() ? "" : " " + v.mapping.unit)
+      << (v.modality == core::Modality::CT ? ", air" : "")
+      << "); use --strict-geometry (scene: volume.strict_geometry) to refuse such series "
+         "instead";
+    v.warnings.push_back(oneLine(w.str()));  // the path may hold any bytes
     return v;
 }
 
@@ -539,8 +579,8 @@ core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOption
     const mod::Api& api = dicomModule(path);
     const char* inProcess = std::getenv("VOXLIGHT_DICOM_IN_PROCESS");
     if (inProcess && std::strcmp(inProcess, "1") == 0)
-        return api.readSeries(path, options, progress, mod::Hooks{});
-    return readIsolated(api, path, options, progress);
+        return regularize(api.readSeries(path, options, progress, mod::Hooks{}), path, progress);
+    return regularize(readIsolated(api, path, options, progress), path, progress);
 }
 
 }  // namespace voxlight::io::detail

@@ -13,6 +13,8 @@
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "core/progress.h"
 #include "core/volume.h"
@@ -21,7 +23,7 @@
 namespace voxlight::io::dicom_module {
 
 /// Bumped whenever Api or the types it passes change layout or meaning.
-inline constexpr int kAbiVersion = 2;
+inline constexpr int kAbiVersion = 3;
 inline constexpr const char* kFileName = "libvoxlight_dicom_gdcm.so";
 /// The one symbol the module exports: `const void* voxlight_dicom_module()` returning an Api.
 inline constexpr const char* kEntryPoint = "voxlight_dicom_module";
@@ -37,9 +39,22 @@ struct Hooks {
     std::function<void(const std::filesystem::path&)> reading;
 };
 
+/// What the module read. When the slice positions are regular, `stack` is the volume and the
+/// other fields are empty. When they are not (gantry tilt, variable spacing) and
+/// options.strictGeometry is false, `stack` holds the acquired slices in order along the normal
+/// (its origin and spacing.z are placeholders) and the caller resamples them onto a regular grid
+/// (slice_stack.h) outside the GDCM child.
+struct SeriesResult {
+    core::Volume stack;
+    std::vector<glm::dvec3> slicePositions;  ///< Image Position (Patient) of stack slice k
+    /// What is irregular, for the warning: "gantry tilt of 15 degrees", "slice spacing varying
+    /// from 1 to 2.5 mm", or both joined by " and ".
+    std::string irregularity;
+};
+
 struct Api {
     int abiVersion;  ///< first member (module_loader.h)
-    core::Volume (*readSeries)(const std::filesystem::path& path, const ReadOptions& options,
+    SeriesResult (*readSeries)(const std::filesystem::path& path, const ReadOptions& options,
                                const core::Progress& progress, const Hooks& hooks);
 };
 
@@ -47,7 +62,8 @@ struct Api {
 
 namespace voxlight::io::detail {
 /// The GDCM implementation behind readDicomSeries (in the module).
-core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const ReadOptions& options,
-                                     const core::Progress& progress,
-                                     const dicom_module::Hooks& hooks);
+dicom_module::SeriesResult readDicomSeriesWithGdcm(const std::filesystem::path& path,
+                                                   const ReadOptions& options,
+                                                   const core::Progress& progress,
+                                                   const dicom_module::Hooks& hooks);
 }  // namespace voxlight::io::detail

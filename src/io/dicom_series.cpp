@@ -49,14 +49,15 @@ constexpr double kDuplicateTolMm = 1e-3;
 /// A slice may sit at most this fraction of the slice spacing off the uniform grid through the
 /// first and last slice. Covers positions rounded to 0.1 mm (DS written with one decimal) for
 /// slices ≥ 1 mm; a tenth of a slice is below what trilinear sampling can show. Beyond it the
-/// spacing is variable and voxlight would need to resample.
+/// spacing is variable: the stack is resampled (slice_stack.h), or refused under --strict-geometry.
 constexpr double kMaxGridOffset = 0.1;
 /// A gap within this of an integer multiple k ≥ 2 of the typical spacing is reported as k−1 missing
 /// slices rather than as variable spacing (missing files is the common cause of such gaps).
 constexpr double kMissingSliceRatioTol = 0.15;
 /// Slice positions may drift sideways (perpendicular to the normal) by at most this fraction of the
 /// finest pixel spacing over the whole series; more is a sheared grid (gantry tilt) that a Volume
-/// (orthonormal D) cannot hold.
+/// (orthonormal D) cannot hold: it is resampled (slice_stack.h), or refused under
+/// --strict-geometry.
 constexpr double kMaxShearPixels = 0.2;
 /// Rescale slope/intercept count as identical across slices to this relative accuracy.
 constexpr double kRescaleMatchRel = 1e-9;
@@ -961,10 +962,19 @@ SliceAxes sliceAxes(const SliceHeader& h) {
     return a;
 }
 
+/// What step 4 found about the slice positions.
+struct StackLayout {
+    double spacing = 0.0;  ///< uniform slice spacing (mm); for an irregular stack the mean gap
+    bool regular = true;
+    std::string irregularity;  ///< for the warning (see dicom_module::SeriesResult)
+};
+
 /// Step 4: sort by position along the normal and check that the positions form a uniform, unsheared
-/// stack. Returns the slice spacing (mm).
-double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& axes,
-                             const fs::path& source) {
+/// stack. A sheared (gantry tilt) or variably spaced stack is refused when `strict`, and otherwise
+/// reported in the result for resampling. Duplicate positions and missing slices are always
+/// refused: resampling would hide them.
+StackLayout sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& axes,
+                                  const fs::path& source, bool strict) {
     const std::string src = str(source);
     for (auto& h : slices) h.along = glm::dot(axes.n, h.position);
     std::stable_sort(slices.begin(), slices.end(),
@@ -973,6 +983,10 @@ double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& 
     const auto where = [](const SliceHeader& h) {
         return formatPoint(h.position) + " [" + h.file.filename().string() + "]";
     };
+    const std::string strictFix =
+        "omit --strict-geometry (or set the scene's volume.strict_geometry to false) to load it "
+        "resampled onto a regular grid with a warning, or reslice it to an orthogonal grid first "
+        "(e.g. with dcm2niix)";
 
     // Duplicate positions: two acquisitions (echoes, phases) or the same slice twice.
     for (std::size_t s = 0; s + 1 < n; ++s)
@@ -985,6 +999,7 @@ double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& 
                 "the folder holds several acquisitions at the same positions (echoes, phases, or "
                 "the same series copied twice); put each in its own folder");
 
+    StackLayout layout;
     // Gantry tilt: positions must move along the normal; measure the sideways drift from the first
     // slice.
     double maxDrift = 0.0, driftAngle = 0.0, driftAlong = 0.0;
@@ -999,19 +1014,22 @@ double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& 
         }
     }
     const double finestPixel = std::min(slices[0].pixelSpacing[0], slices[0].pixelSpacing[1]);
-    if (maxDrift > kMaxShearPixels * finestPixel)
-        throw InputError(
-            src, "ImagePositionPatient",
-            "gantry tilt of " + formatNumber(driftAngle, 3) +
-                " degrees is not supported; the slice positions drift " +
-                formatNumber(maxDrift, 4) + " mm sideways over " +
-                formatNumber(std::abs(driftAlong), 4) +
-                " mm instead of following the slice normal (tolerance " +
-                formatNumber(kMaxShearPixels) + " pixel)",
-            "reslice the series to an orthogonal grid first, e.g. convert it with dcm2niix "
-            "(which corrects gantry tilt) and load the NIfTI");
+    if (maxDrift > kMaxShearPixels * finestPixel) {
+        if (strict)
+            throw InputError(src, "ImagePositionPatient",
+                             "gantry tilt of " + formatNumber(driftAngle, 3) +
+                                 " degrees is refused under --strict-geometry; the slice "
+                                 "positions drift " +
+                                 formatNumber(maxDrift, 4) + " mm sideways over " +
+                                 formatNumber(std::abs(driftAlong), 4) +
+                                 " mm instead of following the slice normal (tolerance " +
+                                 formatNumber(kMaxShearPixels) + " pixel)",
+                             strictFix);
+        layout.regular = false;
+        layout.irregularity = "gantry tilt of " + formatNumber(driftAngle, 3) + " degrees";
+    }
 
-    if (n < 2) return 0.0;
+    if (n < 2) return layout;
 
     // Missing slices: a gap close to k ≥ 2 times the typical (median) spacing.
     std::vector<double> gaps(n - 1);
@@ -1037,6 +1055,7 @@ double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& 
 
     // Variable spacing: every slice must sit on the uniform grid through the first and last slice.
     const double spacing = (slices[n - 1].along - slices[0].along) / double(n - 1);
+    layout.spacing = spacing;
     double worst = 0.0;
     std::size_t worstSlice = 0;
     for (std::size_t s = 0; s < n; ++s) {
@@ -1045,17 +1064,22 @@ double sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceAxes& 
     }
     if (worst > kMaxGridOffset * spacing) {
         const auto [lo, hi] = std::minmax_element(gaps.begin(), gaps.end());
-        throw InputError(
-            src, "ImagePositionPatient",
-            "variable slice spacing: gaps between slices range from " + formatNumber(*lo, 4) +
-                " to " + formatNumber(*hi, 4) + " mm; the slice at " + where(slices[worstSlice]) +
-                " is " + formatNumber(worst, 3) + " mm off a uniform grid of " +
-                formatNumber(spacing, 5) + " mm (tolerance " + formatNumber(kMaxGridOffset * 100) +
-                " % of the spacing)",
-            "voxlight does not resample yet; resample the series to uniform spacing (e.g. "
-            "convert with dcm2niix and resample the NIfTI) or load a part with uniform spacing");
+        if (strict)
+            throw InputError(
+                src, "ImagePositionPatient",
+                "variable slice spacing is refused under --strict-geometry: gaps between slices "
+                "range from " +
+                    formatNumber(*lo, 4) + " to " + formatNumber(*hi, 4) + " mm; the slice at " +
+                    where(slices[worstSlice]) + " is " + formatNumber(worst, 3) +
+                    " mm off a uniform grid of " + formatNumber(spacing, 5) + " mm (tolerance " +
+                    formatNumber(kMaxGridOffset * 100) + " % of the spacing)",
+                strictFix);
+        layout.irregularity += std::string(layout.regular ? "" : " and ") +
+                               "slice spacing varying from " + formatNumber(*lo, 4) + " to " +
+                               formatNumber(*hi, 4) + " mm";
+        layout.regular = false;
     }
-    return spacing;
+    return layout;
 }
 
 /// Stored pixel type of the series and the voxel type voxlight keeps it in.
@@ -1217,9 +1241,10 @@ void readSlicePixels(const SliceHeader& h, const PixelPlan& plan, core::Volume& 
 
 }  // namespace
 
-core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const ReadOptions& options,
-                                     const core::Progress& progress,
-                                     const dicom_module::Hooks& hooks) {
+dicom_module::SeriesResult readDicomSeriesWithGdcm(const std::filesystem::path& path,
+                                                   const ReadOptions& options,
+                                                   const core::Progress& progress,
+                                                   const dicom_module::Hooks& hooks) {
     silenceGdcm();
     progress.report("dicom", 0.0);
 
@@ -1335,7 +1360,8 @@ core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const Re
     // Step 4: sort along the normal; spacing from positions (not SliceThickness), checked for
     // uniformity.
     const fs::path source = isDir ? path : dir;
-    double sliceSpacing = sortAndCheckPositions(slices, axes, source);
+    const StackLayout layout = sortAndCheckPositions(slices, axes, source, options.strictGeometry);
+    double sliceSpacing = layout.spacing;
     std::vector<std::string> notes;
     if (slices.size() == 1) {
         if (slices[0].sliceThickness > 0.0) {
@@ -1408,7 +1434,13 @@ core::Volume readDicomSeriesWithGdcm(const std::filesystem::path& path, const Re
             volume.description += (i ? "; " : "") + notes[i];
         volume.description += ")";
     }
-    return volume;
+    dicom_module::SeriesResult result;
+    result.stack = std::move(volume);
+    if (!layout.regular) {
+        for (const SliceHeader& h : slices) result.slicePositions.push_back(h.position);
+        result.irregularity = layout.irregularity;
+    }
+    return result;
 }
 
 }  // namespace voxlight::io::detail

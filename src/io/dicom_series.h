@@ -29,8 +29,10 @@ bool looksLikeDicomFile(const std::filesystem::path& file, bool* hasPreamble = n
 /// volume_io.h for the contract; in short: one series (or options.dicomSeriesUid), sorted by Image
 /// Position (Patient) projected on the slice normal, spacing from positions (not SliceThickness),
 /// rescale slope/intercept → HU, orientation from Image Orientation (Patient), refusal with a clear
-/// InputError of mixed series, missing slices / variable spacing beyond tolerance, gantry tilt
-/// (positions not along the normal), inconsistent rows/columns/type, and unreadable pixels.
+/// InputError of mixed series, missing slices, inconsistent rows/columns/type, and unreadable
+/// pixels. A series whose positions are sheared (gantry tilt: not along the normal) or variably
+/// spaced beyond tolerance is refused when options.strictGeometry, and otherwise resampled onto a
+/// regular grid (slice_stack.h) with one line in Volume::warnings.
 /// InputError (field "dicom module") when the GDCM module cannot be loaded.
 core::Volume readDicomSeries(const std::filesystem::path& path, const ReadOptions& options,
                              const core::Progress& progress);

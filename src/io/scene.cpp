@@ -276,12 +276,15 @@ VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
         v.path = resolvePath(f.string(), baseDir);
         return v;
     }
-    f.allowOnly({"path", "phantom", "size", "series", "nonfinite"});
+    f.allowOnly({"path", "phantom", "size", "series", "nonfinite", "strict_geometry"});
     if (f.has("path") == f.has("phantom")) f.fail("needs exactly one of 'path' or 'phantom'");
     if (f.has("path")) v.path = resolvePath(f.child("path").string(), baseDir);
     if (f.has("phantom")) v.phantom = f.child("phantom").string();
     f.get("size", v.phantomSize, 8, 1024);
     if (f.has("series")) v.readOptions.dicomSeriesUid = f.child("series").string();
+    f.get("strict_geometry", v.readOptions.strictGeometry,
+          "write true (refuse a gantry-tilted or variably spaced DICOM series) or false (resample "
+          "it with a warning), without quotes");
     if (f.has("nonfinite"))
         v.readOptions.nonFinite = f.child("nonfinite").oneOf({"reject", "min"}) == "min"
                                       ? NonFinitePolicy::ReplaceWithMin
@@ -672,6 +675,7 @@ json sceneDocument(const Scene& s) {
              v.readOptions.nonFinite == NonFinitePolicy::ReplaceWithMin ? "min" : "reject"}};
         if (!v.readOptions.dicomSeriesUid.empty())
             d["volume"]["series"] = v.readOptions.dicomSeriesUid;
+        if (v.readOptions.strictGeometry) d["volume"]["strict_geometry"] = true;
     }
     const TransferFunctionDesc& t = s.transferFunction;
     json tf = json::object();

@@ -8,7 +8,9 @@
 //
 // Schema (every key optional except volume; defaults in the structs below):
 // {
-//   "volume": "ct.nii.gz" | {"path": "dicom/", "series": "1.2.3", "nonfinite": "reject"|"min"}
+//   "volume": "ct.nii.gz" | {"path": "dicom/", "series": "1.2.3", "nonfinite": "reject"|"min",
+//                            "strict_geometry": false (true: refuse a gantry-tilted or variably
+//                            spaced DICOM series instead of resampling it; --strict-geometry)}
 //             | {"phantom": "torso", "size": 128},
 //   "transfer_function": "ct-bone" | {"preset": "ct-bone", "extinction_scale": 1.0}
 //             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0,

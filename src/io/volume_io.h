@@ -18,8 +18,11 @@
 // (int16/uint16) or to float32.
 //
 // Failure: every problem (missing file, unknown format, truncated data, absurd dims, non-finite
-// voxels under the Reject policy, mixed DICOM series, missing slices, gantry tilt) throws
-// voxlight::InputError naming the file, the field and the fix. Sizes are checked against
+// voxels under the Reject policy, mixed DICOM series, missing slices; gantry tilt and variable
+// slice spacing only under ReadOptions::strictGeometry) throws voxlight::InputError naming the
+// file, the field and the fix. Otherwise a gantry-tilted or variably spaced DICOM series is
+// resampled onto a regular grid in patient space (io/slice_stack.h) and Volume::warnings says so
+// in one line. Sizes are checked against
 // core::kMaxVoxels and the file's real length *before* allocating.
 //
 // VTK (and, for DICOM, GDCM) is loaded on the first call, from modules beside the executable
@@ -53,6 +56,9 @@ struct ReadOptions {
     std::optional<RawLayout> raw;  ///< set to read a raw file; otherwise the format is detected
     std::string dicomSeriesUid;    ///< choose one series when a DICOM folder holds several
     NonFinitePolicy nonFinite = NonFinitePolicy::Reject;
+    /// DICOM: refuse a gantry-tilted or variably spaced series (InputError, field
+    /// ImagePositionPatient) instead of resampling it onto a regular grid with a warning.
+    bool strictGeometry = false;
 };
 
 /// Loads a volume (file or DICOM directory).

@@ -22,7 +22,7 @@
 namespace voxlight::io::volume_module {
 
 /// Bumped whenever Api or the types it passes change layout or meaning.
-inline constexpr int kAbiVersion = 1;
+inline constexpr int kAbiVersion = 2;
 inline constexpr const char* kFileName = "libvoxlight_volume_vtk.so";
 /// The one symbol the module exports: `const void* voxlight_volume_module()` returning an Api.
 inline constexpr const char* kEntryPoint = "voxlight_volume_module";

@@ -1160,6 +1160,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         const std::uint64_t identity = volumeIdentity(run.scene());  // the key it runs under
         auto v = std::make_shared<LoadedVolume>();
         v->volume = loadSceneVolume(run.scene(), run.progress());
+        for (const auto& w : v->volume.warnings) run.warn(w);  // e.g. a tilted series resampled
         v->contentHash = core::contentHash(v->volume);
         v->nonFinite = v->volume.countNonFinite();
         // What a later process needs to name this volume's artifacts before reading it.

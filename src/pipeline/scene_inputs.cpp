@@ -77,7 +77,7 @@ std::uint64_t volumeIdentity(const io::Scene& scene) {
         return h.value();
     }
     const io::ReadOptions& o = src.readOptions;
-    h.add(o.dicomSeriesUid).add(int(o.nonFinite)).add(o.raw.has_value());
+    h.add(o.dicomSeriesUid).add(int(o.nonFinite)).add(o.raw.has_value()).add(o.strictGeometry);
     std::error_code ec;
     const fs::path path =
         fs::weakly_canonical(src.path, ec).empty() ? src.path : fs::weakly_canonical(src.path, ec);

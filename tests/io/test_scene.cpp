@@ -193,6 +193,25 @@ TEST(Scene, OverridesReachIntoShorthandForms) {
     EXPECT_THROW(io::applyOverride(k, "camera.projection.x=1"), InputError);
 }
 
+TEST(Scene, StrictGeometryIsABooleanThatRoundTrips) {
+    // The scene twin of --strict-geometry: false by default, strictly a boolean, and kept by the
+    // resolved document (and by the --set path the CLI uses).
+    EXPECT_FALSE(parse(json::parse(R"({"volume": "dicom/"})")).volume.readOptions.strictGeometry);
+    const io::Scene s =
+        parse(json::parse(R"({"volume": {"path": "dicom/", "strict_geometry": true}})"));
+    EXPECT_TRUE(s.volume.readOptions.strictGeometry);
+    EXPECT_EQ(io::sceneDocument(s)["volume"]["strict_geometry"], true);
+    EXPECT_TRUE(
+        parse(json{{"volume", io::sceneDocument(s)["volume"]}}).volume.readOptions.strictGeometry);
+    expectBad(json::parse(R"({"volume": {"path": "dicom/", "strict_geometry": "yes"}})"),
+              "volume.strict_geometry", {"must be true or false", "string", "resample"});
+    expectBad(json::parse(R"({"volume": {"path": "dicom/", "strict_geometry": 1}})"),
+              "volume.strict_geometry", {"must be true or false"});
+    json j = json::parse(R"({"volume": {"path": "dicom/"}})");
+    io::applyOverride(j, "volume.strict_geometry=true");
+    EXPECT_TRUE(parse(j).volume.readOptions.strictGeometry);
+}
+
 namespace {
 /// loadScene's InputError message for a scene file holding `text`; fails the test if it loads.
 std::string loadError(const test::TempDir& tmp, const std::string& text) {

@@ -12,6 +12,7 @@
 #include <gdcmWriter.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <cstring>
@@ -25,6 +26,7 @@
 #include <vector>
 
 #include "io/dicom_series.h"
+#include "io/slice_stack.h"
 #include "support/test_support.h"
 
 namespace fs = std::filesystem;
@@ -404,29 +406,379 @@ void writeStack(const fs::path& ct, const fs::path& out, const std::vector<glm::
         writeWithPosition(files[s], out / ("s" + std::to_string(s) + ".dcm"), positions[s]);
 }
 
-TEST(DicomSeries, GantryTiltRefused) {
-    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
-    TempDir tmp;
-    // Each slice 2 mm further in z and 2·tan(15°) mm further in y: a 15° tilted stack.
-    const double tilt = 15.0 * 3.14159265358979323846 / 180.0;
+// --- Gantry tilt and variable spacing: resampled onto a regular grid (or refused when strict)
+// -------------------------------------------------------------------------------------------------
+
+constexpr double kPi = 3.14159265358979323846;
+/// The shared CT's first slice position; the synthetic stacks start there.
+const glm::dvec3 kP0{-249.5, -437.5, -800.0};
+
+/// A 15° tilted stack as a gantry tilt makes it: each slice `gap` mm further in z and gap·tan(15°)
+/// mm further along `shear` (a unit in-plane direction).
+std::vector<glm::dvec3> tiltedPositions(int slices, double gap, const glm::dvec3& shear) {
     std::vector<glm::dvec3> p;
-    for (int s = 0; s < 5; ++s)
-        p.push_back({-249.5, -437.5 + 2.0 * s * std::tan(tilt), -800.0 + 2.0 * s});
-    writeStack(ct, tmp.path(), p);
-    expectInputError([&] { read(tmp.path()); },
-                     {"gantry tilt of 15 degrees is not supported", "reslice"});
+    for (int s = 0; s < slices; ++s)
+        p.push_back(kP0 + glm::dvec3(0, 0, gap * s) +
+                    gap * s * std::tan(15.0 * kPi / 180.0) * shear);
+    return p;
 }
 
-TEST(DicomSeries, VariableSpacingRefused) {
+ReadOptions strictOptions() {
+    ReadOptions o;
+    o.strictGeometry = true;
+    return o;
+}
+
+/// A linear field of patient position (mm), as stored values: trilinear interpolation in the
+/// sheared frame reproduces it exactly, so the resampled volume can be checked voxel by voxel.
+double linearField(const glm::dvec3& p) {
+    const glm::dvec3 d = p - kP0;
+    return 2000.0 + 3.0 * d.x + 2.0 * d.y + 4.0 * d.z;
+}
+/// The field is written rounded to uint16 (≤ 0.5) and the blend is rounded back to uint16 (≤ 0.5).
+constexpr double kFieldTol = 1.0 + 1e-6;
+
+/// Synthetic series from the shared CT's first file: `cols`×`rows` uint16 pixels holding
+/// linearField at each pixel's patient position (axial: i = +x, j = +y), PixelSpacing
+/// [Δrow, Δcol] = `pixelSpacing`, one file per position.
+void writeFieldStack(const fs::path& ct, const fs::path& out, const std::vector<glm::dvec3>& pos,
+                     int cols, int rows, const glm::dvec2& pixelSpacing) {
+    const fs::path templ = dicomFiles(ct).front();
+    for (std::size_t s = 0; s < pos.size(); ++s) {
+        gdcm::Reader r;
+        r.SetFileName(templ.string().c_str());
+        ASSERT_TRUE(r.Read());
+        gdcm::DataSet& ds = r.GetFile().GetDataSet();
+        const auto put = [&](std::uint16_t g, std::uint16_t e, gdcm::VR vr, std::string v) {
+            if (v.size() % 2) v += ' ';
+            gdcm::DataElement de(gdcm::Tag(g, e));
+            de.SetVR(vr);
+            de.SetByteValue(v.data(), std::uint32_t(v.size()));
+            ds.Replace(de);
+        };
+        const auto us = [](int v) { return std::string{char(v & 0xff), char(v >> 8)}; };
+        std::ostringstream ipp, ps;
+        ipp.precision(12);
+        ipp << pos[s].x << '\\' << pos[s].y << '\\' << pos[s].z;
+        ps.precision(12);
+        ps << pixelSpacing[0] << '\\' << pixelSpacing[1];
+        std::vector<std::uint16_t> px(std::size_t(cols) * std::size_t(rows));
+        for (int b = 0; b < rows; ++b)
+            for (int a = 0; a < cols; ++a)
+                px[std::size_t(b) * cols + a] = std::uint16_t(std::lround(linearField(
+                    pos[s] + glm::dvec3(a * pixelSpacing[1], b * pixelSpacing[0], 0.0))));
+        put(0x0020, 0x0032, gdcm::VR::DS, ipp.str());
+        put(0x0020, 0x0037, gdcm::VR::DS, "1\\0\\0\\0\\1\\0");
+        put(0x0028, 0x0030, gdcm::VR::DS, ps.str());
+        put(0x0028, 0x0010, gdcm::VR::US, us(rows));
+        put(0x0028, 0x0011, gdcm::VR::US, us(cols));
+        put(0x7fe0, 0x0010, gdcm::VR::OW,
+            std::string(reinterpret_cast<const char*>(px.data()), px.size() * 2));
+        gdcm::Writer w;
+        w.SetFile(r.GetFile());
+        w.CheckFileMetaInformationOff();
+        const fs::path dst = out / ("s" + std::to_string(s) + ".dcm");
+        w.SetFileName(dst.string().c_str());
+        ASSERT_TRUE(w.Write()) << dst;
+    }
+}
+
+/// Checks every voxel of a resampled field stack: where the bracketing acquired slices (those with
+/// a nonzero weight) cover the voxel's in-plane position, the value is linearField there; elsewhere
+/// it is the volume's minimum. The bracketing is found here from the positions themselves.
+void expectFieldResampled(const Volume& v, const std::vector<glm::dvec3>& pos, int cols, int rows,
+                          const glm::dvec2& pixelSpacing) {
+    const auto& g = v.geometry();
+    const double intercept = v.mapping.intercept;  // the template's −1024, slope 1
+    ASSERT_DOUBLE_EQ(v.mapping.slope, 1.0);
+    // Background: the smallest value written into the files (not read back from the volume).
+    double background = HUGE_VAL;
+    for (const glm::dvec3& p : pos)
+        for (int b = 0; b < rows; ++b)
+            for (int a = 0; a < cols; ++a)
+                background =
+                    std::min(background,
+                             double(std::lround(linearField(
+                                 p + glm::dvec3(a * pixelSpacing[1], b * pixelSpacing[0], 0.0)))) +
+                                 intercept);
+    std::size_t inside = 0, outside = 0;
+    const auto covers = [&](const glm::dvec3& p, std::size_t s) {
+        const double x = (p.x - pos[s].x) / pixelSpacing[1], y = (p.y - pos[s].y) / pixelSpacing[0];
+        constexpr double kEdge = 1e-6;
+        return x > -kEdge && y > -kEdge && x < cols - 1 + kEdge && y < rows - 1 + kEdge;
+    };
+    for (int c = 0; c < g.dims.z; ++c)
+        for (int b = 0; b < g.dims.y; ++b)
+            for (int a = 0; a < g.dims.x; ++a) {
+                const glm::dvec3 p = g.indexToWorld(glm::dvec3(a, b, c));
+                std::size_t k = 0;
+                while (k + 2 < pos.size() && pos[k + 1].z <= p.z + 1e-9) ++k;
+                const double t = (p.z - pos[k].z) / (pos[k + 1].z - pos[k].z);
+                const bool in = (t > 1.0 - 1e-9 || covers(p, k)) && (t < 1e-9 || covers(p, k + 1));
+                const double got = v.at(a, b, c);
+                if (in) {
+                    ++inside;
+                    ASSERT_NEAR(got, linearField(p) + intercept, kFieldTol)
+                        << "voxel " << a << "," << b << "," << c << " at " << p.x << "," << p.y
+                        << "," << p.z;
+                } else {
+                    ++outside;
+                    ASSERT_EQ(got, background) << "voxel " << a << "," << b << "," << c;
+                }
+            }
+    // Not vacuous: a good part of the grid is inside the acquired data (these stacks are small
+    // and strongly sheared, so much of the grown bounding box is not).
+    EXPECT_GT(inside, (inside + outside) / 4);
+}
+
+TEST(DicomSeries, GantryTiltResampledOntoRegularGrid) {
     VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
     TempDir tmp;
-    // Gaps 2, 2, 2, 2.5, 2.5, 2.5 mm: neither uniform nor a multiple of the typical gap.
+    // 6 slices 2 mm apart, tilted 15° so that each is 2·tan 15° = 0.536 mm further in −y (0.67 of
+    // a 0.8 mm row): 12 columns × 10 rows of 0.5 × 0.8 mm.
+    const int cols = 12, rows = 10;
+    const glm::dvec2 ps{0.8, 0.5};
+    const std::vector<glm::dvec3> pos = tiltedPositions(6, 2.0, {0, -1, 0});
+    writeFieldStack(ct, tmp.path(), pos, cols, rows, ps);
+    const Volume v = read(tmp.path());
+
+    // Geometry from the slice positions: i, j, n unchanged; in-plane spacing kept; the last slice
+    // is 5·0.536 = 2.68 mm = 3.35 rows further in −y, so the grid starts 4 rows before slice 0
+    // (on slice 0's pixel lattice) and spans 4 + 9 + 1 = 14 rows; 6 slices at the 2 mm gap.
+    const auto& g = v.geometry();
+    const double shiftRows = 5 * 2.0 * std::tan(15.0 * kPi / 180.0) / ps[0];
+    const int rowsBefore = int(std::ceil(shiftRows));
+    ASSERT_EQ(rowsBefore, 4);
+    EXPECT_EQ(g.dims, glm::ivec3(cols, rows + rowsBefore, 6));
+    EXPECT_NEAR(g.spacing.x, 0.5, kMmTol);
+    EXPECT_NEAR(g.spacing.y, 0.8, kMmTol);
+    EXPECT_NEAR(g.spacing.z, 2.0, kMmTol);
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r) EXPECT_NEAR(g.direction[c][r], c == r ? 1.0 : 0.0, 1e-12);
+    EXPECT_NEAR(g.origin.x, kP0.x, kMmTol);
+    EXPECT_NEAR(g.origin.y, kP0.y - rowsBefore * ps[0], kMmTol);
+    EXPECT_NEAR(g.origin.z, kP0.z, kMmTol);
+    // The first and last grid planes are the first and last slices' planes.
+    EXPECT_NEAR(g.indexToWorld({0, 0, g.dims.z - 1}).z, pos.back().z, kMmTol);
+    EXPECT_EQ(v.type(), VoxelType::UInt16);  // the stored type is kept
+    expectFieldResampled(v, pos, cols, rows, ps);
+
+    // One warning line: what was found, what was done, how to refuse.
+    ASSERT_EQ(v.warnings.size(), 1u);
+    const std::string& w = v.warnings[0];
+    std::cout << "[warning] " << w << "\n";
+    EXPECT_EQ(w.find('\n'), std::string::npos);
+    for (const char* k : {"gantry tilt of 15 degrees", "resampled its 6 slices", "6 slices at 2 mm",
+                          "--strict-geometry"})
+        EXPECT_NE(w.find(k), std::string::npos) << "\"" << k << "\" not in: " << w;
+    EXPECT_NE(w.find(tmp.path().string()), std::string::npos) << w;
+}
+
+TEST(DicomSeries, VariableSpacingResampledAtSmallestGap) {
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    TempDir tmp;
+    // Gaps 2, 2, 2, 2.5, 2.5, 2.5 mm: 13.5 mm in steps ≤ the smallest gap (2 mm) = 7 steps of
+    // 13.5/7 mm, 8 slices.
     const std::vector<double> z{0.0, 2.0, 4.0, 6.0, 8.5, 11.0, 13.5};
-    std::vector<glm::dvec3> p;
-    for (double zz : z) p.push_back({-249.5, -437.5, -800.0 + zz});
-    writeStack(ct, tmp.path(), p);
-    expectInputError([&] { read(tmp.path()); },
-                     {"variable slice spacing", "2 to 2.5 mm", "does not resample"});
+    std::vector<glm::dvec3> pos;
+    for (double zz : z) pos.push_back(kP0 + glm::dvec3(0, 0, zz));
+    const int cols = 12, rows = 10;
+    const glm::dvec2 ps{0.8, 0.5};
+    writeFieldStack(ct, tmp.path(), pos, cols, rows, ps);
+    const Volume v = read(tmp.path());
+    const auto& g = v.geometry();
+    EXPECT_EQ(g.dims, glm::ivec3(cols, rows, 8));
+    EXPECT_NEAR(g.spacing.z, 13.5 / 7.0, kMmTol);
+    EXPECT_NEAR(glm::distance(g.origin, kP0), 0.0, kMmTol);
+    expectFieldResampled(v, pos, cols, rows, ps);
+    ASSERT_EQ(v.warnings.size(), 1u);
+    std::cout << "[warning] " << v.warnings[0] << "\n";
+    EXPECT_NE(v.warnings[0].find("slice spacing varying from 2 to 2.5 mm"), std::string::npos)
+        << v.warnings[0];
+    EXPECT_NE(v.warnings[0].find("8 slices at 1.929 mm"), std::string::npos) << v.warnings[0];
+}
+
+TEST(DicomSeries, TiltAndVariableSpacingTogether) {
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    TempDir tmp;
+    // Sheared along +x and −y at once (0.3 and 0.2 mm per mm of z) with gaps 1.5, 1.5, 2.5, 2 mm.
+    const std::vector<double> z{0.0, 1.5, 3.0, 5.5, 7.5};
+    std::vector<glm::dvec3> pos;
+    for (double zz : z) pos.push_back(kP0 + glm::dvec3(0.3 * zz, -0.2 * zz, zz));
+    const int cols = 9, rows = 11;
+    const glm::dvec2 ps{0.6, 0.7};
+    writeFieldStack(ct, tmp.path(), pos, cols, rows, ps);
+    const Volume v = read(tmp.path());
+    const auto& g = v.geometry();
+    // x: slices shifted 0 .. 2.25 mm = 0 .. 3.21 columns → 9 + 4 columns from slice 0's first;
+    // y: 0 .. −1.5 mm = 2.5 rows back → 3 rows before, 11 + 3; z: 7.5 mm in 5 steps of 1.5 mm.
+    EXPECT_EQ(g.dims, glm::ivec3(cols + 4, rows + 3, 6));
+    EXPECT_NEAR(g.spacing.z, 1.5, kMmTol);
+    EXPECT_NEAR(glm::distance(g.origin, kP0 + glm::dvec3(0, -3 * 0.6, 0)), 0.0, kMmTol);
+    expectFieldResampled(v, pos, cols, rows, ps);
+    ASSERT_EQ(v.warnings.size(), 1u);
+    EXPECT_NE(v.warnings[0].find("gantry tilt of"), std::string::npos) << v.warnings[0];
+    EXPECT_NE(v.warnings[0].find("and slice spacing varying from 1.5 to 2.5 mm"), std::string::npos)
+        << v.warnings[0];
+}
+
+TEST(DicomSeries, StrictGeometryRefusesTiltAndVariableSpacing) {
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    {
+        TempDir tmp;
+        writeStack(ct, tmp.path(), tiltedPositions(5, 2.0, {0, 1, 0}));
+        expectInputError([&] { read(tmp.path(), strictOptions()); },
+                         {tmp.path().string().c_str(), "ImagePositionPatient",
+                          "gantry tilt of 15 degrees", "--strict-geometry", "omit"});
+    }
+    {
+        TempDir tmp;
+        const std::vector<double> z{0.0, 2.0, 4.0, 6.0, 8.5, 11.0, 13.5};
+        std::vector<glm::dvec3> p;
+        for (double zz : z) p.push_back(kP0 + glm::dvec3(0, 0, zz));
+        writeStack(ct, tmp.path(), p);
+        expectInputError([&] { read(tmp.path(), strictOptions()); },
+                         {"ImagePositionPatient", "variable slice spacing", "2 to 2.5 mm",
+                          "--strict-geometry", "omit"});
+    }
+}
+
+TEST(DicomSeries, TiltedSharedCtLoadsWithWarningAndKeepsFirstSlice) {
+    // The check: the shared CT made into a tilted series by shearing its slice positions.
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    TempDir tmp;
+    const std::vector<glm::dvec3> pos = tiltedPositions(5, 2.0, {0, 1, 0});
+    writeStack(ct, tmp.path(), pos);
+    const Volume v = read(tmp.path());
+    const auto& g = v.geometry();
+    // +y shear: 4·0.536 mm = 2.2 rows of 0.9765625 mm after the last row: 512 + 3 rows.
+    EXPECT_EQ(g.dims, glm::ivec3(512, 515, 5));
+    EXPECT_NEAR(glm::distance(g.origin, pos[0]), 0.0, kMmTol);
+    EXPECT_NEAR(g.spacing.y, kCtPixelSpacing, kMmTol);
+    EXPECT_NEAR(g.spacing.z, 2.0, kMmTol);
+    EXPECT_EQ(v.mapping.unit, "HU");
+    ASSERT_EQ(v.warnings.size(), 1u);
+    EXPECT_NE(v.warnings[0].find("gantry tilt of 15 degrees"), std::string::npos);
+    // Grid slice 0 is acquired slice 0 on its own pixel lattice: identical pixels, then background
+    // in the rows only later slices reach.
+    gdcm::ImageReader r;
+    r.SetFileName(dicomFiles(tmp.path())[0].string().c_str());
+    ASSERT_TRUE(r.Read());
+    std::vector<std::uint16_t> stored(512 * 512);
+    ASSERT_TRUE(r.GetImage().GetBuffer(reinterpret_cast<char*>(stored.data())));
+    const std::uint16_t* got = v.dataAs<std::uint16_t>();
+    std::uint16_t lowest = 0xffff;
+    for (std::size_t q = 0; q < v.voxelCount(); ++q) lowest = std::min(lowest, got[q]);
+    for (int b = 0; b < 515; ++b)
+        for (int a = 0; a < 512; a += 7)
+            ASSERT_EQ(got[std::size_t(b) * 512 + a],
+                      b < 512 ? stored[std::size_t(b) * 512 + a] : lowest)
+                << a << "," << b;
+}
+
+TEST(SliceStack, FloatStackResampledExactlyWithoutSharedData) {
+    // resampleSliceStack on its own, with an oblique slice orientation (rotated 30° about z): a
+    // float field linear in patient position is reproduced to float rounding, and voxels that no
+    // bracketing slice covers hold the stack's minimum.
+    const double c30 = std::cos(kPi / 6), s30 = std::sin(kPi / 6);
+    const glm::dvec3 i(c30, s30, 0), j(-s30, c30, 0), n(0, 0, 1);
+    voxlight::core::Geometry sg;
+    sg.dims = {7, 5, 4};
+    sg.spacing = {0.75, 1.25, 99.0};  // spacing.z and origin are ignored
+    sg.direction = glm::dmat3(i, j, n);
+    Volume stack(sg, VoxelType::Float32);
+    const glm::dvec3 p0(10, -20, 30);
+    const std::vector<double> w{0.0, 1.0, 3.0, 4.5};  // variable gaps
+    std::vector<glm::dvec3> pos;
+    for (double ww : w) pos.push_back(p0 + ww * n + ww * 0.4 * i - ww * 0.3 * j);  // sheared
+    const auto field = [](const glm::dvec3& p) { return 0.5 * p.x - 1.5 * p.y + 2.0 * p.z + 7.0; };
+    float* d = stack.dataAs<float>();
+    for (int k = 0; k < 4; ++k)
+        for (int b = 0; b < 5; ++b)
+            for (int a = 0; a < 7; ++a)
+                d[stack.linearIndex(a, b, k)] = float(field(pos[k] + a * 0.75 * i + b * 1.25 * j));
+    const Volume v = voxlight::io::detail::resampleSliceStack(stack, pos, "stack");
+    const auto& g = v.geometry();
+    EXPECT_EQ(v.type(), VoxelType::Float32);
+    EXPECT_NEAR(g.spacing.z, 4.5 / 5.0, 1e-12);  // 5 steps ≤ the smallest gap (1 mm)
+    EXPECT_EQ(g.dims.z, 6);
+    for (int c = 0; c < 3; ++c)
+        EXPECT_NEAR(glm::distance(g.direction[c], sg.direction[c]), 0, 1e-12);
+    // Shear 4.5·0.4/0.75 = 2.4 columns forward, 4.5·0.3/1.25 = 1.08 rows back.
+    EXPECT_EQ(g.dims.x, 7 + 3);
+    EXPECT_EQ(g.dims.y, 5 + 2);
+    EXPECT_NEAR(glm::distance(g.origin, p0 - 2 * 1.25 * j), 0.0, 1e-9);
+    float lowest = d[0];
+    for (std::size_t q = 0; q < stack.voxelCount(); ++q) lowest = std::min(lowest, d[q]);
+    /// Float32 storage of values ≈ 100: relative rounding 6e-8, a few ulps through the blend.
+    constexpr double kFloatFieldTol = 1e-4;
+    int inside = 0, outside = 0;
+    for (int c = 0; c < g.dims.z; ++c)
+        for (int b = 0; b < g.dims.y; ++b)
+            for (int a = 0; a < g.dims.x; ++a) {
+                const glm::dvec3 p = g.indexToWorld(glm::dvec3(a, b, c));
+                const double wp = glm::dot(p - p0, n);
+                std::size_t k = 0;
+                while (k + 2 < pos.size() && w[k + 1] <= wp + 1e-9) ++k;
+                const double t = (wp - w[k]) / (w[k + 1] - w[k]);
+                const auto covers = [&](std::size_t s) {
+                    const double x = glm::dot(p - pos[s], i) / 0.75;
+                    const double y = glm::dot(p - pos[s], j) / 1.25;
+                    return x > -1e-6 && y > -1e-6 && x < 6 + 1e-6 && y < 4 + 1e-6;
+                };
+                const bool in = (t > 1 - 1e-9 || covers(k)) && (t < 1e-9 || covers(k + 1));
+                if (in) {
+                    ++inside;
+                    ASSERT_NEAR(v.at(a, b, c), field(p), kFloatFieldTol)
+                        << a << "," << b << "," << c;
+                } else {
+                    ++outside;
+                    ASSERT_EQ(v.at(a, b, c), lowest) << a << "," << b << "," << c;
+                }
+            }
+    EXPECT_GT(inside, 100);
+    EXPECT_GT(outside, 10);
+
+    // Progress ends at 1 under its own stage name; a raised cancel flag stops the resampling.
+    std::atomic<bool> cancel{false};
+    std::vector<double> seen;
+    const Progress p(
+        [&](const std::string& stage, double f) {
+            EXPECT_EQ(stage, "dicom resample");
+            seen.push_back(f);
+        },
+        &cancel);
+    (void)voxlight::io::detail::resampleSliceStack(stack, pos, "stack", p);
+    ASSERT_FALSE(seen.empty());
+    EXPECT_DOUBLE_EQ(seen.back(), 1.0);
+    cancel = true;
+    EXPECT_THROW((void)voxlight::io::detail::resampleSliceStack(stack, pos, "stack", p),
+                 voxlight::CancelledError);
+}
+
+TEST(DicomSeries, RegularSeriesUntouchedAndSilent) {
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    const Volume lax = read(ct);
+    const Volume strict = read(ct, strictOptions());
+    EXPECT_TRUE(lax.warnings.empty());
+    EXPECT_EQ(lax.geometry().dims, strict.geometry().dims);
+    EXPECT_EQ(lax.geometry().origin, strict.geometry().origin);
+    EXPECT_EQ(lax.geometry().spacing, strict.geometry().spacing);
+    ASSERT_EQ(lax.sizeBytes(), strict.sizeBytes());
+    EXPECT_EQ(std::memcmp(lax.data(), strict.data(), lax.sizeBytes()), 0);
+    // A synthetic regular stack keeps its written pixels exactly (no resampling on the way).
+    TempDir tmp;
+    std::vector<glm::dvec3> pos;
+    for (int s = 0; s < 4; ++s) pos.push_back(kP0 + glm::dvec3(0, 0, 2.0 * s));
+    writeFieldStack(ct, tmp.path(), pos, 6, 5, {1.0, 1.0});
+    const Volume v = read(tmp.path());
+    EXPECT_TRUE(v.warnings.empty());
+    EXPECT_EQ(v.dims(), glm::ivec3(6, 5, 4));
+    for (int c = 0; c < 4; ++c)
+        for (int b = 0; b < 5; ++b)
+            for (int a = 0; a < 6; ++a)
+                ASSERT_EQ(v.dataAs<std::uint16_t>()[v.linearIndex(a, b, c)],
+                          std::uint16_t(std::lround(linearField(pos[c] + glm::dvec3(a, b, 0)))));
 }
 
 TEST(DicomSeries, SmallPositionJitterAccepted) {
