@@ -35,27 +35,67 @@ void checkOptions(const LocalVisibilityOptions& o) {
                          "give e.g. 16");
 }
 
-/// The value a visibility ray reads at a point: the grid's seamless interpolation of the selected
-/// levels (MultiresGrid::sample: exactly trilinear in the voxels where neighbouring blocks are at
-/// level 0, so a dense surface on a block face sits where the continuous model puts it); where no
-/// stored block contributes (inside a block at kNone, away from stored ones: the TF is transparent
-/// over every value read there) the owner's mean, flagged as not stored. With the TF table for the
-/// steps' pre-integrated σt.
+/// The value a visibility ray reads at a point: trilinear in the volume's voxels (the block
+/// pyramid's level 0), i.e. the continuous model itself, whatever the blocks' levels — the LOD
+/// sets where visibility is stored and how long the steps are, not what matter the rays see.
+/// `stored` says whether the point's owner block is stored (a step between two points in blocks
+/// at kNone integrates nothing: every value read there is transparent). With the TF table for
+/// the steps' pre-integrated σt.
 struct ValueField {
     const MultiresGrid& grid;
+    const BlockPyramid& pyramid;
     const optics::TfTable& table;
-    std::vector<float> mean;  ///< per block: its 1³ level
+    glm::vec3 top;          ///< largest voxel index per axis
+    glm::ivec3 lastCorner;  ///< largest lower corner of a trilinear cell per axis
 
-    ValueField(const MultiresGrid& g, const optics::TfTable& t) : grid(g), table(t) {
-        const BlockPyramid& pyr = g.pyramid();
-        mean.resize(pyr.blockCount());
-        for (std::size_t b = 0; b < mean.size(); ++b) mean[b] = pyr.data(b, kLevels - 1)[0];
+    ValueField(const MultiresGrid& g, const optics::TfTable& t)
+        : grid(g), pyramid(g.pyramid()), table(t) {
+        top = glm::vec3(g.dims() - 1);
+        lastCorner = glm::max(g.dims() - 2, glm::ivec3(0));
     }
 
-    [[gnu::always_inline]] float at(const glm::vec3& p, bool& stored) const {
-        const float v = grid.sample(p, NAN);  // the pyramid holds finite values only
-        stored = !std::isnan(v);
-        return stored ? v : mean[grid.ownerBlock(p)];
+    [[gnu::always_inline]] float voxel(int i, int j, int k) const {
+        const std::size_t b = pyramid.blockIndex(i >> 4, j >> 4, k >> 4);  // kBlockSize = 16
+        return pyramid.data(
+            b, 0)[std::size_t(i & 15) + 16 * (std::size_t(j & 15) + 16 * std::size_t(k & 15))];
+    }
+
+    [[gnu::always_inline]] float at(const glm::vec3& pIn, bool& stored) const {
+        const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), top);
+        stored = grid.level(grid.ownerBlock(p)) != kNone;
+        const glm::ivec3 c = glm::min(glm::ivec3(p), lastCorner);
+        const glm::vec3 f = p - glm::vec3(c);
+        const int di = c.x < int(top.x) ? 1 : 0, dj = c.y < int(top.y) ? 1 : 0,
+                  dk = c.z < int(top.z) ? 1 : 0;
+        float v000, v100, v010, v110, v001, v101, v011, v111;
+        if ((c.x & 15) != 15 && (c.y & 15) != 15 && (c.z & 15) != 15) {
+            // All eight corners in one block (the common case).
+            const float* d =
+                pyramid.data(pyramid.blockIndex(c.x >> 4, c.y >> 4, c.z >> 4), 0) +
+                (std::size_t(c.x & 15) + 16 * (std::size_t(c.y & 15) + 16 * std::size_t(c.z & 15)));
+            const std::size_t sj = 16 * std::size_t(dj), sk = 256 * std::size_t(dk);
+            v000 = d[0];
+            v100 = d[di];
+            v010 = d[sj];
+            v110 = d[sj + di];
+            v001 = d[sk];
+            v101 = d[sk + di];
+            v011 = d[sk + sj];
+            v111 = d[sk + sj + di];
+        } else {
+            v000 = voxel(c.x, c.y, c.z);
+            v100 = voxel(c.x + di, c.y, c.z);
+            v010 = voxel(c.x, c.y + dj, c.z);
+            v110 = voxel(c.x + di, c.y + dj, c.z);
+            v001 = voxel(c.x, c.y, c.z + dk);
+            v101 = voxel(c.x + di, c.y, c.z + dk);
+            v011 = voxel(c.x, c.y + dj, c.z + dk);
+            v111 = voxel(c.x + di, c.y + dj, c.z + dk);
+        }
+        const float a0 = v000 + f.x * (v100 - v000), a1 = v010 + f.x * (v110 - v010);
+        const float a2 = v001 + f.x * (v101 - v001), a3 = v011 + f.x * (v111 - v011);
+        const float b0 = a0 + f.y * (a1 - a0), b1 = a2 + f.y * (a3 - a2);
+        return b0 + f.z * (b1 - b0);
     }
 };
 
@@ -397,25 +437,12 @@ std::vector<std::uint8_t> changeSources(const MultiresGrid& before, const Multir
     std::vector<std::uint8_t> source(count, 0);
     for (std::size_t b = 0; b < count; ++b) source[b] = before.level(b) != after.level(b);
     if (!changed.empty()) {
-        // The values a ray reads: a block's own samples' range, or its mean at kNone (ValueField),
-        // blended within half a sample spacing of a face with its neighbours' (MultiresGrid::
-        // sample) — so a point owned by b reads values in the hull of b's and its 26 neighbours'
-        // ranges (reach 1). A step (≤ kMaxStepVoxels < kBlockSize, sub-steps included) from a
+        // The values a ray reads: trilinear in the voxels (ValueField), so a point owned by b
+        // reads values in the hull of b's and its 26 neighbours' voxel ranges (reach 1). A step (≤ kMaxStepVoxels < kBlockSize, sub-steps included) from a
         // point owned by b ends in b or a neighbour and integrates σt over the values between its
         // ends: inside the hull over b's neighbourhood of those hulls (reach 2).
         std::vector<optics::ValueInterval> range(count);
-        for (std::size_t b = 0; b < count; ++b) {
-            const int l = after.level(b);
-            if (l == kNone) {
-                const float m = pyr.data(b, kLevels - 1)[0];
-                range[b] = {m, m};
-                continue;
-            }
-            const float* v = after.levelData(b);
-            const int n = levelResolution(l);
-            const auto [lo, hi] = std::minmax_element(v, v + std::size_t(n) * n * n);
-            range[b] = {*lo, *hi};
-        }
+        for (std::size_t b = 0; b < count; ++b) range[b] = {pyr.stats(b).min, pyr.stats(b).max};
         const glm::ivec3 nb = pyr.blocks();
         auto dilate = [&](const std::vector<optics::ValueInterval>& in) {
             std::vector<optics::ValueInterval> out(count);
