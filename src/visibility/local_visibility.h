@@ -18,17 +18,18 @@
 // Ray integration: pre-integrated steps that follow the LOD (Kronander §4.2, "adaptive step size
 // according to the LOD selection"): the step inside a block at level l is min(2^l, kMaxStepVoxels)
 // voxels (one sample per reduced sample spacing), the last step shortened to end at R (or at the
-// volume's box: outside the volume is empty). The value is read at both ends of a step through the
-// grid's seamless interpolation (MultiresGrid::sample: exactly trilinear in the voxels between
-// level-0 blocks, across block faces too) and the step's optical depth is Δ · mean σt over the
+// volume's box: outside the volume is empty). The value is read at both ends of a step trilinearly
+// in the volume's voxels (the BlockPyramid's level 0: the continuous model itself, whatever the
+// blocks' levels — the LOD sets where V is stored and how long the steps are) and the step's
+// optical depth is Δ · mean σt over the
 // values between them, from the TF table's cumulative integral (TfTable::sigmaIntegral; exact for
 // a value linear along the step, as in the renderer). A step deeper than kRefineDepth is split
 // into sub-steps, each pre-integrated: the value is linear only within a voxel, and a dense surface
 // crossed mid-step would otherwise be smeared over the step. (A midpoint rule with the σt of the
 // owner block alone took a step across a bone surface at its midpoint's full σt, or dropped the
 // half voxel past a block face: V 0.37 instead of e^−1 … 1 instead of e^−1 next to a face.)
-// Inside a block at kNone, away from stored ones, σt is 0 (the TF is transparent over every value
-// read there); a step from a stored block into one integrates towards the block's mean. A ray
+// A step with both ends in blocks at kNone integrates nothing (the TF is transparent over every
+// value read there). A ray
 // stops once its optical depth exceeds kOpaqueDepth (transmittance < 1e-4: the rest changes V by
 // less than that).
 //
@@ -56,8 +57,8 @@
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only
 // the blocks the change can reach, with a result identical bit for bit to computeLocalVisibility.
-// What a point's value reads: the values the grid's interpolation gives along its rays (all
-// within R of it; near a block face they blend the block's samples with its neighbours'), the
+// What a point's value reads: the voxel values along its rays (all within R of it; a value read
+// in a block's extent interpolates its voxels and its neighbours' next to it), the
 // step lengths the selected levels give, and the cell-visibility flags of the cells its rays cross
 // and of those within 2·s + 1 voxels (visibilityNeeded). A block is a *source of change* when its
 // level differs between the two selections, one of its cells changed visibility, or σt changed
