@@ -93,23 +93,9 @@ double opticalDepth(const OpacityPyramid& pyr, const glm::vec3& origin, const gl
                 // A removed voxel: the clipped pyramid's midpoint read.
                 depth = double(pyr.sample(0, origin + (t + 0.5f * dt) * d)) * double(dt);
             } else {
-                depth = double(table.meanExtinction(sFront, iFront, sBack, iBack)) * double(dt);
-                if (depth > kRefineDepth) {  // split as local_visibility.h does
-                    const int k = std::min(int(std::ceil(depth / kRefineDepth)), kMaxSubSteps);
-                    const float sub = dt / float(k);
-                    depth = 0.0;
-                    float s0 = sFront;
-                    double i0 = iFront;
-                    for (int j = 1; j <= k && tau + depth <= kOpaqueDepth; ++j) {
-                        const float s1 =
-                            j == k ? sBack : pyr.value(origin + (t + float(j) * sub) * d);
-                        const double i1 = j == k ? iBack : table.sigmaIntegral(s1);
-                        depth += double(table.meanExtinction(s0, i0, s1, i1)) * double(sub);
-                        s0 = s1;
-                        i0 = i1;
-                    }
-                    n += std::uint64_t(k - 1);
-                }
+                depth = preIntegratedStep(
+                    table, sFront, iFront, sBack, iBack, dt, tau,
+                    [&](float x) { return pyr.value(origin + (t + x) * d); }, n);
             }
             tau += depth;
             sFront = sBack;

@@ -168,27 +168,13 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
         // nothing is stored and σt is 0).
         if (frontStored || backStored) {
             ++n;
-            const double step = double(table.meanExtinction(sFront, iFront, sBack, iBack)) * dt;
-            if (step <= kRefineDepth) {
-                tau += step;
-            } else {
-                // Dense: the value is linear only within a voxel, so a step across a surface
-                // (where it kinks) is split into sub-steps, each pre-integrated.
-                const int k = std::min(int(std::ceil(step / kRefineDepth)), kMaxSubSteps);
-                const float sub = dt / float(k);
-                float s0 = sFront;
-                double i0 = iFront;
-                for (int j = 1; j <= k && tau <= kOpaqueDepth; ++j) {
+            tau += preIntegratedStep(
+                table, sFront, iFront, sBack, iBack, dt, tau,
+                [&](float x) {
                     bool st = false;
-                    const float s1 =
-                        j == k ? sBack : field.at(origin + (t + float(j) * sub) * d, st);
-                    const double i1 = j == k ? iBack : table.sigmaIntegral(s1);
-                    tau += double(table.meanExtinction(s0, i0, s1, i1)) * double(sub);
-                    s0 = s1;
-                    i0 = i1;
-                }
-                n += std::uint64_t(k - 1);  // at most: the loop stops once opaque (counted as k)
-            }
+                    return field.at(origin + (t + x) * d, st);
+                },
+                n);
             if (tau > kOpaqueDepth) break;
         }
         sFront = sBack;

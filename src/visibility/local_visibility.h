@@ -72,6 +72,8 @@
 // narrow value range (moving the soft-tissue ramp) recomputes the blocks near the tissue it touches,
 // and the LOD selection's own reshuffling (the budget is global) is what else it costs; the stats
 // report both.
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
@@ -99,6 +101,36 @@ inline constexpr double kRefineDepth = 1.0;
 inline constexpr int kMaxSubSteps = 16;
 /// Optical depth at which a visibility ray stops (e^−9.21 = 1e-4).
 inline constexpr double kOpaqueDepth = 9.21;
+
+/// Optical depth of one ray step of length dt (mm) whose value runs from sFront to sBack
+/// (integrals iFront/iBack: TfTable::sigmaIntegral), pre-integrated; a step deeper than
+/// kRefineDepth is split into up to kMaxSubSteps sub-steps, value(x) giving the value x mm into
+/// the step, and the split stops once tauBefore plus the depth so far exceeds kOpaqueDepth.
+/// `samples` counts the sub-steps' extra reads. Shared by sh-local's and ritschel's rays.
+template <class Value>
+[[gnu::always_inline]] inline double preIntegratedStep(const optics::TfTable& table, float sFront,
+                                                       double iFront, float sBack, double iBack,
+                                                       float dt, double tauBefore, Value&& value,
+                                                       std::uint64_t& samples) {
+    double depth = double(table.meanExtinction(sFront, iFront, sBack, iBack)) * double(dt);
+    if (depth <= kRefineDepth) return depth;
+    // Dense: the value is linear only within a voxel, so a step across a surface (where it
+    // kinks) is split into sub-steps, each pre-integrated.
+    const int k = std::min(int(std::ceil(depth / kRefineDepth)), kMaxSubSteps);
+    const float sub = dt / float(k);
+    depth = 0.0;
+    float s0 = sFront;
+    double i0 = iFront;
+    for (int j = 1; j <= k && tauBefore + depth <= kOpaqueDepth; ++j) {
+        const float s1 = j == k ? sBack : value(float(j) * sub);
+        const double i1 = j == k ? iBack : table.sigmaIntegral(s1);
+        depth += double(table.meanExtinction(s0, i0, s1, i1)) * double(sub);
+        s0 = s1;
+        i0 = i1;
+    }
+    samples += std::uint64_t(k - 1);  // at most: the split stops once opaque
+    return depth;
+}
 /// Fewest rays per SH coefficient for which the corrected weights are guaranteed positive (checked
 /// for every allowed count by tests/visibility).
 inline constexpr int kMinRaysPerCoefficient = 2;
