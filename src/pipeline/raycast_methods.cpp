@@ -14,8 +14,11 @@
 //                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
 //                         (MB of visibility coefficients; not both)
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
-//                         volume's dims). Its local stages have the same keys as sh-local's, so
-//                         switching between the two recomputes nothing once both have run.
+//                         volume's dims) and global_near ("local": the fine local field at the
+//                         sample times the far grid, default; "grid": Kronander's grid-only V^G —
+//                         visibility/global_visibility.h). Its local stages have the same keys as
+//                         sh-local's, so switching between the two recomputes nothing once both
+//                         have run.
 //   ritschel:             hierarchical visibility (Ritschel 2007; visibility/
 //                         hierarchical_visibility.h): rays (32), coefficients (1/4/9/16; 4),
 //                         patterns (M jittered direction sets; 16), subsample (1:s grid, 1…8;
@@ -324,6 +327,7 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
         s.dataReduction = p.number("data_reduction", s.dataReduction, 1.0, 1e6);
     if (kind == Kind::ShGlobal) {
         s.global.resolution = p.integer("global_resolution", 64, 1, 1024);
+        s.global.nearFromLocal = p.choice("global_near", "local", {"local", "grid"}) == "local";
         s.global.threads = scene.render.threads;
     }
     return s;
@@ -950,6 +954,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
         return KeyBuilder(run, "global_visibility")
             .stage(clipped ? "clip_local_visibility" : "local_visibility")
             .integer(std::uint64_t(go.resolution))
+            .integer(go.nearFromLocal ? 1 : 0)
             .value();
     };
     gv.compute = [go, clipped](Run& run) {
@@ -967,7 +972,8 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
         const auto& g = *a.as<visibility::GlobalVisibility>();
         std::ostringstream os;
         os << g.resolution().x << "x" << g.resolution().y << "x" << g.resolution().z << " points, "
-           << g.coefficients() << " SH coefficients, " << (g.bytes() >> 20) << " MB";
+           << g.coefficients() << " SH coefficients, " << (g.bytes() >> 20) << " MB, "
+           << (g.nearFromLocal() ? "near part from the local field" : "grid only");
         return os.str();
     };
     plan.stages.push_back(gv);
@@ -1685,7 +1691,7 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution",
-     "window", "window_strength", "ambient"},
+     "global_near", "window", "window_strength", "ambient"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",

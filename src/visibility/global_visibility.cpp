@@ -14,6 +14,10 @@
 
 namespace voxlight::visibility {
 
+namespace {
+const float kInvSqrt4Pi = float(1.0 / std::sqrt(4.0 * std::numbers::pi));
+}  // namespace
+
 GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> localPtr,
                                          const GlobalVisibilityOptions& options,
                                          const core::Progress& progress) {
@@ -31,10 +35,14 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     const glm::ivec3 dims = grid.dims();
 
     GlobalVisibility out;
+    out.local_ = localPtr;
+    if (options.nearFromLocal) out.product_ = std::make_shared<const sh::ShProduct>(C);
+    const int firstPiece = options.nearFromLocal ? 1 : 0;
     out.coefficients_ = C;
     out.res_ = glm::min(glm::ivec3(options.resolution), dims);
     out.scale_ = glm::vec3(dims) / glm::vec3(out.res_);
     out.data_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z * C, 0.f);
+    out.open_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z, 1.f);
     const float spacing = std::max({out.scale_.x, out.scale_.y, out.scale_.z});
 
     // Per direction: the step of r_s in index space, and Y_i(ω_k) (unweighted, for eq. 11) and
@@ -81,13 +89,18 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                             ++skipped;
                             continue;
                         }
+                        if (options.nearFromLocal) {
+                            local.sample(x, vl);
+                            out.open_[out.index(g)] = std::clamp(vl[0] * kInvSqrt4Pi, 0.f, 1.f);
+                        }
                         std::fill(v, v + C, 0.0);
                         for (int k = 0; k < N; ++k) {
-                            // Piecewise integration in steps of r_s (eq. 11), front to back.
+                            // Piecewise integration in steps of r_s (eq. 11), front to back,
+                            // from the second piece on when the first is the local field's.
                             const float* yk = y.data() + std::size_t(k) * C;
                             double T = 1.0;
-                            for (glm::vec3 p = x; inside(p) && T >= kGlobalStopT;
-                                 p += step[std::size_t(k)]) {
+                            for (glm::vec3 p = x + float(firstPiece) * step[std::size_t(k)];
+                                 inside(p) && T >= kGlobalStopT; p += step[std::size_t(k)]) {
                                 local.sample(p, vl);
                                 float t = 0.f;
                                 for (int i = 0; i < C; ++i) t += vl[i] * yk[i];
@@ -114,7 +127,16 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
 }
 
 void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
+    if (!product_) return sampleFar(p, out);
+    float nearV[16], farV[16];
+    local_->sample(p, nearV);
+    sampleFar(p, farV);
+    product_->apply(nearV, farV, out);
+}
+
+void GlobalVisibility::sampleFar(const glm::vec3& p, float* out) const {
     const int C = coefficients_;
+    float total = 0.f;
     glm::vec3 u = (p + 0.5f) / scale_ - 0.5f;
     u = glm::clamp(u, glm::vec3(0.f), glm::vec3(res_ - 1));
     const glm::ivec3 i0 = glm::min(glm::ivec3(u), glm::max(res_ - 2, glm::ivec3(0)));
@@ -123,11 +145,16 @@ void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
     for (int c = 0; c < 8; ++c) {
         const glm::ivec3 o((c & 1), (c >> 1) & 1, c >> 2);
         const glm::ivec3 g = glm::min(i0 + o, res_ - 1);
-        const float w = (o.x ? f.x : 1.f - f.x) * (o.y ? f.y : 1.f - f.y) * (o.z ? f.z : 1.f - f.z);
+        const float w = (o.x ? f.x : 1.f - f.x) * (o.y ? f.y : 1.f - f.y) *
+                        (o.z ? f.z : 1.f - f.z) *
+                        (product_ ? open_[index(g)] + kBuriedWeight : 1.f);
         if (w == 0.f) continue;
+        total += w;
         const float* d = at(g);
         for (int i = 0; i < C; ++i) out[i] += w * d[i];
     }
+    const float inv = 1.f / total;
+    for (int i = 0; i < C; ++i) out[i] *= inv;
 }
 
 }  // namespace voxlight::visibility

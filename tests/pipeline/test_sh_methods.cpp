@@ -290,6 +290,17 @@ TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility)
     d["method"]["params"]["global_resolution"] = 8;  // the global grid only
     EXPECT_EQ(ranStages(session.run(scene(d))),
               (std::set<std::string>{"global_visibility", "camera", "render"}));
+    // Kronander's grid-only field: a different global_visibility (rerun alone) and image.
+    const RunResult split = session.run(scene(d));
+    d["method"]["params"]["global_near"] = "grid";
+    const RunResult gridOnly = session.run(scene(d));
+    EXPECT_EQ(ranStages(gridOnly),
+              (std::set<std::string>{"global_visibility", "camera", "render"}));
+    EXPECT_TRUE(allFinite(gridOnly.image));
+    EXPECT_NE(gridOnly.image.pixels, split.image.pixels);
+    d["method"]["params"]["global_near"] = "sample";
+    EXPECT_THROW(session.run(scene(d)), InputError);
+    d["method"]["params"].erase("global_near");
     d["method"]["name"] = "sh-local";  // sh-local has no global grid to size
     EXPECT_THROW(session.run(scene(d)), InputError);
 }
