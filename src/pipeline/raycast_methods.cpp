@@ -214,7 +214,8 @@ const Codec& skipCellsCodec() {
 }
 
 const Codec& transferFunctionCodec() {
-    static const Codec c{1,
+    // 2: TfPoint gained the surface channels (specular, roughness, phase g).
+    static const Codec c{2,
                          [](const Artifact& a, ByteWriter& w) {
                              const auto& t = a.as<TfArtifact>()->tf;
                              w.string(t.name());
