@@ -792,8 +792,10 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                     if (!(T > 0.0)) continue;
                     glm::dvec3 c = beta * f * T * glm::dvec3(ls.value);
                     if (!ls.delta) {
+                        // Always MIS: a BRDF event also samples its lobe toward the lights when
+                        // the path ends here (below).
                         c /= double(ls.pdf);
-                        if (continues) c *= powerHeuristic(ls.pdf, pdfBrdf(mat, nrm, wo, wi));
+                        c *= powerHeuristic(ls.pdf, pdfBrdf(mat, nrm, wo, wi));
                     }
                     L += c;
                     continue;
@@ -812,7 +814,37 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 }
                 L += c;
             }
-            if (!continues) break;
+            if (!continues) {
+                // A BRDF event that ends the path still samples its lobe toward the area and
+                // environment lights (MIS with the light samples above): a glossy lobe under an
+                // environment map is what light sampling alone estimates worst. The ray sees the
+                // transmittance the shadow rays see (ratio tracking over lightInterval).
+                if (surface) {
+                    const double u0 = rng.uniformDouble(), u1 = rng.uniformDouble(),
+                                 u2 = rng.uniformDouble();
+                    const BrdfSample bs = sampleBrdf(mat, nrm, wo, u0, u1, u2);
+                    if (bs.pdf > 0.0) {
+                        const glm::dvec3 w = beta * bs.f * (glm::dot(nrm, bs.wi) / bs.pdf);
+                        const Ray sr{x3, bs.wi};
+                        const glm::vec3 wi(bs.wi);
+                        double T = -1.0;  // traced on first need
+                        for (const auto& light : lightList) {
+                            if (light->isDelta()) continue;
+                            const glm::dvec3 le(light->radiance(x3, wi));
+                            if (le == glm::dvec3(0.0)) continue;
+                            if (T < 0.0) {
+                                double l0 = 0.0, l1 = INFINITY;
+                                T = im.lightInterval(sr, l0, l1)
+                                        ? im.ratioTracking(view, sr, l0, l1, rng, n)
+                                        : 1.0;
+                            }
+                            if (!(T > 0.0)) break;
+                            L += w * le * (T * powerHeuristic(bs.pdf, light->pdf(x3, wi)));
+                        }
+                    }
+                }
+                break;
+            }
             if (bounce + 1 >= options_.rouletteAfter) {
                 const double q = std::clamp(std::max({beta.x, beta.y, beta.z}), 0.05, 1.0);
                 if (rng.uniformDouble() >= q) break;
