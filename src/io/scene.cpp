@@ -317,13 +317,44 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
             pts.fail("must be a non-empty array of control points");
         for (std::size_t i = 0; i < pts.size(); ++i) {
             const Field p = pts.at(i);
-            p.allowOnly({"value", "color", "extinction", "emission"});
+            p.allowOnly(
+                {"value", "color", "extinction", "emission", "specular", "roughness", "phase_g"});
             TransferFunctionPoint tp;
             if (!p.has("value")) p.fail("needs a 'value'");
             tp.value = p.child("value").number();
             p.get("color", tp.color, 0.0, 1.0);
             p.get("extinction", tp.extinction, 0.0, 1e6);
             p.get("emission", tp.emission, 0.0, 1e9);
+            if (p.has("specular")) {
+                const Field sp = p.child("specular");
+                if (!sp.isArray() || sp.size() != 3)
+                    sp.fail("must be an array of 3 numbers in [0, 1], got " + typeName(sp.raw()) +
+                                " " + shortDump(sp.raw()),
+                            "e.g. \"specular\": [0.04, 0.04, 0.04]");
+                tp.specular = sp.vec3(0.0, 1.0);
+            }
+            if (p.has("roughness")) {
+                const Field r = p.child("roughness");
+                if (!r.raw().is_number() || !(r.raw().get<double>() > 0.0) ||
+                    !(r.raw().get<double>() <= 1.0))
+                    r.fail("must be a number in (0, 1], got " + typeName(r.raw()) + " " +
+                               shortDump(r.raw()),
+                           "e.g. \"roughness\": 0.5 (small: glossy, 1: matte)");
+                tp.roughness = r.raw().get<double>();
+            }
+            if (p.has("phase_g")) {
+                const Field g = p.child("phase_g");
+                if (!g.raw().is_number() || !(std::abs(g.raw().get<double>()) < 1.0))
+                    g.fail("must be a number strictly between -1 and 1, got " + typeName(g.raw()) +
+                               " " + shortDump(g.raw()),
+                           "e.g. \"phase_g\": 0.3 (0: isotropic, > 0: forward)");
+                tp.phaseG = g.raw().get<double>();
+            }
+            if (i > 0 && tp.phaseG.has_value() != tf.points.front().phaseG.has_value())
+                p.child("phase_g").fail(
+                    tp.phaseG ? "is given here but not on points[0]"
+                              : "is missing here but given on points[0]",
+                    "give phase_g on every point or on none (none: method.params.phase_g)");
             if (!tf.points.empty() && !(tp.value > tf.points.back().value)) {
                 std::ostringstream os;
                 os << "must be strictly increasing; got " << tp.value << " after "
@@ -681,11 +712,17 @@ json sceneDocument(const Scene& s) {
     json tf = json::object();
     if (!t.points.empty()) {
         tf["points"] = json::array();
-        for (const auto& p : t.points)
-            tf["points"].push_back({{"value", p.value},
-                                    {"color", vec(p.color)},
-                                    {"extinction", p.extinction},
-                                    {"emission", vec(p.emission)}});
+        for (const auto& p : t.points) {
+            json pt = {{"value", p.value},
+                       {"color", vec(p.color)},
+                       {"extinction", p.extinction},
+                       {"emission", vec(p.emission)}};
+            // The surface channels only when set (a scene without them reads back the same).
+            if (p.specular != glm::dvec3(0.0)) pt["specular"] = vec(p.specular);
+            if (p.roughness != 1.0) pt["roughness"] = p.roughness;
+            if (p.phaseG) pt["phase_g"] = *p.phaseG;
+            tf["points"].push_back(pt);
+        }
     } else if (!t.preset.empty()) {
         tf["preset"] = t.preset;
     }

@@ -14,7 +14,11 @@
 //             | {"phantom": "torso", "size": 128},
 //   "transfer_function": "ct-bone" | {"preset": "ct-bone", "extinction_scale": 1.0}
 //             | {"points": [{"value": -1000, "color": [r,g,b], "extinction": 0.0,
-//                            "emission": [r,g,b]}, ...]},
+//                            "emission": [r,g,b], "specular": [r,g,b] (BRDF F0, 0..1; 0),
+//                            "roughness": (0, 1] (1), "phase_g": (-1, 1) (on every point or
+//                            none; none = method.params.phase_g)}, ...]},
+//             (specular, roughness and phase_g are read only by pathtrace's scattering modes:
+//             pathtrace/path_tracer.h)
 //             (either form may add "window": {"level": L, "width": W})
 //   "camera": {"projection": "perspective"|"orthographic",
 //              "view": "anterior"|"posterior"|"left"|"right"|"superior"|"inferior"|"oblique"
@@ -75,10 +79,13 @@ struct VolumeSource {
 };
 
 struct TransferFunctionPoint {
-    double value = 0.0;        ///< physical value (HU for CT)
-    glm::dvec3 color{1.0};     ///< albedo, 0..1
-    double extinction = 0.0;   ///< σt, 1/mm, ≥ 0
-    glm::dvec3 emission{0.0};  ///< emitted radiance, linear RGB, ≥ 0
+    double value = 0.0;            ///< physical value (HU for CT)
+    glm::dvec3 color{1.0};         ///< albedo, 0..1
+    double extinction = 0.0;       ///< σt, 1/mm, ≥ 0
+    glm::dvec3 emission{0.0};      ///< emitted radiance, linear RGB, ≥ 0
+    glm::dvec3 specular{0.0};      ///< BRDF specular colour F0, 0..1
+    double roughness = 1.0;        ///< BRDF roughness, (0, 1]
+    std::optional<double> phaseG;  ///< Henyey–Greenstein g, (−1, 1); unset = the method's phase_g
 };
 
 struct TransferFunctionDesc {

@@ -47,14 +47,30 @@ std::array<float, 2> robustRange(const core::Volume& volume, float loFraction, f
 
 namespace {
 TfPoint pt(float value, float sigma, glm::vec3 color) { return {value, color, sigma, {0, 0, 0}}; }
+/// The point with the BRDF channels (pathtrace hybrid scattering): a grey specular F0 and a
+/// roughness. Dielectric tissue reflects F0 ≈ 0.02–0.05 at normal incidence (water 0.02);
+/// wet, smooth contrast-filled lumen walls read glossier than porous bone.
+TfPoint surf(TfPoint p, float specular, float roughness) {
+    p.specular = glm::vec3(specular);
+    p.roughness = roughness;
+    return p;
+}
+/// The same surface channels on every point.
+std::vector<TfPoint> allSurf(std::vector<TfPoint> pts, float specular, float roughness) {
+    for (auto& p : pts) p = surf(p, specular, roughness);
+    return pts;
+}
 
 TransferFunction absolutePreset(const std::string& name) {
     const glm::vec3 ivory(0.93f, 0.85f, 0.70f), bright(0.97f, 0.94f, 0.86f);
     if (name == "ct-bone")
-        return TransferFunction({pt(-1024, 0, ivory), pt(140, 0, {0.70f, 0.42f, 0.30f}),
-                                 pt(250, 0.25f, {0.85f, 0.65f, 0.48f}), pt(450, 1.2f, ivory),
-                                 pt(1000, 3.f, bright), pt(3071, 3.f, bright)},
-                                {500, 2000}, name);
+        // Bone: a low, matte specular (porous, dry surface).
+        return TransferFunction(
+            allSurf({pt(-1024, 0, ivory), pt(140, 0, {0.70f, 0.42f, 0.30f}),
+                     pt(250, 0.25f, {0.85f, 0.65f, 0.48f}), pt(450, 1.2f, ivory),
+                     pt(1000, 3.f, bright), pt(3071, 3.f, bright)},
+                    0.04f, 0.7f),
+            {500, 2000}, name);
     if (name == "ct-angio") {
         const glm::vec3 red(0.80f, 0.10f, 0.07f), metal(0.80f, 0.84f, 0.92f);
         // Lumen red up to ≈ 330 HU, bone ivory from ≈ 430 HU (cortex at 3 mm voxels is often
@@ -62,17 +78,26 @@ TransferFunction absolutePreset(const std::string& name) {
         // (σt ≤ 0.3/mm): a contrast-filled vessel is many mm thick and still turns opaque, while
         // the 1–2 mm partial-volume rim on every bone surface stays translucent, so bone reads
         // ivory rather than red.
-        return TransferFunction({pt(-1024, 0, red), pt(110, 0, red), pt(200, 0.12f, red),
-                                 pt(330, 0.3f, {0.85f, 0.24f, 0.15f}), pt(430, 1.2f, ivory),
-                                 pt(1150, 3.f, bright), pt(1500, 6.f, metal), pt(3071, 6.f, metal)},
-                                {400, 1400}, name);
+        // Surfaces: contrast lumen glossy (F0 0.08, roughness 0.3), bone matte as in ct-bone,
+        // metal a bright, fairly smooth specular.
+        return TransferFunction(
+            {surf(pt(-1024, 0, red), 0.08f, 0.3f), surf(pt(110, 0, red), 0.08f, 0.3f),
+             surf(pt(200, 0.12f, red), 0.08f, 0.3f),
+             surf(pt(330, 0.3f, {0.85f, 0.24f, 0.15f}), 0.08f, 0.3f),
+             surf(pt(430, 1.2f, ivory), 0.04f, 0.7f), surf(pt(1150, 3.f, bright), 0.04f, 0.7f),
+             surf(pt(1500, 6.f, metal), 0.9f, 0.25f), surf(pt(3071, 6.f, metal), 0.9f, 0.25f)},
+            {400, 1400}, name);
     }
     if (name == "ct-soft-tissue") {
         const glm::vec3 fat(0.90f, 0.78f, 0.45f), muscle(0.78f, 0.30f, 0.24f);
+        // Soft tissue scatters mostly by the phase function anyway (its σt is small, so the
+        // opacity factor of P_brdf is); where it does take the BRDF, a faint, rough specular.
         return TransferFunction(
-            {pt(-1024, 0, fat), pt(-160, 0, fat), pt(-90, 0.004f, fat), pt(-30, 0.001f, fat),
-             pt(20, 0.02f, muscle), pt(80, 0.06f, {0.86f, 0.42f, 0.36f}),
-             pt(220, 0.15f, {0.92f, 0.82f, 0.72f}), pt(600, 1.f, bright), pt(3071, 1.f, bright)},
+            allSurf({pt(-1024, 0, fat), pt(-160, 0, fat), pt(-90, 0.004f, fat),
+                     pt(-30, 0.001f, fat), pt(20, 0.02f, muscle),
+                     pt(80, 0.06f, {0.86f, 0.42f, 0.36f}), pt(220, 0.15f, {0.92f, 0.82f, 0.72f}),
+                     pt(600, 1.f, bright), pt(3071, 1.f, bright)},
+                    0.03f, 0.8f),
             {40, 400}, name);
     }
     if (name == "ct-lung") {
@@ -81,9 +106,11 @@ TransferFunction absolutePreset(const std::string& name) {
         // noise, up to ≈ −930 HU in the shared abdomen CT) stays clear, and ends at −550 HU because
         // every air/tissue boundary passes through this range by partial volume (a shell whose
         // opacity grows with ∫σt over the range).
+        // A translucent cast: faint, rough specular (mostly phase: σt ≤ 0.04/mm).
         return TransferFunction(
-            {pt(-1024, 0, pink), pt(-900, 0, pink), pt(-850, 0.02f, pink),
-             pt(-700, 0.04f, {0.95f, 0.72f, 0.68f}), pt(-550, 0, pink), pt(3071, 0, pink)},
+            allSurf({pt(-1024, 0, pink), pt(-900, 0, pink), pt(-850, 0.02f, pink),
+                     pt(-700, 0.04f, {0.95f, 0.72f, 0.68f}), pt(-550, 0, pink), pt(3071, 0, pink)},
+                    0.02f, 0.9f),
             {-600, 1500}, name);
     }
     if (name == "phantom-step")
@@ -96,15 +123,20 @@ TransferFunction absolutePreset(const std::string& name) {
 
 TransferFunction relativePreset(const std::string& name) {
     if (name == "mr-t1-brain")
+        // Skin/brain surface: a low, moderately rough specular (moist tissue).
         return TransferFunction(
-            {pt(0, 0, {0.55f, 0.40f, 0.35f}), pt(0.14f, 0, {0.60f, 0.45f, 0.40f}),
-             pt(0.26f, 0.06f, {0.78f, 0.56f, 0.47f}), pt(0.45f, 0.35f, {0.84f, 0.68f, 0.60f}),
-             pt(0.75f, 0.7f, {0.90f, 0.82f, 0.76f}), pt(1, 0.8f, {0.98f, 0.96f, 0.92f})},
+            allSurf(
+                {pt(0, 0, {0.55f, 0.40f, 0.35f}), pt(0.14f, 0, {0.60f, 0.45f, 0.40f}),
+                 pt(0.26f, 0.06f, {0.78f, 0.56f, 0.47f}), pt(0.45f, 0.35f, {0.84f, 0.68f, 0.60f}),
+                 pt(0.75f, 0.7f, {0.90f, 0.82f, 0.76f}), pt(1, 0.8f, {0.98f, 0.96f, 0.92f})},
+                0.04f, 0.5f),
             {0.5f, 1.f}, name);
     if (name == "generic")
-        return TransferFunction({pt(0, 0, glm::vec3(0.85f)), pt(0.25f, 0, glm::vec3(0.85f)),
-                                 pt(0.5f, 0.5f, glm::vec3(0.9f)), pt(1, 1.f, glm::vec3(0.95f))},
-                                {0.5f, 1.f}, name);
+        return TransferFunction(
+            allSurf({pt(0, 0, glm::vec3(0.85f)), pt(0.25f, 0, glm::vec3(0.85f)),
+                     pt(0.5f, 0.5f, glm::vec3(0.9f)), pt(1, 1.f, glm::vec3(0.95f))},
+                    0.04f, 0.5f),
+            {0.5f, 1.f}, name);
     return {};
 }
 

@@ -11,6 +11,10 @@
 //                   range (1st–99.5th percentile), because MR intensities have no absolute unit
 //   generic         relative grey ramp for anything else (phantoms, unknown modality)
 //   phantom-step    σt = 0.02/mm above 0.5, 0 below: the exact-optics sphere/slab phantoms
+// Surface channels (path tracer hybrid/BRDF scattering only): specular F0 / roughness bone 0.04 /
+// 0.7 (matte), contrast lumen 0.08 / 0.3 (glossier), metal 0.9 / 0.25, soft tissue 0.03 / 0.8,
+// lung 0.02 / 0.9, MR T1 and generic 0.04 / 0.5; phantom-step keeps the defaults (0, 1). No preset
+// carries a phase g: the method's phase_g applies.
 #include <array>
 #include <string>
 #include <vector>

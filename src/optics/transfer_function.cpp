@@ -13,8 +13,11 @@
 namespace voxlight::optics {
 
 std::ostream& operator<<(std::ostream& os, const TfPoint& p) {
-    return os << "{value " << p.value << ", color (" << p.color.r << ", " << p.color.g << ", "
-              << p.color.b << "), extinction " << p.extinction << "/mm}";
+    os << "{value " << p.value << ", color (" << p.color.r << ", " << p.color.g << ", " << p.color.b
+       << "), extinction " << p.extinction << "/mm, specular (" << p.specular.r << ", "
+       << p.specular.g << ", " << p.specular.b << "), roughness " << p.roughness;
+    if (!std::isnan(p.phaseG)) os << ", phase g " << p.phaseG;
+    return os << "}";
 }
 
 std::ostream& operator<<(std::ostream& os, const TransferFunction& tf) {
@@ -54,6 +57,16 @@ TransferFunction::TransferFunction(std::vector<TfPoint> points, Window window, s
                              "must be finite and >= 0, got " + os.str());
         if (!finite3(p.emission) || glm::any(glm::lessThan(p.emission, glm::vec3(0.f))))
             throw InputError(src, field + ".emission", "must be finite and >= 0");
+        if (!finite3(p.specular) || glm::any(glm::lessThan(p.specular, glm::vec3(0.f))) ||
+            glm::any(glm::greaterThan(p.specular, glm::vec3(1.f))))
+            throw InputError(src, field + ".specular", "must be in [0, 1], got " + os.str());
+        if (!(p.roughness > 0.f && p.roughness <= 1.f))
+            throw InputError(src, field + ".roughness", "must be in (0, 1], got " + os.str());
+        if (std::isnan(p.phaseG) != std::isnan(points_.front().phaseG))
+            throw InputError(src, field + ".phase_g", "is given on some points but not on others",
+                             "give phase_g on every point or on none");
+        if (!std::isnan(p.phaseG) && !(std::abs(p.phaseG) < 1.f))
+            throw InputError(src, field + ".phase_g", "must lie strictly between -1 and 1");
     }
     if (!(window_.width > 0.f) || !std::isfinite(window_.width) || !std::isfinite(window_.level))
         throw InputError(src, "window", "width must be finite and > 0, level finite");
@@ -74,6 +87,24 @@ TfSample TransferFunction::eval(float value) const {
     s.extinction = a.extinction + f * (b.extinction - a.extinction);
     s.albedo = a.color + f * (b.color - a.color);
     s.emission = a.emission + f * (b.emission - a.emission);
+    return s;
+}
+
+TfSurface TransferFunction::evalSurface(float value) const {
+    const auto toSurface = [](const TfPoint& p) {
+        return TfSurface{p.specular, p.roughness, p.phaseG};
+    };
+    if (!(value > points_.front().value)) return toSurface(points_.front());  // NaN → low end
+    if (value >= points_.back().value) return toSurface(points_.back());
+    const auto it = std::upper_bound(points_.begin(), points_.end(), value,
+                                     [](float v, const TfPoint& p) { return v < p.value; });
+    const TfPoint& b = *it;
+    const TfPoint& a = *(it - 1);
+    const float f = (value - a.value) / (b.value - a.value);
+    TfSurface s;
+    s.specular = a.specular + f * (b.specular - a.specular);
+    s.roughness = a.roughness + f * (b.roughness - a.roughness);
+    s.phaseG = a.phaseG + f * (b.phaseG - a.phaseG);
     return s;
 }
 
@@ -135,6 +166,8 @@ TfTable::TfTable(const TransferFunction& tf) {
     invCellD_ = 1.0 / cell_;
     const std::size_t n = kTableCells + 1;
     nodes_.resize(n);
+    surface_.resize(n);
+    hasPhaseG_ = tf.hasPhaseG();
     sigma_.resize(n);
     weighted_.resize(n);
     cumSigma_.resize(n);
@@ -142,6 +175,8 @@ TfTable::TfTable(const TransferFunction& tf) {
     for (std::size_t i = 0; i < n; ++i) {
         const TfSample s = tf.eval(float(double(lo_) + cell_ * double(i)));
         nodes_[i] = {s.extinction, s.albedo, s.emission};
+        const TfSurface u = tf.evalSurface(float(double(lo_) + cell_ * double(i)));
+        surface_[i] = {u.specular, u.roughness, u.phaseG};
         sigma_[i] = s.extinction;
         for (int c = 0; c < 3; ++c) {
             weighted_[i][c] = s.extinction * s.albedo[c];

@@ -5,8 +5,15 @@
 //   σt(s)        extinction, 1/mm (≥ 0); a step of length Δ mm has opacity α = 1 − exp(−σt·Δ)
 //   a(s)         single-scattering albedo, linear RGB in [0, 1] (the "colour" of a tissue)
 //   e(s)         emitted radiance, linear RGB (≥ 0), weighted by (1 − a) in the source term
+// and, for the path tracer's surface-like (hybrid) scattering only (pathtrace/brdf.h):
+//   specular(s)  the BRDF's specular colour F0 (Schlick), linear RGB in [0, 1]; default 0
+//   roughness(s) the BRDF's roughness r ∈ (0, 1] (GGX α = r²); default 1 (matte)
+//   g(s)         Henyey–Greenstein asymmetry ∈ (−1, 1) of the phase function; optional as a whole:
+//                a TF gives it on every point or on none, and without it the path tracer uses
+//                its method parameter phase_g (hasPhaseG())
 // Every property is piecewise linear between control points (strictly increasing value) and
-// constant beyond the first and last point.
+// constant beyond the first and last point. The surface channels never change σt, a or e, so
+// every method but the path tracer's hybrid/BRDF scattering ignores them.
 //
 // Window/level remaps the value axis: a TF is authored for a reference window [level0 ± width0/2]
 // and `withWindow(level, width)` stretches/shifts every control point so that the reference window
@@ -34,11 +41,17 @@
 
 namespace voxlight::optics {
 
+/// TfPoint::phaseG when the point (and so the TF) carries no phase asymmetry.
+inline constexpr float kNoPhaseG = NAN;
+
 struct TfPoint {
-    float value = 0.f;        ///< physical value (HU for CT)
-    glm::vec3 color{1.f};     ///< albedo, 0..1
-    float extinction = 0.f;   ///< σt, 1/mm
-    glm::vec3 emission{0.f};  ///< linear RGB radiance
+    float value = 0.f;         ///< physical value (HU for CT)
+    glm::vec3 color{1.f};      ///< albedo, 0..1
+    float extinction = 0.f;    ///< σt, 1/mm
+    glm::vec3 emission{0.f};   ///< linear RGB radiance
+    glm::vec3 specular{0.f};   ///< BRDF specular colour F0, 0..1
+    float roughness = 1.f;     ///< BRDF roughness, (0, 1]
+    float phaseG = kNoPhaseG;  ///< HG asymmetry, (−1, 1); kNoPhaseG (NaN) = the method's phase_g
 };
 std::ostream& operator<<(std::ostream& os, const TfPoint& p);
 
@@ -47,6 +60,13 @@ struct TfSample {
     float extinction = 0.f;
     glm::vec3 albedo{0.f};
     glm::vec3 emission{0.f};
+};
+
+/// The surface channels at one value (interpolated like the colours).
+struct TfSurface {
+    glm::vec3 specular{0.f};
+    float roughness = 1.f;
+    float phaseG = kNoPhaseG;  ///< kNoPhaseG when the TF has no phase channel
 };
 
 struct Window {
@@ -60,8 +80,9 @@ class TransferFunction {
   public:
     TransferFunction() = default;
     /// Throws InputError(source "transfer function", field "points") unless there is ≥ 1 point,
-    /// values strictly increasing and finite, colours in [0,1], extinction and emission ≥ 0 and
-    /// finite. `window` is the reference window (for MIP/MinIP grey and for withWindow).
+    /// values strictly increasing and finite, colours and specular in [0,1], extinction and
+    /// emission ≥ 0 and finite, roughness in (0, 1], and phaseG in (−1, 1) on every point or
+    /// kNoPhaseG on every point. `window` is the reference window (for MIP/MinIP grey and for withWindow).
     TransferFunction(std::vector<TfPoint> points, Window window, std::string name = "custom");
 
     const std::vector<TfPoint>& points() const { return points_; }
@@ -70,6 +91,10 @@ class TransferFunction {
 
     /// Exact piecewise-linear evaluation (binary search; slow path, reference for tests).
     TfSample eval(float value) const;
+    /// The surface channels, evaluated the same way.
+    TfSurface evalSurface(float value) const;
+    /// True when the points carry a phase asymmetry g (all of them, by construction).
+    bool hasPhaseG() const { return !std::isnan(points_.front().phaseG); }
     /// Largest σt over [lo, hi] (exact: max over the end values and the control points inside).
     float maxExtinction(float lo, float hi) const;
     /// True when σt = 0 on all of [lo, hi].
@@ -115,6 +140,18 @@ class TfTable {
         s.emission = a.emission + at.f * (b.emission - a.emission);
         return s;
     }
+    /// The surface channels by the same interpolation (their own table: lookup() stays as small).
+    TfSurface surface(float value) const {
+        const Position at = position(value);
+        const SurfaceNode& a = surface_[at.cell];
+        const SurfaceNode& b = surface_[at.cell + 1];
+        TfSurface s;
+        s.specular = a.specular + at.f * (b.specular - a.specular);
+        s.roughness = a.roughness + at.f * (b.roughness - a.roughness);
+        s.phaseG = a.phaseG + at.f * (b.phaseG - a.phaseG);  // NaN stays NaN
+        return s;
+    }
+    bool hasPhaseG() const { return hasPhaseG_; }
     /// lookup(value).extinction without the colours (the trackers' and visibility rays' inner
     /// loops read only σt).
     float extinction(float value) const {
@@ -279,6 +316,11 @@ class TfTable {
         glm::vec3 albedo;
         glm::vec3 emission;
     };
+    struct SurfaceNode {
+        glm::vec3 specular;
+        float roughness;
+        float phaseG;
+    };
     /// Cumulative integral from lo_ of σt at a value (exact for the linearly interpolated table,
     /// linear extension outside the range); `cell`/`x` return where it was evaluated.
     double cumulativeSigma(double value, int& cell, double& x) const;
@@ -290,7 +332,9 @@ class TfTable {
     bool emissive_ = false;                    // some node has σt·(1 − a)·e > 0
     float zeroBelow_ = 0.f, zeroAbove_ = 0.f;  // σt = 0 on (−∞, zeroBelow_] and [zeroAbove_, ∞)
     std::vector<Node> nodes_;                  // kTableCells + 1
-    std::vector<float> sigma_;                 // integrand σt at nodes
+    std::vector<SurfaceNode> surface_;         // kTableCells + 1
+    bool hasPhaseG_ = false;
+    std::vector<float> sigma_;                    // integrand σt at nodes
     std::vector<std::array<float, 6>> weighted_;  // σt·a, σt·(1−a)·e at nodes
     std::vector<double> cumSigma_;                // cumulative integrals at nodes
     std::vector<std::array<double, 6>> cumWeighted_;

@@ -14,6 +14,7 @@
 #include "core/error.h"
 #include "core/timing.h"
 #include "grid/brick_traversal.h"
+#include "pathtrace/brdf.h"
 #include "render/shading.h"
 
 namespace voxlight::pathtrace {
@@ -55,8 +56,11 @@ struct HalfSpace {
 };
 
 struct Counters {
-    std::uint64_t real = 0, null = 0, shadow = 0, violations = 0, budget = 0;
+    std::uint64_t real = 0, null = 0, shadow = 0, violations = 0, budget = 0, surface = 0;
 };
+
+/// Kroes' constant in P_brdf = α · (1 − exp(−25 · g_f³ · |∇s|_n)) (NOTES.md §4).
+constexpr double kKroesGradientScale = 25.0;
 
 double powerHeuristic(double a, double b) { return a * a / (a * a + b * b); }
 
@@ -101,7 +105,12 @@ struct PathTracer::Impl {
     std::shared_ptr<const core::Volume> volume;
     std::shared_ptr<const optics::TfTable> table;
     std::shared_ptr<const grid::BrickMajorants> cells;
-    glm::dmat3 toIndex;  ///< world direction → index units (Dᵀ / spacing)
+    glm::dmat3 toIndex;      ///< world direction → index units (Dᵀ / spacing)
+    glm::dmat3 gradToWorld;  ///< index-space gradient → world gradient (toIndexᵀ)
+    Scattering scattering = Scattering::Phase;
+    /// Hybrid: the opacity step h (smallest spacing, mm), h / (value range) for |∇s|_n, and
+    /// 25 g_f³.
+    double opacityStepMm = 1.0, gradientNorm = 0.0, gradientRate = 0.0;
     glm::dvec3 origin;
     glm::dvec3 boxLo, boxHi;  ///< volume box in index space (voxel centres; ±0.5 on a 1-voxel axis)
     std::vector<HalfSpace> keep;       ///< every plane and box face: where paths collide
@@ -132,6 +141,25 @@ struct PathTracer::Impl {
     template <class View>
     float sigma(const View& v, const glm::vec3& ijk) const {
         return table->extinction(v.sample(ijk.x, ijk.y, ijk.z));
+    }
+
+    /// ∇s (value/mm, world) at index point ijk by central differences one voxel apart.
+    template <class View>
+    glm::dvec3 gradient(const View& v, const glm::dvec3& ijk) const {
+        const float x = float(ijk.x), y = float(ijk.y), z = float(ijk.z);
+        const glm::dvec3 gi(0.5 * (double(v.sample(x + 1.f, y, z)) - v.sample(x - 1.f, y, z)),
+                            0.5 * (double(v.sample(x, y + 1.f, z)) - v.sample(x, y - 1.f, z)),
+                            0.5 * (double(v.sample(x, y, z + 1.f)) - v.sample(x, y, z - 1.f)));
+        return gradToWorld * gi;
+    }
+
+    /// P_brdf (header comment) for σt and the gradient's length; 0 without a normal.
+    double brdfProbability(double sigma, double gradLen) const {
+        if (scattering == Scattering::Phase || !(gradLen > 0.0) || !std::isfinite(gradLen))
+            return 0.0;
+        if (scattering == Scattering::Brdf) return 1.0;
+        const double opacity = -std::expm1(-sigma * opacityStepMm);
+        return opacity * -std::expm1(-gradientRate * gradLen * gradientNorm);
     }
 
     Track track(const Ray& ray, double t0, double t1) const {
@@ -413,6 +441,8 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     if (options_.maxBounces < 1) throw InputError("pathtrace", "max_bounces", "must be at least 1");
     if (!(std::abs(options_.phaseG) < 1.f))
         throw InputError("pathtrace", "phase_g", "must lie strictly between -1 and 1");
+    if (!(options_.gradientFactor >= 0.f && options_.gradientFactor <= 1.f))
+        throw InputError("pathtrace", "gradient_factor", "must lie in [0, 1]");
     VL_CHECK(volume && table && cells);
     auto impl = std::make_shared<Impl>();
     const core::Geometry& g = volume->geometry();
@@ -426,6 +456,21 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     impl->toIndex = glm::dmat3(1.0);
     for (int col = 0; col < 3; ++col)
         for (int row = 0; row < 3; ++row) impl->toIndex[col][row] = dt[col][row] / g.spacing[row];
+    impl->gradToWorld = glm::transpose(impl->toIndex);
+    impl->scattering = options_.scattering;
+    impl->opacityStepMm = std::min({g.spacing.x, g.spacing.y, g.spacing.z});
+    {
+        // The volume's value range from the cells' ranges (|∇s|_n's normaliser).
+        float lo = INFINITY, hi = -INFINITY;
+        for (std::size_t i = 0; i < impl->cells->size(); ++i) {
+            const auto& r = impl->cells->valueRange(i);
+            if (std::isfinite(r[0]) && std::isfinite(r[1]) && r[0] <= r[1])
+                lo = std::min(lo, r[0]), hi = std::max(hi, r[1]);
+        }
+        impl->gradientNorm = hi > lo ? impl->opacityStepMm / (double(hi) - double(lo)) : 0.0;
+        const double gf = options_.gradientFactor;
+        impl->gradientRate = kKroesGradientScale * gf * gf * gf;
+    }
     for (int a = 0; a < 3; ++a) {
         const int n = g.dims[a];
         impl->boxLo[a] = n > 1 ? 0.0 : -0.5;
@@ -490,6 +535,15 @@ double PathTracer::transmittance(const Ray& ray, double maxT, core::CounterRng& 
 
 float PathTracer::extinctionAt(const glm::dvec3& p) const {
     return impl_->volume->visit([&](const auto& v) { return impl_->sigma(v, impl_->indexOf(p)); });
+}
+
+double PathTracer::brdfProbabilityAt(const glm::dvec3& p, glm::dvec3* gradient) const {
+    return impl_->volume->visit([&](const auto& v) {
+        const glm::dvec3 ijk = impl_->indexOf(p);
+        const glm::dvec3 gr = impl_->gradient(v, ijk);
+        if (gradient) *gradient = gr;
+        return impl_->brdfProbability(impl_->sigma(v, ijk), glm::length(gr));
+    });
 }
 
 double PathTracer::autofocus(const render::Camera& camera) const {
@@ -631,8 +685,10 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     if (lightList.empty())
         lightList.push_back(render::headlight(camera, render::kVolumetricHeadlightIrradiance));
     const float g = options_.phaseG;
+    const bool phaseChannel = im.table->hasPhaseG();  // the TF's g replaces options_.phaseG
     const glm::dvec3 bg(options_.background);
-    std::atomic<std::uint64_t> paths{0}, real{0}, null{0}, shadow{0}, violations{0}, budget{0};
+    std::atomic<std::uint64_t> paths{0}, real{0}, null{0}, shadow{0}, violations{0}, budget{0},
+        surfaceEvents{0};
 
     // One sample of pixel p: accumulates rgb, rgb² and coverage.
     auto trace = [&](const auto& view, int x, int y, int s, Counters& n) {
@@ -682,21 +738,69 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             if (bounce == 0) covered = 1.0;
             const glm::dvec3 x3 = ray.origin + *hit * ray.direction;
             const glm::dvec3 ijk = im.indexOf(x3);
-            const optics::TfSample ts =
-                im.table->lookup(view.sample(float(ijk.x), float(ijk.y), float(ijk.z)));
+            const float value = view.sample(float(ijk.x), float(ijk.y), float(ijk.z));
+            const optics::TfSample ts = im.table->lookup(value);
             const glm::dvec3 albedo(ts.albedo);
             L += beta * (1.0 - albedo) * glm::dvec3(ts.emission);  // ARCHITECTURE §1: (1 − a)·e
-            beta *= albedo;
-            if (beta == glm::dvec3(0.0)) break;
+            // Phase or BRDF for this event (hybrid scattering, header comment). Only a P_brdf
+            // strictly between 0 and 1 draws a random number, so phase-only paths keep theirs.
+            float gHere = g;
+            bool surface = false;
+            SurfaceMaterial mat;
+            glm::dvec3 nrm(0.0);
+            const glm::dvec3 wo = -ray.direction;
+            if (im.scattering != Scattering::Phase || phaseChannel) {
+                const optics::TfSurface sf = im.table->surface(value);
+                if (phaseChannel) gHere = sf.phaseG;
+                if (im.scattering != Scattering::Phase) {
+                    const glm::dvec3 grad = im.gradient(view, ijk);
+                    const double len = glm::length(grad);
+                    const double pb = im.brdfProbability(ts.extinction, len);
+                    if (pb > 0.0 && (pb >= 1.0 || rng.uniformDouble() < pb)) {
+                        surface = true;
+                        nrm = grad / len;
+                        if (glm::dot(nrm, wo) < 0.0) nrm = -nrm;
+                        mat = {albedo, glm::dvec3(sf.specular), double(sf.roughness)};
+                        ++n.surface;
+                    }
+                }
+            }
+            if (!surface) {
+                beta *= albedo;
+                if (beta == glm::dvec3(0.0)) break;
+            }
             const bool continues = bounce + 1 < options_.maxBounces;
             // Next-event estimation towards every light; MIS weights only when the path also
-            // continues by phase sampling (which can then hit the same area/environment light).
+            // continues by phase (BRDF) sampling (which can then hit the same area/environment
+            // light).
             for (const auto& light : lightList) {
                 const glm::vec2 u(rng.uniform(), rng.uniform());
                 const lights::LightSample ls = light->sample(x3, u);
                 if (!(ls.pdf > 0.f)) continue;
                 const glm::dvec3 wi(ls.wi);
-                const double phase = henyeyGreenstein(float(glm::dot(ray.direction, wi)), g);
+                if (surface) {
+                    // f·|n·wi| of the BRDF in place of the phase function.
+                    const double cosI = glm::dot(nrm, wi);
+                    if (!(cosI > 0.0)) continue;
+                    const glm::dvec3 f = evalBrdf(mat, nrm, wo, wi) * cosI;
+                    if (f == glm::dvec3(0.0)) continue;
+                    double st0 = 0.0, st1 = double(ls.distance);
+                    const Ray sr{x3, wi};
+                    const double T = im.lightInterval(sr, st0, st1)
+                                         ? im.ratioTracking(view, sr, st0, st1, rng, n)
+                                         : 1.0;
+                    if (!(T > 0.0)) continue;
+                    glm::dvec3 c = beta * f * T * glm::dvec3(ls.value);
+                    if (!ls.delta) {
+                        // Always MIS: a BRDF event also samples its lobe toward the lights when
+                        // the path ends here (below).
+                        c /= double(ls.pdf);
+                        c *= powerHeuristic(ls.pdf, pdfBrdf(mat, nrm, wo, wi));
+                    }
+                    L += c;
+                    continue;
+                }
+                const double phase = henyeyGreenstein(float(glm::dot(ray.direction, wi)), gHere);
                 double st0 = 0.0, st1 = double(ls.distance);
                 const Ray sr{x3, wi};
                 const double T = im.lightInterval(sr, st0, st1)
@@ -710,15 +814,56 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 }
                 L += c;
             }
-            if (!continues) break;
+            if (!continues) {
+                // A BRDF event that ends the path still samples its lobe toward the area and
+                // environment lights (MIS with the light samples above): a glossy lobe under an
+                // environment map is what light sampling alone estimates worst. The ray sees the
+                // transmittance the shadow rays see (ratio tracking over lightInterval).
+                if (surface) {
+                    const double u0 = rng.uniformDouble(), u1 = rng.uniformDouble(),
+                                 u2 = rng.uniformDouble();
+                    const BrdfSample bs = sampleBrdf(mat, nrm, wo, u0, u1, u2);
+                    if (bs.pdf > 0.0) {
+                        const glm::dvec3 w = beta * bs.f * (glm::dot(nrm, bs.wi) / bs.pdf);
+                        const Ray sr{x3, bs.wi};
+                        const glm::vec3 wi(bs.wi);
+                        double T = -1.0;  // traced on first need
+                        for (const auto& light : lightList) {
+                            if (light->isDelta()) continue;
+                            const glm::dvec3 le(light->radiance(x3, wi));
+                            if (le == glm::dvec3(0.0)) continue;
+                            if (T < 0.0) {
+                                double l0 = 0.0, l1 = INFINITY;
+                                T = im.lightInterval(sr, l0, l1)
+                                        ? im.ratioTracking(view, sr, l0, l1, rng, n)
+                                        : 1.0;
+                            }
+                            if (!(T > 0.0)) break;
+                            L += w * le * (T * powerHeuristic(bs.pdf, light->pdf(x3, wi)));
+                        }
+                    }
+                }
+                break;
+            }
             if (bounce + 1 >= options_.rouletteAfter) {
                 const double q = std::clamp(std::max({beta.x, beta.y, beta.z}), 0.05, 1.0);
                 if (rng.uniformDouble() >= q) break;
                 beta /= q;
             }
+            if (surface) {
+                const double u0 = rng.uniformDouble(), u1 = rng.uniformDouble(),
+                             u2 = rng.uniformDouble();
+                const BrdfSample bs = sampleBrdf(mat, nrm, wo, u0, u1, u2);
+                if (!(bs.pdf > 0.0)) break;
+                beta *= bs.f * (glm::dot(nrm, bs.wi) / bs.pdf);
+                if (beta == glm::dvec3(0.0)) break;
+                phasePdf = bs.pdf;
+                ray = Ray{x3, bs.wi};
+                continue;
+            }
             const glm::dvec3 next =
-                sampleHenyeyGreenstein(ray.direction, g, rng.uniform(), rng.uniform());
-            phasePdf = henyeyGreenstein(float(glm::dot(ray.direction, next)), g);
+                sampleHenyeyGreenstein(ray.direction, gHere, rng.uniform(), rng.uniform());
+            phasePdf = henyeyGreenstein(float(glm::dot(ray.direction, next)), gHere);
             ray = Ray{x3, next};
         }
         double lum = 0.0;
@@ -769,6 +914,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             paths += std::uint64_t(r.rows().size()) * r.cols().size() * std::uint64_t(s1 - s0);
             real += n.real, null += n.null, shadow += n.shadow, violations += n.violations;
             budget += n.budget;
+            surfaceEvents += n.surface;
         });
         done = s1;
         error = relativeError(done);
@@ -812,6 +958,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         stats->shadowRays = shadow;
         stats->majorantViolations = violations;
         stats->budgetExceeded = budget;
+        stats->surfaceEvents = surfaceEvents;
         stats->seconds = clock.seconds();
         stats->relativeStdError = error;
         stats->targetReached = reached;

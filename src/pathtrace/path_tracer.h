@@ -16,6 +16,29 @@
 // function (isotropic or Henyey–Greenstein), with Russian roulette after a few bounces.
 // max_bounces = 1 is single scattering, the optical model the SH methods approximate.
 //
+// Scattering (Options::scattering): at each real collision the path scatters either by the phase
+// function (HG with the TF's phase g channel where it has one, else phaseG) or by the surface
+// BRDF of pathtrace/brdf.h around the normal n = ±∇s/|∇s| (central differences of the trilinear
+// field, one voxel apart; flipped to face the incoming path). Kroes et al. 2012 (Exposure Render,
+// section "Hybrid scattering", eq. 1–2) choose the BRDF with probability
+//   P_brdf(x) = α(x) · (1 − exp(−25 · g_f³ · |∇s|_n(x)))
+// (the extraction ../shared/papers/kroes2012-…txt lost the formula; NOTES.md §4 restates it),
+// where here α(x) = 1 − exp(−σt(x)·h) is the opacity of one voxel step h (the smallest spacing),
+// |∇s|_n = |∇s| · h / (value range of the volume) the gradient per voxel normalised by the data's
+// range (Exposure Render normalises by the intensity range), and g_f = gradientFactor ∈ [0, 1].
+// The choice *is* the medium's scattering model (as in Exposure Render): the event scatters by
+// P·f_brdf·|n·wi| + (1 − P)·a·p, each estimated with its own light sampling and MIS exactly as the
+// phase function is. A BRDF event's colour is the BRDF's (diffuse a, specular F0): it does not
+// multiply by a again. A zero (or non-finite) gradient has no normal: phase, whatever the mode.
+// Unlike a phase event, a BRDF event that ends the path (single scattering, or the last bounce)
+// still draws one BRDF direction toward the area and environment lights, MIS-weighted with its
+// light samples (power heuristic): glossy lobes under an environment map need it.
+//   phase   never the BRDF (the default: the optical model of ARCHITECTURE.md §1 that every
+//           other method approximates, so the reference stays comparable)
+//   brdf    always the BRDF where the gradient is non-zero
+//   hybrid  P_brdf as above; gradientFactor 0 gives the phase image bit for bit (no extra random
+//           number is drawn where P_brdf = 0)
+//
 // Camera rays that escape see the background (radiance + T·background, alpha = 1 − T in
 // expectation, as the ray caster's film); scattered rays that escape see the environment and area
 // lights. No lights in the scene: the ray caster's headlight.
@@ -51,16 +74,22 @@
 
 namespace voxlight::pathtrace {
 
+/// Which scattering function a real collision uses (see the header comment).
+enum class Scattering { Phase, Brdf, Hybrid };
+
 struct Options {
     int samplesPerPixel = 64;  ///< the most samples per pixel (a target error may stop sooner)
     double maxSeconds = 0.0;   ///< > 0: stop after the pass that crosses this many seconds
     /// > 0: stop after the pass whose estimated relative error (Stats::relativeStdError) is at
     /// most this, once kMinSamplesForErrorStop samples are in.
     double targetError = 0.0;
-    int maxBounces = 1;        ///< scattering events per path (1 = single scattering)
-    float phaseG = 0.f;        ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
-    int rouletteAfter = 3;     ///< bounces before Russian roulette may end a path
-    bool majorantGrid = true;  ///< false: one global majorant (Exposure Render's scheme)
+    int maxBounces = 1;  ///< scattering events per path (1 = single scattering)
+    float phaseG = 0.f;  ///< Henyey–Greenstein asymmetry, (−1, 1); 0 = isotropic
+                         ///< (a TF with a phase g channel overrides it)
+    Scattering scattering = Scattering::Phase;
+    float gradientFactor = 0.5f;  ///< Kroes' g_f for Scattering::Hybrid, [0, 1]
+    int rouletteAfter = 3;        ///< bounces before Russian roulette may end a path
+    bool majorantGrid = true;     ///< false: one global majorant (Exposure Render's scheme)
     /// Samples spread over each pixel's area (antialiased photo); false: through its centre, as
     /// the ray caster and the SH methods sample — for pixel-by-pixel references.
     bool pixelJitter = true;
@@ -79,6 +108,8 @@ struct Options {
 struct Stats {
     int samplesPerPixel = 0;  ///< passes completed × samples per pass
     std::uint64_t paths = 0, realCollisions = 0, nullCollisions = 0, shadowRays = 0;
+    /// Real collisions that scattered by the BRDF (hybrid/brdf scattering).
+    std::uint64_t surfaceEvents = 0;
     /// Samples whose σt exceeded the cell's majorant (would bias delta tracking): 0 when the
     /// majorants are right; counted, never silently ignored.
     std::uint64_t majorantViolations = 0;
@@ -136,6 +167,9 @@ class PathTracer {
     double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
     /// σt at a world point (TF table lookup of the trilinear value).
     float extinctionAt(const glm::dvec3& p) const;
+    /// Kroes' P_brdf at a world point under these options (0 for Scattering::Phase; 1 for Brdf
+    /// where the gradient is non-zero), and the gradient (value/mm, world) it used.
+    double brdfProbabilityAt(const glm::dvec3& p, glm::dvec3* gradient = nullptr) const;
     /// Autofocus: the depth along the view (mm) where the ray through the image centre has lost
     /// half its light (optical depth ln 2, marched at a quarter voxel in the kept region) — the
     /// first visible surface; the depth of the volume's centre when that ray stays clear.

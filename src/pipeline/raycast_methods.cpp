@@ -33,7 +33,10 @@
 //                         (relative NRMS the samples predict; 0 = off), reference (false; true:
 //                         pixel-centre samples, target_error 0.01, up to 16384 spp, and the image
 //                         becomes the cached `reference` stage), max_bounces (1, or 16 with the
-//                         multiple_scattering effect), phase_g, majorant_grid, antialias,
+//                         multiple_scattering effect), phase_g (a TF's phase_g channel
+//                         overrides it), scattering ("phase" | "brdf" | "hybrid"; "phase") and
+//                         gradient_factor (hybrid only; 0.5: Kroes' g_f, path_tracer.h),
+//                         majorant_grid, antialias,
 //                         denoise (true | false | "auto" = on unless reference; never in
 //                         reference mode: true there is an error) and denoise_target (0.01: the
 //                         relative standard error at and below which a pixel is left as traced;
@@ -217,7 +220,8 @@ const Codec& skipCellsCodec() {
 }
 
 const Codec& transferFunctionCodec() {
-    static const Codec c{1,
+    // 2: TfPoint gained the surface channels (specular, roughness, phase g).
+    static const Codec c{2,
                          [](const Artifact& a, ByteWriter& w) {
                              const auto& t = a.as<TfArtifact>()->tf;
                              w.string(t.name());
@@ -473,6 +477,16 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
                "add \"multiple_scattering\" to effects or set max_bounces to 1");
     t.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
     t.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
+    const std::string scattering = p.choice("scattering", "phase", {"phase", "brdf", "hybrid"});
+    t.scattering = scattering == "brdf"     ? pathtrace::Scattering::Brdf
+                   : scattering == "hybrid" ? pathtrace::Scattering::Hybrid
+                                            : pathtrace::Scattering::Phase;
+    if (scattering != "hybrid" && p.has("gradient_factor"))
+        p.fail("gradient_factor",
+               "applies only to hybrid scattering but scattering is \"" + scattering + "\"",
+               "remove gradient_factor or set scattering to \"hybrid\"");
+    if (scattering == "hybrid")
+        t.gradientFactor = float(p.number("gradient_factor", 0.5, 0.0, 1.0));
     t.majorantGrid = p.boolean("majorant_grid", true);
     t.pixelJitter = p.boolean("antialias", !reference);
     t.seed = o.seed;
@@ -685,7 +699,8 @@ std::shared_ptr<const TracedImage> tracePath(
                       {"majorant_violations", st.majorantViolations},
                       {"null_collision_budget_exceeded", st.budgetExceeded},
                       {"max_bounces", pt.maxBounces},
-                      {"majorant_grid", pt.majorantGrid}};
+                      {"majorant_grid", pt.majorantGrid},
+                      {"surface_events", st.surfaceEvents}};
     if (st.budgetExceeded > 0)
         out->warnings.push_back(
             std::to_string(st.budgetExceeded) +
@@ -1670,8 +1685,9 @@ const RegisterMethod kPathTrace([] {
         "Monte-Carlo path tracer: delta tracking over the majorant grid, exact shadows, "
         "single or multiple scattering (the reference)";
     m.effects = {"local_shadows", "global_shadows", "multiple_scattering"};
-    m.params = {"spp",     "seconds",       "target_error", "reference", "max_bounces",
-                "phase_g", "majorant_grid", "antialias",    "denoise",   "denoise_target"};
+    m.params = {"spp",           "seconds",   "target_error", "reference",
+                "max_bounces",   "phase_g",   "scattering",   "gradient_factor",
+                "majorant_grid", "antialias", "denoise",      "denoise_target"};
     m.plan = [](const io::Scene& scene, ParamReader& reader) {
         return planRayCaster(Kind::PathTrace, scene, reader);
     };

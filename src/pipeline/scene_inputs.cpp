@@ -102,8 +102,9 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
     if (!d.points.empty()) {
         std::vector<optics::TfPoint> pts;
         for (const auto& p : d.points)
-            pts.push_back(
-                {float(p.value), glm::vec3(p.color), float(p.extinction), glm::vec3(p.emission)});
+            pts.push_back({float(p.value), glm::vec3(p.color), float(p.extinction),
+                           glm::vec3(p.emission), glm::vec3(p.specular), float(p.roughness),
+                           p.phaseG ? float(*p.phaseG) : optics::kNoPhaseG});
         const float lo = pts.front().value, hi = pts.back().value;
         optics::Window w{0.5f * (lo + hi), hi > lo ? hi - lo : 1.f};
         if (d.window) w = {float(d.window->x), float(d.window->y)};

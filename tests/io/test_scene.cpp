@@ -290,3 +290,41 @@ TEST(Scene, EndlessFileIsRefusedAtTheSizeLimit) {
         EXPECT_NE(std::string(e.what()).find("16 MiB"), std::string::npos) << e.what();
     }
 }
+
+TEST(Scene, TransferFunctionSurfaceChannelsAreReadStrictlyAndRoundTrip) {
+    const io::Scene s = parse(json::parse(R"({"volume": "a.nii", "transfer_function": {"points": [
+      {"value": 0, "specular": [0.04, 0.04, 0.04], "roughness": 0.5, "phase_g": 0.2},
+      {"value": 1, "extinction": 1, "phase_g": -0.3}]}})"));
+    ASSERT_EQ(s.transferFunction.points.size(), 2u);
+    EXPECT_EQ(s.transferFunction.points[0].specular, glm::dvec3(0.04));
+    EXPECT_EQ(s.transferFunction.points[0].roughness, 0.5);
+    EXPECT_EQ(s.transferFunction.points[1].roughness, 1.0);  // default
+    EXPECT_EQ(*s.transferFunction.points[1].phaseG, -0.3);
+    const json d = io::sceneDocument(s);
+    EXPECT_EQ(d["transfer_function"]["points"][0]["roughness"], 0.5);
+    EXPECT_EQ(d["transfer_function"]["points"][1]["phase_g"], -0.3);
+    EXPECT_FALSE(d["transfer_function"]["points"][1].contains("specular"));  // default not written
+    EXPECT_EQ(io::sceneDocument(parse(d))["transfer_function"], d["transfer_function"]);
+    // Wrong types and values out of range: the field, what was found, and what to write.
+    const auto tf = [](const std::string& point) {
+        return json::parse(R"({"volume": "a.nii", "transfer_function": {"points": [)" + point +
+                           "]}}");
+    };
+    expectBad(tf(R"({"value": 0, "roughness": "rough"})"), "transfer_function.points[0].roughness",
+              {"(0, 1]", "string", "e.g."});
+    expectBad(tf(R"({"value": 0, "roughness": 0})"), "transfer_function.points[0].roughness",
+              {"(0, 1]"});
+    expectBad(tf(R"({"value": 0, "roughness": 1.5})"), "transfer_function.points[0].roughness");
+    expectBad(tf(R"({"value": 0, "phase_g": 1})"), "transfer_function.points[0].phase_g",
+              {"between -1 and 1"});
+    expectBad(tf(R"({"value": 0, "phase_g": [0.1]})"), "transfer_function.points[0].phase_g",
+              {"array"});
+    expectBad(tf(R"({"value": 0, "specular": 0.04})"), "transfer_function.points[0].specular",
+              {"array of 3", "e.g."});
+    expectBad(tf(R"({"value": 0, "specular": [0, 2, 0]})"),
+              "transfer_function.points[0].specular[1]", {"[0, 1]"});
+    expectBad(tf(R"({"value": 0, "phase_g": 0.1}, {"value": 1})"),
+              "transfer_function.points[1].phase_g", {"every point or on none"});
+    expectBad(tf(R"({"value": 0, "roughnes": 0.1})"), "transfer_function.points[0].roughnes",
+              {"did you mean 'roughness'"});
+}

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "core/phantoms.h"
@@ -212,4 +213,75 @@ TEST(TfTable, ExtinctionChangeCoversEveryValueWhoseSigmaDiffers) {
         if (!e.none && std::isfinite(changed.lo))  // tight: within the edit's span ± 3 cells
             EXPECT_GT(changed.lo, -100.f - 3.f * a.cellWidth());
     }
+}
+
+TEST(TransferFunction, SurfaceChannelsInterpolateLikeTheColours) {
+    // Specular, roughness and phase g: piecewise linear between the points, constant beyond,
+    // exactly as the albedo; the table's surface() agrees with the exact evaluation.
+    std::vector<TfPoint> p = {pt(0, 0, {0, 0, 0}), pt(100, 1, {1, 1, 1}), pt(200, 3, {0, 1, 0})};
+    p[0].specular = {0.f, 0.f, 0.f}, p[0].roughness = 1.f, p[0].phaseG = -0.2f;
+    p[1].specular = {1.f, 0.5f, 0.f}, p[1].roughness = 0.2f, p[1].phaseG = 0.6f;
+    p[2].specular = {0.f, 1.f, 0.f}, p[2].roughness = 0.5f, p[2].phaseG = 0.f;
+    const TransferFunction tf(p, {100, 200});
+    ASSERT_TRUE(tf.hasPhaseG());
+    const optics::TfTable table(tf);
+    ASSERT_TRUE(table.hasPhaseG());
+    for (float v : {-50.f, 0.f, 25.f, 50.f, 100.f, 130.f, 199.f, 250.f}) {
+        const optics::TfSample s = tf.eval(v);
+        const optics::TfSurface u = tf.evalSurface(v);
+        // The same weights as the albedo: red albedo 0→1 on [0, 100] like specular red.
+        if (v <= 100.f) EXPECT_NEAR(u.specular.r, s.albedo.r, 1e-6f) << v;
+        const float f = std::clamp(v / 100.f, 0.f, 1.f),
+                    f2 = std::clamp((v - 100.f) / 100.f, 0.f, 1.f);
+        const float rough = v <= 100.f ? 1.f + f * (0.2f - 1.f) : 0.2f + f2 * (0.5f - 0.2f);
+        const float g = v <= 100.f ? -0.2f + f * 0.8f : 0.6f - f2 * 0.6f;
+        EXPECT_NEAR(u.roughness, rough, 1e-6f) << v;
+        EXPECT_NEAR(u.phaseG, g, 1e-6f) << v;
+        const optics::TfSurface t = table.surface(v);
+        EXPECT_NEAR(t.roughness, u.roughness, kTableTol) << v;
+        EXPECT_NEAR(t.phaseG, u.phaseG, kTableTol) << v;
+        EXPECT_NEAR(t.specular.g, u.specular.g, kTableTol) << v;
+    }
+    // Without the channels: specular 0, roughness 1, and no phase g (the method's applies).
+    const TransferFunction plain({pt(0, 0), pt(1, 1)}, {0.5f, 1.f});
+    EXPECT_FALSE(plain.hasPhaseG());
+    EXPECT_FALSE(optics::TfTable(plain).hasPhaseG());
+    EXPECT_TRUE(std::isnan(optics::TfTable(plain).surface(0.5f).phaseG));
+    EXPECT_EQ(optics::TfTable(plain).surface(0.5f).roughness, 1.f);
+}
+
+TEST(TransferFunction, RejectsBadSurfaceChannelsWithTheField) {
+    auto field = [](std::vector<TfPoint> p) {
+        try {
+            TransferFunction t(std::move(p), {0, 1});
+        } catch (const InputError& e) {
+            return e.field();
+        }
+        return std::string("accepted");
+    };
+    TfPoint a = pt(0, 1), b = pt(1, 1);
+    a.roughness = 0.f;
+    EXPECT_EQ(field({a, b}), "points[0].roughness");
+    a = pt(0, 1), b.roughness = 1.5f;
+    EXPECT_EQ(field({a, b}), "points[1].roughness");
+    b = pt(1, 1), b.specular = {0.f, 1.2f, 0.f};
+    EXPECT_EQ(field({a, b}), "points[1].specular");
+    b = pt(1, 1), a.phaseG = 1.f, b.phaseG = 0.f;
+    EXPECT_EQ(field({a, b}), "points[0].phase_g");
+    a.phaseG = 0.5f, b.phaseG = optics::kNoPhaseG;
+    EXPECT_EQ(field({a, b}), "points[1].phase_g");  // on some points but not all
+    b.phaseG = -0.9f;
+    EXPECT_EQ(field({a, b}), "accepted");
+}
+
+TEST(Presets, SurfaceChannelsAreSensibleAndCarryNoPhaseG) {
+    // Bone matte with a low specular; the contrast lumen of ct-angio glossier than its bone.
+    const optics::TfTable bone(optics::makePreset("ct-bone"));
+    EXPECT_LE(bone.surface(1000.f).specular.r, 0.05f);
+    EXPECT_GE(bone.surface(1000.f).roughness, 0.6f);
+    const optics::TfTable angio(optics::makePreset("ct-angio"));
+    EXPECT_LT(angio.surface(300.f).roughness, angio.surface(1000.f).roughness);
+    EXPECT_GT(angio.surface(300.f).specular.r, angio.surface(1000.f).specular.r);
+    for (const auto& info : optics::presetCatalog())
+        EXPECT_FALSE(optics::makePreset(info.name, {0.f, 1.f}).hasPhaseG()) << info.name;
 }

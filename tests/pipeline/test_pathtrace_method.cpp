@@ -258,3 +258,32 @@ TEST(PathTraceMethod, DenoisesTheDisplayImageOnlyAndNeverAReference) {
         }
     }
 }
+
+TEST(PathTraceMethod, ScatteringAndGradientFactorAreReadStrictly) {
+    json d = tracedScene();
+    // Default: the phase function, no surface events.
+    EXPECT_EQ(Session().run(scene(d)).details["pathtrace"]["surface_events"], 0);
+    d["method"]["params"]["scattering"] = "hybrid";
+    d["method"]["params"]["gradient_factor"] = 1.0;
+    const RunResult r = Session().run(scene(d));
+    EXPECT_GT(r.details["pathtrace"]["surface_events"].get<double>(), 0.0);
+    for (float v : r.image.pixels) ASSERT_TRUE(std::isfinite(v) && v >= 0.f);
+    auto field = [&](const json& params) {
+        json e = tracedScene();
+        e["method"]["params"] = params;
+        try {
+            Session().plan(scene(e));
+        } catch (const InputError& err) {
+            return err.field();
+        }
+        return std::string("accepted");
+    };
+    EXPECT_EQ(field({{"scattering", "surface"}}), "method.params.scattering");
+    EXPECT_EQ(field({{"scattering", 1}}), "method.params.scattering");
+    EXPECT_EQ(field({{"gradient_factor", 0.5}}), "method.params.gradient_factor");  // phase
+    EXPECT_EQ(field({{"scattering", "brdf"}, {"gradient_factor", 0.5}}),
+              "method.params.gradient_factor");
+    EXPECT_EQ(field({{"scattering", "hybrid"}, {"gradient_factor", 1.5}}),
+              "method.params.gradient_factor");
+    EXPECT_EQ(field({{"scattering", "hybrid"}, {"gradient_factor", 0.0}}), "accepted");
+}
