@@ -1,0 +1,181 @@
+// SPDX-License-Identifier: MIT
+// CGAL's side of iso/: clean-up and report (cleanup.h). The mesh crosses into a CGAL::Surface_mesh
+// and back; vertex colours travel as a Surface_mesh property.
+#include "iso/cleanup.h"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/connected_components.h>
+#include <CGAL/Polygon_mesh_processing/manifoldness.h>
+#include <CGAL/Polygon_mesh_processing/measure.h>
+#include <CGAL/Polygon_mesh_processing/repair_degeneracies.h>
+#include <CGAL/Polygon_mesh_processing/self_intersections.h>
+#include <CGAL/Polygon_mesh_processing/smooth_shape.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
+#include <CGAL/Surface_mesh_simplification/edge_collapse.h>
+
+#include <array>
+#include <cmath>
+#include <ostream>
+#include <vector>
+
+#include "core/timing.h"
+
+namespace voxlight::iso {
+
+namespace {
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using SurfaceMesh = CGAL::Surface_mesh<Kernel::Point_3>;
+using Color = std::array<float, 3>;
+namespace PMP = CGAL::Polygon_mesh_processing;
+namespace SMS = CGAL::Surface_mesh_simplification;
+
+SurfaceMesh toCgal(const Mesh& mesh) {
+    SurfaceMesh sm;
+    sm.reserve(SurfaceMesh::size_type(mesh.n_vertices()), SurfaceMesh::size_type(mesh.n_edges()),
+               SurfaceMesh::size_type(mesh.n_faces()));
+    auto color = sm.add_property_map<SurfaceMesh::Vertex_index, Color>("v:color").first;
+    std::vector<SurfaceMesh::Vertex_index> vi(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) {
+        const Mesh::Point& p = mesh.point(v);
+        vi[v.idx()] = sm.add_vertex(Kernel::Point_3(p[0], p[1], p[2]));
+        const Mesh::Color& c = mesh.color(v);
+        color[vi[v.idx()]] = {c[0], c[1], c[2]};
+    }
+    for (const auto f : mesh.faces()) {
+        std::array<SurfaceMesh::Vertex_index, 3> t;
+        int k = 0;
+        for (const auto v : mesh.fv_range(f)) t[k++] = vi[v.idx()];
+        // Both are half-edge meshes: a face OpenMesh accepted, Surface_mesh accepts.
+        VL_CHECK(sm.add_face(t[0], t[1], t[2]) != SurfaceMesh::null_face());
+    }
+    return sm;
+}
+
+/// Back to OpenMesh, dropping vertices no face uses any more. Normals are left zero (callers set
+/// them: cleanup.h).
+Mesh fromCgal(const SurfaceMesh& sm) {
+    Mesh mesh;
+    const auto color = sm.property_map<SurfaceMesh::Vertex_index, Color>("v:color").first;
+    mesh.reserve(sm.number_of_vertices(), sm.number_of_edges(), sm.number_of_faces());
+    std::vector<Mesh::VertexHandle> vh(sm.num_vertices());
+    for (const auto v : sm.vertices()) {
+        if (sm.is_isolated(v)) continue;
+        const auto& p = sm.point(v);
+        vh[v.idx()] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+        const Color& c = color[v];
+        mesh.set_color(vh[v.idx()], Mesh::Color(c[0], c[1], c[2]));
+        mesh.set_normal(vh[v.idx()], Mesh::Normal(0.0));
+    }
+    omerr().disable();
+    for (const auto f : sm.faces()) {
+        std::array<Mesh::VertexHandle, 3> t;
+        int k = 0;
+        for (const auto v : CGAL::vertices_around_face(sm.halfedge(f), sm)) t[k++] = vh[v.idx()];
+        mesh.add_face(t[0], t[1], t[2]);
+    }
+    omerr().enable();
+    return mesh;
+}
+
+double meanEdgeLength(const SurfaceMesh& sm) {
+    double sum = 0.0;
+    for (const auto e : sm.edges())
+        sum += std::sqrt(CGAL::to_double(
+            CGAL::squared_distance(sm.point(sm.vertex(e, 0)), sm.point(sm.vertex(e, 1)))));
+    return sm.number_of_edges() ? sum / double(sm.number_of_edges()) : 0.0;
+}
+
+}  // namespace
+
+CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Progress& progress) {
+    CleanupStats st;
+    st.facesBefore = st.facesAfter = mesh.n_faces();
+    if (!options.any()) return st;
+    core::Stopwatch sw;
+    SurfaceMesh sm = toCgal(mesh);
+    if (options.removeDegenerate) {
+        progress.report("mesh clean-up: degenerate faces", 0.0);
+        const std::size_t before = sm.number_of_faces();
+        PMP::remove_degenerate_faces(sm);
+        sm.collect_garbage();
+        st.degenerateFacesRemoved = before - sm.number_of_faces();
+    }
+    if (options.keepLargest > 0) {
+        progress.report("mesh clean-up: components", 0.0);
+        st.componentsRemoved +=
+            PMP::keep_largest_connected_components(sm, std::size_t(options.keepLargest));
+        sm.collect_garbage();
+    }
+    if (options.minComponentFaces > 0) {
+        progress.report("mesh clean-up: components", 0.5);
+        st.componentsRemoved += PMP::keep_large_connected_components(sm, options.minComponentFaces);
+        sm.collect_garbage();
+    }
+    if (options.smoothIterations > 0 && sm.number_of_faces() > 0) {
+        progress.report("mesh clean-up: smoothing", 0.0);
+        const double h = meanEdgeLength(sm);
+        PMP::smooth_shape(
+            sm, options.smoothStrength * h * h,
+            CGAL::parameters::number_of_iterations(unsigned(options.smoothIterations)));
+        st.verticesMoved = true;
+    }
+    if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {
+        progress.report("mesh clean-up: decimation", 0.0);
+        SMS::Count_stop_predicate<SurfaceMesh> stop(3 * options.targetFaces / 2);
+        SMS::edge_collapse(sm, stop);
+        sm.collect_garbage();
+        st.verticesMoved = true;
+    }
+    progress.checkCancel();
+    mesh = fromCgal(sm);
+    st.facesAfter = mesh.n_faces();
+    st.seconds = sw.seconds();
+    progress.report("mesh clean-up", 1.0);
+    return st;
+}
+
+MeshReport reportMesh(const Mesh& mesh, bool checkSelfIntersections,
+                      const core::Progress& progress) {
+    core::Stopwatch sw;
+    MeshReport r;
+    r.vertices = mesh.n_vertices();
+    r.faces = mesh.n_faces();
+    for (const auto e : mesh.edges())
+        if (mesh.is_boundary(e)) ++r.boundaryEdges;
+    r.closed = r.boundaryEdges == 0;
+    if (r.faces == 0) return r;
+    progress.report("mesh report", 0.0);
+    SurfaceMesh sm = toCgal(mesh);
+    auto component = sm.add_property_map<SurfaceMesh::Face_index, std::size_t>("f:cc").first;
+    r.components = PMP::connected_components(sm, component);
+    std::vector<SurfaceMesh::Halfedge_index> pinched;
+    PMP::non_manifold_vertices(sm, std::back_inserter(pinched));
+    r.nonManifoldVertices = pinched.size();
+    r.areaMm2 = CGAL::to_double(PMP::area(sm));
+    if (r.closed) r.volumeMm3 = CGAL::to_double(PMP::volume(sm));
+    if (checkSelfIntersections) {
+        progress.report("mesh report: self-intersections", 0.5);
+        std::vector<std::pair<SurfaceMesh::Face_index, SurfaceMesh::Face_index>> pairs;
+        PMP::self_intersections(sm, std::back_inserter(pairs));
+        r.selfIntersections = static_cast<long long>(pairs.size());
+    }
+    r.seconds = sw.seconds();
+    progress.report("mesh report", 1.0);
+    return r;
+}
+
+std::ostream& operator<<(std::ostream& os, const MeshReport& r) {
+    os << r.vertices << " vertices, " << r.faces << " faces, " << r.components << " component(s), "
+       << r.boundaryEdges << " boundary edges, " << r.nonManifoldVertices
+       << " non-manifold vertices, self-intersections ";
+    if (r.selfIntersections < 0)
+        os << "not checked";
+    else
+        os << r.selfIntersections;
+    os << ", area " << r.areaMm2 << " mm2";
+    if (r.closed) os << ", volume " << r.volumeMm3 << " mm3";
+    return os;
+}
+
+}  // namespace voxlight::iso
