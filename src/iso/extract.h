@@ -10,9 +10,14 @@
 // Integer isovalues on integer data: when the isovalue is an integer in *stored* units (300 HU on
 // a CT stored as int16 with intercept −1024), voxels exactly at the isovalue put flying-edges
 // vertices exactly on grid points, giving zero-area triangles and, where several edges meet there,
-// coincident vertices (BUILD-NOTES). extract moves such an isovalue by kIntegerIsoNudge stored units
-// toward the outside, so that voxels equal to the isovalue count as inside, as above; the surface
-// moves by at most 1/256 of a voxel. Half-integer (and non-integer) isovalues are used as given.
+// coincident vertices (BUILD-NOTES). extract moves such an isovalue by kIntegerIsoNudge = ½ stored
+// unit toward the outside — to the half-integer between the isovalue and the next lower value —
+// so that voxels equal to the isovalue count as inside, as above. The surface moves by ½/g voxel
+// where the data rise by g stored units per voxel (0.5 mm at a 1 HU/mm ramp, 0.0005 mm at a bone
+// edge of 1000 HU/mm). Half-integer (and non-integer) isovalues are used as given.
+// A smaller nudge is not safe: 1/256 unit on a 1000-per-voxel edge leaves vertices 4e-6 voxel from
+// grid points, below float resolution at index ≈ 30 — zero-area triangles and, on the 256³ torso
+// at 300 HU, 98 self-intersecting face pairs (tests/iso IntegerIsovalueOnIntegerDataIsHandled).
 //
 // Clipping (open cut): the kept region is the intersection of the half-spaces dot(x − p, n) ≥ 0
 // (clip planes; crop-box faces via core::boxHalfSpaces). Triangles crossing a plane are cut along
@@ -33,10 +38,10 @@
 
 namespace voxlight::iso {
 
-/// Stored units an integer isovalue on integer data is moved by (see header comment): small
-/// against any data step, large enough that no interpolated vertex lands within float rounding of
-/// a grid point.
-inline constexpr double kIntegerIsoNudge = 1.0 / 256.0;
+/// Stored units an integer isovalue on integer data is moved by (see header comment): half of the
+/// smallest data step, the largest distance from every stored value, so that interpolated vertices
+/// stay ≥ ½/(value range) of an edge away from grid points.
+inline constexpr double kIntegerIsoNudge = 0.5;
 
 struct ExtractOptions {
     double isovalue = 0.0;              ///< physical units (HU for CT); strictly inside the range

@@ -142,35 +142,49 @@ TEST(Extract, CropBoxKeepsOnlyWhatIsInside) {
         ASSERT_LE(toGlm(ex.mesh.point(vh)).z, s.centre.z + 1e-9);
 }
 
-TEST(Extract, IntegerIsovalueOnIntegerDataIsHandled) {
-    // uint8 distance ramp with many voxels exactly at the isovalue 50.
+/// An int16 ball whose values rise by `step` per voxel through the isovalue 300, in steps of half
+/// a voxel so that a whole shell of voxels is exactly 300. Centred far from index 0 (coordinates ≈ 30, where
+/// a float's resolution is ≈ 2e-6 voxel): a steep step (1000: bone against soft tissue) puts a
+/// barely moved isovalue's vertices within rounding of the grid points.
+core::Volume integerBall(double step) {
     core::Geometry g;
-    g.dims = {24, 24, 24};
-    core::Volume v(g, core::VoxelType::UInt8);
-    auto* d = v.dataAs<std::uint8_t>();
-    const glm::dvec3 c(11.5, 11.0, 11.25);
-    int atIso = 0;
-    for (int k = 0; k < 24; ++k)
-        for (int j = 0; j < 24; ++j)
-            for (int i = 0; i < 24; ++i) {
+    g.dims = {40, 40, 40};
+    core::Volume v(g, core::VoxelType::Int16);
+    auto* d = v.dataAs<std::int16_t>();
+    const glm::dvec3 c(30.5, 29.0, 30.25);
+    for (int k = 0; k < 40; ++k)
+        for (int j = 0; j < 40; ++j)
+            for (int i = 0; i < 40; ++i) {
                 const double r = glm::length(glm::dvec3(i, j, k) - c);
-                const int val = int(std::clamp(std::lround(50 + 10 * (8.0 - r)), 0L, 100L));
-                d[v.linearIndex(i, j, k)] = std::uint8_t(val);
-                atIso += val == 50;
+                // Distance quantised to half voxels: a shell of voxels sits exactly at 300.
+                const double q = std::round(2.0 * (7.0 - r)) / 2.0;
+                d[v.linearIndex(i, j, k)] =
+                    std::int16_t(std::clamp(std::lround(300 + step * q), -1000L, 3000L));
             }
-    ASSERT_GT(atIso, 20);
-    const Extraction ex = extractIsosurface(v, test::at(50.0));
-    EXPECT_TRUE(ex.stats.nudged);
-    EXPECT_NEAR(ex.stats.storedIsovalue, 50.0 - kIntegerIsoNudge, 1e-12);
-    EXPECT_EQ(ex.stats.rejectedFaces, 0u);
-    const MeshReport r = reportMesh(ex.mesh, true);
-    EXPECT_TRUE(r.closed);
-    EXPECT_EQ(r.nonManifoldVertices, 0u);
-    EXPECT_EQ(r.selfIntersections, 0);
-    // No zero-area triangles: voxels at the isovalue are inside, never on the surface.
-    for (const auto fh : ex.mesh.faces()) ASSERT_GT(ex.mesh.calc_face_area(fh), 1e-9);
-    // Half-integer isovalues are used as given.
-    EXPECT_FALSE(extractIsosurface(v, test::at(50.5)).stats.nudged);
+    return v;
+}
+
+TEST(Extract, IntegerIsovalueOnIntegerDataIsHandled) {
+    for (const double step : {10.0, 1000.0}) {
+        SCOPED_TRACE(step);
+        const core::Volume v = integerBall(step);
+        std::size_t atIso = 0;
+        for (std::size_t i = 0; i < v.voxelCount(); ++i)
+            atIso += v.dataAs<std::int16_t>()[i] == 300;
+        ASSERT_GT(atIso, 20u);
+        const Extraction ex = extractIsosurface(v, test::at(300.0));
+        EXPECT_TRUE(ex.stats.nudged);
+        EXPECT_EQ(ex.stats.storedIsovalue, 300.0 - kIntegerIsoNudge);
+        EXPECT_EQ(ex.stats.rejectedFaces, 0u);
+        const MeshReport r = reportMesh(ex.mesh, true);
+        EXPECT_TRUE(r.closed);
+        EXPECT_EQ(r.nonManifoldVertices, 0u);
+        EXPECT_EQ(r.selfIntersections, 0);
+        // No zero-area triangles: voxels at the isovalue are inside, never on the surface.
+        for (const auto fh : ex.mesh.faces()) ASSERT_GT(ex.mesh.calc_face_area(fh), 1e-9);
+        // Half-integer isovalues are used as given.
+        EXPECT_FALSE(extractIsosurface(v, test::at(300.5)).stats.nudged);
+    }
 }
 
 TEST(Extract, IsovalueOutsideTheRangeAndFlatVolumesAreInputErrors) {
