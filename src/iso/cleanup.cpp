@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // CGAL's side of iso/: clean-up and report (cleanup.h). The mesh crosses into a CGAL::Surface_mesh
-// and back; vertex colours travel as a Surface_mesh property.
+// and back; vertex colours and normals travel as Surface_mesh properties.
 #include "iso/cleanup.h"
 
 #include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
@@ -27,6 +27,7 @@ namespace {
 using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
 using SurfaceMesh = CGAL::Surface_mesh<Kernel::Point_3>;
 using Color = std::array<float, 3>;
+using Normal = std::array<double, 3>;
 namespace PMP = CGAL::Polygon_mesh_processing;
 namespace SMS = CGAL::Surface_mesh_simplification;
 
@@ -34,13 +35,16 @@ SurfaceMesh toCgal(const Mesh& mesh) {
     SurfaceMesh sm;
     sm.reserve(SurfaceMesh::size_type(mesh.n_vertices()), SurfaceMesh::size_type(mesh.n_edges()),
                SurfaceMesh::size_type(mesh.n_faces()));
-    auto color = sm.add_property_map<SurfaceMesh::Vertex_index, Color>("v:color").first;
+    auto color = sm.add_property_map<SurfaceMesh::Vertex_index, Color>("v:voxlight_color").first;
+    auto normal = sm.add_property_map<SurfaceMesh::Vertex_index, Normal>("v:voxlight_normal").first;
     std::vector<SurfaceMesh::Vertex_index> vi(mesh.n_vertices());
     for (const auto v : mesh.vertices()) {
         const Mesh::Point& p = mesh.point(v);
         vi[v.idx()] = sm.add_vertex(Kernel::Point_3(p[0], p[1], p[2]));
         const Mesh::Color& c = mesh.color(v);
         color[vi[v.idx()]] = {c[0], c[1], c[2]};
+        const Mesh::Normal& n = mesh.normal(v);
+        normal[vi[v.idx()]] = {n[0], n[1], n[2]};
     }
     for (const auto f : mesh.faces()) {
         std::array<SurfaceMesh::Vertex_index, 3> t;
@@ -52,11 +56,12 @@ SurfaceMesh toCgal(const Mesh& mesh) {
     return sm;
 }
 
-/// Back to OpenMesh, dropping vertices no face uses any more. Normals are left zero (callers set
-/// them: cleanup.h).
+/// Back to OpenMesh, dropping vertices no face uses any more.
 Mesh fromCgal(const SurfaceMesh& sm) {
     Mesh mesh;
-    const auto color = sm.property_map<SurfaceMesh::Vertex_index, Color>("v:color").first;
+    const auto color = sm.property_map<SurfaceMesh::Vertex_index, Color>("v:voxlight_color").first;
+    const auto normal =
+        sm.property_map<SurfaceMesh::Vertex_index, Normal>("v:voxlight_normal").first;
     mesh.reserve(sm.number_of_vertices(), sm.number_of_edges(), sm.number_of_faces());
     std::vector<Mesh::VertexHandle> vh(sm.num_vertices());
     for (const auto v : sm.vertices()) {
@@ -65,7 +70,8 @@ Mesh fromCgal(const SurfaceMesh& sm) {
         vh[v.idx()] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
         const Color& c = color[v];
         mesh.set_color(vh[v.idx()], Mesh::Color(c[0], c[1], c[2]));
-        mesh.set_normal(vh[v.idx()], Mesh::Normal(0.0));
+        const Normal& n = normal[v];
+        mesh.set_normal(vh[v.idx()], Mesh::Normal(n[0], n[1], n[2]));
     }
     omerr().disable();
     for (const auto f : sm.faces()) {

@@ -16,8 +16,9 @@
 //   5. decimation                     SMS::edge_collapse with Lindstrom–Turk cost and placement,
 //                                     stopping at about `targetFaces` faces (CGAL 5.5 stops on an
 //                                     edge count: 1.5 × targetFaces, exact for closed meshes).
-// Vertex colours follow their vertex (a collapsed edge keeps one end's colour). Normals of moved
-// vertices are stale afterwards: callers set them again (extract.h's setGradientNormals).
+// Vertex colours and normals follow their vertex (a collapsed edge keeps one end's). Normals of
+// moved vertices are stale afterwards (CleanupStats::verticesMoved): callers set them again
+// (extract.h's setGradientNormals).
 #include <cstddef>
 #include <iosfwd>
 

@@ -37,6 +37,9 @@ TEST(Cleanup, KeepsTheLargestComponentOfTwoSpheres) {
     for (const auto vh : ex.mesh.vertices()) {
         ASSERT_NEAR(glm::length(toGlm(ex.mesh.point(vh)) - big.centre), big.radius, kRadiusTol);
         ASSERT_EQ(ex.mesh.color(vh), Mesh::Color(0.2f, 0.4f, 0.6f));
+        // Normals survive the round trip through CGAL (no vertex moved): still outward.
+        const glm::dvec3 radial = glm::normalize(toGlm(ex.mesh.point(vh)) - big.centre);
+        ASSERT_GT(glm::dot(toGlm(ex.mesh.normal(vh)), radial), 0.99);
     }
 }
 
