@@ -139,9 +139,9 @@ Command addIsoCommand(CLI::App& app) {
         try {
             ex = iso::extractIsosurface(volume, options, progress);
         } catch (const InputError& e) {
-            if (e.field() != "isovalue") throw;
-            if (e.problem().find("flat") != std::string::npos)
-                throw InputError(s.source, "volume", e.problem(), e.fix());
+            if (e.source() != "isosurface" || (e.field() != "volume" && e.field() != "isovalue"))
+                throw;
+            if (e.field() == "volume") throw InputError(s.source, "volume", e.problem(), e.fix());
             const std::string fix = isoField == "transfer_function"
                                         ? e.fix() +
                                               " with --isovalue (the transfer function's "

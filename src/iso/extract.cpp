@@ -200,7 +200,7 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
     const auto [lo, hi] = st.range;
     if (!(lo < hi))
         throw InputError(
-            "isosurface", "isovalue",
+            "isosurface", "volume",
             "the volume is flat (every voxel is " + number(lo) + "): it has no isosurface",
             "use a volume whose values vary");
     if (!(options.isovalue > lo && options.isovalue < hi))

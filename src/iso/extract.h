@@ -67,9 +67,10 @@ struct Extraction {
     ExtractStats stats;
 };
 
-/// Extracts the isosurface. Throws InputError (source "isosurface", field "isovalue") when the
-/// volume is flat (min = max: there is no surface) or the isovalue is not strictly inside
-/// (min, max) — the message names the range; the caller maps the field to its own option or key.
+/// Extracts the isosurface. Throws InputError (source "isosurface") with field "volume" when the
+/// volume is flat (min = max: there is no surface), with field "isovalue" when the isovalue is not
+/// strictly inside (min, max) — the message names the range; the caller maps the field to its own
+/// option or key.
 /// An empty mesh is returned only when clipping removed everything. Throws CancelledError through
 /// `progress`; InputError (field "iso module") when the VTK module cannot be loaded.
 Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& options,

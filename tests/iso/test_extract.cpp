@@ -205,6 +205,7 @@ TEST(Extract, IsovalueOutsideTheRangeAndFlatVolumesAreInputErrors) {
         extractIsosurface(flat, test::at(0.0));
         FAIL() << "no error";
     } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "volume");
         EXPECT_NE(std::string(e.what()).find("flat"), std::string::npos) << e.what();
     }
 }
