@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // voxlight iso SCENE.json|VOLUME -o MESH.(ply|obj|glb) [--isovalue V] [--stats STATS.json]
 //              [--set key=value]... [--remove-degenerate] [--keep-largest K]
-//              [--min-component-faces N] [--smooth N [--smooth-strength S]] [--decimate FACES]
+//              [--min-component-faces N] [--smooth N] [--decimate FACES]
 //              [--no-self-intersections] [-q]
 // Extracts the scene's isosurface as a mesh (iso/: VTK flying edges → OpenMesh, world mm, outward
 // gradient normals), cuts it by the scene's clip planes and crop box (open cut), optionally cleans
@@ -87,12 +87,8 @@ Command addIsoCommand(CLI::App& app) {
                       "Drop connected components with fewer faces");
     c.sub
         ->add_option("--smooth", cleanup->smoothIterations,
-                     "Smooth with N iterations of mean curvature flow (shrinks slightly)")
+                     "Smooth with N iterations of Taubin lambda|mu smoothing (does not shrink)")
         ->check(CLI::Range(0, 1000));
-    c.sub
-        ->add_option("--smooth-strength", cleanup->smoothStrength,
-                     "Smoothing time step per (mean edge length)^2")
-        ->check(CLI::Range(1e-6, 100.0));
     c.sub
         ->add_option("--decimate", cleanup->targetFaces,
                      "Decimate (edge collapse) to about this many faces")

@@ -9,7 +9,6 @@
 #include <CGAL/Polygon_mesh_processing/measure.h>
 #include <CGAL/Polygon_mesh_processing/repair_degeneracies.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
-#include <CGAL/Polygon_mesh_processing/smooth_shape.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
@@ -84,12 +83,31 @@ Mesh fromCgal(const SurfaceMesh& sm) {
     return mesh;
 }
 
-double meanEdgeLength(const SurfaceMesh& sm) {
-    double sum = 0.0;
-    for (const auto e : sm.edges())
-        sum += std::sqrt(CGAL::to_double(
-            CGAL::squared_distance(sm.point(sm.vertex(e, 0)), sm.point(sm.vertex(e, 1)))));
-    return sm.number_of_edges() ? sum / double(sm.number_of_edges()) : 0.0;
+/// Taubin λ|μ smoothing (cleanup.h): each iteration moves every interior vertex by λ, then by μ,
+/// times (mean of its neighbours − itself). Boundary vertices (open cuts, the volume's faces) stay.
+void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progress) {
+    std::vector<Kernel::Point_3> next(sm.num_vertices());
+    for (int it = 0; it < iterations; ++it) {
+        progress.report("mesh clean-up: smoothing", double(it) / double(iterations));
+        for (const double f : {kTaubinLambda, kTaubinMu}) {
+            for (const auto v : sm.vertices()) {
+                const Kernel::Point_3& p = sm.point(v);
+                next[v.idx()] = p;
+                if (sm.is_isolated(v) || sm.is_border(v, false)) continue;
+                double sx = 0, sy = 0, sz = 0;
+                int n = 0;
+                for (const auto w : CGAL::vertices_around_target(sm.halfedge(v), sm)) {
+                    const Kernel::Point_3& q = sm.point(w);
+                    sx += q.x(), sy += q.y(), sz += q.z();
+                    ++n;
+                }
+                next[v.idx()] =
+                    Kernel::Point_3(p.x() + f * (sx / n - p.x()), p.y() + f * (sy / n - p.y()),
+                                    p.z() + f * (sz / n - p.z()));
+            }
+            for (const auto v : sm.vertices()) sm.point(v) = next[v.idx()];
+        }
+    }
 }
 
 }  // namespace
@@ -120,10 +138,7 @@ CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Prog
     }
     if (options.smoothIterations > 0 && sm.number_of_faces() > 0) {
         progress.report("mesh clean-up: smoothing", 0.0);
-        const double h = meanEdgeLength(sm);
-        PMP::smooth_shape(
-            sm, options.smoothStrength * h * h,
-            CGAL::parameters::number_of_iterations(unsigned(options.smoothIterations)));
+        taubinSmooth(sm, options.smoothIterations, progress);
         st.verticesMoved = true;
     }
     if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {

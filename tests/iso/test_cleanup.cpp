@@ -82,5 +82,29 @@ TEST(Cleanup, DecimationAndSmoothingKeepAClosedManifold) {
     for (const auto vh : ex.mesh.vertices()) ASSERT_NEAR(ex.mesh.normal(vh).norm(), 1.f, 1e-5f);
 }
 
+/// Taubin smoothing of a sphere against the sphere: a low-pass filter barely moves an already smooth
+/// surface (measured: area and volume change < 0.2 % after 10 iterations at R = 10 voxels).
+constexpr double kSmoothedSphereTol = 0.01;
+
+TEST(Cleanup, TaubinSmoothingMovesVerticesButDoesNotShrinkASphere) {
+    Ball big, small;
+    const core::Volume v = twoBalls(big, small);
+    Extraction ex = extractIsosurface(v, test::at(0.0));
+    const MeshReport before = reportMesh(ex.mesh, false);
+    const Mesh original = ex.mesh;
+    CleanupOptions o;
+    o.smoothIterations = 10;
+    EXPECT_TRUE(cleanUp(ex.mesh, o).verticesMoved);
+    const MeshReport after = reportMesh(ex.mesh, true);
+    EXPECT_NEAR(after.areaMm2 / before.areaMm2, 1.0, kSmoothedSphereTol);
+    EXPECT_NEAR(after.volumeMm3 / before.volumeMm3, 1.0, kSmoothedSphereTol);
+    EXPECT_TRUE(after.closed);
+    EXPECT_EQ(after.selfIntersections, 0);
+    double moved = 0.0;
+    for (const auto vh : ex.mesh.vertices())
+        moved = std::max(moved, (ex.mesh.point(vh) - original.point(vh)).norm());
+    EXPECT_GT(moved, 1e-3);
+}
+
 }  // namespace
 }  // namespace voxlight::iso
