@@ -10,6 +10,7 @@
 #include <CGAL/Polygon_mesh_processing/repair_degeneracies.h>
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
 #include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 
@@ -144,7 +145,9 @@ CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Prog
     if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {
         progress.report("mesh clean-up: decimation", 0.0);
         SMS::Count_stop_predicate<SurfaceMesh> stop(3 * options.targetFaces / 2);
-        SMS::edge_collapse(sm, stop);
+        // Refuse collapses that would turn a face over (a source of self-intersections).
+        SMS::edge_collapse(sm, stop,
+                           CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>()));
         sm.collect_garbage();
         st.verticesMoved = true;
     }

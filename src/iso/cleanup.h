@@ -16,7 +16,8 @@
 //                                     vertices stay put. Written here on CGAL's mesh: CGAL's own
 //                                     smooth_shape (mean curvature flow) rippled and thinned the
 //                                     torso's ribs (area −26 % after 3 steps) and cost 10 s there.
-//   5. decimation                     SMS::edge_collapse with Lindstrom–Turk cost and placement,
+//   5. decimation                     SMS::edge_collapse with Lindstrom–Turk cost and placement
+//                                     and a Bounded_normal_change_filter (no face turned over),
 //                                     stopping at about `targetFaces` faces (CGAL 5.5 stops on an
 //                                     edge count: 1.5 × targetFaces, exact for closed meshes).
 // Vertex colours and normals follow their vertex (a collapsed edge keeps one end's). Normals of
