@@ -52,5 +52,6 @@ Command addInfoCommand(CLI::App& app);
 Command addPhantomCommand(CLI::App& app);
 Command addSceneCommand(CLI::App& app);
 Command addRenderCommand(CLI::App& app);
+Command addIsoCommand(CLI::App& app);
 
 }  // namespace voxlight::app

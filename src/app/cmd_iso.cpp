@@ -1,0 +1,227 @@
+// SPDX-License-Identifier: MIT
+// voxlight iso SCENE.json|VOLUME -o MESH.(ply|obj|glb) [--isovalue V] [--stats STATS.json]
+//              [--set key=value]... [--remove-degenerate] [--keep-largest K]
+//              [--min-component-faces N] [--smooth N] [--decimate FACES]
+//              [--no-self-intersections] [-q]
+// Extracts the scene's isosurface as a mesh (iso/: VTK flying edges → OpenMesh, world mm, outward
+// gradient normals), cuts it by the scene's clip planes and crop box (open cut), optionally cleans
+// it up (CGAL), reports it and writes it with vertex colours.
+//
+// The isovalue, first found wins: --isovalue; the scene's method.params.iso_value (the `iso`
+// render method's parameter, so that `voxlight render` of the same scene shows the same surface);
+// the transfer function's surface value (where its extinction reaches a tenth of its maximum,
+// optics::TransferFunction::surfaceValue — what the `iso` render method uses by default). The
+// vertex colour is the transfer function's albedo at the isovalue.
+//
+// Bad input exits 2 with one line and writes nothing: an isovalue outside the data range (the
+// line names the range), a flat volume (no isosurface exists), clip planes / crop box that remove
+// the whole surface, an output path that cannot be written or whose extension is not .ply, .obj or
+// .glb.
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+#include <sstream>
+
+#include "app/cli_support.h"
+#include "app/output_files.h"
+#include "core/half_space.h"
+#include "core/timing.h"
+#include "io/scene.h"
+#include "iso/cleanup.h"
+#include "iso/export.h"
+#include "iso/extract.h"
+#include "pipeline/pipeline.h"
+#include "pipeline/scene_inputs.h"
+
+namespace voxlight::app {
+
+namespace {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+json stage(const std::string& name, bool ran, const std::string& reason, double seconds) {
+    return {{"name", name}, {"ran", ran}, {"reason", reason}, {"seconds", seconds}};
+}
+
+json reportJson(const iso::MeshReport& r) {
+    return {{"vertices", r.vertices},
+            {"faces", r.faces},
+            {"components", r.components},
+            {"boundary_edges", r.boundaryEdges},
+            {"non_manifold_vertices", r.nonManifoldVertices},
+            {"self_intersections", r.selfIntersections < 0 ? json() : json(r.selfIntersections)},
+            {"closed", r.closed},
+            {"area_mm2", r.areaMm2},
+            {"volume_mm3", r.closed ? json(r.volumeMm3) : json()}};
+}
+
+}  // namespace
+
+Command addIsoCommand(CLI::App& app) {
+    Command c;
+    c.sub = app.add_subcommand("iso", "Extract the scene's isosurface as a mesh (PLY, OBJ, glTF)");
+    auto scene = std::make_shared<std::string>();
+    auto out = std::make_shared<std::string>();
+    auto stats = std::make_shared<std::string>();
+    auto sets = std::make_shared<std::vector<std::string>>();
+    auto isovalue = std::make_shared<double>(0.0);
+    auto cleanup = std::make_shared<iso::CleanupOptions>();
+    auto noSelfIntersections = std::make_shared<bool>(false);
+    auto quiet = std::make_shared<bool>(false);
+    c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
+    c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
+    CLI::Option* isoOption =
+        c.sub->add_option("--isovalue", *isovalue,
+                          "Isovalue in physical units (HU for CT); default: the scene's "
+                          "method.params.iso_value, else the transfer function's surface value");
+    c.sub->add_option("--stats", *stats, "Write stages, timings and the mesh report as JSON");
+    c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set crop_box.min=[0,0,0]")
+        ->allow_extra_args(false);
+    c.sub->add_flag("--remove-degenerate", cleanup->removeDegenerate,
+                    "Remove degenerate (zero-area) faces");
+    c.sub
+        ->add_option("--keep-largest", cleanup->keepLargest,
+                     "Keep only the K largest connected components")
+        ->check(CLI::Range(1, 1 << 30));
+    c.sub->add_option("--min-component-faces", cleanup->minComponentFaces,
+                      "Drop connected components with fewer faces");
+    c.sub
+        ->add_option("--smooth", cleanup->smoothIterations,
+                     "Smooth with N iterations of Taubin lambda|mu smoothing (does not shrink)")
+        ->check(CLI::Range(0, 1000));
+    c.sub
+        ->add_option("--decimate", cleanup->targetFaces,
+                     "Decimate (edge collapse) to about this many faces")
+        ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40));
+    c.sub->add_flag("--no-self-intersections", *noSelfIntersections,
+                    "Skip the self-intersection count of the report (its costly part)");
+    c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
+    c.run = [=] {
+        core::Stopwatch total;
+        checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}});
+        const io::Scene s = loadInput(*scene, *sets);
+        pipeline::Session().plan(s);  // the scene is valid as `render` reads it
+        const core::Progress progress = terminalProgress(*quiet);
+        json stages = json::array();
+
+        core::Stopwatch sw;
+        const core::Volume volume = pipeline::loadSceneVolume(s, progress);
+        for (const auto& w : volume.warnings)
+            std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
+        stages.push_back(stage("volume", true, "loaded: " + volume.description, sw.seconds()));
+        const optics::TransferFunction tf = pipeline::buildTransferFunction(s, volume);
+
+        // The isovalue and who gave it (errors about it name that place).
+        iso::ExtractOptions options;
+        std::string isoSource = "command line", isoField = "--isovalue";
+        if (isoOption->count() > 0) {
+            options.isovalue = *isovalue;
+        } else if (s.method.name == "iso" && s.method.params.contains("iso_value")) {
+            options.isovalue = s.method.params["iso_value"].get<double>();
+            isoSource = s.source, isoField = "method.params.iso_value";
+        } else {
+            options.isovalue = tf.surfaceValue();
+            isoSource = s.source, isoField = "transfer_function";
+        }
+        options.color = tf.eval(float(options.isovalue)).albedo;
+        for (const auto& p : s.clipPlanes)
+            options.keep.push_back({p.point, glm::normalize(p.normal)});
+        if (s.cropBox)
+            for (const auto& h : core::boxHalfSpaces(s.cropBox->min, s.cropBox->max))
+                options.keep.push_back(h);
+
+        sw.restart();
+        iso::Extraction ex;
+        try {
+            ex = iso::extractIsosurface(volume, options, progress);
+        } catch (const InputError& e) {
+            if (e.source() != "isosurface" || (e.field() != "volume" && e.field() != "isovalue"))
+                throw;
+            if (e.field() == "volume") throw InputError(s.source, "volume", e.problem(), e.fix());
+            const std::string fix = isoField == "transfer_function"
+                                        ? e.fix() +
+                                              " with --isovalue (the transfer function's "
+                                              "surface value is not inside the data)"
+                                        : e.fix();
+            throw InputError(isoSource, isoField, e.problem(), fix);
+        }
+        const iso::ExtractStats& es = ex.stats;
+        stages.push_back(stage(
+            "extract", true,
+            "computed: flying edges " + std::to_string(es.flyingEdgesTriangles) + " triangles",
+            sw.seconds()));
+        if (ex.mesh.n_faces() == 0)
+            throw InputError(s.source, s.cropBox ? "crop_box" : "clip_planes",
+                             "the clip planes and crop box remove the whole isosurface (" +
+                                 std::to_string(es.flyingEdgesTriangles) + " triangles)",
+                             "move them so that part of the surface is kept");
+
+        sw.restart();
+        const iso::CleanupStats cs = iso::cleanUp(ex.mesh, *cleanup, progress);
+        if (cs.verticesMoved) iso::setGradientNormals(ex.mesh, volume);
+        stages.push_back(stage("cleanup", cleanup->any(),
+                               cleanup->any() ? "computed: " + std::to_string(cs.facesBefore) +
+                                                    " → " + std::to_string(cs.facesAfter) + " faces"
+                                              : "not needed: no clean-up option given",
+                               sw.seconds()));
+        if (ex.mesh.n_faces() == 0)
+            throw InputError("command line", "--min-component-faces",
+                             "the clean-up removed every face", "lower the minimum");
+
+        sw.restart();
+        const iso::MeshReport report = iso::reportMesh(ex.mesh, !*noSelfIntersections, progress);
+        stages.push_back(stage("report", true, "computed", sw.seconds()));
+
+        sw.restart();
+        throwIfCancelled();
+        OutputFiles files;
+        const iso::ExportInfo info{volume.description, options.isovalue, volume.mapping.unit};
+        files.write(*out, "--output", [&](const fs::path& p) {
+            iso::writeMesh(ex.mesh, p, *iso::meshFormatFor(*out), info);
+        });
+        stages.push_back(stage("write_mesh", true, "computed: " + *out, sw.seconds()));
+        if (!stats->empty()) {
+            json j = {{"stages", stages},
+                      {"total_seconds", total.seconds()},
+                      {"peak_rss_mb", core::peakRssMiB()},
+                      {"isosurface",
+                       {{"isovalue", es.isovalue},
+                        {"isovalue_source", isoField},
+                        {"stored_isovalue", es.storedIsovalue},
+                        {"integer_isovalue_nudged", es.nudged},
+                        {"data_range", es.range},
+                        {"flying_edges_triangles", es.flyingEdgesTriangles},
+                        {"clipped_triangles", es.clippedTriangles},
+                        {"faces_refused_non_manifold", es.rejectedFaces},
+                        {"cleanup",
+                         {{"degenerate_faces_removed", cs.degenerateFacesRemoved},
+                          {"components_removed", cs.componentsRemoved},
+                          {"faces_before", cs.facesBefore},
+                          {"faces_after", cs.facesAfter}}},
+                        {"report", reportJson(report)},
+                        {"units", "mm"},
+                        {"frame", "LPS"}}},
+                      {"scene", s.document}};
+            const std::string text = j.dump(2, ' ', false, json::error_handler_t::replace);
+            files.write(*stats, "--stats", [&](const fs::path& p) { writeTextFile(p, text); });
+        }
+        throwIfCancelled();
+        files.commit();
+        if (es.rejectedFaces)
+            std::fprintf(stderr,
+                         "voxlight: warning: %zu triangle(s) left out: they would have made an "
+                         "edge non-manifold\n",
+                         es.rejectedFaces);
+        if (!*quiet) {
+            std::ostringstream line;
+            line << "isosurface at " << es.isovalue << (volume.mapping.unit.empty() ? "" : " ")
+                 << volume.mapping.unit << " (" << isoField << "): " << report;
+            std::fprintf(stderr, "%s\nwrote %s (total %.2f s)\n", line.str().c_str(), out->c_str(),
+                         total.seconds());
+        }
+        return kExitOk;
+    };
+    return c;
+}
+
+}  // namespace voxlight::app

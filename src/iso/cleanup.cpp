@@ -1,0 +1,205 @@
+// SPDX-License-Identifier: MIT
+// CGAL's side of iso/: clean-up and report (cleanup.h). The mesh crosses into a CGAL::Surface_mesh
+// and back; vertex colours and normals travel as Surface_mesh properties.
+#include "iso/cleanup.h"
+
+#include <CGAL/Exact_predicates_inexact_constructions_kernel.h>
+#include <CGAL/Polygon_mesh_processing/connected_components.h>
+#include <CGAL/Polygon_mesh_processing/manifoldness.h>
+#include <CGAL/Polygon_mesh_processing/measure.h>
+#include <CGAL/Polygon_mesh_processing/repair_degeneracies.h>
+#include <CGAL/Polygon_mesh_processing/self_intersections.h>
+#include <CGAL/Surface_mesh.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
+#include <CGAL/Surface_mesh_simplification/edge_collapse.h>
+
+#include <array>
+#include <cmath>
+#include <ostream>
+#include <vector>
+
+#include "core/timing.h"
+
+namespace voxlight::iso {
+
+namespace {
+using Kernel = CGAL::Exact_predicates_inexact_constructions_kernel;
+using SurfaceMesh = CGAL::Surface_mesh<Kernel::Point_3>;
+using Color = std::array<float, 3>;
+using Normal = std::array<double, 3>;
+namespace PMP = CGAL::Polygon_mesh_processing;
+namespace SMS = CGAL::Surface_mesh_simplification;
+
+SurfaceMesh toCgal(const Mesh& mesh) {
+    SurfaceMesh sm;
+    sm.reserve(SurfaceMesh::size_type(mesh.n_vertices()), SurfaceMesh::size_type(mesh.n_edges()),
+               SurfaceMesh::size_type(mesh.n_faces()));
+    auto color = sm.add_property_map<SurfaceMesh::Vertex_index, Color>("v:voxlight_color").first;
+    auto normal = sm.add_property_map<SurfaceMesh::Vertex_index, Normal>("v:voxlight_normal").first;
+    std::vector<SurfaceMesh::Vertex_index> vi(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) {
+        const Mesh::Point& p = mesh.point(v);
+        vi[v.idx()] = sm.add_vertex(Kernel::Point_3(p[0], p[1], p[2]));
+        const Mesh::Color& c = mesh.color(v);
+        color[vi[v.idx()]] = {c[0], c[1], c[2]};
+        const Mesh::Normal& n = mesh.normal(v);
+        normal[vi[v.idx()]] = {n[0], n[1], n[2]};
+    }
+    for (const auto f : mesh.faces()) {
+        std::array<SurfaceMesh::Vertex_index, 3> t;
+        int k = 0;
+        for (const auto v : mesh.fv_range(f)) t[k++] = vi[v.idx()];
+        // Both are half-edge meshes: a face OpenMesh accepted, Surface_mesh accepts.
+        VL_CHECK(sm.add_face(t[0], t[1], t[2]) != SurfaceMesh::null_face());
+    }
+    return sm;
+}
+
+/// Back to OpenMesh, dropping vertices no face uses any more.
+Mesh fromCgal(const SurfaceMesh& sm) {
+    Mesh mesh;
+    const auto color = sm.property_map<SurfaceMesh::Vertex_index, Color>("v:voxlight_color").first;
+    const auto normal =
+        sm.property_map<SurfaceMesh::Vertex_index, Normal>("v:voxlight_normal").first;
+    mesh.reserve(sm.number_of_vertices(), sm.number_of_edges(), sm.number_of_faces());
+    std::vector<Mesh::VertexHandle> vh(sm.num_vertices());
+    for (const auto v : sm.vertices()) {
+        if (sm.is_isolated(v)) continue;
+        const auto& p = sm.point(v);
+        vh[v.idx()] = mesh.add_vertex(Mesh::Point(p.x(), p.y(), p.z()));
+        const Color& c = color[v];
+        mesh.set_color(vh[v.idx()], Mesh::Color(c[0], c[1], c[2]));
+        const Normal& n = normal[v];
+        mesh.set_normal(vh[v.idx()], Mesh::Normal(n[0], n[1], n[2]));
+    }
+    omerr().disable();
+    for (const auto f : sm.faces()) {
+        std::array<Mesh::VertexHandle, 3> t;
+        int k = 0;
+        for (const auto v : CGAL::vertices_around_face(sm.halfedge(f), sm)) t[k++] = vh[v.idx()];
+        mesh.add_face(t[0], t[1], t[2]);
+    }
+    omerr().enable();
+    return mesh;
+}
+
+/// Taubin λ|μ smoothing (cleanup.h): each iteration moves every interior vertex by λ, then by μ,
+/// times (mean of its neighbours − itself). Boundary vertices (open cuts, the volume's faces) stay.
+void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progress) {
+    std::vector<Kernel::Point_3> next(sm.num_vertices());
+    for (int it = 0; it < iterations; ++it) {
+        progress.report("mesh clean-up: smoothing", double(it) / double(iterations));
+        for (const double f : {kTaubinLambda, kTaubinMu}) {
+            for (const auto v : sm.vertices()) {
+                const Kernel::Point_3& p = sm.point(v);
+                next[v.idx()] = p;
+                if (sm.is_isolated(v) || sm.is_border(v, false)) continue;
+                double sx = 0, sy = 0, sz = 0;
+                int n = 0;
+                for (const auto w : CGAL::vertices_around_target(sm.halfedge(v), sm)) {
+                    const Kernel::Point_3& q = sm.point(w);
+                    sx += q.x(), sy += q.y(), sz += q.z();
+                    ++n;
+                }
+                next[v.idx()] =
+                    Kernel::Point_3(p.x() + f * (sx / n - p.x()), p.y() + f * (sy / n - p.y()),
+                                    p.z() + f * (sz / n - p.z()));
+            }
+            for (const auto v : sm.vertices()) sm.point(v) = next[v.idx()];
+        }
+    }
+}
+
+}  // namespace
+
+CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Progress& progress) {
+    CleanupStats st;
+    st.facesBefore = st.facesAfter = mesh.n_faces();
+    if (!options.any()) return st;
+    core::Stopwatch sw;
+    SurfaceMesh sm = toCgal(mesh);
+    if (options.removeDegenerate) {
+        progress.report("mesh clean-up: degenerate faces", 0.0);
+        const std::size_t before = sm.number_of_faces();
+        PMP::remove_degenerate_faces(sm);
+        sm.collect_garbage();
+        st.degenerateFacesRemoved = before - sm.number_of_faces();
+    }
+    if (options.keepLargest > 0) {
+        progress.report("mesh clean-up: components", 0.0);
+        st.componentsRemoved +=
+            PMP::keep_largest_connected_components(sm, std::size_t(options.keepLargest));
+        sm.collect_garbage();
+    }
+    if (options.minComponentFaces > 0) {
+        progress.report("mesh clean-up: components", 0.5);
+        st.componentsRemoved += PMP::keep_large_connected_components(sm, options.minComponentFaces);
+        sm.collect_garbage();
+    }
+    if (options.smoothIterations > 0 && sm.number_of_faces() > 0) {
+        progress.report("mesh clean-up: smoothing", 0.0);
+        taubinSmooth(sm, options.smoothIterations, progress);
+        st.verticesMoved = true;
+    }
+    if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {
+        progress.report("mesh clean-up: decimation", 0.0);
+        SMS::Count_stop_predicate<SurfaceMesh> stop(3 * options.targetFaces / 2);
+        // Refuse collapses that would turn a face over (a source of self-intersections).
+        SMS::edge_collapse(sm, stop,
+                           CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>()));
+        sm.collect_garbage();
+        st.verticesMoved = true;
+    }
+    progress.checkCancel();
+    mesh = fromCgal(sm);
+    st.facesAfter = mesh.n_faces();
+    st.seconds = sw.seconds();
+    progress.report("mesh clean-up", 1.0);
+    return st;
+}
+
+MeshReport reportMesh(const Mesh& mesh, bool checkSelfIntersections,
+                      const core::Progress& progress) {
+    core::Stopwatch sw;
+    MeshReport r;
+    r.vertices = mesh.n_vertices();
+    r.faces = mesh.n_faces();
+    for (const auto e : mesh.edges())
+        if (mesh.is_boundary(e)) ++r.boundaryEdges;
+    r.closed = r.boundaryEdges == 0;
+    if (r.faces == 0) return r;
+    progress.report("mesh report", 0.0);
+    SurfaceMesh sm = toCgal(mesh);
+    auto component = sm.add_property_map<SurfaceMesh::Face_index, std::size_t>("f:cc").first;
+    r.components = PMP::connected_components(sm, component);
+    std::vector<SurfaceMesh::Halfedge_index> pinched;
+    PMP::non_manifold_vertices(sm, std::back_inserter(pinched));
+    r.nonManifoldVertices = pinched.size();
+    r.areaMm2 = CGAL::to_double(PMP::area(sm));
+    if (r.closed) r.volumeMm3 = CGAL::to_double(PMP::volume(sm));
+    if (checkSelfIntersections) {
+        progress.report("mesh report: self-intersections", 0.5);
+        std::vector<std::pair<SurfaceMesh::Face_index, SurfaceMesh::Face_index>> pairs;
+        PMP::self_intersections(sm, std::back_inserter(pairs));
+        r.selfIntersections = static_cast<long long>(pairs.size());
+    }
+    r.seconds = sw.seconds();
+    progress.report("mesh report", 1.0);
+    return r;
+}
+
+std::ostream& operator<<(std::ostream& os, const MeshReport& r) {
+    os << r.vertices << " vertices, " << r.faces << " faces, " << r.components << " component(s), "
+       << r.boundaryEdges << " boundary edges, " << r.nonManifoldVertices
+       << " non-manifold vertices, self-intersections ";
+    if (r.selfIntersections < 0)
+        os << "not checked";
+    else
+        os << r.selfIntersections;
+    os << ", area " << r.areaMm2 << " mm2";
+    if (r.closed) os << ", volume " << r.volumeMm3 << " mm3";
+    return os;
+}
+
+}  // namespace voxlight::iso

@@ -1,0 +1,299 @@
+// SPDX-License-Identifier: MIT
+#include "iso/extract.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+
+#include <cmath>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+
+#include "core/timing.h"
+#include "io/module_loader.h"
+#include "iso/flying_edges_module.h"
+
+namespace voxlight::iso {
+
+namespace {
+
+const fe_module::Api& feModule() {
+    static std::once_flag once;
+    static io::detail::LoadedModule loaded;
+    std::call_once(once, [] {
+        loaded = io::detail::loadModule(fe_module::kFileName, fe_module::kEntryPoint,
+                                        fe_module::kAbiVersion);
+    });
+    if (!loaded.api)
+        throw InputError("isosurface", "iso module",
+                         "isosurface extraction (VTK) is unavailable: " + loaded.error,
+                         std::string("put ") + fe_module::kFileName +
+                             " (built with voxlight) beside the voxlight executable");
+    return *static_cast<const fe_module::Api*>(loaded.api);
+}
+
+std::string number(double v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return b;
+}
+
+bool isIntegerType(core::VoxelType t) { return t != core::VoxelType::Float32; }
+
+/// Central-difference gradient of stored values at voxel (i,j,k), per index step (one-sided at the
+/// border, zero along an axis of size 1).
+template <class View>
+glm::vec3 voxelGradient(const View& v, int i, int j, int k) {
+    auto diff = [&](int n, int c, auto at) -> float {
+        if (n < 2) return 0.f;
+        const int lo = std::max(c - 1, 0), hi = std::min(c + 1, n - 1);
+        return (at(hi) - at(lo)) / float(hi - lo);
+    };
+    return {diff(v.nx, i, [&](int x) { return v.stored(x, j, k); }),
+            diff(v.ny, j, [&](int y) { return v.stored(i, y, k); }),
+            diff(v.nz, k, [&](int z) { return v.stored(i, j, z); })};
+}
+
+/// Trilinear interpolation of voxelGradient at continuous index p (clamped to the grid).
+template <class View>
+glm::vec3 gradientAt(const View& v, glm::dvec3 p) {
+    const glm::ivec3 n(v.nx, v.ny, v.nz);
+    glm::ivec3 i0;
+    glm::vec3 f;
+    for (int a = 0; a < 3; ++a) {
+        const double x = std::clamp(p[a], 0.0, double(n[a] - 1));
+        i0[a] = std::min(int(x), std::max(n[a] - 2, 0));
+        f[a] = float(x - i0[a]);
+    }
+    const glm::ivec3 i1 = glm::min(i0 + 1, n - 1);
+    glm::vec3 g(0.f);
+    for (int c = 0; c < 8; ++c) {
+        const int x = c & 1 ? i1.x : i0.x, y = c & 2 ? i1.y : i0.y, z = c & 4 ? i1.z : i0.z;
+        const float w = (c & 1 ? f.x : 1 - f.x) * (c & 2 ? f.y : 1 - f.y) * (c & 4 ? f.z : 1 - f.z);
+        if (w != 0.f) g += w * voxelGradient(v, x, y, z);
+    }
+    return g;
+}
+
+/// Outward unit normals (−∇ of physical values, world mm) at world points; zero where ∇ = 0.
+std::vector<glm::vec3> gradientNormals(const std::vector<glm::dvec3>& points,
+                                       const core::Volume& volume) {
+    const core::Geometry& geo = volume.geometry();
+    // d(physical)/d(world) = slope · D · diag(1/spacing) · d(stored)/d(index).
+    const glm::dmat3 toWorld =
+        volume.mapping.slope * geo.direction *
+        glm::dmat3(glm::dvec3(1.0 / geo.spacing.x, 0, 0), glm::dvec3(0, 1.0 / geo.spacing.y, 0),
+                   glm::dvec3(0, 0, 1.0 / geo.spacing.z));
+    std::vector<glm::vec3> normals(points.size());
+    volume.visit([&](const auto& view) {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, points.size(), 4096),
+                          [&](const tbb::blocked_range<std::size_t>& r) {
+                              for (std::size_t i = r.begin(); i != r.end(); ++i) {
+                                  const glm::dvec3 g =
+                                      toWorld *
+                                      glm::dvec3(gradientAt(view, geo.worldToIndex(points[i])));
+                                  const double len = glm::length(g);
+                                  normals[i] = len > 0 ? glm::vec3(-g / len) : glm::vec3(0.f);
+                              }
+                          });
+        return 0;
+    });
+    return normals;
+}
+
+/// Sets vertex v's normal to normals[v]; where that is zero (the gradient vanished: a plateau exactly
+/// at the isovalue), to the mesh's own area-weighted normal instead.
+void applyNormals(Mesh& mesh, const std::vector<glm::vec3>& normals) {
+    bool anyZero = false;
+    for (const auto v : mesh.vertices()) {
+        const glm::vec3& n = normals[v.idx()];
+        anyZero = anyZero || n == glm::vec3(0.f);
+        mesh.set_normal(v, Mesh::Normal(n.x, n.y, n.z));
+    }
+    if (!anyZero) return;
+    mesh.request_face_normals();
+    mesh.update_face_normals();
+    for (const auto v : mesh.vertices())
+        if (normals[v.idx()] == glm::vec3(0.f)) {
+            const Mesh::Normal n = mesh.calc_vertex_normal(v);
+            const double len = n.norm();
+            mesh.set_normal(v, len > 0 ? n / len : n);
+        }
+    mesh.release_face_normals();
+}
+
+/// An indexed triangle list in world mm.
+struct Soup {
+    std::vector<glm::dvec3> points;
+    std::vector<std::uint32_t> triangles;
+};
+
+/// Cuts `soup` by one half-space, keeping dot(x − p, n) ≥ 0 (header comment: open cut).
+void clipSoup(Soup& soup, const core::HalfSpace& h) {
+    const std::size_t np = soup.points.size();
+    std::vector<double> d(np);
+    for (std::size_t i = 0; i < np; ++i) d[i] = h.distance(soup.points[i]);
+    // The point where edge (a in, b out) crosses the plane, made once per edge.
+    std::unordered_map<std::uint64_t, std::uint32_t> cuts;
+    auto cut = [&](std::uint32_t a, std::uint32_t b) -> std::uint32_t {
+        if (d[a] == 0.0) return a;  // a lies on the plane: no new point, no sliver
+        const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
+        const auto [it, fresh] = cuts.try_emplace(key, std::uint32_t(soup.points.size()));
+        if (fresh) {
+            const double t = d[a] / (d[a] - d[b]);
+            soup.points.push_back(soup.points[a] + t * (soup.points[b] - soup.points[a]));
+        }
+        return it->second;
+    };
+    std::vector<std::uint32_t> out;
+    out.reserve(soup.triangles.size());
+    auto emit = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
+        if (a == b || b == c || c == a) return;
+        out.insert(out.end(), {a, b, c});
+    };
+    for (std::size_t t = 0; t < soup.triangles.size(); t += 3) {
+        const std::uint32_t v[3] = {soup.triangles[t], soup.triangles[t + 1],
+                                    soup.triangles[t + 2]};
+        const bool in[3] = {d[v[0]] >= 0, d[v[1]] >= 0, d[v[2]] >= 0};
+        const int count = int(in[0]) + int(in[1]) + int(in[2]);
+        if (count == 3) {
+            out.insert(out.end(), v, v + 3);
+            continue;
+        }
+        if (count == 0) continue;
+        // Rotate so that v[0] is the odd one out (the lone inside or the lone outside vertex),
+        // keeping the winding.
+        int r = 0;
+        for (int k = 0; k < 3; ++k)
+            if (in[k] == (count == 1)) r = k;
+        const std::uint32_t a = v[r], b = v[(r + 1) % 3], c = v[(r + 2) % 3];
+        if (count == 1) {
+            emit(a, cut(a, b), cut(a, c));
+        } else {
+            const std::uint32_t ab = cut(b, a), ac = cut(c, a);
+            emit(ab, b, c);
+            emit(ab, c, ac);
+        }
+    }
+    soup.triangles = std::move(out);
+    // Drop the points no triangle uses any more.
+    std::vector<std::uint32_t> remap(soup.points.size(), UINT32_MAX);
+    std::vector<glm::dvec3> kept;
+    for (auto& i : soup.triangles) {
+        if (remap[i] == UINT32_MAX) {
+            remap[i] = std::uint32_t(kept.size());
+            kept.push_back(soup.points[i]);
+        }
+        i = remap[i];
+    }
+    soup.points = std::move(kept);
+}
+
+}  // namespace
+
+Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& options,
+                             const core::Progress& progress) {
+    Extraction result;
+    ExtractStats& st = result.stats;
+    st.isovalue = options.isovalue;
+    st.range = volume.physicalRange();
+    const auto [lo, hi] = st.range;
+    if (!(lo < hi))
+        throw InputError(
+            "isosurface", "volume",
+            "the volume is flat (every voxel is " + number(lo) + "): it has no isosurface",
+            "use a volume whose values vary");
+    if (!(options.isovalue > lo && options.isovalue < hi))
+        throw InputError(
+            "isosurface", "isovalue",
+            number(options.isovalue) + " is outside the data range [" + number(lo) + ", " +
+                number(hi) + "]",
+            "choose an isovalue strictly between " + number(lo) + " and " + number(hi));
+
+    // Physical → stored, with the integer rule of the header comment.
+    const double slope = volume.mapping.slope;
+    double stored = (options.isovalue - volume.mapping.intercept) / slope;
+    if (isIntegerType(volume.type()) &&
+        std::abs(stored - std::round(stored)) <= 1e-9 * std::max(1.0, std::abs(stored))) {
+        stored = std::round(stored) - (slope > 0 ? kIntegerIsoNudge : -kIntegerIsoNudge);
+        st.nudged = true;
+    }
+    st.storedIsovalue = stored;
+
+    // Flying edges, index space → world mm.
+    core::Stopwatch sw;
+    fe_module::Soup fe = feModule().flyingEdges(volume, stored, progress);
+    st.flyingEdgesSeconds = sw.seconds();
+    st.flyingEdgesTriangles = fe.triangles.size() / 3;
+    sw.restart();
+    Soup soup;
+    soup.points.resize(fe.points.size() / 3);
+    const core::Geometry& geo = volume.geometry();
+    for (std::size_t i = 0; i < soup.points.size(); ++i)
+        soup.points[i] =
+            geo.indexToWorld({fe.points[3 * i], fe.points[3 * i + 1], fe.points[3 * i + 2]});
+    soup.triangles = std::move(fe.triangles);
+    fe.points = {};
+    for (const core::HalfSpace& h : options.keep) {
+        progress.checkCancel();
+        clipSoup(soup, h);
+    }
+    st.clippedTriangles = soup.triangles.size() / 3;
+    st.clipSeconds = sw.seconds();
+
+    // Normals, and the winding that agrees with them (VTK's winding is flipped by a mirroring
+    // direction matrix or a negative slope; a whole-mesh vote decides).
+    sw.restart();
+    progress.report("isosurface normals", 0.0);
+    const std::vector<glm::vec3> normals = gradientNormals(soup.points, volume);
+    double agree = 0.0;
+    for (std::size_t t = 0; t < soup.triangles.size(); t += 3) {
+        const glm::dvec3& a = soup.points[soup.triangles[t]];
+        const glm::dvec3 n = glm::cross(soup.points[soup.triangles[t + 1]] - a,
+                                        soup.points[soup.triangles[t + 2]] - a);
+        const glm::vec3 g = normals[soup.triangles[t]] + normals[soup.triangles[t + 1]] +
+                            normals[soup.triangles[t + 2]];
+        agree += glm::dot(n, glm::dvec3(g));
+    }
+    st.flipped = agree < 0.0;
+    st.normalsSeconds = sw.seconds();
+
+    // OpenMesh half-edge mesh.
+    sw.restart();
+    progress.report("isosurface mesh", 0.0);
+    Mesh& mesh = result.mesh;
+    const std::size_t nf = soup.triangles.size() / 3;
+    mesh.reserve(soup.points.size(), nf * 3 / 2 + 16, nf);
+    std::vector<Mesh::VertexHandle> vh(soup.points.size());
+    const Mesh::Color color(options.color.r, options.color.g, options.color.b);
+    for (std::size_t i = 0; i < soup.points.size(); ++i) {
+        const glm::dvec3& p = soup.points[i];
+        vh[i] = mesh.add_vertex(Mesh::Point(p.x, p.y, p.z));
+        mesh.set_color(vh[i], color);
+    }
+    // OpenMesh reports every refused face on its error stream; they are counted instead.
+    omerr().disable();
+    for (std::size_t t = 0; t < nf; ++t) {
+        if ((t & 0xFFFF) == 0) progress.report("isosurface mesh", double(t) / double(nf));
+        const std::uint32_t* f = &soup.triangles[3 * t];
+        const Mesh::FaceHandle h = st.flipped ? mesh.add_face(vh[f[0]], vh[f[2]], vh[f[1]])
+                                              : mesh.add_face(vh[f[0]], vh[f[1]], vh[f[2]]);
+        if (!h.is_valid()) ++st.rejectedFaces;
+    }
+    omerr().enable();
+    applyNormals(mesh, normals);
+    st.meshSeconds = sw.seconds();
+    progress.report("isosurface mesh", 1.0);
+    return result;
+}
+
+void setGradientNormals(Mesh& mesh, const core::Volume& volume) {
+    std::vector<glm::dvec3> points(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) {
+        const Mesh::Point& p = mesh.point(v);
+        points[v.idx()] = {p[0], p[1], p[2]};
+    }
+    applyNormals(mesh, gradientNormals(points, volume));
+}
+
+}  // namespace voxlight::iso

@@ -1,0 +1,85 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Isosurface extraction: vtkFlyingEdges3D (in a module, flying_edges_module.h) → optional open cut by
+// clip planes / crop box → OpenMesh triangle mesh in world mm (iso/mesh.h) with outward normals
+// from the volume gradient and a uniform vertex colour.
+//
+// Which side is inside: the surface separates voxels whose physical value is ≥ the isovalue
+// ("inside": bone above 300 HU) from those below. Normals point outward, toward lower values.
+//
+// Integer isovalues on integer data: when the isovalue is an integer in *stored* units (300 HU on
+// a CT stored as int16 with intercept −1024), voxels exactly at the isovalue put flying-edges
+// vertices exactly on grid points, giving zero-area triangles and, where several edges meet there,
+// coincident vertices (BUILD-NOTES). extract moves such an isovalue by kIntegerIsoNudge = ½ stored
+// unit toward the outside — to the half-integer between the isovalue and the next lower value —
+// so that voxels equal to the isovalue count as inside, as above. The surface moves by ½/g voxel
+// where the data rise by g stored units per voxel (0.5 mm at a 1 HU/mm ramp, 0.0005 mm at a bone
+// edge of 1000 HU/mm). Half-integer (and non-integer) isovalues are used as given.
+// A smaller nudge is not safe: 1/256 unit on a 1000-per-voxel edge leaves vertices 4e-6 voxel from
+// grid points, below float resolution at index ≈ 30 — zero-area triangles and, on the 256³ torso
+// at 300 HU, 98 self-intersecting face pairs (tests/iso IntegerIsovalueOnIntegerDataIsHandled).
+//
+// Clipping (open cut): the kept region is the intersection of the half-spaces dot(x − p, n) ≥ 0
+// (clip planes; crop-box faces via core::boxHalfSpaces). Triangles crossing a plane are cut along
+// it exactly (new vertices on the crossed edges, shared between neighbours, so the cut surface
+// stays 2-manifold with a boundary along the cut); nothing caps the hole.
+//
+// Cost: flying edges, then one pass per half-space, one parallel pass for normals, and OpenMesh's
+// half-edge construction (serial; bench/bench_iso.cpp compares the whole with flying edges alone).
+#include <array>
+#include <cstddef>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "core/half_space.h"
+#include "core/progress.h"
+#include "core/volume.h"
+#include "iso/mesh.h"
+
+namespace voxlight::iso {
+
+/// Stored units an integer isovalue on integer data is moved by (see header comment): half of the
+/// smallest data step, the largest distance from every stored value, so that interpolated vertices
+/// stay ≥ ½/(value range) of an edge away from grid points.
+inline constexpr double kIntegerIsoNudge = 0.5;
+
+struct ExtractOptions {
+    double isovalue = 0.0;              ///< physical units (HU for CT); strictly inside the range
+    std::vector<core::HalfSpace> keep;  ///< clip planes and crop faces; empty = no cut
+    glm::vec3 color{1.f};               ///< linear RGB of every vertex
+};
+
+struct ExtractStats {
+    double isovalue = 0.0;                  ///< physical, as asked
+    double storedIsovalue = 0.0;            ///< what flying edges was given (stored units)
+    bool nudged = false;                    ///< the integer rule above moved it
+    std::array<double, 2> range{0.0, 0.0};  ///< the volume's physical value range
+    std::size_t flyingEdgesTriangles = 0;   ///< before clipping
+    std::size_t clippedTriangles = 0;       ///< after clipping (= flying edges' without planes)
+    std::size_t rejectedFaces =
+        0;                 ///< triangles OpenMesh refused (would make an edge non-manifold)
+    bool flipped = false;  ///< faces were re-wound to agree with the outward normals
+    double flyingEdgesSeconds = 0, clipSeconds = 0, normalsSeconds = 0, meshSeconds = 0;
+};
+
+struct Extraction {
+    Mesh mesh;
+    ExtractStats stats;
+};
+
+/// Extracts the isosurface. Throws InputError (source "isosurface") with field "volume" when the
+/// volume is flat (min = max: there is no surface), with field "isovalue" when the isovalue is not
+/// strictly inside (min, max) — the message names the range; the caller maps the field to its own
+/// option or key.
+/// An empty mesh is returned only when clipping removed everything. Throws CancelledError through
+/// `progress`; InputError (field "iso module") when the VTK module cannot be loaded.
+Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& options,
+                             const core::Progress& progress = core::Progress::none());
+
+/// Sets every vertex normal to −∇s/|∇s| at the vertex (∇s: trilinear interpolation of the voxels'
+/// central-difference gradients, one-sided at the border, taken to world mm through spacing and
+/// direction). Where the gradient vanishes the normal is the mesh's own (area-weighted faces).
+/// Used by extraction and again after clean-up moved vertices.
+void setGradientNormals(Mesh& mesh, const core::Volume& volume);
+
+}  // namespace voxlight::iso

@@ -1,0 +1,46 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Analytic volumes for the iso/ tests: fields whose isosurfaces are known spheres.
+#include <cmath>
+#include <vector>
+
+#include "core/volume.h"
+#include "iso/extract.h"
+#include "iso/mesh.h"
+
+namespace voxlight::iso::test {
+
+struct Ball {
+    glm::dvec3 centre;
+    double radius;
+};
+
+/// Float volume whose value is max over balls of (radius − |x − centre|) (world mm): the isovalue-0
+/// surface is the union of the spheres; each value is the signed distance to the nearest sphere, so
+/// linear interpolation along grid edges places vertices within O(h²/R) of it.
+inline core::Volume ballsVolume(const core::Geometry& g, const std::vector<Ball>& balls) {
+    core::Volume v(g, core::VoxelType::Float32);
+    float* d = v.dataAs<float>();
+    for (int k = 0; k < g.dims.z; ++k)
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i) {
+                const glm::dvec3 p = g.indexToWorld({i, j, k});
+                double s = -1e30;
+                for (const Ball& b : balls) s = std::max(s, b.radius - glm::length(p - b.centre));
+                d[v.linearIndex(i, j, k)] = float(s);
+            }
+    v.description = "balls";
+    return v;
+}
+
+inline glm::dvec3 toGlm(const OpenMesh::Vec3d& p) { return {p[0], p[1], p[2]}; }
+
+/// Extraction at `isovalue` with vertex colour `color`, no clipping.
+inline ExtractOptions at(double isovalue, glm::vec3 color = glm::vec3(1.f)) {
+    ExtractOptions o;
+    o.isovalue = isovalue;
+    o.color = color;
+    return o;
+}
+
+}  // namespace voxlight::iso::test

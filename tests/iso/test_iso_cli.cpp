@@ -1,0 +1,138 @@
+// SPDX-License-Identifier: MIT
+// `voxlight iso` end to end: a mesh and stats are written; bad input exits 2 with one line and
+// leaves no file behind.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <fstream>
+#include <nlohmann/json.hpp>
+
+#include "io/volume_io.h"
+#include "support/test_support.h"
+
+namespace voxlight {
+namespace {
+namespace fs = std::filesystem;
+
+struct Result {
+    int code;
+    std::string err;
+};
+
+Result run(const std::string& args, const fs::path& dir) {
+    const fs::path errFile = dir / "stderr.txt";
+    const std::string cmd =
+        std::string(VOXLIGHT_BINARY) + " " + args + " >/dev/null 2>'" + errFile.string() + "'";
+    const int status = std::system(cmd.c_str());
+    std::ifstream ef(errFile);
+    std::string err((std::istreambuf_iterator<char>(ef)), {});
+    fs::remove(errFile);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, err};
+}
+
+std::size_t lineCount(const std::string& s) {
+    return std::size_t(std::count(s.begin(), s.end(), '\n'));
+}
+
+/// Nothing but the given names in `dir` (no temporaries left behind).
+void expectOnly(const fs::path& dir, std::vector<std::string> names) {
+    std::vector<std::string> found;
+    for (const auto& e : fs::directory_iterator(dir)) found.push_back(e.path().filename().string());
+    std::sort(found.begin(), found.end());
+    std::sort(names.begin(), names.end());
+    EXPECT_EQ(found, names);
+}
+
+fs::path writeScene(const test::TempDir& tmp, const std::string& body) {
+    const fs::path p = tmp / "scene.json";
+    std::ofstream(p) << body;
+    return p;
+}
+
+constexpr const char* kSphere = R"({"volume": {"phantom": "sphere", "size": 24})";
+
+TEST(IsoCli, WritesMeshAndStats) {
+    test::TempDir tmp;
+    const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
+    const Result r = run("iso -q '" + scene.string() + "' -o '" + (tmp / "m.glb").string() +
+                             "' --isovalue 0.5 --stats '" + (tmp / "st.json").string() + "'",
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    expectOnly(tmp.path(), {"scene.json", "m.glb", "st.json"});
+    std::ifstream in(tmp / "st.json");
+    const auto j = nlohmann::json::parse(in);
+    EXPECT_EQ(j["isosurface"]["isovalue"], 0.5);
+    EXPECT_EQ(j["isosurface"]["isovalue_source"], "--isovalue");
+    EXPECT_TRUE(j["isosurface"]["report"]["closed"].get<bool>());
+    EXPECT_EQ(j["isosurface"]["report"]["self_intersections"], 0);
+    EXPECT_EQ(j["isosurface"]["report"]["boundary_edges"], 0);
+}
+
+TEST(IsoCli, IsovalueComesFromTheSceneWhenNotGiven) {
+    test::TempDir tmp;
+    const fs::path scene =
+        writeScene(tmp, std::string(kSphere) +
+                            R"(, "method": {"name": "iso", "params": {"iso_value": 0.25}}})");
+    const Result r = run("iso -q '" + scene.string() + "' -o '" + (tmp / "m.ply").string() +
+                             "' --stats '" + (tmp / "st.json").string() + "'",
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    std::ifstream in(tmp / "st.json");
+    const auto j = nlohmann::json::parse(in);
+    EXPECT_EQ(j["isosurface"]["isovalue"], 0.25);
+    EXPECT_EQ(j["isosurface"]["isovalue_source"], "method.params.iso_value");
+}
+
+void expectBadInput(const test::TempDir& tmp, const std::string& args, const std::string& needle,
+                    const std::vector<std::string>& leftOver) {
+    const Result r = run(args, tmp.path());
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+    EXPECT_NE(r.err.find(needle), std::string::npos) << r.err;
+    expectOnly(tmp.path(), leftOver);
+}
+
+TEST(IsoCli, IsovalueOutsideTheDataRangeNamesTheRange) {
+    test::TempDir tmp;
+    const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
+    expectBadInput(
+        tmp, "iso -q '" + scene.string() + "' -o '" + (tmp / "m.ply").string() + "' --isovalue 7",
+        "--isovalue: 7 is outside the data range [0, 1]", {"scene.json"});
+}
+
+TEST(IsoCli, FlatVolumeHasNoIsosurface) {
+    test::TempDir tmp;
+    core::Geometry g;
+    g.dims = {8, 8, 8};
+    core::Volume flat(g, core::VoxelType::Int16);
+    io::writeVolume(flat, tmp / "flat.nii.gz");
+    expectBadInput(tmp,
+                   "iso -q '" + (tmp / "flat.nii.gz").string() + "' -o '" +
+                       (tmp / "m.ply").string() + "' --isovalue 0",
+                   "flat", {"flat.nii.gz"});
+}
+
+TEST(IsoCli, UnwritableOrUnknownOutputsAreRefusedBeforeTheWork) {
+    test::TempDir tmp;
+    const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
+    expectBadInput(tmp, "iso -q '" + scene.string() + "' -o '" + (tmp / "m.stl").string() + "'",
+                   ".ply, .obj, .glb", {"scene.json"});
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' -o '" + (tmp / "no" / "m.ply").string() + "'",
+                   "does not exist", {"scene.json"});
+}
+
+TEST(IsoCli, ClipPlanesThatRemoveEverythingAreAnError) {
+    test::TempDir tmp;
+    const fs::path scene =
+        writeScene(tmp, std::string(kSphere) +
+                            R"(, "clip_planes": [{"point": [1e4, 0, 0], "normal": [1, 0, 0]}]})");
+    expectBadInput(tmp, "iso -q '" + scene.string() + "' -o '" + (tmp / "m.obj").string() + "'",
+                   "remove the whole isosurface", {"scene.json"});
+}
+
+}  // namespace
+}  // namespace voxlight
