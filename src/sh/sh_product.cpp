@@ -32,8 +32,7 @@ ShProduct::ShProduct(int coefficients) : coefficients_(coefficients) {
                     g += rule.weights[q] * yq[i] * yq[j] * yq[k];
                 }
                 if (std::abs(g) > kTripleZero)
-                    terms_.push_back(
-                        {std::uint8_t(i), std::uint8_t(j), std::uint8_t(k), float(g)});
+                    terms_.push_back({std::uint8_t(i), std::uint8_t(j), std::uint8_t(k), float(g)});
             }
 }
 

@@ -32,7 +32,8 @@ TEST(ShProduct, MultiplyingByAConstantScalesAndTheMeanIsExact) {
         // The constant function 1 is (√(4π), 0, …): f ⊗ 1 = f.
         one[0] = float(std::sqrt(4.0 * std::numbers::pi));
         p.apply(a.data(), one.data(), out.data());
-        for (int i = 0; i < C; ++i) EXPECT_NEAR(out[std::size_t(i)], a[std::size_t(i)], kProductTol);
+        for (int i = 0; i < C; ++i)
+            EXPECT_NEAR(out[std::size_t(i)], a[std::size_t(i)], kProductTol);
         // Band 0 of a product is ∫ f g / √(4π) = Σ a_i b_i / √(4π) (orthonormality).
         std::vector<float> b(n);
         for (float& x : b) x = float(rng.uniformDouble() * 2.0 - 1.0);
@@ -64,10 +65,11 @@ TEST(ShProduct, EqualsTheProjectionOfThePointwiseProduct) {
             for (int i = 0; i < C; ++i) s += c[std::size_t(i)] * y[std::size_t(i)];
             return s;
         };
-        const auto expected =
-            projectFunction(band, rule, [&](const glm::dvec3& w) { return eval(a, w) * eval(b, w); });
+        const auto expected = projectFunction(
+            band, rule, [&](const glm::dvec3& w) { return eval(a, w) * eval(b, w); });
         p.apply(a.data(), b.data(), out.data());
         for (int i = 0; i < C; ++i)
-            EXPECT_NEAR(out[std::size_t(i)], expected[std::size_t(i)], kProductTol) << C << " " << i;
+            EXPECT_NEAR(out[std::size_t(i)], expected[std::size_t(i)], kProductTol)
+                << C << " " << i;
     }
 }
