@@ -541,11 +541,23 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
 }
 
 /// Spacing (absolute) and origin of a VTK image; direction left as identity for the caller to set.
-Geometry spacingAndOrigin(vtkImageData* img) {
+/// InputError (field `spacingField` / `originField`) on a zero or non-finite spacing or a
+/// non-finite origin: VTK takes them at face value (fuzz_vti: Spacing="1 0 1").
+Geometry spacingAndOrigin(vtkImageData* img, const fs::path& path, const char* spacingField,
+                          const char* originField) {
     Geometry g;
     double sp[3], org[3];
     img->GetSpacing(sp);
     img->GetOrigin(org);
+    for (int a = 0; a < 3; ++a) {
+        if (!std::isfinite(sp[a]) || sp[a] == 0.0)
+            throw InputError(path.string(), spacingField,
+                             "voxel spacing " + std::to_string(sp[a]) + " on axis " +
+                                 std::to_string(a) + " is not a positive size in mm",
+                             "repair the header");
+        if (!std::isfinite(org[a]))
+            throw InputError(path.string(), originField, "is NaN or infinite", "repair the header");
+    }
     g.spacing = glm::abs(glm::dvec3(sp[0], sp[1], sp[2]));
     g.origin = glm::dvec3(org[0], org[1], org[2]);
     return g;
@@ -554,7 +566,7 @@ Geometry spacingAndOrigin(vtkImageData* img) {
 template <class VtkReader>
 Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r) {
     vtkImageData* img = runImageReader(r, path, progress);
-    Geometry g = spacingAndOrigin(img);
+    Geometry g = spacingAndOrigin(img, path, "spacing", "origin");
     Volume v = fromImageData(img, path, g);
     v.description = path.filename().string();
     return v;
@@ -875,6 +887,30 @@ void checkVtiFile(const fs::path& path) {
                                  " levels (byte " + std::to_string(i) + ")",
                              "the file is damaged or not a VTK image file");
     }
+    // Geometry attributes: VTK replaces one that does not parse (Spacing="1 nan 1") by its
+    // default (1 1 1) without a word — a silently wrong geometry.
+    if (const std::size_t tag = xml.find("<ImageData"); tag != std::string::npos) {
+        for (const auto& [name, count] :
+             {std::pair<const char*, int>{"Spacing", 3}, {"Origin", 3}, {"Direction", 9}}) {
+            const std::string text = xmlAttribute(xml, tag, name);
+            if (text.empty()) continue;  // absent: VTK's default is right
+            std::istringstream words(text);
+            std::string w;
+            int n = 0;
+            bool ok = true;
+            while (words >> w) {
+                char* end = nullptr;
+                const double v = std::strtod(w.c_str(), &end);
+                ok = ok && end == w.c_str() + w.size() && std::isfinite(v);
+                ++n;
+            }
+            if (!ok || n != count)
+                throw InputError(
+                    path.string(), name,
+                    "'" + text + "' is not " + std::to_string(count) + " finite numbers",
+                    "repair the header");
+        }
+    }
     if (appended == std::string::npos) return;
     // Appended data: one '_' then the arrays, each at its offset.
     const std::size_t root = xml.find("<VTKFile");
@@ -989,7 +1025,7 @@ Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& p
     runVtkChecked(
         r, path, "data", [&] { r->Update(); }, progress);
     vtkImageData* img = r->GetOutput();
-    Geometry g = spacingAndOrigin(img);
+    Geometry g = spacingAndOrigin(img, path, "Spacing", "Origin");
     const double* d = img->GetDirectionMatrix()->GetData();  // row-major
     for (int c = 0; c < 3; ++c)
         for (int rr = 0; rr < 3; ++rr) g.direction[c][rr] = d[3 * rr + c];

@@ -552,6 +552,35 @@ TEST(BadInput, FuzzVtiAppendedDataWithoutMarkerIsRefusedQuickly) {
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }
 
+TEST(BadInput, FuzzVtiZeroOrNonFiniteSpacingAndOriginAreRefused) {
+    // fuzz_vti: Spacing="1 0 1" reached an internal check (exit 1) instead of an input error; and
+    // VTK replaced an attribute it could not parse ("1 nan 1") by its default without a word.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("kronander", o), tmp / "k.vti");
+    const std::string good = readAll(tmp / "k.vti");
+    auto edited = [&](const std::string& attr, const std::string& value) {
+        std::string text = good;
+        const std::size_t at = text.find(attr + "=\"");
+        EXPECT_NE(at, std::string::npos) << attr;
+        const std::size_t begin = at + attr.size() + 2, end = text.find('"', begin);
+        text.replace(begin, end - begin, value);
+        return text;
+    };
+    for (const char* spacing : {"1 0 1", "1 nan 1", "inf 1 1", "1 1", "1 x 1"}) {
+        writeText(tmp / "s.vti", edited("Spacing", spacing));
+        expectInputError(tmp / "s.vti", "Spacing", {"repair the header"});
+    }
+    writeText(tmp / "o.vti", edited("Origin", "0 nan 0"));
+    expectInputError(tmp / "o.vti", "Origin", {"finite numbers"});
+    writeText(tmp / "d.vti", edited("Direction", "1 0 0 0 1 0 0 0"));
+    expectInputError(tmp / "d.vti", "Direction", {"9 finite numbers"});
+    // A negative spacing is a flipped axis VTK reads as such: still loads.
+    writeText(tmp / "n.vti", edited("Spacing", "1 -1 1"));
+    EXPECT_EQ(io::readVolume(tmp / "n.vti").voxelCount(), 8u * 8u * 8u);
+}
+
 TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
     // fuzz_nifti_gz: 80 non-NUL descrip bytes were read past their end (ASan heap-buffer-overflow).
     test::TempDir tmp;
