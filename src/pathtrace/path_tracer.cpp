@@ -770,6 +770,14 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 if (beta == glm::dvec3(0.0)) break;
             }
             const bool continues = bounce + 1 < options_.maxBounces;
+            // Transmittance from x3 along wi up to `distance` (mm; ∞ for environment lights):
+            // ratio tracking over the part the light's interval keeps (clip planes, box).
+            auto transmittance = [&](const glm::dvec3& wi, double distance) {
+                double t0 = 0.0, t1 = distance;
+                const Ray sr{x3, wi};
+                return im.lightInterval(sr, t0, t1) ? im.ratioTracking(view, sr, t0, t1, rng, n)
+                                                    : 1.0;
+            };
             // Next-event estimation towards every light; MIS weights only when the path also
             // continues by phase (BRDF) sampling (which can then hit the same area/environment
             // light).
@@ -784,11 +792,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                     if (!(cosI > 0.0)) continue;
                     const glm::dvec3 f = evalBrdf(mat, nrm, wo, wi) * cosI;
                     if (f == glm::dvec3(0.0)) continue;
-                    double st0 = 0.0, st1 = double(ls.distance);
-                    const Ray sr{x3, wi};
-                    const double T = im.lightInterval(sr, st0, st1)
-                                         ? im.ratioTracking(view, sr, st0, st1, rng, n)
-                                         : 1.0;
+                    const double T = transmittance(wi, double(ls.distance));
                     if (!(T > 0.0)) continue;
                     glm::dvec3 c = beta * f * T * glm::dvec3(ls.value);
                     if (!ls.delta) {
@@ -801,11 +805,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                     continue;
                 }
                 const double phase = henyeyGreenstein(float(glm::dot(ray.direction, wi)), gHere);
-                double st0 = 0.0, st1 = double(ls.distance);
-                const Ray sr{x3, wi};
-                const double T = im.lightInterval(sr, st0, st1)
-                                     ? im.ratioTracking(view, sr, st0, st1, rng, n)
-                                     : 1.0;
+                const double T = transmittance(wi, double(ls.distance));
                 if (!(T > 0.0)) continue;
                 glm::dvec3 c = beta * (phase * T) * glm::dvec3(ls.value);
                 if (!ls.delta) {
@@ -825,19 +825,13 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                     const BrdfSample bs = sampleBrdf(mat, nrm, wo, u0, u1, u2);
                     if (bs.pdf > 0.0) {
                         const glm::dvec3 w = beta * bs.f * (glm::dot(nrm, bs.wi) / bs.pdf);
-                        const Ray sr{x3, bs.wi};
                         const glm::vec3 wi(bs.wi);
                         double T = -1.0;  // traced on first need
                         for (const auto& light : lightList) {
                             if (light->isDelta()) continue;
                             const glm::dvec3 le(light->radiance(x3, wi));
                             if (le == glm::dvec3(0.0)) continue;
-                            if (T < 0.0) {
-                                double l0 = 0.0, l1 = INFINITY;
-                                T = im.lightInterval(sr, l0, l1)
-                                        ? im.ratioTracking(view, sr, l0, l1, rng, n)
-                                        : 1.0;
-                            }
+                            if (T < 0.0) T = transmittance(bs.wi, INFINITY);
                             if (!(T > 0.0)) break;
                             L += w * le * (T * powerHeuristic(bs.pdf, light->pdf(x3, wi)));
                         }
