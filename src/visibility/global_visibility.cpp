@@ -42,7 +42,8 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     out.res_ = glm::min(glm::ivec3(options.resolution), dims);
     out.scale_ = glm::vec3(dims) / glm::vec3(out.res_);
     out.data_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z * C, 0.f);
-    out.open_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z, 1.f);
+    if (options.nearFromLocal)  // openness weights only the split's far interpolation
+        out.open_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z, 1.f);
     const float spacing = std::max({out.scale_.x, out.scale_.y, out.scale_.z});
 
     // Per direction: the step of r_s in index space, and Y_i(ω_k) (unweighted, for eq. 11) and
@@ -153,6 +154,7 @@ void GlobalVisibility::sampleFar(const glm::vec3& p, float* out) const {
         const float* d = at(g);
         for (int i = 0; i < C; ++i) out[i] += w * d[i];
     }
+    if (!product_) return;  // plain trilinear: the weights sum to 1
     const float inv = 1.f / total;
     for (int i = 0; i < C; ++i) out[i] *= inv;
 }

@@ -70,8 +70,9 @@ class GlobalVisibility {
     const float* at(const glm::ivec3& g) const {
         return data_.data() + index(g) * std::size_t(coefficients_);
     }
-    /// Openness of grid point g: its local V_0/√(4π) in [0, 1] (1 where skipped as empty).
-    float openness(const glm::ivec3& g) const { return open_[index(g)]; }
+    /// Openness of grid point g: its local V_0/√(4π) in [0, 1] (1 where skipped as empty, and
+    /// everywhere without the near/far split).
+    float openness(const glm::ivec3& g) const { return open_.empty() ? 1.f : open_[index(g)]; }
     /// Voxels between neighbouring grid points (the largest over the axes).
     float spacingVoxels() const { return std::max({scale_.x, scale_.y, scale_.z}); }
     /// Voxel coordinate of grid point g.
@@ -97,7 +98,7 @@ class GlobalVisibility {
     glm::ivec3 res_{0};
     glm::vec3 scale_{1.f};  ///< voxels per grid step
     std::vector<float> data_;
-    std::vector<float> open_;  ///< per grid point (openness)
+    std::vector<float> open_;  ///< per grid point (openness); empty unless nearFromLocal
     std::uint64_t rays_ = 0, skipped_ = 0;
 };
 
