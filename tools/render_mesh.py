@@ -3,11 +3,16 @@
 """Render exported isosurface meshes (voxlight iso ... -o X.ply|.obj) side by side, seen from the
 patient's front, to look at them: one viewport per mesh, vertex colours as stored, VTK's headlight.
 
-usage: xvfb-run -a /usr/bin/python3 tools/render_mesh.py OUT.png MESH [MESH ...] [--size W H]
+usage: xvfb-run -a /usr/bin/python3 tools/render_mesh.py OUT.png MESH [MESH ...] [--size W H] [--unlit]
+[--azimuth DEG]
+--unlit shows the stored vertex colours as they are (no headlight): how a mesh with light baked in by
+`voxlight iso --bake` looks in a viewer that draws vertex colours flat. --azimuth turns the camera about
+the superior axis (0 = anterior view, 90 = from the patient's left).
 Meshes are in mm, patient LPS (src/iso/export.h): the camera looks along +y (from anterior) with
 +z (superior) up. Needs Debian's python3-vtk9 (tools/setup.sh).
 """
 import argparse
+import math
 
 from vtkmodules.vtkIOGeometry import vtkOBJReader
 from vtkmodules.vtkIOImage import vtkPNGWriter
@@ -29,6 +34,8 @@ def main():
     ap.add_argument("out")
     ap.add_argument("meshes", nargs="+")
     ap.add_argument("--size", nargs=2, type=int, default=[400, 400], help="per viewport")
+    ap.add_argument("--unlit", action="store_true", help="vertex colours as stored, no lighting")
+    ap.add_argument("--azimuth", type=float, default=0.0, help="degrees about +z from anterior")
     a = ap.parse_args()
     n = len(a.meshes)
     window = vtkRenderWindow()
@@ -42,6 +49,8 @@ def main():
         mapper.SetColorModeToDirectScalars()
         actor = vtkActor()
         actor.SetMapper(mapper)
+        if a.unlit:
+            actor.GetProperty().SetLighting(False)
         ren = vtkRenderer()
         ren.SetViewport(i / n, 0, (i + 1) / n, 1)
         ren.SetBackground(0.08, 0.08, 0.1)
@@ -50,7 +59,9 @@ def main():
         c = [(b[0] + b[1]) / 2, (b[2] + b[3]) / 2, (b[4] + b[5]) / 2]
         cam = ren.GetActiveCamera()
         cam.SetFocalPoint(*c)
-        cam.SetPosition(c[0], c[1] - 1000.0, c[2])  # anterior is −y in LPS
+        az = math.radians(a.azimuth)
+        # anterior is −y in LPS; +azimuth turns toward the patient's left (+x)
+        cam.SetPosition(c[0] + 1000.0 * math.sin(az), c[1] - 1000.0 * math.cos(az), c[2])
         cam.SetViewUp(0, 0, 1)
         ren.ResetCamera()
         cam.Zoom(1.15)

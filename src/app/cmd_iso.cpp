@@ -2,7 +2,8 @@
 // voxlight iso SCENE.json|VOLUME -o MESH.(ply|obj|glb) [--isovalue V] [--stats STATS.json]
 //              [--set key=value]... [--remove-degenerate] [--keep-largest K]
 //              [--min-component-faces N] [--smooth N] [--decimate FACES]
-//              [--no-self-intersections] [-q]
+//              [--no-self-intersections] [--bake [--samples N] [--bounces K]
+//              [--lattice-resolution R] [--lattice-mode irradiance|sh] [--sh-order O]] [-q]
 // Extracts the scene's isosurface as a mesh (iso/: VTK flying edges → OpenMesh, world mm, outward
 // gradient normals), cuts it by the scene's clip planes and crop box (open cut), optionally cleans
 // it up (CGAL), reports it and writes it with vertex colours.
@@ -11,14 +12,19 @@
 // render method's parameter, so that `voxlight render` of the same scene shows the same surface);
 // the transfer function's surface value (where its extinction reaches a tenth of its maximum,
 // optics::TransferFunction::surfaceValue — what the `iso` render method uses by default). The
-// vertex colour is the transfer function's albedo at the isovalue.
+// vertex colour is the transfer function's albedo at the isovalue; with --bake, the light the
+// scene's lights give each vertex through the illumination lattice (iso/lattice.h: shadows, sky,
+// interreflections) — albedo·E/π·2^exposure — or, when the scene has no lights, a uniform white sky
+// of radiance 1 (an unoccluded vertex shows its albedo: ambient occlusion with bounces).
 //
 // Bad input exits 2 with one line and writes nothing: an isovalue outside the data range (the
 // line names the range), a flat volume (no isosurface exists), clip planes / crop box that remove
 // the whole surface, an output path that cannot be written or whose extension is not .ply, .obj or
 // .glb.
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <sstream>
 
@@ -30,6 +36,8 @@
 #include "iso/cleanup.h"
 #include "iso/export.h"
 #include "iso/extract.h"
+#include "iso/lattice.h"
+#include "lights/environment_light.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/scene_inputs.h"
 
@@ -68,6 +76,9 @@ Command addIsoCommand(CLI::App& app) {
     auto cleanup = std::make_shared<iso::CleanupOptions>();
     auto noSelfIntersections = std::make_shared<bool>(false);
     auto quiet = std::make_shared<bool>(false);
+    auto bake = std::make_shared<bool>(false);
+    auto lattice = std::make_shared<iso::LatticeOptions>();
+    auto latticeMode = std::make_shared<std::string>("irradiance");
     c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
     CLI::Option* isoOption =
@@ -95,6 +106,23 @@ Command addIsoCommand(CLI::App& app) {
         ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40));
     c.sub->add_flag("--no-self-intersections", *noSelfIntersections,
                     "Skip the self-intersection count of the report (its costly part)");
+    c.sub->add_flag("--bake", *bake,
+                    "Bake the scene's lights (shadows, sky, interreflections) into the vertex "
+                    "colours through an illumination lattice (Wyman 2006)");
+    c.sub->add_option("--samples", lattice->samples, "--bake: paths per lattice texel (100)")
+        ->check(CLI::Range(1, 1000000));
+    c.sub->add_option("--bounces", lattice->bounces, "--bake: diffuse interreflections (1)")
+        ->check(CLI::Range(0, 16));
+    c.sub
+        ->add_option("--lattice-resolution", lattice->resolution,
+                     "--bake: lattice texels per voxel along each axis, 0.125…8 (1)")
+        ->check(CLI::Range(0.125, 8.0));
+    c.sub
+        ->add_option("--lattice-mode", *latticeMode,
+                     "--bake: irradiance (any lights) or sh (SH transfer, distant lights)")
+        ->check(CLI::IsMember({"irradiance", "sh"}));
+    c.sub->add_option("--sh-order", lattice->shOrder, "--bake with sh: SH order 1…5 (5: 25 coeff.)")
+        ->check(CLI::Range(1, 5));
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
@@ -105,7 +133,9 @@ Command addIsoCommand(CLI::App& app) {
         json stages = json::array();
 
         core::Stopwatch sw;
-        const core::Volume volume = pipeline::loadSceneVolume(s, progress);
+        const auto volumePtr =
+            std::make_shared<const core::Volume>(pipeline::loadSceneVolume(s, progress));
+        const core::Volume& volume = *volumePtr;
         for (const auto& w : volume.warnings)
             std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
         stages.push_back(stage("volume", true, "loaded: " + volume.description, sw.seconds()));
@@ -172,6 +202,51 @@ Command addIsoCommand(CLI::App& app) {
         const iso::MeshReport report = iso::reportMesh(ex.mesh, !*noSelfIntersections, progress);
         stages.push_back(stage("report", true, "computed", sw.seconds()));
 
+        // Baked light (the lattice's texels at the vertices only).
+        sw.restart();
+        iso::LatticeStats ls;
+        std::string lightsUsed;
+        if (*bake) {
+            iso::LatticeOptions lo = *lattice;
+            lo.mode =
+                *latticeMode == "sh" ? iso::LatticeMode::ShTransfer : iso::LatticeMode::Irradiance;
+            std::vector<std::shared_ptr<const lights::Light>> ls0 = pipeline::buildLights(s);
+            if (ls0.empty()) {
+                core::ImageRGBA white(64, 32);
+                for (std::size_t i = 0; i < white.pixels.size(); ++i) white.pixels[i] = 1.f;
+                ls0.push_back(std::make_shared<lights::EnvironmentLight>(
+                    white, lights::EnvironmentOptions{}, "white sky"));
+                lightsUsed = "a uniform white sky (the scene has no lights)";
+            } else {
+                lightsUsed = std::to_string(ls0.size()) + " scene light(s)";
+            }
+            try {
+                iso::IlluminationLattice lat(volumePtr, tf, std::move(ls0), lo);
+                ls = iso::bakeVertexColours(ex.mesh, lat, options.color,
+                                            float(std::exp2(s.image.exposureStops)), progress);
+            } catch (const InputError& e) {
+                if (e.source() != "lattice") throw;
+                static const std::map<std::string, std::string> option = {
+                    {"samples", "--samples"},
+                    {"bounces", "--bounces"},
+                    {"resolution", "--lattice-resolution"},
+                    {"sh_order", "--sh-order"},
+                    {"mode", "--lattice-mode"},
+                    {"memory", "--lattice-resolution"}};
+                const auto it = option.find(e.field());
+                if (it == option.end()) throw InputError(s.source, e.field(), e.problem(), e.fix());
+                throw InputError("command line", it->second, e.problem(), e.fix());
+            }
+        }
+        stages.push_back(stage("illumination_lattice", *bake,
+                               *bake ? "computed: " + std::to_string(ls.texelsComputed) +
+                                           " texels of " + std::to_string(ls.texelsFull) + " (" +
+                                           lightsUsed + ", " + std::to_string(lattice->samples) +
+                                           " paths, " + std::to_string(lattice->bounces) +
+                                           " bounce(s))"
+                                     : "not needed: no --bake (vertex colour = the TF's albedo)",
+                               sw.seconds()));
+
         sw.restart();
         throwIfCancelled();
         OutputFiles files;
@@ -199,6 +274,19 @@ Command addIsoCommand(CLI::App& app) {
                           {"faces_before", cs.facesBefore},
                           {"faces_after", cs.facesAfter}}},
                         {"report", reportJson(report)},
+                        {"lattice", *bake ? json{{"texels_full", ls.texelsFull},
+                                                 {"texels_computed", ls.texelsComputed},
+                                                 {"texels_plateau", ls.plateauTexels},
+                                                 {"paths", ls.pathsTraced},
+                                                 {"shadow_rays", ls.shadowRays},
+                                                 {"seconds", ls.seconds},
+                                                 {"stored_mib", ls.storedMiB},
+                                                 {"samples", lattice->samples},
+                                                 {"bounces", lattice->bounces},
+                                                 {"resolution", lattice->resolution},
+                                                 {"mode", *latticeMode},
+                                                 {"lights", lightsUsed}}
+                                          : json(nullptr)},
                         {"units", "mm"},
                         {"frame", "LPS"}}},
                       {"scene", s.document}};

@@ -1,0 +1,762 @@
+// SPDX-License-Identifier: MIT
+#include "iso/lattice.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <string>
+#include <thread>
+
+#include "core/error.h"
+#include "core/rng.h"
+#include "core/timing.h"
+#include "sh/sh_basis.h"
+
+namespace voxlight::iso {
+
+namespace {
+
+constexpr double kPi = std::numbers::pi;
+/// Cells per skip-brick edge (a brick's value range covers its 8³ cells' 9³ corner voxels).
+constexpr int kSkipBrick = 8;
+/// Block::done values: not computed (0), a texel with its own surface, a plateau texel.
+constexpr std::uint8_t kSurfaceTexel = 1, kPlateauTexel = 2;
+/// Bisection steps for a crossing inside one monotone piece of a cell's cubic: 2⁻³⁰ of a cell.
+constexpr int kBisectionSteps = 30;
+
+std::string number(double v) {
+    char b[64];
+    std::snprintf(b, sizeof b, "%.6g", v);
+    return b;
+}
+
+void checkOptions(const LatticeOptions& o) {
+    if (o.samples < 1 || o.samples > 1000000)
+        throw InputError("lattice", "samples",
+                         "must be 1…1000000 paths per texel, got " + std::to_string(o.samples),
+                         "give e.g. 100 (Wyman: ~100 suffice)");
+    if (o.bounces < 0 || o.bounces > 16)
+        throw InputError("lattice", "bounces", "must be 0…16, got " + std::to_string(o.bounces),
+                         "give e.g. 1");
+    if (!(o.resolution >= 1.0 / 8.0 - 1e-12 && o.resolution <= 8.0 + 1e-12))
+        throw InputError("lattice", "resolution",
+                         "must be 1/8…8 texels per voxel, got " + number(o.resolution),
+                         "give 1 (the volume's own resolution), 0.5 or 2");
+    if (o.shOrder < 1 || o.shOrder > 5)
+        throw InputError("lattice", "sh_order",
+                         "must be 1…5 (1…25 coefficients), got " + std::to_string(o.shOrder),
+                         "give 3 (9 coefficients) or 5 (25, Wyman's)");
+    if (!(o.memoryBudgetMiB > 0.0) || !std::isfinite(o.memoryBudgetMiB))
+        throw InputError("lattice", "memory", "the memory budget must be a positive number of MiB",
+                         "give e.g. 4096");
+}
+
+void checkLightsForMode(const std::vector<std::shared_ptr<const lights::Light>>& ls,
+                        LatticeMode mode) {
+    for (const auto& l : ls) {
+        VL_CHECK(l != nullptr);
+        if (mode == LatticeMode::ShTransfer && l->kind() != "directional" &&
+            l->kind() != "environment")
+            throw InputError("lattice", "mode",
+                             "an SH transfer lattice takes distant lights only (directional, "
+                             "environment); the scene has a " +
+                                 std::string(l->kind()) + " light",
+                             "use the irradiance lattice (mode \"irradiance\") for point and area "
+                             "lights");
+    }
+}
+
+/// Uniform cubic B-spline weights and derivative weights for the 4 taps floor(x)−1 … floor(x)+2
+/// at fractional position f ∈ [0, 1).
+void bspline(double f, double w[4], double dw[4]) {
+    const double f2 = f * f, f3 = f2 * f;
+    w[0] = (1 - 3 * f + 3 * f2 - f3) / 6.0;
+    w[1] = (4 - 6 * f2 + 3 * f3) / 6.0;
+    w[2] = (1 + 3 * f + 3 * f2 - 3 * f3) / 6.0;
+    w[3] = f3 / 6.0;
+    dw[0] = (-1 + 2 * f - f2) / 2.0;
+    dw[1] = (-4 * f + 3 * f2) / 2.0;
+    dw[2] = (1 + 2 * f - 3 * f2) / 2.0;
+    dw[3] = f2 / 2.0;
+}
+
+/// Orthonormal basis around unit n (Duff et al. 2017).
+void basis(const glm::dvec3& n, glm::dvec3& t, glm::dvec3& b) {
+    const double sign = std::copysign(1.0, n.z);
+    const double a = -1.0 / (sign + n.z);
+    const double c = n.x * n.y * a;
+    t = {1.0 + sign * n.x * n.x * a, sign * c, -sign * n.x};
+    b = {c, sign + n.y * n.y * a, -n.y};
+}
+
+glm::dvec3 cosineSample(const glm::dvec3& n, double u1, double u2) {
+    glm::dvec3 t, b;
+    basis(n, t, b);
+    const double r = std::sqrt(u1), phi = 2.0 * kPi * u2;
+    return r * std::cos(phi) * t + r * std::sin(phi) * b + std::sqrt(std::max(0.0, 1.0 - u1)) * n;
+}
+
+glm::dvec3 sphereSample(double u1, double u2) {
+    const double z = 1.0 - 2.0 * u1, r = std::sqrt(std::max(0.0, 1.0 - z * z)),
+                 phi = 2.0 * kPi * u2;
+    return {r * std::cos(phi), r * std::sin(phi), z};
+}
+
+}  // namespace
+
+/// The volume's physical values as floats, skip bricks, and the ray/isosurface queries.
+struct IlluminationLattice::Tracer {
+    glm::ivec3 n;  ///< voxels per axis
+    std::vector<float> s;
+    glm::ivec3 bricks;
+    std::vector<std::array<float, 2>> range;  ///< per skip brick: min, max of its corner voxels
+    core::Geometry geo;
+    glm::dmat3 worldToIdx;   ///< direction (world, per mm) → index units per mm
+    glm::dmat3 gradToWorld;  ///< index-space gradient → world gradient (per mm)
+    double minSpacing;
+
+    explicit Tracer(const core::Volume& v) : n(v.dims()), geo(v.geometry()) {
+        s.resize(std::size_t(v.voxelCount()));
+        v.visit([&](const auto& view) {
+            tbb::parallel_for(0, n.z, [&](int k) {
+                for (int j = 0; j < n.y; ++j)
+                    for (int i = 0; i < n.x; ++i) s[idx(i, j, k)] = view.at(i, j, k);
+            });
+            return 0;
+        });
+        const glm::dmat3 invSpacing(glm::dvec3(1.0 / geo.spacing.x, 0, 0),
+                                    glm::dvec3(0, 1.0 / geo.spacing.y, 0),
+                                    glm::dvec3(0, 0, 1.0 / geo.spacing.z));
+        worldToIdx = invSpacing * glm::transpose(geo.direction);
+        gradToWorld = geo.direction * invSpacing;
+        minSpacing = std::min({geo.spacing.x, geo.spacing.y, geo.spacing.z});
+        const glm::ivec3 cells = glm::max(n - 1, glm::ivec3(1));
+        bricks = (cells + kSkipBrick - 1) / kSkipBrick;
+        range.resize(std::size_t(bricks.x) * bricks.y * bricks.z);
+        tbb::parallel_for(0, bricks.z, [&](int bz) {
+            for (int by = 0; by < bricks.y; ++by)
+                for (int bx = 0; bx < bricks.x; ++bx) {
+                    float lo = INFINITY, hi = -INFINITY;
+                    const glm::ivec3 b(bx, by, bz);
+                    const glm::ivec3 a = b * kSkipBrick, e = glm::min(a + kSkipBrick, n - 1);
+                    for (int k = a.z; k <= e.z; ++k)
+                        for (int j = a.y; j <= e.y; ++j)
+                            for (int i = a.x; i <= e.x; ++i) {
+                                const float x = s[idx(i, j, k)];
+                                if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
+                            }
+                    range[brickIndex(b)] = {lo, hi};
+                }
+        });
+    }
+
+    std::size_t idx(int i, int j, int k) const {
+        return std::size_t(i) + std::size_t(n.x) * (std::size_t(j) + std::size_t(n.y) * k);
+    }
+    std::size_t brickIndex(const glm::ivec3& b) const {
+        return std::size_t(b.x) +
+               std::size_t(bricks.x) * (std::size_t(b.y) + std::size_t(bricks.y) * b.z);
+    }
+    float voxel(int i, int j, int k) const {
+        return s[idx(std::clamp(i, 0, n.x - 1), std::clamp(j, 0, n.y - 1),
+                     std::clamp(k, 0, n.z - 1))];
+    }
+
+    /// Trilinear physical value at index position p (clamped).
+    double value(const glm::dvec3& pIn) const {
+        const glm::dvec3 p = glm::clamp(pIn, glm::dvec3(0.0), glm::dvec3(n - 1));
+        const glm::ivec3 c = glm::min(glm::ivec3(p), glm::max(n - 2, glm::ivec3(0)));
+        const glm::dvec3 f = p - glm::dvec3(c);
+        double r = 0;
+        for (int q = 0; q < 8; ++q) {
+            const int dx = q & 1, dy = (q >> 1) & 1, dz = q >> 2;
+            const double w = (dx ? f.x : 1 - f.x) * (dy ? f.y : 1 - f.y) * (dz ? f.z : 1 - f.z);
+            if (w != 0.0) r += w * voxel(c.x + dx, c.y + dy, c.z + dz);
+        }
+        return r;
+    }
+
+    /// Outward (−∇) unit world normal of the tricubic B-spline smoothed field at index p; zero
+    /// where that gradient vanishes.
+    glm::dvec3 smoothNormal(const glm::dvec3& pIn) const {
+        const glm::dvec3 p = glm::clamp(pIn, glm::dvec3(0.0), glm::dvec3(n - 1));
+        const glm::ivec3 c = glm::ivec3(glm::floor(p));
+        double w[3][4], dw[3][4];
+        for (int a = 0; a < 3; ++a) bspline(p[a] - c[a], w[a], dw[a]);
+        glm::dvec3 g(0.0);
+        for (int z = 0; z < 4; ++z)
+            for (int y = 0; y < 4; ++y)
+                for (int x = 0; x < 4; ++x) {
+                    const double v = voxel(c.x + x - 1, c.y + y - 1, c.z + z - 1);
+                    g.x += v * dw[0][x] * w[1][y] * w[2][z];
+                    g.y += v * w[0][x] * dw[1][y] * w[2][z];
+                    g.z += v * w[0][x] * w[1][y] * dw[2][z];
+                }
+        const glm::dvec3 gw = gradToWorld * g;
+        const double len = glm::length(gw);
+        return len > 0.0 && std::isfinite(len) ? -gw / len : glm::dvec3(0.0);
+    }
+
+    /// First t ∈ (0, tMax] (mm) where the trilinear field along origin + t·ω (index origin, world
+    /// unit ω) crosses `iso` from the side the origin is on. Returns false when the ray leaves the
+    /// volume (or passes tMax) first.
+    bool hit(const glm::dvec3& origin, const glm::dvec3& omega, double iso, double tMax,
+             double* tHit = nullptr) const {
+        const glm::dvec3 d = worldToIdx * omega;  // index units per mm
+        // Which side the origin is on: −1 below iso (the outside; also exactly at iso, as on a
+        // plateau, so that only values above it stop the ray), +1 above.
+        const double sigma = value(origin) - iso > 0.0 ? 1.0 : -1.0;
+        const glm::ivec3 lastCell = glm::max(n - 2, glm::ivec3(0));
+        glm::dvec3 inv;
+        glm::ivec3 step;
+        for (int a = 0; a < 3; ++a) {
+            inv[a] = d[a] != 0.0 ? 1.0 / d[a] : INFINITY;
+            step[a] = d[a] > 0.0 ? 1 : -1;
+        }
+        // The volume box in index space [0, n − 1]: exit parameter.
+        double tExit = tMax;
+        for (int a = 0; a < 3; ++a)
+            if (d[a] != 0.0)
+                tExit = std::min(tExit, ((d[a] > 0 ? n[a] - 1 : 0) - origin[a]) * inv[a]);
+        if (!(tExit > 0.0)) return false;
+        double t = 0.0;
+        glm::ivec3 c = glm::clamp(glm::ivec3(glm::floor(origin)), glm::ivec3(0), lastCell);
+        glm::dvec3 tNext;
+        auto initNext = [&] {
+            for (int a = 0; a < 3; ++a)
+                tNext[a] =
+                    d[a] != 0.0 ? ((c[a] + (d[a] > 0 ? 1 : 0)) - origin[a]) * inv[a] : INFINITY;
+        };
+        initNext();
+        while (true) {
+            const glm::ivec3 b = c / kSkipBrick;
+            const auto& r = range[brickIndex(b)];
+            if (!mayCross(r[0], r[1], iso, sigma)) {
+                // No crossing in this brick's cells: jump to where the ray leaves it.
+                double e = INFINITY;
+                int ae = 0;
+                for (int a = 0; a < 3; ++a)
+                    if (d[a] != 0.0) {
+                        const double face = d[a] > 0 ? (b[a] + 1) * kSkipBrick : b[a] * kSkipBrick;
+                        const double ta = (face - origin[a]) * inv[a];
+                        if (ta < e) e = ta, ae = a;
+                    }
+                if (e >= tExit) return false;
+                t = std::max(e, t);
+                const glm::dvec3 p = origin + t * d;
+                for (int a = 0; a < 3; ++a)
+                    c[a] = std::clamp(int(std::floor(p[a])), b[a] * kSkipBrick,
+                                      std::min((b[a] + 1) * kSkipBrick - 1, lastCell[a]));
+                c[ae] = d[ae] > 0 ? (b[ae] + 1) * kSkipBrick : b[ae] * kSkipBrick - 1;
+                if (c[ae] < 0 || c[ae] > lastCell[ae]) return false;
+                initNext();
+                continue;
+            }
+            // One cell of a brick that may hold a crossing.
+            const double t1 = std::min({tNext.x, tNext.y, tNext.z, tExit});
+            if (cellHit(c, origin, d, t, t1, iso, sigma, tHit)) return true;
+            if (t1 >= tExit) return false;
+            const int a = tNext.x <= tNext.y && tNext.x <= tNext.z ? 0 : tNext.y <= tNext.z ? 1 : 2;
+            t = std::max(t, t1);
+            c[a] += step[a];
+            if (c[a] < 0 || c[a] > lastCell[a]) return false;
+            tNext[a] += std::abs(inv[a]);
+        }
+    }
+
+    /// Whether values in [lo, hi] can lie strictly across iso from the side sigma.
+    static bool mayCross(float lo, float hi, double iso, double sigma) {
+        return sigma < 0.0 ? double(hi) > iso : double(lo) < iso;
+    }
+
+    /// The first crossing inside cell c over t ∈ [t0, t1]: the trilinear field along the ray is a
+    /// cubic in t; its critical points split [t0, t1] into monotone pieces, and the first piece
+    /// whose end lies across `iso` holds the crossing (bisection).
+    bool cellHit(const glm::ivec3& c, const glm::dvec3& o, const glm::dvec3& d, double t0,
+                 double t1, double iso, double sigma, double* tHit) const {
+        if (!(t1 > t0)) return false;
+        float v[8], lo = INFINITY, hi = -INFINITY;
+        for (int q = 0; q < 8; ++q) {
+            v[q] = voxel(c.x + (q & 1), c.y + ((q >> 1) & 1), c.z + (q >> 2));
+            lo = std::min(lo, v[q]), hi = std::max(hi, v[q]);
+        }
+        if (!mayCross(lo, hi, iso, sigma)) return false;
+        // Local coordinate along the cell: q(u) = q0 + d·u, u = t − t0.
+        const glm::dvec3 q0 = o + t0 * d - glm::dvec3(c);
+        // Along x: e_jk(u) = v0jk (1 − qx) + v1jk qx = A + B u.
+        double A[4], B[4];
+        for (int jk = 0; jk < 4; ++jk) {
+            const double a0 = v[2 * jk], a1 = v[2 * jk + 1];
+            A[jk] = a0 + (a1 - a0) * q0.x;
+            B[jk] = (a1 - a0) * d.x;
+        }
+        // Along y: quadratic per k.
+        double Q[2][3];
+        for (int k = 0; k < 2; ++k) {
+            const double a0 = A[2 * k], b0 = B[2 * k], a1 = A[2 * k + 1], b1 = B[2 * k + 1];
+            // (a0 + b0 u)(1 − qy − dy u) + (a1 + b1 u)(qy + dy u)
+            const double wy0 = 1.0 - q0.y, wy1 = q0.y;
+            Q[k][0] = a0 * wy0 + a1 * wy1;
+            Q[k][1] = b0 * wy0 - a0 * d.y + b1 * wy1 + a1 * d.y;
+            Q[k][2] = -b0 * d.y + b1 * d.y;
+        }
+        // Along z: cubic.
+        const double wz0 = 1.0 - q0.z, wz1 = q0.z;
+        double C[4];
+        C[0] = Q[0][0] * wz0 + Q[1][0] * wz1 - iso;
+        C[1] = Q[0][1] * wz0 - Q[0][0] * d.z + Q[1][1] * wz1 + Q[1][0] * d.z;
+        C[2] = Q[0][2] * wz0 - Q[0][1] * d.z + Q[1][2] * wz1 + Q[1][1] * d.z;
+        C[3] = -Q[0][2] * d.z + Q[1][2] * d.z;
+        auto g = [&](double u) { return sigma * (((C[3] * u + C[2]) * u + C[1]) * u + C[0]); };
+        const double L = t1 - t0;
+        if (g(0.0) < 0.0) {
+            if (tHit) *tHit = t0;
+            return true;
+        }
+        // Critical points of the cubic inside (0, L).
+        double cuts[4] = {0.0, L, L, L};
+        int nc = 1;
+        const double a = 3 * C[3], bq = 2 * C[2], cq = C[1];
+        if (a != 0.0) {
+            const double disc = bq * bq - 4 * a * cq;
+            if (disc > 0.0) {
+                const double sq = std::sqrt(disc);
+                double r1 = (-bq - sq) / (2 * a), r2 = (-bq + sq) / (2 * a);
+                if (r1 > r2) std::swap(r1, r2);
+                if (r1 > 0.0 && r1 < L) cuts[nc++] = r1;
+                if (r2 > 0.0 && r2 < L) cuts[nc++] = r2;
+            }
+        } else if (bq != 0.0) {
+            const double r = -cq / bq;
+            if (r > 0.0 && r < L) cuts[nc++] = r;
+        }
+        cuts[nc++] = L;
+        for (int piece = 0; piece + 1 < nc; ++piece) {
+            double lo2 = cuts[piece], hi2 = cuts[piece + 1];
+            if (g(hi2) >= 0.0) continue;
+            for (int it = 0; it < kBisectionSteps; ++it) {
+                const double mid = 0.5 * (lo2 + hi2);
+                (g(mid) >= 0.0 ? lo2 : hi2) = mid;
+            }
+            if (tHit) *tHit = t0 + hi2;
+            return true;
+        }
+        return false;
+    }
+
+    /// A start point for paths leaving a surface point p (index) along world normal nrm: p moved
+    /// out by kStartOffsetVoxels, then further in steps until it is on the outside (value < iso).
+    /// False when still inside after kMaxStartWalkVoxels.
+    bool startPoint(const glm::dvec3& p, const glm::dvec3& nrm, double iso, glm::dvec3& out) const {
+        const glm::dvec3 dn =
+            worldToIdx * nrm * minSpacing;  // one voxel (smallest spacing) along n
+        constexpr int kWalkSteps = 8;
+        for (int k = 0; k <= kWalkSteps; ++k) {
+            const double voxels =
+                kStartOffsetVoxels + (kMaxStartWalkVoxels - kStartOffsetVoxels) * k / kWalkSteps;
+            out = p + voxels * dn;
+            if (value(out) < iso) return true;
+        }
+        return false;
+    }
+};
+
+struct IlluminationLattice::Block {
+    std::vector<float> data;
+    std::vector<std::uint8_t> done;
+};
+
+IlluminationLattice::IlluminationLattice(std::shared_ptr<const core::Volume> volume,
+                                         const optics::TransferFunction& tf,
+                                         std::vector<std::shared_ptr<const lights::Light>> lights,
+                                         const LatticeOptions& options)
+    : volume_(std::move(volume)), tf_(tf), lights_(std::move(lights)), options_(options) {
+    checkOptions(options_);
+    VL_CHECK(volume_ != nullptr);
+    checkLightsForMode(lights_, options_.mode);
+    const auto r = volume_->physicalRange();
+    if (!(r[0] < r[1]))
+        throw InputError("lattice", "volume",
+                         "the volume is flat (every voxel " + number(r[0]) + ")",
+                         "an isosurface needs values on both sides of the isovalue");
+    res_ = options_.resolution;
+    const glm::ivec3 n = volume_->dims();
+    for (int a = 0; a < 3; ++a) dims_[a] = int(std::floor((n[a] - 1) * res_ + 1e-9)) + 1;
+    blocks_ = (dims_ + kLatticeBlock - 1) / kLatticeBlock;
+    tracer_ = std::make_unique<Tracer>(*volume_);
+    redot();
+}
+
+IlluminationLattice::~IlluminationLattice() = default;
+
+std::size_t IlluminationLattice::floatsPerTexel() const {
+    return options_.mode == LatticeMode::Irradiance
+               ? 3
+               : 3 + 3 * std::size_t(options_.shOrder * options_.shOrder);
+}
+
+double IlluminationLattice::storedMiB() const {
+    const double perBlock =
+        double(kLatticeBlock * kLatticeBlock * kLatticeBlock) * (4.0 * floatsPerTexel() + 1.0);
+    return double(blockMap_.size()) * perBlock / (1024.0 * 1024.0);
+}
+
+namespace {
+std::uint64_t keyOf(const glm::ivec3& b) {
+    return std::uint64_t(b.x) | (std::uint64_t(b.y) << 21) | (std::uint64_t(b.z) << 42);
+}
+int inBlock(const glm::ivec3& t) {
+    const glm::ivec3 l = t % kLatticeBlock;
+    return l.x + kLatticeBlock * (l.y + kLatticeBlock * l.z);
+}
+}  // namespace
+
+IlluminationLattice::Block* IlluminationLattice::blockFor(const glm::ivec3& t) const {
+    const auto it = blockMap_.find(keyOf(t / kLatticeBlock));
+    return it == blockMap_.end() ? nullptr : it->second.get();
+}
+
+bool IlluminationLattice::computed(const glm::ivec3& t) const {
+    const Block* b = blockFor(t);
+    return b && b->done[std::size_t(inBlock(t))];
+}
+
+bool IlluminationLattice::plateau(const glm::ivec3& t) const {
+    const Block* b = blockFor(t);
+    VL_CHECK(b && b->done[std::size_t(inBlock(t))]);
+    return b->done[std::size_t(inBlock(t))] == kPlateauTexel;
+}
+
+const float* IlluminationLattice::texelData(const glm::ivec3& t) const {
+    const Block* b = blockFor(t);
+    VL_CHECK(b && b->done[std::size_t(inBlock(t))]);
+    return b->data.data() + std::size_t(inBlock(t)) * floatsPerTexel();
+}
+
+glm::vec3 IlluminationLattice::texelIrradiance(const glm::ivec3& t) const {
+    const float* d = texelData(t);
+    return {d[0], d[1], d[2]};
+}
+
+std::span<const glm::vec3> IlluminationLattice::texelTransfer(const glm::ivec3& t) const {
+    VL_CHECK(options_.mode == LatticeMode::ShTransfer);
+    const float* d = texelData(t) + 3;
+    static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
+    return {reinterpret_cast<const glm::vec3*>(d),
+            std::size_t(options_.shOrder * options_.shOrder)};
+}
+
+glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world) const {
+    const glm::dvec3 q = volume_->geometry().worldToIndex(world) * res_;
+    glm::ivec3 i0;
+    glm::dvec3 f;
+    for (int a = 0; a < 3; ++a) {
+        const double x = std::clamp(q[a], 0.0, double(dims_[a] - 1));
+        i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
+        f[a] = x - i0[a];
+    }
+    // Plateau texels (no surface of their own) only where all weighed texels are plateaus.
+    glm::dvec3 e(0.0), ePlateau(0.0);
+    double w1 = 0.0, wPlateau = 0.0;
+    for (int c = 0; c < 8; ++c) {
+        const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
+        const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
+        if (w == 0.0) continue;
+        const glm::ivec3 t = glm::min(i0 + o, dims_ - 1);
+        if (plateau(t)) {
+            ePlateau += w * glm::dvec3(texelIrradiance(t));
+            wPlateau += w;
+        } else {
+            e += w * glm::dvec3(texelIrradiance(t));
+            w1 += w;
+        }
+    }
+    return glm::vec3(w1 > 0.0 ? e / w1 : ePlateau / wPlateau);
+}
+
+void IlluminationLattice::redot() {
+    lightSh_.clear();
+    if (options_.mode != LatticeMode::ShTransfer) return;
+    const int C = options_.shOrder * options_.shOrder;
+    lightSh_.assign(std::size_t(C), glm::vec3(0.f));
+    for (const auto& l : lights_) {
+        const std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), options_.shOrder - 1);
+        for (int i = 0; i < C; ++i) lightSh_[std::size_t(i)] += c[std::size_t(i)];
+    }
+    const std::size_t fpt = floatsPerTexel();
+    for (auto& [key, block] : blockMap_)
+        for (std::size_t t = 0; t < block->done.size(); ++t)
+            if (block->done[t]) dotTexel(block->data.data() + t * fpt);
+}
+
+void IlluminationLattice::dotTexel(float* d) const {
+    // E = max(0, Σ ℓ_i ⊙ T_i): band-limited delta lights ring below zero in their shadows.
+    glm::dvec3 e(0.0);
+    for (std::size_t i = 0; i < lightSh_.size(); ++i)
+        e += glm::dvec3(lightSh_[i]) * glm::dvec3(d[3 + 3 * i], d[4 + 3 * i], d[5 + 3 * i]);
+    e = glm::max(e, 0.0);
+    d[0] = float(e.x), d[1] = float(e.y), d[2] = float(e.z);
+}
+
+void IlluminationLattice::setLights(std::vector<std::shared_ptr<const lights::Light>> lights) {
+    checkLightsForMode(lights, options_.mode);
+    lights_ = std::move(lights);
+    if (options_.mode == LatticeMode::ShTransfer) {
+        redot();
+    } else {
+        blockMap_.clear();
+        stored_ = 0;
+    }
+}
+
+LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoints,
+                                          const core::Progress& progress) {
+    std::vector<glm::ivec3> needed;
+    needed.reserve(worldPoints.size() * 2);
+    const core::Geometry& g = volume_->geometry();
+    for (const glm::dvec3& w : worldPoints) {
+        const glm::dvec3 q = g.worldToIndex(w) * res_;
+        glm::ivec3 i0;
+        glm::dvec3 f;
+        for (int a = 0; a < 3; ++a) {
+            const double x = std::clamp(q[a], 0.0, double(dims_[a] - 1));
+            i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
+            f[a] = x - i0[a];
+        }
+        // The corners irradiance() weighs (a point on a texel's plane needs no texel beyond it).
+        for (int c = 0; c < 8; ++c) {
+            const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
+            const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
+            if (w != 0.0) needed.push_back(glm::min(i0 + o, dims_ - 1));
+        }
+    }
+    return computeTexels(std::move(needed), progress);
+}
+
+LatticeStats IlluminationLattice::requireIsosurface(double isovalue,
+                                                    const core::Progress& progress) {
+    const Tracer& tr = *tracer_;
+    const glm::ivec3 cells = glm::max(tr.n - 1, glm::ivec3(1));
+    std::vector<std::vector<glm::ivec3>> perSlice(std::size_t(cells.z));
+    tbb::parallel_for(0, cells.z, [&](int k) {
+        auto& out = perSlice[std::size_t(k)];
+        for (int j = 0; j < cells.y; ++j)
+            for (int i = 0; i < cells.x; ++i) {
+                float lo = INFINITY, hi = -INFINITY;
+                for (int q = 0; q < 8; ++q) {
+                    const float v = tr.voxel(i + (q & 1), j + ((q >> 1) & 1), k + (q >> 2));
+                    lo = std::min(lo, v), hi = std::max(hi, v);
+                }
+                if (!(lo <= isovalue && isovalue <= hi && lo < hi)) continue;
+                // The texels whose trilinear stencil covers some point of cell [i, i+1]×….
+                glm::ivec3 a, b;
+                const glm::ivec3 c(i, j, k);
+                for (int ax = 0; ax < 3; ++ax) {
+                    a[ax] = std::clamp(int(std::floor(c[ax] * res_ + 1e-9)), 0, dims_[ax] - 1);
+                    b[ax] = std::clamp(int(std::ceil((c[ax] + 1) * res_ - 1e-9)), 0, dims_[ax] - 1);
+                }
+                for (int z = a.z; z <= b.z; ++z)
+                    for (int y = a.y; y <= b.y; ++y)
+                        for (int x = a.x; x <= b.x; ++x) out.emplace_back(x, y, z);
+            }
+    });
+    std::vector<glm::ivec3> needed;
+    for (auto& v : perSlice) needed.insert(needed.end(), v.begin(), v.end());
+    return computeTexels(std::move(needed), progress);
+}
+
+LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
+                                                const core::Progress& progress) {
+    core::Stopwatch clock;
+    LatticeStats st;
+    st.texelsFull = std::uint64_t(dims_.x) * dims_.y * dims_.z;
+    auto linear = [&](const glm::ivec3& t) {
+        return std::uint64_t(t.x) +
+               std::uint64_t(dims_.x) * (std::uint64_t(t.y) + std::uint64_t(dims_.y) * t.z);
+    };
+    std::sort(needed.begin(), needed.end(),
+              [&](const glm::ivec3& a, const glm::ivec3& b) { return linear(a) < linear(b); });
+    needed.erase(std::unique(needed.begin(), needed.end()), needed.end());
+    st.texelsNeeded = needed.size();
+    std::vector<glm::ivec3> todo;
+    for (const glm::ivec3& t : needed)
+        if (!computed(t)) todo.push_back(t);
+    st.texelsReused = st.texelsNeeded - todo.size();
+    st.texelsComputed = todo.size();
+
+    // Allocate the blocks first (serially), within the budget.
+    std::vector<std::uint64_t> newBlocks;
+    for (const glm::ivec3& t : todo) {
+        const std::uint64_t k = keyOf(t / kLatticeBlock);
+        if (!blockMap_.count(k)) newBlocks.push_back(k);
+    }
+    std::sort(newBlocks.begin(), newBlocks.end());
+    newBlocks.erase(std::unique(newBlocks.begin(), newBlocks.end()), newBlocks.end());
+    const std::size_t fpt = floatsPerTexel();
+    constexpr std::size_t kTexelsPerBlock = kLatticeBlock * kLatticeBlock * kLatticeBlock;
+    const double perBlockMiB = double(kTexelsPerBlock) * (4.0 * fpt + 1.0) / (1024.0 * 1024.0);
+    if (double(blockMap_.size() + newBlocks.size()) * perBlockMiB > options_.memoryBudgetMiB)
+        throw InputError("lattice", "memory",
+                         "the lattice needs " +
+                             number(double(blockMap_.size() + newBlocks.size()) * perBlockMiB) +
+                             " MiB of texels, over the budget of " +
+                             number(options_.memoryBudgetMiB) + " MiB",
+                         "lower the lattice resolution or the SH order, or raise the budget");
+    for (const std::uint64_t k : newBlocks) {
+        auto b = std::make_unique<Block>();
+        b->data.assign(kTexelsPerBlock * fpt, 0.f);
+        b->done.assign(kTexelsPerBlock, 0);
+        blockMap_.emplace(k, std::move(b));
+    }
+
+    const Tracer& tr = *tracer_;
+    const LatticeOptions& o = options_;
+    const int C = o.shOrder * o.shOrder;
+    const bool sh = o.mode == LatticeMode::ShTransfer;
+    std::vector<const lights::Light*> deltas, others;
+    for (const auto& l : lights_) (l->isDelta() ? deltas : others).push_back(l.get());
+    std::atomic<std::uint64_t> paths{0}, shadows{0}, plateaus{0}, finished{0};
+    std::atomic<std::size_t> done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    const char* stage = "illumination lattice";
+    progress.report(stage, 0.0);
+
+    // Irradiance from the delta lights at surface point x (index) with normal n (world; zero =
+    // the full-sphere average, cos θ → 1/4).
+    auto directDelta = [&](const glm::dvec3& x, const glm::dvec3& nrm, double iso,
+                           std::uint64_t& nShadow) {
+        glm::dvec3 e(0.0);
+        const glm::dvec3 world = tr.geo.indexToWorld(x);
+        for (const lights::Light* l : deltas) {
+            const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
+            if (!(ls.pdf > 0.f)) continue;
+            const double cosT = nrm == glm::dvec3(0.0) ? 0.25 : glm::dot(nrm, glm::dvec3(ls.wi));
+            if (cosT <= 0.0) continue;
+            ++nShadow;
+            if (tr.hit(x, glm::dvec3(ls.wi), iso, double(ls.distance))) continue;
+            e += glm::dvec3(ls.value) * cosT;
+        }
+        return e;
+    };
+
+    tbb::task_arena arena(o.threads > 0 ? o.threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& rg) {
+            if (progress.cancelled()) return;
+            std::uint64_t nPaths = 0, nShadow = 0, nPlateau = 0, nDone = 0;
+            std::vector<double> y(static_cast<std::size_t>(C));
+            std::vector<glm::dvec3> T(static_cast<std::size_t>(C));
+            for (std::size_t r = rg.begin(); r != rg.end(); ++r) {
+                const glm::ivec3 t = todo[r];
+                const glm::dvec3 xt = texelIndexPosition(t);
+                const double iso = tr.value(xt);
+                const glm::dvec3 albedo =
+                    glm::clamp(glm::dvec3(tf_.eval(float(iso)).albedo), 0.0, 1.0);
+                glm::dvec3 n0 = tr.smoothNormal(xt);
+                glm::dvec3 x0 = xt;
+                if (n0 != glm::dvec3(0.0) && !tr.startPoint(xt, n0, iso, x0)) n0 = glm::dvec3(0.0);
+                const bool plateau = n0 == glm::dvec3(0.0);
+                if (plateau) x0 = xt, ++nPlateau;
+                glm::dvec3 E(0.0);  // Σ over paths of what follows the first direction
+                std::fill(T.begin(), T.end(), glm::dvec3(0.0));
+                // Delta lights at the texel are the same for every path: once.
+                const glm::dvec3 direct0 = sh ? glm::dvec3(0.0) : directDelta(x0, n0, iso, nShadow);
+                const std::uint64_t key = linear(t);
+                for (int smp = 0; smp < o.samples; ++smp) {
+                    core::CounterRng rng(core::hashCounters(key, std::uint64_t(smp)), o.seed);
+                    glm::dvec3 x = x0, nrm = n0, beta(1.0);
+                    for (int vertex = 0;; ++vertex) {
+                        const double u1 = rng.uniformDouble(), u2 = rng.uniformDouble();
+                        const bool sphere = nrm == glm::dvec3(0.0);
+                        const glm::dvec3 w =
+                            sphere ? sphereSample(u1, u2) : cosineSample(nrm, u1, u2);
+                        double th = 0.0;
+                        if (!tr.hit(x, w, iso, INFINITY, &th)) {
+                            // Escaped: distant/area radiance, π per cosine-weighted sample (the
+                            // full sphere: π·L as well, see the header).
+                            if (sh) {
+                                sh::evalShUnitDouble(o.shOrder - 1, w, y);
+                                for (int i = 0; i < C; ++i)
+                                    T[std::size_t(i)] += kPi * beta * y[std::size_t(i)];
+                            } else {
+                                const glm::dvec3 world = tr.geo.indexToWorld(x);
+                                for (const lights::Light* l : others)
+                                    E += kPi * beta * glm::dvec3(l->radiance(world, glm::vec3(w)));
+                            }
+                            break;
+                        }
+                        if (vertex >= o.bounces) break;
+                        // A diffuse bounce on the same isosurface.
+                        beta *= albedo;
+                        if (beta == glm::dvec3(0.0)) break;
+                        const glm::dvec3 y1 = x + th * (tr.worldToIdx * w);
+                        glm::dvec3 ny = tr.smoothNormal(y1);
+                        if (ny == glm::dvec3(0.0)) break;
+                        if (glm::dot(ny, w) > 0.0) ny = -ny;  // face the arriving path
+                        glm::dvec3 xs;
+                        if (!tr.startPoint(y1, ny, iso, xs)) break;
+                        if (!sh) E += beta * directDelta(xs, ny, iso, nShadow);
+                        x = xs;
+                        nrm = ny;
+                    }
+                    ++nPaths;
+                }
+                float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
+                const double inv = 1.0 / o.samples;
+                if (sh) {
+                    for (int i = 0; i < C; ++i)
+                        for (int ch = 0; ch < 3; ++ch)
+                            d[3 + 3 * i + ch] = float(T[std::size_t(i)][ch] * inv);
+                    dotTexel(d);
+                } else {
+                    const glm::dvec3 e = direct0 + E * inv;
+                    d[0] = float(e.x), d[1] = float(e.y), d[2] = float(e.z);
+                }
+                blockFor(t)->done[std::size_t(inBlock(t))] =
+                    plateau ? kPlateauTexel : kSurfaceTexel;
+                ++nDone;
+            }
+            paths += nPaths;
+            shadows += nShadow;
+            plateaus += nPlateau;
+            finished += nDone;
+            const std::size_t now = done.fetch_add(rg.size()) + rg.size();
+            if (std::this_thread::get_id() == caller)
+                progress.report(stage, double(now) / double(std::max<std::size_t>(todo.size(), 1)));
+        });
+    });
+    // Texels finished before a cancel are complete and stay; the rest were never marked.
+    stored_ += finished;
+    if (progress.cancelled()) throw CancelledError();
+    progress.report(stage, 1.0);
+    st.texelsStored = stored_;
+    st.pathsTraced = paths;
+    st.shadowRays = shadows;
+    st.plateauTexels = plateaus;
+    st.seconds = clock.seconds();
+    st.storedMiB = storedMiB();
+    return st;
+}
+
+LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, const glm::vec3& albedo,
+                               float scale, const core::Progress& progress) {
+    std::vector<glm::dvec3> points;
+    points.reserve(mesh.n_vertices());
+    for (const auto v : mesh.vertices()) {
+        const auto& p = mesh.point(v);
+        points.emplace_back(p[0], p[1], p[2]);
+    }
+    const LatticeStats st = lattice.require(points, progress);
+    const glm::vec3 k = albedo * float(scale / kPi);
+    for (const auto v : mesh.vertices()) {
+        const glm::vec3 c = k * lattice.irradiance(points[v.idx()]);
+        mesh.set_color(v, Mesh::Color(c.x, c.y, c.z));
+    }
+    return st;
+}
+
+}  // namespace voxlight::iso

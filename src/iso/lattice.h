@@ -1,0 +1,176 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// Illumination lattice (Wyman, Parker, Shirley, Hansen 2006 §4; NOTES.md §3): global illumination
+// on isosurfaces, precomputed on a 3-D grid of texels and interpolated trilinearly where a surface
+// is shaded (mesh vertices for the lit-mesh export, iso/bake.h).
+//
+// Per texel t at voxel-index position x_t (the lattice spans the voxel centres [0, dims − 1] with
+// `resolution` texels per voxel along each axis, Wyman Fig. 12: 1/8, 1, 8):
+//   * its own isosurface: the level set s = s(x_t) of the volume's trilinear physical value s
+//     through the texel (so one lattice serves every isovalue; a texel is computed once and kept);
+//   * its normal n: −∇(B ∗ s)/|…| of the tricubic B-spline smoothed field (4×4×4 voxels), outward,
+//     toward lower values (iso/extract.h's convention);
+//   * paths start at x_t + ε·n (kStartOffsetVoxels, moved further along n until s < s(x_t)), are
+//     traced against the trilinear isosurface of the texel's isovalue — cell by cell, cells whose 8
+//     corners (and 8³-cell bricks whose value range) do not contain the isovalue skipped, the
+//     crossing inside a candidate cell found exactly on the cubic that trilinear interpolation is
+//     along a line (monotone pieces between its critical points, then bisection) — and escape at
+//     the volume's boundary;
+//   * irradiance E(x_t) = ∫ L_in(x_t, ω) cos θ dω by cosine-weighted Monte Carlo: delta lights
+//     (directional, point) by next-event estimation with a shadow ray at every path vertex; the
+//     other lights (environment, area) by the radiance they send along an escaping path; surfaces
+//     hit reflect as Lambertian with the albedo the transfer function gives the texel's isovalue
+//     (the whole isosurface has that albedo), up to `bounces` interreflections.
+//   * Texels where the smoothed gradient vanishes (a plateau at the isovalue: no surface) use the
+//     full sphere, E = π · mean of L_in over all directions (the cosine term averaged over normals),
+//     with only values above theirs occluding; trilinear reads leave them out (weights renormalised
+//     over the texels that have a surface) unless all texels read are plateaus — they carry no
+//     surface's light, and on sharp-edged data (a phantom's constant inside and outside) they would
+//     pull a surface toward what a point in the open sees.
+// Stored as
+//   * Irradiance: RGB E per texel (static lights; any mix of directional, point, environment and
+//     area lights). Changing a light invalidates every texel.
+//   * ShTransfer: the irradiance transfer vector T_i = ∫ (path throughput) Y_i(ω_escape) … per RGB
+//     channel, i < (order)² (order ≤ 5: 25 coefficients), for *distant* lights only (directional
+//     and environment): E = Σ_i ℓ_i ⊙ T_i with the lights' SH coefficients ℓ (lights/light.h), so
+//     lights turn and change by re-dotting, without tracing. Delta lights are then band-limited
+//     (their shadows blur: Wyman's trade) and ring: the dot is clamped at 0.
+// Lazy: `require` computes only the texels that trilinear reads at the given points need (the 2×2×2
+// stencil of each point), or those of the cells an isosurface crosses; computed texels are kept, so
+// a new isovalue or a refined mesh computes only texels not seen before. Every texel's random
+// numbers are a counter-based function of (texel index, sample, seed): a texel's value does not
+// depend on thread count, on what else was required or in which order — lazy equals full, bit for
+// bit (tested).
+// Units: world mm (patient LPS), lights in the scene's radiometric unit (lights/light.h); a
+// Lambertian surface of albedo a under E leaves radiance a·E/π, so a white sky of radiance 1 gives
+// an unoccluded surface E = π and radiance a.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <unordered_map>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/volume.h"
+#include "iso/mesh.h"
+#include "lights/light.h"
+#include "optics/transfer_function.h"
+
+namespace voxlight::iso {
+
+enum class LatticeMode { Irradiance, ShTransfer };
+
+/// Start offset along the normal, voxels (Wyman: "slightly"): far enough that float rounding of the
+/// start point and the trilinear-vs-B-spline normal mismatch leave the point outside its own
+/// isosurface, small next to a voxel so that the texel still represents its own surface.
+inline constexpr double kStartOffsetVoxels = 0.05;
+/// Largest further walk along the normal to get outside (texels where the smoothed normal and the
+/// trilinear field disagree), voxels; beyond it the texel is a plateau and uses the full sphere.
+inline constexpr double kMaxStartWalkVoxels = 1.0;
+/// Texels per lazy-allocation block edge (8³ texels per block).
+inline constexpr int kLatticeBlock = 8;
+
+struct LatticeOptions {
+    int samples = 100;        ///< paths per texel, ≥ 1
+    int bounces = 1;          ///< diffuse interreflections, 0…16
+    double resolution = 1.0;  ///< texels per voxel along each axis, 1/8…8
+    LatticeMode mode = LatticeMode::Irradiance;
+    int shOrder = 5;  ///< ShTransfer: bands 0…order−1, (order)² coefficients, 1…5
+    std::uint64_t seed = 0;
+    double memoryBudgetMiB = 4096.0;  ///< texel storage; over it → InputError naming the budget
+    int threads = 0;                  ///< 0 = all cores
+};
+
+/// What one `require` call did.
+struct LatticeStats {
+    std::uint64_t texelsFull = 0;      ///< texels of the whole lattice (what a full one computes)
+    std::uint64_t texelsNeeded = 0;    ///< texels the request reads
+    std::uint64_t texelsComputed = 0;  ///< of those, computed by this call
+    std::uint64_t texelsReused = 0;    ///< of those, already computed before
+    std::uint64_t texelsStored = 0;    ///< computed texels held after the call
+    std::uint64_t pathsTraced = 0, shadowRays = 0;
+    std::uint64_t plateauTexels = 0;  ///< computed with the full sphere (no surface normal)
+    double seconds = 0.0;
+    double storedMiB = 0.0;  ///< texel storage after the call
+};
+
+class IlluminationLattice {
+  public:
+    /// Throws InputError (source "lattice", the option's name as field) on bad options, a flat
+    /// volume, lights the mode cannot take (ShTransfer: point or area lights).
+    IlluminationLattice(std::shared_ptr<const core::Volume> volume,
+                        const optics::TransferFunction& tf,
+                        std::vector<std::shared_ptr<const lights::Light>> lights,
+                        const LatticeOptions& options);
+    ~IlluminationLattice();
+    IlluminationLattice(const IlluminationLattice&) = delete;
+    IlluminationLattice& operator=(const IlluminationLattice&) = delete;
+
+    /// Computes the texels trilinear reads at these world points (mm) need. Throws InputError
+    /// (field "memory") when the texels would exceed the budget, CancelledError through progress.
+    LatticeStats require(std::span<const glm::dvec3> worldPoints,
+                         const core::Progress& progress = core::Progress::none());
+    /// Computes the texels of every volume cell whose 8 corners span `isovalue` (what direct ray
+    /// casting of that isosurface reads).
+    LatticeStats requireIsosurface(double isovalue,
+                                   const core::Progress& progress = core::Progress::none());
+
+    /// Irradiance at a world point: trilinear over the 8 texels around it (plateau texels left out,
+    /// above), each of which must have been required (VL_CHECK). ShTransfer: re-dotted with the
+    /// current lights.
+    glm::vec3 irradiance(const glm::dvec3& world) const;
+    /// The stored value of texel (i, j, k) (must be computed): irradiance, or re-dotted transfer.
+    glm::vec3 texelIrradiance(const glm::ivec3& t) const;
+    /// ShTransfer only: the transfer vector of a computed texel, (order)² RGB entries.
+    std::span<const glm::vec3> texelTransfer(const glm::ivec3& t) const;
+    bool computed(const glm::ivec3& t) const;
+    /// Whether computed texel t is a plateau (no surface through it: the full-sphere value).
+    bool plateau(const glm::ivec3& t) const;
+
+    /// New lights. ShTransfer: re-dots (no texel is traced again; distant lights only, as the
+    /// constructor). Irradiance: every computed texel is dropped (the next require traces again).
+    void setLights(std::vector<std::shared_ptr<const lights::Light>> lights);
+
+    const glm::ivec3& dims() const { return dims_; }  ///< texels per axis
+    /// Texel (i, j, k)'s voxel-index position.
+    glm::dvec3 texelIndexPosition(const glm::ivec3& t) const { return glm::dvec3(t) / res_; }
+    const LatticeOptions& options() const { return options_; }
+    std::uint64_t texelsStored() const { return stored_; }
+    double storedMiB() const;
+
+  private:
+    struct Block;
+    struct Tracer;
+    std::size_t floatsPerTexel() const;
+    Block* blockFor(const glm::ivec3& t) const;
+    const float* texelData(const glm::ivec3& t) const;
+    LatticeStats computeTexels(std::vector<glm::ivec3> needed, const core::Progress& progress);
+    void redot();
+    /// ShTransfer: the irradiance slot of texel data d from its transfer and the current lights.
+    void dotTexel(float* d) const;
+
+    std::shared_ptr<const core::Volume> volume_;
+    optics::TransferFunction tf_;
+    std::vector<std::shared_ptr<const lights::Light>> lights_;
+    LatticeOptions options_;
+    std::unique_ptr<Tracer> tracer_;
+    double res_;
+    glm::ivec3 dims_, blocks_;
+    std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blockMap_;
+    std::uint64_t stored_ = 0;
+    std::vector<glm::vec3> lightSh_;  ///< ShTransfer: Σ lights' SH coefficients, (order)²
+};
+
+/// Bakes the lattice's light into the mesh's vertex colours (the lit-mesh export): requires the
+/// vertices' texels, then colour = albedo ⊙ E(vertex)/π · scale — the radiance a Lambertian
+/// surface of that albedo leaves, linear RGB (exporters clamp to [0, 1] and encode, iso/export.h);
+/// `scale` is the display exposure, 2^stops. Returns the require's stats.
+LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, const glm::vec3& albedo,
+                               float scale,
+                               const core::Progress& progress = core::Progress::none());
+
+}  // namespace voxlight::iso

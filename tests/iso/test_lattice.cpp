@@ -1,0 +1,313 @@
+// SPDX-License-Identifier: MIT
+// The illumination lattice (iso/lattice.h) against closed forms: a convex surface under a uniform
+// sky, the floor of a well (a cone of sky), energy bounds with interreflections, lazy = full, any
+// thread count, SH transfer re-dotting.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <memory>
+#include <numbers>
+
+#include "iso/lattice.h"
+#include "iso_test_util.h"
+#include "lights/environment_light.h"
+
+namespace voxlight::iso {
+namespace {
+
+using test::Ball;
+using test::ballsVolume;
+
+constexpr double kPi = std::numbers::pi;
+
+/// A uniform sky of radiance L (an equirect map of one value; 128 × 64 pixels, so that its SH
+/// projection — pixel-centre values × exact solid angles — leaves ≤ 0.05 % in bands 2 and 4, where a
+/// 16 × 8 map leaves 1.5 %).
+std::shared_ptr<const lights::Light> sky(float L) {
+    core::ImageRGBA img(128, 64);
+    for (int y = 0; y < img.height; ++y)
+        for (int x = 0; x < img.width; ++x) {
+            float* p = img.at(x, y);
+            p[0] = p[1] = p[2] = L;
+            p[3] = 1.f;
+        }
+    return std::make_shared<lights::EnvironmentLight>(img, lights::EnvironmentOptions{}, "sky");
+}
+
+/// A TF whose albedo is `a` at every value (the lattice reads only the albedo).
+optics::TransferFunction albedoTf(float a, float lo, float hi) {
+    optics::TfPoint p0, p1;
+    p0.value = lo, p1.value = hi;
+    p0.color = p1.color = glm::vec3(a);
+    p0.extinction = p1.extinction = 1.f;
+    return optics::TransferFunction({p0, p1}, optics::Window{0.5f * (lo + hi), hi - lo});
+}
+
+core::Geometry cube(int n, double spacing = 1.0) {
+    core::Geometry g;
+    g.dims = glm::ivec3(n);
+    g.spacing = glm::dvec3(spacing);
+    g.origin = glm::dvec3(-0.5 * (n - 1) * spacing);
+    return g;
+}
+
+std::shared_ptr<const core::Volume> share(core::Volume v) {
+    return std::make_shared<const core::Volume>(std::move(v));
+}
+
+/// A plate whose top is z = D with a round well of radius R down to a floor at z = 0, solid below
+/// the floor: value = −(signed distance of the CSG union {z ≤ 0} ∪ ({z ≤ D} ∩ {r ≥ R})), so the
+/// 0-level set is the shape and the value rises into the solid.
+core::Volume wellVolume(const core::Geometry& g, double R, double D) {
+    core::Volume v(g, core::VoxelType::Float32);
+    float* d = v.dataAs<float>();
+    for (int k = 0; k < g.dims.z; ++k)
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i) {
+                const glm::dvec3 p = g.indexToWorld({i, j, k});
+                const double r = std::hypot(p.x, p.y);
+                const double sdf = std::min(p.z, std::max(p.z - D, R - r));
+                d[v.linearIndex(i, j, k)] = float(-sdf);
+            }
+    v.description = "well";
+    return v;
+}
+
+LatticeOptions opts(int samples, int bounces, LatticeMode mode = LatticeMode::Irradiance) {
+    LatticeOptions o;
+    o.samples = samples;
+    o.bounces = bounces;
+    o.mode = mode;
+    return o;
+}
+
+// Relative error allowed for a convex surface under a uniform sky, where every path escapes in the
+// continuous model: cosine-sampled directions that graze the surface can still meet the trilinear
+// isosurface's voxel-scale bumps (its normal is the B-spline smoothed one); measured 0 % on the
+// ball of radius 10 voxels — the bound leaves room for such grazing hits.
+constexpr double kConvexTolerance = 0.005;
+
+TEST(Lattice, AConvexSurfaceUnderAUniformSkyGetsPiL) {
+    const float L = 0.8f;
+    const core::Geometry g = cube(32);
+    IlluminationLattice lat(share(ballsVolume(g, {Ball{{0, 0, 0}, 10.0}})), albedoTf(0.f, -20, 20),
+                            {sky(L)}, opts(64, 2));
+    const LatticeStats st = lat.requireIsosurface(0.0);
+    ASSERT_GT(st.texelsComputed, 1000u);
+    EXPECT_EQ(st.texelsReused, 0u);
+    EXPECT_LT(st.texelsNeeded, st.texelsFull / 4);  // only the surface's texels
+    int checked = 0;
+    for (int k = 0; k < g.dims.z; ++k)
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i) {
+                if (!lat.computed({i, j, k})) continue;
+                const glm::vec3 e = lat.texelIrradiance({i, j, k});
+                ASSERT_NEAR(e.x, kPi * L, kConvexTolerance * kPi * L) << i << " " << j << " " << k;
+                ++checked;
+            }
+    EXPECT_EQ(std::uint64_t(checked), st.texelsNeeded);
+}
+
+// The floor's centre of a well of radius R and depth D sees the sky through a cone of half-angle
+// θ = atan(R/D): E = π·L·sin²θ (albedo 0: nothing else lights it). Tolerance: 3 standard errors
+// of the Bernoulli estimate plus the rim's discretisation (the trilinear level set of the wall
+// lies within ≈ h²/(8R) of the cylinder, and the rim's edge is rounded within one voxel:
+// d(sin²θ)/dR = sin 2θ · D/(R² + D²) → ≤ 2 % of E per half voxel at R = D = 16).
+TEST(Lattice, TheFloorOfAWellSeesItsConeOfSky) {
+    const double R = 16, D = 16;
+    const float L = 1.f;
+    core::Geometry g;
+    g.dims = {72, 72, 40};
+    g.origin = {-36.0, -36.0, -4.0};  // voxel (36, 36, 4) is world (0, 0, 0), the floor's centre
+    const int samples = 20000;
+    IlluminationLattice lat(share(wellVolume(g, R, D)), albedoTf(0.f, -40, 40), {sky(L)},
+                            opts(samples, 0));
+    const glm::ivec3 floor(36, 36, 4);
+    const LatticeStats st = lat.require(std::vector<glm::dvec3>{glm::dvec3(0.0)});
+    EXPECT_EQ(st.texelsNeeded,
+              1u);  // a point exactly on a texel needs only it (the others weigh 0)
+    ASSERT_TRUE(lat.computed(floor));
+    const double sin2 = std::pow(std::sin(std::atan(R / D)), 2.0);
+    const double expected = kPi * L * sin2;
+    const double se = kPi * L * std::sqrt(sin2 * (1 - sin2) / samples);
+    const double discretisation = 0.02 * expected;
+    EXPECT_NEAR(lat.texelIrradiance(floor).x, expected, 3 * se + discretisation);
+}
+
+// Radiance never exceeds the sky's anywhere when albedo ≤ 1, so E ≤ π·L for every texel whatever
+// the bounces (the furnace limit); and each bounce adds light where the surface sees itself.
+TEST(Lattice, InterreflectionsAddLightButNeverExceedTheFurnaceLimit) {
+    const float L = 1.f;
+    core::Geometry g;
+    g.dims = {40, 40, 28};
+    g.origin = {-20.0, -20.0, -4.0};
+    auto vol = share(wellVolume(g, 8, 16));
+    const std::vector<glm::dvec3> floorPoint{glm::dvec3(0.0)};
+    double previous = 0.0;
+    for (const int bounces : {0, 1, 4}) {
+        IlluminationLattice lat(vol, albedoTf(1.f, -40, 40), {sky(L)}, opts(4000, bounces));
+        lat.require(floorPoint);
+        const double e = lat.irradiance(glm::dvec3(0.0)).x;
+        EXPECT_GT(e, previous * 1.05) << bounces << " bounces";
+        EXPECT_LE(e, kPi * L) << bounces << " bounces";
+        previous = e;
+        // Every texel of the whole surface stays under the limit (few paths: the bound holds for
+        // every path, not only on average).
+        IlluminationLattice whole(vol, albedoTf(1.f, -40, 40), {sky(L)}, opts(4, bounces));
+        whole.requireIsosurface(0.0);
+        for (int k = 0; k < g.dims.z; ++k)
+            for (int j = 0; j < g.dims.y; ++j)
+                for (int i = 0; i < g.dims.x; ++i)
+                    if (whole.computed({i, j, k})) {
+                        ASSERT_LE(whole.texelIrradiance({i, j, k}).x, kPi * L * (1 + 1e-5));
+                    }
+    }
+}
+
+// Lazy = full, bit for bit, and the thread count changes nothing: every texel's random numbers
+// depend only on its index, its sample and the seed.
+TEST(Lattice, LazyTexelsEqualAFreshComputationForAnyThreadCount) {
+    const core::Geometry g = cube(24);
+    auto vol = share(ballsVolume(g, {Ball{{-2, 0, 0}, 6.0}, Ball{{4, 1, 0}, 5.0}}));
+    auto light =
+        std::make_shared<lights::DirectionalLight>(glm::vec3(2.f), glm::vec3(0.3f, 0.5f, 1.f));
+    LatticeOptions a = opts(16, 1);
+    a.threads = 2;
+    IlluminationLattice lazy(vol, albedoTf(0.7f, -20, 20), {sky(0.5f), light}, a);
+    const LatticeStats s1 = lazy.requireIsosurface(0.0);
+    const LatticeStats s2 = lazy.requireIsosurface(0.5);  // half a voxel further out
+    EXPECT_GT(s2.texelsReused, s2.texelsNeeded / 2) << "a small isovalue step reuses most texels";
+    EXPECT_EQ(s2.texelsComputed + s2.texelsReused, s2.texelsNeeded);
+    EXPECT_EQ(s2.texelsStored, s1.texelsComputed + s2.texelsComputed);
+
+    LatticeOptions b = a;
+    b.threads = 1;
+    IlluminationLattice fresh(vol, albedoTf(0.7f, -20, 20), {sky(0.5f), light}, b);
+    fresh.requireIsosurface(0.5);
+    int compared = 0;
+    for (int k = 0; k < 24; ++k)
+        for (int j = 0; j < 24; ++j)
+            for (int i = 0; i < 24; ++i)
+                if (fresh.computed({i, j, k})) {
+                    ASSERT_TRUE(lazy.computed({i, j, k}));
+                    const glm::vec3 x = lazy.texelIrradiance({i, j, k}),
+                                    y = fresh.texelIrradiance({i, j, k});
+                    ASSERT_EQ(x, y) << i << " " << j << " " << k;
+                    ++compared;
+                }
+    EXPECT_GT(compared, 500);
+}
+
+// Shadows: a ball between a directional light and a floor darkens the floor below it (E = 0 in
+// the umbra with albedo 0 and no sky) and not beside it (E = E_l cos θ).
+TEST(Lattice, ADirectionalLightCastsAShadow) {
+    core::Geometry g;
+    g.dims = {48, 48, 32};
+    g.origin = {-24.0, -24.0, -4.0};
+    core::Volume v(g, core::VoxelType::Float32);
+    float* d = v.dataAs<float>();
+    for (int k = 0; k < g.dims.z; ++k)
+        for (int j = 0; j < g.dims.y; ++j)
+            for (int i = 0; i < g.dims.x; ++i) {
+                const glm::dvec3 p = g.indexToWorld({i, j, k});
+                const double floorSdf = p.z, ballSdf = glm::length(p - glm::dvec3(0, 0, 14)) - 6.0;
+                d[v.linearIndex(i, j, k)] = float(-std::min(floorSdf, ballSdf));
+            }
+    const float E = 2.f;
+    auto light = std::make_shared<lights::DirectionalLight>(glm::vec3(E), glm::vec3(0, 0, 1));
+    IlluminationLattice lat(share(std::move(v)), albedoTf(0.f, -40, 40), {light}, opts(4, 0));
+    const std::vector<glm::dvec3> pts{{0, 0, 0}, {18, 0, 0}};
+    lat.require(pts);
+    EXPECT_NEAR(lat.irradiance(pts[0]).x, 0.0, 1e-6);    // under the ball
+    EXPECT_NEAR(lat.irradiance(pts[1]).x, E, 1e-3 * E);  // open floor, light straight above
+}
+
+// SH transfer: a uniform sky is exact in band 0 (E = π·L on a convex surface, as the irradiance
+// lattice); turning a directional light re-dots without tracing and equals a lattice computed
+// for the turned light from the start.
+TEST(Lattice, ShTransferRedotsWhenTheLightTurns) {
+    const core::Geometry g = cube(24);
+    auto vol = share(ballsVolume(g, {Ball{{0, 0, 0}, 7.0}}));
+    IlluminationLattice skyLit(vol, albedoTf(0.5f, -20, 20), {sky(1.f)},
+                               opts(32, 1, LatticeMode::ShTransfer));
+    skyLit.requireIsosurface(0.0);
+    for (int k = 0; k < 24; ++k)
+        for (int j = 0; j < 24; ++j)
+            for (int i = 0; i < 24; ++i)
+                if (skyLit.computed({i, j, k})) {
+                    ASSERT_NEAR(skyLit.texelIrradiance({i, j, k}).x, kPi, kConvexTolerance * kPi);
+                }
+
+    auto l1 = std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), glm::vec3(1, 0, 0));
+    auto l2 = std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), glm::vec3(0, 1, 1));
+    IlluminationLattice turned(vol, albedoTf(0.5f, -20, 20), {l1},
+                               opts(32, 1, LatticeMode::ShTransfer));
+    const LatticeStats first = turned.requireIsosurface(0.0);
+    turned.setLights({l2});
+    const LatticeStats again = turned.requireIsosurface(0.0);
+    EXPECT_EQ(again.texelsComputed, 0u);
+    EXPECT_EQ(again.pathsTraced, 0u);
+    IlluminationLattice direct(vol, albedoTf(0.5f, -20, 20), {l2},
+                               opts(32, 1, LatticeMode::ShTransfer));
+    direct.requireIsosurface(0.0);
+    ASSERT_EQ(first.texelsComputed, again.texelsNeeded);
+    for (int k = 0; k < 24; ++k)
+        for (int j = 0; j < 24; ++j)
+            for (int i = 0; i < 24; ++i)
+                if (direct.computed({i, j, k})) {
+                    ASSERT_EQ(turned.texelIrradiance({i, j, k}), direct.texelIrradiance({i, j, k}));
+                }
+}
+
+TEST(Lattice, BadOptionsAndLightsNameTheirField) {
+    const core::Geometry g = cube(8);
+    auto vol = share(ballsVolume(g, {Ball{{0, 0, 0}, 2.0}}));
+    const auto tf = albedoTf(0.5f, -5, 5);
+    auto field = [&](LatticeOptions o, std::vector<std::shared_ptr<const lights::Light>> ls) {
+        try {
+            IlluminationLattice lat(vol, tf, std::move(ls), o);
+        } catch (const InputError& e) {
+            return e.field();
+        }
+        return std::string("none");
+    };
+    LatticeOptions o = opts(10, 1);
+    o.samples = 0;
+    EXPECT_EQ(field(o, {sky(1)}), "samples");
+    o = opts(10, 99);
+    EXPECT_EQ(field(o, {sky(1)}), "bounces");
+    o = opts(10, 1);
+    o.resolution = 16;
+    EXPECT_EQ(field(o, {sky(1)}), "resolution");
+    o = opts(10, 1, LatticeMode::ShTransfer);
+    o.shOrder = 6;
+    EXPECT_EQ(field(o, {sky(1)}), "sh_order");
+    o.shOrder = 3;
+    auto point = std::make_shared<lights::PointLight>(glm::vec3(1.f), glm::dvec3(0, 0, 9));
+    EXPECT_EQ(field(o, {point}), "mode");
+    EXPECT_EQ(field(opts(10, 1), {point}), "none");
+
+    // Flat volume.
+    core::Volume flat(g, core::VoxelType::Float32);
+    try {
+        IlluminationLattice lat(share(std::move(flat)), tf, {sky(1)}, opts(10, 1));
+        ADD_FAILURE() << "a flat volume was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "volume");
+    }
+    // Over the memory budget: nothing is computed.
+    LatticeOptions tiny = opts(10, 1);
+    tiny.memoryBudgetMiB = 0.001;
+    IlluminationLattice lat(vol, tf, {sky(1)}, tiny);
+    try {
+        lat.requireIsosurface(0.0);
+        ADD_FAILURE() << "the budget was not enforced";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "memory");
+        EXPECT_NE(std::string(e.what()).find("budget"), std::string::npos);
+    }
+    EXPECT_EQ(lat.texelsStored(), 0u);
+}
+
+}  // namespace
+}  // namespace voxlight::iso
