@@ -159,6 +159,11 @@ void runVtkChecked(vtkAlgorithm* alg, const fs::path& path, const std::string& w
 // ---------------------------------------------------------------------------------------------------------------
 // Size checks before any allocation.
 
+/// Deflate (zlib, gzip) expands at most 1032:1: compressed data claiming more bytes than its size
+/// times this (plus kDeflateSlackBytes for headers and tiny inputs) cannot be what it says.
+constexpr std::uint64_t kMaxDeflateRatio = 1032;
+constexpr std::uint64_t kDeflateSlackBytes = std::uint64_t(1) << 16;
+
 void checkExtent(const int ext[6], int components, const fs::path& path) {
     std::ostringstream dims;
     std::uint64_t voxels = 1;
@@ -434,12 +439,11 @@ void checkNiftiHeader(const fs::path& path) {
     const double offset = v1 ? f32(108) : double(i64(168));
     std::error_code ec;
     const std::uintmax_t fileSize = fs::file_size(path, ec);
-    // Compressed: deflate cannot expand beyond 1032:1, so a small .nii.gz claiming gigabytes is
-    // refused before VTK allocates them (fuzz_nifti_gz: 4.2 GB for a 600-byte file).
+    // Compressed: deflate cannot expand beyond kMaxDeflateRatio, so a small .nii.gz claiming
+    // gigabytes is refused before VTK allocates them (fuzz_nifti_gz: 4.2 GB for a 600-byte file).
     const std::uint64_t claimed = voxels * std::uint64_t(it->second) / 8;
-    constexpr std::uint64_t kMaxDeflateRatio = 1032;
     if (!ec && hasExtension(path, {".gz"}) &&
-        claimed > kMaxDeflateRatio * std::uint64_t(fileSize) + (std::uint64_t(1) << 16))
+        claimed > kMaxDeflateRatio * std::uint64_t(fileSize) + kDeflateSlackBytes)
         throw InputError(path.string(), "data",
                          "the header claims " + std::to_string(claimed) +
                              " data bytes but the compressed file of " + std::to_string(fileSize) +
@@ -752,6 +756,15 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
                              "file holds " + std::to_string(have) + " bytes, header " +
                                  path.filename().string() + " claims " + std::to_string(need),
                              "the data is truncated; copy it again");
+        // Compressed data claiming more than deflate can expand to: refused before MetaIO
+        // allocates it (fuzz_metaimage in CI: a small .mha declaring gigabytes went over 2 GB).
+        if (isCompressed && need > kMaxDeflateRatio * have + kDeflateSlackBytes)
+            throw InputError(raw.string(), "data",
+                             "header " + path.filename().string() + " claims " +
+                                 std::to_string(need) + " voxel bytes but the " +
+                                 std::to_string(have) + " compressed bytes cannot hold more than " +
+                                 std::to_string(kMaxDeflateRatio * have),
+                             "the file is truncated or its DimSize is damaged");
         if (isCompressed && h.find("CompressedDataSize")) {
             const double claimed = metaNumbers(h, path, "CompressedDataSize", 1)[0];
             if (double(have) < claimed)

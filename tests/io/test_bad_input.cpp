@@ -385,6 +385,13 @@ TEST(BadInput, MetaImageShortOrUndecompressibleData) {
                             "LOCAL") +
                         std::string(64, '\7'),
                     "data", {"64 compressed bytes", "claims 5000"});
+    // A few compressed bytes claiming 2 GiB of voxels: refused before anything is allocated (deflate
+    // expands at most 1032:1; found by fuzz_metaimage in CI as memory over its 2 GB budget).
+    expectNrrdError(
+        tmp, "huge.mha",
+        mhdText("NDims = 3\nDimSize = 1024 1024 1024\nCompressedData = True\n", "LOCAL") +
+            std::string(600, '\7'),
+        "data", {"claims 2147483648 voxel bytes", "cannot hold more than 619200"});
 }
 
 namespace {
