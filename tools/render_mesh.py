@@ -3,9 +3,9 @@
 """Render exported isosurface meshes (voxlight iso ... -o X.ply|.obj) side by side, seen from the
 patient's front, to look at them: one viewport per mesh, vertex colours as stored, VTK's headlight.
 
-usage: xvfb-run -a /usr/bin/python3 tools/render_mesh.py OUT.png MESH [MESH ...] [--size W H] [--unlit]
-[--azimuth DEG]
---unlit shows the stored vertex colours as they are (no headlight): how a mesh with light baked in by
+usage: xvfb-run -a /usr/bin/python3 tools/render_mesh.py OUT.png MESH [MESH ...] [--size W H]
+[--unlit [INDEX ...]] [--azimuth DEG]
+--unlit (all meshes, or those at the 0-based indices given) shows the stored vertex colours as they are (no headlight): how a mesh with light baked in by
 `voxlight iso --bake` looks in a viewer that draws vertex colours flat. --azimuth turns the camera about
 the superior axis (0 = anterior view, 90 = from the patient's left).
 Meshes are in mm, patient LPS (src/iso/export.h): the camera looks along +y (from anterior) with
@@ -34,7 +34,9 @@ def main():
     ap.add_argument("out")
     ap.add_argument("meshes", nargs="+")
     ap.add_argument("--size", nargs=2, type=int, default=[400, 400], help="per viewport")
-    ap.add_argument("--unlit", action="store_true", help="vertex colours as stored, no lighting")
+    ap.add_argument("--unlit", nargs="*", type=int, default=None, metavar="INDEX",
+                    help="vertex colours as stored, no lighting: every mesh, or those at the given "
+                         "0-based indices")
     ap.add_argument("--azimuth", type=float, default=0.0, help="degrees about +z from anterior")
     a = ap.parse_args()
     n = len(a.meshes)
@@ -49,7 +51,7 @@ def main():
         mapper.SetColorModeToDirectScalars()
         actor = vtkActor()
         actor.SetMapper(mapper)
-        if a.unlit:
+        if a.unlit is not None and (not a.unlit or i in a.unlit):
             actor.GetProperty().SetLighting(False)
         ren = vtkRenderer()
         ren.SetViewport(i / n, 0, (i + 1) / n, 1)

@@ -222,8 +222,10 @@ Command addIsoCommand(CLI::App& app) {
             }
             try {
                 iso::IlluminationLattice lat(volumePtr, tf, std::move(ls0), lo);
-                ls = iso::bakeVertexColours(ex.mesh, lat, options.color,
-                                            float(std::exp2(s.image.exposureStops)), progress);
+                ls = iso::bakeVertexColours(
+                    ex.mesh, lat,
+                    es.storedIsovalue * volume.mapping.slope + volume.mapping.intercept,
+                    options.color, float(std::exp2(s.image.exposureStops)), progress);
             } catch (const InputError& e) {
                 if (e.source() != "lattice") throw;
                 static const std::map<std::string, std::string> option = {

@@ -279,11 +279,14 @@ struct IlluminationLattice::Tracer {
     bool cellHit(const glm::ivec3& c, const glm::dvec3& o, const glm::dvec3& d, double t0,
                  double t1, double iso, double sigma, double* tHit) const {
         if (!(t1 > t0)) return false;
-        float v[8], lo = INFINITY, hi = -INFINITY;
-        for (int q = 0; q < 8; ++q) {
-            v[q] = voxel(c.x + (q & 1), c.y + ((q >> 1) & 1), c.z + (q >> 2));
-            lo = std::min(lo, v[q]), hi = std::max(hi, v[q]);
-        }
+        // c is a cell (c + 1 ≤ n − 1 wherever the axis has 2 voxels): direct reads.
+        const float* base = s.data() + idx(c.x, c.y, c.z);
+        const std::size_t dx = n.x > 1 ? 1 : 0, dy = n.y > 1 ? std::size_t(n.x) : 0,
+                          dz = n.z > 1 ? std::size_t(n.x) * std::size_t(n.y) : 0;
+        const float v[8] = {base[0],  base[dx],      base[dy],      base[dy + dx],
+                            base[dz], base[dz + dx], base[dz + dy], base[dz + dy + dx]};
+        float lo = v[0], hi = v[0];
+        for (int q = 1; q < 8; ++q) lo = std::min(lo, v[q]), hi = std::max(hi, v[q]);
         if (!mayCross(lo, hi, iso, sigma)) return false;
         // Local coordinate along the cell: q(u) = q0 + d·u, u = t − t0.
         const glm::dvec3 q0 = o + t0 * d - glm::dvec3(c);
@@ -451,6 +454,10 @@ std::span<const glm::vec3> IlluminationLattice::texelTransfer(const glm::ivec3& 
 }
 
 glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world) const {
+    return irradiance(world, NAN);
+}
+
+glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfaceIso) const {
     const glm::dvec3 q = volume_->geometry().worldToIndex(world) * res_;
     glm::ivec3 i0;
     glm::dvec3 f;
@@ -459,23 +466,33 @@ glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world) const {
         i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
         f[a] = x - i0[a];
     }
-    // Plateau texels (no surface of their own) only where all weighed texels are plateaus.
-    glm::dvec3 e(0.0), ePlateau(0.0);
-    double w1 = 0.0, wPlateau = 0.0;
+    // Groups in order of preference (header): texels with a surface on the inside of
+    // surfaceIso, inside plateaus, then the outside ones — only those a require() computed.
+    glm::ivec3 texel[8];
+    double weight[8];
+    int group[8], n = 0, best = 2;
     for (int c = 0; c < 8; ++c) {
         const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
         const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
         if (w == 0.0) continue;
-        const glm::ivec3 t = glm::min(i0 + o, dims_ - 1);
-        if (plateau(t)) {
-            ePlateau += w * glm::dvec3(texelIrradiance(t));
-            wPlateau += w;
-        } else {
-            e += w * glm::dvec3(texelIrradiance(t));
-            w1 += w;
-        }
+        texel[n] = glm::min(i0 + o, dims_ - 1);
+        weight[n] = w;
+        group[n] = outsideOf(texel[n], surfaceIso) ? 2 : plateau(texel[n]) ? 1 : 0;
+        best = std::min(best, group[n]);
+        ++n;
     }
-    return glm::vec3(w1 > 0.0 ? e / w1 : ePlateau / wPlateau);
+    glm::dvec3 e(0.0);
+    double wsum = 0.0;
+    for (int c = 0; c < n; ++c)
+        if (group[c] == best) {
+            e += weight[c] * glm::dvec3(texelIrradiance(texel[c]));
+            wsum += weight[c];
+        }
+    return glm::vec3(wsum > 0.0 ? e / wsum : e);
+}
+
+bool IlluminationLattice::outsideOf(const glm::ivec3& t, double surfaceIso) const {
+    return !std::isnan(surfaceIso) && tracer_->value(texelIndexPosition(t)) < surfaceIso;
 }
 
 void IlluminationLattice::redot() {
@@ -515,6 +532,11 @@ void IlluminationLattice::setLights(std::vector<std::shared_ptr<const lights::Li
 
 LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoints,
                                           const core::Progress& progress) {
+    return require(worldPoints, NAN, progress);
+}
+
+LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoints,
+                                          double surfaceIso, const core::Progress& progress) {
     std::vector<glm::ivec3> needed;
     needed.reserve(worldPoints.size() * 2);
     const core::Geometry& g = volume_->geometry();
@@ -527,12 +549,22 @@ LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoint
             i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
             f[a] = x - i0[a];
         }
-        // The corners irradiance() weighs (a point on a texel's plane needs no texel beyond it).
+        // The corners irradiance() weighs (a point on a texel's plane needs no texel beyond it);
+        // with a surface isovalue only those inside it, unless none is.
+        glm::ivec3 corner[8];
+        bool outside[8];
+        int n = 0, inside = 0;
         for (int c = 0; c < 8; ++c) {
             const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
             const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
-            if (w != 0.0) needed.push_back(glm::min(i0 + o, dims_ - 1));
+            if (w == 0.0) continue;
+            corner[n] = glm::min(i0 + o, dims_ - 1);
+            outside[n] = outsideOf(corner[n], surfaceIso);
+            inside += !outside[n];
+            ++n;
         }
+        for (int c = 0; c < n; ++c)
+            if (!outside[c] || inside == 0) needed.push_back(corner[c]);
     }
     return computeTexels(std::move(needed), progress);
 }
@@ -742,18 +774,19 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     return st;
 }
 
-LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, const glm::vec3& albedo,
-                               float scale, const core::Progress& progress) {
+LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
+                               const glm::vec3& albedo, float scale,
+                               const core::Progress& progress) {
     std::vector<glm::dvec3> points;
     points.reserve(mesh.n_vertices());
     for (const auto v : mesh.vertices()) {
         const auto& p = mesh.point(v);
         points.emplace_back(p[0], p[1], p[2]);
     }
-    const LatticeStats st = lattice.require(points, progress);
+    const LatticeStats st = lattice.require(points, isovalue, progress);
     const glm::vec3 k = albedo * float(scale / kPi);
     for (const auto v : mesh.vertices()) {
-        const glm::vec3 c = k * lattice.irradiance(points[v.idx()]);
+        const glm::vec3 c = k * lattice.irradiance(points[v.idx()], isovalue);
         mesh.set_color(v, Mesh::Color(c.x, c.y, c.z));
     }
     return st;

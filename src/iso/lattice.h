@@ -114,6 +114,10 @@ class IlluminationLattice {
     /// (field "memory") when the texels would exceed the budget, CancelledError through progress.
     LatticeStats require(std::span<const glm::dvec3> worldPoints,
                          const core::Progress& progress = core::Progress::none());
+    /// The same for points on the isosurface at `surfaceIso`: only the texels
+    /// irradiance(p, surfaceIso) reads (those inside it, unless none around a point is).
+    LatticeStats require(std::span<const glm::dvec3> worldPoints, double surfaceIso,
+                         const core::Progress& progress = core::Progress::none());
     /// Computes the texels of every volume cell whose 8 corners span `isovalue` (what direct ray
     /// casting of that isosurface reads).
     LatticeStats requireIsosurface(double isovalue,
@@ -123,6 +127,13 @@ class IlluminationLattice {
     /// above), each of which must have been required (VL_CHECK). ShTransfer: re-dotted with the
     /// current lights.
     glm::vec3 irradiance(const glm::dvec3& world) const;
+    /// The same for a point on the isosurface at `surfaceIso` (values above it inside): texels
+    /// outside that surface (value < surfaceIso) are used only where no texel inside it is — their
+    /// own isosurfaces lie in the matter around it (on CT, the noise of soft tissue), not on it,
+    /// and mixing them in gave the lit torso a mottled, wood-grain texture at voxel scale.
+    glm::vec3 irradiance(const glm::dvec3& world, double surfaceIso) const;
+    /// Whether texel t lies outside the surface at surfaceIso (false for NaN: no surface given).
+    bool outsideOf(const glm::ivec3& t, double surfaceIso) const;
     /// The stored value of texel (i, j, k) (must be computed): irradiance, or re-dotted transfer.
     glm::vec3 texelIrradiance(const glm::ivec3& t) const;
     /// ShTransfer only: the transfer vector of a computed texel, (order)² RGB entries.
@@ -165,12 +176,13 @@ class IlluminationLattice {
     std::vector<glm::vec3> lightSh_;  ///< ShTransfer: Σ lights' SH coefficients, (order)²
 };
 
-/// Bakes the lattice's light into the mesh's vertex colours (the lit-mesh export): requires the
-/// vertices' texels, then colour = albedo ⊙ E(vertex)/π · scale — the radiance a Lambertian
+/// Bakes the lattice's light into the mesh's vertex colours (the lit-mesh export; the mesh is the
+/// isosurface at `isovalue`, physical): requires the vertices' texels, then colour =
+/// albedo ⊙ irradiance(vertex, isovalue)/π · scale — the radiance a Lambertian
 /// surface of that albedo leaves, linear RGB (exporters clamp to [0, 1] and encode, iso/export.h);
 /// `scale` is the display exposure, 2^stops. Returns the require's stats.
-LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, const glm::vec3& albedo,
-                               float scale,
+LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
+                               const glm::vec3& albedo, float scale,
                                const core::Progress& progress = core::Progress::none());
 
 }  // namespace voxlight::iso

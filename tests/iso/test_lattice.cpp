@@ -259,6 +259,39 @@ TEST(Lattice, ShTransferRedotsWhenTheLightTurns) {
                 }
 }
 
+// At a point of the surface at isovalue v, irradiance(p, v) reads only the texels inside it (value
+// ≥ v), weights renormalised: the outside texels' own isosurfaces lie in the matter around it.
+TEST(Lattice, ASurfacePointReadsTheTexelsInsideItsSurface) {
+    const core::Geometry g = cube(16);
+    auto light =
+        std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), glm::vec3(0.2f, 0.3f, 1.f));
+    IlluminationLattice lat(share(ballsVolume(g, {Ball{{0, 0, 0}, 4.3}})), albedoTf(0.5f, -20, 20),
+                            {sky(1.f), light}, opts(8, 1));
+    const glm::dvec3 p(0.3, 0.4, 4.25);  // near the top of the ball, inside a cell
+    lat.require(std::vector<glm::dvec3>{p});
+    const glm::dvec3 q = g.worldToIndex(p);
+    const glm::ivec3 i0 = glm::ivec3(glm::floor(q));
+    const glm::dvec3 f = q - glm::dvec3(i0);
+    glm::dvec3 sum(0.0);
+    double w = 0.0;
+    int inside = 0;
+    for (int c = 0; c < 8; ++c) {
+        const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
+        const glm::ivec3 t = i0 + o;
+        const double wt = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
+        const double value = 4.3 - glm::length(g.indexToWorld(glm::dvec3(t)));
+        if (value < 0.0 || lat.plateau(t)) continue;
+        sum += wt * glm::dvec3(lat.texelIrradiance(t));
+        w += wt;
+        ++inside;
+    }
+    ASSERT_GT(inside, 0);
+    ASSERT_LT(inside, 8);
+    const glm::vec3 expected(sum / w), got = lat.irradiance(p, 0.0);
+    for (int ch = 0; ch < 3; ++ch) EXPECT_NEAR(got[ch], expected[ch], 1e-5f * expected[ch]);
+    EXPECT_NE(got, lat.irradiance(p));  // all eight texels give another value
+}
+
 TEST(Lattice, BadOptionsAndLightsNameTheirField) {
     const core::Geometry g = cube(8);
     auto vol = share(ballsVolume(g, {Ball{{0, 0, 0}, 2.0}}));
