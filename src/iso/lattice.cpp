@@ -457,7 +457,8 @@ glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world) const {
     return irradiance(world, NAN);
 }
 
-glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfaceIso) const {
+int IlluminationLattice::stencil(const glm::dvec3& world, glm::ivec3 texel[8],
+                                 double weight[8]) const {
     const glm::dvec3 q = volume_->geometry().worldToIndex(world) * res_;
     glm::ivec3 i0;
     glm::dvec3 f;
@@ -466,20 +467,27 @@ glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfac
         i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
         f[a] = x - i0[a];
     }
+    int n = 0;
+    for (int c = 0; c < 8; ++c) {
+        const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
+        const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
+        if (w == 0.0) continue;  // a point on a texel's plane needs no texel beyond it
+        texel[n] = glm::min(i0 + o, dims_ - 1);
+        weight[n++] = w;
+    }
+    return n;
+}
+
+glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfaceIso) const {
     // Groups in order of preference (header): texels with a surface on the inside of
     // surfaceIso, inside plateaus, then the outside ones — only those a require() computed.
     glm::ivec3 texel[8];
     double weight[8];
-    int group[8], n = 0, best = 2;
-    for (int c = 0; c < 8; ++c) {
-        const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
-        const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
-        if (w == 0.0) continue;
-        texel[n] = glm::min(i0 + o, dims_ - 1);
-        weight[n] = w;
-        group[n] = outsideOf(texel[n], surfaceIso) ? 2 : plateau(texel[n]) ? 1 : 0;
-        best = std::min(best, group[n]);
-        ++n;
+    int group[8], best = 2;
+    const int n = stencil(world, texel, weight);
+    for (int c = 0; c < n; ++c) {
+        group[c] = outsideOf(texel[c], surfaceIso) ? 2 : plateau(texel[c]) ? 1 : 0;
+        best = std::min(best, group[c]);
     }
     glm::dvec3 e(0.0);
     double wsum = 0.0;
@@ -539,32 +547,20 @@ LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoint
                                           double surfaceIso, const core::Progress& progress) {
     std::vector<glm::ivec3> needed;
     needed.reserve(worldPoints.size() * 2);
-    const core::Geometry& g = volume_->geometry();
     for (const glm::dvec3& w : worldPoints) {
-        const glm::dvec3 q = g.worldToIndex(w) * res_;
-        glm::ivec3 i0;
-        glm::dvec3 f;
-        for (int a = 0; a < 3; ++a) {
-            const double x = std::clamp(q[a], 0.0, double(dims_[a] - 1));
-            i0[a] = std::min(int(x), std::max(dims_[a] - 2, 0));
-            f[a] = x - i0[a];
-        }
-        // The corners irradiance() weighs (a point on a texel's plane needs no texel beyond it);
-        // with a surface isovalue only those inside it, unless none is.
-        glm::ivec3 corner[8];
+        // The texels irradiance() reads: with a surface isovalue only those inside it, unless
+        // none is.
+        glm::ivec3 texel[8];
+        double weight[8];
         bool outside[8];
-        int n = 0, inside = 0;
-        for (int c = 0; c < 8; ++c) {
-            const glm::ivec3 o(c & 1, (c >> 1) & 1, c >> 2);
-            const double w = (o.x ? f.x : 1 - f.x) * (o.y ? f.y : 1 - f.y) * (o.z ? f.z : 1 - f.z);
-            if (w == 0.0) continue;
-            corner[n] = glm::min(i0 + o, dims_ - 1);
-            outside[n] = outsideOf(corner[n], surfaceIso);
-            inside += !outside[n];
-            ++n;
+        int inside = 0;
+        const int n = stencil(w, texel, weight);
+        for (int c = 0; c < n; ++c) {
+            outside[c] = outsideOf(texel[c], surfaceIso);
+            inside += !outside[c];
         }
         for (int c = 0; c < n; ++c)
-            if (!outside[c] || inside == 0) needed.push_back(corner[c]);
+            if (!outside[c] || inside == 0) needed.push_back(texel[c]);
     }
     return computeTexels(std::move(needed), progress);
 }

@@ -161,6 +161,8 @@ class IlluminationLattice {
     const float* texelData(const glm::ivec3& t) const;
     LatticeStats computeTexels(std::vector<glm::ivec3> needed, const core::Progress& progress);
     void redot();
+    /// The texels trilinear reads at a world point (weight > 0) and their weights; returns how many.
+    int stencil(const glm::dvec3& world, glm::ivec3 texel[8], double weight[8]) const;
     /// ShTransfer: the irradiance slot of texel data d from its transfer and the current lights.
     void dotTexel(float* d) const;
 

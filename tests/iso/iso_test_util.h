@@ -15,22 +15,31 @@ struct Ball {
     double radius;
 };
 
-/// Float volume whose value is max over balls of (radius − |x − centre|) (world mm): the isovalue-0
-/// surface is the union of the spheres; each value is the signed distance to the nearest sphere, so
-/// linear interpolation along grid edges places vertices within O(h²/R) of it.
-inline core::Volume ballsVolume(const core::Geometry& g, const std::vector<Ball>& balls) {
+/// Float volume whose value at each voxel is f(world position in mm).
+template <class F>
+core::Volume fieldVolume(const core::Geometry& g, F&& f, const char* description = "field") {
     core::Volume v(g, core::VoxelType::Float32);
     float* d = v.dataAs<float>();
     for (int k = 0; k < g.dims.z; ++k)
         for (int j = 0; j < g.dims.y; ++j)
-            for (int i = 0; i < g.dims.x; ++i) {
-                const glm::dvec3 p = g.indexToWorld({i, j, k});
-                double s = -1e30;
-                for (const Ball& b : balls) s = std::max(s, b.radius - glm::length(p - b.centre));
-                d[v.linearIndex(i, j, k)] = float(s);
-            }
-    v.description = "balls";
+            for (int i = 0; i < g.dims.x; ++i)
+                d[v.linearIndex(i, j, k)] = float(f(g.indexToWorld({i, j, k})));
+    v.description = description;
     return v;
+}
+
+/// Float volume whose value is max over balls of (radius − |x − centre|) (world mm): the isovalue-0
+/// surface is the union of the spheres; each value is the signed distance to the nearest sphere, so
+/// linear interpolation along grid edges places vertices within O(h²/R) of it.
+inline core::Volume ballsVolume(const core::Geometry& g, const std::vector<Ball>& balls) {
+    return fieldVolume(
+        g,
+        [&](const glm::dvec3& p) {
+            double s = -1e30;
+            for (const Ball& b : balls) s = std::max(s, b.radius - glm::length(p - b.centre));
+            return s;
+        },
+        "balls");
 }
 
 inline glm::dvec3 toGlm(const OpenMesh::Vec3d& p) { return {p[0], p[1], p[2]}; }

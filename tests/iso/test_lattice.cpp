@@ -59,18 +59,12 @@ std::shared_ptr<const core::Volume> share(core::Volume v) {
 /// the floor: value = −(signed distance of the CSG union {z ≤ 0} ∪ ({z ≤ D} ∩ {r ≥ R})), so the
 /// 0-level set is the shape and the value rises into the solid.
 core::Volume wellVolume(const core::Geometry& g, double R, double D) {
-    core::Volume v(g, core::VoxelType::Float32);
-    float* d = v.dataAs<float>();
-    for (int k = 0; k < g.dims.z; ++k)
-        for (int j = 0; j < g.dims.y; ++j)
-            for (int i = 0; i < g.dims.x; ++i) {
-                const glm::dvec3 p = g.indexToWorld({i, j, k});
-                const double r = std::hypot(p.x, p.y);
-                const double sdf = std::min(p.z, std::max(p.z - D, R - r));
-                d[v.linearIndex(i, j, k)] = float(-sdf);
-            }
-    v.description = "well";
-    return v;
+    return test::fieldVolume(
+        g,
+        [&](const glm::dvec3& p) {
+            return -std::min(p.z, std::max(p.z - D, R - std::hypot(p.x, p.y)));
+        },
+        "well");
 }
 
 LatticeOptions opts(int samples, int bounces, LatticeMode mode = LatticeMode::Irradiance) {
@@ -204,15 +198,10 @@ TEST(Lattice, ADirectionalLightCastsAShadow) {
     core::Geometry g;
     g.dims = {48, 48, 32};
     g.origin = {-24.0, -24.0, -4.0};
-    core::Volume v(g, core::VoxelType::Float32);
-    float* d = v.dataAs<float>();
-    for (int k = 0; k < g.dims.z; ++k)
-        for (int j = 0; j < g.dims.y; ++j)
-            for (int i = 0; i < g.dims.x; ++i) {
-                const glm::dvec3 p = g.indexToWorld({i, j, k});
-                const double floorSdf = p.z, ballSdf = glm::length(p - glm::dvec3(0, 0, 14)) - 6.0;
-                d[v.linearIndex(i, j, k)] = float(-std::min(floorSdf, ballSdf));
-            }
+    // A floor (top at z = 0) and a ball of radius 6 above it.
+    core::Volume v = test::fieldVolume(g, [](const glm::dvec3& p) {
+        return -std::min(p.z, glm::length(p - glm::dvec3(0, 0, 14)) - 6.0);
+    });
     const float E = 2.f;
     auto light = std::make_shared<lights::DirectionalLight>(glm::vec3(E), glm::vec3(0, 0, 1));
     IlluminationLattice lat(share(std::move(v)), albedoTf(0.f, -40, 40), {light}, opts(4, 0));
