@@ -3,7 +3,8 @@
 //              [--set key=value]... [--remove-degenerate] [--keep-largest K]
 //              [--min-component-faces N] [--smooth N] [--decimate FACES]
 //              [--no-self-intersections] [--bake [--samples N] [--bounces K]
-//              [--lattice-resolution R] [--lattice-mode irradiance|sh] [--sh-order O]] [-q]
+//              [--bake-from vertices|lattice] [--lattice-resolution R]
+//              [--lattice-mode irradiance|sh] [--sh-order O]] [-q]
 // Extracts the scene's isosurface as a mesh (iso/: VTK flying edges → OpenMesh, world mm, outward
 // gradient normals), cuts it by the scene's clip planes and crop box (open cut), optionally cleans
 // it up (CGAL), reports it and writes it with vertex colours.
@@ -13,9 +14,10 @@
 // the transfer function's surface value (where its extinction reaches a tenth of its maximum,
 // optics::TransferFunction::surfaceValue — what the `iso` render method uses by default). The
 // vertex colour is the transfer function's albedo at the isovalue; with --bake, the light the
-// scene's lights give each vertex through the illumination lattice (iso/lattice.h: shadows, sky,
-// interreflections) — albedo·E/π·2^exposure — or, when the scene has no lights, a uniform white sky
-// of radiance 1 (an unoccluded vertex shows its albedo: ambient occlusion with bounces).
+// scene's lights give each vertex (iso/lattice.h: shadows, sky, interreflections) —
+// albedo·E/π·2^exposure — traced from the vertex itself (default) or read from Wyman's
+// illumination lattice (--bake-from lattice); when the scene has no lights, a uniform white sky of
+// radiance 1 (an unoccluded vertex shows its albedo: ambient occlusion with bounces).
 //
 // Bad input exits 2 with one line and writes nothing: an isovalue outside the data range (the
 // line names the range), a flat volume (no isosurface exists), clip planes / crop box that remove
@@ -79,6 +81,7 @@ Command addIsoCommand(CLI::App& app) {
     auto bake = std::make_shared<bool>(false);
     auto lattice = std::make_shared<iso::LatticeOptions>();
     auto latticeMode = std::make_shared<std::string>("irradiance");
+    auto bakeFrom = std::make_shared<std::string>("vertices");
     c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
     CLI::Option* isoOption =
@@ -117,6 +120,11 @@ Command addIsoCommand(CLI::App& app) {
         ->add_option("--lattice-resolution", lattice->resolution,
                      "--bake: lattice texels per voxel along each axis, 0.125…8 (1)")
         ->check(CLI::Range(0.125, 8.0));
+    c.sub
+        ->add_option("--bake-from", *bakeFrom,
+                     "--bake: vertices (paths from each vertex: accurate, the default) or lattice "
+                     "(Wyman's illumination lattice, trilinear)")
+        ->check(CLI::IsMember({"vertices", "lattice"}));
     c.sub
         ->add_option("--lattice-mode", *latticeMode,
                      "--bake: irradiance (any lights) or sh (SH transfer, distant lights)")
@@ -220,12 +228,18 @@ Command addIsoCommand(CLI::App& app) {
             } else {
                 lightsUsed = std::to_string(ls0.size()) + " scene light(s)";
             }
+            if (*bakeFrom == "vertices" && lo.mode == iso::LatticeMode::ShTransfer)
+                throw InputError("command line", "--lattice-mode",
+                                 "an SH transfer bake needs the lattice",
+                                 "add --bake-from lattice, or drop --lattice-mode sh");
             try {
                 iso::IlluminationLattice lat(volumePtr, tf, std::move(ls0), lo);
                 ls = iso::bakeVertexColours(
                     ex.mesh, lat,
                     es.storedIsovalue * volume.mapping.slope + volume.mapping.intercept,
-                    options.color, float(std::exp2(s.image.exposureStops)), progress);
+                    options.color, float(std::exp2(s.image.exposureStops)),
+                    *bakeFrom == "lattice" ? iso::BakeSource::Lattice : iso::BakeSource::Vertices,
+                    progress);
             } catch (const InputError& e) {
                 if (e.source() != "lattice") throw;
                 static const std::map<std::string, std::string> option = {
@@ -240,12 +254,14 @@ Command addIsoCommand(CLI::App& app) {
                 throw InputError("command line", it->second, e.problem(), e.fix());
             }
         }
-        stages.push_back(stage("illumination_lattice", *bake,
-                               *bake ? "computed: " + std::to_string(ls.texelsComputed) +
-                                           " texels of " + std::to_string(ls.texelsFull) + " (" +
-                                           lightsUsed + ", " + std::to_string(lattice->samples) +
-                                           " paths, " + std::to_string(lattice->bounces) +
-                                           " bounce(s))"
+        const std::string bakeWhat =
+            *bakeFrom == "lattice"
+                ? std::to_string(ls.texelsComputed) + " texels of " + std::to_string(ls.texelsFull)
+                : std::to_string(ex.mesh.n_vertices()) + " vertices";
+        stages.push_back(stage("bake_light", *bake,
+                               *bake ? "computed: " + bakeWhat + " (" + lightsUsed + ", " +
+                                           std::to_string(lattice->samples) + " paths, " +
+                                           std::to_string(lattice->bounces) + " bounce(s))"
                                      : "not needed: no --bake (vertex colour = the TF's albedo)",
                                sw.seconds()));
 
@@ -276,19 +292,21 @@ Command addIsoCommand(CLI::App& app) {
                           {"faces_before", cs.facesBefore},
                           {"faces_after", cs.facesAfter}}},
                         {"report", reportJson(report)},
-                        {"lattice", *bake ? json{{"texels_full", ls.texelsFull},
-                                                 {"texels_computed", ls.texelsComputed},
-                                                 {"texels_plateau", ls.plateauTexels},
-                                                 {"paths", ls.pathsTraced},
-                                                 {"shadow_rays", ls.shadowRays},
-                                                 {"seconds", ls.seconds},
-                                                 {"stored_mib", ls.storedMiB},
-                                                 {"samples", lattice->samples},
-                                                 {"bounces", lattice->bounces},
-                                                 {"resolution", lattice->resolution},
-                                                 {"mode", *latticeMode},
-                                                 {"lights", lightsUsed}}
-                                          : json(nullptr)},
+                        {"bake", *bake ? json{{"vertices", ex.mesh.n_vertices()},
+                                              {"texels_full", ls.texelsFull},
+                                              {"texels_computed", ls.texelsComputed},
+                                              {"texels_plateau", ls.plateauTexels},
+                                              {"paths", ls.pathsTraced},
+                                              {"shadow_rays", ls.shadowRays},
+                                              {"seconds", ls.seconds},
+                                              {"stored_mib", ls.storedMiB},
+                                              {"samples", lattice->samples},
+                                              {"bounces", lattice->bounces},
+                                              {"resolution", lattice->resolution},
+                                              {"mode", *latticeMode},
+                                              {"from", *bakeFrom},
+                                              {"lights", lightsUsed}}
+                                       : json(nullptr)},
                         {"units", "mm"},
                         {"frame", "LPS"}}},
                       {"scene", s.document}};

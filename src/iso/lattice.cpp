@@ -641,111 +641,37 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
         blockMap_.emplace(k, std::move(b));
     }
 
-    const Tracer& tr = *tracer_;
     const LatticeOptions& o = options_;
     const int C = o.shOrder * o.shOrder;
     const bool sh = o.mode == LatticeMode::ShTransfer;
-    std::vector<const lights::Light*> deltas, others;
-    for (const auto& l : lights_) (l->isDelta() ? deltas : others).push_back(l.get());
     std::atomic<std::uint64_t> paths{0}, shadows{0}, plateaus{0}, finished{0};
     std::atomic<std::size_t> done{0};
     const std::thread::id caller = std::this_thread::get_id();
     const char* stage = "illumination lattice";
     progress.report(stage, 0.0);
 
-    // Irradiance from the delta lights at surface point x (index) with normal n (world; zero =
-    // the full-sphere average, cos θ → 1/4).
-    auto directDelta = [&](const glm::dvec3& x, const glm::dvec3& nrm, double iso,
-                           std::uint64_t& nShadow) {
-        glm::dvec3 e(0.0);
-        const glm::dvec3 world = tr.geo.indexToWorld(x);
-        for (const lights::Light* l : deltas) {
-            const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
-            if (!(ls.pdf > 0.f)) continue;
-            const double cosT = nrm == glm::dvec3(0.0) ? 0.25 : glm::dot(nrm, glm::dvec3(ls.wi));
-            if (cosT <= 0.0) continue;
-            ++nShadow;
-            if (tr.hit(x, glm::dvec3(ls.wi), iso, double(ls.distance))) continue;
-            e += glm::dvec3(ls.value) * cosT;
-        }
-        return e;
-    };
-
     tbb::task_arena arena(o.threads > 0 ? o.threads : tbb::task_arena::automatic);
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& rg) {
             if (progress.cancelled()) return;
             std::uint64_t nPaths = 0, nShadow = 0, nPlateau = 0, nDone = 0;
-            std::vector<double> y(static_cast<std::size_t>(C));
-            std::vector<glm::dvec3> T(static_cast<std::size_t>(C));
+            PathSums sums(C);
             for (std::size_t r = rg.begin(); r != rg.end(); ++r) {
                 const glm::ivec3 t = todo[r];
                 const glm::dvec3 xt = texelIndexPosition(t);
-                const double iso = tr.value(xt);
-                const glm::dvec3 albedo =
-                    glm::clamp(glm::dvec3(tf_.eval(float(iso)).albedo), 0.0, 1.0);
-                glm::dvec3 n0 = tr.smoothNormal(xt);
-                glm::dvec3 x0 = xt;
-                if (n0 != glm::dvec3(0.0) && !tr.startPoint(xt, n0, iso, x0)) n0 = glm::dvec3(0.0);
-                const bool plateau = n0 == glm::dvec3(0.0);
-                if (plateau) x0 = xt, ++nPlateau;
-                glm::dvec3 E(0.0);  // Σ over paths of what follows the first direction
-                std::fill(T.begin(), T.end(), glm::dvec3(0.0));
-                // Delta lights at the texel are the same for every path: once.
-                const glm::dvec3 direct0 = sh ? glm::dvec3(0.0) : directDelta(x0, n0, iso, nShadow);
-                const std::uint64_t key = linear(t);
-                for (int smp = 0; smp < o.samples; ++smp) {
-                    core::CounterRng rng(core::hashCounters(key, std::uint64_t(smp)), o.seed);
-                    glm::dvec3 x = x0, nrm = n0, beta(1.0);
-                    for (int vertex = 0;; ++vertex) {
-                        const double u1 = rng.uniformDouble(), u2 = rng.uniformDouble();
-                        const bool sphere = nrm == glm::dvec3(0.0);
-                        const glm::dvec3 w =
-                            sphere ? sphereSample(u1, u2) : cosineSample(nrm, u1, u2);
-                        double th = 0.0;
-                        if (!tr.hit(x, w, iso, INFINITY, &th)) {
-                            // Escaped: distant/area radiance, π per cosine-weighted sample (the
-                            // full sphere: π·L as well, see the header).
-                            if (sh) {
-                                sh::evalShUnitDouble(o.shOrder - 1, w, y);
-                                for (int i = 0; i < C; ++i)
-                                    T[std::size_t(i)] += kPi * beta * y[std::size_t(i)];
-                            } else {
-                                const glm::dvec3 world = tr.geo.indexToWorld(x);
-                                for (const lights::Light* l : others)
-                                    E += kPi * beta * glm::dvec3(l->radiance(world, glm::vec3(w)));
-                            }
-                            break;
-                        }
-                        if (vertex >= o.bounces) break;
-                        // A diffuse bounce on the same isosurface.
-                        beta *= albedo;
-                        if (beta == glm::dvec3(0.0)) break;
-                        const glm::dvec3 y1 = x + th * (tr.worldToIdx * w);
-                        glm::dvec3 ny = tr.smoothNormal(y1);
-                        if (ny == glm::dvec3(0.0)) break;
-                        if (glm::dot(ny, w) > 0.0) ny = -ny;  // face the arriving path
-                        glm::dvec3 xs;
-                        if (!tr.startPoint(y1, ny, iso, xs)) break;
-                        if (!sh) E += beta * directDelta(xs, ny, iso, nShadow);
-                        x = xs;
-                        nrm = ny;
-                    }
-                    ++nPaths;
-                }
+                estimate(xt, tracer_->value(xt), linear(t), o.samples, sums);
+                nPaths += sums.paths, nShadow += sums.shadowRays, nPlateau += sums.plateau;
                 float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
-                const double inv = 1.0 / o.samples;
                 if (sh) {
                     for (int i = 0; i < C; ++i)
                         for (int ch = 0; ch < 3; ++ch)
-                            d[3 + 3 * i + ch] = float(T[std::size_t(i)][ch] * inv);
+                            d[3 + 3 * i + ch] = float(sums.T[std::size_t(i)][ch]);
                     dotTexel(d);
                 } else {
-                    const glm::dvec3 e = direct0 + E * inv;
-                    d[0] = float(e.x), d[1] = float(e.y), d[2] = float(e.z);
+                    d[0] = float(sums.E.x), d[1] = float(sums.E.y), d[2] = float(sums.E.z);
                 }
                 blockFor(t)->done[std::size_t(inBlock(t))] =
-                    plateau ? kPlateauTexel : kSurfaceTexel;
+                    sums.plateau ? kPlateauTexel : kSurfaceTexel;
                 ++nDone;
             }
             paths += nPaths;
@@ -770,8 +696,94 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     return st;
 }
 
+void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
+                                   PathSums& out) const {
+    const Tracer& tr = *tracer_;
+    const LatticeOptions& o = options_;
+    const int C = o.shOrder * o.shOrder;
+    const bool sh = o.mode == LatticeMode::ShTransfer;
+    out.paths = out.shadowRays = 0;
+    std::fill(out.T.begin(), out.T.end(), glm::dvec3(0.0));
+    // Irradiance from the delta lights at surface point x (index) with normal n (world; zero =
+    // the full-sphere average, cos θ → 1/4).
+    auto directDelta = [&](const glm::dvec3& x, const glm::dvec3& nrm) {
+        glm::dvec3 e(0.0);
+        const glm::dvec3 world = tr.geo.indexToWorld(x);
+        for (const auto& l : lights_) {
+            if (!l->isDelta()) continue;
+            const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
+            if (!(ls.pdf > 0.f)) continue;
+            const double cosT = nrm == glm::dvec3(0.0) ? 0.25 : glm::dot(nrm, glm::dvec3(ls.wi));
+            if (cosT <= 0.0) continue;
+            ++out.shadowRays;
+            if (tr.hit(x, glm::dvec3(ls.wi), iso, double(ls.distance))) continue;
+            e += glm::dvec3(ls.value) * cosT;
+        }
+        return e;
+    };
+    const glm::dvec3 albedo = glm::clamp(glm::dvec3(tf_.eval(float(iso)).albedo), 0.0, 1.0);
+    glm::dvec3 n0 = tr.smoothNormal(xt);
+    glm::dvec3 x0 = xt;
+    if (n0 != glm::dvec3(0.0) && !tr.startPoint(xt, n0, iso, x0)) n0 = glm::dvec3(0.0);
+    out.plateau = n0 == glm::dvec3(0.0);
+    if (out.plateau) x0 = xt;
+    glm::dvec3 E(0.0);  // Σ over paths of what follows the first direction
+    // Delta lights at the start are the same for every path: once.
+    const glm::dvec3 direct0 = sh ? glm::dvec3(0.0) : directDelta(x0, n0);
+    for (int smp = 0; smp < samples; ++smp) {
+        core::CounterRng rng(core::hashCounters(key, std::uint64_t(smp)), o.seed);
+        glm::dvec3 x = x0, nrm = n0, beta(1.0);
+        for (int vertex = 0;; ++vertex) {
+            const double u1 = rng.uniformDouble(), u2 = rng.uniformDouble();
+            const bool sphere = nrm == glm::dvec3(0.0);
+            const glm::dvec3 w = sphere ? sphereSample(u1, u2) : cosineSample(nrm, u1, u2);
+            double th = 0.0;
+            if (!tr.hit(x, w, iso, INFINITY, &th)) {
+                // Escaped: distant/area radiance, π per cosine-weighted sample (the full sphere:
+                // π·L as well, see the header).
+                if (sh) {
+                    sh::evalShUnitDouble(o.shOrder - 1, w, out.y);
+                    for (int i = 0; i < C; ++i)
+                        out.T[std::size_t(i)] += kPi * beta * out.y[std::size_t(i)];
+                } else {
+                    const glm::dvec3 world = tr.geo.indexToWorld(x);
+                    for (const auto& l : lights_)
+                        if (!l->isDelta())
+                            E += kPi * beta * glm::dvec3(l->radiance(world, glm::vec3(w)));
+                }
+                break;
+            }
+            if (vertex >= o.bounces) break;
+            // A diffuse bounce on the same isosurface.
+            beta *= albedo;
+            if (beta == glm::dvec3(0.0)) break;
+            const glm::dvec3 y1 = x + th * (tr.worldToIdx * w);
+            glm::dvec3 ny = tr.smoothNormal(y1);
+            if (ny == glm::dvec3(0.0)) break;
+            if (glm::dot(ny, w) > 0.0) ny = -ny;  // face the arriving path
+            glm::dvec3 xs;
+            if (!tr.startPoint(y1, ny, iso, xs)) break;
+            if (!sh) E += beta * directDelta(xs, ny);
+            x = xs;
+            nrm = ny;
+        }
+        ++out.paths;
+    }
+    const double inv = 1.0 / samples;
+    out.E = direct0 + E * inv;
+    for (auto& t : out.T) t *= inv;
+}
+
+glm::vec3 IlluminationLattice::pointIrradiance(const glm::dvec3& world, double iso, int samples,
+                                               std::uint64_t key) const {
+    VL_CHECK(options_.mode == LatticeMode::Irradiance && samples > 0);
+    PathSums sums(options_.shOrder * options_.shOrder);
+    estimate(volume_->geometry().worldToIndex(world), iso, key, samples, sums);
+    return glm::vec3(sums.E);
+}
+
 LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
-                               const glm::vec3& albedo, float scale,
+                               const glm::vec3& albedo, float scale, BakeSource source,
                                const core::Progress& progress) {
     std::vector<glm::dvec3> points;
     points.reserve(mesh.n_vertices());
@@ -779,10 +791,41 @@ LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double 
         const auto& p = mesh.point(v);
         points.emplace_back(p[0], p[1], p[2]);
     }
-    const LatticeStats st = lattice.require(points, isovalue, progress);
+    std::vector<glm::vec3> e(points.size());
+    LatticeStats st;
+    if (source == BakeSource::Lattice) {
+        st = lattice.require(points, progress);
+        for (std::size_t i = 0; i < points.size(); ++i) e[i] = lattice.irradiance(points[i]);
+    } else {
+        // Paths from every vertex on the mesh's own isosurface (the lattice's reference).
+        core::Stopwatch clock;
+        const int samples = lattice.options().samples;
+        std::atomic<std::size_t> done{0};
+        const std::thread::id caller = std::this_thread::get_id();
+        const char* stage = "baking light at the vertices";
+        progress.report(stage, 0.0);
+        tbb::task_arena arena(lattice.options().threads > 0 ? lattice.options().threads
+                                                            : tbb::task_arena::automatic);
+        arena.execute([&] {
+            tbb::parallel_for(
+                tbb::blocked_range<std::size_t>(0, points.size(), 64), [&](const auto& r) {
+                    if (progress.cancelled()) return;
+                    for (std::size_t i = r.begin(); i != r.end(); ++i)
+                        e[i] =
+                            lattice.pointIrradiance(points[i], isovalue, samples, std::uint64_t(i));
+                    const std::size_t now = done.fetch_add(r.size()) + r.size();
+                    if (std::this_thread::get_id() == caller)
+                        progress.report(stage, double(now) / double(points.size()));
+                });
+        });
+        if (progress.cancelled()) throw CancelledError();
+        progress.report(stage, 1.0);
+        st.pathsTraced = std::uint64_t(samples) * points.size();
+        st.seconds = clock.seconds();
+    }
     const glm::vec3 k = albedo * float(scale / kPi);
     for (const auto v : mesh.vertices()) {
-        const glm::vec3 c = k * lattice.irradiance(points[v.idx()], isovalue);
+        const glm::vec3 c = k * e[v.idx()];
         mesh.set_color(v, Mesh::Color(c.x, c.y, c.z));
     }
     return st;

@@ -153,42 +153,53 @@ std::vector<std::array<double, 3>> objColours(const fs::path& p) {
 }
 
 // --bake with no scene lights: a uniform white sky of radiance 1, under which an unoccluded
-// (convex) surface leaves exactly its albedo — the colour of the unbaked export.
+// (convex) surface leaves exactly its albedo — the colour of the unbaked export — whether traced
+// from the vertices (the default) or read from the lattice.
 TEST(IsoCli, BakedLightUnderTheDefaultSkyLeavesAConvexSurfaceItsAlbedo) {
     test::TempDir tmp;
     const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
     const std::string base = "iso -q '" + scene.string() + "' --isovalue 0.5 -o '";
     ASSERT_EQ(run(base + (tmp / "plain.obj").string() + "'", tmp.path()).code, 0);
-    const Result r = run(base + (tmp / "lit.obj").string() + "' --bake --samples 16 --stats '" +
-                             (tmp / "st.json").string() + "'",
-                         tmp.path());
-    ASSERT_EQ(r.code, 0) << r.err;
-    const auto plain = objColours(tmp / "plain.obj"), lit = objColours(tmp / "lit.obj");
-    ASSERT_EQ(plain.size(), lit.size());
-    ASSERT_GT(lit.size(), 100u);
-    // In linear terms: the mean within 0.5 % of the albedo (the lattice tests' convex tolerance);
-    // each vertex loses at most one of its texels' 16 paths (6.25 %): on the phantom's ±1-voxel
-    // ramp the trilinear surface has voxel-scale facets that a grazing path can meet (measured:
-    // 12 of 1248 vertices below 0.995, the lowest 0.983, mean 0.9999).
+    const auto plain = objColours(tmp / "plain.obj");
+    ASSERT_GT(plain.size(), 100u);
     auto linear = [](double c) {
         return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
     };
-    double sum = 0.0;
-    for (std::size_t i = 0; i < lit.size(); ++i) {
-        const double ratio = linear(lit[i][0]) / linear(plain[i][0]);
-        ASSERT_LE(ratio, 1.0 + 1e-3) << i;
-        ASSERT_GE(ratio, 1.0 - 1.0 / 16.0) << i;
-        for (int c = 1; c < 3; ++c)
-            ASSERT_NEAR(linear(lit[i][c]) / linear(plain[i][c]), ratio, 1e-2) << i;
-        sum += ratio;
+    for (const std::string from : {"vertices", "lattice"}) {
+        SCOPED_TRACE(from);
+        const Result r =
+            run(base + (tmp / "lit.obj").string() + "' --bake --samples 16 --bake-from " + from +
+                    " --stats '" + (tmp / "st.json").string() + "'",
+                tmp.path());
+        ASSERT_EQ(r.code, 0) << r.err;
+        const auto lit = objColours(tmp / "lit.obj");
+        ASSERT_EQ(plain.size(), lit.size());
+        // In linear terms: the mean within 0.5 % of the albedo (the lattice tests' convex
+        // tolerance); each vertex loses at most one of its 16 paths (6.25 %): on the phantom's
+        // ±1-voxel ramp the trilinear surface has voxel-scale facets that a grazing path can meet
+        // (measured from the lattice: 12 of 1248 vertices below 0.995, the lowest 0.983).
+        double sum = 0.0;
+        for (std::size_t i = 0; i < lit.size(); ++i) {
+            const double ratio = linear(lit[i][0]) / linear(plain[i][0]);
+            ASSERT_LE(ratio, 1.0 + 1e-3) << i;
+            ASSERT_GE(ratio, 1.0 - 1.0 / 16.0) << i;
+            for (int c = 1; c < 3; ++c)
+                ASSERT_NEAR(linear(lit[i][c]) / linear(plain[i][c]), ratio, 1e-2) << i;
+            sum += ratio;
+        }
+        EXPECT_NEAR(sum / double(lit.size()), 1.0, 0.005);
+        std::ifstream in(tmp / "st.json");
+        const auto j = nlohmann::json::parse(in);
+        const auto& bake = j["isosurface"]["bake"];
+        EXPECT_EQ(bake["from"], from);
+        EXPECT_NE(bake["lights"].get<std::string>().find("white sky"), std::string::npos);
+        if (from == "lattice") {
+            EXPECT_GT(bake["texels_computed"].get<int>(), 0);
+            EXPECT_LT(bake["texels_computed"].get<int>(), bake["texels_full"].get<int>());
+        } else {
+            EXPECT_EQ(bake["paths"].get<std::size_t>(), 16 * lit.size());
+        }
     }
-    EXPECT_NEAR(sum / double(lit.size()), 1.0, 0.005);
-    std::ifstream in(tmp / "st.json");
-    const auto j = nlohmann::json::parse(in);
-    const auto& lat = j["isosurface"]["lattice"];
-    EXPECT_GT(lat["texels_computed"].get<int>(), 0);
-    EXPECT_LT(lat["texels_computed"].get<int>(), lat["texels_full"].get<int>());
-    EXPECT_NE(lat["lights"].get<std::string>().find("white sky"), std::string::npos);
 }
 
 TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
@@ -198,8 +209,12 @@ TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
                  R"(, "lights": [{"type": "point", "position": [0, 0, 100], "intensity": 1}]})");
     expectBadInput(tmp,
                    "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
-                       (tmp / "m.ply").string() + "' --bake --lattice-mode sh",
+                       (tmp / "m.ply").string() + "' --bake --lattice-mode sh --bake-from lattice",
                    "distant lights only", {"scene.json"});
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.ply").string() + "' --bake --lattice-mode sh --bake-from vertices",
+                   "needs the lattice", {"scene.json"});
 }
 
 }  // namespace

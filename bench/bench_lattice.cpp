@@ -1,0 +1,169 @@
+// SPDX-License-Identifier: MIT
+// Illumination lattice (iso/lattice.h) against its reference, Wyman 2006 Fig. 11 style: the
+// irradiance baked at mesh vertices from a lattice of 100 / 625 / 2,500 paths per texel, against
+// per-point path tracing of the same isosurface at each vertex (IlluminationLattice::
+// pointIrradiance, 10,000 paths) — the error a lit-mesh export carries — with the seconds beside
+// each row. Two interpolation rules are compared: the texels inside the surface (what `voxlight iso
+// --bake` uses) and all eight (Wyman's plain trilinear). A "per vertex" row gives the error of
+// tracing the vertices themselves with as many paths (what the lattice saves or costs).
+// Then the lazy texel counts for the whole bone mesh: vertices' texels (inside only), every
+// crossed cell's, the full lattice; and the texels an isovalue step of 10 HU reuses.
+//
+// Scenes: the torso phantom (128³, so the table runs in minutes) and the shared abdomen CT when
+// ../shared/datasets/ct/abdomen-totalseg/example_ct.nii.gz exists (skipped with a message if not),
+// bone at 300 HU (torso 250 HU), a directional key light plus a uniform sky of 0.3, 1 bounce.
+// Errors over kVertices vertices drawn with a fixed seed: NRMS = RMS(E − E_ref) / mean(E_ref), and
+// the mean bias. Not a test; one run prints one table (timings are the machine's of the moment).
+// Run: build/bench/bench_lattice [--quick]  (--quick: 100 and 625 paths, 2,500-path reference)
+// bench-deps: iso io core optics lights
+#include <benchmark/benchmark.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <memory>
+#include <vector>
+
+#include "core/phantoms.h"
+#include "core/rng.h"
+#include "core/timing.h"
+#include "io/volume_io.h"
+#include "iso/extract.h"
+#include "iso/lattice.h"
+#include "lights/environment_light.h"
+#include "optics/presets.h"
+
+namespace fs = std::filesystem;
+using namespace voxlight;
+
+namespace {
+
+constexpr int kVertices = 300;
+constexpr int kReferencePaths = 10000;
+
+std::vector<std::shared_ptr<const lights::Light>> sceneLights() {
+    core::ImageRGBA sky(64, 32);
+    for (std::size_t i = 0; i < sky.pixels.size(); ++i) sky.pixels[i] = 0.3f;
+    return {std::make_shared<lights::DirectionalLight>(glm::vec3(3.f),
+                                                       glm::vec3(-0.35f, -0.75f, 0.55f)),
+            std::make_shared<lights::EnvironmentLight>(sky, lights::EnvironmentOptions{}, "sky")};
+}
+
+struct Errors {
+    double nrms = 0, bias = 0;
+};
+
+Errors compare(const std::vector<glm::vec3>& e, const std::vector<glm::vec3>& ref) {
+    double se = 0, d = 0, m = 0;
+    for (std::size_t i = 0; i < e.size(); ++i) {
+        const double x = e[i].y - ref[i].y;  // green: the channels differ only by albedo
+        se += x * x;
+        d += x;
+        m += ref[i].y;
+    }
+    const double n = double(e.size()), mean = m / n;
+    return {std::sqrt(se / n) / mean, d / n / mean};
+}
+
+void run(const char* name, std::shared_ptr<const core::Volume> volume, double isovalue,
+         bool quick) {
+    const optics::TransferFunction tf = optics::makePreset("ct-bone");
+    iso::ExtractOptions eo;
+    eo.isovalue = isovalue;
+    const iso::Extraction ex = iso::extractIsosurface(*volume, eo);
+    const double iso = ex.stats.storedIsovalue * volume->mapping.slope + volume->mapping.intercept;
+    std::vector<glm::dvec3> all;
+    for (const auto v : ex.mesh.vertices()) {
+        const auto& p = ex.mesh.point(v);
+        all.emplace_back(p[0], p[1], p[2]);
+    }
+    std::vector<glm::dvec3> pts;
+    core::CounterRng rng(7);
+    for (int i = 0; i < kVertices; ++i)
+        pts.push_back(all[std::size_t(rng.uniformDouble() * double(all.size()))]);
+    std::printf("\n%s: bone at %g (%zu vertices; %d drawn), key light + sky 0.3, 1 bounce\n", name,
+                isovalue, all.size(), kVertices);
+
+    iso::LatticeOptions o;
+    o.bounces = 1;
+    const int refPaths = quick ? 2500 : kReferencePaths;
+    core::Stopwatch sw;
+    std::vector<glm::vec3> ref;
+    {
+        iso::IlluminationLattice lat(volume, tf, sceneLights(), o);
+        for (std::size_t i = 0; i < pts.size(); ++i)
+            ref.push_back(lat.pointIrradiance(pts[i], iso, refPaths, 1000003 + i));
+    }
+    std::printf("reference: %d paths per vertex, %.1f s\n", refPaths, sw.seconds());
+    std::printf(
+        "| paths per texel | texels | seconds | NRMS inside texels | bias | NRMS all 8 "
+        "(Wyman) | bias | per vertex, same paths: NRMS | seconds "
+        "|\n|---|---|---|---|---|---|---|---|---|\n");
+    std::vector<int> counts = {100, 625};
+    if (!quick) counts.push_back(2500);
+    for (const int n : counts) {
+        o.samples = n;
+        iso::IlluminationLattice inside(volume, tf, sceneLights(), o);
+        sw.restart();
+        const iso::LatticeStats st = inside.require(pts, iso);
+        const double secInside = sw.seconds();
+        std::vector<glm::vec3> a, b, c;
+        for (const auto& p : pts) a.push_back(inside.irradiance(p, iso));
+        iso::IlluminationLattice plain(volume, tf, sceneLights(), o);
+        plain.require(pts);
+        for (const auto& p : pts) b.push_back(plain.irradiance(p));
+        sw.restart();
+        for (std::size_t i = 0; i < pts.size(); ++i)
+            c.push_back(plain.pointIrradiance(pts[i], iso, n, 7000003 + i));
+        const double secPoint = sw.seconds();
+        const Errors ea = compare(a, ref), eb = compare(b, ref), ec = compare(c, ref);
+        std::printf("| %d | %llu | %.1f | %.3f | %+.1f %% | %.3f | %+.1f %% | %.3f | %.1f |\n", n,
+                    (unsigned long long)st.texelsComputed, secInside, ea.nrms, 100 * ea.bias,
+                    eb.nrms, 100 * eb.bias, ec.nrms, secPoint);
+    }
+
+    // Lazy texel counts for the whole mesh, and the reuse of a 10 HU isovalue step (16 paths:
+    // counts do not depend on paths).
+    o.samples = 1;
+    iso::IlluminationLattice lat(volume, tf, sceneLights(), o);
+    const iso::LatticeStats sv = lat.require(all, iso);
+    iso::ExtractOptions eo2 = eo;
+    eo2.isovalue = isovalue + 10.0;
+    const iso::Extraction ex2 = iso::extractIsosurface(*volume, eo2);
+    std::vector<glm::dvec3> all2;
+    for (const auto v : ex2.mesh.vertices()) {
+        const auto& p = ex2.mesh.point(v);
+        all2.emplace_back(p[0], p[1], p[2]);
+    }
+    const iso::LatticeStats s2 = lat.require(
+        all2, ex2.stats.storedIsovalue * volume->mapping.slope + volume->mapping.intercept);
+    iso::IlluminationLattice cells(volume, tf, sceneLights(), o);
+    const iso::LatticeStats sc = cells.requireIsosurface(iso);
+    std::printf(
+        "texels: vertices (inside) %llu, crossed cells %llu, full lattice %llu; a +10 HU "
+        "step needs %llu, reuses %llu (%.0f %%)\n",
+        (unsigned long long)sv.texelsNeeded, (unsigned long long)sc.texelsNeeded,
+        (unsigned long long)sv.texelsFull, (unsigned long long)s2.texelsNeeded,
+        (unsigned long long)s2.texelsReused,
+        100.0 * double(s2.texelsReused) / double(std::max<std::uint64_t>(s2.texelsNeeded, 1)));
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    bool quick = false;
+    for (int i = 1; i < argc; ++i) quick = quick || std::strcmp(argv[i], "--quick") == 0;
+    core::PhantomOptions po;
+    po.size = 128;
+    run("torso phantom 128³", std::make_shared<const core::Volume>(core::makePhantom("torso", po)),
+        250.0, quick);
+    const fs::path ct = fs::path(VOXLIGHT_SOURCE_DIR) / ".." / "shared" / "datasets" / "ct" /
+                        "abdomen-totalseg" / "example_ct.nii.gz";
+    if (fs::exists(ct))
+        run("abdomen CT", std::make_shared<const core::Volume>(io::readVolume(ct)), 300.0, quick);
+    else
+        std::printf("\nabdomen CT skipped: %s is absent\n", ct.c_str());
+    return 0;
+}
