@@ -98,7 +98,7 @@ void run(const char* name, std::shared_ptr<const core::Volume> volume, double is
     }
     std::printf("reference: %d paths per vertex, %.1f s\n", refPaths, sw.seconds());
     std::printf(
-        "| paths per texel | texels | seconds | NRMS inside texels | bias | NRMS all 8 "
+        "| paths per texel | texels (inside) | seconds | NRMS inside texels | bias | NRMS all 8 "
         "(Wyman) | bias | per vertex, same paths: NRMS | seconds "
         "|\n|---|---|---|---|---|---|---|---|---|\n");
     std::vector<int> counts = {100, 625};
