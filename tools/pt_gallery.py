@@ -28,7 +28,8 @@ CASES = {"torso": (None, "oblique", "ct-bone"),
 ENVIRONMENT = "env/courtyard.hdr"
 ENV_INTENSITY = 0.4
 APERTURE_MM = 60.0  # thin-lens diameter: what lies behind the focused surface blurs visibly
-# Area light: a disk above the patient's left shoulder, facing the volume's centre.
+# Area light: a disk above the patient's right shoulder and in front (LPS: −x, −y, +z), facing the
+# volume's centre.
 AREA_OFFSET_MM = [-250.0, -300.0, 350.0]
 AREA_RADIUS_MM = 80.0
 AREA_RADIANCE = 100.0
