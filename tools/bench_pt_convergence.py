@@ -24,8 +24,9 @@ table the README quotes). Run from the repository root:
         [--docs docs/pathtrace] [--size 256] [--quick]
 
 The machine it runs on is shared (2 cores, other builds): seconds are as measured under that load,
-and the tool records the load average beside them. ≈ 15–20 min at 256²; --quick (128², torso
-only, shorter ladders, noisier references) ≈ 3 min.
+and the tool records the load average beside them. 11 min at 256² at load 8–9.5 (most of it the four
+references); --quick (128², torso only, shorter ladders, noisier references) 3.5 min. 512² would take
+≈ 4× as long (the references dominate), so it is not the default.
 """
 import argparse
 import json
