@@ -37,6 +37,8 @@ import time
 import numpy as np
 from PIL import Image
 
+from voxlight_cli import read_exr
+
 DATASETS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "..", "shared",
                         "datasets")
 SIZE = 128  # image side: small enough that a 1 % reference costs minutes, not hours
@@ -107,21 +109,6 @@ def render(voxlight, scene, name, work, method, params, effects, cache=None):
         st = json.load(f)
     pre = sum(s["seconds"] for s in st["stages"] if s["ran"] and s["kind"] == "precompute")
     return png, exr, st, pre, time.time() - t
-
-
-def read_exr(path, work):
-    """Linear RGBA as float32: one float TIFF per channel via oiiotool (PIL reads mode F; Debian 12
-    has no Python OpenImageIO)."""
-    tifs = [os.path.join(work, "tmp-%s.tif" % c) for c in "RGBA"]
-    cmd = ["oiiotool", path]
-    for c, t in zip("RGB", tifs):
-        cmd += ["--dup", "--ch", c, "-d", "float", "-o", t, "--pop"]
-    cmd += ["--ch", "A", "-d", "float", "-o", tifs[3]]
-    subprocess.run(cmd, check=True, capture_output=True)
-    a = np.stack([np.asarray(Image.open(t), dtype=np.float32) for t in tifs], axis=2)
-    for t in tifs:
-        os.remove(t)
-    return a
 
 
 def errors(ref_png, ref_lin, png, lin):

@@ -1,7 +1,7 @@
 # SPDX-License-Identifier: MIT
 """Helpers the gallery and benchmark scripts share to drive the voxlight CLI: where the shared
 datasets are, a volume's world centre, one render of a scene (dict) with its stats, the seconds of
-its precompute stages, and a labelled mosaic of tiles (PIL).
+its precompute stages, reading a linear EXR, and a labelled mosaic of tiles (PIL).
 
     import voxlight_cli   # from a script in tools/ (its directory is on sys.path)
 """
@@ -10,6 +10,7 @@ import os
 import subprocess
 import sys
 
+import numpy as np
 from PIL import Image, ImageDraw
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -58,6 +59,21 @@ def render(exe, scene, out_png, stats, extra=()):
 def stage_seconds(stats, kind="precompute"):
     """{stage name: seconds} of the stages of `kind` that ran (were computed, not cached)."""
     return {s["name"]: s["seconds"] for s in stats["stages"] if s["ran"] and s["kind"] == kind}
+
+
+def read_exr(path, work):
+    """Linear RGBA as float32: one float TIFF per channel via oiiotool (PIL reads mode F; Debian 12
+    has no Python OpenImageIO). `work` is a directory for the temporary TIFFs."""
+    tifs = [os.path.join(work, "tmp-%s.tif" % c) for c in "RGBA"]
+    cmd = ["oiiotool", path]
+    for c, t in zip("RGB", tifs):
+        cmd += ["--dup", "--ch", c, "-d", "float", "-o", t, "--pop"]
+    cmd += ["--ch", "A", "-d", "float", "-o", tifs[3]]
+    subprocess.run(cmd, check=True, capture_output=True)
+    a = np.stack([np.asarray(Image.open(t), dtype=np.float32) for t in tifs], axis=2)
+    for t in tifs:
+        os.remove(t)
+    return a
 
 
 def mosaic(rows, out_png, col_labels=None, row_labels=None, label_h=18, row_label_w=0):

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // voxlight render SCENE.json|VOLUME -o OUT.png [--view V] [--exr OUT.exr] [--std-error E.exr]
-//                 [--stats STATS.json] [--set key=value]... [--cache DIR] [--frames N] [--explain]
+//                 [--display-exr D.exr] [--stats STATS.json] [--set key=value]... [--cache DIR]
+//                 [--frames N] [--explain]
 // Renders a scene through the pipeline (its method's plan of stages): display-mapped PNG, linear
 // EXR, stats JSON. A volume file or DICOM folder is a scene on its own (io::volumeScene: the
 // modality's preset, an anterior view fitted to what it shows, a headlight). --explain prints the
@@ -49,6 +50,7 @@ Command addRenderCommand(CLI::App& app) {
     auto out = std::make_shared<std::string>();
     auto exr = std::make_shared<std::string>();
     auto stdErr = std::make_shared<std::string>();
+    auto displayExr = std::make_shared<std::string>();
     auto stats = std::make_shared<std::string>();
     auto sets = std::make_shared<std::vector<std::string>>();
     auto quiet = std::make_shared<bool>(false);
@@ -70,6 +72,9 @@ Command addRenderCommand(CLI::App& app) {
     c.sub->add_option("--std-error", *stdErr,
                       "Also write the per-pixel standard error of the radiance as OpenEXR "
                       "(method pathtrace)");
+    c.sub->add_option("--display-exr", *displayExr,
+                      "Also write the linear image the display image is made from as OpenEXR "
+                      "(pathtrace: denoised when the denoiser ran; otherwise the --exr image)");
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
@@ -94,6 +99,7 @@ Command addRenderCommand(CLI::App& app) {
             plan.push_back(outputRecord("write_image", *out, "-o"));
             plan.push_back(outputRecord("write_exr", *exr, "--exr"));
             plan.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
+            plan.push_back(outputRecord("write_display_exr", *displayExr, "--display-exr"));
             // The stage column fits the longest name (hierarchical_visibility is 23 characters).
             int width = kExplainNameWidth;
             for (const auto& r : plan) width = std::max(width, int(r.name.size()));
@@ -116,6 +122,7 @@ Command addRenderCommand(CLI::App& app) {
         checkOutputs({{"--output", *out, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}},
                       {"--exr", *exr, {".exr"}},
                       {"--std-error", *stdErr, {".exr"}},
+                      {"--display-exr", *displayExr, {".exr"}},
                       {"--stats", *stats, {".json"}}});
         const io::Scene s = loadInput(*scene, *sets, *view);
         if (!stdErr->empty() && s.method.name != "pathtrace")
@@ -155,6 +162,14 @@ Command addRenderCommand(CLI::App& app) {
                         [&](const fs::path& p) { io::writeImage(it->second, p); });
         }
         r.stages.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
+        r.stages.back().seconds = sw.seconds();
+        sw.restart();
+        if (!displayExr->empty()) {
+            throwIfCancelled();
+            files.write(*displayExr, "--display-exr",
+                        [&](const fs::path& p) { io::writeImage(shown, p); });
+        }
+        r.stages.push_back(outputRecord("write_display_exr", *displayExr, "--display-exr"));
         r.stages.back().seconds = sw.seconds();
         if (!stats->empty()) {
             throwIfCancelled();

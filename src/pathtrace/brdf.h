@@ -19,8 +19,13 @@
 // integrates it by quadrature (glossy lobes: by the sampled estimator) for wo, roughness and F0 on
 // a grid with a = 1 (the largest found, F0 = 1 at roughness 0.03–0.1, is 1 within 2·10⁻⁴).
 //
-// Sampling: the glossy lobe by D(h)·(n·h) (Walter eq. 35–36) reflected about h, the diffuse lobe
-// by a cosine; the lobe is chosen with a probability from their Fresnel weights at μo (clamped to
+// Sampling: the glossy lobe by the GGX distribution of visible normals (Heitz 2018, "Sampling the
+// GGX Distribution of Visible Normals", JCGT 7(4) 1–13, listing 1, isotropic α),
+//   D_wo(h) = G1(wo)·max(0, wo·h)·D(h)/μo,   pdf(wi) = D_wo(h)/(4 wo·h) = G1(wo)·D(h)/(4 μo),
+// reflected about h: no microfacet facing away from wo is drawn, and the glossy lobe's weight
+// f·μi/pdf is F·G1(wi) ≤ 1 (drawing h by D(h)·(n·h), Walter eq. 35–36, as before, gave the weight
+// F·G1(wo)·G1(wi)·(wo·h)/(μo·(n·h)), above 1 at grazing wo); the diffuse lobe by a cosine. The
+// lobe is chosen with a probability from their Fresnel weights at μo (clamped to
 // [kMinLobeProbability, 1 − kMinLobeProbability] so that each lobe is sampled wherever it is
 // non-zero), and pdf() is the one-sample mixture of both densities.
 //
@@ -115,9 +120,10 @@ inline double pdfBrdf(const SurfaceMaterial& m, const glm::dvec3& n, const glm::
     const double hl = glm::length(hs);
     if (hl > 0.0) {
         const glm::dvec3 h = hs / hl;
-        const double oh = glm::dot(wo, h);
-        if (oh > 0.0)
-            glossy = ggxD(glm::dot(n, h), alphaOf(m.roughness)) * glm::dot(n, h) / (4.0 * oh);
+        if (glm::dot(wo, h) > 0.0) {
+            const double alpha = alphaOf(m.roughness);
+            glossy = smithG1(cosO, alpha) * ggxD(glm::dot(n, h), alpha) / (4.0 * cosO);
+        }
     }
     return ps * glossy + (1.0 - ps) * cosI / std::numbers::pi;
 }
@@ -134,12 +140,25 @@ inline BrdfSample sampleBrdf(const SurfaceMaterial& m, const glm::dvec3& n, cons
     basis(n, t1, t2);
     const double phi = 2.0 * std::numbers::pi * u2;
     if (u0 < glossyProbability(m, cosO)) {
-        // h from D(h)·(n·h): cos²θ = (1 − u) / (1 + (α² − 1) u).
-        const double a2 = alphaOf(m.roughness) * alphaOf(m.roughness);
-        const double cos2 = (1.0 - u1) / (1.0 + (a2 - 1.0) * u1);
-        const double cosT = std::sqrt(std::clamp(cos2, 0.0, 1.0));
-        const double sinT = std::sqrt(std::max(0.0, 1.0 - cosT * cosT));
-        const glm::dvec3 h = sinT * std::cos(phi) * t1 + sinT * std::sin(phi) * t2 + cosT * n;
+        // h from the visible normals (Heitz 2018, listing 1): stretch wo by α, sample the
+        // projected half disk of the hemisphere it sees, unstretch the normal.
+        const double alpha = alphaOf(m.roughness);
+        const glm::dvec3 vh =
+            glm::normalize(glm::dvec3(alpha * glm::dot(wo, t1), alpha * glm::dot(wo, t2), cosO));
+        const double lensq = vh.x * vh.x + vh.y * vh.y;
+        const glm::dvec3 b1 = lensq > 0.0 ? glm::dvec3(-vh.y, vh.x, 0.0) / std::sqrt(lensq)
+                                          : glm::dvec3(1.0, 0.0, 0.0);
+        const glm::dvec3 b2 = glm::cross(vh, b1);
+        const double r = std::sqrt(u1);
+        const double p1 = r * std::cos(phi);
+        const double blend = 0.5 * (1.0 + vh.z);
+        const double p2 =
+            (1.0 - blend) * std::sqrt(std::max(0.0, 1.0 - p1 * p1)) + blend * r * std::sin(phi);
+        const glm::dvec3 nh =
+            p1 * b1 + p2 * b2 + std::sqrt(std::max(0.0, 1.0 - p1 * p1 - p2 * p2)) * vh;
+        const glm::dvec3 hl =
+            glm::normalize(glm::dvec3(alpha * nh.x, alpha * nh.y, std::max(0.0, nh.z)));
+        const glm::dvec3 h = hl.x * t1 + hl.y * t2 + hl.z * n;
         s.wi = 2.0 * glm::dot(wo, h) * h - wo;
     } else {
         // Cosine-weighted hemisphere.

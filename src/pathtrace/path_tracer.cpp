@@ -537,6 +537,15 @@ float PathTracer::extinctionAt(const glm::dvec3& p) const {
     return impl_->volume->visit([&](const auto& v) { return impl_->sigma(v, impl_->indexOf(p)); });
 }
 
+const optics::TfTable& PathTracer::table() const { return *impl_->table; }
+
+optics::TfSample PathTracer::mediumAt(const glm::dvec3& p) const {
+    return impl_->volume->visit([&](const auto& v) {
+        const glm::dvec3 ijk = impl_->indexOf(p);
+        return impl_->table->lookup(v.sample(float(ijk.x), float(ijk.y), float(ijk.z)));
+    });
+}
+
 double PathTracer::brdfProbabilityAt(const glm::dvec3& p, glm::dvec3* gradient) const {
     return impl_->volume->visit([&](const auto& v) {
         const glm::dvec3 ijk = impl_->indexOf(p);

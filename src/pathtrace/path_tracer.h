@@ -167,6 +167,9 @@ class PathTracer {
     double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
     /// σt at a world point (TF table lookup of the trilinear value).
     float extinctionAt(const glm::dvec3& p) const;
+    /// σt, albedo and emission at a world point (the same lookup; what a real collision there
+    /// reads).
+    optics::TfSample mediumAt(const glm::dvec3& p) const;
     /// Kroes' P_brdf at a world point under these options (0 for Scattering::Phase; 1 for Brdf
     /// where the gradient is non-zero), and the gradient (value/mm, world) it used.
     double brdfProbabilityAt(const glm::dvec3& p, glm::dvec3* gradient = nullptr) const;
@@ -186,6 +189,8 @@ class PathTracer {
     Guides guides(const render::Camera& camera) const;
 
     const Options& options() const { return options_; }
+    /// The TF table the tracer reads.
+    const optics::TfTable& table() const;
 
   private:
     struct Impl;

@@ -434,6 +434,18 @@ TEST(Cli, ThePathTracersDenoiserChangesThePngOnlyAndABadValueIsOneLine) {
         << "the EXR is the raw estimate";
     EXPECT_NE(io::readImage(tmp / "on.png").pixels, io::readImage(tmp / "off.png").pixels)
         << "the PNG is denoised";
+    // --display-exr: the linear image the PNG shows — denoised with the denoiser, else the EXR.
+    r = run(base + " -o " + q(tmp / "on2.png") + " --display-exr " + q(tmp / "on-shown.exr"),
+            tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(io::readImage(tmp / "on-shown.exr").pixels, io::readImage(tmp / "on.exr").pixels)
+        << "the denoised linear image";
+    r = run(base + " --set method.params.denoise=false -o " + q(tmp / "off2.png") +
+                " --display-exr " + q(tmp / "off-shown.exr"),
+            tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(io::readImage(tmp / "off-shown.exr").pixels, io::readImage(tmp / "off.exr").pixels)
+        << "without the denoiser it is the EXR";
     r = run(base + " --set method.params.denoise=yes -o " + q(tmp / "bad.png"), tmp.path());
     EXPECT_EQ(r.code, 2);
     EXPECT_EQ(lineCount(r.err), 1u) << r.err;
