@@ -379,6 +379,41 @@ TEST(Cli, AVolumeRendersDirectlyAndItsInitSceneRendersTheSameImage) {
     EXPECT_EQ(fs::path(shown["volume"].get<std::string>()), tmp / "t.nii.gz");
 }
 
+TEST(Cli, SceneInitPrintsTheLoadersWarningsAsInfoAndRenderDo) {
+    // A tilted DICOM series is resampled with one warning line; every command that reads the
+    // volume prints that same line on stderr (scene --init reads it to choose the preset), and
+    // scene --init's stdout stays the scene alone.
+    test::TempDir tmp;
+    test::writeTiltedCtSeries(tmp / "ct");
+    const auto warningLines = [](const std::string& err) {
+        std::vector<std::string> out;
+        std::size_t at = 0;
+        while ((at = err.find("voxlight: warning: ", at)) != std::string::npos) {
+            const std::size_t end = err.find('\n', at);
+            out.push_back(err.substr(at, end - at));
+            at = end;
+        }
+        return out;
+    };
+    const Result info = run("info -q " + q(tmp / "ct"), tmp.path());
+    ASSERT_EQ(info.code, 0) << info.err;
+    const std::vector<std::string> expected = warningLines(info.err);
+    ASSERT_EQ(expected.size(), 1u) << info.err;
+    EXPECT_NE(expected[0].find("gantry tilt"), std::string::npos) << expected[0];
+    const Result init = run("scene --init " + q(tmp / "ct"), tmp.path());
+    ASSERT_EQ(init.code, 0) << init.err;
+    EXPECT_EQ(warningLines(init.err), expected) << init.err;
+    EXPECT_EQ(nlohmann::json::parse(init.out)["transfer_function"]["preset"], "ct-bone");
+    const Result render =
+        run("render -q " + q(tmp / "ct") + " --set image.width=16 --set image.height=16 -o " +
+                q(tmp / "ct.png"),
+            tmp.path());
+    ASSERT_EQ(render.code, 0) << render.err;
+    const std::vector<std::string> rendered = warningLines(render.err);
+    EXPECT_NE(std::find(rendered.begin(), rendered.end(), expected[0]), rendered.end())
+        << render.err;
+}
+
 TEST(Cli, ViewReplacesTheScenesCameraPlacement) {
     test::TempDir tmp;
     std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
