@@ -504,6 +504,37 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
 }
 
+TEST(Pipeline, ACachedVolumeRepeatsItsLoaderWarningInEveryRun) {
+    // A tilted DICOM series loads with one warning (resampled). A session that serves the volume
+    // from its memory cache must still say so for each render it makes from it: the warning is
+    // about the data, not about this run's reading of it.
+    test::TempDir tmp;
+    test::writeTiltedCtSeries(tmp / "ct");
+    Session session;
+    json d = {{"volume", (tmp / "ct").string()},
+              {"method", "gradient"},
+              {"image", {{"width", 16}, {"height", 16}}}};
+    const auto tiltWarnings = [](const RunResult& r) {
+        std::size_t n = 0;
+        for (const auto& w : r.warnings) n += w.find("gantry tilt") != std::string::npos;
+        return n;
+    };
+    const RunResult first = session.run(scene(d));
+    EXPECT_TRUE(first.stage("load_volume").ran);
+    EXPECT_EQ(tiltWarnings(first), 1u);
+    d["camera"] = {{"azimuth", 40}};
+    const RunResult second = session.run(scene(d));
+    EXPECT_FALSE(second.stage("load_volume").ran);
+    EXPECT_EQ(second.stage("load_volume").reason.rfind("cached", 0), 0u)
+        << second.stage("load_volume").reason;
+    EXPECT_EQ(tiltWarnings(second), 1u);
+    ASSERT_TRUE(second.details.contains("warnings"));
+    EXPECT_NE(second.details["warnings"].dump().find("gantry tilt"), std::string::npos);
+    // A volume without loader warnings does not inherit them.
+    d["volume"] = {{"phantom", "sphere"}, {"size", 16}};
+    EXPECT_EQ(tiltWarnings(session.run(scene(d))), 0u);
+}
+
 TEST(Pipeline, UpParallelToTheViewFallsBackWithAWarningNeverNaN) {
     Session session;
     json d = {{"volume", {{"phantom", "sphere"}, {"size", 16}}},
