@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -335,6 +337,43 @@ TEST(Cli, CtrlCLeavesAllOrNothing) {
             EXPECT_EQ(listing(out), std::vector<std::string>{"t.nii.gz"});
         }
         fs::remove(out / "t.nii.gz");
+    }
+}
+
+TEST(Cli, CtrlCStopsAReadBlockedInsideTheReader) {
+    // A MetaImage whose second slice file is a FIFO nobody writes: MetaIO blocks in open(2)
+    // forever, as on a hung network share. voxlight reads MetaImage in a child process; once that
+    // child exists (the read has begun), SIGINT must end `voxlight info` with 130 and one line.
+    // kCancelBound bounds a hang, not speed: the parent polls its cancel flag every 50 ms.
+    constexpr double kCancelBound = 2.0;
+    test::TempDir tmp;
+    std::ofstream(tmp / "hang.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\n"
+                                       "ElementType = MET_UCHAR\nElementDataFile = LIST\n"
+                                       "s0.raw\ns1.raw\n";
+    std::ofstream(tmp / "s0.raw", std::ios::binary) << std::string(16, '\x10');
+    ASSERT_EQ(::mkfifo((tmp / "s1.raw").c_str(), 0600), 0);
+    const fs::path errFile = tmp / "info-stderr.txt";
+    for (const char* signal : {"INT", "TERM"}) {
+        const Result r = runShell(
+            std::string(VOXLIGHT_BINARY) + " info " + q(tmp / "hang.mhd") + " 2>" + q(errFile) +
+                " & pid=$!; n=0; while ! pgrep -P $pid >/dev/null && [ $n -lt 600 ]; do sleep 0.05;"
+                " n=$((n+1)); done; t0=$(date +%s%N); kill -" +
+                signal + " $pid; wait $pid; rc=$?; t1=$(date +%s%N); echo $rc $(((t1-t0)/1000000))",
+            tmp.path());
+        std::istringstream out(r.out);
+        int code = -1;
+        double ms = -1;
+        out >> code >> ms;
+        std::ifstream ef(errFile);
+        const std::string err((std::istreambuf_iterator<char>(ef)), {});
+        EXPECT_EQ(code, 130) << signal << ": " << err;
+        EXPECT_GE(ms, 0.0) << r.out;
+        EXPECT_LT(ms / 1000.0, kCancelBound) << signal;
+        std::size_t lines = 0;
+        std::istringstream es(err);
+        for (std::string l; std::getline(es, l);) lines += !l.empty();
+        EXPECT_EQ(lines, 1u) << err;
+        EXPECT_NE(err.find("voxlight: cancelled; nothing was written"), std::string::npos) << err;
     }
 }
 
