@@ -356,7 +356,8 @@ TEST(Cli, CtrlCStopsAReadBlockedInsideTheReader) {
     for (const char* signal : {"INT", "TERM"}) {
         const Result r = runShell(
             std::string(VOXLIGHT_BINARY) + " info " + q(tmp / "hang.mhd") + " 2>" + q(errFile) +
-                " & pid=$!; n=0; while ! pgrep -P $pid >/dev/null && [ $n -lt 600 ]; do sleep 0.05;"
+                " & pid=$!; n=0; while ! grep -qs '[0-9]' /proc/$pid/task/$pid/children &&"
+                " [ $n -lt 600 ]; do sleep 0.05;"
                 " n=$((n+1)); done; t0=$(date +%s%N); kill -" +
                 signal + " $pid; wait $pid; rc=$?; t1=$(date +%s%N); echo $rc $(((t1-t0)/1000000))",
             tmp.path());
