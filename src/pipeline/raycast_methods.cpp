@@ -1317,12 +1317,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         auto g = std::make_shared<GradientArtifact>();
         std::size_t bytes = 0;
         if (render::gradientTableUse(v, options) == render::GradientTableUse::Bricked) {
-            g->bricked = std::make_shared<const render::BrickedGradients>(
-                render::BrickedGradients::build(v, *run.get<grid::BrickMajorants>("skip_cells")));
+            g->bricked =
+                std::make_shared<const render::BrickedGradients>(render::BrickedGradients::build(
+                    v, *run.get<grid::BrickMajorants>("skip_cells"),
+                    render::BrickedGradients::kMaxEntries, run.progress()));
             bytes = g->bricked->d.size() * sizeof(render::GradientEntry);
         } else {
-            g->dense =
-                std::make_shared<const render::VoxelGradients>(render::VoxelGradients::build(v));
+            g->dense = std::make_shared<const render::VoxelGradients>(
+                render::VoxelGradients::build(v, run.progress()));
             bytes = g->dense->d.size() * sizeof(render::GradientEntry);
         }
         return Artifact::of<GradientArtifact>(std::move(g), bytes);
