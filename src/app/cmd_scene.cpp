@@ -4,6 +4,7 @@
 // its value, defaults included, the transfer function chosen from the data — so that users edit a
 // file instead of reading a header; rendering it renders what `render VOLUME` renders.
 #include <algorithm>
+#include <cstdio>
 #include <iostream>
 #include <memory>
 
@@ -50,6 +51,10 @@ Command addSceneCommand(CLI::App& app) {
                 "\"lights\": [] means a headlight that follows the camera. Schema: src/io/scene.h.";
         if (s.transferFunction.preset.empty() && s.transferFunction.points.empty()) {
             const core::Volume v = pipeline::loadSceneVolume(s, terminalProgress(true));
+            // The loader's warnings (a tilted DICOM series resampled, ...), as `info` and
+            // `render` print them: stderr, so that stdout stays the scene.
+            for (const auto& w : v.warnings)
+                std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
             doc["transfer_function"]["preset"] = optics::defaultPresetName(v);
         }
         doc["method"]["params"] = plan.params;

@@ -29,6 +29,9 @@ class Progress {
         if (cancel_ && cancel_->load(std::memory_order_relaxed)) throw CancelledError();
     }
     bool cancelled() const { return cancel_ && cancel_->load(std::memory_order_relaxed); }
+    /// Whether a cancel flag is attached at all (work that can only be stopped at a cost, e.g. in
+    /// a child process, skips that cost when nobody can cancel).
+    bool cancellable() const { return cancel_ != nullptr; }
 
   private:
     Sink sink_;

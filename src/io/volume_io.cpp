@@ -4,6 +4,13 @@
 // (volume_io_loader.cpp, volume_module.h).
 #include "io/volume_io.h"
 
+#include <fcntl.h>
+#include <poll.h>
+#include <signal.h>
+#include <sys/mman.h>
+#include <sys/resource.h>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <vtkCommand.h>
 #include <vtkDataArray.h>
@@ -31,6 +38,7 @@
 #include <zlib.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -100,12 +108,19 @@ class ReaderObserver : public vtkCommand {
         if (event == vtkCommand::ErrorEvent && data)
             errors.emplace_back(static_cast<const char*>(data));
         if (event == vtkCommand::ProgressEvent && data && progress) {
-            if (progress->cancelled()) {
-                cancelled = true;
-                if (auto* alg = vtkAlgorithm::SafeDownCast(caller)) alg->SetAbortExecute(1);
-                return;
+            // The reader's loop tests AbortExecute at its next step (NIfTI: every 2 % of its
+            // rows; NRRD raw data: every 2 % of its slices' rows; VTI: every block of data).
+            // No exception may unwind through VTK's frames: a flag raised between the check and
+            // report() aborts the same way.
+            try {
+                if (!progress->cancelled()) {
+                    progress->report("read", *static_cast<double*>(data));
+                    return;
+                }
+            } catch (const CancelledError&) {
             }
-            progress->report("read", *static_cast<double*>(data));
+            cancelled = true;
+            if (auto* alg = vtkAlgorithm::SafeDownCast(caller)) alg->SetAbortExecute(1);
         }
     }
     std::vector<std::string> errors;
@@ -317,14 +332,244 @@ bool hasExtension(const fs::path& p, const std::vector<std::string>& exts) {
     return false;
 }
 
-/// Runs a vtkImageReader2: header, size checks before any allocation, then the data.
-vtkImageData* runImageReader(vtkImageReader2* r, const fs::path& path,
-                             const core::Progress& progress) {
+// ---------------------------------------------------------------------------------------------------------------
+// Readers whose data read has no progress events to abort on (MetaIO reads all voxels in one call;
+// VTK's NRRD reader inflates gzip data in one gzread and parses ascii in one loop) run it in a
+// forked child when the caller can cancel: the parent polls the cancel flag and kills the child,
+// so Ctrl-C is honoured within a poll interval however large the file. The voxels come back
+// through a memfd the parent maps; VTK's errors and what MetaIO printed on std::cerr come back as
+// text and are judged as an in-process read would judge them. A crash of the reader becomes an
+// InputError instead of ending voxlight.
+
+/// How often the parent looks at the cancel flag and the child's progress.
+constexpr int kChildPollMs = 50;
+
+/// Keeps a shared_ptr alive as long as the VTK object it observes (released on its deletion).
+class KeepAlive : public vtkCommand {
+  public:
+    static KeepAlive* New() { return new KeepAlive; }
+    void Execute(vtkObject*, unsigned long, void*) override {}
+    std::shared_ptr<void> held;
+};
+
+/// Kills and reaps the child and closes the descriptors unless the child was reaped.
+struct ReaderChild {
+    pid_t pid = -1;
+    int msg = -1, mem = -1;
+    ReaderChild() = default;
+    ReaderChild(const ReaderChild&) = delete;
+    ReaderChild& operator=(const ReaderChild&) = delete;
+    ~ReaderChild() {
+        if (pid > 0) {
+            ::kill(pid, SIGKILL);
+            wait();
+        }
+        for (int fd : {msg, mem})
+            if (fd >= 0) ::close(fd);
+    }
+    int wait() {
+        int status = 0;
+        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        }
+        pid = -1;
+        return status;
+    }
+    /// Bytes the child has read so far (its /proc rchar), 0 when unknown.
+    std::uint64_t bytesRead() const {
+        std::ifstream io("/proc/" + std::to_string(pid) + "/io");
+        std::string key;
+        std::uint64_t value = 0;
+        while (io >> key >> value)
+            if (key == "rchar:") return value;
+        return 0;
+    }
+};
+
+void putField(std::string& out, const std::string& s) {
+    const std::uint32_t n = std::uint32_t(s.size());
+    out.append(reinterpret_cast<const char*>(&n), sizeof n);
+    out += s;
+}
+std::string takeField(const std::string& in, std::size_t& at) {
+    std::uint32_t n = 0;
+    if (at + sizeof n > in.size()) return {};
+    std::memcpy(&n, in.data() + at, sizeof n);
+    at += sizeof n;
+    n = std::uint32_t(std::min<std::size_t>(n, in.size() - at));
+    std::string out = in.substr(at, n);
+    at += n;
+    return out;
+}
+
+[[noreturn]] void systemFailure(const fs::path& path, const char* what) {
+    throw InputError(
+        path.string(), "data",
+        std::string("cannot start the reader process: ") + what + ": " + std::strerror(errno),
+        "check the system's limits on processes and memory");
+}
+
+/// The child: read the data, copy the voxels into `memFd`, send one message ('V' done, 'E'
+/// InputError fields, 'X' another exception) followed by what was printed on std::cerr.
+[[noreturn]] void readInChild(vtkImageReader2* r, const fs::path& path, std::size_t bytes,
+                              int msgFd, int memFd) {
+    // Ctrl-C reaches the parent, which kills the child; a crash ends the child plainly.
+    ::signal(SIGINT, SIG_IGN);
+    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGPIPE}) ::signal(sig, SIG_DFL);
+    rlimit core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &core);
+    std::ostringstream printed;
+    std::cerr.rdbuf(printed.rdbuf());  // the parent's capture (if any) is the parent's
+    std::string msg;
+    try {
+        runVtkChecked(r, path, "data", [&] { r->Update(); });
+        vtkDataArray* scalars = r->GetOutput()->GetPointData()->GetScalars();
+        if (!scalars ||
+            std::size_t(scalars->GetNumberOfValues()) * std::size_t(scalars->GetDataTypeSize()) !=
+                bytes)
+            throw InternalError("the reader's output does not have the size of its header");
+        if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
+        void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
+        if (p == MAP_FAILED) throw std::bad_alloc();
+        std::memcpy(p, scalars->GetVoidPointer(0), bytes);
+        msg = "V";
+    } catch (const InputError& e) {
+        msg = "E";
+        for (const std::string* f : {&e.source(), &e.field(), &e.problem(), &e.fix()})
+            putField(msg, *f);
+    } catch (const std::bad_alloc&) {
+        msg = "X";
+        putField(msg, "out of memory");
+    } catch (const std::exception& e) {
+        msg = "X";
+        putField(msg, e.what());
+    }
+    putField(msg, printed.str());
+    const char* p = msg.data();
+    std::size_t left = msg.size();
+    while (left > 0) {
+        const ssize_t w = ::write(msgFd, p, left);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) break;
+        p += w, left -= std::size_t(w);
+    }
+    ::_exit(0);  // no atexit handlers, no flush of the parent's stdio buffers
+}
+
+/// Runs `r`'s data read (after UpdateInformation) in a child; the output image, its scalars
+/// mapped from the child's memfd. `expectedBytes` (the bytes the read will take from files, 0 if
+/// unknown) turns the child's read count into progress.
+vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& path,
+                                            std::uint64_t expectedBytes,
+                                            const core::Progress& progress) {
+    int ext[6];
+    r->GetDataExtent(ext);
+    const int comps = r->GetNumberOfScalarComponents();
+    const std::size_t values = std::size_t(ext[1] - ext[0] + 1) * std::size_t(ext[3] - ext[2] + 1) *
+                               std::size_t(ext[5] - ext[4] + 1) * std::size_t(comps);
+    const std::size_t bytes =
+        values * std::size_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType()));
+    ReaderChild child;
+    child.mem = ::memfd_create("voxlight-read", MFD_CLOEXEC);
+    if (child.mem < 0) systemFailure(path, "memfd_create");
+    int pipeFds[2];
+    if (::pipe2(pipeFds, O_CLOEXEC) != 0) systemFailure(path, "pipe");
+    child.msg = pipeFds[0];
+    std::fflush(nullptr);  // nothing buffered is written twice
+    child.pid = ::fork();
+    if (child.pid < 0) {
+        ::close(pipeFds[1]);
+        systemFailure(path, "fork");
+    }
+    if (child.pid == 0) {
+        ::close(pipeFds[0]);
+        readInChild(r, path, bytes, pipeFds[1], child.mem);
+    }
+    ::close(pipeFds[1]);
+
+    std::string msg;
+    progress.report("read", 0.0);
+    for (;;) {
+        pollfd fd{child.msg, POLLIN, 0};
+        const int n = ::poll(&fd, 1, kChildPollMs);
+        progress.checkCancel();  // CancelledError: the guard kills the child
+        if (n < 0 && errno != EINTR) systemFailure(path, "poll");
+        if (n > 0) {
+            char buf[4096];
+            const ssize_t got = ::read(child.msg, buf, sizeof buf);
+            if (got > 0) {
+                msg.append(buf, std::size_t(got));
+                continue;
+            }
+            if (got == 0 || (errno != EINTR && errno != EAGAIN)) break;  // the child is done
+        } else if (expectedBytes > 0) {
+            progress.report("read",
+                            std::min(0.99, double(child.bytesRead()) / double(expectedBytes)));
+        }
+    }
+    const int status = child.wait();
+    progress.checkCancel();
+
+    std::size_t at = 1;
+    const char kind = msg.empty() ? '\0' : msg[0];
+    if (kind == 'E') {
+        const std::string source = takeField(msg, at), field = takeField(msg, at),
+                          problem = takeField(msg, at), fix = takeField(msg, at);
+        std::cerr << takeField(msg, at);  // into the caller's capture, as an in-process read
+        throw InputError(source, field, problem, fix);
+    }
+    if (kind == 'X') throw InternalError("volume reader: " + takeField(msg, at));
+    if (kind != 'V') {
+        std::string why = "the reader ended abnormally";
+        if (WIFSIGNALED(status))
+            why = "the reader crashed with signal " + std::to_string(WTERMSIG(status)) + " (" +
+                  strsignal(WTERMSIG(status)) + ")";
+        else if (WIFEXITED(status))
+            why = "the reader exited with status " + std::to_string(WEXITSTATUS(status));
+        throw InputError(path.string(), "data", "could not be read: " + why,
+                         "check that the file is complete and not corrupt");
+    }
+    std::cerr << takeField(msg, at);
+    struct stat st {};
+    if (::fstat(child.mem, &st) != 0 || std::uint64_t(st.st_size) != bytes)
+        throw InternalError("volume reader: the child's voxel buffer has the wrong size");
+    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, child.mem, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    const std::shared_ptr<void> mapping(p, [bytes](void* q) { ::munmap(q, bytes); });
+    vtkSmartPointer<vtkDataArray> scalars;
+    scalars.TakeReference(vtkDataArray::CreateDataArray(r->GetDataScalarType()));
+    scalars->SetNumberOfComponents(comps);
+    scalars->SetVoidArray(p, vtkIdType(values), 1);  // 1: VTK must not free it
+    vtkNew<KeepAlive> keep;
+    keep->held = mapping;
+    scalars->AddObserver(vtkCommand::DeleteEvent, keep);
+    auto img = vtkSmartPointer<vtkImageData>::New();
+    img->SetExtent(ext);
+    img->SetSpacing(r->GetDataSpacing());
+    img->SetOrigin(r->GetDataOrigin());
+    img->GetPointData()->SetScalars(scalars);
+    return img;
+}
+
+/// How a reader's data read is run when the caller can cancel (see readContained).
+enum class DataRead {
+    Abortable,  ///< in process: the reader's progress events abort it
+    Contained,  ///< the reader cannot be interrupted: in a child process the parent can kill
+};
+
+/// Runs a vtkImageReader2: header, size checks before any allocation, then the data (in a child
+/// when `how` says the reader cannot be interrupted and `progress` can cancel; `expectedBytes` as
+/// for readContained).
+vtkSmartPointer<vtkImageData> runImageReader(vtkImageReader2* r, const fs::path& path,
+                                             const core::Progress& progress,
+                                             DataRead how = DataRead::Abortable,
+                                             std::uint64_t expectedBytes = 0) {
     r->SetFileName(path.c_str());
     runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
     int ext[6];
     r->GetDataExtent(ext);
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
+    if (how == DataRead::Contained && progress.cancellable())
+        return readContained(r, path, expectedBytes, progress);
     runVtkChecked(
         r, path, "data", [&] { r->Update(); }, progress);
     return r->GetOutput();
@@ -470,7 +715,7 @@ void checkNiftiHeader(const fs::path& path) {
 Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
     checkNiftiHeader(path);
     vtkNew<vtkNIFTIImageReader> r;
-    vtkImageData* img = runImageReader(r, path, progress);
+    const vtkSmartPointer<vtkImageData> img = runImageReader(r, path, progress);
 
     // NIfTI world (RAS) = M · (vtkOrigin + ijk ⊙ spacing); M from sform (preferred, as nibabel) or
     // qform.
@@ -568,8 +813,9 @@ Geometry spacingAndOrigin(vtkImageData* img, const fs::path& path, const char* s
 }
 
 template <class VtkReader>
-Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r) {
-    vtkImageData* img = runImageReader(r, path, progress);
+Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r,
+                     DataRead how = DataRead::Abortable, std::uint64_t expectedBytes = 0) {
+    const vtkSmartPointer<vtkImageData> img = runImageReader(r, path, progress, how, expectedBytes);
     Geometry g = spacingAndOrigin(img, path, "spacing", "origin");
     Volume v = fromImageData(img, path, g);
     v.description = path.filename().string();
@@ -735,6 +981,9 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
         std::uint64_t(ext[1] - ext[0] + 1) * (ext[3] - ext[2] + 1) * (ext[5] - ext[4] + 1) *
         std::uint64_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType())) *
         std::uint64_t(r->GetNumberOfScalarComponents());
+    // What MetaIO will read, for progress: raw data only (MetaIO reads compressed data whole
+    // before it inflates it, so the bytes read say nothing about the time left).
+    std::uint64_t fileBytes = isCompressed ? 0 : need;
     if (dataFile != "LIST" && dataFile.find('%') == std::string::npos) {
         const bool local = dataFile == "LOCAL";
         const fs::path raw = local ? path : path.parent_path() / dataFile;
@@ -751,6 +1000,7 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
             if (hs > 0) skip += hs >= double(size) ? size : std::uint64_t(hs);
         }
         const std::uint64_t have = size - std::min(size, skip);
+        if (!isCompressed) fileBytes = have;
         if (!isCompressed && have < need)
             throw InputError(raw.string(), "data",
                              "file holds " + std::to_string(have) + " bytes, header " +
@@ -779,7 +1029,9 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
     {
         // MetaIO loads short or undecompressible data with only a line on std::cerr.
         CerrCapture metaio;
-        v = readSimpleVtk(path, progress, r.Get());
+        // MetaIO reads every voxel in one call, without progress events: in a child process
+        // that Ctrl-C can stop.
+        v = readSimpleVtk(path, progress, r.Get(), DataRead::Contained, fileBytes);
         if (!metaio.firstLine().empty())
             throw InputError(path.string(), "data", "could not be read: " + metaio.firstLine(),
                              "the data is truncated or corrupt; copy it again");
@@ -813,7 +1065,18 @@ Volume readNrrd(const fs::path& path, const ReadOptions&, const core::Progress& 
     detail::checkNrrdDataSize(h, path);
     const Geometry g = detail::nrrdGeometry(h, path);
     vtkNew<vtkNrrdReader> r;
-    vtkImageData* img = runImageReader(r, path, progress);
+    // VTK reads raw data in rows it can abort; gzip data in one gzread and ascii data in one loop,
+    // neither of which it can: those in a child process that Ctrl-C can stop.
+    std::uint64_t fileBytes = 0;
+    for (const fs::path& f : h.dataFiles.empty() ? std::vector<fs::path>{path} : h.dataFiles) {
+        std::error_code ec;
+        const auto size = fs::file_size(f, ec);
+        if (!ec) fileBytes += size;
+    }
+    const vtkSmartPointer<vtkImageData> img = runImageReader(
+        r, path, progress,
+        h.encoding == detail::NrrdEncoding::Raw ? DataRead::Abortable : DataRead::Contained,
+        fileBytes);
     Volume v = fromImageData(img, path, g);
     VL_CHECK(v.geometry().dims == g.dims);  // our parse and VTK agree on the layout
     v.description = path.filename().string();

@@ -252,6 +252,8 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
             r.seconds = sw.seconds();
         }
         if (st.describe) r.reason += ": " + st.describe(run, a);
+        if (st.warnings)
+            for (const auto& w : st.warnings(a)) run.warn(w);
         run.keys_[st.name] = st.outputKey ? st.outputKey(run, a) : key;
         run.artifacts_[st.name] = a;
         res.stages.push_back(r);

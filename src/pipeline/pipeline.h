@@ -67,6 +67,10 @@ struct Stage {
     std::function<std::optional<std::uint64_t>(const Run&, std::uint64_t)> predictOutputKey;
     /// A short description of the artifact for the stats ("4096 bricks of 16^3").
     std::function<std::string(const Run&, const Artifact&)> describe;
+    /// Warnings that belong to the artifact (load_volume: the loader's, e.g. a tilted DICOM
+    /// series resampled): every run that uses it reports them, whether it was computed or served
+    /// from the cache — a warning about the data does not go quiet because the data was cached.
+    std::function<std::vector<std::string>(const Artifact&)> warnings;
 };
 
 struct Plan {

@@ -1181,7 +1181,6 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         const std::uint64_t identity = volumeIdentity(run.scene());  // the key it runs under
         auto v = std::make_shared<LoadedVolume>();
         v->volume = loadSceneVolume(run.scene(), run.progress());
-        for (const auto& w : v->volume.warnings) run.warn(w);  // e.g. a tilted series resampled
         v->contentHash = core::contentHash(v->volume);
         v->nonFinite = v->volume.countNonFinite();
         // What a later process needs to name this volume's artifacts before reading it.
@@ -1189,6 +1188,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         run.cache().putRecord("volume-voxels", identity, v->volume.voxelCount());
         const std::size_t bytes = v->volume.sizeBytes();
         return Artifact::of<LoadedVolume>(std::move(v), bytes);
+    };
+    load.warnings = [](const Artifact& a) {  // e.g. a tilted series resampled
+        return a.as<LoadedVolume>()->volume.warnings;
     };
     load.outputKey = [](const Run&, const Artifact& a) {
         return a.as<LoadedVolume>()->contentHash;
@@ -1315,12 +1317,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         auto g = std::make_shared<GradientArtifact>();
         std::size_t bytes = 0;
         if (render::gradientTableUse(v, options) == render::GradientTableUse::Bricked) {
-            g->bricked = std::make_shared<const render::BrickedGradients>(
-                render::BrickedGradients::build(v, *run.get<grid::BrickMajorants>("skip_cells")));
+            g->bricked =
+                std::make_shared<const render::BrickedGradients>(render::BrickedGradients::build(
+                    v, *run.get<grid::BrickMajorants>("skip_cells"),
+                    render::BrickedGradients::kMaxEntries, run.progress()));
             bytes = g->bricked->d.size() * sizeof(render::GradientEntry);
         } else {
-            g->dense =
-                std::make_shared<const render::VoxelGradients>(render::VoxelGradients::build(v));
+            g->dense = std::make_shared<const render::VoxelGradients>(
+                render::VoxelGradients::build(v, run.progress()));
             bytes = g->dense->d.size() * sizeof(render::GradientEntry);
         }
         return Artifact::of<GradientArtifact>(std::move(g), bytes);

@@ -191,7 +191,9 @@ struct VoxelGradients {
     std::size_t di = 0, dj = 0, dk = 0;  ///< corner strides (0 on a single-voxel axis)
     float slope = 1.f;                   ///< stored → physical value
     /// The table for `volume`, or empty when the type is float or a difference does not fit.
-    static VoxelGradients build(const core::Volume& volume);
+    /// Throws CancelledError when `progress` is cancelled (checked per slice).
+    static VoxelGradients build(const core::Volume& volume,
+                                const core::Progress& progress = core::Progress::none());
     bool empty() const { return d.empty(); }
     /// Looked up by the cell's linear voxel index (cell.offset), not by (i, j, k).
     static constexpr bool kByIndex = false;
@@ -222,9 +224,11 @@ struct BrickedGradients {
     float slope = 1.f;                   ///< stored → physical value
     /// The table for `volume` in the bricks near the non-empty cells of `cells` (the caster's
     /// kSkipCellVoxels³ skip cells, with skip distances); empty when the type is float or a
-    /// difference does not fit in int16.
+    /// difference does not fit in int16. Throws CancelledError when `progress` is cancelled
+    /// (checked per brick).
     static BrickedGradients build(const core::Volume& volume, const grid::BrickMajorants& cells,
-                                  std::uint64_t maxEntries = kMaxEntries);
+                                  std::uint64_t maxEntries = kMaxEntries,
+                                  const core::Progress& progress = core::Progress::none());
     bool empty() const { return d.empty(); }
     /// Looked up by the cell's lower corner (cell.i, cell.j, cell.k).
     static constexpr bool kByIndex = true;

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <sys/wait.h>
 
 #include <algorithm>
@@ -8,6 +9,7 @@
 #include <cstdio>
 #include <fstream>
 #include <nlohmann/json.hpp>
+#include <sstream>
 #include <string>
 #include <vector>
 
@@ -338,6 +340,44 @@ TEST(Cli, CtrlCLeavesAllOrNothing) {
     }
 }
 
+TEST(Cli, CtrlCStopsAReadBlockedInsideTheReader) {
+    // A MetaImage whose second slice file is a FIFO nobody writes: MetaIO blocks in open(2)
+    // forever, as on a hung network share. voxlight reads MetaImage in a child process; once that
+    // child exists (the read has begun), SIGINT must end `voxlight info` with 130 and one line.
+    // kCancelBound bounds a hang, not speed: the parent polls its cancel flag every 50 ms.
+    constexpr double kCancelBound = 2.0;
+    test::TempDir tmp;
+    std::ofstream(tmp / "hang.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\n"
+                                       "ElementType = MET_UCHAR\nElementDataFile = LIST\n"
+                                       "s0.raw\ns1.raw\n";
+    std::ofstream(tmp / "s0.raw", std::ios::binary) << std::string(16, '\x10');
+    ASSERT_EQ(::mkfifo((tmp / "s1.raw").c_str(), 0600), 0);
+    const fs::path errFile = tmp / "info-stderr.txt";
+    for (const char* signal : {"INT", "TERM"}) {
+        const Result r = runShell(
+            std::string(VOXLIGHT_BINARY) + " info " + q(tmp / "hang.mhd") + " 2>" + q(errFile) +
+                " & pid=$!; n=0; while ! grep -qs '[0-9]' /proc/$pid/task/$pid/children &&"
+                " [ $n -lt 600 ]; do sleep 0.05;"
+                " n=$((n+1)); done; t0=$(date +%s%N); kill -" +
+                signal + " $pid; wait $pid; rc=$?; t1=$(date +%s%N); echo $rc $(((t1-t0)/1000000))",
+            tmp.path());
+        std::istringstream out(r.out);
+        int code = -1;
+        double ms = -1;
+        out >> code >> ms;
+        std::ifstream ef(errFile);
+        const std::string err((std::istreambuf_iterator<char>(ef)), {});
+        EXPECT_EQ(code, 130) << signal << ": " << err;
+        EXPECT_GE(ms, 0.0) << r.out;
+        EXPECT_LT(ms / 1000.0, kCancelBound) << signal;
+        std::size_t lines = 0;
+        std::istringstream es(err);
+        for (std::string l; std::getline(es, l);) lines += !l.empty();
+        EXPECT_EQ(lines, 1u) << err;
+        EXPECT_NE(err.find("voxlight: cancelled; nothing was written"), std::string::npos) << err;
+    }
+}
+
 TEST(Cli, AVolumeRendersDirectlyAndItsInitSceneRendersTheSameImage) {
     test::TempDir tmp;
     ASSERT_EQ(run("phantom torso --size 40 -q -o " + q(tmp / "t.nii.gz"), tmp.path()).code, 0);
@@ -377,6 +417,41 @@ TEST(Cli, AVolumeRendersDirectlyAndItsInitSceneRendersTheSameImage) {
     ASSERT_EQ(r.code, 0) << r.err;
     const auto shown = nlohmann::json::parse(r.out);
     EXPECT_EQ(fs::path(shown["volume"].get<std::string>()), tmp / "t.nii.gz");
+}
+
+TEST(Cli, SceneInitPrintsTheLoadersWarningsAsInfoAndRenderDo) {
+    // A tilted DICOM series is resampled with one warning line; every command that reads the
+    // volume prints that same line on stderr (scene --init reads it to choose the preset), and
+    // scene --init's stdout stays the scene alone.
+    test::TempDir tmp;
+    test::writeTiltedCtSeries(tmp / "ct");
+    const auto warningLines = [](const std::string& err) {
+        std::vector<std::string> out;
+        std::size_t at = 0;
+        while ((at = err.find("voxlight: warning: ", at)) != std::string::npos) {
+            const std::size_t end = err.find('\n', at);
+            out.push_back(err.substr(at, end - at));
+            at = end;
+        }
+        return out;
+    };
+    const Result info = run("info -q " + q(tmp / "ct"), tmp.path());
+    ASSERT_EQ(info.code, 0) << info.err;
+    const std::vector<std::string> expected = warningLines(info.err);
+    ASSERT_EQ(expected.size(), 1u) << info.err;
+    EXPECT_NE(expected[0].find("gantry tilt"), std::string::npos) << expected[0];
+    const Result init = run("scene --init " + q(tmp / "ct"), tmp.path());
+    ASSERT_EQ(init.code, 0) << init.err;
+    EXPECT_EQ(warningLines(init.err), expected) << init.err;
+    EXPECT_EQ(nlohmann::json::parse(init.out)["transfer_function"]["preset"], "ct-bone");
+    const Result render =
+        run("render -q " + q(tmp / "ct") + " --set image.width=16 --set image.height=16 -o " +
+                q(tmp / "ct.png"),
+            tmp.path());
+    ASSERT_EQ(render.code, 0) << render.err;
+    const std::vector<std::string> rendered = warningLines(render.err);
+    EXPECT_NE(std::find(rendered.begin(), rendered.end(), expected[0]), rendered.end())
+        << render.err;
 }
 
 TEST(Cli, ViewReplacesTheScenesCameraPlacement) {

@@ -16,6 +16,7 @@
 #include "pipeline/pipeline.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
+#include "render/ray_caster.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -502,6 +503,63 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     // A normal view: no warning.
     d.erase("camera");
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+}
+
+TEST(Pipeline, ACachedVolumeRepeatsItsLoaderWarningInEveryRun) {
+    // A tilted DICOM series loads with one warning (resampled). A session that serves the volume
+    // from its memory cache must still say so for each render it makes from it: the warning is
+    // about the data, not about this run's reading of it.
+    test::TempDir tmp;
+    test::writeTiltedCtSeries(tmp / "ct");
+    Session session;
+    json d = {{"volume", (tmp / "ct").string()},
+              {"method", "gradient"},
+              {"image", {{"width", 16}, {"height", 16}}}};
+    const auto tiltWarnings = [](const RunResult& r) {
+        std::size_t n = 0;
+        for (const auto& w : r.warnings) n += w.find("gantry tilt") != std::string::npos;
+        return n;
+    };
+    const RunResult first = session.run(scene(d));
+    EXPECT_TRUE(first.stage("load_volume").ran);
+    EXPECT_EQ(tiltWarnings(first), 1u);
+    d["camera"] = {{"azimuth", 40}};
+    const RunResult second = session.run(scene(d));
+    EXPECT_FALSE(second.stage("load_volume").ran);
+    EXPECT_EQ(second.stage("load_volume").reason.rfind("cached", 0), 0u)
+        << second.stage("load_volume").reason;
+    EXPECT_EQ(tiltWarnings(second), 1u);
+    ASSERT_TRUE(second.details.contains("warnings"));
+    EXPECT_NE(second.details["warnings"].dump().find("gantry tilt"), std::string::npos);
+    // A volume without loader warnings does not inherit them.
+    d["volume"] = {{"phantom", "sphere"}, {"size", 16}};
+    EXPECT_EQ(tiltWarnings(session.run(scene(d))), 0u);
+}
+
+TEST(Pipeline, TheGradientsStageStopsWhenCancelled) {
+    // The gradients stage builds its table with run.progress(): on a 512³ CT it ran 11 s on a
+    // loaded machine without looking at the cancel flag. Both layouts stop (CancelledError) when
+    // the flag is raised, and build the same table as before when it is not.
+    core::PhantomOptions o;
+    o.size = 48;
+    const core::Volume v = core::makePhantom("torso", o);
+    const glm::ivec3 counts = (v.dims() + (render::kSkipCellVoxels - 1)) / render::kSkipCellVoxels;
+    const std::size_t cells = std::size_t(counts.x) * counts.y * counts.z;
+    const grid::BrickMajorants everyCell = grid::BrickMajorants::fromCells(
+        counts, render::kSkipCellVoxels, std::vector<float>(cells, 1.f),
+        std::vector<std::array<float, 2>>(cells, {0.f, 1.f}));
+    std::atomic<bool> flag{true};
+    const core::Progress cancelled({}, &flag);
+    EXPECT_THROW((void)render::VoxelGradients::build(v, cancelled), CancelledError);
+    EXPECT_THROW((void)render::BrickedGradients::build(
+                     v, everyCell, render::BrickedGradients::kMaxEntries, cancelled),
+                 CancelledError);
+    flag = false;
+    EXPECT_EQ(render::VoxelGradients::build(v, cancelled).d, render::VoxelGradients::build(v).d);
+    EXPECT_EQ(render::BrickedGradients::build(v, everyCell, render::BrickedGradients::kMaxEntries,
+                                              cancelled)
+                  .d,
+              render::BrickedGradients::build(v, everyCell).d);
 }
 
 TEST(Pipeline, UpParallelToTheViewFallsBackWithAWarningNeverNaN) {

@@ -32,6 +32,12 @@ std::filesystem::path sourceDir();
 /// Path of a file under ../shared/datasets relative to the project root, or nullopt if absent.
 std::optional<std::filesystem::path> sharedDataset(const std::string& relative);
 
+/// Writes a small CT series into `dir` (created if missing), one file per slice: `slices` slices of
+/// 12×8 int16 pixels (0.5 × 0.75 mm, rescale −1024), 2 mm apart and each sheared 2·tan 15° mm
+/// further in y — a 15° gantry tilt, which the loader resamples with one warning line (unless
+/// ReadOptions::strictGeometry). Explicit VR little endian written byte by byte: no GDCM needed.
+void writeTiltedCtSeries(const std::filesystem::path& dir, int slices = 4);
+
 }  // namespace voxlight::test
 
 /// Skips the current test with a clear message when a shared dataset is missing; else binds `var`
