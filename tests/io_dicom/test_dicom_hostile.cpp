@@ -36,36 +36,10 @@ namespace {
 
 constexpr int kRows = 8, kColumns = 12;
 
-void putU16(std::string& s, unsigned v) {
-    s += char(v & 0xff);
-    s += char(v >> 8 & 0xff);
-}
-void putU32(std::string& s, std::uint32_t v) {
-    for (int i = 0; i < 4; ++i) s += char(v >> (8 * i) & 0xff);
-}
-
-/// One explicit-VR little-endian element; `value` padded to even length.
-std::string element(unsigned group, unsigned elem, const char* vr, std::string value) {
-    if (value.size() % 2) value += std::strcmp(vr, "UI") == 0 ? '\0' : ' ';
-    std::string s;
-    putU16(s, group);
-    putU16(s, elem);
-    s += vr;
-    const bool longForm = std::strcmp(vr, "OB") == 0 || std::strcmp(vr, "OW") == 0 ||
-                          std::strcmp(vr, "SQ") == 0 || std::strcmp(vr, "UN") == 0;
-    if (longForm) {
-        putU16(s, 0);
-        putU32(s, std::uint32_t(value.size()));
-    } else {
-        putU16(s, unsigned(value.size()));
-    }
-    return s + value;
-}
-std::string us(unsigned v) {
-    std::string s;
-    putU16(s, v);
-    return s;
-}
+using voxlight::test::element;
+using voxlight::test::putU16;
+using voxlight::test::putU32;
+std::string us(unsigned v) { return voxlight::test::u16(v); }
 
 /// A valid single-slice CT (int16, 12x8, rescale -1024) in explicit VR little endian.
 std::string validSlice() {

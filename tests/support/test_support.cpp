@@ -43,7 +43,6 @@ std::optional<std::filesystem::path> sharedDataset(const std::string& relative) 
     return std::nullopt;
 }
 
-namespace {
 void putU16(std::string& s, unsigned v) {
     s += char(v & 0xff);
     s += char(v >> 8 & 0xff);
@@ -56,14 +55,15 @@ std::string u16(unsigned v) {
     putU16(s, v);
     return s;
 }
-/// One explicit-VR little-endian element; `value` padded to even length.
 std::string element(unsigned group, unsigned elem, const char* vr, std::string value) {
     if (value.size() % 2) value += std::strcmp(vr, "UI") == 0 ? '\0' : ' ';
     std::string s;
     putU16(s, group);
     putU16(s, elem);
     s += vr;
-    if (std::strcmp(vr, "OB") == 0 || std::strcmp(vr, "OW") == 0) {
+    const bool longForm = std::strcmp(vr, "OB") == 0 || std::strcmp(vr, "OW") == 0 ||
+                          std::strcmp(vr, "SQ") == 0 || std::strcmp(vr, "UN") == 0;
+    if (longForm) {
         putU16(s, 0);
         putU32(s, std::uint32_t(value.size()));
     } else {
@@ -71,7 +71,6 @@ std::string element(unsigned group, unsigned elem, const char* vr, std::string v
     }
     return s + value;
 }
-}  // namespace
 
 void writeTiltedCtSeries(const std::filesystem::path& dir, int slices) {
     constexpr int kRows = 8, kColumns = 12;

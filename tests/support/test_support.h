@@ -4,6 +4,7 @@
 // skip.
 #include <gtest/gtest.h>
 
+#include <cstdint>
 #include <filesystem>
 #include <optional>
 #include <string>
@@ -31,6 +32,14 @@ std::filesystem::path sourceDir();
 
 /// Path of a file under ../shared/datasets relative to the project root, or nullopt if absent.
 std::optional<std::filesystem::path> sharedDataset(const std::string& relative);
+
+/// DICOM bytes for tests that write files by hand: little-endian 16/32-bit words appended to s,
+/// a 16-bit word as a string, and one explicit-VR little-endian element with `value` padded to
+/// even length (the 4-byte length form for OB, OW, SQ and UN).
+void putU16(std::string& s, unsigned v);
+void putU32(std::string& s, std::uint32_t v);
+std::string u16(unsigned v);
+std::string element(unsigned group, unsigned elem, const char* vr, std::string value);
 
 /// Writes a small CT series into `dir` (created if missing), one file per slice: `slices` slices of
 /// 12×8 int16 pixels (0.5 × 0.75 mm, rescale −1024), 2 mm apart and each sheared 2·tan 15° mm
