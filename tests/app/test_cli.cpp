@@ -347,11 +347,8 @@ TEST(Cli, CtrlCStopsAReadBlockedInsideTheReader) {
     // kCancelBound bounds a hang, not speed: the parent polls its cancel flag every 50 ms.
     constexpr double kCancelBound = 2.0;
     test::TempDir tmp;
-    std::ofstream(tmp / "hang.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\n"
-                                       "ElementType = MET_UCHAR\nElementDataFile = LIST\n"
-                                       "s0.raw\ns1.raw\n";
-    std::ofstream(tmp / "s0.raw", std::ios::binary) << std::string(16, '\x10');
-    ASSERT_EQ(::mkfifo((tmp / "s1.raw").c_str(), 0600), 0);
+    test::writeBlockedMetaImage(tmp.path());
+    ASSERT_FALSE(HasFailure());
     const fs::path errFile = tmp / "info-stderr.txt";
     for (const char* signal : {"INT", "TERM"}) {
         const Result r = runShell(

@@ -243,11 +243,8 @@ TEST(CancelReadErrors, AReaderBlockedOnItsDataFileIsStopped) {
     // A MetaImage whose second slice file is a FIFO nobody writes: MetaIO blocks in open(2)
     // forever (as on a hung network share). Raising the flag still ends the read.
     test::TempDir tmp;
-    std::ofstream(tmp / "hang.mhd") << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\n"
-                                       "ElementType = MET_UCHAR\nElementDataFile = LIST\n"
-                                       "s0.raw\ns1.raw\n";
-    std::ofstream(tmp / "s0.raw", std::ios::binary) << std::string(16, '\x10');
-    ASSERT_EQ(::mkfifo((tmp / "s1.raw").c_str(), 0600), 0);
+    test::writeBlockedMetaImage(tmp.path());
+    ASSERT_FALSE(HasFailure());
     std::atomic<bool> flag{false};
     const core::Progress progress({}, &flag);
     Clock::time_point raised;

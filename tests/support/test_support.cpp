@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "support/test_support.h"
 
+#include <sys/stat.h>
 #include <unistd.h>
 
 #include <atomic>
@@ -70,6 +71,16 @@ std::string element(unsigned group, unsigned elem, const char* vr, std::string v
         putU16(s, unsigned(value.size()));
     }
     return s + value;
+}
+
+std::filesystem::path writeBlockedMetaImage(const std::filesystem::path& dir) {
+    const std::filesystem::path header = dir / "hang.mhd";
+    std::ofstream(header) << "ObjectType = Image\nNDims = 3\nDimSize = 4 4 2\n"
+                             "ElementType = MET_UCHAR\nElementDataFile = LIST\n"
+                             "s0.raw\ns1.raw\n";
+    std::ofstream(dir / "s0.raw", std::ios::binary) << std::string(16, '\x10');
+    EXPECT_EQ(::mkfifo((dir / "s1.raw").c_str(), 0600), 0);
+    return header;
 }
 
 void writeTiltedCtSeries(const std::filesystem::path& dir, int slices) {

@@ -41,6 +41,10 @@ void putU32(std::string& s, std::uint32_t v);
 std::string u16(unsigned v);
 std::string element(unsigned group, unsigned elem, const char* vr, std::string value);
 
+/// Writes `dir`/hang.mhd, a MetaImage whose second slice file (s1.raw) is a FIFO nobody writes:
+/// MetaIO blocks in open(2) on it forever, as on a hung network share. Returns the header's path.
+std::filesystem::path writeBlockedMetaImage(const std::filesystem::path& dir);
+
 /// Writes a small CT series into `dir` (created if missing), one file per slice: `slices` slices of
 /// 12×8 int16 pixels (0.5 × 0.75 mm, rescale −1024), 2 mm apart and each sheared 2·tan 15° mm
 /// further in y — a 15° gantry tilt, which the loader resamples with one warning line (unless
