@@ -32,10 +32,11 @@ void expectSameVolume(const core::Volume& a, const core::Volume& b, bool checkDi
     for (int i = 0; i < 3; ++i) {
         EXPECT_NEAR(a.geometry().spacing[i], b.geometry().spacing[i], kHeaderGeometryTol);
         EXPECT_NEAR(a.geometry().origin[i], b.geometry().origin[i], kHeaderGeometryTol);
-        if (checkDirection)
+        if (checkDirection) {
             for (int c = 0; c < 3; ++c)
                 EXPECT_NEAR(a.geometry().direction[c][i], b.geometry().direction[c][i],
                             kHeaderGeometryTol);
+        }
     }
     EXPECT_NEAR(a.mapping.slope, b.mapping.slope, 1e-6);
     EXPECT_NEAR(a.mapping.intercept, b.mapping.intercept, 1e-6);
