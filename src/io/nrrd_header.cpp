@@ -227,6 +227,13 @@ class Parser {
                     const std::size_t e = std::min(buf.find('\n', pos), buf.size());
                     lastLineUnterminated = e == buf.size();
                     const std::string name = trim(buf.substr(pos, e - pos));
+                    // VTK reads the header as a C string: a NUL ends it there, without the final
+                    // newline, and VTK 9.1 then loops forever (fuzz_nrrd_detached timeout).
+                    if (name.find('\0') != std::string::npos)
+                        fail("data file",
+                             "holds a NUL byte in listed file " +
+                                 std::to_string(h.dataFiles.size() + 1),
+                             "the header is corrupt");
                     pos = std::min(e + 1, buf.size());
                     if (name.empty()) break;
                     h.dataFiles.push_back(beside(name));
