@@ -39,7 +39,6 @@
 #include "iso/export.h"
 #include "iso/extract.h"
 #include "iso/lattice.h"
-#include "lights/environment_light.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/scene_inputs.h"
 
@@ -220,10 +219,7 @@ Command addIsoCommand(CLI::App& app) {
                 *latticeMode == "sh" ? iso::LatticeMode::ShTransfer : iso::LatticeMode::Irradiance;
             std::vector<std::shared_ptr<const lights::Light>> ls0 = pipeline::buildLights(s);
             if (ls0.empty()) {
-                core::ImageRGBA white(64, 32);
-                for (std::size_t i = 0; i < white.pixels.size(); ++i) white.pixels[i] = 1.f;
-                ls0.push_back(std::make_shared<lights::EnvironmentLight>(
-                    white, lights::EnvironmentOptions{}, "white sky"));
+                ls0.push_back(pipeline::whiteSky());
                 lightsUsed = "a uniform white sky (the scene has no lights)";
             } else {
                 lightsUsed = std::to_string(ls0.size()) + " scene light(s)";

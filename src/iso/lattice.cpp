@@ -782,6 +782,54 @@ glm::vec3 IlluminationLattice::pointIrradiance(const glm::dvec3& world, double i
     return glm::vec3(sums.E);
 }
 
+glm::vec3 IlluminationLattice::directIrradiance(const glm::dvec3& world, double iso,
+                                                bool shadows) const {
+    const Tracer& tr = *tracer_;
+    const glm::dvec3 x = volume_->geometry().worldToIndex(world);
+    const glm::dvec3 nrm = tr.smoothNormal(x);
+    if (nrm == glm::dvec3(0.0)) return glm::vec3(0.f);
+    glm::dvec3 start = x;
+    if (shadows && !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
+    glm::dvec3 e(0.0);
+    for (const auto& l : lights_) {
+        if (!l->isDelta()) continue;
+        const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
+        if (!(ls.pdf > 0.f)) continue;
+        const double cosT = glm::dot(nrm, glm::dvec3(ls.wi));
+        if (cosT <= 0.0) continue;
+        if (shadows && tr.hit(start, glm::dvec3(ls.wi), iso, double(ls.distance))) continue;
+        e += glm::dvec3(ls.value) * cosT;
+    }
+    return glm::vec3(e);
+}
+
+glm::vec3 IlluminationLattice::vicinityIrradiance(const glm::dvec3& world, double iso,
+                                                  double radiusMm, int samples,
+                                                  std::uint64_t key) const {
+    VL_CHECK(samples > 0 && radiusMm > 0.0);
+    const Tracer& tr = *tracer_;
+    const glm::dvec3 x = volume_->geometry().worldToIndex(world);
+    const glm::dvec3 nrm = tr.smoothNormal(x);
+    glm::dvec3 start;
+    if (nrm == glm::dvec3(0.0) || !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
+    bool sky = true;  // no environment or area light: a white sky of radiance 1
+    for (const auto& l : lights_) sky = sky && l->isDelta();
+    glm::dvec3 e(0.0);
+    for (int smp = 0; smp < samples; ++smp) {
+        core::CounterRng rng(core::hashCounters(key, std::uint64_t(smp)), options_.seed);
+        const double u1 = rng.uniformDouble(), u2 = rng.uniformDouble();
+        const glm::dvec3 w = cosineSample(nrm, u1, u2);
+        if (tr.hit(start, w, iso, radiusMm)) continue;
+        if (sky) {
+            e += glm::dvec3(kPi);
+            continue;
+        }
+        for (const auto& l : lights_)
+            if (!l->isDelta()) e += kPi * glm::dvec3(l->radiance(world, glm::vec3(w)));
+    }
+    return glm::vec3(e / double(samples));
+}
+
 LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
                                const glm::vec3& albedo, float scale, BakeSource source,
                                const core::Progress& progress) {

@@ -149,6 +149,20 @@ class IlluminationLattice {
     glm::vec3 pointIrradiance(const glm::dvec3& world, double iso, int samples,
                               std::uint64_t key) const;
 
+    /// Wyman's baselines (Figs. 8–10), at a surface point on the isosurface at `iso` (its smoothed
+    /// normal n there, as estimate() uses; zero irradiance where there is none):
+    /// Lambert (shadows false): Σ over the delta lights (directional, point) of E_l · max(0, n·l);
+    /// Lambert + hard shadows (true): each term times the visibility of one shadow ray against
+    /// the trilinear isosurface. Environment and area lights are not part of these baselines.
+    glm::vec3 directIrradiance(const glm::dvec3& world, double iso, bool shadows) const;
+    /// Vicinity shading (Stewart 2003): E = ∫ L(ω) V_r(ω) cos θ dω by `samples` cosine-weighted
+    /// directions, where V_r is 0 when the isosurface is hit within `radiusMm` and L is the
+    /// lattice's environment and area lights (a uniform white sky of radiance 1 when it has none:
+    /// the obscurance of the surface) — occlusion only from the vicinity, no delta lights, no
+    /// bounces. `key` seeds its random numbers.
+    glm::vec3 vicinityIrradiance(const glm::dvec3& world, double iso, double radiusMm, int samples,
+                                 std::uint64_t key) const;
+
     /// New lights. ShTransfer: re-dots (no texel is traced again; distant lights only, as the
     /// constructor). Irradiance: every computed texel is dropped (the next require traces again).
     void setLights(std::vector<std::shared_ptr<const lights::Light>> lights);

@@ -61,15 +61,18 @@
 // simulates "specular" (an effects list without it turns the highlight off); sh-global and
 // ritschel local_shadows and global_shadows, sh-local local_shadows.
 #include <cmath>
+#include <map>
 #include <sstream>
 
 #include "core/hash.h"
 #include "core/timing.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
+#include "iso/lattice.h"
 #include "lights/environment_light.h"
 #include "optics/presets.h"
 #include "pathtrace/path_tracer.h"
+#include "pipeline/iso_shading.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
 #include "render/framing.h"
@@ -260,6 +263,7 @@ enum class Kind {
     Mip,
     MinIp,
     Iso,
+    IsoLattice,
     ShLocal,
     ShGlobal,
     Ritschel,
@@ -278,6 +282,7 @@ render::Mode modeOf(Kind k) {
         case Kind::MinIp:
             return render::Mode::MinIp;
         case Kind::Iso:
+        case Kind::IsoLattice:
             return render::Mode::Isosurface;
         case Kind::ShLocal:  // DVR traversal and skip rule; shading by render/sh_shading.h
         case Kind::ShGlobal:
@@ -292,7 +297,8 @@ bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal || k == Kin
 /// The two on Kronander's multiresolution grid.
 bool isKronander(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
 bool isLit(Kind k) {
-    return k == Kind::Gradient || k == Kind::Iso || isSh(k) || k == Kind::PathTrace;
+    return k == Kind::Gradient || k == Kind::Iso || k == Kind::IsoLattice || isSh(k) ||
+           k == Kind::PathTrace;
 }
 
 /// sh-local's and sh-global's own parameters (see the header comment).
@@ -400,10 +406,11 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
         o.blinnPhong.shininess = float(p.number("shininess", o.blinnPhong.shininess, 1.0, 1e4));
         o.centralDifferences = p.boolean("central_differences", o.centralDifferences);
     }
-    if (kind == Kind::Iso) {
+    if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
         o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
     }
+
     o.seed = scene.render.seed;
     o.threads = scene.render.threads;
     o.terminationTransmittance = float(scene.render.termination);
@@ -415,6 +422,76 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
                                     scene.cropBox->shadowsFromRemoved};
     return o;
 }
+
+/// iso-lattice's own parameters (pipeline/iso_shading.h, iso/lattice.h).
+struct IsoLatticeParams {
+    IsoShadingOptions shading;
+    iso::LatticeOptions lattice;
+    double vicinityRadiusVoxels = 8.0;
+};
+
+/// Vicinity shading's default radius, voxels (smallest spacing): Stewart's vicinity is the
+/// neighbourhood whose occluders matter for shape perception; 8 voxels shows a bone's grooves
+/// and the gaps between vertebrae without the darkening of a whole-body occlusion.
+constexpr double kDefaultVicinityVoxels = 8.0;
+
+IsoLatticeParams parseIsoLatticeParams(const io::Scene& scene, ParamReader& p) {
+    IsoLatticeParams q;
+    q.shading.shading = isoShadingFromName(p.choice("shading", "lattice", isoShadingNames()));
+    const bool usesSamples = q.shading.shading == IsoShading::Lattice ||
+                             q.shading.shading == IsoShading::Paths ||
+                             q.shading.shading == IsoShading::Vicinity;
+    auto only = [&](const std::string& key, bool used, const std::string& which) {
+        if (!used && p.has(key))
+            p.fail(key,
+                   "is not read by shading '" + isoShadingNames()[int(q.shading.shading)] + "'",
+                   "it applies to shading " + which + "; remove it");
+    };
+    only("samples", usesSamples, "lattice, paths and vicinity");
+    const bool gi =
+        q.shading.shading == IsoShading::Lattice || q.shading.shading == IsoShading::Paths;
+    only("bounces", gi, "lattice and paths");
+    const bool lat = q.shading.shading == IsoShading::Lattice;
+    for (const char* k : {"lattice_resolution", "lattice_mode", "sh_order", "lattice_memory_mb"})
+        only(k, lat, "lattice");
+    only("vicinity_radius", q.shading.shading == IsoShading::Vicinity, "vicinity");
+    const bool ph = q.shading.shading == IsoShading::Phong;
+    for (const char* k : {"ambient", "diffuse", "specular", "shininess"}) only(k, ph, "phong");
+    if (usesSamples) q.shading.samples = p.integer("samples", 100, 1, 1 << 20);
+    q.lattice.samples = q.shading.samples;
+    if (gi) q.lattice.bounces = p.integer("bounces", 1, 0, 16);
+    if (lat) {
+        q.lattice.resolution = p.number("lattice_resolution", 1.0, 0.125, 8.0);
+        q.lattice.mode = p.choice("lattice_mode", "irradiance", {"irradiance", "sh"}) == "sh"
+                             ? iso::LatticeMode::ShTransfer
+                             : iso::LatticeMode::Irradiance;
+        if (q.lattice.mode == iso::LatticeMode::ShTransfer)
+            q.lattice.shOrder = p.integer("sh_order", 5, 1, 5);
+        else
+            only("sh_order", false, "lattice with lattice_mode 'sh'");
+        q.lattice.memoryBudgetMiB = p.number("lattice_memory_mb", 4096.0, 1.0, 1 << 20);
+    }
+    if (q.shading.shading == IsoShading::Vicinity)
+        q.vicinityRadiusVoxels = p.number("vicinity_radius", kDefaultVicinityVoxels, 0.5, 1e4);
+    if (ph) {
+        render::BlinnPhongParams& b = q.shading.phong;
+        b.ambient = float(p.number("ambient", b.ambient, 0.0, 1e6));
+        b.diffuse = float(p.number("diffuse", b.diffuse, 0.0, 1e6));
+        b.specular = float(p.number("specular", b.specular, 0.0, 1e6));
+        b.shininess = float(p.number("shininess", b.shininess, 1.0, 1e4));
+    }
+    q.lattice.seed = scene.render.seed;
+    q.lattice.threads = scene.render.threads;
+    return q;
+}
+
+/// The lattice of method iso-lattice: kept in the memory cache, its texels filled lazily by the
+/// frames (the one mutable artifact: frames of one process add texels, never change them).
+struct LatticeArtifact {
+    std::shared_ptr<iso::IlluminationLattice> lattice;
+    mutable std::uint64_t lightsKey =
+        0;  ///< SH transfer: the lights its irradiance slots are dotted with
+};
 
 /// Reference mode's defaults: traced until the image's estimated relative error (NRMS against the
 /// converged image) is 1 % — at mid-grey about one 8-bit display step, under the 2/255 the
@@ -1136,6 +1213,121 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
 
 // ---- The plan ----------------------------------------------------------------------------------
 
+/// iso-lattice's lattice (pipeline/iso_shading.h): the volume's float copy and skip bricks its
+/// tracer reads, and the texels the frames fill. Lights are in the key except for an SH transfer
+/// lattice, which re-dots when they change (the frame does).
+Stage illuminationLatticeStage(const IsoLatticeParams& q) {
+    const bool sh = q.lattice.mode == iso::LatticeMode::ShTransfer;
+    Stage st{"illumination_lattice", StageKind::Precompute,
+             sh ? std::vector<std::string>{"load_volume", "transfer_function", "method"}
+                : std::vector<std::string>{"load_volume", "transfer_function", "lights", "method"}};
+    if (!isoShadingTraces(q.shading.shading))
+        st.skip = "not needed: shading 'phong' traces nothing";
+    const json latticeKey = {
+        {"samples", q.lattice.samples},           {"bounces", q.lattice.bounces},
+        {"resolution", q.lattice.resolution},     {"mode", sh ? "sh" : "irradiance"},
+        {"sh_order", q.lattice.shOrder},          {"seed", q.lattice.seed},
+        {"memory_mib", q.lattice.memoryBudgetMiB}};
+    st.key = [latticeKey, sh](const Run& run) {
+        KeyBuilder k(run, "illumination_lattice");
+        k.stage("load_volume").stage("transfer_function").json(latticeKey);
+        if (!sh) k.stage("lights");
+        return k.value();
+    };
+    st.compute = [q](Run& run) {
+        const auto loaded = run.get<LoadedVolume>("load_volume");
+        LightList lights = *run.get<LightList>("lights");
+        if (lights.empty()) lights.push_back(whiteSky());
+        auto a = std::make_shared<LatticeArtifact>();
+        try {
+            a->lattice = std::make_shared<iso::IlluminationLattice>(
+                std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
+                run.get<TfArtifact>("transfer_function")->tf, std::move(lights), q.lattice);
+        } catch (const InputError& e) {
+            if (e.source() != "lattice") throw;
+            static const std::map<std::string, std::string> param = {
+                {"samples", "samples"},
+                {"bounces", "bounces"},
+                {"resolution", "lattice_resolution"},
+                {"sh_order", "sh_order"},
+                {"mode", "lattice_mode"},
+                {"memory", "lattice_memory_mb"}};
+            const auto it = param.find(e.field());
+            throw InputError(run.scene().source,
+                             it == param.end() ? e.field() : "method.params." + it->second,
+                             e.problem(), e.fix());
+        }
+        a->lightsKey = lightsIdentity(run.scene());
+        const std::size_t bytes = std::size_t(loaded->volume.voxelCount()) * sizeof(float);
+        return Artifact::of<LatticeArtifact>(std::move(a), bytes);
+    };
+    st.notOnDisk = "texels are filled lazily by the frames that read them";
+    st.describe = [](const Run&, const Artifact& a) {
+        const auto& l = *a.as<LatticeArtifact>()->lattice;
+        return std::to_string(l.dims().x) + "x" + std::to_string(l.dims().y) + "x" +
+               std::to_string(l.dims().z) + " texels, " + std::to_string(l.texelsStored()) +
+               " computed so far";
+    };
+    return st;
+}
+
+/// One iso-lattice frame: hits, the texels they read (lattice shading), the shading.
+core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
+                                      const render::Camera& camera, const IsoLatticeParams& q,
+                                      render::RenderStats& stats) {
+    IsoShadingOptions o = q.shading;
+    iso::IlluminationLattice* lattice = nullptr;
+    if (run.has("illumination_lattice")) {
+        const auto a = run.get<LatticeArtifact>("illumination_lattice");
+        lattice = a->lattice.get();
+        const std::uint64_t lk = lightsIdentity(run.scene());
+        if (q.lattice.mode == iso::LatticeMode::ShTransfer && lk != a->lightsKey) {
+            LightList lights = *run.get<LightList>("lights");
+            if (lights.empty()) lights.push_back(whiteSky());
+            try {
+                lattice->setLights(std::move(lights));  // re-dots the texels: no tracing
+            } catch (const InputError& e) {
+                throw InputError(run.scene().source, "lights", e.problem(), e.fix());
+            }
+            a->lightsKey = lk;
+        }
+    }
+    const core::Volume& v = caster.volume();
+    o.vicinityRadiusMm = q.vicinityRadiusVoxels * core::minComponent(v.geometry().spacing);
+    IsoFrameStats fs;
+    core::ImageRGBA film;
+    try {
+        film = renderLitIsosurface(caster, camera, lattice, o, run.progress(), fs);
+    } catch (const InputError& e) {
+        if (e.source() != "lattice") throw;
+        throw InputError(run.scene().source, "method.params.lattice_memory_mb", e.problem(),
+                         e.fix());
+    }
+    stats.rays = fs.hits;
+    stats.samples = fs.samples;
+    json& d = run.details()["iso_lattice"];
+    d["shading"] = isoShadingNames()[int(o.shading)];
+    d["hit_pixels"] = fs.hits;
+    d["hit_seconds"] = fs.hitSeconds;
+    d["shade_seconds"] = fs.shadeSeconds;
+    if (o.shading == IsoShading::Vicinity) d["vicinity_radius_mm"] = o.vicinityRadiusMm;
+    if (o.shading == IsoShading::Lattice) {
+        const iso::LatticeStats& ls = fs.lattice;
+        d["lattice"] = {{"texels_full", ls.texelsFull},
+                        {"texels_needed", ls.texelsNeeded},
+                        {"texels_computed", ls.texelsComputed},
+                        {"texels_reused", ls.texelsReused},
+                        {"texels_stored", ls.texelsStored},
+                        {"paths", ls.pathsTraced},
+                        {"shadow_rays", ls.shadowRays},
+                        {"plateau_texels", ls.plateauTexels},
+                        {"seconds", ls.seconds},
+                        {"stored_mib", ls.storedMiB},
+                        {"dims", {lattice->dims().x, lattice->dims().y, lattice->dims().z}}};
+    }
+    return film;
+}
+
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     render::RenderOptions options = parseOptions(kind, scene, reader);
@@ -1150,6 +1342,24 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     const visibility::HierarchicalVisibilityOptions ritschelParams =
         kind == Kind::Ritschel ? parseRitschelParams(scene, reader)
                                : visibility::HierarchicalVisibilityOptions{};
+    const IsoLatticeParams isoLattice =
+        kind == Kind::IsoLattice ? parseIsoLatticeParams(scene, reader) : IsoLatticeParams{};
+    if (kind == Kind::IsoLattice) {
+        const IsoShading sh = isoLattice.shading.shading;
+        if (sh == IsoShading::Lambert || sh == IsoShading::Shadows) {
+            bool delta = false;
+            for (const auto& l : scene.lights)
+                delta = delta || l.type == "directional" || l.type == "point";
+            if (!delta)
+                throw InputError(scene.source, "method.params.shading",
+                                 "'" + isoShadingNames()[int(sh)] +
+                                     "' is lit by directional and point lights, and the scene "
+                                     "has none",
+                                 "add a directional or point light, or use shading 'lattice', "
+                                 "'paths' or 'vicinity' (a white sky when the scene has no "
+                                 "lights)");
+        }
+    }
     if (isSh(kind))
         options.shWindow =
             parseShWindowParams(reader, kind == Kind::Ritschel ? ritschelParams.coefficients
@@ -1254,8 +1464,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
 
     // MIP/MinIP skip nothing and an explicit isovalue decides alone: their cells do not read the
     // TF, so a TF change keeps them.
-    const bool cellsReadTf = !(kind == Kind::Mip || kind == Kind::MinIp ||
-                               (kind == Kind::Iso && options.isoValue.has_value()));
+    const bool cellsReadTf =
+        !(kind == Kind::Mip || kind == Kind::MinIp ||
+          ((kind == Kind::Iso || kind == Kind::IsoLattice) && options.isoValue.has_value()));
     Stage cells{"skip_cells", StageKind::Precompute,
                 cellsReadTf ? std::vector<std::string>{"brick_grid", "transfer_function", "method"}
                             : std::vector<std::string>{"brick_grid", "method"}};
@@ -1356,9 +1567,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         const std::size_t bytes = lightBytes(*l);
         return Artifact::of<LightList>(std::move(l), bytes);
     };
-    lightsStage.describe = [](const Run&, const Artifact& a) {
+    const bool whiteSkyWhenNone =
+        kind == Kind::IsoLattice && isoShadingTraces(isoLattice.shading.shading);
+    lightsStage.describe = [whiteSkyWhenNone](const Run&, const Artifact& a) {
         const auto& l = *a.as<LightList>();
-        if (l.empty()) return std::string("none in the scene: a headlight follows the camera");
+        if (l.empty())
+            return std::string(whiteSkyWhenNone
+                                   ? "none in the scene: a uniform white sky"
+                                   : "none in the scene: a headlight follows the camera");
         std::string s;
         for (const auto& x : l) s += (s.empty() ? "" : ", ") + std::string(x->kind());
         return s;
@@ -1389,6 +1605,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return std::string("irradiance SH, 9 coefficients");
     };
     plan.stages.push_back(sh);
+
+    if (kind == Kind::IsoLattice) plan.stages.push_back(illuminationLatticeStage(isoLattice));
 
     // What the fitted camera frames: the hull of the visible matter (render/framing.h).
     // The cut's geometry only: whether removed matter still shadows does not change the framing.
@@ -1486,6 +1704,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     if (isKronander(kind))
         frame.inputs.push_back(clipped ? "clip_local_visibility" : "local_visibility");
     if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
+    if (kind == Kind::IsoLattice) frame.inputs.push_back("illumination_lattice");
     if (kind == Kind::Ritschel)
         frame.inputs.push_back(clipped ? "clip_hierarchical_visibility"
                                        : "hierarchical_visibility");
@@ -1500,6 +1719,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             .stage("light_sh");
         if (isKronander(kind)) k.stage(clipped ? "clip_local_visibility" : "local_visibility");
         if (kind == Kind::ShGlobal) k.stage("global_visibility");
+        if (kind == Kind::IsoLattice) k.stage("illumination_lattice");
         if (kind == Kind::Ritschel)
             k.stage(clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility");
         return k.json(optionsKey).value();
@@ -1545,7 +1765,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         plan.stages.push_back(frame);
         return plan;
     }
-    frame.compute = [options, kind, clipped](Run& run) {
+    frame.compute = [options, kind, clipped, isoLattice](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -1588,6 +1808,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 }
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
+            } else if (kind == Kind::IsoLattice) {
+                film = std::make_shared<core::ImageRGBA>(
+                    renderIsoLatticeFrame(run, caster, *camera, isoLattice, stats));
             } else {
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, run.progress(), &stats));
@@ -1600,7 +1823,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                            {"termination", s.render.termination},
                            {"threads", o.threads}};
             // A resolved default is a parameter as used (pipeline.h: "params_resolved").
-            if (kind == Kind::Iso) d["params_resolved"]["iso_value"] = caster.isoValue();
+            if (kind == Kind::Iso || kind == Kind::IsoLattice)
+                d["params_resolved"]["iso_value"] = caster.isoValue();
             const optics::TransferFunction& tfn = tfa->tf;
             json points = json::array();
             for (const auto& p : tfn.points())
@@ -1622,6 +1846,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
                            {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
                            {"up", {cam.up().x, cam.up().y, cam.up().z}},
+                           {"right", {cam.right().x, cam.right().y, cam.right().z}},
                            {"projection", cam.projection() == render::Projection::Perspective
                                               ? "perspective"
                                               : "orthographic"},
@@ -1721,6 +1946,13 @@ const RegisterMethod kRitschel(rayCasterMethod(
     {"rays", "coefficients", "patterns", "subsample", "quantize_8bit", "max_distance",
      "hierarchical", "window", "window_strength", "ambient"},
     {"local_shadows", "global_shadows"}));
+const RegisterMethod kIsoLattice(rayCasterMethod(
+    Kind::IsoLattice, "iso-lattice",
+    "direct isosurface shaded with global illumination from Wyman's illumination lattice "
+    "(lazy texels, shadows, sky, interreflections), or one of his baselines for comparison",
+    {"iso_value", "shading", "samples", "bounces", "lattice_resolution", "lattice_mode", "sh_order",
+     "lattice_memory_mb", "vicinity_radius", "ambient", "diffuse", "specular", "shininess"},
+    {}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

@@ -200,6 +200,13 @@ std::shared_ptr<const lights::Light> buildLight(const io::LightDesc& l) {
 }
 }  // namespace
 
+std::shared_ptr<const lights::Light> whiteSky() {
+    core::ImageRGBA white(64, 32);
+    for (float& v : white.pixels) v = 1.f;
+    return std::make_shared<lights::EnvironmentLight>(white, lights::EnvironmentOptions{},
+                                                      "white sky");
+}
+
 std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& scene) {
     std::vector<std::shared_ptr<const lights::Light>> out;
     for (std::size_t i = 0; i < scene.lights.size(); ++i) {

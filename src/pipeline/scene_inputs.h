@@ -56,6 +56,10 @@ std::string resolveView(const io::CameraDesc& desc, std::span<const glm::dvec3> 
 /// The scene's lights as lights::Light (environment maps are read here). Errors name
 /// "lights[i].<field>".
 std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& scene);
+/// A uniform white sky of radiance 1 (an environment light): what the global-illumination
+/// isosurface shadings (voxlight iso --bake, method iso-lattice) light a scene without lights
+/// with — an unoccluded Lambertian surface of albedo a then shows radiance a.
+std::shared_ptr<const lights::Light> whiteSky();
 /// Identity of the lights: their JSON and each environment map file's identity.
 std::uint64_t lightsIdentity(const io::Scene& scene);
 /// Identity of the environment lights alone (what their SH irradiance depends on).
