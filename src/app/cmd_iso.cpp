@@ -81,6 +81,7 @@ Command addIsoCommand(CLI::App& app) {
     auto lattice = std::make_shared<iso::LatticeOptions>();
     auto latticeMode = std::make_shared<std::string>("irradiance");
     auto bakeFrom = std::make_shared<std::string>("vertices");
+    auto exportSh = std::make_shared<bool>(false);
     c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
     CLI::Option* isoOption =
@@ -130,10 +131,23 @@ Command addIsoCommand(CLI::App& app) {
         ->check(CLI::IsMember({"irradiance", "sh"}));
     c.sub->add_option("--sh-order", lattice->shOrder, "--bake with sh: SH order 1…5 (5: 25 coeff.)")
         ->check(CLI::Range(1, 5));
+    c.sub->add_flag("--export-sh", *exportSh,
+                    "--bake --bake-from lattice --lattice-mode sh: also write each vertex's SH "
+                    "irradiance transfer into the PLY (relight the mesh without tracing)");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
         checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}});
+        if (*exportSh) {
+            if (!*bake || *bakeFrom != "lattice" || *latticeMode != "sh")
+                throw InputError("command line", "--export-sh",
+                                 "needs the SH transfer of a lattice bake",
+                                 "add --bake --bake-from lattice --lattice-mode sh");
+            if (iso::meshFormatFor(*out) != iso::MeshFormat::Ply)
+                throw InputError("command line", "--export-sh",
+                                 "per-vertex SH transfer is written to PLY only",
+                                 "write the mesh to a .ply file");
+        }
         const io::Scene s = loadInput(*scene, *sets);
         pipeline::Session().plan(s);  // the scene is valid as `render` reads it
         const core::Progress progress = terminalProgress(*quiet);
@@ -213,6 +227,7 @@ Command addIsoCommand(CLI::App& app) {
         sw.restart();
         iso::LatticeStats ls;
         std::string lightsUsed;
+        iso::VertexTransfer transfer;
         if (*bake) {
             iso::LatticeOptions lo = *lattice;
             lo.mode =
@@ -235,7 +250,8 @@ Command addIsoCommand(CLI::App& app) {
                     es.storedIsovalue * volume.mapping.slope + volume.mapping.intercept,
                     options.color, float(std::exp2(s.image.exposureStops)),
                     *bakeFrom == "lattice" ? iso::BakeSource::Lattice : iso::BakeSource::Vertices,
-                    progress);
+                    progress, *exportSh ? &transfer.values : nullptr);
+                if (*exportSh) transfer.order = lo.shOrder;
             } catch (const InputError& e) {
                 if (e.source() != "lattice") throw;
                 static const std::map<std::string, std::string> option = {
@@ -266,7 +282,8 @@ Command addIsoCommand(CLI::App& app) {
         OutputFiles files;
         const iso::ExportInfo info{volume.description, options.isovalue, volume.mapping.unit};
         files.write(*out, "--output", [&](const fs::path& p) {
-            iso::writeMesh(ex.mesh, p, *iso::meshFormatFor(*out), info);
+            iso::writeMesh(ex.mesh, p, *iso::meshFormatFor(*out), info,
+                           *exportSh ? &transfer : nullptr);
         });
         stages.push_back(stage("write_mesh", true, "computed: " + *out, sw.seconds()));
         if (!stats->empty()) {
@@ -301,6 +318,7 @@ Command addIsoCommand(CLI::App& app) {
                                               {"resolution", lattice->resolution},
                                               {"mode", *latticeMode},
                                               {"from", *bakeFrom},
+                                              {"sh_transfer_exported", *exportSh},
                                               {"lights", lightsUsed}}
                                        : json(nullptr)},
                         {"units", "mm"},

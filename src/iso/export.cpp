@@ -40,23 +40,34 @@ void closeChecked(File f, const std::filesystem::path& path) {
 
 std::uint8_t srgb8(float linear) { return std::uint8_t(std::lround(255.f * srgbEncode(linear))); }
 
-void writePly(const Mesh& mesh, const std::filesystem::path& path, const ExportInfo& info) {
+void writePly(const Mesh& mesh, const std::filesystem::path& path, const ExportInfo& info,
+              const VertexTransfer* transfer) {
     static_assert(std::endian::native == std::endian::little, "PLY writer assumes little endian");
     File f = openForWrite(path);
     std::string header = "ply\nformat binary_little_endian 1.0\n";
     for (const auto& line :
          detail::commentLines(info, "red green blue: sRGB-encoded 8-bit of the linear colour"))
         header += "comment " + line + "\n";
+    const std::size_t C =
+        transfer ? std::size_t(transfer->order) * std::size_t(transfer->order) : 0;
+    VL_CHECK(!transfer || transfer->values.size() == C * 3 * mesh.n_vertices());
+    if (transfer)
+        header += "comment sh<i>_r sh<i>_g sh<i>_b, i < " + std::to_string(C) +
+                  ": irradiance transfer in voxlight's real orthonormal SH basis (i = l*l + l + "
+                  "m) over LPS directions; E = max(0, sum_i L_i * sh<i>) for distant light of "
+                  "radiance SH L, colour = albedo * E / pi\n";
     header += "element vertex " + std::to_string(mesh.n_vertices()) +
               "\nproperty float x\nproperty float y\nproperty float z\n"
               "property float nx\nproperty float ny\nproperty float nz\n"
-              "property uchar red\nproperty uchar green\nproperty uchar blue\n"
-              "element face " +
-              std::to_string(mesh.n_faces()) +
+              "property uchar red\nproperty uchar green\nproperty uchar blue\n";
+    for (std::size_t i = 0; i < C; ++i)
+        for (const char* ch : {"r", "g", "b"})
+            header += "property float sh" + std::to_string(i) + "_" + ch + "\n";
+    header += "element face " + std::to_string(mesh.n_faces()) +
               "\nproperty list uchar int vertex_indices\nend_header\n";
     std::fwrite(header.data(), 1, header.size(), f.get());
-    // Packed records: 6 floats + 3 bytes per vertex, 1 + 3 ints per face.
-    constexpr std::size_t kVertexBytes = 6 * sizeof(float) + 3;
+    // Packed records: 6 floats + 3 bytes (+ 3·C floats) per vertex, 1 + 3 ints per face.
+    const std::size_t kVertexBytes = 6 * sizeof(float) + 3 + 3 * C * sizeof(float);
     std::vector<char> buf(kVertexBytes * mesh.n_vertices());
     char* out = buf.data();
     for (const auto v : mesh.vertices()) {
@@ -68,6 +79,10 @@ void writePly(const Mesh& mesh, const std::filesystem::path& path, const ExportI
         const std::uint8_t rgb[3] = {srgb8(c[0]), srgb8(c[1]), srgb8(c[2])};
         std::memcpy(out, xyz, sizeof xyz);
         std::memcpy(out + sizeof xyz, rgb, 3);
+        if (C > 0)
+            std::memcpy(out + sizeof xyz + 3,
+                        transfer->values.data() + std::size_t(v.idx()) * 3 * C,
+                        3 * C * sizeof(float));
         out += kVertexBytes;
     }
     std::fwrite(buf.data(), 1, buf.size(), f.get());
@@ -137,13 +152,16 @@ float srgbEncode(float linear) {
 }
 
 void writeMesh(const Mesh& mesh, const std::filesystem::path& path, MeshFormat format,
-               const ExportInfo& info) {
+               const ExportInfo& info, const VertexTransfer* transfer) {
     if (mesh.n_faces() == 0)
         throw InputError(path.string(), "mesh", "has no faces to write",
                          "choose an isovalue, clip planes and crop box that leave a surface");
+    if (transfer && format != MeshFormat::Ply)
+        throw InputError(path.string(), "format", "per-vertex SH transfer is written to PLY only",
+                         "export to a .ply file");
     switch (format) {
         case MeshFormat::Ply:
-            return writePly(mesh, path, info);
+            return writePly(mesh, path, info, transfer);
         case MeshFormat::Obj:
             return writeObj(mesh, path, info);
         case MeshFormat::Glb:

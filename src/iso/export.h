@@ -41,12 +41,24 @@ struct ExportInfo {
     std::string unit;         ///< "HU", or empty
 };
 
+/// Per-vertex SH irradiance transfer (`voxlight iso --bake --lattice-mode sh --export-sh`; the
+/// lattice's ShTransfer mode, iso/lattice.h), written to PLY only as extra vertex properties after
+/// the colour: `property float sh<i>_r`, `sh<i>_g`, `sh<i>_b` for i < order², in voxlight's real
+/// orthonormal SH basis (sh/sh_basis.h: index i = l² + l + m) over directions in patient LPS. A
+/// viewer relights the mesh with any distant light of SH coefficients L (radiance, same basis) by
+/// E_c = max(0, Σ_i L_i,c · sh<i>_c) and colour = albedo · E / π (the `comment` lines say so).
+struct VertexTransfer {
+    int order = 0;              ///< bands; (order)² coefficients per channel
+    std::vector<float> values;  ///< [(vertex · order² + i) · 3 + channel]
+};
+
 /// sRGB encoding (IEC 61966-2-1) of a linear value in [0, 1] (clamped).
 float srgbEncode(float linear);
 
-/// Writes `mesh` (≥ 1 face) to `path` in `format`.
+/// Writes `mesh` (≥ 1 face) to `path` in `format`, with the per-vertex transfer when given
+/// (PLY only: InputError for the other formats).
 void writeMesh(const Mesh& mesh, const std::filesystem::path& path, MeshFormat format,
-               const ExportInfo& info);
+               const ExportInfo& info, const VertexTransfer* transfer = nullptr);
 
 namespace detail {
 void writeGlb(const Mesh& mesh, const std::filesystem::path& path, const ExportInfo& info);

@@ -7,6 +7,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <numbers>
 #include <string>
 #include <thread>
@@ -478,25 +479,53 @@ int IlluminationLattice::stencil(const glm::dvec3& world, glm::ivec3 texel[8],
     return n;
 }
 
-glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfaceIso) const {
+int IlluminationLattice::surfaceStencil(const glm::dvec3& world, double surfaceIso,
+                                        glm::ivec3 texel[8], double weight[8]) const {
     // Groups in order of preference (header): texels with a surface on the inside of
     // surfaceIso, inside plateaus, then the outside ones — only those a require() computed.
-    glm::ivec3 texel[8];
-    double weight[8];
+    glm::ivec3 all[8];
+    double w[8];
     int group[8], best = 2;
-    const int n = stencil(world, texel, weight);
+    const int n = stencil(world, all, w);
     for (int c = 0; c < n; ++c) {
-        group[c] = outsideOf(texel[c], surfaceIso) ? 2 : plateau(texel[c]) ? 1 : 0;
+        group[c] = outsideOf(all[c], surfaceIso) ? 2 : plateau(all[c]) ? 1 : 0;
         best = std::min(best, group[c]);
     }
-    glm::dvec3 e(0.0);
     double wsum = 0.0;
+    int m = 0;
     for (int c = 0; c < n; ++c)
         if (group[c] == best) {
-            e += weight[c] * glm::dvec3(texelIrradiance(texel[c]));
-            wsum += weight[c];
+            texel[m] = all[c];
+            weight[m++] = w[c];
+            wsum += w[c];
         }
-    return glm::vec3(wsum > 0.0 ? e / wsum : e);
+    if (wsum > 0.0)
+        for (int c = 0; c < m; ++c) weight[c] /= wsum;
+    return m;
+}
+
+glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world, double surfaceIso) const {
+    glm::ivec3 texel[8];
+    double weight[8];
+    const int n = surfaceStencil(world, surfaceIso, texel, weight);
+    glm::dvec3 e(0.0);
+    for (int c = 0; c < n; ++c) e += weight[c] * glm::dvec3(texelIrradiance(texel[c]));
+    return glm::vec3(e);
+}
+
+void IlluminationLattice::transfer(const glm::dvec3& world, double surfaceIso,
+                                   std::span<glm::vec3> out) const {
+    VL_CHECK(options_.mode == LatticeMode::ShTransfer &&
+             out.size() == std::size_t(options_.shOrder * options_.shOrder));
+    glm::ivec3 texel[8];
+    double weight[8];
+    const int n = surfaceStencil(world, surfaceIso, texel, weight);
+    std::vector<glm::dvec3> sum(out.size(), glm::dvec3(0.0));
+    for (int c = 0; c < n; ++c) {
+        const std::span<const glm::vec3> t = texelTransfer(texel[c]);
+        for (std::size_t i = 0; i < out.size(); ++i) sum[i] += weight[c] * glm::dvec3(t[i]);
+    }
+    for (std::size_t i = 0; i < out.size(); ++i) out[i] = glm::vec3(sum[i]);
 }
 
 bool IlluminationLattice::outsideOf(const glm::ivec3& t, double surfaceIso) const {
@@ -832,7 +861,9 @@ glm::vec3 IlluminationLattice::vicinityIrradiance(const glm::dvec3& world, doubl
 
 LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
                                const glm::vec3& albedo, float scale, BakeSource source,
-                               const core::Progress& progress) {
+                               const core::Progress& progress, std::vector<float>* transfer) {
+    VL_CHECK(!transfer ||
+             (source == BakeSource::Lattice && lattice.options().mode == LatticeMode::ShTransfer));
     std::vector<glm::dvec3> points;
     points.reserve(mesh.n_vertices());
     for (const auto v : mesh.vertices()) {
@@ -844,6 +875,16 @@ LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double 
     if (source == BakeSource::Lattice) {
         st = lattice.require(points, progress);
         for (std::size_t i = 0; i < points.size(); ++i) e[i] = lattice.irradiance(points[i]);
+        if (transfer) {
+            const std::size_t C =
+                std::size_t(lattice.options().shOrder * lattice.options().shOrder);
+            transfer->assign(points.size() * C * 3, 0.f);
+            std::vector<glm::vec3> t(C);
+            for (std::size_t i = 0; i < points.size(); ++i) {
+                lattice.transfer(points[i], NAN, t);
+                std::memcpy(transfer->data() + i * C * 3, t.data(), C * sizeof(glm::vec3));
+            }
+        }
     } else {
         // Paths from every vertex on the mesh's own isosurface (the lattice's reference).
         core::Stopwatch clock;

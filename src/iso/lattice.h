@@ -132,6 +132,11 @@ class IlluminationLattice {
     /// own isosurfaces lie in the matter around it (on CT, the noise of soft tissue), not on it,
     /// and mixing them in gave the lit torso a mottled, wood-grain texture at voxel scale.
     glm::vec3 irradiance(const glm::dvec3& world, double surfaceIso) const;
+    /// ShTransfer only: the transfer vector at a point on the isosurface at `surfaceIso`,
+    /// interpolated as irradiance(world, surfaceIso) interpolates (the same texels and weights), so
+    /// that max(0, Σ_i ℓ_i ⊙ out_i) with the lights' SH coefficients ℓ is the irradiance up to the
+    /// clamp: (order)² RGB entries into `out`.
+    void transfer(const glm::dvec3& world, double surfaceIso, std::span<glm::vec3> out) const;
     /// Whether texel t lies outside the surface at surfaceIso (false for NaN: no surface given).
     bool outsideOf(const glm::ivec3& t, double surfaceIso) const;
     /// The stored value of texel (i, j, k) (must be computed): irradiance, or re-dotted transfer.
@@ -196,6 +201,10 @@ class IlluminationLattice {
     /// point, normal, plateaus, lights); random numbers keyed by (key, sample, seed).
     void estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
                   PathSums& out) const;
+    /// The texels irradiance(world, surfaceIso) reads (the preferred group, header) and their
+    /// normalised weights; returns how many.
+    int surfaceStencil(const glm::dvec3& world, double surfaceIso, glm::ivec3 texel[8],
+                       double weight[8]) const;
     /// The texels trilinear reads at a world point (weight > 0) and their weights; returns how many.
     int stencil(const glm::dvec3& world, glm::ivec3 texel[8], double weight[8]) const;
     /// ShTransfer: the irradiance slot of texel data d from its transfer and the current lights.
@@ -229,9 +238,11 @@ enum class BakeSource {
 /// `isovalue`, physical): colour = albedo ⊙ E(vertex)/π · scale — the radiance a Lambertian
 /// surface of that albedo leaves, linear RGB (exporters clamp to [0, 1] and encode,
 /// iso/export.h); `scale` is the display exposure, 2^stops. E from `source`. Returns the stats
-/// (for Vertices: paths and seconds only).
+/// (for Vertices: paths and seconds only). `transfer` (Lattice source, ShTransfer lattice only):
+/// also each vertex's interpolated transfer vector, [(vertex · order² + i) · 3 + channel].
 LatticeStats bakeVertexColours(Mesh& mesh, IlluminationLattice& lattice, double isovalue,
                                const glm::vec3& albedo, float scale, BakeSource source,
-                               const core::Progress& progress = core::Progress::none());
+                               const core::Progress& progress = core::Progress::none(),
+                               std::vector<float>* transfer = nullptr);
 
 }  // namespace voxlight::iso

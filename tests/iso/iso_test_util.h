@@ -1,7 +1,16 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // Analytic volumes for the iso/ tests: fields whose isosurfaces are known spheres.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+
 #include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
 #include <vector>
 
 #include "core/volume.h"
@@ -50,6 +59,20 @@ inline ExtractOptions at(double isovalue, glm::vec3 color = glm::vec3(1.f)) {
     o.isovalue = isovalue;
     o.color = color;
     return o;
+}
+
+/// Reads an exported mesh back with tests/iso/read_mesh.py (VTK's readers and the file by hand);
+/// nullopt (the caller skips) when python3-vtk9 is missing.
+inline std::optional<nlohmann::json> readMeshBack(const std::filesystem::path& file,
+                                                  const std::filesystem::path& dir) {
+    const std::filesystem::path outFile = dir / "reader.json";
+    const std::string cmd = "/usr/bin/python3 '" + std::string(VOXLIGHT_ISO_READER) + "' '" +
+                            file.string() + "' > '" + outFile.string() + "'";
+    const int status = std::system(cmd.c_str());
+    if (WIFEXITED(status) && WEXITSTATUS(status) == 77) return std::nullopt;
+    EXPECT_EQ(status, 0) << cmd;
+    std::ifstream in(outFile);
+    return nlohmann::json::parse(in);
 }
 
 }  // namespace voxlight::iso::test

@@ -33,6 +33,31 @@ def leaves(data):
         it.GoToNextItem()
 
 
+PLY_TYPES = {"float": "f", "float32": "f", "uchar": "B", "uint8": "B", "int": "i", "int32": "i"}
+
+
+def ply_vertex_records(path):
+    """The vertex element of a binary little-endian PLY by hand (the PLY spec): property names
+    and one tuple per vertex — what VTK's reader does not expose (extra properties)."""
+    with open(path, "rb") as f:
+        data = f.read()
+    end = data.index(b"end_header\n") + len(b"end_header\n")
+    names, fmt, count, element = [], "<", 0, None
+    for line in data[:end].decode("ascii").splitlines():
+        w = line.split()
+        if w[:1] == ["format"]:
+            assert w[1] == "binary_little_endian", w
+        elif w[:1] == ["element"]:
+            element = w[1]
+            if element == "vertex":
+                count = int(w[2])
+        elif w[:1] == ["property"] and element == "vertex":
+            fmt += PLY_TYPES[w[1]]
+            names.append(w[2])
+    size = struct.calcsize(fmt)
+    return names, [struct.unpack_from(fmt, data, end + i * size) for i in range(count)]
+
+
 def read_ply(path):
     r = vtkPLYReader()
     r.SetFileName(path)
@@ -40,8 +65,15 @@ def read_ply(path):
     pd = r.GetOutput()
     rgb = vtk_to_numpy(pd.GetPointData().GetArray("RGB"))
     colours = sorted({tuple(int(c) for c in row) for row in rgb})
-    return {"vertices": pd.GetNumberOfPoints(), "faces": pd.GetNumberOfCells(),
-            "has_normals": pd.GetPointData().GetNormals() is not None, "colours": colours}
+    out = {"vertices": pd.GetNumberOfPoints(), "faces": pd.GetNumberOfCells(),
+           "has_normals": pd.GetPointData().GetNormals() is not None, "colours": colours}
+    names, records = ply_vertex_records(path)
+    sh = [i for i, n in enumerate(names) if n.startswith("sh")]
+    if sh:  # per vertex: nx ny nz, red green blue, then the SH transfer properties in order
+        keep = [names.index(n) for n in ("nx", "ny", "nz", "red", "green", "blue")] + sh
+        out["sh_names"] = [names[i] for i in sh]
+        out["sh_vertices"] = [[rec[i] for i in keep] for rec in records]
+    return out
 
 
 def read_obj(path):

@@ -25,18 +25,6 @@ using nlohmann::json;
 /// Linear albedo used as the vertex colour: not a grey, and not at the ends of the sRGB curve.
 const glm::vec3 kColour{0.8f, 0.5f, 0.2f};
 
-/// Runs the reader; nullopt (and the test skips) when python3-vtk9 is missing.
-std::optional<json> readBack(const fs::path& file, const fs::path& dir) {
-    const fs::path outFile = dir / "reader.json";
-    const std::string cmd = "/usr/bin/python3 '" + std::string(VOXLIGHT_ISO_READER) + "' '" +
-                            file.string() + "' > '" + outFile.string() + "'";
-    const int status = std::system(cmd.c_str());
-    if (WIFEXITED(status) && WEXITSTATUS(status) == 77) return std::nullopt;
-    EXPECT_EQ(status, 0) << cmd;
-    std::ifstream in(outFile);
-    return json::parse(in);
-}
-
 class Export : public ::testing::Test {
   protected:
     void SetUp() override {
@@ -54,7 +42,7 @@ class Export : public ::testing::Test {
 };
 
 TEST_F(Export, PlyReadsBackWithCountsNormalsAndSrgbColours) {
-    const auto r = readBack(write("s.ply"), tmp_.path());
+    const auto r = test::readMeshBack(write("s.ply"), tmp_.path());
     if (!r) GTEST_SKIP() << "/usr/bin/python3 lacks python3-vtk9 (tools/setup.sh)";
     EXPECT_EQ((*r)["vertices"], mesh_.n_vertices());
     EXPECT_EQ((*r)["faces"], mesh_.n_faces());
@@ -65,7 +53,8 @@ TEST_F(Export, PlyReadsBackWithCountsNormalsAndSrgbColours) {
 }
 
 TEST_F(Export, ObjReadsBackWithCountsAndColours) {
-    const auto r = readBack(write("s.OBJ"), tmp_.path());  // extensions are case-insensitive
+    const auto r =
+        test::readMeshBack(write("s.OBJ"), tmp_.path());  // extensions are case-insensitive
     if (!r) GTEST_SKIP() << "/usr/bin/python3 lacks python3-vtk9 (tools/setup.sh)";
     EXPECT_EQ((*r)["vertices"], mesh_.n_vertices());
     EXPECT_EQ((*r)["faces"], mesh_.n_faces());
@@ -80,7 +69,7 @@ TEST_F(Export, ObjReadsBackWithCountsAndColours) {
 }
 
 TEST_F(Export, GlbReadsBackWithLinearColoursAndTheDocumentedNodeMatrix) {
-    const auto r = readBack(write("s.glb"), tmp_.path());
+    const auto r = test::readMeshBack(write("s.glb"), tmp_.path());
     if (!r) GTEST_SKIP() << "/usr/bin/python3 lacks python3-vtk9 (tools/setup.sh)";
     EXPECT_EQ((*r)["vertices"], mesh_.n_vertices());
     EXPECT_EQ((*r)["faces"], mesh_.n_faces());

@@ -13,6 +13,8 @@
 #include <sstream>
 
 #include "io/volume_io.h"
+#include "iso_test_util.h"
+#include "sh/sh_basis.h"
 #include "support/test_support.h"
 
 namespace voxlight {
@@ -200,6 +202,67 @@ TEST(IsoCli, BakedLightUnderTheDefaultSkyLeavesAConvexSurfaceItsAlbedo) {
             EXPECT_EQ(bake["paths"].get<std::size_t>(), 16 * lit.size());
         }
     }
+}
+
+// --export-sh: each vertex's SH irradiance transfer T in the PLY (read back by hand from the file,
+// tests/iso/read_mesh.py). Under the default white sky a convex surface is unoccluded, so
+// T_lm = Â_l · Y_lm(n) (Ramamoorthi & Hanrahan 2001: Â_0 = π, Â_1 = 2π/3) at the vertex normal n:
+// band 0 exactly (every path escapes, Y_00 is constant), band 1 within its Monte-Carlo noise —
+// 256 cosine-weighted paths per texel leave ≈ 7 % of the band's amplitude per texel, the 8 texels
+// a vertex reads ≈ 3 %, bound on the RMS over vertices 0.08 of Â_1·max|Y_1m|. The baked colour is
+// the relit transfer: red / (√(4π) · T_00,r / π) is the albedo at every vertex (the sky's SH is
+// √(4π) in band 0), within 8-bit sRGB rounding (≤ 1.5 % at the sphere's mid-grey).
+TEST(IsoCli, ExportedShTransferRelightsToTheBakedColours) {
+    test::TempDir tmp;
+    const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
+    const fs::path ply = tmp / "sh.ply";
+    const Result r = run("iso -q '" + scene.string() + "' --isovalue 0.5 -o '" + ply.string() +
+                             "' --bake --bake-from lattice --lattice-mode sh --sh-order 2 "
+                             "--samples 256 --export-sh",
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto back = iso::test::readMeshBack(ply, tmp.path());
+    if (!back) GTEST_SKIP() << "python3-vtk9 is missing: the PLY was not read back";
+    const nlohmann::json& j = *back;
+    ASSERT_EQ(j["sh_names"].size(), 12u);
+    EXPECT_EQ(j["sh_names"][0], "sh0_r");
+    EXPECT_EQ(j["sh_names"][11], "sh3_b");
+    const auto& vs = j["sh_vertices"];
+    ASSERT_EQ(vs.size(), j["vertices"].get<std::size_t>());  // VTK's reader agrees on the count
+    ASSERT_GT(vs.size(), 100u);
+    const double pi = 3.14159265358979323846, a0 = pi, a1 = 2.0 * pi / 3.0;
+    auto linear = [](double c) {
+        return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
+    };
+    double band1Sq = 0.0, albedoMin = 1e9, albedoMax = 0.0;
+    std::array<double, 4> y{};
+    for (const auto& v : vs) {
+        const glm::dvec3 n(v[0].get<double>(), v[1].get<double>(), v[2].get<double>());
+        sh::evalShUnitDouble(1, glm::normalize(n), y);
+        for (int c = 0; c < 3; ++c)
+            ASSERT_NEAR(v[6 + c].get<double>(), a0 * y[0], 0.005 * a0 * y[0]);
+        for (int i = 1; i < 4; ++i) {
+            const double d = v[6 + 3 * i].get<double>() - a1 * y[std::size_t(i)];
+            band1Sq += d * d;
+        }
+        const double relit = std::sqrt(4.0 * pi) * v[6].get<double>() / pi;
+        const double albedo = linear(v[3].get<double>() / 255.0) / relit;
+        albedoMin = std::min(albedoMin, albedo), albedoMax = std::max(albedoMax, albedo);
+    }
+    const double maxY1 = std::sqrt(3.0 / (4.0 * pi));
+    EXPECT_LT(std::sqrt(band1Sq / (3.0 * double(vs.size()))), 0.08 * a1 * maxY1);
+    EXPECT_LT(albedoMax / albedoMin, 1.03);
+    // Not for the other formats, and not without the SH lattice.
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.obj").string() +
+                       "' --bake --bake-from lattice --lattice-mode sh --export-sh",
+                   "PLY only", {"scene.json", "sh.ply", "reader.json"});
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.ply").string() + "' --bake --export-sh",
+                   "--bake-from lattice --lattice-mode sh",
+                   {"scene.json", "sh.ply", "reader.json"});
 }
 
 TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
