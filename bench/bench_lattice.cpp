@@ -3,8 +3,10 @@
 // irradiance baked at mesh vertices from a lattice of 100 / 625 / 2,500 paths per texel, against
 // per-point path tracing of the same isosurface at each vertex (IlluminationLattice::
 // pointIrradiance, 10,000 paths) — the error a lit-mesh export carries — with the seconds beside
-// each row. Two interpolation rules are compared: the texels inside the surface (what `voxlight iso
-// --bake` uses) and all eight (Wyman's plain trilinear). A "per vertex" row gives the error of
+// each row. Three lattices are compared: texels moved onto the isosurface being baked
+// (TexelPlacement::OnSurface, what `voxlight iso --bake-from lattice` and method iso-lattice use),
+// and Wyman's texels on their own isosurfaces read by two rules: the texels inside the surface
+// and all eight (Wyman's plain trilinear). A "per vertex" row gives the error of
 // tracing the vertices themselves with as many paths (what the lattice saves or costs).
 // Then the lazy texel counts for the whole bone mesh: vertices' texels (inside only), every
 // crossed cell's, the full lattice; and the texels an isovalue step of 10 HU reuses.
@@ -98,18 +100,24 @@ void run(const char* name, std::shared_ptr<const core::Volume> volume, double is
     }
     std::printf("reference: %d paths per vertex, %.1f s\n", refPaths, sw.seconds());
     std::printf(
-        "| paths per texel | texels (inside) | seconds | NRMS inside texels | bias | NRMS all 8 "
-        "(Wyman) | bias | per vertex, same paths: NRMS | seconds "
-        "|\n|---|---|---|---|---|---|---|---|---|\n");
+        "| paths per texel | on surface: texels | seconds | NRMS | bias | own isosurfaces, inside "
+        "texels: NRMS | bias | own, all 8 (Wyman): NRMS | bias | per vertex, same paths: NRMS | "
+        "seconds |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
     std::vector<int> counts = {100, 625};
     if (!quick) counts.push_back(2500);
     for (const int n : counts) {
         o.samples = n;
-        iso::IlluminationLattice inside(volume, tf, sceneLights(), o);
+        iso::LatticeOptions os = o;
+        os.placement = iso::TexelPlacement::OnSurface;
+        os.surfaceIso = iso;
+        iso::IlluminationLattice onSurface(volume, tf, sceneLights(), os);
         sw.restart();
-        const iso::LatticeStats st = inside.require(pts, iso);
-        const double secInside = sw.seconds();
-        std::vector<glm::vec3> a, b, c;
+        const iso::LatticeStats st = onSurface.require(pts, iso);
+        const double secSurface = sw.seconds();
+        std::vector<glm::vec3> s, a, b, c;
+        for (const auto& p : pts) s.push_back(onSurface.irradiance(p, iso));
+        iso::IlluminationLattice inside(volume, tf, sceneLights(), o);
+        inside.require(pts, iso);
         for (const auto& p : pts) a.push_back(inside.irradiance(p, iso));
         iso::IlluminationLattice plain(volume, tf, sceneLights(), o);
         plain.require(pts);
@@ -118,10 +126,14 @@ void run(const char* name, std::shared_ptr<const core::Volume> volume, double is
         for (std::size_t i = 0; i < pts.size(); ++i)
             c.push_back(plain.pointIrradiance(pts[i], iso, n, 7000003 + i));
         const double secPoint = sw.seconds();
-        const Errors ea = compare(a, ref), eb = compare(b, ref), ec = compare(c, ref);
-        std::printf("| %d | %llu | %.1f | %.3f | %+.1f %% | %.3f | %+.1f %% | %.3f | %.1f |\n", n,
-                    (unsigned long long)st.texelsComputed, secInside, ea.nrms, 100 * ea.bias,
-                    eb.nrms, 100 * eb.bias, ec.nrms, secPoint);
+        const Errors es = compare(s, ref), ea = compare(a, ref), eb = compare(b, ref),
+                     ec = compare(c, ref);
+        std::printf(
+            "| %d | %llu | %.1f | %.3f | %+.1f %% | %.3f | %+.1f %% | %.3f | %+.1f %% | %.3f | "
+            "%.1f "
+            "|\n",
+            n, (unsigned long long)st.texelsComputed, secSurface, es.nrms, 100 * es.bias, ea.nrms,
+            100 * ea.bias, eb.nrms, 100 * eb.bias, ec.nrms, secPoint);
     }
 
     // Lazy texel counts for the whole mesh, and the reuse of a 10 HU isovalue step (16 paths:

@@ -7,7 +7,8 @@ traced from every hit point — under a key and a fill light (datasets/scenes/to
 1 bounce. Each image's seconds and its NRMS against a reference (paths from every hit point with
 --ref-samples paths) over the pixels both hit are printed, written to OUT/iso-lattice.json and
 captioned in the mosaic OUT/iso-lattice.png (vicinity shading is lit by a white sky, not the
-scene's lights: no NRMS).
+scene's lights: no NRMS; phong's lights are divided by π, its convention's factor against the
+Lambertian radiance albedo·E/π).
 
     /usr/bin/python3 tools/iso_gallery.py [--build build] [--out docs/iso] [--size 256]
         [--samples 100] [--ref-samples 1000] [--phantom-size 256] [--datasets ../shared/datasets]
@@ -16,6 +17,7 @@ The abdominal CT row is skipped with a note when the file is absent.
 """
 import argparse
 import json
+import math
 import os
 import shutil
 import sys
@@ -62,9 +64,14 @@ def main():
             params = {"iso_value": iso, "shading": shading}
             if shading in ("lattice", "paths", "vicinity"):
                 params["samples"] = samples
+            lights = LIGHTS
+            if shading == "phong":
+                # Blinn-Phong's clinical convention: irradiance 1 shows the albedo, π times the
+                # Lambertian radiance albedo·E/π of the other shadings; scaled so that they compare.
+                lights = [dict(l, intensity=l["intensity"] / math.pi) for l in LIGHTS]
             return {"volume": vol, "transfer_function": "ct-bone",
                     "method": {"name": "iso-lattice", "params": params},
-                    "lights": LIGHTS, "camera": camera,
+                    "lights": lights, "camera": camera,
                     "image": {"width": a.size, "height": a.size}}
 
         ref_exr = os.path.join(work, f"{case}-reference.exr")

@@ -82,6 +82,7 @@ Command addIsoCommand(CLI::App& app) {
     auto latticeMode = std::make_shared<std::string>("irradiance");
     auto bakeFrom = std::make_shared<std::string>("vertices");
     auto exportSh = std::make_shared<bool>(false);
+    auto latticeTexels = std::make_shared<std::string>("surface");
     c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
     CLI::Option* isoOption =
@@ -131,6 +132,12 @@ Command addIsoCommand(CLI::App& app) {
         ->check(CLI::IsMember({"irradiance", "sh"}));
     c.sub->add_option("--sh-order", lattice->shOrder, "--bake with sh: SH order 1…5 (5: 25 coeff.)")
         ->check(CLI::Range(1, 5));
+    c.sub
+        ->add_option("--lattice-texels", *latticeTexels,
+                     "--bake-from lattice: surface (texels moved onto the isosurface being baked: "
+                     "accurate, the default) or own (Wyman's: each texel on its own isosurface, "
+                     "shared by every isovalue)")
+        ->check(CLI::IsMember({"surface", "own"}));
     c.sub->add_flag("--export-sh", *exportSh,
                     "--bake --bake-from lattice --lattice-mode sh: also write each vertex's SH "
                     "irradiance transfer into the PLY (relight the mesh without tracing)");
@@ -232,6 +239,11 @@ Command addIsoCommand(CLI::App& app) {
             iso::LatticeOptions lo = *lattice;
             lo.mode =
                 *latticeMode == "sh" ? iso::LatticeMode::ShTransfer : iso::LatticeMode::Irradiance;
+            const double physicalIso =
+                es.storedIsovalue * volume.mapping.slope + volume.mapping.intercept;
+            lo.placement = *latticeTexels == "own" ? iso::TexelPlacement::OwnIsosurface
+                                                   : iso::TexelPlacement::OnSurface;
+            if (lo.placement == iso::TexelPlacement::OnSurface) lo.surfaceIso = physicalIso;
             std::vector<std::shared_ptr<const lights::Light>> ls0 = pipeline::buildLights(s);
             if (ls0.empty()) {
                 ls0.push_back(pipeline::whiteSky());
@@ -318,6 +330,7 @@ Command addIsoCommand(CLI::App& app) {
                                               {"resolution", lattice->resolution},
                                               {"mode", *latticeMode},
                                               {"from", *bakeFrom},
+                                              {"lattice_texels", *latticeTexels},
                                               {"sh_transfer_exported", *exportSh},
                                               {"lights", lightsUsed}}
                                        : json(nullptr)},

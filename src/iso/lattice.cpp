@@ -28,6 +28,10 @@ constexpr int kSkipBrick = 8;
 constexpr std::uint8_t kSurfaceTexel = 1, kPlateauTexel = 2;
 /// Bisection steps for a crossing inside one monotone piece of a cell's cubic: 2⁻³⁰ of a cell.
 constexpr int kBisectionSteps = 30;
+/// OnSurface reads: a texel counts as on the query point's face when their smoothed normals are
+/// within 60° (cos 0.5) — the two faces of a thin plate or rib are ≈ 180° apart, a curved surface
+/// turns far less than 60° over the one voxel between texels.
+constexpr double kSameFaceCosine = 0.5;
 
 std::string number(double v) {
     char b[64];
@@ -352,6 +356,36 @@ struct IlluminationLattice::Tracer {
         return false;
     }
 
+    /// p (index) moved onto the trilinear isosurface at iso by Newton steps along the gradient
+    /// (central differences of a quarter voxel), each at most half a voxel, to within 1e-4 voxel;
+    /// false when the gradient vanishes or the point would move more than maxVoxels.
+    bool project(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out) const {
+        constexpr double h = 0.25, kTol = 1e-4, kMaxStep = 0.5;
+        constexpr int kIterations = 32;
+        glm::dvec3 x = p;
+        for (int it = 0; it < kIterations; ++it) {
+            const double f = value(x) - iso;
+            glm::dvec3 g;
+            for (int a = 0; a < 3; ++a) {
+                glm::dvec3 e(0.0);
+                e[a] = h;
+                g[a] = (value(x + e) - value(x - e)) / (2.0 * h);
+            }
+            const double g2 = glm::dot(g, g);
+            if (!(g2 > 0.0) || !std::isfinite(g2)) return false;
+            glm::dvec3 step = -f / g2 * g;
+            const double len = glm::length(step);
+            if (len <= kTol) {
+                out = x;
+                return glm::length(x - p) <= maxVoxels;
+            }
+            if (len > kMaxStep) step *= kMaxStep / len;
+            x = glm::clamp(x + step, glm::dvec3(0.0), glm::dvec3(n - 1));
+            if (glm::length(x - p) > maxVoxels + kMaxStep) return false;
+        }
+        return false;
+    }
+
     /// A start point for paths leaving a surface point p (index) along world normal nrm: p moved
     /// out by kStartOffsetVoxels, then further in steps until it is on the outside (value < iso).
     /// False when still inside after kMaxStartWalkVoxels.
@@ -387,6 +421,13 @@ IlluminationLattice::IlluminationLattice(std::shared_ptr<const core::Volume> vol
         throw InputError("lattice", "volume",
                          "the volume is flat (every voxel " + number(r[0]) + ")",
                          "an isosurface needs values on both sides of the isovalue");
+    if (options_.placement == TexelPlacement::OnSurface &&
+        !(options_.surfaceIso > r[0] && options_.surfaceIso < r[1]))
+        throw InputError("lattice", "isovalue",
+                         "texels on the surface need an isovalue strictly inside the data range [" +
+                             number(r[0]) + ", " + number(r[1]) + "], got " +
+                             number(options_.surfaceIso),
+                         "choose an isovalue the volume crosses");
     res_ = options_.resolution;
     const glm::ivec3 n = volume_->dims();
     for (int a = 0; a < 3; ++a) dims_[a] = int(std::floor((n[a] - 1) * res_ + 1e-9)) + 1;
@@ -398,9 +439,10 @@ IlluminationLattice::IlluminationLattice(std::shared_ptr<const core::Volume> vol
 IlluminationLattice::~IlluminationLattice() = default;
 
 std::size_t IlluminationLattice::floatsPerTexel() const {
-    return options_.mode == LatticeMode::Irradiance
-               ? 3
-               : 3 + 3 * std::size_t(options_.shOrder * options_.shOrder);
+    const std::size_t onSurface = options_.placement == TexelPlacement::OnSurface ? 3 : 0;
+    return onSurface + (options_.mode == LatticeMode::Irradiance
+                            ? 3
+                            : 3 + 3 * std::size_t(options_.shOrder * options_.shOrder));
 }
 
 double IlluminationLattice::storedMiB() const {
@@ -487,8 +529,20 @@ int IlluminationLattice::surfaceStencil(const glm::dvec3& world, double surfaceI
     double w[8];
     int group[8], best = 2;
     const int n = stencil(world, all, w);
+    const bool onSurface = options_.placement == TexelPlacement::OnSurface;
+    glm::dvec3 nq(0.0);
+    if (onSurface) nq = tracer_->smoothNormal(volume_->geometry().worldToIndex(world));
+    const std::size_t fpt = floatsPerTexel();
     for (int c = 0; c < n; ++c) {
-        group[c] = outsideOf(all[c], surfaceIso) ? 2 : plateau(all[c]) ? 1 : 0;
+        if (onSurface) {
+            // Texels that sit on another face of the surface (the far side of a thin rib: the
+            // normal there turns away) are read only where no texel shares this point's face.
+            const float* d = texelData(all[c]);
+            const glm::dvec3 nt(d[fpt - 3], d[fpt - 2], d[fpt - 1]);
+            group[c] = plateau(all[c]) ? 2 : glm::dot(nq, nt) < kSameFaceCosine ? 1 : 0;
+        } else {
+            group[c] = outsideOf(all[c], surfaceIso) ? 2 : plateau(all[c]) ? 1 : 0;
+        }
         best = std::min(best, group[c]);
     }
     double wsum = 0.0;
@@ -585,7 +639,9 @@ LatticeStats IlluminationLattice::require(std::span<const glm::dvec3> worldPoint
         int inside = 0;
         const int n = stencil(w, texel, weight);
         for (int c = 0; c < n; ++c) {
-            outside[c] = outsideOf(texel[c], surfaceIso);
+            // On-surface texels all estimate the one surface: every texel of the stencil.
+            outside[c] = options_.placement == TexelPlacement::OwnIsosurface &&
+                         outsideOf(texel[c], surfaceIso);
             inside += !outside[c];
         }
         for (int c = 0; c < n; ++c)
@@ -688,7 +744,23 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
             for (std::size_t r = rg.begin(); r != rg.end(); ++r) {
                 const glm::ivec3 t = todo[r];
                 const glm::dvec3 xt = texelIndexPosition(t);
-                estimate(xt, tracer_->value(xt), linear(t), o.samples, sums);
+                if (o.placement == TexelPlacement::OwnIsosurface) {
+                    estimate(xt, tracer_->value(xt), linear(t), o.samples, sums);
+                } else {
+                    glm::dvec3 xs;
+                    if (tracer_->project(xt, o.surfaceIso, kMaxProjectionVoxels, xs)) {
+                        estimate(xs, o.surfaceIso, linear(t), o.samples, sums);
+                        // The normal where the texel sits on the surface, last in its data.
+                        const glm::dvec3 nrm = tracer_->smoothNormal(xs);
+                        float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
+                        for (int a = 0; a < 3; ++a) d[fpt - 3 + std::size_t(a)] = float(nrm[a]);
+                    } else {  // no point of the surface near: left out of reads
+                        sums.E = glm::dvec3(0.0);
+                        std::fill(sums.T.begin(), sums.T.end(), glm::dvec3(0.0));
+                        sums.plateau = true;
+                        sums.paths = sums.shadowRays = 0;
+                    }
+                }
                 nPaths += sums.paths, nShadow += sums.shadowRays, nPlateau += sums.plateau;
                 float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
                 if (sh) {

@@ -64,6 +64,24 @@ namespace voxlight::iso {
 
 enum class LatticeMode { Irradiance, ShTransfer };
 
+/// Which isosurface a texel's paths start on.
+enum class TexelPlacement {
+    /// Wyman's: the texel's own isosurface s = s(x_t), so one lattice serves every isovalue; on
+    /// sharp-edged data (CT bone) the texels around a surface point lie on other surfaces and the
+    /// trilinear blend is 0.3–0.5 NRMS off per-point tracing (README, bench_lattice).
+    OwnIsosurface,
+    /// The isosurface at `surfaceIso`: x_t moved onto it by Newton steps on the trilinear field
+    /// (at most kMaxProjectionVoxels), so the 8 texels around a point of that surface all estimate
+    /// that surface and interpolation errs only by the irradiance's own variation. Texels with no
+    /// such surface point near them are left out of reads (as plateaus). One lattice per isovalue.
+    OnSurface,
+};
+
+/// OnSurface: farthest a texel is moved onto the surface, voxels. A texel of a cell the surface
+/// crosses lies within √3 voxels of it (the cell's diagonal); beyond that margin it reads no
+/// surface point and is left out.
+inline constexpr double kMaxProjectionVoxels = 2.0;
+
 /// Start offset along the normal, voxels (Wyman: "slightly"): far enough that float rounding of the
 /// start point and the trilinear-vs-B-spline normal mismatch leave the point outside its own
 /// isosurface, small next to a voxel so that the texel still represents its own surface.
@@ -80,6 +98,8 @@ struct LatticeOptions {
     double resolution = 1.0;  ///< texels per voxel along each axis, 1/8…8
     LatticeMode mode = LatticeMode::Irradiance;
     int shOrder = 5;  ///< ShTransfer: bands 0…order−1, (order)² coefficients, 1…5
+    TexelPlacement placement = TexelPlacement::OwnIsosurface;
+    double surfaceIso = NAN;  ///< OnSurface: the isovalue (physical), inside the data's range
     std::uint64_t seed = 0;
     double memoryBudgetMiB = 4096.0;  ///< texel storage; over it → InputError naming the budget
     int threads = 0;                  ///< 0 = all cores

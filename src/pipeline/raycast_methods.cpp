@@ -452,7 +452,8 @@ IsoLatticeParams parseIsoLatticeParams(const io::Scene& scene, ParamReader& p) {
         q.shading.shading == IsoShading::Lattice || q.shading.shading == IsoShading::Paths;
     only("bounces", gi, "lattice and paths");
     const bool lat = q.shading.shading == IsoShading::Lattice;
-    for (const char* k : {"lattice_resolution", "lattice_mode", "sh_order", "lattice_memory_mb"})
+    for (const char* k :
+         {"lattice_resolution", "lattice_mode", "sh_order", "lattice_memory_mb", "lattice_texels"})
         only(k, lat, "lattice");
     only("vicinity_radius", q.shading.shading == IsoShading::Vicinity, "vicinity");
     const bool ph = q.shading.shading == IsoShading::Phong;
@@ -470,6 +471,9 @@ IsoLatticeParams parseIsoLatticeParams(const io::Scene& scene, ParamReader& p) {
         else
             only("sh_order", false, "lattice with lattice_mode 'sh'");
         q.lattice.memoryBudgetMiB = p.number("lattice_memory_mb", 4096.0, 1.0, 1 << 20);
+        q.lattice.placement = p.choice("lattice_texels", "surface", {"surface", "own"}) == "own"
+                                  ? iso::TexelPlacement::OwnIsosurface
+                                  : iso::TexelPlacement::OnSurface;
     }
     if (q.shading.shading == IsoShading::Vicinity)
         q.vicinityRadiusVoxels = p.number("vicinity_radius", kDefaultVicinityVoxels, 0.5, 1e4);
@@ -1216,7 +1220,7 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
 /// iso-lattice's lattice (pipeline/iso_shading.h): the volume's float copy and skip bricks its
 /// tracer reads, and the texels the frames fill. Lights are in the key except for an SH transfer
 /// lattice, which re-dots when they change (the frame does).
-Stage illuminationLatticeStage(const IsoLatticeParams& q) {
+Stage illuminationLatticeStage(const IsoLatticeParams& q, const render::RenderOptions& options) {
     const bool sh = q.lattice.mode == iso::LatticeMode::ShTransfer;
     Stage st{"illumination_lattice", StageKind::Precompute,
              sh ? std::vector<std::string>{"load_volume", "transfer_function", "method"}
@@ -1224,25 +1228,35 @@ Stage illuminationLatticeStage(const IsoLatticeParams& q) {
     if (!isoShadingTraces(q.shading.shading))
         st.skip = "not needed: shading 'phong' traces nothing";
     const json latticeKey = {
-        {"samples", q.lattice.samples},           {"bounces", q.lattice.bounces},
-        {"resolution", q.lattice.resolution},     {"mode", sh ? "sh" : "irradiance"},
-        {"sh_order", q.lattice.shOrder},          {"seed", q.lattice.seed},
-        {"memory_mib", q.lattice.memoryBudgetMiB}};
+        {"samples", q.lattice.samples},
+        {"bounces", q.lattice.bounces},
+        {"resolution", q.lattice.resolution},
+        {"mode", sh ? "sh" : "irradiance"},
+        {"sh_order", q.lattice.shOrder},
+        {"seed", q.lattice.seed},
+        {"memory_mib", q.lattice.memoryBudgetMiB},
+        {"texels", q.lattice.placement == iso::TexelPlacement::OnSurface ? "surface" : "own"},
+        // the default isovalue is the TF's (its stage is in the key)
+        {"iso_value", options.isoValue ? json(*options.isoValue) : json()}};
     st.key = [latticeKey, sh](const Run& run) {
         KeyBuilder k(run, "illumination_lattice");
         k.stage("load_volume").stage("transfer_function").json(latticeKey);
         if (!sh) k.stage("lights");
         return k.value();
     };
-    st.compute = [q](Run& run) {
+    st.compute = [q, options](Run& run) {
         const auto loaded = run.get<LoadedVolume>("load_volume");
         LightList lights = *run.get<LightList>("lights");
         if (lights.empty()) lights.push_back(whiteSky());
         auto a = std::make_shared<LatticeArtifact>();
+        const optics::TransferFunction& tf = run.get<TfArtifact>("transfer_function")->tf;
+        iso::LatticeOptions lo = q.lattice;
         try {
+            if (lo.placement == iso::TexelPlacement::OnSurface)
+                lo.surfaceIso = render::resolveIsoValue(tf, options);
             a->lattice = std::make_shared<iso::IlluminationLattice>(
-                std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
-                run.get<TfArtifact>("transfer_function")->tf, std::move(lights), q.lattice);
+                std::shared_ptr<const core::Volume>(loaded, &loaded->volume), tf, std::move(lights),
+                lo);
         } catch (const InputError& e) {
             if (e.source() != "lattice") throw;
             static const std::map<std::string, std::string> param = {
@@ -1251,7 +1265,8 @@ Stage illuminationLatticeStage(const IsoLatticeParams& q) {
                 {"resolution", "lattice_resolution"},
                 {"sh_order", "sh_order"},
                 {"mode", "lattice_mode"},
-                {"memory", "lattice_memory_mb"}};
+                {"memory", "lattice_memory_mb"},
+                {"isovalue", "iso_value"}};
             const auto it = param.find(e.field());
             throw InputError(run.scene().source,
                              it == param.end() ? e.field() : "method.params." + it->second,
@@ -1606,7 +1621,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     };
     plan.stages.push_back(sh);
 
-    if (kind == Kind::IsoLattice) plan.stages.push_back(illuminationLatticeStage(isoLattice));
+    if (kind == Kind::IsoLattice)
+        plan.stages.push_back(illuminationLatticeStage(isoLattice, options));
 
     // What the fitted camera frames: the hull of the visible matter (render/framing.h).
     // The cut's geometry only: whether removed matter still shadows does not change the framing.
@@ -1951,7 +1967,8 @@ const RegisterMethod kIsoLattice(rayCasterMethod(
     "direct isosurface shaded with global illumination from Wyman's illumination lattice "
     "(lazy texels, shadows, sky, interreflections), or one of his baselines for comparison",
     {"iso_value", "shading", "samples", "bounces", "lattice_resolution", "lattice_mode", "sh_order",
-     "lattice_memory_mb", "vicinity_radius", "ambient", "diffuse", "specular", "shininess"},
+     "lattice_memory_mb", "lattice_texels", "vicinity_radius", "ambient", "diffuse", "specular",
+     "shininess"},
     {}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
