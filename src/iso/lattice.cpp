@@ -27,7 +27,10 @@ constexpr int kSkipBrick = 8;
 /// Block::done values: not computed (0), a texel with its own surface, a plateau texel.
 constexpr std::uint8_t kSurfaceTexel = 1, kPlateauTexel = 2;
 /// Bisection steps for a crossing inside one monotone piece of a cell's cubic: 2⁻³⁰ of a cell.
-constexpr int kBisectionSteps = 30;
+/// Crossing search: the bracket is narrowed to this fraction of the monotone piece (bisection's 30
+/// halvings gave 2^-30 ≈ 9e-10), in at most kMaxRootSteps steps.
+constexpr double kRootTolerance = 1e-9;
+constexpr int kMaxRootSteps = 60;
 /// OnSurface reads: a texel counts as on the query point's face when their smoothed normals are
 /// within 60° (cos 0.5) — the two faces of a thin plate or rib are ≈ 180° apart, a curved surface
 /// turns far less than 60° over the one voxel between texels.
@@ -345,12 +348,32 @@ struct IlluminationLattice::Tracer {
         cuts[nc++] = L;
         for (int piece = 0; piece + 1 < nc; ++piece) {
             double lo2 = cuts[piece], hi2 = cuts[piece + 1];
-            if (g(hi2) >= 0.0) continue;
-            for (int it = 0; it < kBisectionSteps; ++it) {
-                const double mid = 0.5 * (lo2 + hi2);
-                (g(mid) >= 0.0 ? lo2 : hi2) = mid;
+            double fhi = g(hi2);
+            if (fhi >= 0.0) continue;
+            // The crossing in [lo2, hi2] (g(lo2) ≥ 0 > g(hi2), g monotone there) to within
+            // kRootTolerance of the piece: regula falsi with the Illinois step (the end kept twice
+            // has its value halved), superlinear where bisection took 30 halvings.
+            if (tHit) {
+                double flo = g(lo2);
+                const double tol = (hi2 - lo2) * kRootTolerance;
+                int kept = 0;
+                for (int it = 0; it < kMaxRootSteps && hi2 - lo2 > tol; ++it) {
+                    double m =
+                        flo > fhi ? lo2 + (hi2 - lo2) * flo / (flo - fhi) : 0.5 * (lo2 + hi2);
+                    if (!(m > lo2 && m < hi2)) m = 0.5 * (lo2 + hi2);
+                    const double fm = g(m);
+                    if (fm >= 0.0) {
+                        lo2 = m, flo = fm;
+                        if (kept == -1) fhi *= 0.5;
+                        kept = -1;
+                    } else {
+                        hi2 = m, fhi = fm;
+                        if (kept == 1) flo *= 0.5;
+                        kept = 1;
+                    }
+                }
+                *tHit = t0 + hi2;
             }
-            if (tHit) *tHit = t0 + hi2;
             return true;
         }
         return false;
