@@ -273,18 +273,19 @@ json Session::documentAtTime(double t) const {
     };
     if (!same("camera"))
         if (auto cam = interpolateCamera(a.camera, b.camera, s)) doc["camera"] = *cam;
+    // Planes and lights are written as the scene format writes them (absolute environment paths);
+    // a part that is held keeps keyframe k's text.
     io::Scene mixed = a;
-    bool changed = false;
+    bool planes = false, lights = false;
     if (!same("clip_planes"))
-        if (auto planes = interpolatePlanes(a.clipPlanes, b.clipPlanes, s))
-            mixed.clipPlanes = *planes, changed = true;
+        if (auto p = interpolatePlanes(a.clipPlanes, b.clipPlanes, s))
+            mixed.clipPlanes = *p, planes = true;
     if (!same("lights"))
-        if (auto ls = interpolateLights(a.lights, b.lights, s)) mixed.lights = *ls, changed = true;
-    if (changed) {
-        // Written as the scene format writes them (absolute environment paths).
+        if (auto l = interpolateLights(a.lights, b.lights, s)) mixed.lights = *l, lights = true;
+    if (planes || lights) {
         const json written = io::sceneDocument(mixed);
-        if (!same("clip_planes")) doc["clip_planes"] = written["clip_planes"];
-        if (!same("lights")) doc["lights"] = written["lights"];
+        if (planes) doc["clip_planes"] = written["clip_planes"];
+        if (lights) doc["lights"] = written["lights"];
     }
     return doc;
 }
