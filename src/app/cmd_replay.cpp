@@ -206,6 +206,7 @@ Command addReplayCommand(CLI::App& app) {
         if (!video->empty()) ffmpeg = findOnPath("ffmpeg");
 
         // The frames: one pipeline session, each frame written as soon as it is done.
+        const bool created = !fs::exists(dir, ec);
         fs::create_directories(dir, ec);
         if (ec)
             throw InputError("command line", "--out",
@@ -258,11 +259,17 @@ Command addReplayCommand(CLI::App& app) {
                                  }().c_str());
             }
         } catch (const CancelledError&) {
+            if (done == 0 && created) fs::remove(dir, ec);  // empty: as if never run
             std::fprintf(stderr,
                          "\nvoxlight: cancelled after %zu of %zu frames; the %zu written are "
                          "complete, nothing is half-written\n",
                          done, scenes.size(), done);
             return kExitCancelled;
+        } catch (...) {
+            // A failure in the first frame (a volume file that does not read) leaves no folder
+            // behind that this run created; later ones keep the whole frames before them.
+            if (done == 0 && created) fs::remove(dir, ec);
+            throw;
         }
 
         // Frames of an earlier, longer replay into the same folder would join a video made from

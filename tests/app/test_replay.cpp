@@ -160,6 +160,11 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
     json missing = smallSession();
     missing["scene"]["volume"] = "no-such-ct.nii.gz";
     writeJson(tmp / "missing-volume.json", missing);
+    // A volume that exists but does not read: found in the first frame's load, before any write.
+    std::ofstream(tmp / "junk.nii") << "not a nifti";
+    json junk = smallSession();
+    junk["scene"]["volume"] = "junk.nii";
+    writeJson(tmp / "junk-volume.json", junk);
     // A scene file (by path) naming a missing volume.
     json sceneFile = smallSession()["scene"];
     sceneFile["volume"] = "gone/ct.nii.gz";
@@ -186,6 +191,7 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
     const std::vector<Case> cases = {
         {q(tmp / "missing-volume.json"), "no-such-ct.nii.gz"},
         {q(tmp / "missing-via-scene.json"), "gone/ct.nii.gz"},
+        {q(tmp / "junk-volume.json"), "junk.nii"},
         {q(tmp / "truncated.json"), "not valid JSON"},
         {q(tmp / "corrupt.json"), "not valid JSON"},
         {q(tmp / "wrong-type.json"), "keyframes[1].time"},
