@@ -134,9 +134,10 @@ Command addReplayCommand(CLI::App& app) {
     c.sub->add_option("SESSION", *sessionFile, "Session JSON (docs/sessions.md)")->required();
     c.sub->add_option("--out", *outDir, "Folder for frame_00000.png, ... (created if missing)")
         ->required();
-    c.sub->add_option("--fps", *fps,
-                      "Frames per second between the first and last keyframe (interpolated); "
-                      "default: one frame per keyframe");
+    CLI::Option* fpsOption =
+        c.sub->add_option("--fps", *fps,
+                          "Frames per second between the first and last keyframe (interpolated); "
+                          "default: one frame per keyframe");
     c.sub->add_option("--set", *sets, "Override a scene key in every frame, e.g. --set method=mip")
         ->allow_extra_args(false);
     c.sub->add_option("--size", *size, "Image size WxH (same as --set image.width/height)");
@@ -176,7 +177,7 @@ Command addReplayCommand(CLI::App& app) {
             const auto s = sizeOverrides(*size);
             overrides.insert(overrides.end(), s.begin(), s.end());
         }
-        const bool interpolate = *fps != 0.0;
+        const bool interpolate = fpsOption->count() > 0;
         std::vector<double> times;
         if (interpolate) {
             times = session::frameTimes(ses, *fps);

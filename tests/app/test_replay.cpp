@@ -27,7 +27,13 @@ struct Result {
     std::string out, err;
 };
 
-std::string q(const fs::path& p) { return "'" + p.string() + "'"; }
+/// The path single-quoted for the shell (appended piecewise: GCC 12 warns falsely on '+' here).
+std::string q(const fs::path& p) {
+    std::string s = "'";
+    s += p.string();
+    s += "'";
+    return s;
+}
 
 /// Runs a shell command line, its stderr captured.
 Result runShell(const std::string& line, const fs::path& dir) {
@@ -201,6 +207,7 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --set camera.fov_y=wide", "camera.fov_y"},
         {q(tmp / "good.json") + " --size 16by16", "--size"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
+        {q(tmp / "good.json") + " --fps 0", "--fps"},
         {q(tmp / "good.json") + " --video v.gif", "--video"},
     };
     for (const Case& c : cases) {
