@@ -193,9 +193,15 @@ Command addReplayCommand(CLI::App& app) {
         if (!cacheDir->empty()) pipe.cache().setDirectory(*cacheDir);
         for (const io::Scene& s : scenes) (void)pipe.plan(s);
         {
+            // Named by the file that holds the volume key: the session, or its scene file.
             const io::VolumeSource& v = scenes.front().volume;
+            const fs::path sceneFile =
+                ses.scenePath.empty() || fs::path(ses.scenePath).is_absolute()
+                    ? fs::path(ses.scenePath)
+                    : fs::path(ses.source).parent_path() / ses.scenePath;
             if (v.phantom.empty() && !fs::exists(v.path, ec))
-                throw InputError(ses.source, ses.scenePath.empty() ? "scene.volume" : "volume",
+                throw InputError(ses.scenePath.empty() ? ses.source : sceneFile.string(),
+                                 ses.scenePath.empty() ? "scene.volume" : "volume",
                                  "names '" + v.path.string() + "', which does not exist",
                                  ses.scenePath.empty()
                                      ? "fix the path (relative paths resolve against the "
