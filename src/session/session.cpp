@@ -357,7 +357,8 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
     if (version < 1) fail("version", "must be 1, got " + std::to_string(version), "\"version\": 1");
     if (doc.contains("description")) {
         if (!doc["description"].is_string())
-            fail("description", "must be a string, got " + typeName(doc["description"]));
+            fail("description", "must be a string, got " + typeName(doc["description"]),
+                 "free text in quotes, or leave it out");
         s.description = doc["description"].get<std::string>();
     }
 
@@ -421,10 +422,12 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
         const json& t = k["time"];
         if (!t.is_number())
             fail(at + ".time",
-                 "must be a number of seconds, got " + typeName(t) + " " + shortDump(t));
+                 "must be a number of seconds, got " + typeName(t) + " " + shortDump(t),
+                 "e.g. \"time\": 1.5, without quotes or units");
         kf.time = t.get<double>();
         if (!std::isfinite(kf.time) || kf.time < 0.0)
-            fail(at + ".time", "must be a finite number of seconds ≥ 0, got " + number(kf.time));
+            fail(at + ".time", "must be a finite number of seconds ≥ 0, got " + number(kf.time),
+                 "seconds since the session's start, e.g. \"time\": 0");
         if (i > 0 && !(kf.time > s.keyframes.back().time))
             fail(at + ".time",
                  "must be after the keyframe before it (" + number(s.keyframes.back().time) +
@@ -432,7 +435,8 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
                  "keyframes are in time order, at most one per time");
         if (k.contains("note")) {
             if (!k["note"].is_string())
-                fail(at + ".note", "must be a string, got " + typeName(k["note"]));
+                fail(at + ".note", "must be a string, got " + typeName(k["note"]),
+                     "free text in quotes, or leave it out");
             kf.note = k["note"].get<std::string>();
         }
         s.keyframes.push_back(std::move(kf));
@@ -484,12 +488,14 @@ Recorder::Recorder(const io::Scene& scene, std::string description) : scene_(sce
 void Recorder::record(double seconds, const State& state, const std::string& note) {
     if (!std::isfinite(seconds) || seconds < 0.0)
         throw InputError("recorder", "time",
-                         "must be a finite number of seconds ≥ 0, got " + number(seconds));
+                         "must be a finite number of seconds ≥ 0, got " + number(seconds),
+                         "pass the seconds since the recording started");
     std::vector<Keyframe>& kfs = session_.keyframes;
     if (!kfs.empty() && seconds < kfs.back().time)
         throw InputError("recorder", "time",
                          "must not be before the last keyframe (" + number(kfs.back().time) +
-                             " s), got " + number(seconds) + " s");
+                             " s), got " + number(seconds) + " s",
+                         "record in time order (the same time replaces the last keyframe)");
     if (!kfs.empty() && seconds == kfs.back().time) kfs.pop_back(), states_.pop_back();
     // Every part in the scene format (io::sceneDocument of the scene with this state).
     io::Scene s = scene_;
