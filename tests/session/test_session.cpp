@@ -184,6 +184,14 @@ TEST(Session, CameraHalfwayIsTheOrbitAboutTheTarget) {
     EXPECT_NEAR(eye.z, 0.0, kPositionTolMm);
     // At a quarter: 22.5°.
     EXPECT_NEAR(s.sceneAtTime(0.5).camera.azimuthDeg, 22.5, kAngleTolDeg);
+    // Across ±180° the orbit takes the short way (20° through the back, not 340° round the
+    // front).
+    json wrap = orbitSession();
+    wrap["keyframes"][0]["camera"]["azimuth"] = 170;
+    wrap["keyframes"][1]["camera"]["azimuth"] = -170;
+    const session::Session w = session::parseSession(wrap, "s.json", fs::current_path());
+    EXPECT_NEAR(std::abs(w.sceneAtTime(1.0).camera.azimuthDeg), 180.0, kAngleTolDeg);
+    EXPECT_NEAR(w.sceneAtTime(0.5).camera.azimuthDeg, 175.0, kAngleTolDeg);
 }
 
 TEST(Session, LookAtCamerasSlerpAboutTheTargetWithLinearDistance) {
