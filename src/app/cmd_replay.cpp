@@ -219,15 +219,17 @@ Command addReplayCommand(CLI::App& app) {
             throw InputError("command line", "--out",
                              "cannot create '" + *outDir + "': " + ec.message(),
                              "create it first, or give another --out");
-        // A frame's stages show a bar on a terminal; elsewhere the line per frame is the progress
-        // (plain lines for every stage of every frame would drown it).
-        const core::Progress progress = terminalProgress(*quiet || !::isatty(STDERR_FILENO));
         json frames = json::array();
         std::size_t done = 0;
         std::vector<double> frameSeconds;
         try {
             for (std::size_t i = 0; i < scenes.size(); ++i) {
                 core::Stopwatch sw;
+                // A frame's stages show a bar on a terminal, one per frame so that only a frame
+                // taking over a second shows one; elsewhere the line per frame is the progress
+                // (plain lines for every stage of every frame would drown it).
+                const core::Progress progress =
+                    terminalProgress(*quiet || !::isatty(STDERR_FILENO));
                 pipeline::RunResult r = pipe.run(scenes[i], {}, progress);
                 throwIfCancelled();
                 const fs::path file = dir / frameName(i);
