@@ -15,7 +15,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-targets_all=(nifti nifti_gz nrrd nrrd_detached metaimage metaimage_mhd vti raw dicom dicom_series scene)
+targets_all=(nifti nifti_gz nrrd nrrd_detached metaimage metaimage_mhd vti raw dicom dicom_series scene session)
 if [ $# -lt 2 ]; then
   echo "usage: tools/fuzz.sh TARGET|all SECONDS [libFuzzer options...]" >&2
   echo "targets: ${targets_all[*]}" >&2
@@ -37,7 +37,7 @@ nice -n 19 cmake --build --preset fuzz --target "${need_build[@]}" >/dev/null
 
 # Seeds: voxlight's phantom writer needs a built CLI (any preset's).
 seeds=$build/corpus-seeds
-if [ ! -d "$seeds/scene" ]; then
+if [ ! -d "$seeds/scene" ] || [ ! -d "$seeds/session" ]; then
   voxlight=build/voxlight
   if [ ! -x "$voxlight" ]; then
     nice -n 19 cmake --build --preset fuzz --target voxlight >/dev/null
@@ -53,7 +53,7 @@ dict_for() {
     metaimage|metaimage_mhd) echo fuzz/metaimage.dict ;;
     vti) echo fuzz/vti.dict ;;
     dicom|dicom_series) echo fuzz/dicom.dict ;;
-    scene) echo fuzz/json.dict ;;
+    scene|session) echo fuzz/json.dict ;;
     *) echo "" ;;
   esac
 }

@@ -17,6 +17,7 @@ and vtk.
 """
 import argparse
 import gzip
+import json
 import os
 import shutil
 import struct
@@ -286,6 +287,23 @@ def scene_seeds(out):
             shutil.copy(os.path.join(scenes, name), os.path.join(out, "scene", name))
 
 
+def session_seeds(out):
+    # The example sessions; one referring to a scene file by a relative path finds none beside the
+    # corpus, so an inline copy of each is added (the scene file's document put in its place).
+    sessions = os.path.join(ROOT, "datasets", "sessions")
+    for name in sorted(os.listdir(sessions)):
+        if not name.endswith(".json"):
+            continue
+        with open(os.path.join(sessions, name)) as f:
+            doc = json.load(f)
+        shutil.copy(os.path.join(sessions, name), os.path.join(out, "session", name))
+        if isinstance(doc.get("scene"), str):
+            with open(os.path.join(sessions, doc["scene"])) as f:
+                doc["scene"] = json.load(f)
+            with open(os.path.join(out, "session", "inline-" + name), "w") as f:
+                json.dump(doc, f, indent=1)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("outdir")
@@ -297,7 +315,7 @@ def main():
                  "(cmake --build --preset release --target voxlight) or pass --voxlight" %
                  args.voxlight)
     targets = ("nifti", "nifti_gz", "nrrd", "nrrd_detached", "metaimage", "metaimage_mhd", "vti",
-               "raw", "dicom", "dicom_series", "scene")
+               "raw", "dicom", "dicom_series", "scene", "session")
     for t in targets:
         shutil.rmtree(os.path.join(args.outdir, t), ignore_errors=True)
         os.makedirs(os.path.join(args.outdir, t))
@@ -309,6 +327,7 @@ def main():
     nibabel_seeds(args.outdir)
     vtk_seeds(args.outdir)
     scene_seeds(args.outdir)
+    session_seeds(args.outdir)
     for t in targets:
         d = os.path.join(args.outdir, t)
         files = os.listdir(d)

@@ -13,11 +13,11 @@
 
 #include "app/cli_support.h"
 #include "app/output_files.h"
+#include "app/render_output.h"
 #include "core/timing.h"
 #include "io/image.h"
 #include "io/scene.h"
 #include "pipeline/pipeline.h"
-#include "render/tonemap.h"
 
 namespace voxlight::app {
 
@@ -136,13 +136,8 @@ Command addRenderCommand(CLI::App& app) {
         throwIfCancelled();
         // The display image: pathtrace's denoised one when it made one (the EXR stays the raw
         // linear estimate).
-        const auto denoised = r.images.find("denoised");
-        const core::ImageRGBA& shown = denoised != r.images.end() ? denoised->second : r.image;
-        files.write(*out, "--output", [&](const fs::path& p) {
-            io::writeImage(render::toDisplay(shown, float(s.image.exposureStops),
-                                             render::displayFromString(s.image.display)),
-                           p);
-        });
+        const core::ImageRGBA& shown = shownImage(r);
+        files.write(*out, "--output", [&](const fs::path& p) { writeDisplayImage(r, s, p); });
         r.stages.push_back(outputRecord("write_image", *out, "-o"));
         r.stages.back().seconds = sw.seconds();
         sw.restart();

@@ -650,9 +650,6 @@ bool isPathKey(const std::string& key) {
            std::all_of(key.begin() + 7, key.begin() + long(dot), ::isdigit);
 }
 
-namespace {
-/// Applies overrides; a relative path given by one is made absolute against the current
-/// directory (the user typed it there), so the scene's folder no longer applies to it.
 void applyOverrides(json& doc, const std::vector<std::string>& overrides) {
     for (const auto& o : overrides) {
         applyOverride(doc, o);
@@ -676,7 +673,6 @@ void applyOverrides(json& doc, const std::vector<std::string>& overrides) {
             *node = fs::absolute(node->get<std::string>()).string();
     }
 }
-}  // namespace
 
 Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overrides) {
     json doc = {{"volume", fs::absolute(volume).lexically_normal().string()}};
@@ -793,7 +789,7 @@ json sceneDocument(const Scene& s) {
     return d;
 }
 
-Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
+json readJsonFile(const fs::path& path) {
     const std::string file = path.string();
     std::error_code ec;
     if (fs::is_directory(path, ec))
@@ -826,10 +822,15 @@ Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides)
         throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
                          "fix the syntax at the byte shown");
     }
+    return doc;
+}
+
+Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
+    json doc = readJsonFile(path);
     applyOverrides(doc, overrides);
     fs::path base = path.parent_path();
     if (base.empty()) base = ".";
-    return parseScene(doc, file, base);
+    return parseScene(doc, path.string(), base);
 }
 
 }  // namespace voxlight::io

@@ -193,6 +193,10 @@ struct Scene {
 /// The value null removes the key (its default applies again): --set camera.azimuth=null.
 void applyOverride(nlohmann::json& doc, const std::string& assignment);
 
+/// Applies overrides in order (applyOverride); a relative path given by one to a path key
+/// (isPathKey) is made absolute against the current directory, where the user typed it.
+void applyOverrides(nlohmann::json& doc, const std::vector<std::string>& overrides);
+
 /// Validates and converts a document. `source` names it in errors; relative paths resolve against
 /// `baseDir`. A document nesting arrays/objects deeper than 64 levels, or holding a value nlohmann
 /// cannot convert or print (a string that is not UTF-8), is an InputError naming `source`.
@@ -215,6 +219,11 @@ nlohmann::json sceneDocument(const Scene& scene);
 /// True for the keys whose string values are file paths (volume, volume.path, lights.N.path):
 /// given on the command line (--set) they resolve against the current directory.
 bool isPathKey(const std::string& dottedKey);
+
+/// Reads a JSON file with the scene file's limits (loadScene's failures below, before parsing:
+/// not a directory, readable, at most 16 MiB, nesting at most 64 levels, valid JSON). Every
+/// failure is an InputError naming the file. Also reads session files (session/session.h).
+nlohmann::json readJsonFile(const std::filesystem::path& path);
 
 /// Reads a scene file, applies overrides in order (path keys given by them resolve against the
 /// current directory, other paths against the scene's folder), validates. Every failure is an InputError naming
