@@ -53,5 +53,6 @@ Command addPhantomCommand(CLI::App& app);
 Command addSceneCommand(CLI::App& app);
 Command addRenderCommand(CLI::App& app);
 Command addIsoCommand(CLI::App& app);
+Command addViewCommand(CLI::App& app);
 
 }  // namespace voxlight::app
