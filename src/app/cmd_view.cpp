@@ -51,6 +51,14 @@ Command addViewCommand(CLI::App& app) {
         options.log = *log;
         options.quit = &cancelFlag();
         options.openInput = [](const std::string& path) { return loadInput(path, {}); };
+        options.saveScreenshot = [](const core::ImageRGBA& image, const std::string& path) {
+            checkOutputs(
+                {{"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}});
+            OutputFiles files;
+            files.write(path, "screenshot",
+                        [&](const std::filesystem::path& p) { io::writeImage(image, p); });
+            files.commit();
+        };
         std::optional<core::ImageRGBA> shot = viewer::runViewer(options, std::move(initial));
         throwIfCancelled();
         if (!screenshot->empty()) {

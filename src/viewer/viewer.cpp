@@ -34,6 +34,8 @@ using nlohmann::json;
 constexpr double kFrameBudgetSeconds = 1.0 / 60.0;
 /// Mouse: degrees of orbit per pixel dragged; zoom factor per wheel notch.
 constexpr double kOrbitDegPerPixel = 0.4, kZoomPerNotch = 1.1;
+/// Frames left out of the frame-time statistics (GL shader compilation, ImGui's font atlas).
+constexpr std::uint64_t kWarmUpFrames = 3;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -48,6 +50,7 @@ const char* const kHelp =
     "Home               back to the scene's own camera\n"
     "W                  back to the scene's window/level\n"
     "F1 or H            show / hide this help\n"
+    "F12                save a screenshot (path in the File panel)\n"
     "Ctrl+O             focus the file field\n"
     "drop a file        open it (scene, volume, DICOM folder)\n"
     "Esc or Q           quit\n";
@@ -162,6 +165,8 @@ class Viewer {
     std::atomic<bool> loadCancel_{false};
     std::string loadingPath_, loadError_;
     bool focusPath_ = false;
+    std::string shotPath_ = "voxlight-view.png", shotMessage_;
+    bool shotRequested_ = false;
 
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
@@ -326,6 +331,7 @@ void Viewer::handleImageMouse() {
 void Viewer::handleKeys() {
     ImGuiIO& io = ImGui::GetIO();
     if (io.KeyCtrl && ImGui::IsKeyPressed(GLFW_KEY_O)) focusPath_ = true;
+    if (ImGui::IsKeyPressed(GLFW_KEY_F12)) shotRequested_ = true;
     if (io.WantCaptureKeyboard) return;
     if (ImGui::IsKeyPressed(GLFW_KEY_ESCAPE) || ImGui::IsKeyPressed(GLFW_KEY_Q))
         glfwSetWindowShouldClose(window_, GLFW_TRUE);
@@ -385,8 +391,17 @@ void Viewer::drawPanel() {
         ImGui::SameLine();
         if (ImGui::Button("Open") || enter) startLoad(path_);
         if (!loadingPath_.empty()) ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
-        if (!loadError_.empty())
-            ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "%s", loadError_.c_str());
+        if (!loadError_.empty()) {
+            ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(1, 0.4f, 0.4f, 1));
+            ImGui::TextWrapped("%s", loadError_.c_str());
+            ImGui::PopStyleColor();
+        }
+        if (options_.saveScreenshot) {
+            ImGui::InputText("##shot", &shotPath_);
+            ImGui::SameLine();
+            if (ImGui::Button("Screenshot")) shotRequested_ = true;
+            if (!shotMessage_.empty()) ImGui::TextDisabled("%s", shotMessage_.c_str());
+        }
     }
     if (!renderError_.empty())
         ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "render: %s", renderError_.c_str());
@@ -480,7 +495,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
     std::optional<core::ImageRGBA> shot;
     while (!glfwWindowShouldClose(window_)) {
         if (options_.quit && options_.quit->load()) break;
-        frameInterval_.add(frameClock.seconds());
+        if (frames_ > kWarmUpFrames) frameInterval_.add(frameClock.seconds());
         frameClock.restart();
         core::Stopwatch work;
         glfwPollEvents();
@@ -530,8 +545,18 @@ std::optional<core::ImageRGBA> Viewer::run() {
             shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
             texH_ == imageH_)
             shot = readWindow();
+        if (shotRequested_ && options_.saveScreenshot) {
+            shotRequested_ = false;
+            try {
+                options_.saveScreenshot(readWindow(), shotPath_);
+                shotMessage_ = "wrote " + shotPath_;
+            } catch (const std::exception& e) {
+                shotMessage_ = e.what();
+            }
+        }
         glfwSwapBuffers(window_);
-        frameWork_.add(work.seconds());
+        // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
+        if (frames_ > kWarmUpFrames) frameWork_.add(work.seconds());
         logTimes();
         if (shot) break;
         if (scripted) {

@@ -37,6 +37,9 @@ struct ViewerOptions {
     /// Makes a scene from a path typed in the file field or dropped on the window (a scene file,
     /// a volume or a DICOM folder); throws InputError.
     std::function<io::Scene(const std::string&)> openInput;
+    /// Writes a screenshot the user asks for (F12 or the panel's button) to a path; throws
+    /// InputError (shown in the panel). Unset: the button is hidden.
+    std::function<void(const core::ImageRGBA&, const std::string&)> saveScreenshot;
     /// Raised (e.g. by SIGINT): close the window and return.
     const std::atomic<bool>* quit = nullptr;
 };
