@@ -36,6 +36,8 @@ constexpr double kFrameBudgetSeconds = 1.0 / 60.0;
 constexpr double kOrbitDegPerPixel = 0.4, kZoomPerNotch = 1.1;
 /// Frames left out of the frame-time statistics (GL shader compilation, ImGui's font atlas).
 constexpr std::uint64_t kWarmUpFrames = 3;
+/// A UI frame slower than this is logged with its phases (the bound for the UI frame).
+constexpr double kSlowFrameSeconds = 0.050;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -510,8 +512,10 @@ std::optional<core::ImageRGBA> Viewer::run() {
                 startLoad(path_);
             }
         }
+        const double tEvents = work.seconds();
         pollLoad();
         receive();
+        const double tReceive = work.seconds();
         int fbW = 0, fbH = 0;
         glfwGetFramebufferSize(window_, &fbW, &fbH);
         const int w = std::max(fbW - kPanelWidth, 1), h = std::max(fbH, 1);
@@ -524,6 +528,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
         handleImageMouse();
         drawImage();
         drawPanel();
+        const double tWidgets = work.seconds();
         ImGui::Render();
         glViewport(0, 0, fbW, fbH);
         glClearColor(0.08f, 0.08f, 0.09f, 1.f);
@@ -554,9 +559,18 @@ std::optional<core::ImageRGBA> Viewer::run() {
                 shotMessage_ = e.what();
             }
         }
+        const double tDraw = work.seconds();
         glfwSwapBuffers(window_);
         // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
         if (frames_ > kWarmUpFrames) frameWork_.add(work.seconds());
+        // A slow frame says where its time went.
+        if (options_.log && frames_ > kWarmUpFrames && work.seconds() > kSlowFrameSeconds)
+            std::fprintf(stderr,
+                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f, "
+                         "draw %.1f, present %.1f ms\n",
+                         work.seconds() * 1e3, tEvents * 1e3, (tReceive - tEvents) * 1e3,
+                         (tWidgets - tReceive) * 1e3, (tDraw - tWidgets) * 1e3,
+                         (work.seconds() - tDraw) * 1e3);
         logTimes();
         if (shot) break;
         if (scripted) {
