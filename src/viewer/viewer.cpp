@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <deque>
 #include <future>
+#include <memory>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -100,8 +101,7 @@ class Viewer {
   public:
     Viewer(const ViewerOptions& options, GLFWwindow* window) : options_(options), window_(window) {}
     ~Viewer() {
-        loadCancel_ = true;
-        if (loading_.valid()) loading_.wait();
+        *loadCancel_ = true;  // closing: the futures' destructors wait for the cancelled loads
         if (texture_) glDeleteTextures(1, &texture_);
     }
 
@@ -164,11 +164,13 @@ class Viewer {
     // Loading from the file field or a drop.
     std::string path_;
     std::future<LoadedScene> loading_;
-    std::atomic<bool> loadCancel_{false};
+    std::shared_ptr<std::atomic<bool>> loadCancel_ = std::make_shared<std::atomic<bool>>(false);
+    std::vector<std::future<LoadedScene>> retired_;  ///< superseded loads, cancelled, finishing
     std::string loadingPath_, loadError_;
     bool focusPath_ = false;
     std::string shotPath_ = "voxlight-view.png", shotMessage_;
     bool shotRequested_ = false;
+    std::future<std::string> saving_;  ///< a screenshot being written: its message when done
 
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
@@ -250,22 +252,27 @@ void Viewer::receive() {
 
 void Viewer::startLoad(const std::string& path) {
     if (path.empty()) return;
-    if (loading_.valid()) {  // a newer choice replaces a load in progress
-        loadCancel_ = true;
-        loading_.wait();
+    if (loading_.valid()) {
+        // A newer choice replaces a load in progress: cancel it and let it finish on its own
+        // (polled each frame, never waited for here).
+        *loadCancel_ = true;
+        retired_.push_back(std::move(loading_));
     }
-    loadCancel_ = false;
+    loadCancel_ = std::make_shared<std::atomic<bool>>(false);
     loadError_.clear();
     loadingPath_ = path;
     auto open = options_.openInput;
-    loading_ = std::async(std::launch::async, [this, open, path] {
+    loading_ = std::async(std::launch::async, [cancel = loadCancel_, open, path] {
         if (!open) throw InputError("viewer", "open", "opening files is not available here");
-        const core::Progress progress({}, &loadCancel_);
+        const core::Progress progress({}, cancel.get());
         return prepareScene(open(path), progress);
     });
 }
 
 void Viewer::pollLoad() {
+    std::erase_if(retired_, [](std::future<LoadedScene>& f) {
+        return f.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+    });
     if (!loading_.valid() ||
         loading_.wait_for(std::chrono::seconds(0)) != std::future_status::ready)
         return;
@@ -550,15 +557,24 @@ std::optional<core::ImageRGBA> Viewer::run() {
             shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
             texH_ == imageH_)
             shot = readWindow();
-        if (shotRequested_ && options_.saveScreenshot) {
+        if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
+            // Read back here (the frame is in the back buffer); encode and write on a thread.
             shotRequested_ = false;
-            try {
-                options_.saveScreenshot(readWindow(), shotPath_);
-                shotMessage_ = "wrote " + shotPath_;
-            } catch (const std::exception& e) {
-                shotMessage_ = e.what();
-            }
+            shotMessage_ = "writing " + shotPath_ + " ...";
+            saving_ = std::async(std::launch::async,
+                                 [save = options_.saveScreenshot, image = readWindow(),
+                                  path = shotPath_]() -> std::string {
+                                     try {
+                                         save(image, path);
+                                         return "wrote " + path;
+                                     } catch (const std::exception& e) {
+                                         return e.what();
+                                     }
+                                 });
         }
+        if (saving_.valid() &&
+            saving_.wait_for(std::chrono::seconds(0)) == std::future_status::ready)
+            shotMessage_ = saving_.get();
         const double tDraw = work.seconds();
         glfwSwapBuffers(window_);
         // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
