@@ -67,12 +67,19 @@ std::string glfwErrorText() {
                : std::string(d ? d : "unknown") + " (GLFW error " + std::to_string(code) + ")";
 }
 
-/// Paths dropped on the window (GLFW's drop callback has no user data of its own here).
-std::mutex gDropMutex;
+/// Input GLFW reports through callbacks, collected for the next frame: paths dropped on the
+/// window, and key presses (key, modifiers). ImGui's own key callback is chained to onKey.
+std::mutex gInputMutex;
 std::vector<std::string> gDropped;
+std::vector<std::pair<int, int>> gKeyPresses;
 void onDrop(GLFWwindow*, int count, const char** paths) {
-    std::lock_guard lock(gDropMutex);
+    std::lock_guard lock(gInputMutex);
     for (int i = 0; i < count; ++i) gDropped.emplace_back(paths[i]);
+}
+void onKey(GLFWwindow*, int key, int, int action, int mods) {
+    if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
+    std::lock_guard lock(gInputMutex);
+    gKeyPresses.emplace_back(key, mods);
 }
 
 /// A rolling record of durations (seconds) for the stats panel and the log.
@@ -165,6 +172,7 @@ class Viewer {
     std::string path_;
     std::future<LoadedScene> loading_;
     std::shared_ptr<std::atomic<bool>> loadCancel_ = std::make_shared<std::atomic<bool>>(false);
+    std::shared_ptr<std::atomic<double>> loadFraction_ = std::make_shared<std::atomic<double>>(0.0);
     std::vector<std::future<LoadedScene>> retired_;  ///< superseded loads, cancelled, finishing
     std::string loadingPath_, loadError_;
     bool focusPath_ = false;
@@ -262,11 +270,14 @@ void Viewer::startLoad(const std::string& path) {
     loadError_.clear();
     loadingPath_ = path;
     auto open = options_.openInput;
-    loading_ = std::async(std::launch::async, [cancel = loadCancel_, open, path] {
-        if (!open) throw InputError("viewer", "open", "opening files is not available here");
-        const core::Progress progress({}, cancel.get());
-        return prepareScene(open(path), progress);
-    });
+    loadFraction_ = std::make_shared<std::atomic<double>>(0.0);
+    loading_ = std::async(
+        std::launch::async, [cancel = loadCancel_, fraction = loadFraction_, open, path] {
+            if (!open) throw InputError("viewer", "open", "opening files is not available here");
+            const core::Progress progress(
+                [fraction](const std::string&, double f) { *fraction = f; }, cancel.get());
+            return prepareScene(open(path), progress);
+        });
 }
 
 void Viewer::pollLoad() {
@@ -338,36 +349,71 @@ void Viewer::handleImageMouse() {
 }
 
 void Viewer::handleKeys() {
-    ImGuiIO& io = ImGui::GetIO();
-    if (io.KeyCtrl && ImGui::IsKeyPressed(GLFW_KEY_O)) focusPath_ = true;
-    if (ImGui::IsKeyPressed(GLFW_KEY_F12)) shotRequested_ = true;
-    if (io.WantCaptureKeyboard) return;
-    if (ImGui::IsKeyPressed(GLFW_KEY_ESCAPE) || ImGui::IsKeyPressed(GLFW_KEY_Q))
-        glfwSetWindowShouldClose(window_, GLFW_TRUE);
-    if (ImGui::IsKeyPressed(GLFW_KEY_F1) || ImGui::IsKeyPressed(GLFW_KEY_H))
-        showHelp_ = !showHelp_, helpToggled_ = true;
-    if (io.KeyCtrl) return;
-    const struct {
-        int key;
-        const char* view;
-    } views[] = {{GLFW_KEY_A, "anterior"}, {GLFW_KEY_P, "posterior"}, {GLFW_KEY_L, "left"},
-                 {GLFW_KEY_R, "right"},    {GLFW_KEY_S, "superior"},  {GLFW_KEY_I, "inferior"},
-                 {GLFW_KEY_O, "oblique"}};
-    for (const auto& v : views)
-        if (ImGui::IsKeyPressed(v.key)) snapView(v.view);
-    if (!loaded_) return;
-    if (ImGui::IsKeyPressed(GLFW_KEY_HOME)) {
-        lookAt_.reset();
-        cameraResetGen_ = generation_ + 1;
-        setCamera(loaded_->document.value("camera", json::object()));
+    // Presses recorded by the key callback: a tap shorter than a frame is not lost (ImGui 1.86
+    // only sees which keys are down when a frame starts).
+    std::vector<std::pair<int, int>> presses;
+    {
+        std::lock_guard lock(gInputMutex);
+        presses.swap(gKeyPresses);
     }
-    if (ImGui::IsKeyPressed(GLFW_KEY_W)) setTf(tf_.withWindow(loaded_->tf.window()));
-    const bool in = ImGui::IsKeyPressed(GLFW_KEY_EQUAL) || ImGui::IsKeyPressed(GLFW_KEY_KP_ADD);
-    const bool out =
-        ImGui::IsKeyPressed(GLFW_KEY_MINUS) || ImGui::IsKeyPressed(GLFW_KEY_KP_SUBTRACT);
-    if ((in || out) && ensureLookAt()) {
-        zoom(*lookAt_, in ? kZoomPerNotch : 1.0 / kZoomPerNotch);
-        setCamera(cameraJson(*lookAt_, doc_["camera"]));
+    const bool typing = ImGui::GetIO().WantCaptureKeyboard;
+    for (const auto& [key, mods] : presses) {
+        const bool ctrl = (mods & GLFW_MOD_CONTROL) != 0;
+        if (ctrl && key == GLFW_KEY_O) focusPath_ = true;
+        if (key == GLFW_KEY_F12) shotRequested_ = true;
+        if (typing || ctrl) continue;
+        switch (key) {
+            case GLFW_KEY_ESCAPE:
+            case GLFW_KEY_Q:
+                glfwSetWindowShouldClose(window_, GLFW_TRUE);
+                break;
+            case GLFW_KEY_F1:
+            case GLFW_KEY_H:
+                showHelp_ = !showHelp_, helpToggled_ = true;
+                break;
+            case GLFW_KEY_A:
+                snapView("anterior");
+                break;
+            case GLFW_KEY_P:
+                snapView("posterior");
+                break;
+            case GLFW_KEY_L:
+                snapView("left");
+                break;
+            case GLFW_KEY_R:
+                snapView("right");
+                break;
+            case GLFW_KEY_S:
+                snapView("superior");
+                break;
+            case GLFW_KEY_I:
+                snapView("inferior");
+                break;
+            case GLFW_KEY_O:
+                snapView("oblique");
+                break;
+            case GLFW_KEY_HOME:
+                if (!loaded_) break;
+                lookAt_.reset();
+                cameraResetGen_ = generation_ + 1;
+                setCamera(loaded_->document.value("camera", json::object()));
+                break;
+            case GLFW_KEY_W:
+                if (loaded_) setTf(tf_.withWindow(loaded_->tf.window()));
+                break;
+            case GLFW_KEY_EQUAL:
+            case GLFW_KEY_KP_ADD:
+            case GLFW_KEY_MINUS:
+            case GLFW_KEY_KP_SUBTRACT:
+                if (loaded_ && ensureLookAt()) {
+                    const bool in = key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD;
+                    zoom(*lookAt_, in ? kZoomPerNotch : 1.0 / kZoomPerNotch);
+                    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+                }
+                break;
+            default:
+                break;
+        }
     }
 }
 
@@ -399,7 +445,10 @@ void Viewer::drawPanel() {
         const bool enter = ImGui::InputText("##path", &path_, ImGuiInputTextFlags_EnterReturnsTrue);
         ImGui::SameLine();
         if (ImGui::Button("Open") || enter) startLoad(path_);
-        if (!loadingPath_.empty()) ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
+        if (!loadingPath_.empty()) {
+            ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
+            ImGui::ProgressBar(float(loadFraction_->load()), ImVec2(-1, 0));
+        }
         if (!loadError_.empty()) {
             ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(1, 0.4f, 0.4f, 1));
             ImGui::TextWrapped("%s", loadError_.c_str());
@@ -511,7 +560,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
         {
             std::vector<std::string> dropped;
             {
-                std::lock_guard lock(gDropMutex);
+                std::lock_guard lock(gInputMutex);
                 dropped.swap(gDropped);
             }
             if (!dropped.empty()) {
@@ -640,6 +689,7 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     glfwMakeContextCurrent(window);
     glfwSwapInterval(scripted ? 0 : 1);
     glfwSetDropCallback(window, onDrop);
+    glfwSetKeyCallback(window, onKey);  // before ImGui's, which calls it after its own
 
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
