@@ -82,6 +82,19 @@ void onKey(GLFWwindow*, int key, int, int action, int mods) {
     gKeyPresses.emplace_back(key, mods);
 }
 
+/// The patient direction(s) a world (LPS) vector points to, strongest first: "L", "AS", ... —
+/// axes contributing less than a third of the largest are left out.
+std::string patientDirection(const glm::dvec3& d) {
+    const char* letters[3][2] = {{"L", "R"}, {"P", "A"}, {"S", "I"}};
+    int order[3] = {0, 1, 2};
+    std::sort(order, order + 3, [&](int a, int b) { return std::abs(d[a]) > std::abs(d[b]); });
+    std::string out;
+    for (int i : order)
+        if (std::abs(d[i]) >= std::abs(d[order[0]]) / 3.0 && std::abs(d[i]) > 1e-9)
+            out += letters[i][d[i] > 0 ? 0 : 1];
+    return out;
+}
+
 /// A rolling record of durations (seconds) for the stats panel and the log.
 struct Timings {
     std::deque<double> values;
@@ -432,6 +445,25 @@ void Viewer::drawImage() {
     const float x0 = std::floor((float(imageW_) - w) / 2),
                 y0 = std::floor((float(imageH_) - h) / 2);
     bg->AddImage((ImTextureID)(intptr_t)texture_, ImVec2(x0, y0), ImVec2(x0 + w, y0 + h));
+    // Orientation letters at the image's edges (the patient side each edge faces), from the
+    // camera of the image shown — as radiology viewers label their views.
+    if (renderedCamera_.contains("up") && renderedCamera_.contains("forward")) {
+        const auto v = [&](const char* k) {
+            const json& a = renderedCamera_[k];
+            return glm::dvec3(a[0].get<double>(), a[1].get<double>(), a[2].get<double>());
+        };
+        const glm::dvec3 up = v("up"), right = glm::cross(v("forward"), up);
+        const float cx = x0 + w / 2, cy = y0 + h / 2, pad = 6.f;
+        const ImU32 color = IM_COL32(255, 230, 120, 255);
+        const auto put = [&](const std::string& t, float x, float y) {
+            const ImVec2 size = ImGui::CalcTextSize(t.c_str());
+            bg->AddText(ImVec2(x - size.x / 2, y - size.y / 2), color, t.c_str());
+        };
+        put(patientDirection(-right), x0 + pad + 6, cy);
+        put(patientDirection(right), x0 + w - pad - 6, cy);
+        put(patientDirection(up), cx, y0 + pad + 6);
+        put(patientDirection(-up), cx, y0 + h - pad - 6);
+    }
 }
 
 void Viewer::drawPanel() {
