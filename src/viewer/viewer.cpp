@@ -97,9 +97,14 @@ std::string patientDirection(const glm::dvec3& d) {
 
 /// A rolling record of durations (seconds) for the stats panel and the log.
 struct Timings {
-    std::deque<double> values;
+    std::deque<double> values;  ///< the newest `capacity` values
     std::size_t capacity = 240;
+    double allMax = 0.0;                    ///< over the whole session
+    std::uint64_t count = 0, overSlow = 0;  ///< all values; those over kSlowFrameSeconds
     void add(double s) {
+        allMax = std::max(allMax, s);
+        ++count;
+        overSlow += s > kSlowFrameSeconds;
         values.push_back(s);
         if (values.size() > capacity) values.pop_front();
     }
@@ -684,11 +689,14 @@ std::optional<core::ImageRGBA> Viewer::run() {
     }
     if (options_.log)
         std::fprintf(stderr,
-                     "view: %llu frames; ui frame work mean %.1f ms max %.1f ms; coarse renders "
-                     "%zu (%.3f-%.3f s); full renders %zu (%.3f-%.3f s)\n",
-                     (unsigned long long)frames_, frameWork_.mean() * 1e3, frameWork_.max() * 1e3,
-                     coarseTimes_.values.size(), coarseTimes_.min(), coarseTimes_.max(),
-                     fullTimes_.values.size(), fullTimes_.min(), fullTimes_.max());
+                     "view: %llu frames; ui frame work max %.1f ms over the session, %llu over "
+                     "%.0f ms, mean %.1f ms (last 240); coarse renders %zu (%.3f-%.3f s); full "
+                     "renders %zu (%.3f-%.3f s)\n",
+                     (unsigned long long)frames_, frameWork_.allMax * 1e3,
+                     (unsigned long long)frameWork_.overSlow, kSlowFrameSeconds * 1e3,
+                     frameWork_.mean() * 1e3, std::size_t(coarseTimes_.count), coarseTimes_.min(),
+                     coarseTimes_.max(), std::size_t(fullTimes_.count), fullTimes_.min(),
+                     fullTimes_.max());
     return shot;
 }
 
