@@ -1,6 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "viewer/render_worker.h"
 
+#include <oneapi/tbb/task_scheduler_observer.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -13,6 +18,27 @@
 #include "viewer/view_state.h"
 
 namespace voxlight::viewer {
+
+namespace {
+/// Lowers the calling thread's OS priority (Linux nice is per thread); raising it back would need
+/// privileges, so only threads that do background work call this.
+void lowerThisThread(int nice) {
+    if (nice > 0) ::setpriority(PRIO_PROCESS, id_t(::syscall(SYS_gettid)), nice);
+}
+/// Lowers every oneTBB worker thread that joins the arena of the thread that made it (the
+/// render worker's): the ray caster's and the precompute stages' parallel loops.
+class LowerArenaWorkers : public tbb::task_scheduler_observer {
+  public:
+    explicit LowerArenaWorkers(int nice) : nice_(nice) { observe(true); }
+    ~LowerArenaWorkers() override { observe(false); }
+    void on_scheduler_entry(bool isWorker) override {
+        if (isWorker) lowerThisThread(nice_);
+    }
+
+  private:
+    int nice_;
+};
+}  // namespace
 
 std::vector<std::uint8_t> displayBytes(const io::Scene& scene, const core::ImageRGBA& film) {
     const core::ImageRGBA shown = render::toDisplay(film, float(scene.image.exposureStops),
@@ -65,6 +91,10 @@ RenderWorker::Status RenderWorker::status() const {
 }
 
 void RenderWorker::loop() {
+    // The UI thread gets a core before the render work does (its frames, not the renders, are
+    // what must keep pace on a machine with two cores).
+    lowerThisThread(options_.nice);
+    LowerArenaWorkers lowerWorkers(options_.nice);
     std::unique_lock lock(mutex_);
     // The session (and its cache of volume, gradients, skip cells, ...) lives on this thread only.
     pipeline::Session session;

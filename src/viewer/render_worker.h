@@ -54,6 +54,9 @@ struct WorkerOptions {
     int coarseFactor = 4;             ///< coarse pass: image size divided by this
     double coarseStepScale = 2.0;     ///< coarse pass: render.step multiplied by this
     double coarseTermination = 0.01;  ///< coarse pass: early ray termination at least this
+    /// OS priority (Linux nice, 0–19) of the worker thread and of the oneTBB threads that join
+    /// its parallel loops: the UI thread (nice 0) is scheduled first. 0 leaves them as they are.
+    int nice = 10;
 };
 
 /// 8-bit display pixels of a linear film (the CLI's PNG mapping): exposure, display transform,
