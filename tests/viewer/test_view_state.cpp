@@ -3,9 +3,12 @@
 // rendered camera as an explicit look-at camera must not move the picture.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 
+#include "core/error.h"
 #include "pipeline/pipeline.h"
+#include "viewer/loaded_scene.h"
 #include "viewer/render_worker.h"
 #include "viewer/view_state.h"
 
@@ -103,4 +106,44 @@ TEST(ViewState, CoarseSceneIsAQuarterOfTheSizeWithALongerStep) {
     EXPECT_EQ(coarse.image.height, 128);
     EXPECT_DOUBLE_EQ(coarse.render.stepVoxels, 2.0 * full.render.stepVoxels);
     EXPECT_DOUBLE_EQ(coarse.render.termination, 0.01);
+}
+
+TEST(LoadedScene, SummaryHistogramAndTheScenesTfForTheVolume) {
+    const io::Scene s = io::parseScene(torsoDoc(40, 32), "test", "/");
+    const viewer::LoadedScene l = viewer::prepareScene(s, core::Progress::none());
+    EXPECT_EQ(l.summary.dims, glm::ivec3(40));
+    EXPECT_EQ(l.summary.orientation, "LPS");
+    EXPECT_LT(l.summary.range[0], l.summary.range[1]);
+    // A small volume is binned whole: every voxel once.
+    std::uint64_t sum = 0;
+    for (auto c : l.histogram.counts) sum += c;
+    EXPECT_EQ(sum, l.volume->voxelCount());
+    EXPECT_EQ(l.histogram.total, l.volume->voxelCount());
+    const std::vector<float> bins = l.histogram.logNormalized();
+    EXPECT_FLOAT_EQ(*std::max_element(bins.begin(), bins.end()), 1.f);
+    // The editor starts from the TF the renderer uses (the preset, fitted to this volume).
+    EXPECT_EQ(l.tf.name(), "ct-bone");
+    EXPECT_EQ(l.document["transfer_function"]["preset"], "ct-bone");
+}
+
+TEST(LoadedScene, AVolumeWithoutATfGetsTheModalityPresetByName) {
+    json doc = torsoDoc(24, 32);
+    doc.erase("transfer_function");
+    const viewer::LoadedScene l =
+        viewer::prepareScene(io::parseScene(doc, "test", "/"), core::Progress::none());
+    // Named in the document, so that edits start from a scene that parses again.
+    ASSERT_TRUE(l.document["transfer_function"].contains("preset"));
+    EXPECT_EQ(l.document["transfer_function"]["preset"].get<std::string>(), l.tf.name());
+}
+
+TEST(LoadedScene, AFileThatFailsToLoadIsAnInputErrorNamingIt) {
+    json doc = torsoDoc(24, 32);
+    doc["volume"] = "/nonexistent/ct.nii.gz";
+    try {
+        viewer::prepareScene(io::parseScene(doc, "test", "/"), core::Progress::none());
+        FAIL() << "loaded a volume that does not exist";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("/nonexistent/ct.nii.gz"), std::string::npos)
+            << e.what();
+    }
 }
