@@ -54,5 +54,6 @@ Command addSceneCommand(CLI::App& app);
 Command addRenderCommand(CLI::App& app);
 Command addIsoCommand(CLI::App& app);
 Command addReplayCommand(CLI::App& app);
+Command addViewCommand(CLI::App& app);
 
 }  // namespace voxlight::app

@@ -1,0 +1,82 @@
+// SPDX-License-Identifier: MIT
+// voxlight view [SCENE.json | VOLUME] [--set key=value]... [--screenshot OUT.png --frames N] [--log]
+// The interactive viewer (viewer/viewer.h). The input given on the command line is loaded and
+// checked before the window opens, so a bad scene or a missing volume fails as every command does
+// (one line, exit 2). --screenshot renders N frames without interaction, waits for the
+// full-resolution image and writes the window's content (temporary file, then rename).
+#include <cstdio>
+#include <memory>
+#include <optional>
+
+#include "app/cli_support.h"
+#include "app/output_files.h"
+#include "io/image.h"
+#include "viewer/viewer.h"
+
+namespace voxlight::app {
+
+Command addViewCommand(CLI::App& app) {
+    Command c;
+    c.sub = app.add_subcommand("view", "Open the interactive viewer (GLFW + OpenGL + Dear ImGui)");
+    auto input = std::make_shared<std::string>();
+    auto sets = std::make_shared<std::vector<std::string>>();
+    auto screenshot = std::make_shared<std::string>();
+    auto frames = std::make_shared<int>(1);
+    auto log = std::make_shared<bool>(false);
+    auto quiet = std::make_shared<bool>(false);
+    c.sub->add_option("INPUT", *input,
+                      "Scene JSON, or a volume file / DICOM folder to view with defaults");
+    c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
+        ->allow_extra_args(false);
+    c.sub->add_option("--screenshot", *screenshot,
+                      "Scripted run: write the window (PNG) once the full-resolution image shows, "
+                      "then exit");
+    c.sub->add_option("--frames", *frames, "Scripted run: draw at least N UI frames first")
+        ->check(CLI::Range(1, 100000));
+    c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
+    c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
+    c.run = [=] {
+        if (!screenshot->empty()) {
+            checkOutputs({{"--screenshot", *screenshot, {".png"}}});
+            if (input->empty())
+                throw InputError("command line", "--screenshot", "needs a scene or volume",
+                                 "give SCENE.json or a volume before --screenshot");
+        }
+        std::optional<viewer::LoadedScene> initial;
+        if (!input->empty())
+            initial = viewer::prepareScene(loadInput(*input, *sets), terminalProgress(*quiet));
+        viewer::ViewerOptions options;
+        options.screenshot = *screenshot;
+        options.frames = *frames;
+        options.log = *log;
+        options.quit = &cancelFlag();
+        options.openInput = [](const std::string& path) { return loadInput(path, {}); };
+        options.saveScreenshot = [](const core::ImageRGBA& image, const std::string& path) {
+            checkOutputs(
+                {{"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}});
+            OutputFiles files;
+            files.write(path, "screenshot",
+                        [&](const std::filesystem::path& p) { io::writeImage(image, p); });
+            files.commit();
+        };
+        std::optional<core::ImageRGBA> shot = viewer::runViewer(options, std::move(initial));
+        throwIfCancelled();
+        if (!screenshot->empty()) {
+            if (!shot)
+                throw InputError("view", "--screenshot",
+                                 "the window closed before the image was ready");
+            OutputFiles files;
+            files.write(*screenshot, "--screenshot",
+                        [&](const std::filesystem::path& p) { io::writeImage(*shot, p); });
+            files.commit();
+            if (!*quiet)
+                std::fprintf(stderr, "wrote %s (%dx%d, image area %dx%d at the left)\n",
+                             screenshot->c_str(), shot->width, shot->height,
+                             shot->width - viewer::kPanelWidth, shot->height);
+        }
+        return kExitOk;
+    };
+    return c;
+}
+
+}  // namespace voxlight::app

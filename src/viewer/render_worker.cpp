@@ -1,0 +1,168 @@
+// SPDX-License-Identifier: MIT
+#include "viewer/render_worker.h"
+
+#include <oneapi/tbb/task_scheduler_observer.h>
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "core/error.h"
+#include "core/image.h"
+#include "core/progress.h"
+#include "core/timing.h"
+#include "pipeline/pipeline.h"
+#include "render/tonemap.h"
+#include "viewer/view_state.h"
+
+namespace voxlight::viewer {
+
+namespace {
+/// Lowers the calling thread's OS priority (Linux nice is per thread); raising it back would need
+/// privileges, so only threads that do background work call this.
+void lowerThisThread(int nice) {
+    if (nice > 0) ::setpriority(PRIO_PROCESS, id_t(::syscall(SYS_gettid)), nice);
+}
+/// Lowers every oneTBB worker thread that joins the arena of the thread that made it (the
+/// render worker's): the ray caster's and the precompute stages' parallel loops.
+class LowerArenaWorkers : public tbb::task_scheduler_observer {
+  public:
+    explicit LowerArenaWorkers(int nice) : nice_(nice) { observe(true); }
+    ~LowerArenaWorkers() override { observe(false); }
+    void on_scheduler_entry(bool isWorker) override {
+        if (isWorker) lowerThisThread(nice_);
+    }
+
+  private:
+    int nice_;
+};
+}  // namespace
+
+std::vector<std::uint8_t> displayBytes(const io::Scene& scene, const core::ImageRGBA& film) {
+    const core::ImageRGBA shown = render::toDisplay(film, float(scene.image.exposureStops),
+                                                    render::displayFromString(scene.image.display));
+    std::vector<std::uint8_t> out(shown.pixels.size());
+    for (std::size_t i = 0; i < out.size(); ++i)
+        out[i] = std::uint8_t(std::lround(std::clamp(shown.pixels[i], 0.f, 1.f) * 255.f));
+    return out;
+}
+
+RenderWorker::RenderWorker(WorkerOptions options)
+    : options_(options), thread_([this] { loop(); }) {}
+
+RenderWorker::~RenderWorker() {
+    {
+        std::lock_guard lock(mutex_);
+        stop_ = true;
+        cancel_ = true;
+    }
+    wake_.notify_all();
+    thread_.join();
+}
+
+void RenderWorker::submit(RenderRequest request) {
+    {
+        std::lock_guard lock(mutex_);
+        // A full pass of an older state is wasted work now; a coarse pass finishes (it is short
+        // and keeps the picture moving while the user drags).
+        if (busy_ && runningFull_ && request.generation != runningGeneration_) cancel_ = true;
+        pending_ = std::move(request);
+    }
+    wake_.notify_one();
+}
+
+std::optional<RenderedImage> RenderWorker::take() {
+    std::lock_guard lock(resultMutex_);
+    std::optional<RenderedImage> r = std::move(result_);
+    result_.reset();
+    return r;
+}
+
+RenderWorker::Status RenderWorker::status() const {
+    Status s;
+    s.busy = busy_;
+    s.coarse = busyCoarse_;
+    s.fraction = fraction_;
+    std::lock_guard lock(mutex_);
+    s.generation = runningGeneration_;
+    return s;
+}
+
+void RenderWorker::loop() {
+    // The UI thread gets a core before the render work does (its frames, not the renders, are
+    // what must keep pace on a machine with two cores).
+    lowerThisThread(options_.nice);
+    LowerArenaWorkers lowerWorkers(options_.nice);
+    std::unique_lock lock(mutex_);
+    // The session (and its cache of volume, gradients, skip cells, ...) lives on this thread only.
+    pipeline::Session session;
+    for (;;) {
+        wake_.wait(lock, [&] { return stop_ || pending_.has_value(); });
+        if (stop_) return;
+        RenderRequest request = std::move(*pending_);
+        pending_.reset();
+        cancel_ = false;
+        runningGeneration_ = request.generation;
+        const bool needCoarse = coarseDone_ != request.generation;
+        // Coarse first, for a picture within a fraction of the full render's time.
+        if (needCoarse) {
+            runningFull_ = false;
+            busy_ = busyCoarse_ = true;
+            lock.unlock();
+            const bool done = renderPass(session, request, true);
+            lock.lock();
+            busy_ = busyCoarse_ = false;
+            if (done) coarseDone_ = request.generation;
+            if (stop_) return;
+        }
+        if (request.interacting || pending_) continue;  // a newer state waits: render that
+        runningFull_ = true;
+        busy_ = true;
+        lock.unlock();
+        renderPass(session, request, false);
+        lock.lock();
+        busy_ = false;
+        runningFull_ = false;
+        if (stop_) return;
+    }
+}
+
+bool RenderWorker::renderPass(pipeline::Session& session, const RenderRequest& request,
+                              bool coarse) {
+    RenderedImage out;
+    out.generation = request.generation;
+    out.coarse = coarse;
+    fraction_ = 0.0;
+    const core::Progress progress([this](const std::string&, double f) { fraction_ = f; },
+                                  &cancel_);
+    try {
+        const io::Scene scene =
+            coarse ? coarseScene(request.scene, options_.coarseFactor, options_.coarseStepScale,
+                                 options_.coarseTermination)
+                   : request.scene;
+        core::Stopwatch sw;
+        pipeline::RunResult r = session.run(scene, {}, progress);
+        out.seconds = sw.seconds();
+        const auto denoised = r.images.find("denoised");
+        const core::ImageRGBA& film = denoised != r.images.end() ? denoised->second : r.image;
+        out.width = film.width;
+        out.height = film.height;
+        out.rgba = displayBytes(scene, film);
+        if (r.details.contains("camera")) out.camera = r.details["camera"];
+        out.warnings = r.warnings;
+    } catch (const CancelledError&) {
+        ++cancelled_;
+        return false;
+    } catch (const std::exception& e) {
+        out.error = e.what();
+    }
+    ++completed_;
+    const bool ok = out.error.empty();
+    std::lock_guard lock(resultMutex_);
+    result_ = std::move(out);
+    return ok;
+}
+
+}  // namespace voxlight::viewer

@@ -1,0 +1,109 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The viewer's background renderer: one thread that renders scenes through the pipeline (the same
+// code `voxlight render` runs, with its artifact cache, so a camera change re-runs only the frame
+// stages) while the UI thread keeps drawing. The UI never waits for it:
+//   submit()  hands over the newest scene and returns at once. A full-resolution pass in progress
+//             for an older state is cancelled (core::Progress's cancel flag); a coarse pass is let
+//             finish (it is short), then the newest request is taken — requests in between are
+//             dropped, never queued.
+//   take()    returns the newest finished image, if any, without blocking (a mutex held only to
+//             move a buffer).
+// Progressive refinement: each new state is first rendered coarse (coarseScene: 1/4 of the size,
+// twice the step), then — unless the request says the user is still interacting — at full
+// resolution. A request repeating a state already rendered coarse goes straight to full.
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "core/image.h"
+#include "io/scene.h"
+
+namespace voxlight::pipeline {
+class Session;
+}
+
+namespace voxlight::viewer {
+
+struct RenderRequest {
+    io::Scene scene;               ///< the full-resolution scene
+    std::uint64_t generation = 0;  ///< the state's number: equal numbers are equal scenes
+    bool interacting = false;      ///< the user is dragging: coarse only
+};
+
+/// A finished render, display-encoded as the CLI's PNG is (render::toDisplay with the scene's
+/// exposure and display transform, then 8 bits per channel rounded to nearest).
+struct RenderedImage {
+    std::uint64_t generation = 0;
+    bool coarse = false;
+    int width = 0, height = 0;
+    std::vector<std::uint8_t> rgba;  ///< row 0 = top
+    double seconds = 0.0;            ///< the pipeline run, wall clock
+    nlohmann::json camera;           ///< the camera as used (pipeline details "camera")
+    std::vector<std::string> warnings;
+    std::string error;  ///< non-empty: the render failed (an InputError's message); no pixels
+};
+
+struct WorkerOptions {
+    int coarseFactor = 4;             ///< coarse pass: image size divided by this
+    double coarseStepScale = 2.0;     ///< coarse pass: render.step multiplied by this
+    double coarseTermination = 0.01;  ///< coarse pass: early ray termination at least this
+    /// OS priority (Linux nice, 0–19) of the worker thread and of the oneTBB threads that join
+    /// its parallel loops: the UI thread (nice 0) is scheduled first. 0 leaves them as they are.
+    int nice = 10;
+};
+
+/// 8-bit display pixels of a linear film (the CLI's PNG mapping): exposure, display transform,
+/// clamp, round to nearest.
+std::vector<std::uint8_t> displayBytes(const io::Scene& scene, const core::ImageRGBA& film);
+
+class RenderWorker {
+  public:
+    explicit RenderWorker(WorkerOptions options = {});
+    ~RenderWorker();  ///< cancels the running pass and joins the thread
+    RenderWorker(const RenderWorker&) = delete;
+    RenderWorker& operator=(const RenderWorker&) = delete;
+
+    void submit(RenderRequest request);
+    std::optional<RenderedImage> take();
+
+    struct Status {
+        bool busy = false;
+        bool coarse = false;    ///< the running pass
+        double fraction = 0.0;  ///< of the running pass's current stage
+        std::uint64_t generation = 0;
+    };
+    Status status() const;
+    /// Renders finished so far (both passes), for tests and the stats panel.
+    std::uint64_t completed() const { return completed_.load(); }
+    /// Passes cancelled so far.
+    std::uint64_t cancelled() const { return cancelled_.load(); }
+
+  private:
+    void loop();
+    bool renderPass(pipeline::Session& session, const RenderRequest& request, bool coarse);
+
+    WorkerOptions options_;
+    mutable std::mutex mutex_;
+    std::condition_variable wake_;
+    std::optional<RenderRequest> pending_;
+    bool stop_ = false;
+    bool runningFull_ = false;
+    std::uint64_t runningGeneration_ = 0;
+    std::uint64_t coarseDone_ = ~std::uint64_t(0);  ///< generation last rendered coarse
+    std::atomic<bool> cancel_{false};
+    std::atomic<bool> busy_{false}, busyCoarse_{false};
+    std::atomic<double> fraction_{0.0};
+    std::atomic<std::uint64_t> completed_{0}, cancelled_{0};
+    std::mutex resultMutex_;
+    std::optional<RenderedImage> result_;
+    std::thread thread_;
+};
+
+}  // namespace voxlight::viewer

@@ -1,0 +1,760 @@
+// SPDX-License-Identifier: MIT
+#include "viewer/viewer.h"
+
+#define GLFW_INCLUDE_NONE
+#include <GL/gl.h>
+#include <GLFW/glfw3.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+#include <imgui.h>
+#include <imgui_stdlib.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cstdio>
+#include <deque>
+#include <future>
+#include <memory>
+#include <mutex>
+#include <thread>
+#include <vector>
+
+#include "core/error.h"
+#include "core/timing.h"
+#include "viewer/render_worker.h"
+#include "viewer/tf_editor.h"
+#include "viewer/view_state.h"
+
+namespace voxlight::viewer {
+
+namespace {
+using nlohmann::json;
+
+/// Frame budget of the UI loop when idle: it sleeps in glfwWaitEventsTimeout (woken by any event)
+/// for what is left of it, so an idle viewer leaves the cores to the renderer.
+constexpr double kFrameBudgetSeconds = 1.0 / 60.0;
+/// Mouse: degrees of orbit per pixel dragged; zoom factor per wheel notch.
+constexpr double kOrbitDegPerPixel = 0.4, kZoomPerNotch = 1.1;
+/// Frames left out of the frame-time statistics (GL shader compilation, ImGui's font atlas).
+constexpr std::uint64_t kWarmUpFrames = 3;
+/// A UI frame slower than this is logged with its phases (the issue's bound for the UI frame).
+constexpr double kSlowFrameSeconds = 0.050;
+/// Window size when started without a scene.
+constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
+
+const char* const kHelp =
+    "left drag          orbit about the volume\n"
+    "shift+left / middle drag   pan\n"
+    "wheel, + / -       zoom\n"
+    "right drag         window (horizontal) / level (vertical)\n"
+    "A P L R S I        anterior, posterior, left, right, superior,\n"
+    "                   inferior view (fitted to what the TF shows)\n"
+    "O                  oblique view\n"
+    "Home               back to the scene's own camera\n"
+    "W                  back to the scene's window/level\n"
+    "F1 or H            show / hide this help\n"
+    "F12                save a screenshot (path in the File panel)\n"
+    "Ctrl+O             focus the file field\n"
+    "drop a file        open it (scene, volume, DICOM folder)\n"
+    "Esc or Q           quit\n";
+
+/// GLFW's last error, for the one-line message when the window cannot be opened.
+std::string glfwErrorText() {
+    const char* d = nullptr;
+    const int code = glfwGetError(&d);
+    return code == GLFW_NO_ERROR
+               ? std::string("no reason given")
+               : std::string(d ? d : "unknown") + " (GLFW error " + std::to_string(code) + ")";
+}
+
+/// Input GLFW reports through callbacks, collected for the next frame: paths dropped on the
+/// window, and key presses (key, modifiers). ImGui's own key callback is chained to onKey.
+std::mutex gInputMutex;
+std::vector<std::string> gDropped;
+std::vector<std::pair<int, int>> gKeyPresses;
+void onDrop(GLFWwindow*, int count, const char** paths) {
+    std::lock_guard lock(gInputMutex);
+    for (int i = 0; i < count; ++i) gDropped.emplace_back(paths[i]);
+}
+void onKey(GLFWwindow*, int key, int, int action, int mods) {
+    if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
+    std::lock_guard lock(gInputMutex);
+    gKeyPresses.emplace_back(key, mods);
+}
+
+/// The patient direction(s) a world (LPS) vector points to, strongest first: "L", "AS", ... —
+/// axes contributing less than a third of the largest are left out.
+std::string patientDirection(const glm::dvec3& d) {
+    const char* letters[3][2] = {{"L", "R"}, {"P", "A"}, {"S", "I"}};
+    int order[3] = {0, 1, 2};
+    std::sort(order, order + 3, [&](int a, int b) { return std::abs(d[a]) > std::abs(d[b]); });
+    std::string out;
+    for (int i : order)
+        if (std::abs(d[i]) >= std::abs(d[order[0]]) / 3.0 && std::abs(d[i]) > 1e-9)
+            out += letters[i][d[i] > 0 ? 0 : 1];
+    return out;
+}
+
+/// A rolling record of durations (seconds) for the stats panel and the log.
+struct Timings {
+    std::deque<double> values;  ///< the newest `capacity` values
+    std::size_t capacity = 240;
+    double allMax = 0.0;                    ///< over the whole session
+    std::uint64_t count = 0, overSlow = 0;  ///< all values; those over kSlowFrameSeconds
+    void add(double s) {
+        allMax = std::max(allMax, s);
+        ++count;
+        overSlow += s > kSlowFrameSeconds;
+        values.push_back(s);
+        if (values.size() > capacity) values.pop_front();
+    }
+    double last() const { return values.empty() ? 0.0 : values.back(); }
+    double max() const {
+        return values.empty() ? 0.0 : *std::max_element(values.begin(), values.end());
+    }
+    double mean() const {
+        double s = 0.0;
+        for (double v : values) s += v;
+        return values.empty() ? 0.0 : s / double(values.size());
+    }
+    double min() const {
+        return values.empty() ? 0.0 : *std::min_element(values.begin(), values.end());
+    }
+};
+
+class Viewer {
+  public:
+    Viewer(const ViewerOptions& options, GLFWwindow* window) : options_(options), window_(window) {}
+    ~Viewer() {
+        *loadCancel_ = true;  // closing: the futures' destructors wait for the cancelled loads
+        if (texture_) glDeleteTextures(1, &texture_);
+    }
+
+    void adopt(LoadedScene scene);
+    std::optional<core::ImageRGBA> run();
+
+  private:
+    // Scene edits: every change bumps the generation and asks the worker for a new picture.
+    void changed() { ++generation_, dirty_ = true; }
+    void setCamera(const json& camera) {
+        doc_["camera"] = camera;
+        changed();
+    }
+    void setTf(const optics::TransferFunction& tf) {
+        tf_ = tf;
+        doc_["transfer_function"] = transferFunctionJson(tf_);
+        changed();
+    }
+    bool ensureLookAt();
+    void snapView(const std::string& view);
+    void submit(bool interacting);
+    void receive();
+    void startLoad(const std::string& path);
+    void pollLoad();
+    void handleImageMouse();
+    void handleKeys();
+    void drawImage();
+    void drawPanel();
+    core::ImageRGBA readWindow() const;
+    void logTimes();
+
+    ViewerOptions options_;
+    GLFWwindow* window_;
+    RenderWorker worker_;
+
+    std::optional<LoadedScene> loaded_;
+    json doc_;                      ///< the scene as edited
+    optics::TransferFunction tf_;   ///< the TF as edited (explicit after the first edit)
+    std::optional<LookAt> lookAt_;  ///< set once the mouse moved the camera
+    json renderedCamera_;           ///< the camera of the newest image
+    std::uint64_t renderedCameraGen_ = 0, cameraResetGen_ = 0;
+    std::uint64_t generation_ = 1;
+    bool dirty_ = false, interactingSent_ = false;
+    int imageW_ = 0, imageH_ = 0;  ///< the image area, window pixels
+
+    // Mouse drags on the image.
+    enum class Drag { None, Orbit, Pan, Window } drag_ = Drag::None;
+    ImVec2 dragStart_{0, 0};
+    optics::TransferFunction tfAtDrag_;
+    bool tfEditing_ = false;
+
+    // The shown image.
+    GLuint texture_ = 0;
+    int texW_ = 0, texH_ = 0;
+    bool shownFull_ = false;
+    std::uint64_t shownGen_ = 0;
+    std::string renderError_;
+    std::vector<std::string> renderWarnings_;
+
+    // Loading from the file field or a drop.
+    std::string path_;
+    std::future<LoadedScene> loading_;
+    std::shared_ptr<std::atomic<bool>> loadCancel_ = std::make_shared<std::atomic<bool>>(false);
+    std::shared_ptr<std::atomic<double>> loadFraction_ = std::make_shared<std::atomic<double>>(0.0);
+    std::vector<std::future<LoadedScene>> retired_;  ///< superseded loads, cancelled, finishing
+    std::string loadingPath_, loadError_;
+    bool focusPath_ = false;
+    std::string shotPath_ = "voxlight-view.png", shotMessage_;
+    bool shotRequested_ = false;
+    std::future<std::string> saving_;  ///< a screenshot being written: its message when done
+
+    TfEditorState tfEditor_;
+    bool showHelp_ = false, helpToggled_ = false;
+    Timings frameWork_, frameInterval_, coarseTimes_, fullTimes_;
+    core::Stopwatch logClock_;
+    std::uint64_t frames_ = 0;
+};
+
+void Viewer::adopt(LoadedScene scene) {
+    loaded_ = std::move(scene);
+    doc_ = loaded_->document;
+    tf_ = loaded_->tf;
+    tfEditor_ = {};
+    lookAt_.reset();
+    cameraResetGen_ = generation_ + 1;
+    path_ = loaded_->scene.source;
+    changed();
+}
+
+bool Viewer::ensureLookAt() {
+    if (lookAt_) return true;
+    // Continue from the camera the renderer used for the current placement (none yet: wait).
+    if (renderedCamera_.is_null() || renderedCameraGen_ < cameraResetGen_) return false;
+    lookAt_ = lookAtFromRendered(renderedCamera_, loaded_->centre);
+    return true;
+}
+
+void Viewer::snapView(const std::string& view) {
+    if (!loaded_) return;
+    lookAt_.reset();
+    cameraResetGen_ = generation_ + 1;
+    setCamera(namedViewJson(view, doc_.value("camera", json::object())));
+}
+
+void Viewer::submit(bool interacting) {
+    if (!loaded_ || imageW_ < 1 || imageH_ < 1) return;
+    json doc = doc_;
+    doc["image"]["width"] = imageW_;
+    doc["image"]["height"] = imageH_;
+    try {
+        worker_.submit({sceneFromDocument(doc, loaded_->scene.source), generation_, interacting});
+        renderError_.clear();
+    } catch (const std::exception& e) {
+        renderError_ = e.what();
+    }
+}
+
+void Viewer::receive() {
+    std::optional<RenderedImage> r = worker_.take();
+    if (!r) return;
+    if (!r->error.empty()) {
+        renderError_ = r->error;
+        return;
+    }
+    (r->coarse ? coarseTimes_ : fullTimes_).add(r->seconds);
+    if (options_.log)
+        std::fprintf(stderr, "view: render %s %dx%d in %.3f s (state %llu)\n",
+                     r->coarse ? "coarse" : "full", r->width, r->height, r->seconds,
+                     (unsigned long long)r->generation);
+    // An older state's image still shows the volume better than nothing; a newer one replaces it.
+    if (r->generation < shownGen_) return;
+    if (!texture_) glGenTextures(1, &texture_);
+    glBindTexture(GL_TEXTURE_2D, texture_);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, r->width, r->height, 0, GL_RGBA, GL_UNSIGNED_BYTE,
+                 r->rgba.data());
+    // Full resolution is shown pixel for pixel; the coarse image is magnified smoothly.
+    const GLint filter = r->coarse ? GL_LINEAR : GL_NEAREST;
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    texW_ = r->width, texH_ = r->height;
+    shownFull_ = !r->coarse;
+    shownGen_ = r->generation;
+    renderWarnings_ = r->warnings;
+    if (!r->camera.is_null()) renderedCamera_ = r->camera, renderedCameraGen_ = r->generation;
+}
+
+void Viewer::startLoad(const std::string& path) {
+    if (path.empty()) return;
+    if (loading_.valid()) {
+        // A newer choice replaces a load in progress: cancel it and let it finish on its own
+        // (polled each frame, never waited for here).
+        *loadCancel_ = true;
+        retired_.push_back(std::move(loading_));
+    }
+    loadCancel_ = std::make_shared<std::atomic<bool>>(false);
+    loadError_.clear();
+    loadingPath_ = path;
+    auto open = options_.openInput;
+    loadFraction_ = std::make_shared<std::atomic<double>>(0.0);
+    loading_ = std::async(
+        std::launch::async, [cancel = loadCancel_, fraction = loadFraction_, open, path] {
+            if (!open) throw InputError("viewer", "open", "opening files is not available here");
+            const core::Progress progress(
+                [fraction](const std::string&, double f) { *fraction = f; }, cancel.get());
+            return prepareScene(open(path), progress);
+        });
+}
+
+void Viewer::pollLoad() {
+    std::erase_if(retired_, [](std::future<LoadedScene>& f) {
+        return f.wait_for(std::chrono::seconds(0)) == std::future_status::ready;
+    });
+    if (!loading_.valid() ||
+        loading_.wait_for(std::chrono::seconds(0)) != std::future_status::ready)
+        return;
+    try {
+        adopt(loading_.get());
+    } catch (const CancelledError&) {
+    } catch (const std::exception& e) {
+        // The current volume stays; the error says why the new one did not load.
+        loadError_ = std::string("could not open ") + loadingPath_ + ": " + e.what();
+        if (options_.log) std::fprintf(stderr, "view: %s\n", loadError_.c_str());
+    }
+    loadingPath_.clear();
+}
+
+void Viewer::handleImageMouse() {
+    ImGuiIO& io = ImGui::GetIO();
+    const ImVec2 m = io.MousePos;
+    const bool overImage = m.x >= 0 && m.y >= 0 && m.x < imageW_ && m.y < imageH_;
+    if (drag_ == Drag::None && overImage && !io.WantCaptureMouse && loaded_) {
+        if (ImGui::IsMouseClicked(ImGuiMouseButton_Left))
+            drag_ = io.KeyShift ? Drag::Pan : Drag::Orbit;
+        else if (ImGui::IsMouseClicked(ImGuiMouseButton_Middle))
+            drag_ = Drag::Pan;
+        else if (ImGui::IsMouseClicked(ImGuiMouseButton_Right)) {
+            drag_ = Drag::Window;
+            tfAtDrag_ = tf_;
+        }
+        dragStart_ = m;
+        if (io.MouseWheel != 0.f && ensureLookAt()) {
+            zoom(*lookAt_, std::pow(kZoomPerNotch, double(io.MouseWheel)));
+            setCamera(cameraJson(*lookAt_, doc_["camera"]));
+        }
+    }
+    const bool held = ImGui::IsMouseDown(ImGuiMouseButton_Left) ||
+                      ImGui::IsMouseDown(ImGuiMouseButton_Middle) ||
+                      ImGui::IsMouseDown(ImGuiMouseButton_Right);
+    if (drag_ != Drag::None && !held) {
+        drag_ = Drag::None;
+        return;
+    }
+    const ImVec2 d = io.MouseDelta;
+    if (drag_ == Drag::None || (d.x == 0.f && d.y == 0.f)) return;
+    switch (drag_) {
+        case Drag::Orbit:
+            if (!ensureLookAt()) return;
+            orbit(*lookAt_, -d.x * kOrbitDegPerPixel, d.y * kOrbitDegPerPixel);
+            setCamera(cameraJson(*lookAt_, doc_["camera"]));
+            break;
+        case Drag::Pan:
+            if (!ensureLookAt()) return;
+            pan(*lookAt_, d.x, d.y, imageH_);
+            setCamera(cameraJson(*lookAt_, doc_["camera"]));
+            break;
+        case Drag::Window: {
+            const optics::Window w =
+                dragWindow(tfAtDrag_.window(), m.x - dragStart_.x, m.y - dragStart_.y);
+            if (w.width > 0.f) setTf(tfAtDrag_.withWindow(w));
+            break;
+        }
+        case Drag::None:
+            break;
+    }
+}
+
+void Viewer::handleKeys() {
+    // Presses recorded by the key callback: a tap shorter than a frame is not lost (ImGui 1.86
+    // only sees which keys are down when a frame starts).
+    std::vector<std::pair<int, int>> presses;
+    {
+        std::lock_guard lock(gInputMutex);
+        presses.swap(gKeyPresses);
+    }
+    const bool typing = ImGui::GetIO().WantCaptureKeyboard;
+    for (const auto& [key, mods] : presses) {
+        const bool ctrl = (mods & GLFW_MOD_CONTROL) != 0;
+        if (ctrl && key == GLFW_KEY_O) focusPath_ = true;
+        if (key == GLFW_KEY_F12) shotRequested_ = true;
+        if (typing || ctrl) continue;
+        switch (key) {
+            case GLFW_KEY_ESCAPE:
+            case GLFW_KEY_Q:
+                glfwSetWindowShouldClose(window_, GLFW_TRUE);
+                break;
+            case GLFW_KEY_F1:
+            case GLFW_KEY_H:
+                showHelp_ = !showHelp_, helpToggled_ = true;
+                break;
+            case GLFW_KEY_A:
+                snapView("anterior");
+                break;
+            case GLFW_KEY_P:
+                snapView("posterior");
+                break;
+            case GLFW_KEY_L:
+                snapView("left");
+                break;
+            case GLFW_KEY_R:
+                snapView("right");
+                break;
+            case GLFW_KEY_S:
+                snapView("superior");
+                break;
+            case GLFW_KEY_I:
+                snapView("inferior");
+                break;
+            case GLFW_KEY_O:
+                snapView("oblique");
+                break;
+            case GLFW_KEY_HOME:
+                if (!loaded_) break;
+                lookAt_.reset();
+                cameraResetGen_ = generation_ + 1;
+                setCamera(loaded_->document.value("camera", json::object()));
+                break;
+            case GLFW_KEY_W:
+                if (loaded_) setTf(tf_.withWindow(loaded_->tf.window()));
+                break;
+            case GLFW_KEY_EQUAL:
+            case GLFW_KEY_KP_ADD:
+            case GLFW_KEY_MINUS:
+            case GLFW_KEY_KP_SUBTRACT:
+                if (loaded_ && ensureLookAt()) {
+                    const bool in = key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD;
+                    zoom(*lookAt_, in ? kZoomPerNotch : 1.0 / kZoomPerNotch);
+                    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+                }
+                break;
+            default:
+                break;
+        }
+    }
+}
+
+void Viewer::drawImage() {
+    ImDrawList* bg = ImGui::GetBackgroundDrawList();
+    if (!texture_ || texW_ < 1 || texH_ < 1) {
+        bg->AddText(ImVec2(20, 20), IM_COL32(200, 200, 200, 255),
+                    loaded_ ? "rendering ..."
+                            : "open a scene, volume or DICOM folder (panel, or drop it here)");
+        return;
+    }
+    // Fit the image into the area keeping its aspect (equal sizes: pixel for pixel).
+    const float sx = float(imageW_) / float(texW_), sy = float(imageH_) / float(texH_);
+    const float s = shownFull_ && texW_ == imageW_ && texH_ == imageH_ ? 1.f : std::min(sx, sy);
+    const float w = float(texW_) * s, h = float(texH_) * s;
+    const float x0 = std::floor((float(imageW_) - w) / 2),
+                y0 = std::floor((float(imageH_) - h) / 2);
+    bg->AddImage((ImTextureID)(intptr_t)texture_, ImVec2(x0, y0), ImVec2(x0 + w, y0 + h));
+    // Orientation letters at the image's edges (the patient side each edge faces), from the
+    // camera of the image shown — as radiology viewers label their views.
+    if (renderedCamera_.contains("up") && renderedCamera_.contains("forward")) {
+        const auto v = [&](const char* k) {
+            const json& a = renderedCamera_[k];
+            return glm::dvec3(a[0].get<double>(), a[1].get<double>(), a[2].get<double>());
+        };
+        const glm::dvec3 up = v("up"), right = glm::cross(v("forward"), up);
+        const float cx = x0 + w / 2, cy = y0 + h / 2, pad = 6.f;
+        const ImU32 color = IM_COL32(255, 230, 120, 255);
+        const auto put = [&](const std::string& t, float x, float y) {
+            const ImVec2 size = ImGui::CalcTextSize(t.c_str());
+            bg->AddText(ImVec2(x - size.x / 2, y - size.y / 2), color, t.c_str());
+        };
+        put(patientDirection(-right), x0 + pad + 6, cy);
+        put(patientDirection(right), x0 + w - pad - 6, cy);
+        put(patientDirection(up), cx, y0 + pad + 6);
+        put(patientDirection(-up), cx, y0 + h - pad - 6);
+    }
+}
+
+void Viewer::drawPanel() {
+    ImGui::SetNextWindowPos(ImVec2(float(imageW_), 0));
+    ImGui::SetNextWindowSize(ImVec2(float(kPanelWidth), ImGui::GetIO().DisplaySize.y));
+    ImGui::Begin("voxlight", nullptr,
+                 ImGuiWindowFlags_NoMove | ImGuiWindowFlags_NoResize | ImGuiWindowFlags_NoCollapse);
+    const float width = ImGui::GetContentRegionAvail().x;
+    if (ImGui::CollapsingHeader("File", ImGuiTreeNodeFlags_DefaultOpen)) {
+        if (focusPath_) ImGui::SetKeyboardFocusHere(), focusPath_ = false;
+        const bool enter = ImGui::InputText("##path", &path_, ImGuiInputTextFlags_EnterReturnsTrue);
+        ImGui::SameLine();
+        if (ImGui::Button("Open") || enter) startLoad(path_);
+        if (!loadingPath_.empty()) {
+            ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
+            ImGui::ProgressBar(float(loadFraction_->load()), ImVec2(-1, 0));
+        }
+        if (!loadError_.empty()) {
+            ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(1, 0.4f, 0.4f, 1));
+            ImGui::TextWrapped("%s", loadError_.c_str());
+            ImGui::PopStyleColor();
+        }
+        if (options_.saveScreenshot) {
+            ImGui::InputText("##shot", &shotPath_);
+            ImGui::SameLine();
+            if (ImGui::Button("Screenshot")) shotRequested_ = true;
+            if (!shotMessage_.empty()) ImGui::TextDisabled("%s", shotMessage_.c_str());
+        }
+    }
+    if (!renderError_.empty())
+        ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "render: %s", renderError_.c_str());
+    for (const auto& w : renderWarnings_)
+        ImGui::TextColored(ImVec4(1, 0.8f, 0.3f, 1), "%s", w.c_str());
+    if (loaded_ && ImGui::CollapsingHeader("View", ImGuiTreeNodeFlags_DefaultOpen)) {
+        const char* names[] = {"A", "P", "L", "R", "S", "I"};
+        const char* views[] = {"anterior", "posterior", "left", "right", "superior", "inferior"};
+        for (int i = 0; i < 6; ++i) {
+            if (i) ImGui::SameLine();
+            if (ImGui::Button(names[i], ImVec2(34, 0))) snapView(views[i]);
+            if (ImGui::IsItemHovered()) ImGui::SetTooltip("%s view", views[i]);
+        }
+        ImGui::SameLine();
+        if (ImGui::Button("scene camera")) {
+            lookAt_.reset();
+            cameraResetGen_ = generation_ + 1;
+            setCamera(loaded_->document.value("camera", json::object()));
+        }
+    }
+    if (loaded_ && ImGui::CollapsingHeader("Info")) {
+        const VolumeSummary& s = loaded_->summary;
+        ImGui::TextWrapped("%s", s.description.c_str());
+        ImGui::Text("format      %s", s.format.c_str());
+        ImGui::Text("modality    %s", s.modality.c_str());
+        ImGui::Text("dims        %d x %d x %d", s.dims.x, s.dims.y, s.dims.z);
+        ImGui::Text("spacing     %.3f x %.3f x %.3f mm", s.spacing.x, s.spacing.y, s.spacing.z);
+        ImGui::Text("extent      %.1f x %.1f x %.1f mm", s.extent.x, s.extent.y, s.extent.z);
+        ImGui::Text("origin      %.1f, %.1f, %.1f mm", s.origin.x, s.origin.y, s.origin.z);
+        ImGui::Text("orientation %s", s.orientation.c_str());
+        ImGui::Text("type        %s", s.type.c_str());
+        ImGui::Text("range       %.1f .. %.1f %s", s.range[0], s.range[1], s.unit.c_str());
+        ImGui::Text("method      %s", loaded_->scene.method.name.c_str());
+        for (const auto& w : s.warnings) ImGui::TextWrapped("warning: %s", w.c_str());
+    }
+    if (loaded_ && ImGui::CollapsingHeader("Transfer function", ImGuiTreeNodeFlags_DefaultOpen)) {
+        optics::TransferFunction tf = tf_;
+        const TfEditResult r = drawTfEditor(tfEditor_, tf, loaded_->tf, loaded_->histogram,
+                                            loaded_->robustRange, width);
+        tfEditing_ = r.active;
+        if (r.changed) setTf(tf);
+    }
+    if (ImGui::CollapsingHeader("Stats", ImGuiTreeNodeFlags_DefaultOpen)) {
+        const RenderWorker::Status st = worker_.status();
+        ImGui::Text("UI frame work  %.1f ms (mean %.1f, max %.1f)", frameWork_.last() * 1e3,
+                    frameWork_.mean() * 1e3, frameWork_.max() * 1e3);
+        ImGui::Text("UI frame interval max %.1f ms", frameInterval_.max() * 1e3);
+        ImGui::Text("coarse render  %.3f s (%zu)", coarseTimes_.last(), coarseTimes_.values.size());
+        ImGui::Text("full render    %.3f s (%zu)", fullTimes_.last(), fullTimes_.values.size());
+        if (st.busy)
+            ImGui::Text("rendering %s %3.0f %%", st.coarse ? "coarse" : "full", st.fraction * 100);
+        else
+            ImGui::TextDisabled("%s", shownFull_ ? "idle: full resolution shown" : "idle");
+    }
+    if (helpToggled_) ImGui::SetNextItemOpen(showHelp_), helpToggled_ = false;
+    if (ImGui::CollapsingHeader("Help (F1)")) ImGui::TextUnformatted(kHelp);
+    ImGui::End();
+}
+
+core::ImageRGBA Viewer::readWindow() const {
+    int w = 0, h = 0;
+    glfwGetFramebufferSize(window_, &w, &h);
+    std::vector<std::uint8_t> bytes(std::size_t(4) * w * h);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadBuffer(GL_BACK);
+    glReadPixels(0, 0, w, h, GL_RGBA, GL_UNSIGNED_BYTE, bytes.data());
+    core::ImageRGBA img(w, h);
+    // GL's row 0 is the bottom; the image's is the top.
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const std::uint8_t* p = &bytes[4 * (std::size_t(h - 1 - y) * w + x)];
+            float* q = img.at(x, y);
+            for (int c = 0; c < 3; ++c) q[c] = float(p[c]) / 255.f;
+            q[3] = 1.f;
+        }
+    return img;
+}
+
+void Viewer::logTimes() {
+    if (!options_.log || logClock_.seconds() < 1.0) return;
+    logClock_.restart();
+    std::fprintf(
+        stderr, "view: ui frame work mean %.1f ms max %.1f ms, interval max %.1f ms (%zu frames)\n",
+        frameWork_.mean() * 1e3, frameWork_.max() * 1e3, frameInterval_.max() * 1e3,
+        frameWork_.values.size());
+}
+
+std::optional<core::ImageRGBA> Viewer::run() {
+    const bool scripted = !options_.screenshot.empty();
+    core::Stopwatch sinceStart, frameClock;
+    std::optional<core::ImageRGBA> shot;
+    while (!glfwWindowShouldClose(window_)) {
+        if (options_.quit && options_.quit->load()) break;
+        if (frames_ > kWarmUpFrames) frameInterval_.add(frameClock.seconds());
+        frameClock.restart();
+        core::Stopwatch work;
+        glfwPollEvents();
+        {
+            std::vector<std::string> dropped;
+            {
+                std::lock_guard lock(gInputMutex);
+                dropped.swap(gDropped);
+            }
+            if (!dropped.empty()) {
+                path_ = dropped.back();
+                startLoad(path_);
+            }
+        }
+        const double tEvents = work.seconds();
+        pollLoad();
+        receive();
+        const double tReceive = work.seconds();
+        int fbW = 0, fbH = 0;
+        glfwGetFramebufferSize(window_, &fbW, &fbH);
+        const int w = std::max(fbW - kPanelWidth, 1), h = std::max(fbH, 1);
+        if (w != imageW_ || h != imageH_) imageW_ = w, imageH_ = h, changed();
+
+        ImGui_ImplOpenGL3_NewFrame();
+        ImGui_ImplGlfw_NewFrame();
+        ImGui::NewFrame();
+        handleKeys();
+        handleImageMouse();
+        drawImage();
+        drawPanel();
+        const double tWidgets = work.seconds();
+        ImGui::Render();
+        glViewport(0, 0, fbW, fbH);
+        glClearColor(0.08f, 0.08f, 0.09f, 1.f);
+        glClear(GL_COLOR_BUFFER_BIT);
+        ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+
+        // Ask for a picture of the newest state; coarse while the user drags.
+        const bool interacting = drag_ != Drag::None || tfEditing_;
+        if (dirty_) {
+            submit(interacting);
+            dirty_ = false;
+            interactingSent_ = interacting;
+        } else if (interactingSent_ && !interacting) {
+            submit(false);  // the drag ended: refine the same state
+            interactingSent_ = false;
+        }
+        ++frames_;
+        if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
+            shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
+            texH_ == imageH_)
+            shot = readWindow();
+        if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
+            // Read back here (the frame is in the back buffer); encode and write on a thread.
+            shotRequested_ = false;
+            shotMessage_ = "writing " + shotPath_ + " ...";
+            saving_ = std::async(std::launch::async,
+                                 [save = options_.saveScreenshot, image = readWindow(),
+                                  path = shotPath_]() -> std::string {
+                                     try {
+                                         save(image, path);
+                                         return "wrote " + path;
+                                     } catch (const std::exception& e) {
+                                         return e.what();
+                                     }
+                                 });
+        }
+        if (saving_.valid() &&
+            saving_.wait_for(std::chrono::seconds(0)) == std::future_status::ready)
+            shotMessage_ = saving_.get();
+        const double tDraw = work.seconds();
+        glfwSwapBuffers(window_);
+        // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
+        if (frames_ > kWarmUpFrames) frameWork_.add(work.seconds());
+        // A slow frame says where its time went.
+        if (options_.log && frames_ > kWarmUpFrames && work.seconds() > kSlowFrameSeconds)
+            std::fprintf(stderr,
+                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f, "
+                         "draw %.1f, present %.1f ms\n",
+                         work.seconds() * 1e3, tEvents * 1e3, (tReceive - tEvents) * 1e3,
+                         (tWidgets - tReceive) * 1e3, (tDraw - tWidgets) * 1e3,
+                         (work.seconds() - tDraw) * 1e3);
+        logTimes();
+        if (shot) break;
+        if (scripted) {
+            if (!renderError_.empty())
+                throw InputError(options_.screenshot, "render", renderError_);
+            if (sinceStart.seconds() > options_.screenshotTimeoutSeconds)
+                throw InputError("view", "--screenshot",
+                                 "the full-resolution image was not ready within " +
+                                     std::to_string(int(options_.screenshotTimeoutSeconds)) + " s");
+        }
+        // Idle: sleep what is left of the frame budget, woken early by any input event.
+        const double left = kFrameBudgetSeconds - frameClock.seconds();
+        if (left > 0) glfwWaitEventsTimeout(left);
+    }
+    if (options_.log)
+        std::fprintf(stderr,
+                     "view: %llu frames; ui frame work max %.1f ms over the session, %llu over "
+                     "%.0f ms, mean %.1f ms (last 240); coarse renders %zu (%.3f-%.3f s); full "
+                     "renders %zu (%.3f-%.3f s)\n",
+                     (unsigned long long)frames_, frameWork_.allMax * 1e3,
+                     (unsigned long long)frameWork_.overSlow, kSlowFrameSeconds * 1e3,
+                     frameWork_.mean() * 1e3, std::size_t(coarseTimes_.count), coarseTimes_.min(),
+                     coarseTimes_.max(), std::size_t(fullTimes_.count), fullTimes_.min(),
+                     fullTimes_.max());
+    return shot;
+}
+
+}  // namespace
+
+const char* helpText() { return kHelp; }
+
+std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
+                                         std::optional<LoadedScene> initial) {
+    if (!glfwInit())
+        throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
+                         "run on a desktop, or headless under xvfb-run -a");
+    struct Terminate {
+        ~Terminate() { glfwTerminate(); }
+    } terminate;
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 4);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 5);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+    glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+    const bool scripted = !options.screenshot.empty();
+    // Scripted runs keep the window at the scene's image size plus the panel, so the image area
+    // is exactly the scene's image.
+    if (scripted) glfwWindowHint(GLFW_RESIZABLE, GLFW_FALSE);
+    const int w = (initial ? initial->scene.image.width : kDefaultImageWidth) + kPanelWidth;
+    const int h = initial ? initial->scene.image.height : kDefaultImageHeight;
+    GLFWwindow* window = glfwCreateWindow(w, h, "voxlight view", nullptr, nullptr);
+    if (!window)
+        throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
+                         "run on a desktop, or headless under xvfb-run -a");
+    glfwMakeContextCurrent(window);
+    glfwSwapInterval(scripted ? 0 : 1);
+    glfwSetDropCallback(window, onDrop);
+    glfwSetKeyCallback(window, onKey);  // before ImGui's, which calls it after its own
+
+    IMGUI_CHECKVERSION();
+    ImGui::CreateContext();
+    ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini written into the working directory
+    ImGui::StyleColorsDark();
+    ImGui_ImplGlfw_InitForOpenGL(window, true);
+    ImGui_ImplOpenGL3_Init("#version 450 core");
+    std::optional<core::ImageRGBA> shot;
+    try {
+        // The viewer (its texture, its worker) goes before the context it was made in.
+        Viewer viewer(options, window);
+        if (initial) viewer.adopt(std::move(*initial));
+        shot = viewer.run();
+    } catch (...) {
+        ImGui_ImplOpenGL3_Shutdown();
+        ImGui_ImplGlfw_Shutdown();
+        ImGui::DestroyContext();
+        glfwDestroyWindow(window);
+        throw;
+    }
+    ImGui_ImplOpenGL3_Shutdown();
+    ImGui_ImplGlfw_Shutdown();
+    ImGui::DestroyContext();
+    glfwDestroyWindow(window);
+    return shot;
+}
+
+}  // namespace voxlight::viewer

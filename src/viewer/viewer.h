@@ -1,0 +1,55 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// voxlight view: the interactive viewer's window (GLFW, OpenGL 4.5 core, Dear ImGui).
+//
+// Layout: the volume image fills the window left of a fixed-width side panel (file, views, info,
+// transfer function, stats, help); the image is rendered at the size of that area, so at rest
+// one image pixel is one window pixel. On this project's GPU-less machines the image is the CPU
+// ray caster's (RenderWorker, the pipeline `voxlight render` runs), shown as a texture; the UI
+// thread never waits for it.
+//
+// Mouse on the image: left-drag orbits, middle-drag or shift+left-drag pans, the wheel zooms,
+// right-drag sets window/level. Keys: helpText() (also shown in the help panel).
+//
+// Scripted mode (options.screenshot): draws at least options.frames frames, waits — drawing
+// frames, not blocking — until the full-resolution image of the current state is shown, then
+// returns the window's content (the frame as drawn, panels included).
+#include <atomic>
+#include <functional>
+#include <optional>
+#include <string>
+
+#include "core/image.h"
+#include "io/scene.h"
+#include "viewer/loaded_scene.h"
+
+namespace voxlight::viewer {
+
+/// Width of the side panel in window pixels (the image area is the rest of the window).
+inline constexpr int kPanelWidth = 380;
+
+struct ViewerOptions {
+    /// Non-empty: scripted run that returns a screenshot (the caller writes the file).
+    std::string screenshot;
+    int frames = 1;  ///< scripted: at least this many frames before the screenshot
+    double screenshotTimeoutSeconds = 600.0;
+    bool log = false;  ///< frame and render times on stderr
+    /// Makes a scene from a path typed in the file field or dropped on the window (a scene file,
+    /// a volume or a DICOM folder); throws InputError.
+    std::function<io::Scene(const std::string&)> openInput;
+    /// Writes a screenshot the user asks for (F12 or the panel's button) to a path; throws
+    /// InputError (shown in the panel). Unset: the button is hidden.
+    std::function<void(const core::ImageRGBA&, const std::string&)> saveScreenshot;
+    /// Raised (e.g. by SIGINT): close the window and return.
+    const std::atomic<bool>* quit = nullptr;
+};
+
+/// The keyboard shortcuts, one per line ("key  action").
+const char* helpText();
+
+/// Opens the window and runs until it is closed (or, scripted, until the screenshot). Throws
+/// InputError (source "display") when no OpenGL 4.5 window can be opened, with GLFW's reason.
+std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
+                                         std::optional<LoadedScene> initial);
+
+}  // namespace voxlight::viewer

@@ -1,0 +1,91 @@
+// SPDX-License-Identifier: MIT
+// The background renderer: coarse then full, the full image equal to the CLI's, and a newer state
+// cancelling a full pass in progress (the UI never waits for either).
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <thread>
+
+#include "pipeline/pipeline.h"
+#include "viewer/render_worker.h"
+#include "viewer/view_state.h"
+
+using namespace voxlight;
+using nlohmann::json;
+
+namespace {
+io::Scene torso(int size, int image, double azimuth = 30.0) {
+    return io::parseScene({{"volume", {{"phantom", "torso"}, {"size", size}}},
+                           {"transfer_function", "ct-bone"},
+                           {"camera", {{"azimuth", azimuth}, {"elevation", 15}}},
+                           {"image", {{"width", image}, {"height", image}}}},
+                          "test", "/");
+}
+/// Waits (polling, as the UI does each frame) for the worker's next image.
+std::optional<viewer::RenderedImage> next(viewer::RenderWorker& w, double seconds = 120.0) {
+    const auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (std::chrono::steady_clock::now() < end) {
+        if (auto r = w.take()) return r;
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return std::nullopt;
+}
+}  // namespace
+
+TEST(RenderWorker, CoarseFirstThenTheFullImageTheCliWouldWrite) {
+    const io::Scene scene = torso(48, 128);
+    viewer::RenderWorker worker;
+    worker.submit({scene, 1, false});
+    auto coarse = next(worker);
+    ASSERT_TRUE(coarse);
+    ASSERT_TRUE(coarse->error.empty()) << coarse->error;
+    EXPECT_TRUE(coarse->coarse);
+    EXPECT_EQ(coarse->width, 32);
+    auto full = next(worker);
+    ASSERT_TRUE(full);
+    EXPECT_FALSE(full->coarse);
+    EXPECT_EQ(full->width, 128);
+    EXPECT_TRUE(full->camera.contains("eye"));
+    // The same pipeline as `voxlight render`: bit-identical display bytes.
+    const pipeline::RunResult r = pipeline::renderScene(scene);
+    EXPECT_EQ(full->rgba, viewer::displayBytes(scene, r.image));
+    // The same state again (the drag ended) goes straight to the full pass.
+    worker.submit({scene, 1, false});
+    auto again = next(worker);
+    ASSERT_TRUE(again);
+    EXPECT_FALSE(again->coarse);
+}
+
+TEST(RenderWorker, InteractingRendersCoarseOnly) {
+    viewer::RenderWorker worker;
+    worker.submit({torso(32, 64), 1, true});
+    auto coarse = next(worker);
+    ASSERT_TRUE(coarse);
+    EXPECT_TRUE(coarse->coarse);
+    // Nothing further until the state is submitted as settled.
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_FALSE(worker.take().has_value());
+    EXPECT_FALSE(worker.status().busy);
+}
+
+TEST(RenderWorker, ANewStateCancelsTheFullPassInProgress) {
+    viewer::RenderWorker worker;
+    // Large enough that the full pass runs for a while on two cores.
+    worker.submit({torso(96, 640), 1, false});
+    auto coarse = next(worker);
+    ASSERT_TRUE(coarse && coarse->coarse);
+    // Wait for the full pass to start, then move on to a new state.
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!(worker.status().busy && !worker.status().coarse) &&
+           std::chrono::steady_clock::now() < end)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    worker.submit({torso(96, 640, 60.0), 2, false});
+    // What arrives next is the new state's (coarse, then full); state 1's full image never does.
+    for (int i = 0; i < 2; ++i) {
+        auto r = next(worker);
+        ASSERT_TRUE(r);
+        EXPECT_EQ(r->generation, 2u);
+        EXPECT_EQ(r->coarse, i == 0);
+    }
+    EXPECT_EQ(worker.cancelled(), 1u);
+}
