@@ -11,10 +11,9 @@ int main(int argc, char** argv) {
     CLI::App app{"voxlight: medical direct volume rendering with realistic illumination"};
     app.require_subcommand(1);
     app.set_version_flag("--version", "voxlight 0.1.0");
-    std::vector<Command> commands = {addInfoCommand(app),  addPhantomCommand(app),
-                                     addSceneCommand(app), addRenderCommand(app),
-                                     addIsoCommand(app),   addReplayCommand(app),
-                                     addViewCommand(app)};
+    std::vector<Command> commands = {
+        addInfoCommand(app), addPhantomCommand(app), addSceneCommand(app), addRenderCommand(app),
+        addIsoCommand(app),  addReplayCommand(app),  addViewCommand(app)};
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {
