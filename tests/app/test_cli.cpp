@@ -21,25 +21,8 @@ using namespace voxlight;
 namespace fs = std::filesystem;
 
 namespace {
-struct Result {
-    int code;
-    std::string out, err;
-};
-
-/// Runs a shell command line (its last command's stderr captured).
-Result runShell(const std::string& line, const fs::path& dir) {
-    const fs::path errFile = dir / "stderr.txt";
-    const std::string cmd = line + " 2>'" + errFile.string() + "'";
-    FILE* pipe = ::popen(cmd.c_str(), "r");
-    std::string out;
-    std::array<char, 4096> buf;
-    while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
-    const int status = ::pclose(pipe);
-    std::ifstream ef(errFile);
-    std::string err((std::istreambuf_iterator<char>(ef)), {});
-    fs::remove(errFile);
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
-}
+using Result = test::ShellResult;
+using test::runShell;
 
 /// Runs voxlight with `args`.
 Result run(const std::string& args, const fs::path& dir) {

@@ -22,10 +22,8 @@ namespace fs = std::filesystem;
 using nlohmann::json;
 
 namespace {
-struct Result {
-    int code;
-    std::string out, err;
-};
+using Result = test::ShellResult;
+using test::runShell;
 
 /// The path single-quoted for the shell (appended piecewise: GCC 12 warns falsely on '+' here).
 std::string q(const fs::path& p) {
@@ -33,20 +31,6 @@ std::string q(const fs::path& p) {
     s += p.string();
     s += "'";
     return s;
-}
-
-/// Runs a shell command line, its stderr captured.
-Result runShell(const std::string& line, const fs::path& dir) {
-    const fs::path errFile = dir / "stderr.txt";
-    FILE* pipe = ::popen((line + " 2>" + q(errFile)).c_str(), "r");
-    std::string out;
-    std::array<char, 4096> buf;
-    while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
-    const int status = ::pclose(pipe);
-    std::ifstream ef(errFile);
-    std::string err((std::istreambuf_iterator<char>(ef)), {});
-    fs::remove(errFile);
-    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
 }
 
 Result run(const std::string& args, const fs::path& dir) {

@@ -2,11 +2,14 @@
 #include "support/test_support.h"
 
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
@@ -119,6 +122,23 @@ void writeTiltedCtSeries(const std::filesystem::path& dir, int slices) {
         std::ofstream f(dir / ("s" + std::to_string(k) + ".dcm"), std::ios::binary);
         f.write(bytes.data(), std::streamsize(bytes.size()));
     }
+}
+
+ShellResult runShell(const std::string& line, const std::filesystem::path& dir) {
+    const std::filesystem::path errFile = dir / "stderr.txt";
+    std::string cmd = line;
+    cmd += " 2>'";
+    cmd += errFile.string();
+    cmd += "'";
+    FILE* pipe = ::popen(cmd.c_str(), "r");
+    std::string out;
+    std::array<char, 4096> buf;
+    while (std::size_t n = std::fread(buf.data(), 1, buf.size(), pipe)) out.append(buf.data(), n);
+    const int status = ::pclose(pipe);
+    std::ifstream ef(errFile);
+    std::string err((std::istreambuf_iterator<char>(ef)), {});
+    std::filesystem::remove(errFile);
+    return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out, err};
 }
 
 }  // namespace voxlight::test

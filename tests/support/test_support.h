@@ -51,6 +51,15 @@ std::filesystem::path writeBlockedMetaImage(const std::filesystem::path& dir);
 /// ReadOptions::strictGeometry). Explicit VR little endian written byte by byte: no GDCM needed.
 void writeTiltedCtSeries(const std::filesystem::path& dir, int slices = 4);
 
+/// What a shell command line did: exit code (−1 when it did not exit), stdout, stderr.
+struct ShellResult {
+    int code;
+    std::string out, err;
+};
+/// Runs a shell command line (through popen), its stdout read and its last command's stderr
+/// captured through a file in `dir` (removed afterwards).
+ShellResult runShell(const std::string& line, const std::filesystem::path& dir);
+
 }  // namespace voxlight::test
 
 /// Skips the current test with a clear message when a shared dataset is missing; else binds `var`
