@@ -1,9 +1,12 @@
 // SPDX-License-Identifier: MIT
 // voxlight view [SCENE.json | VOLUME] [--set key=value]... [--screenshot OUT.png --frames N] [--log]
+//               [--script STEPS.json] [--record SESSION.json]
 // The interactive viewer (viewer/viewer.h). The input given on the command line is loaded and
 // checked before the window opens, so a bad scene or a missing volume fails as every command does
 // (one line, exit 2). --screenshot renders N frames without interaction, waits for the
 // full-resolution image and writes the window's content (temporary file, then rename).
+// --script runs UI steps (viewer/view_state.h ScriptStep) through the mouse's code paths;
+// --record writes the exploration as a session (`voxlight replay` re-renders it) on exit.
 #include <cstdio>
 #include <memory>
 #include <optional>
@@ -11,6 +14,7 @@
 #include "app/cli_support.h"
 #include "app/output_files.h"
 #include "io/image.h"
+#include "io/scene.h"
 #include "viewer/viewer.h"
 
 namespace voxlight::app {
@@ -23,6 +27,8 @@ Command addViewCommand(CLI::App& app) {
     auto screenshot = std::make_shared<std::string>();
     auto frames = std::make_shared<int>(1);
     auto log = std::make_shared<bool>(false);
+    auto script = std::make_shared<std::string>();
+    auto record = std::make_shared<std::string>();
     auto quiet = std::make_shared<bool>(false);
     c.sub->add_option("INPUT", *input,
                       "Scene JSON, or a volume file / DICOM folder to view with defaults");
@@ -33,6 +39,13 @@ Command addViewCommand(CLI::App& app) {
                       "then exit");
     c.sub->add_option("--frames", *frames, "Scripted run: draw at least N UI frames first")
         ->check(CLI::Range(1, 100000));
+    c.sub->add_option("--script", *script,
+                      "Run UI steps from a JSON file ([{\"orbit\": [40, 0]}, {\"view\": \"L\"}, "
+                      "{\"window\": [30, -20]}, {\"zoom\": 2}, {\"pan\": [10, 0]}]) as the mouse "
+                      "would");
+    c.sub->add_option("--record", *record,
+                      "Record the exploration as a session (JSON) for voxlight replay; written "
+                      "when the viewer closes");
     c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
     c.run = [=] {
@@ -42,6 +55,14 @@ Command addViewCommand(CLI::App& app) {
                 throw InputError("command line", "--screenshot", "needs a scene or volume",
                                  "give SCENE.json or a volume before --screenshot");
         }
+        if (!record->empty()) {
+            checkOutputs({{"--record", *record, {".json"}}});
+            if (input->empty())
+                throw InputError("command line", "--record", "needs a scene or volume",
+                                 "give SCENE.json or a volume before --record");
+        }
+        std::vector<viewer::ScriptStep> steps;
+        if (!script->empty()) steps = viewer::parseScript(io::readJsonFile(*script), *script);
         std::optional<viewer::LoadedScene> initial;
         if (!input->empty())
             initial = viewer::prepareScene(loadInput(*input, *sets), terminalProgress(*quiet));
@@ -49,6 +70,8 @@ Command addViewCommand(CLI::App& app) {
         options.screenshot = *screenshot;
         options.frames = *frames;
         options.log = *log;
+        options.script = std::move(steps);
+        options.record = *record;
         options.quit = &cancelFlag();
         options.openInput = [](const std::string& path) { return loadInput(path, {}); };
         options.saveScreenshot = [](const core::ImageRGBA& image, const std::string& path) {

@@ -142,4 +142,55 @@ io::Scene sceneFromDocument(const json& doc, const std::string& source) {
     return io::parseScene(doc, source, "/");
 }
 
+std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source) {
+    if (!doc.is_array())
+        throw InputError(source, "script", "must be a JSON array of steps",
+                         R"(write e.g. [{"orbit": [40, 0]}, {"view": "L"}])");
+    std::vector<ScriptStep> steps;
+    for (std::size_t i = 0; i < doc.size(); ++i) {
+        const nlohmann::json& e = doc[i];
+        const std::string at = "[" + std::to_string(i) + "]";
+        if (!e.is_object() || e.size() != 1)
+            throw InputError(source, at, "must be an object with one key",
+                             "orbit, pan, zoom, window or view");
+        const std::string key = e.begin().key();
+        const nlohmann::json& v = e.begin().value();
+        auto number = [&](const nlohmann::json& x) {
+            if (!x.is_number() || !std::isfinite(x.get<double>()))
+                throw InputError(source, at + "." + key, "must hold finite numbers");
+            return x.get<double>();
+        };
+        ScriptStep st;
+        if (key == "orbit" || key == "pan" || key == "window") {
+            if (!v.is_array() || v.size() != 2)
+                throw InputError(source, at + "." + key, "must be [dx, dy] in pixels");
+            st.kind = key == "orbit" ? ScriptStep::Kind::Orbit
+                      : key == "pan" ? ScriptStep::Kind::Pan
+                                     : ScriptStep::Kind::Window;
+            st.a = number(v[0]), st.b = number(v[1]);
+        } else if (key == "zoom") {
+            st.kind = ScriptStep::Kind::Zoom;
+            st.a = number(v);
+        } else if (key == "view") {
+            static const std::vector<std::pair<std::string, std::string>> keys = {
+                {"A", "anterior"}, {"P", "posterior"}, {"L", "left"},
+                {"R", "right"},    {"S", "superior"},  {"I", "inferior"}};
+            if (!v.is_string()) throw InputError(source, at + ".view", "must be a view name");
+            st.kind = ScriptStep::Kind::View;
+            st.view = v.get<std::string>();
+            for (const auto& [k, name] : keys)
+                if (st.view == k) st.view = name;
+            if (!io::findView(st.view))
+                throw InputError(source, at + ".view", "'" + st.view + "' is not a named view",
+                                 "use A, P, L, R, S, I or anterior, posterior, left, right, "
+                                 "superior, inferior");
+        } else {
+            throw InputError(source, at + "." + key, "is not a script step",
+                             "use orbit, pan, zoom, window or view");
+        }
+        steps.push_back(st);
+    }
+    return steps;
+}
+
 }  // namespace voxlight::viewer

@@ -18,6 +18,7 @@
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include "io/scene.h"
 #include "optics/transfer_function.h"
@@ -63,6 +64,25 @@ nlohmann::json transferFunctionJson(const optics::TransferFunction& tf);
 /// The scene the worker renders at a reduced cost for interaction: image size / `factor` (at
 /// least 16 pixels a side), step × `stepScale`, early termination at ≥ `termination`.
 io::Scene coarseScene(const io::Scene& full, int factor, double stepScale, double termination);
+
+/// One step of a scripted UI run (`voxlight view --script`): a gesture as the mouse or keyboard
+/// makes it, applied through the same code path (viewer.cpp). Pixels as the mouse moves them.
+struct ScriptStep {
+    enum class Kind {
+        Orbit,   ///< left-drag by (a, b) pixels
+        Pan,     ///< middle-drag by (a, b) pixels
+        Zoom,    ///< a wheel notches (> 0 closer)
+        Window,  ///< right-drag by (a, b) pixels: window/level
+        View,  ///< the key of a named view: `view` is anterior, posterior, left, … or A/P/L/R/S/I
+    };
+    Kind kind = Kind::Orbit;
+    double a = 0.0, b = 0.0;
+    std::string view;
+};
+/// A script file's steps: a JSON array of one-key objects — {"orbit": [dx, dy]}, {"pan": [dx,
+/// dy]}, {"zoom": notches}, {"window": [dx, dy]}, {"view": "L"}. InputError naming the file and
+/// `[i].key` for anything else (unknown key, wrong type, non-finite number, unknown view).
+std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source);
 
 /// Parses an edited scene document (paths absolute, as io::sceneDocument writes them); `source`
 /// names it in errors.

@@ -21,6 +21,7 @@
 
 #include "core/error.h"
 #include "core/timing.h"
+#include "session/session.h"
 #include "viewer/render_worker.h"
 #include "viewer/tf_editor.h"
 #include "viewer/view_state.h"
@@ -124,7 +125,9 @@ struct Timings {
 
 class Viewer {
   public:
-    Viewer(const ViewerOptions& options, GLFWwindow* window) : options_(options), window_(window) {}
+    Viewer(const ViewerOptions& options, GLFWwindow* window) : options_(options), window_(window) {
+        if (!options_.record.empty()) recordPath_ = options_.record;
+    }
     ~Viewer() {
         *loadCancel_ = true;  // closing: the futures' destructors wait for the cancelled loads
         if (texture_) glDeleteTextures(1, &texture_);
@@ -147,6 +150,15 @@ class Viewer {
     }
     bool ensureLookAt();
     void snapView(const std::string& view);
+    // What the gestures do (the mouse, the keys and a script call the same).
+    void orbitBy(double dx, double dy);
+    void panBy(double dx, double dy);
+    void zoomBy(double notches);
+    void windowDrag(const optics::TransferFunction& start, double dx, double dy);
+    /// Runs the next script step when the full image of the current state is shown.
+    void runScript();
+    void recordState(const io::Scene& scene);
+    std::string saveRecording(const std::string& path);
     void submit(bool interacting);
     void receive();
     void startLoad(const std::string& path);
@@ -198,6 +210,12 @@ class Viewer {
     bool shotRequested_ = false;
     std::future<std::string> saving_;  ///< a screenshot being written: its message when done
 
+    // Recording the exploration as a session.
+    std::optional<session::Recorder> recorder_;
+    core::Stopwatch recordClock_;
+    std::string recordPath_ = "voxlight-session.json", recordMessage_;
+    std::size_t scriptNext_ = 0;
+
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
     Timings frameWork_, frameInterval_, coarseTimes_, fullTimes_;
@@ -213,6 +231,11 @@ void Viewer::adopt(LoadedScene scene) {
     lookAt_.reset();
     cameraResetGen_ = generation_ + 1;
     path_ = loaded_->scene.source;
+    if (!options_.record.empty() || recorder_) {
+        // A newly opened volume starts a new session (a session holds one scene).
+        recorder_.emplace(loaded_->scene, "recorded by voxlight view");
+        recordClock_.restart();
+    }
     changed();
 }
 
@@ -237,7 +260,9 @@ void Viewer::submit(bool interacting) {
     doc["image"]["width"] = imageW_;
     doc["image"]["height"] = imageH_;
     try {
-        worker_.submit({sceneFromDocument(doc, loaded_->scene.source), generation_, interacting});
+        io::Scene scene = sceneFromDocument(doc, loaded_->scene.source);
+        if (!interacting) recordState(scene);
+        worker_.submit({std::move(scene), generation_, interacting});
         renderError_.clear();
     } catch (const std::exception& e) {
         renderError_ = e.what();
@@ -330,10 +355,7 @@ void Viewer::handleImageMouse() {
             tfAtDrag_ = tf_;
         }
         dragStart_ = m;
-        if (io.MouseWheel != 0.f && ensureLookAt()) {
-            zoom(*lookAt_, std::pow(kZoomPerNotch, double(io.MouseWheel)));
-            setCamera(cameraJson(*lookAt_, doc_["camera"]));
-        }
+        if (io.MouseWheel != 0.f) zoomBy(double(io.MouseWheel));
     }
     const bool held = ImGui::IsMouseDown(ImGuiMouseButton_Left) ||
                       ImGui::IsMouseDown(ImGuiMouseButton_Middle) ||
@@ -346,24 +368,81 @@ void Viewer::handleImageMouse() {
     if (drag_ == Drag::None || (d.x == 0.f && d.y == 0.f)) return;
     switch (drag_) {
         case Drag::Orbit:
-            if (!ensureLookAt()) return;
-            orbit(*lookAt_, -d.x * kOrbitDegPerPixel, d.y * kOrbitDegPerPixel);
-            setCamera(cameraJson(*lookAt_, doc_["camera"]));
+            orbitBy(d.x, d.y);
             break;
         case Drag::Pan:
-            if (!ensureLookAt()) return;
-            pan(*lookAt_, d.x, d.y, imageH_);
-            setCamera(cameraJson(*lookAt_, doc_["camera"]));
+            panBy(d.x, d.y);
             break;
-        case Drag::Window: {
-            const optics::Window w =
-                dragWindow(tfAtDrag_.window(), m.x - dragStart_.x, m.y - dragStart_.y);
-            if (w.width > 0.f) setTf(tfAtDrag_.withWindow(w));
+        case Drag::Window:
+            windowDrag(tfAtDrag_, m.x - dragStart_.x, m.y - dragStart_.y);
             break;
-        }
         case Drag::None:
             break;
     }
+}
+
+void Viewer::orbitBy(double dx, double dy) {
+    if (!ensureLookAt()) return;
+    orbit(*lookAt_, -dx * kOrbitDegPerPixel, dy * kOrbitDegPerPixel);
+    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+}
+
+void Viewer::panBy(double dx, double dy) {
+    if (!ensureLookAt()) return;
+    pan(*lookAt_, dx, dy, imageH_);
+    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+}
+
+void Viewer::zoomBy(double notches) {
+    if (!ensureLookAt()) return;
+    zoom(*lookAt_, std::pow(kZoomPerNotch, notches));
+    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+}
+
+void Viewer::windowDrag(const optics::TransferFunction& start, double dx, double dy) {
+    const optics::Window w = dragWindow(start.window(), dx, dy);
+    if (w.width > 0.f) setTf(start.withWindow(w));
+}
+
+void Viewer::runScript() {
+    if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ ||
+        shownGen_ != generation_ || loading_.valid())
+        return;
+    const ScriptStep& st = options_.script[scriptNext_++];
+    switch (st.kind) {
+        case ScriptStep::Kind::Orbit:
+            orbitBy(st.a, st.b);
+            break;
+        case ScriptStep::Kind::Pan:
+            panBy(st.a, st.b);
+            break;
+        case ScriptStep::Kind::Zoom:
+            zoomBy(st.a);
+            break;
+        case ScriptStep::Kind::Window:
+            windowDrag(tf_, st.a, st.b);
+            break;
+        case ScriptStep::Kind::View:
+            snapView(st.view);
+            break;
+    }
+}
+
+void Viewer::recordState(const io::Scene& scene) {
+    if (!recorder_) return;
+    try {
+        recorder_->record(recordClock_.seconds(), session::stateOf(scene));
+    } catch (const std::exception& e) {
+        recordMessage_ = std::string("recording stopped: ") + e.what();
+        recorder_.reset();
+    }
+}
+
+std::string Viewer::saveRecording(const std::string& path) {
+    if (!recorder_) throw InputError("viewer", "session", "nothing is being recorded");
+    recorder_->save(path);
+    return "wrote " + path + " (" + std::to_string(recorder_->session().keyframes.size()) +
+           " keyframes)";
 }
 
 void Viewer::handleKeys() {
@@ -539,6 +618,33 @@ void Viewer::drawPanel() {
         tfEditing_ = r.active;
         if (r.changed) setTf(tf);
     }
+    if (loaded_ && ImGui::CollapsingHeader("Session")) {
+        // Record the exploration (every settled state a keyframe) for `voxlight replay`.
+        if (!recorder_) {
+            if (ImGui::Button("Record")) {
+                recorder_.emplace(loaded_->scene, "recorded by voxlight view");
+                recordClock_.restart();
+                recordMessage_.clear();
+                changed();  // the current state is the first keyframe
+            }
+        } else {
+            ImGui::Text("recording: %zu keyframes, %.1f s", recorder_->session().keyframes.size(),
+                        recordClock_.seconds());
+        }
+        ImGui::SetNextItemWidth(width - 90.f);
+        ImGui::InputText("##sessionpath", &recordPath_);
+        ImGui::SameLine();
+        ImGui::BeginDisabled(!recorder_);
+        if (ImGui::Button("Save")) {
+            try {
+                recordMessage_ = saveRecording(recordPath_);
+            } catch (const std::exception& e) {
+                recordMessage_ = e.what();
+            }
+        }
+        ImGui::EndDisabled();
+        if (!recordMessage_.empty()) ImGui::TextWrapped("%s", recordMessage_.c_str());
+    }
     if (ImGui::CollapsingHeader("Stats", ImGuiTreeNodeFlags_DefaultOpen)) {
         const RenderWorker::Status st = worker_.status();
         ImGui::Text("UI frame work  %.1f ms (mean %.1f, max %.1f)", frameWork_.last() * 1e3,
@@ -619,6 +725,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ImGui::NewFrame();
         handleKeys();
         handleImageMouse();
+        runScript();
         drawImage();
         drawPanel();
         const double tWidgets = work.seconds();
@@ -640,8 +747,8 @@ std::optional<core::ImageRGBA> Viewer::run() {
         }
         ++frames_;
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
-            shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
-            texH_ == imageH_)
+            scriptNext_ >= options_.script.size() && shownFull_ && shownGen_ == generation_ &&
+            !loading_.valid() && texW_ == imageW_ && texH_ == imageH_)
             shot = readWindow();
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.
@@ -697,6 +804,17 @@ std::optional<core::ImageRGBA> Viewer::run() {
                      frameWork_.mean() * 1e3, std::size_t(coarseTimes_.count), coarseTimes_.min(),
                      coarseTimes_.max(), std::size_t(fullTimes_.count), fullTimes_.min(),
                      fullTimes_.max());
+    if (!options_.record.empty() && recorder_) {
+        // Scripted: an error is the run's; interactive: said on stderr, the window is gone.
+        try {
+            const std::string m = saveRecording(options_.record);
+            if (options_.log) std::fprintf(stderr, "view: %s\n", m.c_str());
+        } catch (const InputError&) {
+            if (scripted) throw;
+            std::fprintf(stderr, "voxlight view: the session could not be saved to %s\n",
+                         options_.record.c_str());
+        }
+    }
     return shot;
 }
 

@@ -22,6 +22,7 @@
 #include "core/image.h"
 #include "io/scene.h"
 #include "viewer/loaded_scene.h"
+#include "viewer/view_state.h"
 
 namespace voxlight::viewer {
 
@@ -40,6 +41,15 @@ struct ViewerOptions {
     /// Writes a screenshot the user asks for (F12 or the panel's button) to a path; throws
     /// InputError (shown in the panel). Unset: the button is hidden.
     std::function<void(const core::ImageRGBA&, const std::string&)> saveScreenshot;
+    /// Steps run one per frame, each once the full image of the state before it is shown, through
+    /// the code paths of the mouse and keys (view_state.h ScriptStep); a scripted screenshot is
+    /// taken after the last.
+    std::vector<ScriptStep> script;
+    /// Non-empty: record the exploration as a session (session/session.h Recorder) — a keyframe
+    /// for every state the viewer asks a full image of (settled states: the end of a drag, a
+    /// key, a panel edit), timed from the first — and write it here when the viewer closes (or,
+    /// scripted, before it returns). The panel's Session section saves it on demand too.
+    std::string record;
     /// Raised (e.g. by SIGINT): close the window and return.
     const std::atomic<bool>* quit = nullptr;
 };

@@ -147,3 +147,32 @@ TEST(LoadedScene, AFileThatFailsToLoadIsAnInputErrorNamingIt) {
             << e.what();
     }
 }
+
+TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
+    const auto steps =
+        viewer::parseScript(json::parse(R"([{"orbit": [40, -5]}, {"pan": [1, 2]}, {"zoom": -1.5},
+                        {"window": [3, 4]}, {"view": "L"}, {"view": "superior"}])"),
+                            "steps.json");
+    ASSERT_EQ(steps.size(), 6u);
+    EXPECT_EQ(steps[0].kind, viewer::ScriptStep::Kind::Orbit);
+    EXPECT_EQ(steps[0].b, -5.0);
+    EXPECT_EQ(steps[2].a, -1.5);
+    EXPECT_EQ(steps[4].view, "left");
+    EXPECT_EQ(steps[5].view, "superior");
+    const std::vector<std::pair<const char*, const char*>> bad = {
+        {R"({"orbit": [1, 2]})", "script"},
+        {R"([{"orbit": [1]}])", "[0].orbit"},
+        {R"([{"zoom": "in"}])", "[0].zoom"},
+        {R"([{"view": "Q"}])", "[0].view"},
+        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"},
+        {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"}};
+    for (const auto& [text, field] : bad) {
+        try {
+            viewer::parseScript(json::parse(text), "steps.json");
+            ADD_FAILURE() << text;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), field) << text;
+            EXPECT_EQ(e.source(), "steps.json");
+        }
+    }
+}
