@@ -152,7 +152,7 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
         const std::string at = "[" + std::to_string(i) + "]";
         if (!e.is_object() || e.size() != 1)
             throw InputError(source, at, "must be an object with one key",
-                             "orbit, pan, zoom, window or view");
+                             "orbit, pan, zoom, window, view or pathtrace");
         const std::string key = e.begin().key();
         const nlohmann::json& v = e.begin().value();
         auto number = [&](const nlohmann::json& x) {
@@ -171,6 +171,11 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
         } else if (key == "zoom") {
             st.kind = ScriptStep::Kind::Zoom;
             st.a = number(v);
+        } else if (key == "pathtrace") {
+            st.kind = ScriptStep::Kind::PathTrace;
+            st.a = number(v);
+            if (!(st.a >= 1 && st.a <= 65536) || st.a != std::floor(st.a))
+                throw InputError(source, at + ".pathtrace", "must be a whole spp, 1…65536");
         } else if (key == "view") {
             static const std::vector<std::pair<std::string, std::string>> keys = {
                 {"A", "anterior"}, {"P", "posterior"}, {"L", "left"},
@@ -186,7 +191,7 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
                                  "superior, inferior");
         } else {
             throw InputError(source, at + "." + key, "is not a script step",
-                             "use orbit, pan, zoom, window or view");
+                             "use orbit, pan, zoom, window, view or pathtrace");
         }
         steps.push_back(st);
     }

@@ -74,13 +74,14 @@ struct ScriptStep {
         Zoom,    ///< a wheel notches (> 0 closer)
         Window,  ///< right-drag by (a, b) pixels: window/level
         View,  ///< the key of a named view: `view` is anterior, posterior, left, … or A/P/L/R/S/I
+        PathTrace,  ///< the panel's "render this view" with the path tracer, `a` spp
     };
     Kind kind = Kind::Orbit;
     double a = 0.0, b = 0.0;
     std::string view;
 };
 /// A script file's steps: a JSON array of one-key objects — {"orbit": [dx, dy]}, {"pan": [dx,
-/// dy]}, {"zoom": notches}, {"window": [dx, dy]}, {"view": "L"}. InputError naming the file and
+/// dy]}, {"zoom": notches}, {"window": [dx, dy]}, {"view": "L"}, {"pathtrace": spp} (1…65536). InputError naming the file and
 /// `[i].key` for anything else (unknown key, wrong type, non-finite number, unknown view).
 std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source);
 

@@ -131,6 +131,7 @@ class Viewer {
     ~Viewer() {
         *loadCancel_ = true;  // closing: the futures' destructors wait for the cancelled loads
         if (texture_) glDeleteTextures(1, &texture_);
+        if (ptTexture_) glDeleteTextures(1, &ptTexture_);
     }
 
     void adopt(LoadedScene scene);
@@ -158,6 +159,11 @@ class Viewer {
     /// Runs the next script step when the full image of the current state is shown.
     void runScript();
     void recordState(const io::Scene& scene);
+    // "Render this view with the path tracer": a second worker, its image shown in place of the
+    // live one while the view is unchanged.
+    void startPathTrace(int spp);
+    void receivePathTrace();
+    bool pathTraceShown() const { return ptReady_ && ptGen_ == generation_ && ptShow_; }
     std::string saveRecording(const std::string& path);
     void submit(bool interacting);
     void receive();
@@ -215,6 +221,14 @@ class Viewer {
     core::Stopwatch recordClock_;
     std::string recordPath_ = "voxlight-session.json", recordMessage_;
     std::size_t scriptNext_ = 0;
+
+    RenderWorker ptWorker_;
+    std::uint64_t ptGen_ = 0;  ///< the state the path tracer renders (0: none asked)
+    int ptSpp_ = 64;
+    GLuint ptTexture_ = 0;
+    int ptW_ = 0, ptH_ = 0;
+    bool ptReady_ = false, ptShow_ = true;
+    std::string ptMessage_;
 
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
@@ -425,7 +439,50 @@ void Viewer::runScript() {
         case ScriptStep::Kind::View:
             snapView(st.view);
             break;
+        case ScriptStep::Kind::PathTrace:
+            startPathTrace(int(st.a));
+            break;
     }
+}
+
+void Viewer::startPathTrace(int spp) {
+    if (!loaded_ || imageW_ < 1 || imageH_ < 1) return;
+    json doc = doc_;
+    doc["image"]["width"] = imageW_;
+    doc["image"]["height"] = imageH_;
+    doc["method"] = {{"name", "pathtrace"}, {"params", {{"spp", spp}}}};
+    try {
+        ptWorker_.submit({sceneFromDocument(doc, loaded_->scene.source), generation_, false});
+        ptGen_ = generation_;
+        ptReady_ = false, ptShow_ = true;
+        ptMessage_ = "path tracing " + std::to_string(spp) + " spp ...";
+    } catch (const std::exception& e) {
+        ptMessage_ = e.what();
+    }
+}
+
+void Viewer::receivePathTrace() {
+    std::optional<RenderedImage> r = ptWorker_.take();
+    if (!r || r->generation != ptGen_) return;
+    if (!r->error.empty()) {
+        ptMessage_ = "path tracer: " + r->error;
+        return;
+    }
+    if (r->coarse) return;  // the worker's quarter-size preview: the live image stays
+    if (!ptTexture_) glGenTextures(1, &ptTexture_);
+    glBindTexture(GL_TEXTURE_2D, ptTexture_);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, r->width, r->height, 0, GL_RGBA, GL_UNSIGNED_BYTE,
+                 r->rgba.data());
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    ptW_ = r->width, ptH_ = r->height;
+    ptReady_ = true;
+    char m[96];
+    std::snprintf(m, sizeof m, "path traced in %.1f s", r->seconds);
+    ptMessage_ = m;
 }
 
 void Viewer::recordState(const io::Scene& scene) {
@@ -528,7 +585,9 @@ void Viewer::drawImage() {
     const float w = float(texW_) * s, h = float(texH_) * s;
     const float x0 = std::floor((float(imageW_) - w) / 2),
                 y0 = std::floor((float(imageH_) - h) / 2);
-    bg->AddImage((ImTextureID)(intptr_t)texture_, ImVec2(x0, y0), ImVec2(x0 + w, y0 + h));
+    const bool pt = pathTraceShown() && ptW_ == texW_ && ptH_ == texH_;
+    bg->AddImage((ImTextureID)(intptr_t)(pt ? ptTexture_ : texture_), ImVec2(x0, y0),
+                 ImVec2(x0 + w, y0 + h));
     // Orientation letters at the image's edges (the patient side each edge faces), from the
     // camera of the image shown — as radiology viewers label their views.
     if (renderedCamera_.contains("up") && renderedCamera_.contains("forward")) {
@@ -617,6 +676,21 @@ void Viewer::drawPanel() {
                                             loaded_->robustRange, width);
         tfEditing_ = r.active;
         if (r.changed) setTf(tf);
+    }
+    if (loaded_ && ImGui::CollapsingHeader("Path tracer")) {
+        // This view, photoreal (method pathtrace): rendered in the background, shown in place of
+        // the live image until the view changes.
+        ImGui::SetNextItemWidth(120.f);
+        ImGui::InputInt("spp", &ptSpp_);
+        ptSpp_ = std::clamp(ptSpp_, 1, 65536);
+        ImGui::SameLine();
+        if (ImGui::Button("Render this view")) startPathTrace(ptSpp_);
+        const RenderWorker::Status st = ptWorker_.status();
+        if (st.busy) ImGui::ProgressBar(float(st.fraction), ImVec2(-1, 0));
+        if (ptReady_ && ptGen_ == generation_)
+            ImGui::Checkbox("show the path-traced image", &ptShow_);
+        if (ptReady_ && ptGen_ != generation_) ImGui::TextDisabled("the view changed since");
+        if (!ptMessage_.empty()) ImGui::TextWrapped("%s", ptMessage_.c_str());
     }
     if (loaded_ && ImGui::CollapsingHeader("Session")) {
         // Record the exploration (every settled state a keyframe) for `voxlight replay`.
@@ -714,6 +788,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
         const double tEvents = work.seconds();
         pollLoad();
         receive();
+        receivePathTrace();
         const double tReceive = work.seconds();
         int fbW = 0, fbH = 0;
         glfwGetFramebufferSize(window_, &fbW, &fbH);
@@ -747,8 +822,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         }
         ++frames_;
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
-            scriptNext_ >= options_.script.size() && shownFull_ && shownGen_ == generation_ &&
-            !loading_.valid() && texW_ == imageW_ && texH_ == imageH_)
+            scriptNext_ >= options_.script.size() && (ptGen_ != generation_ || ptReady_) &&
+            shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
+            texH_ == imageH_)
             shot = readWindow();
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.

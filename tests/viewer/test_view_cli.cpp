@@ -167,6 +167,52 @@ TEST(ViewCli, AScriptedExplorationRecordsASessionThatReplaysToTheScreenshot) {
         EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
 }
 
+// "Render this view with the path tracer" (item 7): after an orbit, the panel's job path-traces the
+// view in the background and the image area shows its result — equal to `voxlight replay` of the
+// recorded state with method pathtrace at the same spp (the path tracer's image is the same for
+// any thread count), and not the live gradient image.
+TEST(ViewCli, PathTracingThisViewShowsThePathTracersImageOfIt) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": {"name": "gradient"}, "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json") << R"([{"orbit": [30, 0]}, {"pathtrace": 4}])";
+    const Result view =
+        runShell(*display + VOXLIGHT_BINARY + " view -q " + quoted(tmp / "scene.json") +
+                     " --script " + quoted(tmp / "steps.json") + " --record " +
+                     quoted(tmp / "rec.json") + " --screenshot " + quoted(tmp / "shot.png"),
+                 tmp.path());
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    const std::string replay =
+        std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") + " --out ";
+    const Result traced = runShell(
+        replay + quoted(tmp / "pt") + " --set method.name=pathtrace --set method.params.spp=4",
+        tmp.path());
+    ASSERT_EQ(traced.code, 0) << traced.err;
+    const Result live = runShell(replay + quoted(tmp / "live"), tmp.path());
+    ASSERT_EQ(live.code, 0) << live.err;
+    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
+    const io::ImageRGBA pt = io::readImage(tmp / "pt" / "frame_00001.png");
+    const io::ImageRGBA gradient = io::readImage(tmp / "live" / "frame_00001.png");
+    ASSERT_EQ(s.width, pt.width + kPanelWidth);
+    float worstPt = 0.f, worstLive = 0.f;
+    for (int y = 0; y < pt.height; ++y)
+        for (int x = 0; x < pt.width; ++x)
+            if (!inLabel(x, y, pt.width, pt.height))
+                for (int c = 0; c < 3; ++c) {
+                    worstPt = std::max(worstPt, std::abs(pt.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
+                    worstLive =
+                        std::max(worstLive, std::abs(gradient.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
+                }
+    EXPECT_LE(worstPt, kScreenshotTolLevels + 1e-3f);
+    EXPECT_GT(worstLive, 20.f) << "the live gradient image is shown, not the path tracer's";
+}
+
 TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
     test::TempDir tmp;
     std::ofstream(tmp / "missing-volume.json") << R"({"volume": "nowhere.nii.gz"})";

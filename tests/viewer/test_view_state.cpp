@@ -151,21 +151,22 @@ TEST(LoadedScene, AFileThatFailsToLoadIsAnInputErrorNamingIt) {
 TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
     const auto steps =
         viewer::parseScript(json::parse(R"([{"orbit": [40, -5]}, {"pan": [1, 2]}, {"zoom": -1.5},
-                        {"window": [3, 4]}, {"view": "L"}, {"view": "superior"}])"),
+                        {"window": [3, 4]}, {"view": "L"}, {"view": "superior"},
+                        {"pathtrace": 32}])"),
                             "steps.json");
-    ASSERT_EQ(steps.size(), 6u);
+    ASSERT_EQ(steps.size(), 7u);
+    EXPECT_EQ(steps[6].kind, viewer::ScriptStep::Kind::PathTrace);
+    EXPECT_EQ(steps[6].a, 32.0);
     EXPECT_EQ(steps[0].kind, viewer::ScriptStep::Kind::Orbit);
     EXPECT_EQ(steps[0].b, -5.0);
     EXPECT_EQ(steps[2].a, -1.5);
     EXPECT_EQ(steps[4].view, "left");
     EXPECT_EQ(steps[5].view, "superior");
     const std::vector<std::pair<const char*, const char*>> bad = {
-        {R"({"orbit": [1, 2]})", "script"},
-        {R"([{"orbit": [1]}])", "[0].orbit"},
-        {R"([{"zoom": "in"}])", "[0].zoom"},
-        {R"([{"view": "Q"}])", "[0].view"},
-        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"},
-        {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"}};
+        {R"({"orbit": [1, 2]})", "script"},           {R"([{"orbit": [1]}])", "[0].orbit"},
+        {R"([{"zoom": "in"}])", "[0].zoom"},          {R"([{"view": "Q"}])", "[0].view"},
+        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"}, {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"},
+        {R"([{"pathtrace": 0.5}])", "[0].pathtrace"}};
     for (const auto& [text, field] : bad) {
         try {
             viewer::parseScript(json::parse(text), "steps.json");
