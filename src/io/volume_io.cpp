@@ -826,12 +826,20 @@ Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkRe
 constexpr int kMaxMetaHeaderLines = 256;
 /// MetaImage header bytes read at most (the header ends at ElementDataFile; binary data follows).
 constexpr std::size_t kMaxMetaHeaderBytes = std::size_t(1) << 20;
+/// MetaIO copies header keys (the characters up to '=', ':' or a line break) and string values
+/// (Comment, file names, ...) with strcpy into buffers of 255 bytes: a longer one overflows them
+/// (glibc's fortify aborts the process; found by fuzz_metaimage). Header lines — and with
+/// ElementDataFile = LIST the listed names — this long or longer are refused first.
+constexpr std::size_t kMetaIoFieldBytes = 255;
 
 /// MetaImage "Key = Value" header, up to and including ElementDataFile (the last key).
 struct MetaHeader {
     std::vector<std::pair<std::string, std::string>> fields;
     std::uint64_t dataOffset = 0;  ///< bytes before LOCAL data (after the ElementDataFile line)
     bool complete = false;         ///< ElementDataFile was found
+
+    std::size_t longestLine = 0;  ///< characters of the longest header line (and LIST names)
+    int longestLineNumber = 0;    ///< its line number, 1-based
 
     const std::string* find(const std::string& key) const {
         for (const auto& [k, v] : fields)
@@ -871,6 +879,20 @@ MetaHeader readMetaHeader(const fs::path& path) {
             break;
         }
     }
+    // The longest line MetaIO will copy (kMetaIoFieldBytes): every line before the data, and the
+    // listed file names after "ElementDataFile = LIST".
+    const bool list = h.complete && h.value("ElementDataFile").rfind("LIST", 0) == 0;
+    const std::size_t end = h.complete && !list ? std::size_t(h.dataOffset) : buf.size();
+    std::size_t length = 0;
+    int line = 1;
+    for (std::size_t i = 0; i < end; ++i) {
+        if (buf[i] == '\n') {
+            ++line, length = 0;
+        } else if (buf[i] != '\r' && ++length > h.longestLine) {
+            h.longestLine = length;
+            h.longestLineNumber = line;
+        }
+    }
     return h;
 }
 
@@ -901,6 +923,11 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
     const auto fail = [&](const std::string& field, const std::string& problem) {
         throw InputError(path.string(), field, problem, "fix the MetaImage header");
     };
+    if (h.longestLine >= kMetaIoFieldBytes)
+        fail("header", "line " + std::to_string(h.longestLineNumber) + " has " +
+                           std::to_string(h.longestLine) +
+                           " characters; MetaIO reads header lines of at most " +
+                           std::to_string(kMetaIoFieldBytes - 1));
     for (std::size_t i = 0; i < h.fields.size(); ++i)
         for (std::size_t j = 0; j < i; ++j)
             if (h.fields[i].first == h.fields[j].first) fail(h.fields[i].first, "appears twice");

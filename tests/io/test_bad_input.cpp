@@ -369,6 +369,25 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
                     "ElementSpacing", {"positive"});
     expectNrrdError(tmp, "step0.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 0"),
                     "ElementDataFile", {"pattern"});
+    // fuzz_metaimage: a key of 255+ characters (here binary junk after a cut key) overflowed
+    // MetaIO's 255-byte field name (strcpy; glibc's fortify aborted the process); string values
+    // and LIST names are copied into 255 bytes as well.
+    expectNrrdError(
+        tmp, "longkey.mha",
+        mhdText("NDims = 3\n" + dims + "CenterOfRotatio" + std::string(300, '\x97') + " = 0 0 0\n",
+                "LOCAL") +
+            std::string(400, '\0'),
+        "header", {"line 4 has 323 characters", "at most 254"});
+    expectNrrdError(tmp, "longvalue.mhd",
+                    mhdText("NDims = 3\n" + dims + "Comment = " + std::string(260, 'x') + "\n"),
+                    "header", {"line 4 has 270 characters"});
+    expectNrrdError(tmp, "longlist.mhd",
+                    mhdText("NDims = 3\n" + dims, "LIST\n" + std::string(300, 'm') + ".raw"),
+                    "header", {"line 7 has 304 characters"});
+    // 254 characters still read.
+    writeText(tmp / "longok.mhd",
+              mhdText("NDims = 3\n" + dims + "Comment = " + std::string(244, 'x') + "\n"));
+    EXPECT_EQ(io::readVolume(tmp / "longok.mhd").dims(), glm::ivec3(10, 10, 2));
 }
 
 TEST(BadInput, MetaImageShortOrUndecompressibleData) {
