@@ -840,6 +840,7 @@ struct MetaHeader {
 
     std::size_t longestLine = 0;  ///< characters of the longest header line (and LIST names)
     int longestLineNumber = 0;    ///< its line number, 1-based
+    int nulLine = 0;              ///< the first such line holding a NUL byte (0: none)
 
     const std::string* find(const std::string& key) const {
         for (const auto& [k, v] : fields)
@@ -886,6 +887,7 @@ MetaHeader readMetaHeader(const fs::path& path) {
     std::size_t length = 0;
     int line = 1;
     for (std::size_t i = 0; i < end; ++i) {
+        if (buf[i] == '\0' && h.nulLine == 0) h.nulLine = line;
         if (buf[i] == '\n') {
             ++line, length = 0;
         } else if (buf[i] != '\r' && ++length > h.longestLine) {
@@ -928,6 +930,8 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
                            std::to_string(h.longestLine) +
                            " characters; MetaIO reads header lines of at most " +
                            std::to_string(kMetaIoFieldBytes - 1));
+    // MetaIO reads the header as C strings: a NUL ends a value where this parser does not.
+    if (h.nulLine > 0) fail("header", "line " + std::to_string(h.nulLine) + " holds a NUL byte");
     for (std::size_t i = 0; i < h.fields.size(); ++i)
         for (std::size_t j = 0; j < i; ++j)
             if (h.fields[i].first == h.fields[j].first) fail(h.fields[i].first, "appears twice");
@@ -955,11 +959,26 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
     // A file pattern "name%03d.raw first last step": step 0 divides by zero inside MetaIO.
     const std::string df = h.value("ElementDataFile");
     if (df.find('%') != std::string::npos) {
+        // Exactly "pattern first last step [slice dimension]", integers, as MetaIO splits it
+        // (a stray word becomes its file dimension, which it divides by).
         std::istringstream is(df);
-        std::string fmt;
-        long long first = 0, last = 0, step = 0;
-        if (!(is >> fmt >> first >> last >> step) || step == 0 || (last - first) / step < 0)
-            fail("ElementDataFile", "'" + df + "' is not a valid 'pattern first last step'");
+        std::vector<std::string> words;
+        for (std::string w; is >> w;) words.push_back(w);
+        auto integer = [](const std::string& w, long long& out) {
+            char* end = nullptr;
+            errno = 0;
+            out = std::strtoll(w.c_str(), &end, 10);
+            return !w.empty() && *end == '\0' && errno == 0;
+        };
+        long long first = 0, last = 0, step = 0, dim = 1;
+        const bool ok =
+            (words.size() == 4 || words.size() == 5) && integer(words[1], first) &&
+            integer(words[2], last) && integer(words[3], step) && step != 0 &&
+            (last - first) / step >= 0 &&
+            (words.size() == 4 || (integer(words[4], dim) && dim >= 1 && dim <= (long long)ndims));
+        if (!ok)
+            fail("ElementDataFile",
+                 "'" + df + "' is not a valid 'pattern first last step [slice dimension]'");
     }
 }
 

@@ -384,6 +384,16 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
     expectNrrdError(tmp, "longlist.mhd",
                     mhdText("NDims = 3\n" + dims, "LIST\n" + std::string(300, 'm') + ".raw"),
                     "header", {"line 7 has 304 characters"});
+    // A NUL in a header line: MetaIO's C strings end there, this parser's do not.
+    expectNrrdError(tmp, "nul.mhd",
+                    mhdText("NDims = 3\n" + dims + "Comment = a" + std::string(1, '\0') + "b\n"),
+                    "header", {"line 4 holds a NUL byte"});
+    // fuzz_metaimage: a pattern with a stray word ("= 0"), which MetaIO took for its slice
+    // dimension and divided by (SIGFPE).
+    expectNrrdError(tmp, "stray.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 1 = 0"),
+                    "ElementDataFile", {"slice dimension"});
+    expectNrrdError(tmp, "dim9.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 1 9"),
+                    "ElementDataFile", {"slice dimension"});
     // 254 characters still read.
     writeText(tmp / "longok.mhd",
               mhdText("NDims = 3\n" + dims + "Comment = " + std::string(244, 'x') + "\n"));
