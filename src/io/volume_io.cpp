@@ -841,6 +841,7 @@ struct MetaHeader {
     std::size_t longestLine = 0;  ///< characters of the longest header line (and LIST names)
     int longestLineNumber = 0;    ///< its line number, 1-based
     int nulLine = 0;              ///< the first such line holding a NUL byte (0: none)
+    int lineWithoutKey = 0;       ///< the first non-blank header line without '=' (0: none)
 
     const std::string* find(const std::string& key) const {
         for (const auto& [k, v] : fields)
@@ -865,7 +866,13 @@ MetaHeader readMetaHeader(const fs::path& path) {
         std::string line = buf.substr(pos, (nl == std::string::npos ? buf.size() : nl) - pos);
         pos = nl == std::string::npos ? buf.size() : nl + 1;
         const auto eq = line.find('=');
-        if (eq == std::string::npos) continue;
+        if (eq == std::string::npos) {
+            // MetaIO takes it for a key and reads on past its line break for the '=': what it
+            // then reads as keys and values is not what this parser checked.
+            if (line.find_first_not_of(" \t\r") != std::string::npos && h.lineWithoutKey == 0)
+                h.lineWithoutKey = n + 1;
+            continue;
+        }
         std::string k = line.substr(0, eq), val = line.substr(eq + 1);
         auto trim = [](std::string& s) {
             s.erase(0, s.find_first_not_of(" \t\r"));
@@ -932,6 +939,8 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
                            std::to_string(kMetaIoFieldBytes - 1));
     // MetaIO reads the header as C strings: a NUL ends a value where this parser does not.
     if (h.nulLine > 0) fail("header", "line " + std::to_string(h.nulLine) + " holds a NUL byte");
+    if (h.lineWithoutKey > 0)
+        fail("header", "line " + std::to_string(h.lineWithoutKey) + " is not 'Key = Value'");
     for (std::size_t i = 0; i < h.fields.size(); ++i)
         for (std::size_t j = 0; j < i; ++j)
             if (h.fields[i].first == h.fields[j].first) fail(h.fields[i].first, "appears twice");

@@ -394,6 +394,13 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
                     "ElementDataFile", {"slice dimension"});
     expectNrrdError(tmp, "dim9.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 1 9"),
                     "ElementDataFile", {"slice dimension"});
+    // fuzz_metaimage: a header line without '=' made MetaIO read on past it (an unterminated
+    // string read by strlen: ASan heap-buffer-overflow).
+    expectNrrdError(tmp, "nokey.mhd", mhdText("NDims = 3\n" + dims + "Ose\n"), "header",
+                    {"line 4 is not 'Key = Value'"});
+    // Blank lines are fine.
+    writeText(tmp / "blank.mhd", mhdText("NDims = 3\n\n  \n" + dims));
+    EXPECT_EQ(io::readVolume(tmp / "blank.mhd").dims(), glm::ivec3(10, 10, 2));
     // 254 characters still read.
     writeText(tmp / "longok.mhd",
               mhdText("NDims = 3\n" + dims + "Comment = " + std::string(244, 'x') + "\n"));
