@@ -979,11 +979,21 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
             out = std::strtoll(w.c_str(), &end, 10);
             return !w.empty() && *end == '\0' && errno == 0;
         };
+        // MetaIO hands the pattern to snprintf with one int: exactly one conversion, %d with an
+        // optional zero flag and width ("%n", "%s" or a second % would read or write memory).
+        auto onePercentD = [](const std::string& f) {
+            const std::size_t p = f.find('%');
+            if (p == std::string::npos || f.find('%', p + 1) != std::string::npos) return false;
+            std::size_t q = p + 1;
+            while (q < f.size() && q - p <= 3 && std::isdigit(static_cast<unsigned char>(f[q])))
+                ++q;
+            return q < f.size() && f[q] == 'd';
+        };
         long long first = 0, last = 0, step = 0, dim = 1;
         const bool ok =
-            (words.size() == 4 || words.size() == 5) && integer(words[1], first) &&
-            integer(words[2], last) && integer(words[3], step) && step != 0 &&
-            (last - first) / step >= 0 &&
+            (words.size() == 4 || words.size() == 5) && onePercentD(words[0]) &&
+            integer(words[1], first) && integer(words[2], last) && integer(words[3], step) &&
+            step != 0 && (last - first) / step >= 0 &&
             (words.size() == 4 || (integer(words[4], dim) && dim >= 1 && dim <= (long long)ndims));
         if (!ok)
             fail("ElementDataFile",

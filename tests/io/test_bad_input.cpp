@@ -394,6 +394,10 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
                     "ElementDataFile", {"slice dimension"});
     expectNrrdError(tmp, "dim9.mhd", mhdText("NDims = 3\n" + dims, "m%d.raw 1 2 1 9"),
                     "ElementDataFile", {"slice dimension"});
+    // fuzz_metaimage_mhd: MetaIO gives the pattern to snprintf — "%n" wrote through a bad pointer.
+    for (const char* bad : {"%ni.d 1 2 1", "m%s.raw 1 2 1", "m%d%d.raw 1 2 1", "m%%d.raw 1 2 1"})
+        expectNrrdError(tmp, "fmt.mhd", mhdText("NDims = 3\n" + dims, bad), "ElementDataFile",
+                        {"pattern"});
     // fuzz_metaimage: a header line without '=' made MetaIO read on past it (an unterminated
     // string read by strlen: ASan heap-buffer-overflow).
     expectNrrdError(tmp, "nokey.mhd", mhdText("NDims = 3\n" + dims + "Ose\n"), "header",
