@@ -78,13 +78,15 @@ core::ImageRGBA renderLitIsosurface(const render::RayCaster& caster, const rende
     clock.restart();
 
     const double iso = caster.isoValue();
+    // The hit points: the texels they read (lattice shading only), and how many there are.
     std::vector<glm::dvec3> points;
     for (int y = 0; y < H; ++y)
         for (int x = 0; x < W; ++x) {
             const float* h = hits.at(x, y);
-            if (h[3] > 0.f) points.emplace_back(h[0], h[1], h[2]);
+            if (!(h[3] > 0.f)) continue;
+            ++stats.hits;
+            if (o.shading == IsoShading::Lattice) points.emplace_back(h[0], h[1], h[2]);
         }
-    stats.hits = points.size();
     if (o.shading == IsoShading::Lattice) stats.lattice = lattice->require(points, iso, progress);
 
     const glm::vec3 bg = caster.options().background;

@@ -61,6 +61,15 @@ bool inLabel(int x, int y, int w, int h) {
            (near(x, cx, kLabelHalfWidth) &&
             (near(y, 12, kLabelHalfHeight) || near(y, h - 12, kLabelHalfHeight)));
 }
+
+/// `voxlight view` of dir/scene.json running dir/steps.json, recording dir/rec.json, screenshot
+/// dir/shot.png, under `display` (displayPrefix()).
+Result runScriptedView(const std::string& display, const test::TempDir& dir) {
+    return runShell(display + VOXLIGHT_BINARY + " view -q " + quoted(dir / "scene.json") +
+                        " --script " + quoted(dir / "steps.json") + " --record " +
+                        quoted(dir / "rec.json") + " --screenshot " + quoted(dir / "shot.png"),
+                    dir.path());
+}
 }  // namespace
 
 TEST(ViewCli, ScreenshotImageAreaEqualsTheCpuRender) {
@@ -131,11 +140,7 @@ TEST(ViewCli, AScriptedExplorationRecordsASessionThatReplaysToTheScreenshot) {
     std::ofstream(tmp / "steps.json")
         << R"([{"orbit": [60, 10]}, {"window": [40, -30]}, {"view": "L"}, {"orbit": [-30, 0]},
               {"zoom": 2}])";
-    const Result view =
-        runShell(*display + VOXLIGHT_BINARY + " view -q " + quoted(tmp / "scene.json") +
-                     " --script " + quoted(tmp / "steps.json") + " --record " +
-                     quoted(tmp / "rec.json") + " --screenshot " + quoted(tmp / "shot.png"),
-                 tmp.path());
+    const Result view = runScriptedView(*display, tmp);
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
     ASSERT_EQ(view.code, 0) << view.err;
@@ -180,11 +185,7 @@ TEST(ViewCli, PathTracingThisViewShowsThePathTracersImageOfIt) {
         "method": {"name": "gradient"}, "camera": {"azimuth": 30, "elevation": 15},
         "image": {"width": 160, "height": 128}})";
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [30, 0]}, {"pathtrace": 4}])";
-    const Result view =
-        runShell(*display + VOXLIGHT_BINARY + " view -q " + quoted(tmp / "scene.json") +
-                     " --script " + quoted(tmp / "steps.json") + " --record " +
-                     quoted(tmp / "rec.json") + " --screenshot " + quoted(tmp / "shot.png"),
-                 tmp.path());
+    const Result view = runScriptedView(*display, tmp);
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
     ASSERT_EQ(view.code, 0) << view.err;
