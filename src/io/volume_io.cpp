@@ -961,6 +961,13 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
         if (h.find(key))
             for (double s : metaNumbers(h, path, key, ndims))
                 if (!(s > 0)) fail(key, "holds " + std::to_string(s) + "; must be positive");
+    // MetaIO allocates CompressedDataSize bytes as given (a negative one asks for 2^64 − n).
+    if (h.find("CompressedDataSize")) {
+        const double c = metaNumbers(h, path, "CompressedDataSize", 1)[0];
+        if (!(c >= 1) || c != std::floor(c))
+            fail("CompressedDataSize", "holds " + h.value("CompressedDataSize") +
+                                           "; must be a whole number of bytes ≥ 1");
+    }
     for (const char* key : {"Offset", "Position", "Origin"})
         if (h.find(key)) metaNumbers(h, path, key, ndims);
     for (const char* key : {"TransformMatrix", "Rotation", "Orientation"})

@@ -405,6 +405,14 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
     // Blank lines are fine.
     writeText(tmp / "blank.mhd", mhdText("NDims = 3\n\n  \n" + dims));
     EXPECT_EQ(io::readVolume(tmp / "blank.mhd").dims(), glm::ivec3(10, 10, 2));
+    // fuzz_metaimage: a negative CompressedDataSize became a 2^64-byte allocation in MetaIO.
+    for (const char* c : {"-3.5", "0", "2.5"})
+        expectNrrdError(tmp, "csize.mha",
+                        mhdText("NDims = 3\n" + dims +
+                                    "CompressedData = True\nCompressedDataSize = " + c + "\n",
+                                "LOCAL") +
+                            std::string(64, '\7'),
+                        "CompressedDataSize", {"whole number"});
     // 254 characters still read.
     writeText(tmp / "longok.mhd",
               mhdText("NDims = 3\n" + dims + "Comment = " + std::string(244, 'x') + "\n"));
