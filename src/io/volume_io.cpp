@@ -558,12 +558,13 @@ enum class DataRead {
 
 /// Runs a vtkImageReader2: header, size checks before any allocation, then the data (in a child
 /// when `how` says the reader cannot be interrupted and `progress` can cancel; `expectedBytes` as
-/// for readContained).
+/// for readContained). The reader opens `readFrom` when given (messages still name `path`).
 vtkSmartPointer<vtkImageData> runImageReader(vtkImageReader2* r, const fs::path& path,
                                              const core::Progress& progress,
                                              DataRead how = DataRead::Abortable,
-                                             std::uint64_t expectedBytes = 0) {
-    r->SetFileName(path.c_str());
+                                             std::uint64_t expectedBytes = 0,
+                                             const fs::path& readFrom = {}) {
+    r->SetFileName((readFrom.empty() ? path : readFrom).c_str());
     runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
     int ext[6];
     r->GetDataExtent(ext);
@@ -814,8 +815,10 @@ Geometry spacingAndOrigin(vtkImageData* img, const fs::path& path, const char* s
 
 template <class VtkReader>
 Volume readSimpleVtk(const fs::path& path, const core::Progress& progress, VtkReader* r,
-                     DataRead how = DataRead::Abortable, std::uint64_t expectedBytes = 0) {
-    const vtkSmartPointer<vtkImageData> img = runImageReader(r, path, progress, how, expectedBytes);
+                     DataRead how = DataRead::Abortable, std::uint64_t expectedBytes = 0,
+                     const fs::path& readFrom = {}) {
+    const vtkSmartPointer<vtkImageData> img =
+        runImageReader(r, path, progress, how, expectedBytes, readFrom);
     Geometry g = spacingAndOrigin(img, path, "spacing", "origin");
     Volume v = fromImageData(img, path, g);
     v.description = path.filename().string();
@@ -842,6 +845,8 @@ struct MetaHeader {
     int longestLineNumber = 0;    ///< its line number, 1-based
     int nulLine = 0;              ///< the first such line holding a NUL byte (0: none)
     int lineWithoutKey = 0;       ///< the first non-blank header line without '=' (0: none)
+    /// With ElementDataFile = LIST: the non-blank lines after it (trimmed), at most kMaxDim + 1.
+    std::vector<std::string> listNames;
 
     const std::string* find(const std::string& key) const {
         for (const auto& [k, v] : fields)
@@ -890,6 +895,15 @@ MetaHeader readMetaHeader(const fs::path& path) {
     // The longest line MetaIO will copy (kMetaIoFieldBytes): every line before the data, and the
     // listed file names after "ElementDataFile = LIST".
     const bool list = h.complete && h.value("ElementDataFile").rfind("LIST", 0) == 0;
+    for (std::size_t at = h.dataOffset;
+         list && at < buf.size() && h.listNames.size() <= std::size_t(core::kMaxDim);) {
+        const std::size_t nl = std::min(buf.find('\n', at), buf.size());
+        std::string name = buf.substr(at, nl - at);
+        name.erase(0, name.find_first_not_of(" \t\r"));
+        name.erase(name.find_last_not_of(" \t\r") + 1);
+        if (!name.empty()) h.listNames.push_back(name);
+        at = nl + 1;
+    }
     const std::size_t end = h.complete && !list ? std::size_t(h.dataOffset) : buf.size();
     std::size_t length = 0;
     int line = 1;
@@ -1033,11 +1047,249 @@ class CerrCapture {
     std::streambuf* old_;
 };
 
+/// MetaIO's scalar element types (those vtkMetaImageReader maps to a VTK type).
+bool knownMetaElementType(const std::string& t) {
+    static const char* const kTypes[] = {
+        "MET_CHAR", "MET_UCHAR", "MET_SHORT",     "MET_USHORT",     "MET_INT",   "MET_UINT",
+        "MET_LONG", "MET_ULONG", "MET_LONG_LONG", "MET_ULONG_LONG", "MET_FLOAT", "MET_DOUBLE"};
+    return std::any_of(std::begin(kTypes), std::end(kTypes), [&](const char* k) { return t == k; });
+}
+
+/// A MetaIO boolean ("True"/"False", any case, or 1/0); InputError naming the key otherwise.
+bool metaBool(const MetaHeader& h, const fs::path& path, const std::string& key, bool dflt) {
+    if (!h.find(key)) return dflt;
+    std::string v = h.value(key);
+    std::transform(v.begin(), v.end(), v.begin(), [](unsigned char c) { return std::tolower(c); });
+    if (v == "true" || v == "1") return true;
+    if (v == "false" || v == "0") return false;
+    throw InputError(path.string(), key, "is '" + h.value(key) + "', not True or False",
+                     "fix the MetaImage header");
+}
+
+/// The header MetaIO is given instead of the user's (see readMeta), in a private temporary
+/// directory with links to the data files under short names; removed when this goes away.
+class MetaScratch {
+  public:
+    MetaScratch() {
+        std::string dir = (fs::temp_directory_path() / "voxlight-mhd-XXXXXX").string();
+        if (!::mkdtemp(dir.data()))
+            throw std::runtime_error("cannot create a temporary directory in " +
+                                     fs::temp_directory_path().string() + ": " +
+                                     std::strerror(errno));
+        dir_ = dir;
+    }
+    ~MetaScratch() {
+        std::error_code ec;
+        fs::remove_all(dir_, ec);
+    }
+    MetaScratch(const MetaScratch&) = delete;
+    MetaScratch& operator=(const MetaScratch&) = delete;
+
+    /// A short name in the directory that resolves to `target`.
+    std::string link(const fs::path& target) {
+        const std::string name = "d" + std::to_string(links_++) + ".raw";
+        std::error_code ec;
+        fs::create_symlink(fs::absolute(target, ec), dir_ / name, ec);
+        if (ec)
+            throw std::runtime_error("cannot link " + target.string() + " into " + dir_.string() +
+                                     ": " + ec.message());
+        return name;
+    }
+    fs::path write(const std::string& header) const {
+        const fs::path p = dir_ / "h.mhd";
+        std::ofstream out(p, std::ios::binary);
+        out << header;
+        out.close();
+        if (!out) throw std::runtime_error("cannot write " + p.string());
+        return p;
+    }
+
+  private:
+    fs::path dir_;
+    int links_ = 0;
+};
+
+/// The data files of a validated header, in MetaIO's order (one file; LIST names; a pattern
+/// expanded), with how many dimensions each file holds. InputError when the count does not match
+/// DimSize or a file cannot be opened.
+std::vector<fs::path> metaDataFiles(const MetaHeader& h, const fs::path& path, int& fileDims) {
+    const std::string df = h.value("ElementDataFile");
+    const int ndims = h.value("NDims")[0] - '0';
+    const std::vector<double> dims = metaNumbers(h, path, "DimSize", std::size_t(ndims));
+    fileDims = ndims;
+    if (df == "LOCAL") return {path};
+    const bool list = df.rfind("LIST", 0) == 0;
+    const bool pattern = df.find('%') != std::string::npos;
+    if (!list && !pattern) {
+        const fs::path f = path.parent_path() / df;
+        std::error_code ec;
+        if (!fs::exists(f, ec) || fs::is_directory(f, ec))
+            throw InputError(path.string(), "ElementDataFile",
+                             "names '" + df + "', which cannot be opened",
+                             "put the data file beside the header");
+        return {f};
+    }
+    std::vector<std::string> names;
+    fileDims = ndims - 1;
+    if (list) {
+        std::istringstream is(df.substr(4));
+        std::string w;
+        if (is >> w) {  // "LIST 2D": the dimensions of each file
+            char* end = nullptr;
+            const long d = std::strtol(w.c_str(), &end, 10);
+            if ((std::string(end) != "D" && std::string(end) != "") || d < 1 || d > ndims ||
+                (is >> w))
+                throw InputError(
+                    path.string(), "ElementDataFile",
+                    "'" + df + "' is not 'LIST' or 'LIST nD' with n in 1.." + std::to_string(ndims),
+                    "fix the MetaImage header");
+            fileDims = int(d);
+        }
+        names = h.listNames;
+    } else {
+        std::istringstream is(df);
+        std::string format;
+        long long first = 0, last = 0, step = 1, dim = fileDims;
+        is >> format >> first >> last >> step;
+        if (is >> dim) fileDims = int(dim);  // validateMetaHeader checked every word
+        const std::uint64_t count = std::uint64_t((last - first) / step) + 1;
+        if (count > std::uint64_t(core::kMaxDim) || std::llabs(first) > INT32_MAX ||
+            std::llabs(last) > INT32_MAX)
+            throw InputError(path.string(), "ElementDataFile",
+                             "'" + df + "' names " + std::to_string(count) + " files",
+                             "fix the MetaImage header");
+        for (long long i = first; step > 0 ? i <= last : i >= last; i += step) {
+            char name[kMetaIoFieldBytes + 16];
+            std::snprintf(name, sizeof name, format.c_str(), int(i));  // exactly one %0Nd
+            names.emplace_back(name);
+        }
+    }
+    std::uint64_t expected = 1;
+    for (int a = fileDims; a < ndims; ++a) expected *= std::uint64_t(dims[std::size_t(a)]);
+    if (names.size() != expected)
+        throw InputError(path.string(), "ElementDataFile",
+                         (list ? "LIST names " : "'" + df + "' names ") +
+                             std::to_string(names.size()) + " files; DimSize needs " +
+                             std::to_string(expected) + " files of " + std::to_string(fileDims) +
+                             " dimensions",
+                         "fix the file list or DimSize");
+    std::vector<fs::path> files;
+    for (const std::string& n : names) {
+        const fs::path f = path.parent_path() / n;
+        std::error_code ec;  // (a FIFO or device is MetaIO's to read, cancellably)
+        if (!fs::exists(f, ec) || fs::is_directory(f, ec))
+            throw InputError(path.string(), "ElementDataFile",
+                             "names '" + n + "', which cannot be opened",
+                             "put the data files beside the header");
+        files.push_back(f);
+    }
+    return files;
+}
+
+/// The header MetaIO reads in place of the user's: only the fields voxlight uses, each already
+/// validated and written back in one canonical form, with the data files linked under short
+/// names. MetaIO's own header parser (fixed-size buffers, unchecked scanf/atoi, format strings
+/// built from the file) has yielded one fault after another to fuzzing; it now only ever sees
+/// this text. `skip` is where the data starts in a single data file (HeaderSize; -1: MetaIO's
+/// "the data ends the file").
+std::string canonicalMetaHeader(const MetaHeader& h, const fs::path& path, MetaScratch& scratch,
+                                const std::vector<fs::path>& files, int fileDims, long long skip,
+                                bool compressed) {
+    const int ndims = h.value("NDims")[0] - '0';
+    std::ostringstream o;
+    o.precision(17);
+    auto numbers = [&](const char* key, std::size_t n) {
+        for (double x : metaNumbers(h, path, key, n)) o << ' ' << x;
+        o << '\n';
+    };
+    o << "ObjectType = Image\nNDims = " << ndims << "\nDimSize =";
+    numbers("DimSize", std::size_t(ndims));
+    for (const char* key : {"ElementSpacing", "ElementSize"})
+        if (h.find(key)) {
+            o << "ElementSpacing =";
+            numbers(key, std::size_t(ndims));
+            break;
+        }
+    for (const char* key : {"Offset", "Position", "Origin"})
+        if (h.find(key)) {
+            o << "Offset =";
+            numbers(key, std::size_t(ndims));
+            break;
+        }
+    if (h.find("ElementNumberOfChannels")) {
+        const double c = metaNumbers(h, path, "ElementNumberOfChannels", 1)[0];
+        if (c < 1 || c > 4 || c != std::floor(c))
+            throw InputError(path.string(), "ElementNumberOfChannels",
+                             "is " + h.value("ElementNumberOfChannels") + "; voxlight reads 1..4",
+                             "fix the MetaImage header");
+        o << "ElementNumberOfChannels = " << int(c) << '\n';
+    }
+    if (!h.find("ElementType"))
+        throw InputError(path.string(), "ElementType", "is missing", "fix the MetaImage header");
+    if (!knownMetaElementType(h.value("ElementType")))
+        throw InputError(path.string(), "ElementType",
+                         "is '" + h.value("ElementType") + "', not a MetaImage scalar type",
+                         "use MET_UCHAR, MET_SHORT, MET_FLOAT, ... (MET_CHAR..MET_DOUBLE)");
+    o << "ElementType = " << h.value("ElementType") << '\n';
+    const bool msb = metaBool(h, path, "ElementByteOrderMSB",
+                              metaBool(h, path, "BinaryDataByteOrderMSB", false));
+    o << "BinaryData = " << (metaBool(h, path, "BinaryData", true) ? "True" : "False") << '\n';
+    o << "ElementByteOrderMSB = " << (msb ? "True" : "False") << '\n';
+    if (compressed) {
+        if (files.size() != 1)
+            throw InputError(path.string(), "CompressedData",
+                             "is True with " + std::to_string(files.size()) +
+                                 " data files; voxlight reads compressed data from one file",
+                             "write the volume as one file");
+        if (skip < 0)
+            throw InputError(path.string(), "HeaderSize",
+                             "is -1 (data at the end of the file) with compressed data",
+                             "give the compressed data's offset");
+        std::error_code ec;
+        const std::uint64_t size = fs::file_size(files[0], ec);
+        std::uint64_t bytes = size - std::min<std::uint64_t>(size, std::uint64_t(skip));
+        if (h.find("CompressedDataSize"))
+            bytes = std::uint64_t(metaNumbers(h, path, "CompressedDataSize", 1)[0]);
+        o << "CompressedData = True\nCompressedDataSize = " << bytes << '\n';
+    }
+    if (files.size() == 1 && fileDims == ndims) {
+        o << "HeaderSize = " << skip << "\nElementDataFile = " << scratch.link(files[0]) << '\n';
+    } else {
+        o << "ElementDataFile = LIST " << fileDims << "D\n";
+        for (const fs::path& f : files) o << scratch.link(f) << '\n';
+    }
+    return o.str();
+}
+
 Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
     const MetaHeader h = readMetaHeader(path);
     validateMetaHeader(h, path);
+    // MetaIO reads a header we write from the validated fields, never the user's.
+    int fileDims = 0;
+    const std::vector<fs::path> files = metaDataFiles(h, path, fileDims);
+    const bool isCompressed = metaBool(h, path, "CompressedData", false);
+    const bool local = h.value("ElementDataFile") == "LOCAL";
+    long long skip = local ? (long long)h.dataOffset : 0;
+    if (h.find("HeaderSize")) {
+        // Bytes to skip before the data in each file, or -1: the data ends the file.
+        const double hs = metaNumbers(h, path, "HeaderSize", 1)[0];
+        if (hs < -1 || hs != std::floor(hs) || hs > double(std::int64_t(1) << 52))
+            throw InputError(path.string(), "HeaderSize",
+                             "is " + h.value("HeaderSize") + "; must be -1 or a whole number ≥ 0",
+                             "fix the MetaImage header");
+        if (hs != 0 && files.size() > 1)
+            throw InputError(path.string(), "HeaderSize",
+                             "is " + h.value("HeaderSize") +
+                                 " with a list of data files; voxlight reads such lists without "
+                                 "per-file headers",
+                             "strip the slice files' headers or write one data file");
+        skip = hs < 0 ? -1 : skip + (long long)hs;
+    }
+    MetaScratch scratch;
+    const fs::path metaHeader =
+        scratch.write(canonicalMetaHeader(h, path, scratch, files, fileDims, skip, isCompressed));
     vtkNew<vtkMetaImageReader> r;
-    r->SetFileName(path.c_str());
+    r->SetFileName(metaHeader.c_str());
     {
         CerrCapture quiet;  // MetaIO's header complaints duplicate VTK's error
         runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
@@ -1046,9 +1298,6 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
     r->GetDataExtent(ext);
     checkExtent(ext, r->GetNumberOfScalarComponents(), path);
     // MetaIO reports a short data file on std::cerr only, so check the data length ourselves.
-    const std::string compressed = h.value("CompressedData");
-    const bool isCompressed = compressed == "True" || compressed == "true";
-    const std::string dataFile = h.value("ElementDataFile");
     const std::uint64_t need =
         std::uint64_t(ext[1] - ext[0] + 1) * (ext[3] - ext[2] + 1) * (ext[5] - ext[4] + 1) *
         std::uint64_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType())) *
@@ -1056,27 +1305,18 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
     // What MetaIO will read, for progress: raw data only (MetaIO reads compressed data whole
     // before it inflates it, so the bytes read say nothing about the time left).
     std::uint64_t fileBytes = isCompressed ? 0 : need;
-    if (dataFile != "LIST" && dataFile.find('%') == std::string::npos) {
-        const bool local = dataFile == "LOCAL";
-        const fs::path raw = local ? path : path.parent_path() / dataFile;
+    for (const fs::path& raw : files) {
         std::error_code ec;
         const std::uint64_t size = fs::file_size(raw, ec);
-        if (ec)
-            throw InputError(path.string(), "ElementDataFile",
-                             "names '" + dataFile + "', which cannot be opened",
-                             "put the data file beside the header");
-        // HeaderSize: bytes to skip before raw data (-1: the data is at the end of the file).
-        std::uint64_t skip = local ? h.dataOffset : 0;
-        if (h.find("HeaderSize")) {
-            const double hs = metaNumbers(h, path, "HeaderSize", 1)[0];
-            if (hs > 0) skip += hs >= double(size) ? size : std::uint64_t(hs);
-        }
-        const std::uint64_t have = size - std::min(size, skip);
-        if (!isCompressed) fileBytes = have;
-        if (!isCompressed && have < need)
+        if (ec) continue;  // not a regular file (a FIFO): MetaIO reports what it cannot read
+        // HeaderSize: bytes to skip before the data (-1: the data ends the file).
+        const std::uint64_t have =
+            size - std::min<std::uint64_t>(size, std::uint64_t(std::max(skip, 0LL)));
+        const std::uint64_t needHere = need / files.size();
+        if (!isCompressed && have < needHere)
             throw InputError(raw.string(), "data",
                              "file holds " + std::to_string(have) + " bytes, header " +
-                                 path.filename().string() + " claims " + std::to_string(need),
+                                 path.filename().string() + " claims " + std::to_string(needHere),
                              "the data is truncated; copy it again");
         // Compressed data claiming more than deflate can expand to: refused before MetaIO
         // allocates it (fuzz_metaimage in CI: a small .mha declaring gigabytes went over 2 GB).
@@ -1103,7 +1343,7 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
         CerrCapture metaio;
         // MetaIO reads every voxel in one call, without progress events: in a child process
         // that Ctrl-C can stop.
-        v = readSimpleVtk(path, progress, r.Get(), DataRead::Contained, fileBytes);
+        v = readSimpleVtk(path, progress, r.Get(), DataRead::Contained, fileBytes, metaHeader);
         if (!metaio.firstLine().empty())
             throw InputError(path.string(), "data", "could not be read: " + metaio.firstLine(),
                              "the data is truncated or corrupt; copy it again");

@@ -353,6 +353,65 @@ std::string mhdText(const std::string& fields, const std::string& dataFile = "m.
 }
 }  // namespace
 
+// MetaIO reads a header voxlight writes from the validated fields (volume_io.cpp
+// canonicalMetaHeader), with the data files linked into a private temporary directory: lists and
+// patterns still load, what the canonical header cannot say is refused, and nothing is left behind.
+TEST(BadInput, MetaImageReadThroughACanonicalHeader) {
+    test::TempDir tmp, scratch;
+    ASSERT_EQ(::setenv("TMPDIR", scratch.path().c_str(), 1), 0);
+    writeText(tmp / "s1.raw", std::string(200, '\1'));
+    writeText(tmp / "s2.raw", std::string(200, '\2'));
+    writeText(tmp / "both.raw", std::string(200, '\1') + std::string(200, '\2'));
+    const std::string dims = "NDims = 3\nDimSize = 10 10 2\nElementSpacing = 0.5 1 2\n";
+    for (const char* df : {"both.raw", "LIST\ns1.raw\ns2.raw", "LIST 2D\ns1.raw\n\ns2.raw\n",
+                           "s%d.raw 1 2 1", "s%01d.raw 1 2 1 2"}) {
+        writeText(tmp / "ok.mhd", mhdText(dims + "Offset = 1 2 3\n", df));
+        const core::Volume v = io::readVolume(tmp / "ok.mhd");
+        EXPECT_EQ(v.dims(), glm::ivec3(10, 10, 2)) << df;
+        EXPECT_EQ(v.geometry().spacing, glm::dvec3(0.5, 1, 2)) << df;
+        EXPECT_EQ(v.geometry().origin, glm::dvec3(1, 2, 3)) << df;
+        EXPECT_EQ(v.dataAs<std::int16_t>()[0], 0x0101) << df;
+        EXPECT_EQ(v.dataAs<std::int16_t>()[199], 0x0202) << df;
+    }
+    // HeaderSize in a detached file, and -1 (the data ends the file), as MetaIO means them.
+    writeText(tmp / "skip.raw", std::string(7, 'h') + std::string(400, '\3'));
+    writeText(tmp / "skip.mhd", mhdText(dims + "HeaderSize = 7\n", "skip.raw"));
+    EXPECT_EQ(io::readVolume(tmp / "skip.mhd").dataAs<std::int16_t>()[0], 0x0303);
+    writeText(tmp / "end.mhd", mhdText(dims + "HeaderSize = -1\n", "skip.raw"));
+    EXPECT_EQ(io::readVolume(tmp / "end.mhd").dataAs<std::int16_t>()[199], 0x0303);
+    // What the canonical header cannot carry is refused, naming the field.
+    expectNrrdError(tmp, "count.mhd", mhdText(dims, "LIST\ns1.raw"), "ElementDataFile",
+                    {"LIST names 1 files; DimSize needs 2"});
+    expectNrrdError(tmp, "listdim.mhd", mhdText(dims, "LIST 4D\ns1.raw\ns2.raw"), "ElementDataFile",
+                    {"LIST nD"});
+    expectNrrdError(tmp, "gone.mhd", mhdText(dims, "s%d.raw 1 3 1"), "ElementDataFile",
+                    {"names 3 files"});
+    expectNrrdError(tmp, "gone2.mhd", mhdText(dims, "LIST\ns1.raw\ns9.raw"), "ElementDataFile",
+                    {"names 's9.raw', which cannot be opened"});
+    expectNrrdError(tmp, "type.mhd",
+                    "ObjectType = Image\n" + dims + "ElementType = MET_FLOAT_ARRAY\n" +
+                        "ElementDataFile = both.raw\n",
+                    "ElementType", {"not a MetaImage scalar type"});
+    expectNrrdError(tmp, "notype.mhd",
+                    "ObjectType = Image\n" + dims + "ElementDataFile = both.raw\n", "ElementType",
+                    {"missing"});
+    expectNrrdError(tmp, "msb.mhd", mhdText(dims + "BinaryDataByteOrderMSB = maybe\n", "both.raw"),
+                    "BinaryDataByteOrderMSB", {"not True or False"});
+    expectNrrdError(tmp, "hs.mhd", mhdText(dims + "HeaderSize = -3\n", "both.raw"), "HeaderSize",
+                    {"-1 or a whole number"});
+    expectNrrdError(tmp, "hslist.mhd", mhdText(dims + "HeaderSize = 4\n", "LIST\ns1.raw\ns2.raw"),
+                    "HeaderSize", {"list of data files"});
+    expectNrrdError(tmp, "chan.mhd", mhdText(dims + "ElementNumberOfChannels = 0\n", "both.raw"),
+                    "ElementNumberOfChannels", {"1..4"});
+    expectNrrdError(tmp, "zlist.mhd",
+                    mhdText(dims + "CompressedData = True\n", "LIST\ns1.raw\ns2.raw"),
+                    "CompressedData", {"one file"});
+    // The private directories are gone, after reads and refusals alike.
+    for (const auto& e : fs::directory_iterator(scratch.path()))
+        ADD_FAILURE() << "left behind: " << e.path();
+    ASSERT_EQ(::unsetenv("TMPDIR"), 0);
+}
+
 TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
     test::TempDir tmp;
     writeText(tmp / "m.raw", std::string(400, '\0'));
