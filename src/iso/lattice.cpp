@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstring>
 #include <numbers>
@@ -597,7 +598,9 @@ void IlluminationLattice::transfer(const glm::dvec3& world, double surfaceIso,
     glm::ivec3 texel[8];
     double weight[8];
     const int n = surfaceStencil(world, surfaceIso, texel, weight);
-    std::vector<glm::dvec3> sum(out.size(), glm::dvec3(0.0));
+    std::array<glm::dvec3, 25> sum;  // shOrder ≤ 5: at most 25 coefficients, no allocation
+    VL_CHECK(out.size() <= sum.size());
+    std::fill_n(sum.begin(), out.size(), glm::dvec3(0.0));
     for (int c = 0; c < n; ++c) {
         const std::span<const glm::vec3> t = texelTransfer(texel[c]);
         for (std::size_t i = 0; i < out.size(); ++i) sum[i] += weight[c] * glm::dvec3(t[i]);
