@@ -37,6 +37,7 @@
 
 #include "core/error.h"
 #include "core/text.h"
+#include "io/child_process.h"
 #include "io/dicom_module.h"
 #include "io/dicom_series.h"
 #include "io/module_loader.h"
@@ -342,29 +343,6 @@ std::string signalName(int sig) {
     }
 }
 
-/// Owns the child and the descriptors; kills and reaps the child unless it was reaped.
-struct ChildGuard {
-    pid_t pid = -1;
-    int msg = -1, err = -1, mem = -1;
-    ~ChildGuard() {
-        if (pid > 0) {
-            ::kill(pid, SIGKILL);
-            int status = 0;
-            while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-            }
-        }
-        for (int fd : {msg, err, mem})
-            if (fd >= 0) ::close(fd);
-    }
-    int wait() {
-        int status = 0;
-        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-        }
-        pid = -1;
-        return status;
-    }
-};
-
 const mod::Api& dicomModule(const fs::path& path) {
     static std::once_flag once;
     static LoadedModule loaded;
@@ -387,7 +365,7 @@ const mod::Api& dicomModule(const fs::path& path) {
 
 mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
                                const ReadOptions& options, const core::Progress& progress) {
-    ChildGuard child;
+    ChildProcess child;
     child.mem = ::memfd_create("voxlight-dicom", MFD_CLOEXEC);
     if (child.mem < 0) systemFailure(path, "memfd_create");
     int msgPipe[2], errPipe[2];

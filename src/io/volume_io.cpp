@@ -51,6 +51,7 @@
 #include <sstream>
 
 #include "core/text.h"
+#include "io/child_process.h"
 #include "io/dicom_series.h"
 #include "io/nrrd_header.h"
 #include "io/volume_module.h"
@@ -352,39 +353,6 @@ class KeepAlive : public vtkCommand {
     std::shared_ptr<void> held;
 };
 
-/// Kills and reaps the child and closes the descriptors unless the child was reaped.
-struct ReaderChild {
-    pid_t pid = -1;
-    int msg = -1, mem = -1;
-    ReaderChild() = default;
-    ReaderChild(const ReaderChild&) = delete;
-    ReaderChild& operator=(const ReaderChild&) = delete;
-    ~ReaderChild() {
-        if (pid > 0) {
-            ::kill(pid, SIGKILL);
-            wait();
-        }
-        for (int fd : {msg, mem})
-            if (fd >= 0) ::close(fd);
-    }
-    int wait() {
-        int status = 0;
-        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
-        }
-        pid = -1;
-        return status;
-    }
-    /// Bytes the child has read so far (its /proc rchar), 0 when unknown.
-    std::uint64_t bytesRead() const {
-        std::ifstream io("/proc/" + std::to_string(pid) + "/io");
-        std::string key;
-        std::uint64_t value = 0;
-        while (io >> key >> value)
-            if (key == "rchar:") return value;
-        return 0;
-    }
-};
-
 void putField(std::string& out, const std::string& s) {
     const std::uint32_t n = std::uint32_t(s.size());
     out.append(reinterpret_cast<const char*>(&n), sizeof n);
@@ -468,7 +436,7 @@ vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& 
                                std::size_t(ext[5] - ext[4] + 1) * std::size_t(comps);
     const std::size_t bytes =
         values * std::size_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType()));
-    ReaderChild child;
+    ChildProcess child;
     child.mem = ::memfd_create("voxlight-read", MFD_CLOEXEC);
     if (child.mem < 0) systemFailure(path, "memfd_create");
     int pipeFds[2];

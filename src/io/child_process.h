@@ -1,0 +1,57 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// A reader run in a forked child (volume_io.cpp's contained VTK reads, dicom_loader.cpp's GDCM
+// decoding): the parent owns the child and the descriptors it reads it through.
+
+#include <signal.h>
+#include <sys/types.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cerrno>
+#include <cstdint>
+#include <fstream>
+#include <string>
+
+namespace voxlight::io {
+
+/// Kills (SIGKILL) and reaps the child unless it was reaped by wait(), and closes the
+/// descriptors: whatever way the parent leaves (an error, Ctrl-C's CancelledError), no child and
+/// no descriptor is left behind.
+struct ChildProcess {
+    pid_t pid = -1;
+    int msg = -1;  ///< the child's messages (read end of a pipe)
+    int err = -1;  ///< what the child printed (read end of a pipe), if captured separately
+    int mem = -1;  ///< the memfd the child writes its result into
+
+    ChildProcess() = default;
+    ChildProcess(const ChildProcess&) = delete;
+    ChildProcess& operator=(const ChildProcess&) = delete;
+    ~ChildProcess() {
+        if (pid > 0) {
+            ::kill(pid, SIGKILL);
+            wait();
+        }
+        for (int fd : {msg, err, mem})
+            if (fd >= 0) ::close(fd);
+    }
+    /// Reaps the child; its wait status.
+    int wait() {
+        int status = 0;
+        while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+        }
+        pid = -1;
+        return status;
+    }
+    /// Bytes the child has read so far (its /proc rchar), 0 when unknown.
+    std::uint64_t bytesRead() const {
+        std::ifstream io("/proc/" + std::to_string(pid) + "/io");
+        std::string key;
+        std::uint64_t value = 0;
+        while (io >> key >> value)
+            if (key == "rchar:") return value;
+        return 0;
+    }
+};
+
+}  // namespace voxlight::io
