@@ -24,9 +24,11 @@ std::string toString(StageKind k) {
 }
 
 json toJson(const StageRecord& r) {
-    return {{"name", r.name},     {"kind", toString(r.kind)}, {"ran", r.ran},
-            {"reason", r.reason}, {"seconds", r.seconds},     {"key", r.key},
-            {"inputs", r.inputs}};
+    json j = {{"name", r.name},     {"kind", toString(r.kind)}, {"ran", r.ran},
+              {"reason", r.reason}, {"seconds", r.seconds},     {"key", r.key},
+              {"inputs", r.inputs}};
+    if (r.stale) j["stale"] = true;
+    return j;
 }
 
 std::optional<std::uint64_t> Run::keyOf(const std::string& stage) const {
@@ -210,7 +212,17 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
         }
         const std::optional<std::uint64_t> keyOpt = st.key(run);
         if (!keyOpt) throw InternalError("stage '" + st.name + "' has an unknown input key");
-        const std::uint64_t key = *keyOpt;
+        std::uint64_t key = *keyOpt;
+        // The stage's lineage and, with staleFields, the last field of it standing in.
+        const std::optional<std::uint64_t> lineage =
+            st.lineage && st.kind == StageKind::Precompute ? st.lineage(run) : std::nullopt;
+        const std::string lastRecord = "last_of_lineage:" + st.name;
+        if (options.staleFields && lineage && !cache_.inMemory(st.name, key))
+            if (const auto last = cache_.record(lastRecord, *lineage);
+                last && *last != key && cache_.inMemory(st.name, *last)) {
+                key = *last;
+                r.stale = true;
+            }
         r.key = core::hexKey(key);
         Artifact a;
         if (st.kind == StageKind::Frame) {
@@ -238,7 +250,10 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                 }
             }
             if (!a.empty()) {
-                r.reason = cachedReason(key, disk);
+                r.reason = r.stale ? "stale: the last field computed for an earlier state (" +
+                                         core::hexKey(key).substr(0, 8) +
+                                         ") stands in while this one is computed"
+                                   : cachedReason(key, disk);
             } else {
                 a = st.compute(run);
                 r.ran = true;
@@ -250,6 +265,7 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                     cache_.writeDisk(st.name, key, *st.codec, a);
             }
             r.seconds = sw.seconds();
+            if (lineage && !r.stale) cache_.putRecord(lastRecord, *lineage, key, false);
         }
         if (st.describe) r.reason += ": " + st.describe(run, a);
         if (st.warnings)

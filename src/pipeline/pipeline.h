@@ -71,6 +71,10 @@ struct Stage {
     /// series resampled): every run that uses it reports them, whether it was computed or served
     /// from the cache — a warning about the data does not go quiet because the data was cached.
     std::function<std::vector<std::string>(const Artifact&)> warnings;
+    /// Non-null: the stage's artifact is a field an earlier one of the same lineage (the same
+    /// volume and settings, another transfer function or cut) may stand in for while it is not
+    /// computed yet (RunOptions::staleFields). The key of that lineage, without what changes.
+    std::function<std::optional<std::uint64_t>(const Run&)> lineage;
 };
 
 struct Plan {
@@ -88,6 +92,9 @@ struct StageRecord {
     double seconds = 0.0;  ///< Frame stages: the median frame
     std::string key;       ///< 16 hex digits, or "" when unknown / not needed
     std::vector<std::string> inputs;
+    /// The artifact is an earlier field of the stage's lineage, not this scene's
+    /// (RunOptions::staleFields; the reason says so too).
+    bool stale = false;
 };
 
 /// Stats JSON of a record (name, kind, ran, reason, seconds, key, inputs).
@@ -157,6 +164,13 @@ class KeyBuilder {
 
 struct RunOptions {
     int frames = 1;  ///< Frame stages run this many times (timing); records report the median
+    /// Kronander's interleaved update (an interactive client after a TF change or a cut): a
+    /// stage with a lineage (the visibility fields) whose artifact is not in memory uses the last
+    /// one computed in its lineage instead, if memory still holds it — old shading over the new
+    /// classification at once, while the client computes the new field in a run without this.
+    /// Stages downstream key on the stand-in, so no field computed for the old state is ever
+    /// stored as the new state's. The records say which stages stood in (StageRecord::stale).
+    bool staleFields = false;
 };
 
 /// Most frames one run repeats (a timing aid, not a batch renderer).

@@ -934,6 +934,14 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             .value();
     };
     vis.key = visStageKey;
+    // The lineage of a field: the same volume, rays, coefficients and radius (any TF).
+    const auto localLineage = [visKey](const Run& run, const char* stage) {
+        return KeyBuilder(run, std::string(stage) + "_lineage")
+            .stage("block_pyramid")
+            .json(visKey)
+            .value();
+    };
+    vis.lineage = [localLineage](const Run& run) { return localLineage(run, "local_visibility"); };
     vis.compute = [vo, visKey, visStageKey](Run& run) {
         const auto tfa = run.get<TfArtifact>("transfer_function");
         const auto grid = run.get<visibility::MultiresGrid>("multires_grid");
@@ -1010,6 +1018,9 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             .json(cutKey)
             .value();
     };
+    clip.lineage = [localLineage](const Run& run) {
+        return localLineage(run, "clip_local_visibility");
+    };
     clip.compute = [kept = cuts.kept, threads = vo.threads](Run& run) {
         const auto tfa = run.get<TfArtifact>("transfer_function");
         visibility::ClipUpdateStats st;
@@ -1051,6 +1062,15 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             .stage(clipped ? "clip_local_visibility" : "local_visibility")
             .integer(std::uint64_t(go.resolution))
             .integer(go.nearFromLocal ? 1 : 0)
+            .value();
+    };
+    gv.lineage = [go, clipped, visKey](const Run& run) {
+        return KeyBuilder(run, "global_visibility_lineage")
+            .stage("block_pyramid")
+            .json(visKey)
+            .integer(std::uint64_t(go.resolution))
+            .integer(go.nearFromLocal ? 1 : 0)
+            .integer(clipped ? 1 : 0)
             .value();
     };
     gv.compute = [go, clipped](Run& run) {
@@ -1133,6 +1153,12 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
             .json(visKey)
             .value();
     };
+    vis.lineage = [visKey](const Run& run) {
+        return KeyBuilder(run, "hierarchical_visibility_lineage")
+            .stage("block_pyramid")
+            .json(visKey)
+            .value();
+    };
     vis.compute = [vo](Run& run) {
         core::Stopwatch sw;
         auto v = std::make_shared<const visibility::HierarchicalVisibility>(
@@ -1177,6 +1203,12 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
             .stage("opacity_pyramid")
             .json(visKey)
             .json(cutKey)
+            .value();
+    };
+    clip.lineage = [visKey](const Run& run) {
+        return KeyBuilder(run, "clip_hierarchical_visibility_lineage")
+            .stage("block_pyramid")
+            .json(visKey)
             .value();
     };
     clip.compute = [vo, kept = cuts.kept](Run& run) {

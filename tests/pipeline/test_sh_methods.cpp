@@ -468,3 +468,62 @@ TEST(Ritschel, TurningAnEnvironmentMapRunsNoVisibilityStage) {
     EXPECT_EQ(ranStages(b), (std::set<std::string>{"lights", "camera", "render"}));
     EXPECT_NE(a.image.pixels, b.image.pixels);
 }
+
+// Kronander's interleaved update (RunOptions::staleFields, the viewer's first image after a TF
+// change): the last fields of the same lineage stand in at once, the records say so, nothing
+// computed for the old TF is stored as the new one's, and a run without the option then computes
+// the field a fresh session computes, bit for bit.
+TEST(ShGlobal, AfterATfChangeTheLastFieldsStandInUntilTheNewOnesAreComputed) {
+    Session session;
+    json d = shScene();
+    d["method"]["name"] = "sh-global";
+    const RunResult boneImage = session.run(scene(d));
+    RunOptions stale;
+    stale.staleFields = true;
+    d["transfer_function"] = "ct-soft-tissue";
+    const RunResult standIn = session.run(scene(d), stale);
+    EXPECT_TRUE(standIn.stage("local_visibility").stale);
+    EXPECT_FALSE(standIn.stage("local_visibility").ran);
+    EXPECT_NE(standIn.stage("local_visibility").reason.find("stale"), std::string::npos);
+    EXPECT_FALSE(standIn.stage("global_visibility").ran);  // keyed on the stand-in: cached
+    EXPECT_EQ(toJson(standIn.stage("local_visibility")).value("stale", false), true);
+    EXPECT_FALSE(toJson(standIn.stage("render")).contains("stale"));
+    EXPECT_TRUE(allFinite(standIn.image));
+    EXPECT_NE(standIn.image.pixels, boneImage.image.pixels);  // the new classification
+    // The new fields, computed by a run without the option, are a fresh session's exactly.
+    const RunResult fresh = session.run(scene(d));
+    EXPECT_TRUE(fresh.stage("local_visibility").ran);
+    EXPECT_TRUE(fresh.stage("global_visibility").ran);
+    EXPECT_FALSE(fresh.stage("local_visibility").stale);
+    Session other;
+    const RunResult reference = other.run(scene(d));
+    EXPECT_EQ(fresh.image.pixels, reference.image.pixels);
+    EXPECT_NE(standIn.image.pixels, reference.image.pixels);  // old shading differed
+    // Now current: the option changes nothing.
+    const RunResult again = session.run(scene(d), stale);
+    EXPECT_FALSE(again.stage("local_visibility").stale);
+    EXPECT_EQ(again.image.pixels, reference.image.pixels);
+    // Never across volumes: another volume computes its own fields.
+    d["volume"]["size"] = 24;
+    const RunResult otherVolume = session.run(scene(d), stale);
+    EXPECT_TRUE(otherVolume.stage("local_visibility").ran);
+    EXPECT_FALSE(otherVolume.stage("local_visibility").stale);
+}
+
+TEST(Ritschel, AfterATfChangeTheLastFieldStandsIn) {
+    Session session;
+    json d = shScene();
+    d["method"] = {{"name", "ritschel"}, {"params", {{"rays", 16}}}};
+    (void)session.run(scene(d));
+    RunOptions stale;
+    stale.staleFields = true;
+    d["transfer_function"] = "ct-soft-tissue";
+    const RunResult standIn = session.run(scene(d), stale);
+    EXPECT_TRUE(standIn.stage("hierarchical_visibility").stale);
+    EXPECT_FALSE(standIn.stage("hierarchical_visibility").ran);
+    EXPECT_TRUE(allFinite(standIn.image));
+    const RunResult fresh = session.run(scene(d));
+    EXPECT_TRUE(fresh.stage("hierarchical_visibility").ran);
+    Session other;
+    EXPECT_EQ(fresh.image.pixels, other.run(scene(d)).image.pixels);
+}
