@@ -27,7 +27,7 @@ json toJson(const StageRecord& r) {
     json j = {{"name", r.name},     {"kind", toString(r.kind)}, {"ran", r.ran},
               {"reason", r.reason}, {"seconds", r.seconds},     {"key", r.key},
               {"inputs", r.inputs}};
-    if (r.stale) j["stale"] = true;
+    if (r.stale) j["stale"] = true, j["wanted_key"] = r.wantedKey;
     return j;
 }
 
@@ -220,6 +220,7 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
         if (options.staleFields && lineage && !cache_.inMemory(st.name, key))
             if (const auto last = cache_.record(lastRecord, *lineage);
                 last && *last != key && cache_.inMemory(st.name, *last)) {
+                r.wantedKey = core::hexKey(key);
                 key = *last;
                 r.stale = true;
             }

@@ -93,8 +93,10 @@ struct StageRecord {
     std::string key;       ///< 16 hex digits, or "" when unknown / not needed
     std::vector<std::string> inputs;
     /// The artifact is an earlier field of the stage's lineage, not this scene's
-    /// (RunOptions::staleFields; the reason says so too).
+    /// (RunOptions::staleFields; the reason says so too); `wantedKey` is the key of the field
+    /// this scene needs (16 hex digits), `key` the stand-in's.
     bool stale = false;
+    std::string wantedKey;
 };
 
 /// Stats JSON of a record (name, kind, ran, reason, seconds, key, inputs).

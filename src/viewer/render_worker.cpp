@@ -50,16 +50,22 @@ std::vector<std::uint8_t> displayBytes(const io::Scene& scene, const core::Image
 }
 
 RenderWorker::RenderWorker(WorkerOptions options)
-    : options_(options), thread_([this] { loop(); }) {}
+    : options_(options),
+      session_(std::make_unique<pipeline::Session>()),
+      thread_([this] { loop(); }),
+      fieldThread_([this] { fieldLoop(); }) {}
 
 RenderWorker::~RenderWorker() {
     {
         std::lock_guard lock(mutex_);
         stop_ = true;
         cancel_ = true;
+        fieldCancel_ = true;
     }
     wake_.notify_all();
+    fieldWake_.notify_all();
     thread_.join();
+    fieldThread_.join();
 }
 
 void RenderWorker::submit(RenderRequest request) {
@@ -85,8 +91,10 @@ RenderWorker::Status RenderWorker::status() const {
     s.busy = busy_;
     s.coarse = busyCoarse_;
     s.fraction = fraction_;
+    s.fieldFraction = fieldFraction_;
     std::lock_guard lock(mutex_);
     s.generation = runningGeneration_;
+    s.updatingFields = fieldBusy_ || fieldPending_.has_value();
     return s;
 }
 
@@ -96,8 +104,6 @@ void RenderWorker::loop() {
     lowerThisThread(options_.nice);
     LowerArenaWorkers lowerWorkers(options_.nice);
     std::unique_lock lock(mutex_);
-    // The session (and its cache of volume, gradients, skip cells, ...) lives on this thread only.
-    pipeline::Session session;
     for (;;) {
         wake_.wait(lock, [&] { return stop_ || pending_.has_value(); });
         if (stop_) return;
@@ -111,7 +117,7 @@ void RenderWorker::loop() {
             runningFull_ = false;
             busy_ = busyCoarse_ = true;
             lock.unlock();
-            const bool done = renderPass(session, request, true);
+            const bool done = renderPass(request, true);
             lock.lock();
             busy_ = busyCoarse_ = false;
             if (done) coarseDone_ = request.generation;
@@ -121,16 +127,63 @@ void RenderWorker::loop() {
         runningFull_ = true;
         busy_ = true;
         lock.unlock();
-        renderPass(session, request, false);
+        std::string stale;
+        const bool done = renderPass(request, false, &stale);
         lock.lock();
         busy_ = false;
         runningFull_ = false;
         if (stop_) return;
+        if (!done) continue;
+        lastFull_ = request;
+        // Shaded from earlier fields: have the field thread compute this state's, unless it is
+        // computing them already (a camera or light move needs the same fields: let it go on).
+        if (!stale.empty() && stale != fieldSignature_) {
+            if (fieldBusy_) fieldCancel_ = true;
+            fieldPending_ = request;
+            fieldSignature_ = stale;
+            fieldWake_.notify_one();
+        }
     }
 }
 
-bool RenderWorker::renderPass(pipeline::Session& session, const RenderRequest& request,
-                              bool coarse) {
+void RenderWorker::fieldLoop() {
+    lowerThisThread(options_.nice);
+    LowerArenaWorkers lowerWorkers(options_.nice);
+    std::unique_lock lock(mutex_);
+    for (;;) {
+        fieldWake_.wait(lock, [&] { return stop_ || fieldPending_.has_value(); });
+        if (stop_) return;
+        io::Scene scene = std::move(fieldPending_->scene);
+        fieldPending_.reset();
+        fieldCancel_ = false;
+        fieldBusy_ = true;
+        lock.unlock();
+        // The fields come from a run of the state itself (a tiny image: its frame costs nothing)
+        // without stand-ins; they land in the shared session's cache.
+        scene.image.width = scene.image.height = 8;
+        bool done = false;
+        fieldFraction_ = 0.0;
+        try {
+            const core::Progress progress(
+                [this](const std::string&, double f) { fieldFraction_ = f; }, &fieldCancel_);
+            (void)session_->run(scene, {}, progress);
+            done = true;
+        } catch (const std::exception&) {
+            // Cancelled, or an error the render thread reports for the same state.
+        }
+        lock.lock();
+        fieldBusy_ = false;
+        if (!fieldPending_) fieldSignature_.clear();
+        if (stop_) return;
+        // Render the newest full state again: with its fields ready it is no longer stale.
+        if (done && !fieldPending_ && !pending_ && lastFull_) {
+            pending_ = lastFull_;
+            wake_.notify_one();
+        }
+    }
+}
+
+bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::string* staleFields) {
     RenderedImage out;
     out.generation = request.generation;
     out.coarse = coarse;
@@ -143,7 +196,14 @@ bool RenderWorker::renderPass(pipeline::Session& session, const RenderRequest& r
                                  options_.coarseTermination)
                    : request.scene;
         core::Stopwatch sw;
-        pipeline::RunResult r = session.run(scene, {}, progress);
+        pipeline::RunOptions runOptions;
+        runOptions.staleFields = true;  // old shading at once after a TF change or a cut
+        pipeline::RunResult r = session_->run(scene, runOptions, progress);
+        for (const auto& st : r.stages)
+            if (st.stale) {
+                out.staleShading = true;
+                if (staleFields) *staleFields += st.name + ":" + st.wantedKey + " ";
+            }
         out.seconds = sw.seconds();
         const auto denoised = r.images.find("denoised");
         const core::ImageRGBA& film = denoised != r.images.end() ? denoised->second : r.image;

@@ -12,9 +12,15 @@
 // Progressive refinement: each new state is first rendered coarse (coarseScene: 1/4 of the size,
 // twice the step), then — unless the request says the user is still interacting — at full
 // resolution. A request repeating a state already rendered coarse goes straight to full.
+// Kronander's interleaved update for the SH methods: after a TF change (or a cut) both passes
+// shade from the last visibility fields at once (pipeline::RunOptions::staleFields; the image
+// says staleShading), while a second thread computes the new fields in the same session — not
+// cancelled by camera or light moves, only by a state that needs other fields — and the state
+// is rendered again when they are ready. The UI never waits for either.
 #include <atomic>
 #include <condition_variable>
 #include <cstdint>
+#include <memory>
 #include <mutex>
 #include <nlohmann/json.hpp>
 #include <optional>
@@ -48,6 +54,9 @@ struct RenderedImage {
     nlohmann::json camera;           ///< the camera as used (pipeline details "camera")
     std::vector<std::string> warnings;
     std::string error;  ///< non-empty: the render failed (an InputError's message); no pixels
+    /// Shaded from an earlier state's visibility fields (the new ones are being computed; the
+    /// same state is rendered again when they are ready).
+    bool staleShading = false;
 };
 
 struct WorkerOptions {
@@ -78,6 +87,8 @@ class RenderWorker {
         bool coarse = false;    ///< the running pass
         double fraction = 0.0;  ///< of the running pass's current stage
         std::uint64_t generation = 0;
+        bool updatingFields = false;  ///< the field thread computes visibility for a new state
+        double fieldFraction = 0.0;   ///< of its current stage
     };
     Status status() const;
     /// Renders finished so far (both passes), for tests and the stats panel.
@@ -87,7 +98,9 @@ class RenderWorker {
 
   private:
     void loop();
-    bool renderPass(pipeline::Session& session, const RenderRequest& request, bool coarse);
+    void fieldLoop();
+    /// False when cancelled; `stale`: some field stood in for this state's.
+    bool renderPass(const RenderRequest& request, bool coarse, std::string* staleFields = nullptr);
 
     WorkerOptions options_;
     mutable std::mutex mutex_;
@@ -103,7 +116,19 @@ class RenderWorker {
     std::atomic<std::uint64_t> completed_{0}, cancelled_{0};
     std::mutex resultMutex_;
     std::optional<RenderedImage> result_;
+    /// The session (cache of volume, tables and fields) both threads run scenes through.
+    std::unique_ptr<pipeline::Session> session_;
+    // The field thread (guarded by mutex_): the state whose fields to compute, and the last
+    // full request (rendered again when its fields are ready).
+    std::optional<RenderRequest> fieldPending_;
+    std::string fieldSignature_;  ///< the fields being computed (their keys), "" when idle
+    std::optional<RenderRequest> lastFull_;
+    bool fieldBusy_ = false;
+    std::atomic<bool> fieldCancel_{false};
+    std::atomic<double> fieldFraction_{0.0};
+    std::condition_variable fieldWake_;
     std::thread thread_;
+    std::thread fieldThread_;
 };
 
 }  // namespace voxlight::viewer

@@ -200,6 +200,7 @@ class Viewer {
     GLuint texture_ = 0;
     int texW_ = 0, texH_ = 0;
     bool shownFull_ = false;
+    bool shownStale_ = false;  ///< shaded from an earlier state's visibility fields
     std::uint64_t shownGen_ = 0;
     std::string renderError_;
     std::vector<std::string> renderWarnings_;
@@ -292,9 +293,10 @@ void Viewer::receive() {
     }
     (r->coarse ? coarseTimes_ : fullTimes_).add(r->seconds);
     if (options_.log)
-        std::fprintf(stderr, "view: render %s %dx%d in %.3f s (state %llu)\n",
+        std::fprintf(stderr, "view: render %s %dx%d in %.3f s (state %llu)%s\n",
                      r->coarse ? "coarse" : "full", r->width, r->height, r->seconds,
-                     (unsigned long long)r->generation);
+                     (unsigned long long)r->generation,
+                     r->staleShading ? " shaded from earlier fields" : "");
     // An older state's image still shows the volume better than nothing; a newer one replaces it.
     if (r->generation < shownGen_) return;
     if (!texture_) glGenTextures(1, &texture_);
@@ -310,6 +312,7 @@ void Viewer::receive() {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     texW_ = r->width, texH_ = r->height;
     shownFull_ = !r->coarse;
+    shownStale_ = r->staleShading;
     shownGen_ = r->generation;
     renderWarnings_ = r->warnings;
     if (!r->camera.is_null()) renderedCamera_ = r->camera, renderedCameraGen_ = r->generation;
@@ -419,7 +422,7 @@ void Viewer::windowDrag(const optics::TransferFunction& start, double dx, double
 }
 
 void Viewer::runScript() {
-    if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ ||
+    if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ || shownStale_ ||
         shownGen_ != generation_ || loading_.valid())
         return;
     const ScriptStep& st = options_.script[scriptNext_++];
@@ -730,6 +733,11 @@ void Viewer::drawPanel() {
             ImGui::Text("rendering %s %3.0f %%", st.coarse ? "coarse" : "full", st.fraction * 100);
         else
             ImGui::TextDisabled("%s", shownFull_ ? "idle: full resolution shown" : "idle");
+        // Kronander's interleaved update: the old shading stays until the new fields are ready.
+        if (st.updatingFields)
+            ImGui::TextColored(ImVec4(1.f, 0.8f, 0.3f, 1.f),
+                               "updating shading (visibility) %3.0f %%; earlier shading shown",
+                               st.fieldFraction * 100);
     }
     if (helpToggled_) ImGui::SetNextItemOpen(showHelp_), helpToggled_ = false;
     if (ImGui::CollapsingHeader("Help (F1)")) ImGui::TextUnformatted(kHelp);
@@ -823,8 +831,8 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ++frames_;
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
             scriptNext_ >= options_.script.size() && (ptGen_ != generation_ || ptReady_) &&
-            shownFull_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
-            texH_ == imageH_)
+            shownFull_ && !shownStale_ && shownGen_ == generation_ && !loading_.valid() &&
+            texW_ == imageW_ && texH_ == imageH_)
             shot = readWindow();
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.

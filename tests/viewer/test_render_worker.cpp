@@ -89,3 +89,53 @@ TEST(RenderWorker, ANewStateCancelsTheFullPassInProgress) {
     }
     EXPECT_EQ(worker.cancelled(), 1u);
 }
+
+// Kronander's interleaved update: after a TF change the SH shading of the last fields shows at
+// once (coarse and full), the new fields are computed on the field thread, and the state is then
+// rendered again with them — equal to the CLI's image of the new state.
+TEST(RenderWorker, AfterATfChangeTheOldShadingShowsAtOnceAndTheNewFollows) {
+    auto shScene = [](const char* tf, double azimuth) {
+        return io::parseScene(
+            {{"volume", {{"phantom", "torso"}, {"size", 48}}},
+             {"transfer_function", tf},
+             {"method", {{"name", "sh-local"}, {"params", {{"rays", 24}, {"data_reduction", 2}}}}},
+             {"lights",
+              json::array(
+                  {{{"type", "directional"}, {"direction", {-1, -1, -1}}, {"intensity", 3}}})},
+             {"camera", {{"azimuth", azimuth}, {"elevation", 15}}},
+             {"image", {{"width", 64}, {"height", 64}}}},
+            "test", "/");
+    };
+    viewer::RenderWorker worker;
+    worker.submit({shScene("ct-bone", 30), 1, false});
+    for (;;) {  // the first state computes its fields in its own passes: never stale
+        auto r = next(worker);
+        ASSERT_TRUE(r);
+        ASSERT_TRUE(r->error.empty()) << r->error;
+        EXPECT_FALSE(r->staleShading);
+        if (!r->coarse) break;
+    }
+    const io::Scene soft = shScene("ct-soft-tissue", 30);
+    worker.submit({soft, 2, false});
+    bool sawStale = false, sawUpdating = false;
+    std::optional<viewer::RenderedImage> current;
+    const auto end = std::chrono::steady_clock::now() + std::chrono::seconds(180);
+    while (std::chrono::steady_clock::now() < end) {
+        sawUpdating = sawUpdating || worker.status().updatingFields;
+        if (auto r = worker.take()) {
+            ASSERT_TRUE(r->error.empty()) << r->error;
+            EXPECT_EQ(r->generation, 2u);
+            sawStale = sawStale || r->staleShading;
+            if (!r->coarse && !r->staleShading) {
+                current = std::move(r);
+                break;
+            }
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    EXPECT_TRUE(sawStale);
+    EXPECT_TRUE(sawUpdating);
+    ASSERT_TRUE(current);
+    EXPECT_EQ(current->rgba, viewer::displayBytes(soft, pipeline::renderScene(soft).image));
+    EXPECT_FALSE(worker.status().updatingFields);
+}
