@@ -1015,6 +1015,58 @@ class CerrCapture {
     std::streambuf* old_;
 };
 
+/// Inflates MetaImage compressed data (zlib format, as MetaIO reads it) into a scratch buffer to
+/// prove it yields the `need` bytes MetaIO will ask for: MetaIO's own loop spins forever on some
+/// damaged streams (found by fuzz_metaimage_mhd), so a stream that ends early, is corrupt or runs
+/// out of input is refused before MetaIO sees it. One extra inflate pass (the data is read again
+/// by MetaIO); Ctrl-C is honoured (progress is MetaIO's read's).
+void checkMetaDeflate(const fs::path& file, std::uint64_t offset, std::uint64_t bytes,
+                      std::uint64_t need, const fs::path& header, const core::Progress& progress) {
+    std::ifstream in(file, std::ios::binary);
+    in.seekg(std::streamoff(offset));
+    z_stream z{};
+    if (inflateInit(&z) != Z_OK) throw std::bad_alloc();
+    struct End {
+        z_stream* z;
+        ~End() { inflateEnd(z); }
+    } end{&z};
+    constexpr std::size_t kChunk = std::size_t(1) << 20;
+    std::vector<unsigned char> input(kChunk), output(kChunk);
+    std::uint64_t left = bytes, produced = 0;
+    auto fail = [&](const std::string& why) {
+        throw InputError(file.string(), "data",
+                         "compressed data " + why + " (header " + header.filename().string() +
+                             " claims " + std::to_string(need) + " voxel bytes)",
+                         "the data is truncated or corrupt; copy it again");
+    };
+    while (produced < need) {
+        if (z.avail_in == 0) {
+            if (left == 0) fail("ends after " + std::to_string(produced) + " bytes");
+            in.read(reinterpret_cast<char*>(input.data()),
+                    std::streamsize(std::min<std::uint64_t>(left, kChunk)));
+            const std::size_t got = std::size_t(in.gcount());
+            if (got == 0) fail("ends after " + std::to_string(produced) + " bytes");
+            left -= got;
+            z.next_in = input.data();
+            z.avail_in = uInt(got);
+            progress.checkCancel();
+        }
+        z.next_out = output.data();
+        z.avail_out = uInt(std::min<std::uint64_t>(kChunk, need - produced));
+        const uInt inBefore = z.avail_in, outBefore = z.avail_out;
+        const int rc = inflate(&z, Z_NO_FLUSH);
+        produced += std::min<std::uint64_t>(kChunk, need - produced) - z.avail_out;
+        if (rc == Z_BUF_ERROR && z.avail_in == inBefore && z.avail_out == outBefore &&
+            z.avail_in > 0)
+            fail("makes no progress after " + std::to_string(produced) + " bytes");
+        if (rc == Z_STREAM_END && produced < need)
+            fail("ends after " + std::to_string(produced) + " bytes");
+        if (rc != Z_OK && rc != Z_STREAM_END && rc != Z_BUF_ERROR)
+            fail(std::string("cannot be inflated: ") +
+                 (z.msg ? z.msg : "zlib error " + std::to_string(rc)));
+    }
+}
+
 /// MetaIO's scalar element types (those vtkMetaImageReader maps to a VTK type).
 bool knownMetaElementType(const std::string& t) {
     static const char* const kTypes[] = {
@@ -1303,6 +1355,19 @@ Volume readMeta(const fs::path& path, const ReadOptions&, const core::Progress& 
                                      " compressed bytes, header claims " +
                                      std::to_string(std::uint64_t(claimed)),
                                  "the data is truncated; copy it again");
+        }
+    }
+    if (isCompressed) {
+        std::error_code ec;
+        const std::uint64_t size = fs::file_size(files[0], ec);
+        if (!ec) {
+            const std::uint64_t at =
+                std::min<std::uint64_t>(size, std::uint64_t(std::max(skip, 0LL)));
+            std::uint64_t bytes = size - at;
+            if (h.find("CompressedDataSize"))
+                bytes = std::min<std::uint64_t>(
+                    bytes, std::uint64_t(metaNumbers(h, path, "CompressedDataSize", 1)[0]));
+            checkMetaDeflate(files[0], at, bytes, need, path, progress);
         }
     }
     Volume v;

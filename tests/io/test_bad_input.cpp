@@ -484,11 +484,36 @@ TEST(BadInput, MetaImageShortOrUndecompressibleData) {
     expectNrrdError(tmp, "short.mha",
                     mhdText("NDims = 3\nDimSize = 10 10 2\n", "LOCAL") + std::string(50, '\0'),
                     "data", {"file holds 50 bytes", "claims 400"});
-    // Compressed data that does not decompress: MetaIO only prints "Uncompress failed".
+    // Compressed data that does not decompress (MetaIO only prints "Uncompress failed"): inflated
+    // by voxlight first (volume_io.cpp checkMetaDeflate).
     expectNrrdError(tmp, "junk.mha",
                     mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n", "LOCAL") +
                         std::string(64, '\7'),
-                    "data", {"could not be read"});
+                    "data", {"cannot be inflated"});
+    // fuzz_metaimage_mhd: text whose first bytes read as a zlib header asking for a preset
+    // dictionary ("x " = 0x78 0x20); MetaIO's inflate loop spun forever on it.
+    writeText(tmp / "dict.zraw", "x = 1 0 0 0 1 0 0 0 1\nOffset = -2 3 4.5\n");
+    expectNrrdError(tmp, "dict.mhd",
+                    mhdText("NDims = 3\nDimSize = 10 4 3\nCompressedData = True\n", "dict.zraw"),
+                    "data", {"cannot be inflated"});
+    // A valid stream with fewer bytes than the header claims.
+    {
+        const std::string raw(200, '\5');
+        std::string z(compressBound(uLong(raw.size())), '\0');
+        uLongf zn = uLongf(z.size());
+        ASSERT_EQ(compress(reinterpret_cast<Bytef*>(z.data()), &zn,
+                           reinterpret_cast<const Bytef*>(raw.data()), uLong(raw.size())),
+                  Z_OK);
+        z.resize(zn);
+        expectNrrdError(
+            tmp, "few.mha",
+            mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n", "LOCAL") + z, "data",
+            {"ends after 200 bytes", "claims 400"});
+        // The same stream claiming its 200 bytes loads.
+        writeText(tmp / "ok.mha",
+                  mhdText("NDims = 3\nDimSize = 10 10 1\nCompressedData = True\n", "LOCAL") + z);
+        EXPECT_EQ(io::readVolume(tmp / "ok.mha").dataAs<std::int16_t>()[99], 0x0505);
+    }
     // CompressedDataSize larger than the file.
     expectNrrdError(tmp, "cds.mha",
                     mhdText("NDims = 3\nDimSize = 10 10 2\nCompressedData = True\n"
