@@ -4,10 +4,11 @@
 patient's front, to look at them: one viewport per mesh, vertex colours as stored, VTK's headlight.
 
 usage: xvfb-run -a /usr/bin/python3 tools/render_mesh.py OUT.png MESH [MESH ...] [--size W H]
-[--unlit [INDEX ...]] [--azimuth DEG]
+[--unlit [INDEX ...]] [--azimuth DEG] [--elevation DEG]
 --unlit (all meshes, or those at the 0-based indices given) shows the stored vertex colours as they are (no headlight): how a mesh with light baked in by
 `voxlight iso --bake` looks in a viewer that draws vertex colours flat. --azimuth turns the camera about
-the superior axis (0 = anterior view, 90 = from the patient's left).
+the superior axis (0 = anterior view, 90 = from the patient's left); --elevation raises it toward
+superior (90 = looking down from above, e.g. at the cap of an axial cut).
 Meshes are in mm, patient LPS (src/iso/export.h): the camera looks along +y (from anterior) with
 +z (superior) up. Needs Debian's python3-vtk9 (tools/setup.sh).
 """
@@ -38,6 +39,8 @@ def main():
                     help="vertex colours as stored, no lighting: every mesh, or those at the given "
                          "0-based indices")
     ap.add_argument("--azimuth", type=float, default=0.0, help="degrees about +z from anterior")
+    ap.add_argument("--elevation", type=float, default=0.0,
+                    help="degrees above the axial plane (toward superior)")
     a = ap.parse_args()
     n = len(a.meshes)
     window = vtkRenderWindow()
@@ -63,7 +66,9 @@ def main():
         cam.SetFocalPoint(*c)
         az = math.radians(a.azimuth)
         # anterior is −y in LPS; +azimuth turns toward the patient's left (+x)
-        cam.SetPosition(c[0] + 1000.0 * math.sin(az), c[1] - 1000.0 * math.cos(az), c[2])
+        el = math.radians(max(-89.0, min(89.0, a.elevation)))
+        cam.SetPosition(c[0] + 1000.0 * math.sin(az) * math.cos(el),
+                        c[1] - 1000.0 * math.cos(az) * math.cos(el), c[2] + 1000.0 * math.sin(el))
         cam.SetViewUp(0, 0, 1)
         ren.ResetCamera()
         cam.Zoom(1.15)

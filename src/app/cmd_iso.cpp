@@ -1,12 +1,13 @@
 // SPDX-License-Identifier: MIT
 // voxlight iso SCENE.json|VOLUME -o MESH.(ply|obj|glb) [--isovalue V] [--stats STATS.json]
-//              [--set key=value]... [--remove-degenerate] [--keep-largest K]
+//              [--set key=value]... [--cap] [--remove-degenerate] [--keep-largest K]
 //              [--min-component-faces N] [--smooth N] [--decimate FACES]
 //              [--no-self-intersections] [--bake [--samples N] [--bounces K]
 //              [--bake-from vertices|lattice] [--lattice-resolution R]
 //              [--lattice-mode irradiance|sh] [--sh-order O]] [-q]
 // Extracts the scene's isosurface as a mesh (iso/: VTK flying edges → OpenMesh, world mm, outward
-// gradient normals), cuts it by the scene's clip planes and crop box (open cut), optionally cleans
+// gradient normals), cuts it by the scene's clip planes and crop box (open cut, or capped with
+// --cap: iso/extract.h), optionally cleans
 // it up (CGAL), reports it and writes it with vertex colours.
 //
 // The isovalue, first found wins: --isovalue; the scene's method.params.iso_value (the `iso`
@@ -82,6 +83,7 @@ Command addIsoCommand(CLI::App& app) {
     auto latticeMode = std::make_shared<std::string>("irradiance");
     auto bakeFrom = std::make_shared<std::string>("vertices");
     auto exportSh = std::make_shared<bool>(false);
+    auto cap = std::make_shared<bool>(false);
     auto latticeTexels = std::make_shared<std::string>("surface");
     c.sub->add_option("INPUT", *scene, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("-o,--output", *out, "Mesh file: .ply, .obj or .glb")->required();
@@ -92,6 +94,9 @@ Command addIsoCommand(CLI::App& app) {
     c.sub->add_option("--stats", *stats, "Write stages, timings and the mesh report as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set crop_box.min=[0,0,0]")
         ->allow_extra_args(false);
+    c.sub->add_flag("--cap", *cap,
+                    "Close the cuts of clip planes and crop box with flat caps (a closed surface "
+                    "stays watertight)");
     c.sub->add_flag("--remove-degenerate", cleanup->removeDegenerate,
                     "Remove degenerate (zero-area) faces");
     c.sub
@@ -182,6 +187,7 @@ Command addIsoCommand(CLI::App& app) {
             isoSource = s.source, isoField = "transfer_function";
         }
         options.color = tf.eval(float(options.isovalue)).albedo;
+        options.cap = *cap;
         for (const auto& p : s.clipPlanes)
             options.keep.push_back({p.point, glm::normalize(p.normal)});
         if (s.cropBox)
@@ -311,6 +317,10 @@ Command addIsoCommand(CLI::App& app) {
                         {"flying_edges_triangles", es.flyingEdgesTriangles},
                         {"clipped_triangles", es.clippedTriangles},
                         {"faces_refused_non_manifold", es.rejectedFaces},
+                        {"caps", *cap ? json{{"triangles", es.capTriangles},
+                                             {"open_cut_edges", es.capOpenEdges},
+                                             {"failed_planes", es.capFailures}}
+                                      : json(nullptr)},
                         {"cleanup",
                          {{"degenerate_faces_removed", cs.degenerateFacesRemoved},
                           {"components_removed", cs.componentsRemoved},
@@ -342,6 +352,16 @@ Command addIsoCommand(CLI::App& app) {
         }
         throwIfCancelled();
         files.commit();
+        if (es.capOpenEdges)
+            std::fprintf(stderr,
+                         "voxlight: warning: %zu cut edge(s) left uncapped: the surface is open "
+                         "there (it reaches the volume's border)\n",
+                         es.capOpenEdges);
+        if (es.capFailures)
+            std::fprintf(stderr,
+                         "voxlight: warning: the cap of %zu plane(s) could not be filled whole: "
+                         "the mesh may have holes there\n",
+                         es.capFailures);
         if (es.rejectedFaces)
             std::fprintf(stderr,
                          "voxlight: warning: %zu triangle(s) left out: they would have made an "

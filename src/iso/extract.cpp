@@ -4,13 +4,16 @@
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
 
+#include <algorithm>
 #include <cmath>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <unordered_map>
 
 #include "core/timing.h"
 #include "io/module_loader.h"
+#include "iso/cap_fill.h"
 #include "iso/flying_edges_module.h"
 
 namespace voxlight::iso {
@@ -126,15 +129,24 @@ void applyNormals(Mesh& mesh, const std::vector<glm::vec3>& normals) {
 struct Soup {
     std::vector<glm::dvec3> points;
     std::vector<std::uint32_t> triangles;
+    /// With caps (all empty without): per point, the sum of the outward normals of the caps it
+    /// lies on (zero elsewhere), and whether it lies inside a cap, off the isosurface (a later plane
+    /// cut a cap's diagonal there); per triangle, whether it belongs to a cap.
+    std::vector<glm::dvec3> capNormal;
+    std::vector<char> offSurface;
+    std::vector<char> capFace;
 };
 
-/// Cuts `soup` by one half-space, keeping dot(x − p, n) ≥ 0 (header comment: open cut).
-void clipSoup(Soup& soup, const core::HalfSpace& h) {
+/// Cuts `soup` by one half-space, keeping dot(x − p, n) ≥ 0 (header comment: open cut). The points
+/// on the plane (made by the cut, or lying on it), as indices after the cut.
+std::vector<std::uint32_t> clipSoup(Soup& soup, const core::HalfSpace& h) {
     const std::size_t np = soup.points.size();
     std::vector<double> d(np);
     for (std::size_t i = 0; i < np; ++i) d[i] = h.distance(soup.points[i]);
     // The point where edge (a in, b out) crosses the plane, made once per edge.
     std::unordered_map<std::uint64_t, std::uint32_t> cuts;
+    const bool caps = !soup.capNormal.empty();
+    bool fromCap = false;  // the triangle being cut belongs to a cap
     auto cut = [&](std::uint32_t a, std::uint32_t b) -> std::uint32_t {
         if (d[a] == 0.0) return a;  // a lies on the plane: no new point, no sliver
         const std::uint64_t key = (std::uint64_t(std::min(a, b)) << 32) | std::max(a, b);
@@ -142,22 +154,34 @@ void clipSoup(Soup& soup, const core::HalfSpace& h) {
         if (fresh) {
             const double t = d[a] / (d[a] - d[b]);
             soup.points.push_back(soup.points[a] + t * (soup.points[b] - soup.points[a]));
+            if (caps) {
+                // On an edge between two points of an earlier cap: in that cap's plane too.
+                const bool inCap =
+                    soup.capNormal[a] != glm::dvec3(0.0) && soup.capNormal[b] != glm::dvec3(0.0);
+                soup.capNormal.push_back(inCap ? soup.capNormal[a] : glm::dvec3(0.0));
+                soup.offSurface.push_back(fromCap);
+            }
+        } else if (caps && !fromCap) {
+            soup.offSurface[it->second] = 0;  // the edge is a surface triangle's too (a rim)
         }
         return it->second;
     };
     std::vector<std::uint32_t> out;
+    std::vector<char> outCap;
     out.reserve(soup.triangles.size());
     auto emit = [&](std::uint32_t a, std::uint32_t b, std::uint32_t c) {
         if (a == b || b == c || c == a) return;
         out.insert(out.end(), {a, b, c});
+        if (caps) outCap.push_back(fromCap);
     };
     for (std::size_t t = 0; t < soup.triangles.size(); t += 3) {
+        fromCap = caps && soup.capFace[t / 3];
         const std::uint32_t v[3] = {soup.triangles[t], soup.triangles[t + 1],
                                     soup.triangles[t + 2]};
         const bool in[3] = {d[v[0]] >= 0, d[v[1]] >= 0, d[v[2]] >= 0};
         const int count = int(in[0]) + int(in[1]) + int(in[2]);
         if (count == 3) {
-            out.insert(out.end(), v, v + 3);
+            emit(v[0], v[1], v[2]);
             continue;
         }
         if (count == 0) continue;
@@ -176,17 +200,120 @@ void clipSoup(Soup& soup, const core::HalfSpace& h) {
         }
     }
     soup.triangles = std::move(out);
+    if (caps) soup.capFace = std::move(outCap);
     // Drop the points no triangle uses any more.
     std::vector<std::uint32_t> remap(soup.points.size(), UINT32_MAX);
-    std::vector<glm::dvec3> kept;
+    std::vector<glm::dvec3> kept, keptCap;
+    std::vector<char> keptOff;
     for (auto& i : soup.triangles) {
         if (remap[i] == UINT32_MAX) {
             remap[i] = std::uint32_t(kept.size());
             kept.push_back(soup.points[i]);
+            if (caps) keptCap.push_back(soup.capNormal[i]), keptOff.push_back(soup.offSurface[i]);
         }
         i = remap[i];
     }
+    if (caps) soup.capNormal = std::move(keptCap), soup.offSurface = std::move(keptOff);
+    std::vector<std::uint32_t> onPlane;
+    for (std::size_t i = 0; i < remap.size(); ++i)
+        if (remap[i] != UINT32_MAX && (i >= np || d[i] == 0.0)) onPlane.push_back(remap[i]);
     soup.points = std::move(kept);
+    return onPlane;
+}
+
+/// Closes the cut that clipSoup made by `h` with a flat cap (header comment: capped cut): the
+/// boundary edges on the plane, reversed, are the cap's contours; CGAL fills them (cap_fill.h: nested
+/// ones are holes), and the cap is wound to agree with the surface along them. Chains that do not close
+/// (the surface was open there, e.g. at the volume's border) are left open and counted.
+void capSoup(Soup& soup, const core::HalfSpace& h, const std::vector<std::uint32_t>& onPlane,
+             ExtractStats& st) {
+    std::vector<char> on(soup.points.size(), 0);
+    for (const std::uint32_t i : onPlane) on[i] = 1;
+    auto key = [](std::uint32_t a, std::uint32_t b) { return (std::uint64_t(a) << 32) | b; };
+    std::unordered_map<std::uint64_t, int> directed;
+    for (std::size_t t = 0; t < soup.triangles.size(); t += 3)
+        for (int e = 0; e < 3; ++e) {
+            const std::uint32_t a = soup.triangles[t + e], b = soup.triangles[t + (e + 1) % 3];
+            if (on[a] && on[b]) ++directed[key(a, b)];
+        }
+    // Boundary edges a→b of the surface on the plane; the cap runs along them as b→a.
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> edges;
+    for (const auto& [k, n] : directed) {
+        const std::uint32_t a = std::uint32_t(k >> 32), b = std::uint32_t(k);
+        if (n == 1 && !directed.count(key(b, a))) edges.emplace_back(b, a);
+    }
+    std::sort(edges.begin(), edges.end());  // a deterministic order whatever the hash map's
+    // Peel chains that do not close: a vertex with no edge in (or out) starts (or ends) one.
+    std::unordered_map<std::uint32_t, int> in, out;
+    for (const auto& [a, b] : edges) ++out[a], ++in[b];
+    std::vector<char> dropped(edges.size(), 0);
+    for (bool changed = true; changed;) {
+        changed = false;
+        for (std::size_t e = 0; e < edges.size(); ++e) {
+            if (dropped[e]) continue;
+            const auto [a, b] = edges[e];
+            if (in[a] == 0 || out[b] == 0) {
+                dropped[e] = 1, changed = true;
+                --out[a], --in[b];
+                ++st.capOpenEdges;
+            }
+        }
+    }
+    // The contours in the plane's own 2-D coordinates (any orthonormal basis of it).
+    const glm::dvec3 n = h.normal;
+    const glm::dvec3 u = glm::normalize(
+        glm::cross(n, std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0)));
+    const glm::dvec3 w = glm::cross(n, u);
+    std::vector<std::uint32_t> local(soup.points.size(), UINT32_MAX), global;
+    std::vector<glm::dvec2> points;
+    std::vector<std::uint32_t> segments;
+    auto index = [&](std::uint32_t v) {
+        if (local[v] == UINT32_MAX) {
+            local[v] = std::uint32_t(global.size());
+            global.push_back(v);
+            const glm::dvec3 q = soup.points[v] - h.point;
+            points.emplace_back(glm::dot(q, u), glm::dot(q, w));
+        }
+        return local[v];
+    };
+    std::pair<std::uint32_t, std::uint32_t> reference{UINT32_MAX, UINT32_MAX};
+    for (std::size_t e = 0; e < edges.size(); ++e)
+        if (!dropped[e]) {
+            segments.push_back(index(edges[e].first));
+            segments.push_back(index(edges[e].second));
+            if (reference.first == UINT32_MAX) reference = edges[e];
+        }
+    if (segments.empty()) return;
+    bool ok = true;
+    std::vector<std::uint32_t> tris = detail::fillContours(points, segments, ok);
+    if (!ok) ++st.capFailures;
+    // Winding: the triangle on the reference edge must run along it (b→a of the surface's a→b);
+    // the cap is flat, so every triangle takes the same side of the plane's normal as that one.
+    auto side = [&](std::size_t t) {
+        const glm::dvec3& p = soup.points[global[tris[t]]];
+        const glm::dvec3 n =
+            glm::cross(soup.points[global[tris[t + 1]]] - p, soup.points[global[tris[t + 2]]] - p);
+        return glm::dot(n, h.normal) >= 0.0;
+    };
+    std::optional<bool> want;
+    const std::uint32_t ra = local[reference.first], rb = local[reference.second];
+    for (std::size_t t = 0; t < tris.size() && !want; t += 3)
+        for (int k = 0; k < 3; ++k) {
+            if (tris[t + k] == ra && tris[t + (k + 1) % 3] == rb) want = side(t);
+            if (tris[t + k] == rb && tris[t + (k + 1) % 3] == ra) want = !side(t);
+        }
+    if (!want)
+        want = false;  // no triangle on that edge (a failed fill): face away from the kept side
+    soup.capNormal.resize(soup.points.size(), glm::dvec3(0.0));
+    soup.offSurface.resize(soup.points.size(), 0);
+    soup.capFace.resize(soup.triangles.size() / 3, 0);
+    for (std::size_t t = 0; t < tris.size(); t += 3) {
+        if (side(t) != *want) std::swap(tris[t + 1], tris[t + 2]);
+        for (int k = 0; k < 3; ++k) soup.triangles.push_back(global[tris[t + k]]);
+        soup.capFace.push_back(1);
+    }
+    for (const std::uint32_t v : global) soup.capNormal[v] -= h.normal;  // the cap faces away
+    st.capTriangles += tris.size() / 3;
 }
 
 }  // namespace
@@ -234,9 +361,18 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
             geo.indexToWorld({fe.points[3 * i], fe.points[3 * i + 1], fe.points[3 * i + 2]});
     soup.triangles = std::move(fe.triangles);
     fe.points = {};
-    for (const core::HalfSpace& h : options.keep) {
+    const glm::dvec3& sp = volume.geometry().spacing;
+    const double nudge = kCapPlaneNudge * std::min({sp.x, sp.y, sp.z});
+    for (core::HalfSpace h : options.keep) {
         progress.checkCancel();
-        clipSoup(soup, h);
+        // A capped plane through mesh vertices would pinch the cap's contours there (two loops
+        // meeting at one vertex: a non-manifold cap); moved off them into the removed side.
+        if (options.cap && std::any_of(soup.points.begin(), soup.points.end(),
+                                       [&](const glm::dvec3& p) { return h.distance(p) == 0.0; }))
+            h.point -= nudge * h.normal;
+        const std::vector<std::uint32_t> onPlane = clipSoup(soup, h);
+        // Each cap is cut by the planes after it, so the caps meet along their lines.
+        if (options.cap) capSoup(soup, h, onPlane, st);
     }
     st.clippedTriangles = soup.triangles.size() / 3;
     st.clipSeconds = sw.seconds();
@@ -245,7 +381,17 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
     // direction matrix or a negative slope; a whole-mesh vote decides).
     sw.restart();
     progress.report("isosurface normals", 0.0);
-    const std::vector<glm::vec3> normals = gradientNormals(soup.points, volume);
+    std::vector<glm::vec3> normals = gradientNormals(soup.points, volume);
+    // A rim vertex is shared by the surface and its cap (watertight) but has one normal: the
+    // bisector of the two (header comment), so neither side is shaded edge-on.
+    // A point inside a cap (off the surface) takes the cap's normal alone.
+    for (std::size_t i = 0; i < soup.capNormal.size(); ++i) {
+        if (soup.capNormal[i] == glm::dvec3(0.0)) continue;
+        const glm::dvec3 c = glm::normalize(soup.capNormal[i]);
+        normals[i] = soup.offSurface[i] || normals[i] == glm::vec3(0.f)
+                         ? glm::vec3(c)
+                         : glm::vec3(glm::normalize(glm::dvec3(normals[i]) + c));
+    }
     double agree = 0.0;
     for (std::size_t t = 0; t < soup.triangles.size(); t += 3) {
         const glm::dvec3& a = soup.points[soup.triangles[t]];

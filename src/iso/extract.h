@@ -24,6 +24,16 @@
 // it exactly (new vertices on the crossed edges, shared between neighbours, so the cut surface
 // stays 2-manifold with a boundary along the cut); nothing caps the hole.
 //
+// Capped cut (ExtractOptions::cap): after each plane's cut, the boundary edges on the plane are
+// closed contours where the surface was closed; a constrained Delaunay triangulation (CGAL,
+// cap_fill.h) fills them by nesting parity (a contour inside another is a hole: a cut through a bone's cortex caps the ring, not the marrow), wound to
+// agree with the surface. The cap shares the rim's vertices, so a closed surface stays closed
+// (watertight: the mesh report's boundary edges stay 0), and the planes after it cut the cap too, so
+// the caps of a crop box meet along its edges. The price of sharing: a rim vertex has one normal,
+// the surface's gradient normal, so a renderer that interpolates vertex normals shades the cap's
+// rim like the surface next to it. Contours that do not close (the surface was open there, at the
+// volume's border) are left open and counted (capOpenEdges).
+//
 // Cost: flying edges, then one pass per half-space, one parallel pass for normals, and OpenMesh's
 // half-edge construction (serial; bench/bench_iso.cpp compares the whole with flying edges alone).
 #include <array>
@@ -43,10 +53,17 @@ namespace voxlight::iso {
 /// stay ≥ ½/(value range) of an edge away from grid points.
 inline constexpr double kIntegerIsoNudge = 0.5;
 
+/// Voxels (of the smallest spacing) a capped plane that passes exactly through mesh vertices is
+/// moved toward the removed side: such vertices would pinch the cap's contours (two loops meeting
+/// at one vertex, a non-manifold cap; the torso cut at x = 0 had one). 10⁻⁴ voxel is far below
+/// anything visible and far above float rounding of the vertices' distances.
+inline constexpr double kCapPlaneNudge = 1e-4;
+
 struct ExtractOptions {
     double isovalue = 0.0;              ///< physical units (HU for CT); strictly inside the range
     std::vector<core::HalfSpace> keep;  ///< clip planes and crop faces; empty = no cut
     glm::vec3 color{1.f};               ///< linear RGB of every vertex
+    bool cap = false;                   ///< close each cut with a flat cap (header comment)
 };
 
 struct ExtractStats {
@@ -57,8 +74,11 @@ struct ExtractStats {
     std::size_t flyingEdgesTriangles = 0;   ///< before clipping
     std::size_t clippedTriangles = 0;       ///< after clipping (= flying edges' without planes)
     std::size_t rejectedFaces =
-        0;                 ///< triangles OpenMesh refused (would make an edge non-manifold)
-    bool flipped = false;  ///< faces were re-wound to agree with the outward normals
+        0;                         ///< triangles OpenMesh refused (would make an edge non-manifold)
+    bool flipped = false;          ///< faces were re-wound to agree with the outward normals
+    std::size_t capTriangles = 0;  ///< triangles the caps added (ExtractOptions::cap)
+    std::size_t capOpenEdges = 0;  ///< cut edges left open: chains that do not close
+    std::size_t capFailures = 0;   ///< planes whose contours crossed (part of the fill missing)
     double flyingEdgesSeconds = 0, clipSeconds = 0, normalsSeconds = 0, meshSeconds = 0;
 };
 

@@ -138,6 +138,34 @@ TEST(IsoCli, ClipPlanesThatRemoveEverythingAreAnError) {
                    "remove the whole isosurface", {"scene.json"});
 }
 
+// --cap: a crop box through the sphere phantom leaves a watertight piece, the stats say what the
+// caps added; without it the same cut is open.
+TEST(IsoCli, CapClosesTheCutsOfTheCropBox) {
+    test::TempDir tmp;
+    const fs::path scene = writeScene(
+        tmp, std::string(kSphere) +
+                 R"(, "crop_box": {"min": [-100, -100, -100], "max": [0.3, 0.2, 100]}})");
+    for (const bool cap : {true, false}) {
+        const Result r = run("iso -q '" + scene.string() + "' -o '" + (tmp / "m.ply").string() +
+                                 "' --isovalue 0.5 --stats '" + (tmp / "st.json").string() + "'" +
+                                 (cap ? " --cap" : ""),
+                             tmp.path());
+        ASSERT_EQ(r.code, 0) << r.err;
+        std::ifstream in(tmp / "st.json");
+        const auto j = nlohmann::json::parse(in)["isosurface"];
+        EXPECT_EQ(j["report"]["closed"].get<bool>(), cap);
+        EXPECT_EQ(j["report"]["self_intersections"], 0);
+        if (cap) {
+            EXPECT_GT(j["caps"]["triangles"].get<int>(), 0);
+            EXPECT_EQ(j["caps"]["open_cut_edges"], 0);
+            EXPECT_EQ(j["caps"]["failed_planes"], 0);
+            EXPECT_EQ(j["report"]["boundary_edges"], 0);
+        } else {
+            EXPECT_TRUE(j["caps"].is_null());
+        }
+    }
+}
+
 /// The vertex colours of an OBJ written by voxlight (`v x y z r g b`, sRGB-encoded in [0, 1]).
 std::vector<std::array<double, 3>> objColours(const fs::path& p) {
     std::ifstream in(p);
