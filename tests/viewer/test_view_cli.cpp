@@ -63,13 +63,30 @@ bool inLabel(int x, int y, int w, int h) {
             (near(y, 12, kLabelHalfHeight) || near(y, h - 12, kLabelHalfHeight)));
 }
 
+/// `voxlight ARGS` under `display` (displayPrefix()): voxlight's own exit code and stderr.
+/// xvfb-run's are its own — after a command that exits within a fraction of a second it can fail
+/// to remove its temporary directory ("problem while cleaning up", exit code 5).
+Result runViewUnder(const std::string& display, const std::string& args, const test::TempDir& dir) {
+    const fs::path rc = dir / "view-rc.txt", err = dir / "view-stderr.txt";
+    const Result outer = runShell(display + "sh -c \"" + VOXLIGHT_BINARY + " " + args + " 2>" +
+                                      quoted(err) + "; echo \\$? >" + quoted(rc) + "\"",
+                                  dir.path());
+    std::ifstream rf(rc);
+    int code = -1;
+    if (!(rf >> code)) return outer;  // the command did not run: xvfb-run's error says why
+    std::ifstream ef(err);
+    return {code, std::string((std::istreambuf_iterator<char>(ef)), {})};
+}
+
 /// `voxlight view` of dir/scene.json running dir/steps.json, recording dir/rec.json, screenshot
-/// dir/shot.png, under `display` (displayPrefix()).
-Result runScriptedView(const std::string& display, const test::TempDir& dir) {
-    return runShell(display + VOXLIGHT_BINARY + " view -q " + quoted(dir / "scene.json") +
-                        " --script " + quoted(dir / "steps.json") + " --record " +
-                        quoted(dir / "rec.json") + " --screenshot " + quoted(dir / "shot.png"),
-                    dir.path());
+/// dir/shot.png, under `display` (displayPrefix()); `extra` options before the scene.
+Result runScriptedView(const std::string& display, const test::TempDir& dir,
+                       const std::string& extra = "") {
+    return runViewUnder(display,
+                        "view -q " + extra + quoted(dir / "scene.json") + " --script " +
+                            quoted(dir / "steps.json") + " --record " + quoted(dir / "rec.json") +
+                            " --screenshot " + quoted(dir / "shot.png"),
+                        dir);
 }
 }  // namespace
 
@@ -251,11 +268,7 @@ TEST(ViewCli, ClipPlaneDragLogsItsUiFrames) {
     std::ofstream(tmp / "steps.json") << R"([{"clip_add": {"normal": [0, 1, 0], "offset": -30}},
               {"clip_drag": {"index": 0, "by": [-40, 60], "frames": )"
                                       << kDragFrames << "}}]";
-    const Result view =
-        runShell(*display + VOXLIGHT_BINARY + " view -q --log " + quoted(tmp / "scene.json") +
-                     " --script " + quoted(tmp / "steps.json") + " --record " +
-                     quoted(tmp / "rec.json") + " --screenshot " + quoted(tmp / "shot.png"),
-                 tmp.path());
+    const Result view = runScriptedView(*display, tmp, "--log ");
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
     ASSERT_EQ(view.code, 0) << view.err;
