@@ -174,6 +174,9 @@ class Viewer {
         changed();
     }
     void setClipPlanes() {
+        // The camera stays put: a fitted camera would re-frame to the matter the planes leave,
+        // and the plane would run away from the cursor dragging it.
+        if (!lookAt_ && ensureLookAt()) doc_["camera"] = cameraJson(*lookAt_, doc_["camera"]);
         doc_["clip_planes"] = clipPlanesJson(clips_);
         changed();
     }

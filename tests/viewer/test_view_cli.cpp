@@ -231,6 +231,11 @@ TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreen
     const nlohmann::json rec = nlohmann::json::parse(std::ifstream(tmp / "rec.json"));
     const nlohmann::json& last = rec["keyframes"].back();
     ASSERT_TRUE(last.contains("clip_planes")) << last.dump();
+    // Adding the plane pinned the camera where it was (an explicit eye): a fitted camera would
+    // re-frame to what the plane leaves.
+    const nlohmann::json& added = rec["keyframes"][1];
+    ASSERT_TRUE(added.contains("clip_planes") && added.contains("camera")) << added.dump();
+    EXPECT_TRUE(added["camera"].contains("eye")) << added.dump();
     const Result replay =
         runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
                      " --out " + quoted(tmp / "frames"),
