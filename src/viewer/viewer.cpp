@@ -241,7 +241,7 @@ class Viewer {
     std::vector<ViewClipPlane> clips_;
     int selectedLight_ = 0, selectedClip_ = 0;
     int newLightType_ = 0;
-    std::string envPath_, clipMessage_;
+    std::string envPath_, editMessage_;
     bool showGizmo_ = true, panelDragging_ = false;
     int clipDragIndex_ = -1;
     // A scripted gizmo drag in progress: the per-frame motion and the frames left.
@@ -1017,9 +1017,9 @@ void Viewer::drawLightsPanel(float width) {
     if (ImGui::Button("add light")) {
         try {
             addLight(types[newLightType_], envPath_);
-            clipMessage_.clear();
+            editMessage_.clear();
         } catch (const std::exception& e) {
-            clipMessage_ = e.what();
+            editMessage_ = e.what();
         }
     }
 }
@@ -1151,8 +1151,8 @@ void Viewer::drawPanel() {
         drawLightsPanel(width);
     if (loaded_ && ImGui::CollapsingHeader("Clip planes", ImGuiTreeNodeFlags_DefaultOpen))
         drawClipPanel(width);
-    if (!clipMessage_.empty())
-        ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "%s", clipMessage_.c_str());
+    if (!editMessage_.empty())
+        ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "%s", editMessage_.c_str());
     if (loaded_ && ImGui::CollapsingHeader("Path tracer")) {
         // This view, photoreal (method pathtrace): rendered in the background, shown in place of
         // the live image until the view changes.
