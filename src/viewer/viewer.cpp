@@ -892,18 +892,16 @@ void Viewer::drawGizmo(ImDrawList* dl) {
                                   ImVec2(e.x - n.x * 5, e.y - n.y * 5), color);
         } else {
             // The normal points along the view: a dot (toward the eye) or a cross (away).
-            if (glm::dot(p.normal, cam->forward()) < 0)
+            if (glm::dot(p.normal, cam->forward()) < 0) {
                 dl->AddCircleFilled(*hw, 3.f, color);
-            else
-                dl->AddLine(ImVec2(hw->x - 4, hw->y - 4), ImVec2(hw->x + 4, hw->y + 4), color, 2.f),
-                    dl->AddLine(ImVec2(hw->x - 4, hw->y + 4), ImVec2(hw->x + 4, hw->y - 4), color,
-                                2.f);
+            } else {
+                dl->AddLine(ImVec2(hw->x - 4, hw->y - 4), ImVec2(hw->x + 4, hw->y + 4), color, 2.f);
+                dl->AddLine(ImVec2(hw->x - 4, hw->y + 4), ImVec2(hw->x + 4, hw->y - 4), color, 2.f);
+            }
         }
         dl->AddCircle(*hw, 7.f, color, 0, 2.f);
         if (selected) dl->AddCircleFilled(*hw, 4.f, color);
-        char label[8];
-        std::snprintf(label, sizeof label, "%zu", i);
-        dl->AddText(ImVec2(hw->x + 9, hw->y - 16), color, label);
+        dl->AddText(ImVec2(hw->x + 9, hw->y - 16), color, std::to_string(i).c_str());
     }
     dl->PopClipRect();
 }
