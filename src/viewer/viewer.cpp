@@ -1272,11 +1272,14 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ImGui_ImplOpenGL3_NewFrame();
         ImGui_ImplGlfw_NewFrame();
         ImGui::NewFrame();
+        const double tNewFrame = work.seconds();
         scriptDragMoved_ = false;
         handleKeys();
         handleImageMouse();
         runScript();
+        const double tInput = work.seconds();
         drawImage();
+        const double tImage = work.seconds();
         drawPanel();
         const double tWidgets = work.seconds();
         ImGui::Render();
@@ -1341,10 +1344,13 @@ std::optional<core::ImageRGBA> Viewer::run() {
         // A slow frame says where its time went.
         if (options_.log && frames_ > kWarmUpFrames && work.seconds() > kSlowFrameSeconds)
             std::fprintf(stderr,
-                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f, "
-                         "draw %.1f, present %.1f ms\n",
+                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f "
+                         "(new frame %.1f, input and script %.1f, image and gizmo %.1f, panel "
+                         "%.1f), draw %.1f, present %.1f ms\n",
                          work.seconds() * 1e3, tEvents * 1e3, (tReceive - tEvents) * 1e3,
-                         (tWidgets - tReceive) * 1e3, (tDraw - tWidgets) * 1e3,
+                         (tWidgets - tReceive) * 1e3, (tNewFrame - tReceive) * 1e3,
+                         (tInput - tNewFrame) * 1e3, (tImage - tInput) * 1e3,
+                         (tWidgets - tImage) * 1e3, (tDraw - tWidgets) * 1e3,
                          (work.seconds() - tDraw) * 1e3);
         logTimes();
         if (shot) break;
