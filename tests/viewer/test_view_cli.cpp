@@ -202,11 +202,12 @@ std::vector<io::ImageRGBA> readFrames(const fs::path& dir) {
     return frames;
 }
 
-// Issue #15's "add and move a clip plane, move a light" through the viewer's own code paths: a
-// plane facing the view, moved by the panel's slider path and by the gizmo's drag (coarse frames
-// in between), a light added and turned, the plane flipped; recorded, then replayed. One frame
-// per settled state, each step changes the picture, and the last equals the screenshot's image
-// area (the gizmo hidden by the last step, as the G key does).
+// Issue #15's scripted session ("change TF, add and move a clip plane, move a light, save")
+// through the viewer's own code paths: a window/level drag, a plane facing the view, moved by the
+// panel's slider path and by the gizmo's drag (coarse frames in between), a light added and
+// turned, the plane flipped; recorded, then replayed. One frame per settled state, each step
+// changes the picture, and the last equals the screenshot's image area (the gizmo hidden by the
+// last step, as the G key does).
 TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreenshot) {
     const std::optional<std::string> display = displayPrefix();
     if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
@@ -216,6 +217,7 @@ TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreen
         "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
         "image": {"width": 160, "height": 128}})";
     std::ofstream(tmp / "steps.json") << R"([
+        {"window": [40, -30]},
         {"clip_add": {"normal": "camera", "offset": -12}},
         {"clip_move": {"index": 0, "by": 6}},
         {"clip_drag": {"index": 0, "by": [0, -24], "frames": 6}},
@@ -233,7 +235,7 @@ TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreen
     ASSERT_TRUE(last.contains("clip_planes")) << last.dump();
     // Adding the plane pinned the camera where it was (an explicit eye): a fitted camera would
     // re-frame to what the plane leaves.
-    const nlohmann::json& added = rec["keyframes"][1];
+    const nlohmann::json& added = rec["keyframes"][2];
     ASSERT_TRUE(added.contains("clip_planes") && added.contains("camera")) << added.dump();
     EXPECT_TRUE(added["camera"].contains("eye")) << added.dump();
     const Result replay =
@@ -242,7 +244,7 @@ TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreen
                  tmp.path());
     ASSERT_EQ(replay.code, 0) << replay.err;
     const std::vector<io::ImageRGBA> frames = readFrames(tmp / "frames");
-    ASSERT_EQ(frames.size(), 7u);  // the first state and one per step that changes the scene
+    ASSERT_EQ(frames.size(), 8u);  // the first state and one per step that changes the scene
     const io::ImageRGBA s = io::readImage(tmp / "shot.png");
     const io::ImageRGBA& f = frames.back();
     ASSERT_EQ(s.width, f.width + kPanelWidth);
