@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <filesystem>
 #include <glm/gtc/quaternion.hpp>
 
 #include "core/error.h"
@@ -206,6 +207,9 @@ io::LightDesc newLight(const std::string& type, const glm::dvec3& pivot, double 
     } else if (type == "environment") {
         if (path.empty())
             throw InputError(source, field + ".path", "an environment light needs a map",
+                             "give the path of an .hdr or .exr environment map");
+        if (!std::filesystem::is_regular_file(path))
+            throw InputError(source, field + ".path", "'" + path + "' is not a file",
                              "give the path of an .hdr or .exr environment map");
         l.path = path;
     } else if (type != "directional") {

@@ -91,7 +91,8 @@ void turnLight(io::LightDesc& light, double dAzimuthDeg, double dElevationDeg,
                const glm::dvec3& pivot);
 /// A new light of `type` ("directional", "point" or "environment") from the upper front left of
 /// the patient (azimuth 45, elevation 30), a point light `distanceMm` from `pivot`; an
-/// environment light needs the map's `path` (InputError naming `source`/`field` when empty).
+/// environment light needs the map's `path`, an existing file (InputError naming `source` and
+/// `field`.path otherwise; the map itself is read by the renderer).
 io::LightDesc newLight(const std::string& type, const glm::dvec3& pivot, double distanceMm,
                        const std::string& path, const std::string& source,
                        const std::string& field);

@@ -294,6 +294,12 @@ TEST(ViewState, LightAnglesFollowTheCameraConventionAndRoundTrip) {
     EXPECT_NEAR(glm::length(p.position - pivot), 250.0, 1e-9);
     EXPECT_NEAR(viewer::lightAnglesOf(p, pivot).y, 89.0, 1e-9);
     EXPECT_THROW(viewer::newLight("environment", pivot, 1, "", "t", "f"), InputError);
+    try {
+        viewer::newLight("environment", pivot, 1, "/nonexistent/sky.hdr", "steps.json", "[0].x");
+        ADD_FAILURE() << "a missing environment map was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "[0].x.path");
+    }
     // The lights list parses back as the same lights.
     json doc = torsoDoc(24, 32);
     doc["lights"] = viewer::lightsJson({d, p});
