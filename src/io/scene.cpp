@@ -687,6 +687,36 @@ Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overri
     return parseScene(doc, volume.string(), fs::current_path());
 }
 
+namespace {
+json vec3Document(const glm::dvec3& v) { return json::array({v.x, v.y, v.z}); }
+}  // namespace
+
+json lightDocument(const LightDesc& l) {
+    const auto vec = vec3Document;
+    json j = {{"type", l.type}, {"color", vec(l.color)}, {"intensity", l.intensity}};
+    if (l.type == "directional") j["direction"] = vec(l.direction);
+    if (l.type == "point") j["position"] = vec(l.position), j["min_distance"] = l.minDistance;
+    if (l.type == "area") {
+        j["shape"] = l.shape;
+        j["position"] = vec(l.position);
+        j["normal"] = vec(l.normal);
+        j["radius"] = l.radius;
+        j["size"] = {l.size.x, l.size.y};
+    }
+    if (l.type == "environment") {
+        j["path"] = fs::absolute(l.path).lexically_normal().string();
+        j["rotation"] = vec(l.rotationDeg);
+        j["layout"] = l.layout;
+    }
+    return j;
+}
+
+json clipPlaneDocument(const ClipPlaneDesc& p) {
+    return {{"point", vec3Document(p.point)},
+            {"normal", vec3Document(p.normal)},
+            {"shadows_from_removed", p.shadowsFromRemoved}};
+}
+
 json sceneDocument(const Scene& s) {
     auto vec = [](const glm::dvec3& v) { return json::array({v.x, v.y, v.z}); };
     json d = json::object();
@@ -748,29 +778,9 @@ json sceneDocument(const Scene& s) {
     if (c.target) cam["target"] = vec(*c.target);
     d["camera"] = cam;
     d["lights"] = json::array();
-    for (const LightDesc& l : s.lights) {
-        json j = {{"type", l.type}, {"color", vec(l.color)}, {"intensity", l.intensity}};
-        if (l.type == "directional") j["direction"] = vec(l.direction);
-        if (l.type == "point") j["position"] = vec(l.position), j["min_distance"] = l.minDistance;
-        if (l.type == "area") {
-            j["shape"] = l.shape;
-            j["position"] = vec(l.position);
-            j["normal"] = vec(l.normal);
-            j["radius"] = l.radius;
-            j["size"] = {l.size.x, l.size.y};
-        }
-        if (l.type == "environment") {
-            j["path"] = fs::absolute(l.path).lexically_normal().string();
-            j["rotation"] = vec(l.rotationDeg);
-            j["layout"] = l.layout;
-        }
-        d["lights"].push_back(j);
-    }
+    for (const LightDesc& l : s.lights) d["lights"].push_back(lightDocument(l));
     d["clip_planes"] = json::array();
-    for (const auto& p : s.clipPlanes)
-        d["clip_planes"].push_back({{"point", vec(p.point)},
-                                    {"normal", vec(p.normal)},
-                                    {"shadows_from_removed", p.shadowsFromRemoved}});
+    for (const auto& p : s.clipPlanes) d["clip_planes"].push_back(clipPlaneDocument(p));
     if (s.cropBox)
         d["crop_box"] = {{"min", vec(s.cropBox->min)},
                          {"max", vec(s.cropBox->max)},

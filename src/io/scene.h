@@ -215,6 +215,10 @@ Scene volumeScene(const std::filesystem::path& volume,
 /// transfer function is written as given (empty = the modality default: the caller may fill in
 /// the preset), method.params as given.
 nlohmann::json sceneDocument(const Scene& scene);
+/// One entry of sceneDocument's "lights" (every key of the light's type, paths absolute).
+nlohmann::json lightDocument(const LightDesc& light);
+/// One entry of sceneDocument's "clip_planes".
+nlohmann::json clipPlaneDocument(const ClipPlaneDesc& plane);
 
 /// True for the keys whose string values are file paths (volume, volume.path, lights.N.path):
 /// given on the command line (--set) they resolve against the current directory.

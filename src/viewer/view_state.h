@@ -20,8 +20,10 @@
 #include <string>
 #include <vector>
 
+#include "core/volume.h"
 #include "io/scene.h"
 #include "optics/transfer_function.h"
+#include "render/camera.h"
 
 namespace voxlight::viewer {
 
@@ -65,8 +67,72 @@ nlohmann::json transferFunctionJson(const optics::TransferFunction& tf);
 /// least 16 pixels a side), step × `stepScale`, early termination at ≥ `termination`.
 io::Scene coarseScene(const io::Scene& full, int factor, double stepScale, double termination);
 
-/// One step of a scripted UI run (`voxlight view --script`): a gesture as the mouse or keyboard
-/// makes it, applied through the same code path (viewer.cpp). Pixels as the mouse moves them.
+// Lights. A light's direction is given as the azimuth and elevation (degrees) of where it comes
+// from, in the camera's convention (render/camera.h): the unit vector toward the light is
+// (sin az · cos el, −cos az · cos el, sin el), so azimuth 0 is in front of the patient (anterior,
+// −y), 90 at the patient's left (+x), elevation 90 above (superior, +z). A directional light
+// travels the opposite way; a point light sits at that angle from the volume's centre.
+
+/// Unit vector toward a light at (azimuthDeg, elevationDeg).
+glm::dvec3 towardLight(double azimuthDeg, double elevationDeg);
+/// Inverse of towardLight for any non-zero vector: {azimuth ∈ (−180, 180], elevation ∈ [−90,
+/// 90]} in degrees (azimuth 0 straight above or below).
+glm::dvec2 lightAngles(const glm::dvec3& toward);
+/// The angles of a light: a directional light's source direction (−direction), a point or area
+/// light's position seen from `pivot`, an environment map's rotation about z (azimuth) and x
+/// (elevation).
+glm::dvec2 lightAnglesOf(const io::LightDesc& light, const glm::dvec3& pivot);
+/// Places a light at the angles (lightAnglesOf's meaning): a point or area light keeps its
+/// distance from `pivot` (an area light's normal faces the pivot); elevation is clamped to
+/// [−90, 90].
+void setLightAngles(io::LightDesc& light, const glm::dvec2& anglesDeg, const glm::dvec3& pivot);
+/// Turns a light by (dAzimuth, dElevation) degrees: setLightAngles(lightAnglesOf + d).
+void turnLight(io::LightDesc& light, double dAzimuthDeg, double dElevationDeg,
+               const glm::dvec3& pivot);
+/// A new light of `type` ("directional", "point" or "environment") from the upper front left of
+/// the patient (azimuth 45, elevation 30), a point light `distanceMm` from `pivot`; an
+/// environment light needs the map's `path`, an existing file (InputError naming `source` and
+/// `field`.path otherwise; the map itself is read by the renderer).
+io::LightDesc newLight(const std::string& type, const glm::dvec3& pivot, double distanceMm,
+                       const std::string& path, const std::string& source,
+                       const std::string& field);
+/// The scene's "lights" list for `lights` (io::lightDocument each; empty: the headlight).
+nlohmann::json lightsJson(const std::vector<io::LightDesc>& lights);
+
+// Clip planes. The viewer keeps disabled planes (they are not in the scene it renders).
+struct ViewClipPlane {
+    io::ClipPlaneDesc plane;
+    bool enabled = true;
+};
+/// A plane with unit normal `normal` through `centre` + offsetMm · normal (keeps the side the
+/// normal points to). InputError naming `source`/`field` for a zero or non-finite normal.
+io::ClipPlaneDesc clipPlaneThrough(const glm::dvec3& normal, const glm::dvec3& centre,
+                                   double offsetMm, const std::string& source,
+                                   const std::string& field);
+/// Moves a plane by `mm` along its normal (positive: toward the kept side, removing more).
+void moveClipPlane(io::ClipPlaneDesc& plane, double mm);
+/// Flips a plane: the other side is kept, the plane stays where it is.
+void flipClipPlane(io::ClipPlaneDesc& plane);
+/// The scene's "clip_planes" list: the enabled planes (io::clipPlaneDocument each).
+nlohmann::json clipPlanesJson(const std::vector<ViewClipPlane>& planes);
+/// Where `plane` cuts the box of the volume's voxel centres (`g`): the polygon's corners in world
+/// mm, in order around it (3–6 of them); empty when the plane misses the box.
+std::vector<glm::dvec3> clipOutline(const io::ClipPlaneDesc& plane, const core::Geometry& g);
+/// The camera a LookAt renders with, for projecting world points to an image of `width` ×
+/// `height` pixels (render::Camera::project).
+render::Camera projectionCamera(const LookAt& c, int width, int height);
+/// The gizmo's drag: millimetres along `plane`'s normal for a mouse motion of (dx, dy) image
+/// pixels on `camera`'s image, at the handle `handle` (world mm, on the plane). The motion's part
+/// along the normal's image direction moves the plane as far as the handle's image follows the
+/// cursor. When the normal points (within ~10°) along the view, the image direction is degenerate:
+/// dragging up moves the plane away from the eye, at the handle depth's mm per pixel.
+double clipDragMm(const io::ClipPlaneDesc& plane, const glm::dvec3& handle,
+                  const render::Camera& camera, double dx, double dy);
+
+/// One step of a scripted UI run (`voxlight view --script`): a gesture as the mouse, keyboard
+/// or a panel makes it, applied through the same code path (viewer.cpp). Pixels as the mouse
+/// moves them. `source` and `field` ("[3].clip_move") name the step in errors found when it runs
+/// (an index past the scene's planes or lights).
 struct ScriptStep {
     enum class Kind {
         Orbit,   ///< left-drag by (a, b) pixels
@@ -74,15 +140,51 @@ struct ScriptStep {
         Zoom,    ///< a wheel notches (> 0 closer)
         Window,  ///< right-drag by (a, b) pixels: window/level
         View,  ///< the key of a named view: `view` is anterior, posterior, left, … or A/P/L/R/S/I
-        PathTrace,  ///< the panel's "render this view" with the path tracer, `a` spp
+        PathTrace,    ///< the panel's "render this view" with the path tracer, `a` spp
+        ClipAdd,      ///< a plane: normal `vec` (or facing the camera), `a` mm from the centre
+        ClipMove,     ///< the panel's slider: plane `index` by `a` mm along its normal
+        ClipDrag,     ///< the gizmo's drag of plane `index` by (a, b) pixels over `frames` frames
+        ClipEdit,     ///< plane `index`: flip, enabled, shadows_from_removed
+        ClipRemove,   ///< plane `index`
+        LightAdd,     ///< a light of `lightType` (optional angles, distance, colour, intensity)
+        LightEdit,    ///< light `index`: angles, position, colour, intensity
+        LightTurn,    ///< turn light `index` by (a, b) degrees of azimuth and elevation
+        LightRemove,  ///< light `index`
+        Gizmo,        ///< the G key's state: the clip-plane gizmo shown (a = 1) or hidden (0)
     };
     Kind kind = Kind::Orbit;
     double a = 0.0, b = 0.0;
     std::string view;
+    std::string source, field;
+
+    // Clip-plane and light steps.
+    int index = 0;
+    int frames = 1;
+    bool facingCamera = false;  ///< ClipAdd: the normal is the camera's view direction
+    glm::dvec3 vec{0.0};        ///< ClipAdd: the normal
+    bool flip = false;
+    std::optional<bool> enabled, shadowsFromRemoved;
+    std::string lightType, path;
+    std::optional<double> azimuth, elevation, distance, intensity;
+    std::optional<glm::dvec3> position, color;
 };
-/// A script file's steps: a JSON array of one-key objects — {"orbit": [dx, dy]}, {"pan": [dx,
-/// dy]}, {"zoom": notches}, {"window": [dx, dy]}, {"view": "L"}, {"pathtrace": spp} (1…65536). InputError naming the file and
-/// `[i].key` for anything else (unknown key, wrong type, non-finite number, unknown view).
+/// A script file's steps: a JSON array of one-key objects —
+///   {"orbit": [dx, dy]}, {"pan": [dx, dy]}, {"zoom": notches}, {"window": [dx, dy]},
+///   {"view": "L"}, {"pathtrace": spp} (1…65536),
+///   {"clip_add": {"normal": [x, y, z] | "camera", "offset": mm, "shadows_from_removed": b}},
+///   {"clip_move": {"index": i, "by": mm}},
+///   {"clip_drag": {"index": i, "by": [dx, dy], "frames": n}} (n 1…10000, default 1),
+///   {"clip_edit": {"index": i, "flip": true, "enabled": b, "shadows_from_removed": b}},
+///   {"clip_remove": i},
+///   {"light_add": {"type": "directional" | "point" | "environment", "azimuth": deg,
+///                  "elevation": deg, "distance": mm, "color": [r, g, b], "intensity": x,
+///                  "path": map}},
+///   {"light_edit": {"index": i, "azimuth": deg, "elevation": deg, "position": [x, y, z],
+///                   "color": [r, g, b], "intensity": x}},
+///   {"light_turn": {"index": i, "azimuth": deg, "elevation": deg}} (by these angles),
+///   {"light_remove": i}, {"gizmo": true | false} (the clip-plane gizmo drawn over the image).
+/// InputError naming the file and `[i].key.field` for anything else (unknown step or key, a
+/// missing required key, wrong type, non-finite number, out-of-range value, unknown view).
 std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source);
 
 /// Parses an edited scene document (paths absolute, as io::sceneDocument writes them); `source`

@@ -10,12 +10,15 @@
 #include <imgui_stdlib.h>
 
 #include <algorithm>
+#include <cfloat>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <deque>
 #include <future>
 #include <memory>
 #include <mutex>
+#include <optional>
 #include <thread>
 #include <vector>
 
@@ -40,6 +43,9 @@ constexpr double kOrbitDegPerPixel = 0.4, kZoomPerNotch = 1.1;
 constexpr std::uint64_t kWarmUpFrames = 3;
 /// A UI frame slower than this is logged with its phases (the bound for the UI frame).
 constexpr double kSlowFrameSeconds = 0.050;
+/// Clip-plane gizmo: a left click this close (window pixels) to a plane's handle grabs it; the
+/// normal's arrow length.
+constexpr float kHandleGrabPixels = 12.f, kArrowPixels = 36.f;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -53,6 +59,12 @@ const char* const kHelp =
     "O                  oblique view\n"
     "Home               back to the scene's own camera\n"
     "W                  back to the scene's window/level\n"
+    "C                  add a clip plane facing the view (cuts away\n"
+    "                   the front half; drag its handle to move it)\n"
+    "left drag on a plane's handle   move the clip plane along its normal\n"
+    "G                  show / hide the clip-plane gizmo\n"
+    "ctrl+left drag     turn the selected light (horizontal: azimuth,\n"
+    "                   vertical: elevation)\n"
     "F1 or H            show / hide this help\n"
     "F12                save a screenshot (path in the File panel)\n"
     "Ctrl+O             focus the file field\n"
@@ -156,6 +168,39 @@ class Viewer {
     void panBy(double dx, double dy);
     void zoomBy(double notches);
     void windowDrag(const optics::TransferFunction& start, double dx, double dy);
+    // Lights and clip planes: the panel, the mouse and the script call these.
+    void setLights() {
+        doc_["lights"] = lightsJson(lights_);
+        changed();
+    }
+    void setClipPlanes() {
+        // The camera stays put: a fitted camera would re-frame to the matter the planes leave,
+        // and the plane would run away from the cursor dragging it.
+        if (!lookAt_ && ensureLookAt()) doc_["camera"] = cameraJson(*lookAt_, doc_["camera"]);
+        doc_["clip_planes"] = clipPlanesJson(clips_);
+        changed();
+    }
+    void addLight(const std::string& type, const std::string& path);
+    void turnLightBy(int index, double dAzimuthDeg, double dElevationDeg);
+    /// A plane through the volume's centre + offset along `normal`, or facing the view (normal
+    /// = the camera's forward: the front half is cut away). False when no image was rendered yet.
+    bool addClipPlane(std::optional<glm::dvec3> normal, double offsetMm);
+    void moveClipPlaneBy(int index, double mm);
+    /// The gizmo's drag: (dx, dy) window pixels, projected onto the plane's normal.
+    void dragClipPlane(int index, double dx, double dy);
+    /// The plane's handle: the volume's centre projected onto it (world mm).
+    glm::dvec3 clipHandle(const io::ClipPlaneDesc& p) const {
+        return loaded_->centre - glm::dot(loaded_->centre - p.point, p.normal) * p.normal;
+    }
+    /// The camera of the shown image at the drawn image's size (for the gizmo), if any.
+    std::optional<render::Camera> shownCamera() const;
+    /// World point → window pixel through the shown image's camera.
+    std::optional<ImVec2> toWindow(const render::Camera& cam, const glm::dvec3& p) const;
+    void drawGizmo(ImDrawList* dl);
+    void drawLightsPanel(float width);
+    void drawClipPanel(float width);
+    /// Throws the script's InputError when a step names a plane or light that is not there.
+    void checkIndex(const ScriptStep& st, std::size_t count, const char* what) const;
     /// Runs the next script step when the full image of the current state is shown.
     void runScript();
     void recordState(const io::Scene& scene);
@@ -188,10 +233,26 @@ class Viewer {
     std::uint64_t renderedCameraGen_ = 0, cameraResetGen_ = 0;
     std::uint64_t generation_ = 1;
     bool dirty_ = false, interactingSent_ = false;
-    int imageW_ = 0, imageH_ = 0;  ///< the image area, window pixels
+    int imageW_ = 0, imageH_ = 0;                            ///< the image area, window pixels
+    float drawX0_ = 0, drawY0_ = 0, drawW_ = 0, drawH_ = 0;  ///< where the image is drawn
+
+    // Lights and clip planes as edited (written into doc_ by setLights / setClipPlanes).
+    std::vector<io::LightDesc> lights_;
+    std::vector<ViewClipPlane> clips_;
+    int selectedLight_ = 0, selectedClip_ = 0;
+    int newLightType_ = 0;
+    std::string envPath_, editMessage_;
+    bool showGizmo_ = true, panelDragging_ = false;
+    int clipDragIndex_ = -1;
+    // A scripted gizmo drag in progress: the per-frame motion and the frames left.
+    int scriptDragFrames_ = 0, scriptDragIndex_ = 0;
+    double scriptDragDx_ = 0.0, scriptDragDy_ = 0.0;
+    bool scriptDragMoved_ = false;  ///< this frame made a scripted drag's motion
+    /// UI frame work during the current clip-plane drag (all its frames).
+    Timings clipDragWork_{{}, std::size_t(-1)};
 
     // Mouse drags on the image.
-    enum class Drag { None, Orbit, Pan, Window } drag_ = Drag::None;
+    enum class Drag { None, Orbit, Pan, Window, Clip, Light } drag_ = Drag::None;
     ImVec2 dragStart_{0, 0};
     optics::TransferFunction tfAtDrag_;
     bool tfEditing_ = false;
@@ -243,6 +304,11 @@ void Viewer::adopt(LoadedScene scene) {
     doc_ = loaded_->document;
     tf_ = loaded_->tf;
     tfEditor_ = {};
+    lights_ = loaded_->scene.lights;
+    clips_.clear();
+    for (const io::ClipPlaneDesc& p : loaded_->scene.clipPlanes) clips_.push_back({p, true});
+    selectedLight_ = selectedClip_ = 0;
+    clipDragIndex_ = -1, scriptDragFrames_ = 0;
     lookAt_.reset();
     cameraResetGen_ = generation_ + 1;
     path_ = loaded_->scene.source;
@@ -363,9 +429,22 @@ void Viewer::handleImageMouse() {
     const ImVec2 m = io.MousePos;
     const bool overImage = m.x >= 0 && m.y >= 0 && m.x < imageW_ && m.y < imageH_;
     if (drag_ == Drag::None && overImage && !io.WantCaptureMouse && loaded_) {
-        if (ImGui::IsMouseClicked(ImGuiMouseButton_Left))
+        if (ImGui::IsMouseClicked(ImGuiMouseButton_Left)) {
             drag_ = io.KeyShift ? Drag::Pan : Drag::Orbit;
-        else if (ImGui::IsMouseClicked(ImGuiMouseButton_Middle))
+            if (io.KeyCtrl && !lights_.empty()) drag_ = Drag::Light;
+            // A click on a clip plane's handle grabs the plane (the nearest within reach).
+            const std::optional<render::Camera> cam =
+                showGizmo_ && drag_ == Drag::Orbit ? shownCamera() : std::nullopt;
+            float best = kHandleGrabPixels;
+            for (std::size_t i = 0; cam && i < clips_.size(); ++i) {
+                if (!clips_[i].enabled) continue;
+                const std::optional<ImVec2> h = toWindow(*cam, clipHandle(clips_[i].plane));
+                if (!h) continue;
+                const float d = std::hypot(h->x - m.x, h->y - m.y);
+                if (d <= best) best = d, drag_ = Drag::Clip, clipDragIndex_ = int(i);
+            }
+            if (drag_ == Drag::Clip) selectedClip_ = clipDragIndex_;
+        } else if (ImGui::IsMouseClicked(ImGuiMouseButton_Middle))
             drag_ = Drag::Pan;
         else if (ImGui::IsMouseClicked(ImGuiMouseButton_Right)) {
             drag_ = Drag::Window;
@@ -392,6 +471,14 @@ void Viewer::handleImageMouse() {
             break;
         case Drag::Window:
             windowDrag(tfAtDrag_, m.x - dragStart_.x, m.y - dragStart_.y);
+            break;
+        case Drag::Clip:
+            dragClipPlane(clipDragIndex_, d.x, d.y);
+            break;
+        case Drag::Light:
+            // Horizontal: azimuth (right = toward the patient's left, as the camera's azimuth);
+            // vertical: elevation (up = higher).
+            turnLightBy(selectedLight_, d.x * kOrbitDegPerPixel, -d.y * kOrbitDegPerPixel);
             break;
         case Drag::None:
             break;
@@ -421,7 +508,25 @@ void Viewer::windowDrag(const optics::TransferFunction& start, double dx, double
     if (w.width > 0.f) setTf(start.withWindow(w));
 }
 
+void Viewer::checkIndex(const ScriptStep& st, std::size_t count, const char* what) const {
+    if (std::size_t(st.index) < count) return;
+    const bool bare =
+        st.kind == ScriptStep::Kind::ClipRemove || st.kind == ScriptStep::Kind::LightRemove;
+    throw InputError(st.source, bare ? st.field : st.field + ".index",
+                     "there is no " + std::string(what) + " " + std::to_string(st.index) +
+                         " (the view has " + std::to_string(count) + ")",
+                     "indices count from 0 in the order the planes and lights were added");
+}
+
 void Viewer::runScript() {
+    if (scriptDragFrames_ > 0) {
+        // A scripted gizmo drag: one motion per frame, as the mouse makes it, not waiting for
+        // images (the worker renders coarse while it lasts).
+        dragClipPlane(scriptDragIndex_, scriptDragDx_, scriptDragDy_);
+        --scriptDragFrames_;
+        scriptDragMoved_ = true;
+        return;
+    }
     if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ || shownStale_ ||
         shownGen_ != generation_ || loading_.valid())
         return;
@@ -445,7 +550,142 @@ void Viewer::runScript() {
         case ScriptStep::Kind::PathTrace:
             startPathTrace(int(st.a));
             break;
+        case ScriptStep::Kind::ClipAdd:
+            if (!addClipPlane(st.facingCamera ? std::nullopt : std::optional(st.vec), st.a))
+                throw InputError(st.source, st.field, "no image is shown yet to face");
+            if (st.shadowsFromRemoved) {
+                clips_.back().plane.shadowsFromRemoved = *st.shadowsFromRemoved;
+                setClipPlanes();
+            }
+            break;
+        case ScriptStep::Kind::ClipMove:
+            checkIndex(st, clips_.size(), "clip plane");
+            moveClipPlaneBy(st.index, st.a);
+            break;
+        case ScriptStep::Kind::ClipDrag:
+            checkIndex(st, clips_.size(), "clip plane");
+            scriptDragIndex_ = st.index;
+            scriptDragFrames_ = st.frames;
+            scriptDragDx_ = st.a / st.frames, scriptDragDy_ = st.b / st.frames;
+            selectedClip_ = st.index;
+            runScript();  // the first motion now
+            break;
+        case ScriptStep::Kind::ClipEdit: {
+            checkIndex(st, clips_.size(), "clip plane");
+            ViewClipPlane& c = clips_[st.index];
+            if (st.flip) flipClipPlane(c.plane);
+            if (st.enabled) c.enabled = *st.enabled;
+            if (st.shadowsFromRemoved) c.plane.shadowsFromRemoved = *st.shadowsFromRemoved;
+            setClipPlanes();
+            break;
+        }
+        case ScriptStep::Kind::ClipRemove:
+            checkIndex(st, clips_.size(), "clip plane");
+            clips_.erase(clips_.begin() + st.index);
+            setClipPlanes();
+            break;
+        case ScriptStep::Kind::LightAdd:
+        case ScriptStep::Kind::LightEdit: {
+            io::LightDesc l;
+            if (st.kind == ScriptStep::Kind::LightAdd) {
+                const double d = st.distance.value_or(glm::length(loaded_->summary.extent));
+                l = newLight(st.lightType, loaded_->centre, d, st.path, st.source, st.field);
+            } else {
+                checkIndex(st, lights_.size(), "light");
+                l = lights_[st.index];
+            }
+            if (st.azimuth || st.elevation) {
+                const glm::dvec2 a = lightAnglesOf(l, loaded_->centre);
+                setLightAngles(l, {st.azimuth.value_or(a.x), st.elevation.value_or(a.y)},
+                               loaded_->centre);
+            }
+            if (st.position) {
+                if (l.type != "point" && l.type != "area")
+                    throw InputError(
+                        st.source, st.field + ".position",
+                        "is for point lights; light " + std::to_string(st.index) + " is " + l.type);
+                l.position = *st.position;
+            }
+            if (st.color) l.color = *st.color;
+            if (st.intensity) l.intensity = *st.intensity;
+            if (st.kind == ScriptStep::Kind::LightAdd) {
+                lights_.push_back(l);
+                selectedLight_ = int(lights_.size()) - 1;
+            } else {
+                lights_[st.index] = l;
+            }
+            setLights();
+            break;
+        }
+        case ScriptStep::Kind::LightTurn:
+            checkIndex(st, lights_.size(), "light");
+            turnLightBy(st.index, st.a, st.b);
+            break;
+        case ScriptStep::Kind::LightRemove:
+            checkIndex(st, lights_.size(), "light");
+            lights_.erase(lights_.begin() + st.index);
+            setLights();
+            break;
+        case ScriptStep::Kind::Gizmo:
+            showGizmo_ = st.a != 0.0;
+            break;
     }
+}
+
+void Viewer::addLight(const std::string& type, const std::string& path) {
+    lights_.push_back(newLight(type, loaded_->centre, glm::length(loaded_->summary.extent), path,
+                               "lights panel", "new light"));
+    selectedLight_ = int(lights_.size()) - 1;
+    setLights();
+}
+
+void Viewer::turnLightBy(int index, double dAzimuthDeg, double dElevationDeg) {
+    if (index < 0 || std::size_t(index) >= lights_.size()) return;
+    turnLight(lights_[index], dAzimuthDeg, dElevationDeg, loaded_->centre);
+    setLights();
+}
+
+bool Viewer::addClipPlane(std::optional<glm::dvec3> normal, double offsetMm) {
+    if (!loaded_) return false;
+    if (!normal) {
+        // Facing the view: the camera of the shown image (its forward points into the volume).
+        if (!renderedCamera_.contains("forward")) return false;
+        const json& f = renderedCamera_["forward"];
+        normal = glm::dvec3(f[0].get<double>(), f[1].get<double>(), f[2].get<double>());
+    }
+    clips_.push_back(
+        {clipPlaneThrough(*normal, loaded_->centre, offsetMm, "clip planes", "normal"), true});
+    selectedClip_ = int(clips_.size()) - 1;
+    setClipPlanes();
+    return true;
+}
+
+void Viewer::moveClipPlaneBy(int index, double mm) {
+    if (index < 0 || std::size_t(index) >= clips_.size() || mm == 0.0) return;
+    moveClipPlane(clips_[index].plane, mm);
+    setClipPlanes();
+}
+
+void Viewer::dragClipPlane(int index, double dx, double dy) {
+    if (index < 0 || std::size_t(index) >= clips_.size()) return;
+    const std::optional<render::Camera> cam = shownCamera();
+    if (!cam) return;
+    const io::ClipPlaneDesc& p = clips_[index].plane;
+    moveClipPlaneBy(index, clipDragMm(p, clipHandle(p), *cam, dx, dy));
+}
+
+std::optional<render::Camera> Viewer::shownCamera() const {
+    if (!loaded_ || drawW_ < 1 || drawH_ < 1) return std::nullopt;
+    for (const char* k : {"eye", "forward", "up"})
+        if (!renderedCamera_.contains(k)) return std::nullopt;
+    return projectionCamera(lookAtFromRendered(renderedCamera_, loaded_->centre),
+                            int(std::lround(drawW_)), int(std::lround(drawH_)));
+}
+
+std::optional<ImVec2> Viewer::toWindow(const render::Camera& cam, const glm::dvec3& p) const {
+    double x = 0, y = 0;
+    if (!cam.project(p, x, y)) return std::nullopt;
+    return ImVec2(drawX0_ + float(x), drawY0_ + float(y));
 }
 
 void Viewer::startPathTrace(int spp) {
@@ -558,6 +798,12 @@ void Viewer::handleKeys() {
             case GLFW_KEY_W:
                 if (loaded_) setTf(tf_.withWindow(loaded_->tf.window()));
                 break;
+            case GLFW_KEY_C:
+                addClipPlane(std::nullopt, 0.0);
+                break;
+            case GLFW_KEY_G:
+                showGizmo_ = !showGizmo_;
+                break;
             case GLFW_KEY_EQUAL:
             case GLFW_KEY_KP_ADD:
             case GLFW_KEY_MINUS:
@@ -591,6 +837,8 @@ void Viewer::drawImage() {
     const bool pt = pathTraceShown() && ptW_ == texW_ && ptH_ == texH_;
     bg->AddImage((ImTextureID)(intptr_t)(pt ? ptTexture_ : texture_), ImVec2(x0, y0),
                  ImVec2(x0 + w, y0 + h));
+    drawX0_ = x0, drawY0_ = y0, drawW_ = w, drawH_ = h;
+    drawGizmo(bg);
     // Orientation letters at the image's edges (the patient side each edge faces), from the
     // camera of the image shown — as radiology viewers label their views.
     if (renderedCamera_.contains("up") && renderedCamera_.contains("forward")) {
@@ -612,7 +860,227 @@ void Viewer::drawImage() {
     }
 }
 
+void Viewer::drawGizmo(ImDrawList* dl) {
+    if (!showGizmo_ || !loaded_ || clips_.empty()) return;
+    const std::optional<render::Camera> cam = shownCamera();
+    if (!cam) return;
+    dl->PushClipRect(ImVec2(drawX0_, drawY0_), ImVec2(drawX0_ + drawW_, drawY0_ + drawH_), true);
+    for (std::size_t i = 0; i < clips_.size(); ++i) {
+        if (!clips_[i].enabled) continue;
+        const io::ClipPlaneDesc& p = clips_[i].plane;
+        const bool selected = int(i) == selectedClip_;
+        const ImU32 color = selected ? IM_COL32(90, 220, 255, 255) : IM_COL32(90, 220, 255, 130);
+        // Where the plane cuts the volume's box.
+        std::vector<ImVec2> outline;
+        for (const glm::dvec3& q : clipOutline(p, loaded_->volume->geometry()))
+            if (const std::optional<ImVec2> w = toWindow(*cam, q)) outline.push_back(*w);
+        if (outline.size() >= 3)
+            dl->AddPolyline(outline.data(), int(outline.size()), color, ImDrawFlags_Closed,
+                            selected ? 2.f : 1.f);
+        // The handle (the volume's centre on the plane) and an arrow toward the kept side.
+        const glm::dvec3 h = clipHandle(p);
+        const std::optional<ImVec2> hw = toWindow(*cam, h);
+        if (!hw) continue;
+        const double probe = 0.05 * glm::length(loaded_->summary.extent) + 1.0;
+        const std::optional<ImVec2> tip = toWindow(*cam, h + probe * p.normal);
+        ImVec2 dir(0.f, 0.f);
+        if (tip) dir = ImVec2(tip->x - hw->x, tip->y - hw->y);
+        const float len = std::hypot(dir.x, dir.y);
+        if (len > 2.f) {
+            const ImVec2 u(dir.x / len, dir.y / len), n(-u.y, u.x);
+            const ImVec2 e(hw->x + u.x * kArrowPixels, hw->y + u.y * kArrowPixels);
+            dl->AddLine(*hw, e, color, 2.f);
+            dl->AddTriangleFilled(ImVec2(e.x + u.x * 8, e.y + u.y * 8),
+                                  ImVec2(e.x + n.x * 5, e.y + n.y * 5),
+                                  ImVec2(e.x - n.x * 5, e.y - n.y * 5), color);
+        } else {
+            // The normal points along the view: a dot (toward the eye) or a cross (away).
+            if (glm::dot(p.normal, cam->forward()) < 0) {
+                dl->AddCircleFilled(*hw, 3.f, color);
+            } else {
+                dl->AddLine(ImVec2(hw->x - 4, hw->y - 4), ImVec2(hw->x + 4, hw->y + 4), color, 2.f);
+                dl->AddLine(ImVec2(hw->x - 4, hw->y + 4), ImVec2(hw->x + 4, hw->y - 4), color, 2.f);
+            }
+        }
+        dl->AddCircle(*hw, 7.f, color, 0, 2.f);
+        if (selected) dl->AddCircleFilled(*hw, 4.f, color);
+        dl->AddText(ImVec2(hw->x + 9, hw->y - 16), color, std::to_string(i).c_str());
+    }
+    dl->PopClipRect();
+}
+
+void Viewer::drawLightsPanel(float width) {
+    const glm::dvec3 pivot = loaded_->centre;
+    if (lights_.empty()) ImGui::TextDisabled("no lights: a headlight follows the camera");
+    // The camera of the shown image, for the direction widget (anterior view before any).
+    glm::dvec3 forward(0.0, 1.0, 0.0), up(0.0, 0.0, 1.0);
+    if (renderedCamera_.contains("forward") && renderedCamera_.contains("up")) {
+        const auto v = [&](const char* k) {
+            const json& a = renderedCamera_[k];
+            return glm::dvec3(a[0].get<double>(), a[1].get<double>(), a[2].get<double>());
+        };
+        forward = v("forward"), up = v("up");
+    }
+    const glm::dvec3 right = glm::cross(forward, up);
+    int remove = -1;
+    for (std::size_t i = 0; i < lights_.size(); ++i) {
+        io::LightDesc& l = lights_[i];
+        ImGui::PushID(int(i));
+        char label[64];
+        std::snprintf(label, sizeof label, "%zu  %s", i, l.type.c_str());
+        if (ImGui::Selectable(label, selectedLight_ == int(i))) selectedLight_ = int(i);
+        if (selectedLight_ != int(i)) {
+            ImGui::PopID();
+            continue;
+        }
+        bool edited = false;
+        // The direction widget: the light's direction seen along the view (a disc: the centre
+        // is toward the viewer, the rim at the image's edges; a hollow dot: behind the volume).
+        // Click or drag inside to place the light on the same hemisphere.
+        const float r = 44.f;
+        const ImVec2 c0 = ImGui::GetCursorScreenPos();
+        const ImVec2 c(c0.x + r + 2, c0.y + r + 2);
+        ImGui::InvisibleButton("direction", ImVec2(2 * r + 4, 2 * r + 4));
+        const glm::dvec2 ang = lightAnglesOf(l, pivot);
+        glm::dvec3 t = l.type == "environment"   ? towardLight(ang.x, ang.y)
+                       : l.type == "directional" ? -l.direction
+                                                 : l.position - pivot;
+        if (glm::length(t) > 0) t = glm::normalize(t);
+        const double tx = glm::dot(t, right), ty = glm::dot(t, up), tz = -glm::dot(t, forward);
+        if (ImGui::IsItemActive()) {
+            const ImVec2 m = ImGui::GetIO().MousePos;
+            double x = (m.x - c.x) / r, y = -(m.y - c.y) / r;
+            const double rr = std::hypot(x, y);
+            if (rr > 1.0) x /= rr, y /= rr;
+            const double z = std::sqrt(std::max(0.0, 1.0 - x * x - y * y)) * (tz < 0 ? -1 : 1);
+            setLightAngles(l, lightAngles(x * right + y * up - z * forward), pivot);
+            edited = true;
+            panelDragging_ = true;
+        }
+        ImDrawList* dl = ImGui::GetWindowDrawList();
+        dl->AddCircleFilled(c, r, IM_COL32(40, 44, 52, 255));
+        dl->AddCircle(c, r, IM_COL32(150, 150, 160, 255));
+        const ImVec2 dot(c.x + float(tx) * r, c.y - float(ty) * r);
+        const ImU32 lc = IM_COL32(255, 220, 120, 255);
+        if (tz >= 0)
+            dl->AddCircleFilled(dot, 5.f, lc);
+        else
+            dl->AddCircle(dot, 5.f, lc, 0, 2.f);
+        dl->AddLine(c, dot, IM_COL32(255, 220, 120, 120));
+        ImGui::SameLine();
+        ImGui::BeginGroup();
+        float az = float(ang.x), el = float(ang.y);
+        ImGui::SetNextItemWidth(width - 2 * r - 110);
+        bool turned = ImGui::SliderFloat("azimuth", &az, -180.f, 180.f, "%.0f deg");
+        panelDragging_ |= ImGui::IsItemActive();
+        ImGui::SetNextItemWidth(width - 2 * r - 110);
+        turned |= ImGui::SliderFloat("elevation", &el, -90.f, 90.f, "%.0f deg");
+        panelDragging_ |= ImGui::IsItemActive();
+        if (turned) setLightAngles(l, {az, el}, pivot), edited = true;
+        float intensity = float(l.intensity);
+        ImGui::SetNextItemWidth(width - 2 * r - 110);
+        if (ImGui::DragFloat("intensity", &intensity, float(l.intensity) * 0.01f + 0.001f, 0.f,
+                             FLT_MAX, "%.3g", ImGuiSliderFlags_AlwaysClamp))
+            l.intensity = intensity, edited = true;
+        panelDragging_ |= ImGui::IsItemActive();
+        float col[3] = {float(l.color.r), float(l.color.g), float(l.color.b)};
+        if (ImGui::ColorEdit3("colour", col,
+                              ImGuiColorEditFlags_NoInputs | ImGuiColorEditFlags_Float))
+            l.color = glm::dvec3(col[0], col[1], col[2]), edited = true;
+        ImGui::SameLine();
+        if (ImGui::SmallButton("remove")) remove = int(i);
+        ImGui::EndGroup();
+        if (l.type == "point" || l.type == "area") {
+            float pos[3] = {float(l.position.x), float(l.position.y), float(l.position.z)};
+            ImGui::SetNextItemWidth(width - 90);
+            if (ImGui::DragFloat3("position", pos, 1.f, -1e5f, 1e5f, "%.0f mm"))
+                l.position = glm::dvec3(pos[0], pos[1], pos[2]), edited = true;
+            panelDragging_ |= ImGui::IsItemActive();
+        }
+        if (l.type == "environment") ImGui::TextDisabled("%s", l.path.filename().c_str());
+        if (edited) setLights();
+        ImGui::PopID();
+    }
+    if (remove >= 0) {
+        lights_.erase(lights_.begin() + remove);
+        selectedLight_ = std::max(0, std::min(selectedLight_, int(lights_.size()) - 1));
+        setLights();
+    }
+    const char* types[] = {"directional", "point", "environment"};
+    ImGui::SetNextItemWidth(110.f);
+    ImGui::Combo("##lighttype", &newLightType_, types, 3);
+    ImGui::SameLine();
+    if (newLightType_ == 2) {
+        ImGui::SetNextItemWidth(width - 180.f);
+        ImGui::InputTextWithHint("##envpath", "map .hdr / .exr", &envPath_);
+        ImGui::SameLine();
+    }
+    if (ImGui::Button("add light")) {
+        try {
+            addLight(types[newLightType_], envPath_);
+            editMessage_.clear();
+        } catch (const std::exception& e) {
+            editMessage_ = e.what();
+        }
+    }
+}
+
+void Viewer::drawClipPanel(float width) {
+    int remove = -1;
+    bool edited = false;
+    for (std::size_t i = 0; i < clips_.size(); ++i) {
+        ViewClipPlane& c = clips_[i];
+        ImGui::PushID(int(i));
+        edited |= ImGui::Checkbox("##on", &c.enabled);
+        if (ImGui::IsItemHovered()) ImGui::SetTooltip("enabled");
+        ImGui::SameLine();
+        char label[96];
+        const glm::dvec3& n = c.plane.normal;
+        std::snprintf(label, sizeof label, "%zu  normal %.2f %.2f %.2f", i, n.x, n.y, n.z);
+        if (ImGui::Selectable(label, selectedClip_ == int(i))) selectedClip_ = int(i);
+        if (selectedClip_ == int(i)) {
+            // Offset: the plane's signed distance from the volume's centre along its normal.
+            const double offset = glm::dot(c.plane.point - loaded_->centre, n);
+            const float half = 0.5f * float(glm::length(loaded_->summary.extent));
+            float o = float(offset);
+            ImGui::SetNextItemWidth(width - 70);
+            if (ImGui::SliderFloat("offset", &o, -half, half, "%.1f mm"))
+                moveClipPlane(c.plane, double(o) - offset), edited = true;
+            panelDragging_ |= ImGui::IsItemActive();
+            if (ImGui::Button("flip")) flipClipPlane(c.plane), edited = true;
+            ImGui::SameLine();
+            edited |= ImGui::Checkbox("shadows from removed", &c.plane.shadowsFromRemoved);
+            if (ImGui::IsItemHovered())
+                ImGui::SetTooltip(
+                    "on: a section view, the removed matter still casts shadows\n"
+                    "off: removed for the light too (no shadow, no scattering)");
+            ImGui::SameLine();
+            if (ImGui::SmallButton("remove")) remove = int(i);
+        }
+        ImGui::PopID();
+    }
+    if (remove >= 0) {
+        clips_.erase(clips_.begin() + remove);
+        selectedClip_ = std::max(0, std::min(selectedClip_, int(clips_.size()) - 1));
+        edited = true;
+    }
+    if (edited) setClipPlanes();
+    ImGui::TextDisabled("add");
+    const std::pair<const char*, glm::dvec3> presets[] = {
+        {"sagittal", {1.0, 0.0, 0.0}}, {"coronal", {0.0, 1.0, 0.0}}, {"axial", {0.0, 0.0, 1.0}}};
+    for (const auto& [name, normal] : presets) {
+        ImGui::SameLine();
+        if (ImGui::SmallButton(name)) addClipPlane(normal, 0.0);
+    }
+    ImGui::SameLine();
+    if (ImGui::SmallButton("facing the view (C)")) addClipPlane(std::nullopt, 0.0);
+    ImGui::Checkbox("show the gizmo (G)", &showGizmo_);
+    if (ImGui::IsItemHovered())
+        ImGui::SetTooltip("drag a plane's handle in the image to move it along its normal");
+}
+
 void Viewer::drawPanel() {
+    panelDragging_ = false;
     ImGui::SetNextWindowPos(ImVec2(float(imageW_), 0));
     ImGui::SetNextWindowSize(ImVec2(float(kPanelWidth), ImGui::GetIO().DisplaySize.y));
     ImGui::Begin("voxlight", nullptr,
@@ -680,6 +1148,12 @@ void Viewer::drawPanel() {
         tfEditing_ = r.active;
         if (r.changed) setTf(tf);
     }
+    if (loaded_ && ImGui::CollapsingHeader("Lights", ImGuiTreeNodeFlags_DefaultOpen))
+        drawLightsPanel(width);
+    if (loaded_ && ImGui::CollapsingHeader("Clip planes", ImGuiTreeNodeFlags_DefaultOpen))
+        drawClipPanel(width);
+    if (!editMessage_.empty())
+        ImGui::TextColored(ImVec4(1, 0.4f, 0.4f, 1), "%s", editMessage_.c_str());
     if (loaded_ && ImGui::CollapsingHeader("Path tracer")) {
         // This view, photoreal (method pathtrace): rendered in the background, shown in place of
         // the live image until the view changes.
@@ -806,10 +1280,14 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ImGui_ImplOpenGL3_NewFrame();
         ImGui_ImplGlfw_NewFrame();
         ImGui::NewFrame();
+        const double tNewFrame = work.seconds();
+        scriptDragMoved_ = false;
         handleKeys();
         handleImageMouse();
         runScript();
+        const double tInput = work.seconds();
         drawImage();
+        const double tImage = work.seconds();
         drawPanel();
         const double tWidgets = work.seconds();
         ImGui::Render();
@@ -819,7 +1297,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
 
         // Ask for a picture of the newest state; coarse while the user drags.
-        const bool interacting = drag_ != Drag::None || tfEditing_;
+        const bool clipDragging = drag_ == Drag::Clip || scriptDragMoved_;
+        const bool interacting =
+            drag_ != Drag::None || tfEditing_ || panelDragging_ || scriptDragFrames_ > 0;
         if (dirty_) {
             submit(interacting);
             dirty_ = false;
@@ -830,9 +1310,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         }
         ++frames_;
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
-            scriptNext_ >= options_.script.size() && (ptGen_ != generation_ || ptReady_) &&
-            shownFull_ && !shownStale_ && shownGen_ == generation_ && !loading_.valid() &&
-            texW_ == imageW_ && texH_ == imageH_)
+            scriptNext_ >= options_.script.size() && scriptDragFrames_ == 0 &&
+            (ptGen_ != generation_ || ptReady_) && shownFull_ && !shownStale_ &&
+            shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ && texH_ == imageH_)
             shot = readWindow();
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.
@@ -856,13 +1336,29 @@ std::optional<core::ImageRGBA> Viewer::run() {
         glfwSwapBuffers(window_);
         // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
         if (frames_ > kWarmUpFrames) frameWork_.add(work.seconds());
+        // The "UI frame during a clip-plane drag": the drag's frames on their own.
+        if (clipDragging && frames_ > kWarmUpFrames) {
+            clipDragWork_.add(work.seconds());
+        } else if (clipDragWork_.count > 0) {
+            if (options_.log)
+                std::fprintf(stderr,
+                             "view: clip-plane drag: %llu frames, ui frame work mean %.1f ms, max "
+                             "%.1f ms, %llu over %.0f ms\n",
+                             (unsigned long long)clipDragWork_.count, clipDragWork_.mean() * 1e3,
+                             clipDragWork_.allMax * 1e3, (unsigned long long)clipDragWork_.overSlow,
+                             kSlowFrameSeconds * 1e3);
+            clipDragWork_ = {{}, std::size_t(-1)};
+        }
         // A slow frame says where its time went.
         if (options_.log && frames_ > kWarmUpFrames && work.seconds() > kSlowFrameSeconds)
             std::fprintf(stderr,
-                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f, "
-                         "draw %.1f, present %.1f ms\n",
+                         "view: slow frame %.1f ms: events %.1f, results %.1f, widgets %.1f "
+                         "(new frame %.1f, input and script %.1f, image and gizmo %.1f, panel "
+                         "%.1f), draw %.1f, present %.1f ms\n",
                          work.seconds() * 1e3, tEvents * 1e3, (tReceive - tEvents) * 1e3,
-                         (tWidgets - tReceive) * 1e3, (tDraw - tWidgets) * 1e3,
+                         (tWidgets - tReceive) * 1e3, (tNewFrame - tReceive) * 1e3,
+                         (tInput - tNewFrame) * 1e3, (tImage - tInput) * 1e3,
+                         (tWidgets - tImage) * 1e3, (tDraw - tWidgets) * 1e3,
                          (work.seconds() - tDraw) * 1e3);
         logTimes();
         if (shot) break;

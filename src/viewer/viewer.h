@@ -2,14 +2,16 @@
 #pragma once
 // voxlight view: the interactive viewer's window (GLFW, OpenGL 4.5 core, Dear ImGui).
 //
-// Layout: the volume image fills the window left of a fixed-width side panel (file, views, info,
-// transfer function, stats, help); the image is rendered at the size of that area, so at rest
-// one image pixel is one window pixel. On this project's GPU-less machines the image is the CPU
+// Layout: the volume image fills the window left of a fixed-width side panel; the image is
+// rendered at the size of that area, so at rest one image pixel is one window pixel. On this project's GPU-less machines the image is the CPU
 // ray caster's (RenderWorker, the pipeline `voxlight render` runs), shown as a texture; the UI
 // thread never waits for it.
 //
 // Mouse on the image: left-drag orbits, middle-drag or shift+left-drag pans, the wheel zooms,
-// right-drag sets window/level. Keys: helpText() (also shown in the help panel).
+// right-drag sets window/level; a left-drag that starts on a clip plane's handle (the gizmo drawn
+// over the image) moves that plane along its normal, ctrl+left-drag turns the selected light.
+// Panels: file, view, info, transfer function, lights, clip planes, path tracer, session, stats,
+// help. Keys: helpText() (also shown in the help panel).
 //
 // Scripted mode (options.screenshot): draws at least options.frames frames, waits — drawing
 // frames, not blocking — until the full-resolution image of the current state is shown, then

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
+#include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
 #include <vector>
@@ -62,13 +63,30 @@ bool inLabel(int x, int y, int w, int h) {
             (near(y, 12, kLabelHalfHeight) || near(y, h - 12, kLabelHalfHeight)));
 }
 
+/// `voxlight ARGS` under `display` (displayPrefix()): voxlight's own exit code and stderr.
+/// xvfb-run's are its own — after a command that exits within a fraction of a second it can fail
+/// to remove its temporary directory ("problem while cleaning up", exit code 5).
+Result runViewUnder(const std::string& display, const std::string& args, const test::TempDir& dir) {
+    const fs::path rc = dir / "view-rc.txt", err = dir / "view-stderr.txt";
+    const Result outer = runShell(display + "sh -c \"" + VOXLIGHT_BINARY + " " + args + " 2>" +
+                                      quoted(err) + "; echo \\$? >" + quoted(rc) + "\"",
+                                  dir.path());
+    std::ifstream rf(rc);
+    int code = -1;
+    if (!(rf >> code)) return outer;  // the command did not run: xvfb-run's error says why
+    std::ifstream ef(err);
+    return {code, std::string((std::istreambuf_iterator<char>(ef)), {})};
+}
+
 /// `voxlight view` of dir/scene.json running dir/steps.json, recording dir/rec.json, screenshot
-/// dir/shot.png, under `display` (displayPrefix()).
-Result runScriptedView(const std::string& display, const test::TempDir& dir) {
-    return runShell(display + VOXLIGHT_BINARY + " view -q " + quoted(dir / "scene.json") +
-                        " --script " + quoted(dir / "steps.json") + " --record " +
-                        quoted(dir / "rec.json") + " --screenshot " + quoted(dir / "shot.png"),
-                    dir.path());
+/// dir/shot.png, under `display` (displayPrefix()); `extra` options before the scene.
+Result runScriptedView(const std::string& display, const test::TempDir& dir,
+                       const std::string& extra = "") {
+    return runViewUnder(display,
+                        "view -q " + extra + quoted(dir / "scene.json") + " --script " +
+                            quoted(dir / "steps.json") + " --record " + quoted(dir / "rec.json") +
+                            " --screenshot " + quoted(dir / "shot.png"),
+                        dir);
 }
 }  // namespace
 
@@ -172,6 +190,156 @@ TEST(ViewCli, AScriptedExplorationRecordsASessionThatReplaysToTheScreenshot) {
         EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
 }
 
+/// The replayed frames dir/NAME/frame_00000.png, … in order.
+std::vector<io::ImageRGBA> readFrames(const fs::path& dir) {
+    std::vector<io::ImageRGBA> frames;
+    for (int i = 0;; ++i) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%05d.png", i);
+        if (!fs::exists(dir / name)) break;
+        frames.push_back(io::readImage(dir / name));
+    }
+    return frames;
+}
+
+// Issue #15's scripted session ("change TF, add and move a clip plane, move a light, save")
+// through the viewer's own code paths: a window/level drag, a plane facing the view, moved by the
+// panel's slider path and by the gizmo's drag (coarse frames in between), a light added and
+// turned, the plane flipped; recorded, then replayed. One frame per settled state, each step
+// changes the picture, and the last equals the screenshot's image area (the gizmo hidden by the
+// last step, as the G key does).
+TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreenshot) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json") << R"([
+        {"window": [40, -30]},
+        {"clip_add": {"normal": "camera", "offset": -12}},
+        {"clip_move": {"index": 0, "by": 6}},
+        {"clip_drag": {"index": 0, "by": [0, -24], "frames": 6}},
+        {"light_add": {"type": "directional", "azimuth": -60, "elevation": 20}},
+        {"light_turn": {"index": 0, "azimuth": 70, "elevation": 25}},
+        {"clip_edit": {"index": 0, "flip": true}},
+        {"gizmo": false}])";
+    const Result view = runScriptedView(*display, tmp);
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    // The recorded lights and planes are the scene's parts, as replay reads them.
+    const nlohmann::json rec = nlohmann::json::parse(std::ifstream(tmp / "rec.json"));
+    const nlohmann::json& last = rec["keyframes"].back();
+    ASSERT_TRUE(last.contains("clip_planes")) << last.dump();
+    // Adding the plane pinned the camera where it was (an explicit eye): a fitted camera would
+    // re-frame to what the plane leaves.
+    const nlohmann::json& added = rec["keyframes"][2];
+    ASSERT_TRUE(added.contains("clip_planes") && added.contains("camera")) << added.dump();
+    EXPECT_TRUE(added["camera"].contains("eye")) << added.dump();
+    const Result replay =
+        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
+                     " --out " + quoted(tmp / "frames"),
+                 tmp.path());
+    ASSERT_EQ(replay.code, 0) << replay.err;
+    const std::vector<io::ImageRGBA> frames = readFrames(tmp / "frames");
+    ASSERT_EQ(frames.size(), 8u);  // the first state and one per step that changes the scene
+    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
+    const io::ImageRGBA& f = frames.back();
+    ASSERT_EQ(s.width, f.width + kPanelWidth);
+    float worst = 0.f;
+    for (int y = 0; y < f.height; ++y)
+        for (int x = 0; x < f.width; ++x)
+            if (!inLabel(x, y, f.width, f.height))
+                for (int c = 0; c < 3; ++c)
+                    worst = std::max(worst, std::abs(f.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
+    EXPECT_LE(worst, kScreenshotTolLevels + 1e-3f);
+    for (std::size_t i = 1; i < frames.size(); ++i)
+        EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
+}
+
+// The issue's "logged UI frame ≤ 50 ms during a clip-plane drag": a scripted gizmo drag over many
+// frames (one motion per frame, coarse renders meanwhile) with --log; the viewer logs the drag's
+// own frame statistics, reported here. No bound is asserted (timings on a shared machine are not
+// a test; README's "Where we stand" has the measured ranges). Also checks the gizmo is drawn.
+TEST(ViewCli, ClipPlaneDragLogsItsUiFrames) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 256, "height": 256}})";
+    constexpr int kDragFrames = 90;
+    std::ofstream(tmp / "steps.json") << R"([{"clip_add": {"normal": [0, 1, 0], "offset": -30}},
+              {"clip_drag": {"index": 0, "by": [-40, 60], "frames": )"
+                                      << kDragFrames << "}}]";
+    const Result view = runScriptedView(*display, tmp, "--log ");
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    // The last drag's line: "view: clip-plane drag: N frames, ui frame work mean X ms, max Y ms,
+    // Z over 50 ms".
+    const std::string key = "view: clip-plane drag: ";
+    const std::size_t at = view.err.rfind(key);
+    ASSERT_NE(at, std::string::npos) << view.err;
+    unsigned long long frames = 0, over = 0;
+    double mean = 0, max = 0;
+    ASSERT_EQ(std::sscanf(view.err.c_str() + at + key.size(),
+                          "%llu frames, ui frame work mean %lf ms, max %lf ms, %llu over", &frames,
+                          &mean, &max, &over),
+              4)
+        << view.err.substr(at);
+    EXPECT_EQ(frames, unsigned(kDragFrames));
+    std::printf("clip-plane drag, %llu UI frames: mean %.1f ms, max %.1f ms, %llu over 50 ms\n",
+                frames, mean, max, over);
+    RecordProperty("drag_frames", int(frames));
+    RecordProperty("drag_frame_mean_ms", std::to_string(mean));
+    RecordProperty("drag_frame_max_ms", std::to_string(max));
+    RecordProperty("drag_frames_over_50ms", int(over));
+    // Coarse images while dragging, then the full one.
+    EXPECT_NE(view.err.find("render coarse"), std::string::npos) << view.err;
+    // The gizmo (its outline, handle and arrow in cyan) is over the screenshot's image area, not
+    // in the replayed frame of the same state.
+    const Result replay =
+        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
+                     " --out " + quoted(tmp / "frames"),
+                 tmp.path());
+    ASSERT_EQ(replay.code, 0) << replay.err;
+    const std::vector<io::ImageRGBA> replayed = readFrames(tmp / "frames");
+    ASSERT_FALSE(replayed.empty());
+    const io::ImageRGBA& f = replayed.back();
+    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
+    int gizmo = 0;
+    for (int y = 0; y < f.height; ++y)
+        for (int x = 0; x < f.width; ++x) {
+            const float* a = s.at(x, y);
+            gizmo += std::abs(a[2] - f.at(x, y)[2]) * 255.f > 30.f && a[2] > a[0] + 0.2f;
+        }
+    EXPECT_GT(gizmo, 100) << "no clip-plane gizmo drawn over the image";
+}
+
+// A script step naming a plane or light the view does not have fails when it runs: one line
+// naming the step's field, exit code 2.
+TEST(ViewCli, AScriptStepNamingAMissingPlaneFailsWithOneLine) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 32}, "transfer_function": "ct-bone",
+        "image": {"width": 64, "height": 64}})";
+    std::ofstream(tmp / "steps.json")
+        << R"([{"clip_add": {"normal": [0, 0, 1]}}, {"clip_move": {"index": 1, "by": 3}}])";
+    const Result view = runScriptedView(*display, tmp);
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    EXPECT_EQ(view.code, 2) << view.err;
+    EXPECT_EQ(std::count(view.err.begin(), view.err.end(), '\n'), 1) << view.err;
+    EXPECT_NE(view.err.find("[1].clip_move.index"), std::string::npos) << view.err;
+    EXPECT_FALSE(fs::exists(tmp / "shot.png"));
+}
+
 // "Render this view with the path tracer" (item 7): after an orbit, the panel's job path-traces the
 // view in the background and the image area shows its result — equal to `voxlight replay` of the
 // recorded state with method pathtrace at the same spp (the path tracer's image is the same for
@@ -219,6 +387,7 @@ TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
     std::ofstream(tmp / "missing-volume.json") << R"({"volume": "nowhere.nii.gz"})";
     std::ofstream(tmp / "corrupt.json") << R"({"volume": {"phantom": "torso"}, "camera": )";
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [1, 2]}, {"spin": 3}])";
+    std::ofstream(tmp / "clip-steps.json") << R"([{"clip_move": {"index": 0}}])";
     const std::vector<std::pair<std::string, std::string>> cases = {
         {"view " + quoted(tmp / "missing-volume.json"), "nowhere.nii.gz"},
         {"view " + quoted(tmp / "corrupt.json"), "corrupt.json"},
@@ -230,6 +399,9 @@ TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
          "absent.json"},
         {"view " + quoted(tmp / "missing-volume.json") + " --script " + quoted(tmp / "steps.json"),
          "[1].spin"},
+        {"view " + quoted(tmp / "missing-volume.json") + " --script " +
+             quoted(tmp / "clip-steps.json"),
+         "[0].clip_move"},
         {"view " + quoted(tmp / "missing-volume.json") + " --record " + quoted(tmp / "r.txt"),
          "--record"},
     };

@@ -177,3 +177,199 @@ TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
         }
     }
 }
+
+TEST(ViewScript, ClipPlaneAndLightStepsParse) {
+    const auto steps = viewer::parseScript(json::parse(R"([
+        {"clip_add": {"normal": [0, 2, 0], "offset": -5, "shadows_from_removed": true}},
+        {"clip_add": {"normal": "camera"}},
+        {"clip_move": {"index": 1, "by": 7.5}},
+        {"clip_drag": {"index": 0, "by": [3, -40], "frames": 20}},
+        {"clip_edit": {"index": 0, "flip": true, "enabled": false}},
+        {"clip_remove": 1},
+        {"light_add": {"type": "point", "azimuth": 10, "elevation": -20, "distance": 300,
+                       "color": [1, 0.9, 0.8], "intensity": 5}},
+        {"light_edit": {"index": 0, "position": [1, 2, 3]}},
+        {"light_turn": {"index": 0, "azimuth": 30}},
+        {"light_remove": 0}, {"gizmo": false}])"),
+                                           "steps.json");
+    using Kind = viewer::ScriptStep::Kind;
+    ASSERT_EQ(steps.size(), 11u);
+    EXPECT_EQ(steps[0].kind, Kind::ClipAdd);
+    EXPECT_EQ(steps[0].vec, glm::dvec3(0, 2, 0));
+    EXPECT_EQ(steps[0].a, -5.0);
+    EXPECT_EQ(steps[0].shadowsFromRemoved, true);
+    EXPECT_TRUE(steps[1].facingCamera);
+    EXPECT_FALSE(steps[1].shadowsFromRemoved.has_value());
+    EXPECT_EQ(steps[2].index, 1);
+    EXPECT_EQ(steps[2].a, 7.5);
+    EXPECT_EQ(steps[3].kind, Kind::ClipDrag);
+    EXPECT_EQ(steps[3].b, -40.0);
+    EXPECT_EQ(steps[3].frames, 20);
+    EXPECT_TRUE(steps[4].flip);
+    EXPECT_EQ(steps[4].enabled, false);
+    EXPECT_EQ(steps[5].kind, Kind::ClipRemove);
+    EXPECT_EQ(steps[5].index, 1);
+    EXPECT_EQ(steps[6].lightType, "point");
+    EXPECT_EQ(steps[6].distance, 300.0);
+    EXPECT_EQ(steps[6].color, glm::dvec3(1, 0.9, 0.8));
+    EXPECT_EQ(steps[7].position, glm::dvec3(1, 2, 3));
+    EXPECT_EQ(steps[8].kind, Kind::LightTurn);
+    EXPECT_EQ(steps[8].a, 30.0);
+    EXPECT_EQ(steps[8].b, 0.0);
+    EXPECT_EQ(steps[9].kind, Kind::LightRemove);
+    EXPECT_EQ(steps[10].kind, Kind::Gizmo);
+    EXPECT_EQ(steps[10].a, 0.0);
+    EXPECT_EQ(steps[3].field, "[3].clip_drag");
+}
+
+TEST(ViewScript, BadClipPlaneAndLightStepsNameTheField) {
+    const std::vector<std::pair<const char*, const char*>> bad = {
+        {R"([{"clip_add": {}}])", "[0].clip_add"},
+        {R"([{"clip_add": {"normal": [0, 0, 0]}}])", "[0].clip_add.normal"},
+        {R"([{"clip_add": {"normal": "viewer"}}])", "[0].clip_add.normal"},
+        {R"([{"clip_add": {"normal": [0, 1]}}])", "[0].clip_add.normal"},
+        {R"([{"clip_add": {"normal": [0, 0, 1], "ofset": 3}}])", "[0].clip_add.ofset"},
+        {R"([{"clip_add": {"normal": [0, 0, 1], "shadows_from_removed": 1}}])",
+         "[0].clip_add.shadows_from_removed"},
+        {R"([{"clip_add": [0, 0, 1]}])", "[0].clip_add"},
+        {R"([{"clip_move": {"index": 0}}])", "[0].clip_move"},
+        {R"([{"clip_move": {"index": -1, "by": 2}}])", "[0].clip_move.index"},
+        {R"([{"clip_move": {"index": 0.5, "by": 2}}])", "[0].clip_move.index"},
+        {R"([{"clip_move": {"index": 0, "by": "far"}}])", "[0].clip_move.by"},
+        {R"([{"clip_drag": {"index": 0, "by": 5}}])", "[0].clip_drag.by"},
+        {R"([{"clip_drag": {"index": 0, "by": [0, 5], "frames": 0}}])", "[0].clip_drag.frames"},
+        {R"([{"clip_edit": {"index": 0}}])", "[0].clip_edit"},
+        {R"([{"clip_edit": {"index": 0, "flip": false}}])", "[0].clip_edit.flip"},
+        {R"([{"clip_edit": {"index": 0, "enabled": "no"}}])", "[0].clip_edit.enabled"},
+        {R"([{"clip_remove": "0"}])", "[0].clip_remove"},
+        {R"([{"light_add": {"azimuth": 3}}])", "[0].light_add"},
+        {R"([{"light_add": {"type": "area"}}])", "[0].light_add.type"},
+        {R"([{"light_add": {"type": "environment"}}])", "[0].light_add.path"},
+        {R"([{"light_add": {"type": "directional", "distance": 3}}])", "[0].light_add.distance"},
+        {R"([{"light_add": {"type": "point", "distance": 0}}])", "[0].light_add.distance"},
+        {R"([{"light_add": {"type": "directional", "elevation": 95}}])", "[0].light_add.elevation"},
+        {R"([{"light_add": {"type": "directional", "color": [1, -1, 1]}}])", "[0].light_add.color"},
+        {R"([{"light_add": {"type": "directional", "intensity": -2}}])", "[0].light_add.intensity"},
+        {R"([{"light_edit": {"index": 0}}])", "[0].light_edit"},
+        {R"([{"light_edit": {"index": 0, "direction": [0, 0, 1]}}])", "[0].light_edit.direction"},
+        {R"([{"light_turn": {"index": 0}}])", "[0].light_turn"},
+        {R"([{"light_turn": {"index": 0, "azimuth": null}}])", "[0].light_turn.azimuth"},
+        {R"([{"gizmo": "off"}])", "[0].gizmo"},
+        {R"([{"clip": {"add": [0, 0, 1]}}])", "[0].clip"}};
+    for (const auto& [text, field] : bad) {
+        try {
+            viewer::parseScript(json::parse(text), "steps.json");
+            ADD_FAILURE() << text;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), field) << text << ": " << e.what();
+            EXPECT_EQ(e.source(), "steps.json");
+        }
+    }
+}
+
+TEST(ViewState, LightAnglesFollowTheCameraConventionAndRoundTrip) {
+    // Azimuth 0 is anterior (−y), 90 the patient's left (+x), elevation 90 superior (+z).
+    EXPECT_NEAR(glm::length(viewer::towardLight(0, 0) - glm::dvec3(0, -1, 0)), 0.0, 1e-12);
+    EXPECT_NEAR(glm::length(viewer::towardLight(90, 0) - glm::dvec3(1, 0, 0)), 0.0, 1e-12);
+    EXPECT_NEAR(glm::length(viewer::towardLight(0, 90) - glm::dvec3(0, 0, 1)), 0.0, 1e-12);
+    for (double az : {-170.0, -45.0, 0.0, 30.0, 135.0, 180.0})
+        for (double el : {-80.0, -10.0, 0.0, 45.0, 89.0}) {
+            const glm::dvec2 a = viewer::lightAngles(viewer::towardLight(az, el));
+            EXPECT_NEAR(a.x, az, 1e-9) << az << " " << el;
+            EXPECT_NEAR(a.y, el, 1e-9) << az << " " << el;
+        }
+    // A directional light travels away from where it comes from; a point light keeps its
+    // distance from the pivot; turning adds to the angles.
+    const glm::dvec3 pivot(10, 20, 30);
+    io::LightDesc d = viewer::newLight("directional", pivot, 100, "", "t", "f");
+    viewer::setLightAngles(d, {60, 20}, pivot);
+    EXPECT_NEAR(glm::length(d.direction + viewer::towardLight(60, 20)), 0.0, 1e-12);
+    viewer::turnLight(d, 30, -10, pivot);
+    EXPECT_NEAR(viewer::lightAnglesOf(d, pivot).x, 90.0, 1e-9);
+    EXPECT_NEAR(viewer::lightAnglesOf(d, pivot).y, 10.0, 1e-9);
+    io::LightDesc p = viewer::newLight("point", pivot, 250, "", "t", "f");
+    EXPECT_NEAR(glm::length(p.position - pivot), 250.0, 1e-9);
+    EXPECT_NEAR(p.intensity, 250.0 * 250.0, 1e-9);  // irradiance 1 at the pivot
+    viewer::turnLight(p, -100, 200, pivot);         // elevation stops 1° short of the pole
+    EXPECT_NEAR(glm::length(p.position - pivot), 250.0, 1e-9);
+    EXPECT_NEAR(viewer::lightAnglesOf(p, pivot).y, 89.0, 1e-9);
+    EXPECT_THROW(viewer::newLight("environment", pivot, 1, "", "t", "f"), InputError);
+    try {
+        viewer::newLight("environment", pivot, 1, "/nonexistent/sky.hdr", "steps.json", "[0].x");
+        ADD_FAILURE() << "a missing environment map was accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "[0].x.path");
+    }
+    // The lights list parses back as the same lights.
+    json doc = torsoDoc(24, 32);
+    doc["lights"] = viewer::lightsJson({d, p});
+    const io::Scene s = io::parseScene(doc, "test", "/");
+    ASSERT_EQ(s.lights.size(), 2u);
+    EXPECT_NEAR(glm::length(s.lights[0].direction - d.direction), 0.0, 1e-12);
+    EXPECT_NEAR(glm::length(s.lights[1].position - p.position), 0.0, 1e-9);
+}
+
+TEST(ViewState, ClipPlanesMoveFlipAndOutlineTheBox) {
+    const glm::dvec3 centre(0.0);
+    io::ClipPlaneDesc p = viewer::clipPlaneThrough({0, 0, 2}, centre, 5.0, "t", "f");
+    EXPECT_EQ(p.normal, glm::dvec3(0, 0, 1));
+    EXPECT_EQ(p.point, glm::dvec3(0, 0, 5));
+    viewer::moveClipPlane(p, -3.0);
+    EXPECT_EQ(p.point, glm::dvec3(0, 0, 2));
+    viewer::flipClipPlane(p);
+    EXPECT_EQ(p.normal, glm::dvec3(0, 0, -1));
+    EXPECT_EQ(p.point, glm::dvec3(0, 0, 2));
+    EXPECT_THROW(viewer::clipPlaneThrough({0, 0, 0}, centre, 0, "t", "f"), InputError);
+    // Disabled planes are not in the scene.
+    const json planes = viewer::clipPlanesJson({{p, true}, {p, false}});
+    ASSERT_EQ(planes.size(), 1u);
+    EXPECT_EQ(planes[0]["normal"][2], -1.0);
+    // A box of voxel centres [-10, 10]³: an axial plane cuts it in a square, an oblique one
+    // through the centre perpendicular to a diagonal in a regular hexagon.
+    core::Geometry g;
+    g.dims = {21, 21, 21};
+    g.origin = glm::dvec3(-10.0);
+    const std::vector<glm::dvec3> square = viewer::clipOutline(p, g);
+    ASSERT_EQ(square.size(), 4u);
+    for (const glm::dvec3& q : square) {
+        EXPECT_NEAR(q.z, 2.0, 1e-12);
+        EXPECT_NEAR(std::abs(q.x), 10.0, 1e-12);
+        EXPECT_NEAR(std::abs(q.y), 10.0, 1e-12);
+    }
+    for (std::size_t i = 0; i < 4; ++i)  // in order around it: neighbours share a side
+        EXPECT_NEAR(glm::length(square[i] - square[(i + 1) % 4]), 20.0, 1e-12);
+    const io::ClipPlaneDesc diagonal = viewer::clipPlaneThrough({1, 1, 1}, centre, 0, "t", "f");
+    const std::vector<glm::dvec3> hexagon = viewer::clipOutline(diagonal, g);
+    ASSERT_EQ(hexagon.size(), 6u);
+    for (std::size_t i = 0; i < 6; ++i)
+        EXPECT_NEAR(glm::length(hexagon[i] - hexagon[(i + 1) % 6]), 10.0 * std::sqrt(2.0), 1e-9);
+    EXPECT_TRUE(
+        viewer::clipOutline(viewer::clipPlaneThrough({1, 0, 0}, centre, 11, "t", "f"), g).empty());
+}
+
+TEST(ViewState, AGizmoDragMovesThePlaneAsFarAsItsHandleFollowsTheCursor) {
+    viewer::LookAt c;
+    c.eye = {200.0, -300.0, 80.0};
+    c.target = {0.0, 0.0, 0.0};
+    const render::Camera cam = viewer::projectionCamera(c, 320, 240);
+    // An oblique plane through the target: dragging 25 pixels along the image direction of its
+    // normal moves its handle's image 25 pixels (the image map is smooth: small drags are
+    // almost linear).
+    const io::ClipPlaneDesc p = viewer::clipPlaneThrough({1, 0.3, 0.2}, c.target, 0, "t", "f");
+    double x0, y0, x1, y1;
+    ASSERT_TRUE(cam.project(p.point, x0, y0));
+    ASSERT_TRUE(cam.project(p.point + 1.0 * p.normal, x1, y1));
+    const glm::dvec2 u = glm::normalize(glm::dvec2(x1 - x0, y1 - y0));
+    const double mm = viewer::clipDragMm(p, p.point, cam, 25 * u.x, 25 * u.y);
+    EXPECT_GT(mm, 0.0);
+    double x2, y2;
+    ASSERT_TRUE(cam.project(p.point + mm * p.normal, x2, y2));
+    constexpr double kLinearTolPixels = 0.5;  // perspective: the 20-pixel probe is not exact
+    EXPECT_NEAR(std::hypot(x2 - x0, y2 - y0), 25.0, kLinearTolPixels);
+    // Across the normal's image direction nothing moves.
+    EXPECT_NEAR(viewer::clipDragMm(p, p.point, cam, -25 * u.y, 25 * u.x), 0.0, 1e-9);
+    // A plane facing the camera: dragging up moves it away from the eye.
+    const io::ClipPlaneDesc facing = viewer::clipPlaneThrough(cam.forward(), c.target, 0, "t", "f");
+    EXPECT_GT(viewer::clipDragMm(facing, facing.point, cam, 0, -10), 0.0);
+    EXPECT_LT(viewer::clipDragMm(facing, facing.point, cam, 0, 10), 0.0);
+}
