@@ -412,6 +412,10 @@ bool Viewer::renderGl(const RenderedImage& p) {
             glFinish();  // the frame's real cost (the GL queues its work)
             if (ok) {
                 glTimes_.add(sw.seconds());
+                if (options_.log)
+                    std::fprintf(stderr, "view: GLSL frame %dx%d in %.3f s (state %llu)\n",
+                                 gl_->width(), gl_->height(), glTimes_.last(),
+                                 (unsigned long long)p.generation);
                 texW_ = gl_->width(), texH_ = gl_->height();
                 shownFull_ = true;
                 shownGl_ = true;
@@ -488,6 +492,10 @@ void Viewer::updateRenderer() {
             glFinish();
             const double seconds = sw.seconds();
             if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
+            if (options_.log)
+                std::fprintf(stderr, "view: measuring: GLSL %s %.3f s\n",
+                             warmUp ? "warm-up (uploads, shader compile; 8x8 pixels)" : "frame",
+                             seconds);
             if (!warmUp) glMeasured_.push_back(seconds);
             const bool enough = int(glMeasured_.size()) >= kMeasureFrames ||
                                 (!glMeasured_.empty() && seconds > kClearlySlower * cpuMeasured_);

@@ -334,6 +334,43 @@ TEST(ViewCli, GlslImageAgreesWithTheCpuRayCaster) {
     }
 }
 
+// On the GLSL path the gestures work as on the CPU path (the camera continues from the prepared
+// state's): a scripted orbit, window/level drag and zoom, recorded and replayed on the CPU — the
+// replay's last frame agrees with the screenshot within the GLSL tolerances.
+TEST(ViewCli, AScriptedExplorationOnTheGlslPathReplaysToTheScreenshot) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json")
+        << R"([{"orbit": [60, 10]}, {"window": [40, -30]}, {"zoom": 2}])";
+    const Result view = runShell(
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
+            " --script " + quoted(tmp / "steps.json") + " --record " + quoted(tmp / "rec.json") +
+            " --screenshot " + quoted(tmp / "shot.png"),
+        tmp.path());
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    EXPECT_NE(view.err.find("view: GLSL frame 160x128"), std::string::npos) << view.err;
+    const Result replay =
+        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
+                     " --out " + quoted(tmp / "frames"),
+                 tmp.path());
+    ASSERT_EQ(replay.code, 0) << replay.err;
+    ASSERT_TRUE(fs::exists(tmp / "frames" / "frame_00003.png"));
+    ASSERT_FALSE(fs::exists(tmp / "frames" / "frame_00004.png"));
+    const io::ImageRGBA last = io::readImage(tmp / "frames" / "frame_00003.png");
+    const io::ImageRGBA first = io::readImage(tmp / "frames" / "frame_00000.png");
+    const Agreement a = compareImageArea(last, io::readImage(tmp / "shot.png"));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+    EXPECT_NE(first.pixels, last.pixels) << "the steps changed nothing";
+}
+
 // A scene the GLSL path cannot do (here: nine lights, one more than the shader holds) is drawn by
 // the CPU ray caster even with --renderer gpu, and the viewer says why on stderr (and in the
 // Renderer panel); the image is the CPU's.
