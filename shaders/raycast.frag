@@ -13,9 +13,11 @@
 //   - ray set-up in float (the CPU's is double, then rounded to float),
 //   - the pre-integration table's cumulative integrals as float pairs (hi + lo) instead of
 //     double, and the specular power by pow() instead of the CPU's interpolated table.
-// Empty-space skipping: rays are clipped to the box of the non-empty skip cells (what the CPU's
-// visibleRange() does); the cells inside are not skipped — their segments are transparent, so
-// the image is the same, only slower where rays cross empty cells.
+// Empty-space skipping: rays are clipped to the box of the non-empty skip cells (the CPU's
+// visibleRange()), and inside it a sample in an empty skip cell jumps ahead by the cell's skip
+// distance (grid::BrickMajorants::skipDistances: the cube of cells within d − 1 is empty) to the
+// last lattice sample still inside that cube. Only transparent segments are passed over, as the
+// CPU's run traversal passes over them, so the image does not change.
 #version 450 core
 layout(location = 0) out vec4 outFilm;  // linear radiance + T·background, alpha = 1 − T
 
@@ -35,6 +37,12 @@ uniform vec3 uIndexBoxLo, uIndexBoxHi;      // the volume box in index space
 uniform bool uAnyVisible;
 uniform vec3 uVisibleLo, uVisibleHi;        // RayCaster::visibleRange's box (index space)
 uniform mat3 uGradientMatrix;               // (Δi, Δj, Δk) → world gradient
+
+// Skip distances of the kSkipCellVoxels³ skip cells (uSkip: options.emptySpaceSkipping).
+uniform bool uSkip;
+uniform usampler3D uSkipDistance;
+uniform ivec3 uCellCounts;
+uniform float uCellSize;
 
 // Per-pixel jitter (RaySegment::jitter), computed on the CPU with the same hash.
 uniform sampler2D uJitter;
@@ -338,6 +346,13 @@ bool visibleRange(Ray r, out float t0, out float t1) {
 
 // ---- The march (dvr_march.h marchDvr, SampleLattice) -----------------------------------------
 
+// SampleLattice::t: t_0 = tNear, t_i = tNear + (jitter + i − 1)·Δ clamped to tFar, t_last = tFar.
+float latticeT(int i, int last, float jitter, Ray r) {
+    if (i <= 0) return r.tNear;
+    const float t = fma(jitter + float(i - 1), uStepMm, r.tNear);
+    return i >= last || t > r.tFar ? r.tFar : t;
+}
+
 void main() {
     const ivec2 pixel = ivec2(gl_FragCoord.xy);  // film row y = image row y
     outFilm = vec4(uBackground, 0.0);
@@ -355,27 +370,47 @@ void main() {
     i0 = i0 < last ? max(i0, 0) : last;
     int i1 = v1 < r.tNear + jitter * step ? 0 : 1 + int(floor((v1 - r.tNear) / step - jitter));
     i1 = i1 < last ? max(i1, 0) : last;
-    {
-        const float t = i1 <= 0 ? r.tNear : (i1 >= last ? r.tFar : min(fma(jitter + float(i1 - 1), step, r.tNear), r.tFar));
-        if (i1 < last && t < v1) ++i1;
-    }
+    if (i1 < last && latticeT(i1, last, jitter, r) < v1) ++i1;
     const vec3 toEye = -r.dirWorld;
+    const float maxDir = max(abs(r.dirIndex.x), max(abs(r.dirIndex.y), abs(r.dirIndex.z)));
     vec3 L = vec3(0.0);
     float T = 1.0;
-    float tPrev = i0 <= 0 ? r.tNear
-                          : (i0 >= last ? r.tFar
-                                        : min(fma(jitter + float(i0 - 1), step, r.tNear), r.tFar));
-    float sPrev = valueAt(r.originIndex + tPrev * r.dirIndex);
-    for (int i = i0 + 1; i <= i1; ++i) {
-        float t = fma(jitter + float(i - 1), step, r.tNear);
-        t = (i >= last || t > r.tFar) ? r.tFar : t;
+    int iPrev = i0;
+    float tPrev = latticeT(i0, last, jitter, r);
+    vec3 pPrev = r.originIndex + tPrev * r.dirIndex;
+    float sPrev = valueAt(pPrev);
+    while (iPrev < i1) {
+        if (uSkip && maxDir > 0.0) {
+            // In an empty cell: jump to the last lattice sample inside its empty cube.
+            const ivec3 c = clamp(ivec3(floor(pPrev / uCellSize)), ivec3(0), uCellCounts - 1);
+            const uint d = texelFetch(uSkipDistance, c, 0).r;
+            if (d > 1u) {
+                const float reach = tPrev + 0.999 * float(d - 1u) * uCellSize / maxDir;
+                int iNew = reach < r.tNear + jitter * step
+                               ? 0
+                               : 1 + int(floor((reach - r.tNear) / step - jitter));
+                iNew = min(iNew, last);
+                if (iNew > iPrev) {
+                    if (iNew >= i1) break;  // nothing but empty cells to the end of the range
+                    iPrev = iNew;
+                    tPrev = latticeT(iNew, last, jitter, r);
+                    pPrev = r.originIndex + tPrev * r.dirIndex;
+                    sPrev = valueAt(pPrev);
+                    continue;
+                }
+            }
+        }
+        const int i = iPrev + 1;
+        const float t = latticeT(i, last, jitter, r);
         const vec3 p = r.originIndex + t * r.dirIndex;
         const float s = valueAt(p);
         const float sf = sPrev, t0 = tPrev;
+        iPrev = i;
         sPrev = s;
         tPrev = t;
-        if (uPreintegrated &&
-            (max(sf, s) <= uZeroBelow || min(sf, s) >= uZeroAbove)) continue;  // transparent
+        pPrev = p;
+        if (uPreintegrated && (max(sf, s) <= uZeroBelow || min(sf, s) >= uZeroAbove))
+            continue;  // transparent
         const Segment seg = uPreintegrated ? preintegratedSegment(sf, s) : midpointSegment(sf, s);
         const float dt = t - t0;
         const float tau = seg.sigma * dt;
@@ -386,7 +421,8 @@ void main() {
         vec3 diffuse = vec3(uEaAmbient), specular = vec3(0.0);
         if (uMode == 1) {
             const bool cutFace = r.clipEntry && (t - r.tNear) < uBand;
-            const vec3 n = shadingNormal(gradientAt(p), cutFace ? r.entryNormal : toEye, toEye, uWeak);
+            const vec3 n =
+                shadingNormal(gradientAt(p), cutFace ? r.entryNormal : toEye, toEye, uWeak);
             blinnPhong(r.originWorld + t * r.dirWorld, n, toEye, diffuse, specular);
         }
         L += (T * alpha) * (seg.emission + seg.albedo * diffuse + specular);

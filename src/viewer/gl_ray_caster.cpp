@@ -109,7 +109,7 @@ float finite(float v) { return std::clamp(v, -1e30f, 1e30f); }
 GlRayCaster::~GlRayCaster() { release(); }
 
 void GlRayCaster::release() {
-    const GLuint textures[] = {volumeTex_, tfTex_, jitterTex_, filmTex_, displayTex_};
+    const GLuint textures[] = {volumeTex_, tfTex_, jitterTex_, skipTex_, filmTex_, displayTex_};
     for (GLuint t : textures)
         if (t) glDeleteTextures(1, &t);
     if (filmFbo_) glDeleteFramebuffers(1, &filmFbo_);
@@ -117,7 +117,8 @@ void GlRayCaster::release() {
     if (vao_) glDeleteVertexArrays(1, &vao_);
     if (raycast_) glDeleteProgram(raycast_);
     if (display_) glDeleteProgram(display_);
-    volumeTex_ = tfTex_ = jitterTex_ = filmTex_ = displayTex_ = filmFbo_ = displayFbo_ = 0;
+    volumeTex_ = tfTex_ = jitterTex_ = skipTex_ = filmTex_ = displayTex_ = 0;
+    filmFbo_ = displayFbo_ = 0;
     vao_ = raycast_ = display_ = 0;
 }
 
@@ -243,6 +244,18 @@ void GlRayCaster::uploadTable(const optics::TfTable& table) {
     glTextureParameteri(tfTex_, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
 }
 
+void GlRayCaster::uploadSkipCells(const grid::BrickMajorants& cells) {
+    const glm::ivec3 n = cells.counts();
+    if (skipTex_) glDeleteTextures(1, &skipTex_);
+    glCreateTextures(GL_TEXTURE_3D, 1, &skipTex_);
+    glTextureStorage3D(skipTex_, 1, GL_R8UI, n.x, n.y, n.z);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glTextureSubImage3D(skipTex_, 0, 0, 0, 0, n.x, n.y, n.z, GL_RED_INTEGER, GL_UNSIGNED_BYTE,
+                        cells.skipDistances());
+    glTextureParameteri(skipTex_, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(skipTex_, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+}
+
 void GlRayCaster::uploadJitter(int width, int height, bool jitter, std::uint64_t seed) {
     // RayCaster::setupRay's per-pixel start offset, from the same counter-based hash.
     std::vector<float> j(std::size_t(width) * height, 0.f);
@@ -319,6 +332,10 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
         uploadTable(*setup.tables.table);
         table_ = setup.tables.table;
     }
+    if (skipCells_ != setup.tables.skipCells || !skipTex_) {
+        uploadSkipCells(*setup.tables.skipCells);
+        skipCells_ = setup.tables.skipCells;
+    }
     const int w = camera.width(), h = camera.height();
     if (!ensureTargets(w, h, why)) return false;
     if (!jitterTex_ || jitterW_ != w || jitterH_ != h || jitterOn_ != o.jitter ||
@@ -353,6 +370,10 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     u.v3("uVisibleLo", visible[0]);
     u.v3("uVisibleHi", visible[1]);
     u.m3("uGradientMatrix", caster.gradientMatrix());
+    u.i("uSkip", o.emptySpaceSkipping ? 1 : 0);
+    const glm::ivec3 cells = setup.tables.skipCells->counts();
+    glProgramUniform3i(raycast_, u.at("uCellCounts"), cells.x, cells.y, cells.z);
+    u.f("uCellSize", float(setup.tables.skipCells->cellSize()));
 
     const optics::TfTable& table = *setup.tables.table;
     u.i("uTfCells", optics::TfTable::kTableCells);
@@ -416,6 +437,7 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     u.i("uVolume", 0);
     u.i("uJitter", 1);
     u.i("uTf", 2);
+    u.i("uSkipDistance", 3);
 
     // Save the state ImGui's renderer relies on that we change.
     GLint prevFbo = 0, prevProgram = 0, prevVao = 0, prevViewport[4] = {0, 0, 0, 0};
@@ -443,6 +465,7 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     glBindTextureUnit(0, volumeTex_);
     glBindTextureUnit(1, jitterTex_);
     glBindTextureUnit(2, tfTex_);
+    glBindTextureUnit(3, skipTex_);
     glDrawArrays(GL_TRIANGLES, 0, 3);
 
     // Pass 2: film → display bytes.
@@ -460,6 +483,7 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     glBindTextureUnit(0, 0);
     glBindTextureUnit(1, 0);
     glBindTextureUnit(2, 0);
+    glBindTextureUnit(3, 0);
     glBindFramebuffer(GL_DRAW_FRAMEBUFFER, GLuint(prevFbo));
     glUseProgram(GLuint(prevProgram));
     glBindVertexArray(GLuint(prevVao));

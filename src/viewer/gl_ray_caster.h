@@ -3,9 +3,9 @@
 // The viewer's GLSL ray caster: shaders/raycast.frag (embedded at build time) evaluates the CPU
 // ray caster's emission–absorption and gradient (Blinn–Phong) modes from the same inputs —
 // pipeline::CasterSetup: the volume as a 3D texture (R16 for integer voxels, R32F for float),
-// the TF's pre-integration table as a 2D texture of its nodes and cumulative integrals, the same
-// step, opacity, lights, clip planes, crop box, early termination and per-pixel jitter, and the
-// pipeline's fitted camera — into a float film, then shaders/display.frag maps it to 8 bits as
+// the TF's pre-integration table as a 2D texture of its nodes and cumulative integrals, the skip
+// cells' skip distances as a 3D texture (empty-space skipping), the same step, opacity, lights,
+// clip planes, crop box, early termination and per-pixel jitter, and the pipeline's fitted camera — into a float film, then shaders/display.frag maps it to 8 bits as
 // the CLI's PNG is mapped (exposure, display transform). The image stays in a texture for the
 // window to draw; readDisplay()/readFilm() read it back (tests, screenshots).
 //
@@ -59,18 +59,20 @@ class GlRayCaster {
   private:
     bool uploadVolume(const core::Volume& volume, std::string& why);
     void uploadTable(const optics::TfTable& table);
+    void uploadSkipCells(const grid::BrickMajorants& cells);
     void uploadJitter(int width, int height, bool jitter, std::uint64_t seed);
     bool ensureTargets(int width, int height, std::string& why);
     void release();
 
     std::string renderer_;
     unsigned raycast_ = 0, display_ = 0, vao_ = 0;
-    unsigned volumeTex_ = 0, tfTex_ = 0, jitterTex_ = 0;
+    unsigned volumeTex_ = 0, tfTex_ = 0, jitterTex_ = 0, skipTex_ = 0;
     unsigned filmTex_ = 0, displayTex_ = 0, filmFbo_ = 0, displayFbo_ = 0;
     int width_ = 0, height_ = 0;
     // What is uploaded (held, so that a pointer is never that of a newer object).
     std::shared_ptr<const core::Volume> volume_;
     std::shared_ptr<const optics::TfTable> table_;
+    std::shared_ptr<const grid::BrickMajorants> skipCells_;
     float valueScale_ = 1.f, valueOffset_ = 0.f;
     int jitterW_ = 0, jitterH_ = 0;
     bool jitterOn_ = false;

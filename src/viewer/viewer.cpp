@@ -621,8 +621,9 @@ void Viewer::windowDrag(const optics::TransferFunction& start, double dx, double
 }
 
 void Viewer::runScript() {
+    // Steps run on the renderer the viewer chose (after the start-up measurement).
     if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ ||
-        shownGen_ != generation_ || loading_.valid())
+        shownGen_ != generation_ || loading_.valid() || measure_ != Measure::Done)
         return;
     const ScriptStep& st = options_.script[scriptNext_++];
     switch (st.kind) {
