@@ -308,7 +308,7 @@ bool GlRayCaster::ensureTargets(int width, int height, std::string& why) {
 }
 
 bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops,
-                         render::Display display, std::string& why, bool warmUpOnly) {
+                         render::Display display, std::string& why, Scope scope) {
     if (!ready()) {
         why = "the GLSL ray caster is not initialised";
         return false;
@@ -448,9 +448,12 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     const GLboolean blend = glIsEnabled(GL_BLEND), scissor = glIsEnabled(GL_SCISSOR_TEST);
     const GLboolean depth = glIsEnabled(GL_DEPTH_TEST), cull = glIsEnabled(GL_CULL_FACE);
     glDisable(GL_BLEND);
-    if (warmUpOnly) {
+    if (scope == Scope::WarmUp) {
         glEnable(GL_SCISSOR_TEST);
         glScissor(0, 0, std::min(w, kWarmUpPixels), std::min(h, kWarmUpPixels));
+    } else if (scope == Scope::CentreQuarter) {
+        glEnable(GL_SCISSOR_TEST);
+        glScissor(w / 4, h / 4, std::max(w / 2, 1), std::max(h / 2, 1));
     } else {
         glDisable(GL_SCISSOR_TEST);
     }

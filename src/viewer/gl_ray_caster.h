@@ -41,11 +41,13 @@ class GlRayCaster {
     /// Uploads the volume, the TF table and the jitter only when they changed since the last
     /// call. Does not wait for the GPU (glFinish() for timing). False with the reason on failure
     /// (volume larger than the GL's 3D textures, out of memory, a GL error).
-    /// warmUpOnly: upload and run the shaders on a kWarmUpPixels² corner only — the first draw
-    /// makes a GL compile the shader's machine code (seconds on llvmpipe), which a timing of the
-    /// frame must not include.
+    /// Which pixels a render() computes: all, a kWarmUpPixels² corner (uploads, and the first draw
+    /// that makes a GL compile the shader's machine code — which a timing must not include), or
+    /// the central half of each side (a quarter of the pixels, where the volume is: a cheap probe
+    /// of the frame's cost that over- rather than underestimates it).
+    enum class Scope { Full, WarmUp, CentreQuarter };
     bool render(const pipeline::CasterSetup& setup, float exposureStops, render::Display display,
-                std::string& why, bool warmUpOnly = false);
+                std::string& why, Scope scope = Scope::Full);
     static constexpr int kWarmUpPixels = 8;
     /// The display image (RGBA8, row 0 = the image's top); 0 before the first render.
     unsigned texture() const { return displayTex_; }

@@ -44,8 +44,9 @@ constexpr double kSlowFrameSeconds = 0.050;
 /// Start-up measurement: timed frames of each path (the GL path's first frame, which uploads the
 /// volume and compiles the shader's machine code, is not counted).
 constexpr int kMeasureFrames = 3;
-/// The GL path's timing stops after one frame that is already this many times the CPU's median:
-/// on a software rasteriser a GL frame can take seconds, and the UI waits for each.
+/// The GL path's timing stops when its probe (the central quarter of the image, ×4) or a frame is
+/// already this many times the CPU's median: on a software rasteriser a GL frame can take
+/// seconds, and the UI waits for each.
 constexpr double kClearlySlower = 3.0;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
@@ -483,22 +484,44 @@ void Viewer::updateRenderer() {
             return;  // receive() moves on when the timed frames arrive
         case Measure::GlFrames: {
             // One GL frame per UI frame (the UI keeps its events between them).
-            // The first is a warm-up on a corner (uploads, the shader's machine code), untimed.
+            // First a warm-up on a corner (uploads, the shader's machine code), untimed; then the
+            // central quarter of the image as a probe: on a software rasteriser a full GL frame
+            // takes seconds and the UI waits for it, so a probe that is already clearly slower
+            // than the CPU's frame ends the measurement; else full frames, median.
+            const int run = glFramesRun_++;
+            const GlRayCaster::Scope scope = run == 0   ? GlRayCaster::Scope::WarmUp
+                                             : run == 1 ? GlRayCaster::Scope::CentreQuarter
+                                                        : GlRayCaster::Scope::Full;
             std::string why;
-            const bool warmUp = glFramesRun_++ == 0;
             core::Stopwatch sw;
             const bool ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
-                                        render::displayFromString(prepared_->display), why, warmUp);
+                                        render::displayFromString(prepared_->display), why, scope);
             glFinish();
             const double seconds = sw.seconds();
             if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
             if (options_.log)
                 std::fprintf(stderr, "view: measuring: GLSL %s %.3f s\n",
-                             warmUp ? "warm-up (uploads, shader compile; 8x8 pixels)" : "frame",
+                             run == 0   ? "warm-up (uploads, shader compile; 8x8 pixels)"
+                             : run == 1 ? "central quarter of the image"
+                                        : "frame",
                              seconds);
-            if (!warmUp) glMeasured_.push_back(seconds);
+            if (run == 0) return;
+            if (run == 1) {
+                if (4.0 * seconds > kClearlySlower * cpuMeasured_) {
+                    char reason[320];
+                    std::snprintf(reason, sizeof reason,
+                                  "measured at %dx%d: GLSL %.3f s for the central quarter of the "
+                                  "image (%s; a full frame about %.1f s), CPU ray caster %.3f s "
+                                  "per frame (median of %d) -> the CPU path is faster",
+                                  w, h, seconds, gl_->glRenderer().c_str(), 4.0 * seconds,
+                                  cpuMeasured_, cpuFrames_);
+                    return choose(false, reason);
+                }
+                return;
+            }
+            glMeasured_.push_back(seconds);
             const bool enough = int(glMeasured_.size()) >= kMeasureFrames ||
-                                (!glMeasured_.empty() && seconds > kClearlySlower * cpuMeasured_);
+                                seconds > kClearlySlower * cpuMeasured_;
             if (!enough) return;
             std::vector<double> g = glMeasured_;
             std::sort(g.begin(), g.end());
