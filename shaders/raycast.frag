@@ -21,8 +21,8 @@
 #version 450 core
 layout(location = 0) out vec4 outFilm;  // linear radiance + T·background, alpha = 1 − T
 
-const int kMaxLights = 8;
-const int kMaxClipPlanes = 8;
+const int kMaxLights = 8;      // = viewer/gl_support.h kMaxGlLights
+const int kMaxClipPlanes = 8;  // = viewer/gl_support.h kMaxGlClipPlanes
 const float kOpacitySeriesTau = 0.01;  // dvr_march.h
 const float kPointSampleFraction = 0.01;  // TfTable::kPointSampleFraction
 

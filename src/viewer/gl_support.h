@@ -10,7 +10,8 @@
 
 namespace voxlight::viewer {
 
-/// Lights (after the headlight a scene without lights gets) and clip planes the shader holds.
+/// Lights (after the headlight a scene without lights gets) and clip planes the shader holds
+/// (its uniform arrays: kMaxLights, kMaxClipPlanes in shaders/raycast.frag).
 inline constexpr int kMaxGlLights = 8;
 inline constexpr int kMaxGlClipPlanes = 8;
 

@@ -494,8 +494,13 @@ void Viewer::updateRenderer() {
                                                         : GlRayCaster::Scope::Full;
             std::string why;
             core::Stopwatch sw;
-            const bool ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
-                                        render::displayFromString(prepared_->display), why, scope);
+            bool ok = false;
+            try {
+                ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
+                                 render::displayFromString(prepared_->display), why, scope);
+            } catch (const std::exception& e) {
+                why = e.what();
+            }
             glFinish();
             const double seconds = sw.seconds();
             if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);

@@ -399,6 +399,39 @@ TEST(ViewCli, ASceneTheGlslPathCannotDoFallsBackToTheCpuWithItsReason) {
     EXPECT_LE(r.agreement.worst, kScreenshotTolLevels + 1e-3f);
 }
 
+// A GL failure never ends the viewer: a volume longer than the GL's 3D textures (16384 voxels
+// along i, voxlight's own limit; GL_MAX_3D_TEXTURE_SIZE is 2048 on llvmpipe, 2048–16384 on GPUs)
+// makes the GLSL path give up with one line, and the CPU draws the image.
+TEST(ViewCli, AGlFailureFallsBackToTheCpuWithOneLine) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    constexpr int nx = 16384, ny = 4, nz = 4;
+    {
+        std::ofstream f(tmp / "long.nrrd", std::ios::binary);
+        f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: " << nx << " " << ny << " " << nz
+          << "\nencoding: raw\nspacing: 0.1 1 1\n\n";
+        for (int k = 0; k < nz; ++k)
+            for (int j = 0; j < ny; ++j)
+                for (int i = 0; i < nx; ++i)
+                    f.put(char(j >= 1 && j <= 2 && k >= 1 && k <= 2 ? 200 : 0));
+    }
+    std::ofstream(tmp / "scene.json") << R"({"volume": "long.nrrd",
+        "transfer_function": {"points": [{"value": 0, "extinction": 0},
+                                         {"value": 255, "color": [1, 0.8, 0.6], "extinction": 0.5}]},
+        "method": "gradient", "image": {"width": 160, "height": 128}})";
+    const GlRun r = runGlAgainstCpu(tmp, *display);
+    if (r.skipped) GTEST_SKIP() << r.why;
+    if (r.err.find("the GLSL path failed") == std::string::npos &&
+        r.err.find("renderer gpu (GLSL)") != std::string::npos)
+        GTEST_SKIP() << "this GL holds 16384-voxel 3D textures: nothing to fall back from";
+    EXPECT_NE(r.err.find("view: renderer cpu: the GLSL path failed, the CPU draws: the volume "
+                         "(16384x4x4) exceeds this GL's 3D textures"),
+              std::string::npos)
+        << r.err;
+    EXPECT_LE(r.agreement.worst, kScreenshotTolLevels + 1e-3f);
+}
+
 TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
     test::TempDir tmp;
     std::ofstream(tmp / "missing-volume.json") << R"({"volume": "nowhere.nii.gz"})";
