@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // voxlight view [SCENE.json | VOLUME] [--set key=value]... [--screenshot OUT.png --frames N] [--log]
-//               [--script STEPS.json] [--record SESSION.json]
+//               [--script STEPS.json] [--record SESSION.json] [--renderer auto|gpu|cpu]
 // The interactive viewer (viewer/viewer.h). The input given on the command line is loaded and
 // checked before the window opens, so a bad scene or a missing volume fails as every command does
 // (one line, exit 2). --screenshot renders N frames without interaction, waits for the
@@ -30,6 +30,7 @@ Command addViewCommand(CLI::App& app) {
     auto script = std::make_shared<std::string>();
     auto record = std::make_shared<std::string>();
     auto quiet = std::make_shared<bool>(false);
+    auto renderer = std::make_shared<std::string>("auto");
     c.sub->add_option("INPUT", *input,
                       "Scene JSON, or a volume file / DICOM folder to view with defaults");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
@@ -49,6 +50,11 @@ Command addViewCommand(CLI::App& app) {
     c.sub->add_option("--record", *record,
                       "Record the exploration as a session (JSON) for voxlight replay; written "
                       "when the viewer closes");
+    c.sub
+        ->add_option("--renderer", *renderer,
+                     "Which path draws the image: auto (measure both when a volume is loaded, "
+                     "keep the faster), gpu (the GLSL ray caster where it can), cpu")
+        ->check(CLI::IsMember({"auto", "gpu", "cpu"}));
     c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
     c.run = [=] {
@@ -73,6 +79,7 @@ Command addViewCommand(CLI::App& app) {
         options.screenshot = *screenshot;
         options.frames = *frames;
         options.log = *log;
+        options.renderer = viewer::rendererChoiceFromString(*renderer);
         options.script = std::move(steps);
         options.record = *record;
         options.quit = &cancelFlag();

@@ -215,6 +215,22 @@ TfTable::TfTable(const TransferFunction& tf) {
     }
 }
 
+TfTable::Nodes TfTable::nodes() const {
+    Nodes n;
+    n.lo = lo_;
+    n.hi = hi_;
+    n.cell = cell_;
+    n.sigma = sigma_;
+    n.weighted = weighted_;
+    n.cumSigma = cumSigma_;
+    n.cumWeighted = cumWeighted_;
+    for (const Node& node : nodes_) {
+        n.albedo.push_back(node.albedo);
+        n.emission.push_back(node.emission);
+    }
+    return n;
+}
+
 double TfTable::cumulativeSigma(double value, int& cell, double& x) const {
     const double u = (value - double(lo_)) * invCellD_;
     if (!(u > 0.0)) {  // below the range (or NaN): constant extension of the first node

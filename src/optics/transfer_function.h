@@ -292,6 +292,21 @@ class TfTable {
     };
     ExtinctionProfile extinctionProfile() const { return {lo_, hi_, sigma_}; }
 
+    /// The table's nodes as segment() and lookup() read them, for evaluators of the same model
+    /// outside this class (the viewer's GLSL ray caster): per node i at value lo() + i·cell,
+    /// the integrands σt, σt·a (RGB), σt·(1−a)·e (RGB) and their cumulative integrals from lo(),
+    /// and lookup()'s albedo and emission.
+    struct Nodes {
+        float lo = 0.f, hi = 1.f;
+        double cell = 1.0;  ///< value width of a cell
+        std::vector<float> sigma;
+        std::vector<std::array<float, 6>> weighted;
+        std::vector<double> cumSigma;
+        std::vector<std::array<double, 6>> cumWeighted;
+        std::vector<glm::vec3> albedo, emission;
+    };
+    Nodes nodes() const;
+
   private:
     /// Where a value falls in the table: its cell and the fraction across it (values outside the
     /// range, and NaN, clamp to the ends).

@@ -200,9 +200,46 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
     RunResult res;
     res.method = plan.method;
     res.params = plan.params;
-    std::vector<double> frameSeconds(std::size_t(options.frames), 0.0);
+    const std::vector<double> frameSeconds = runStages(plan, run, res, options, "");
+    if (!run.has(plan.imageStage))
+        throw InternalError("plan of '" + plan.method + "' has no image stage '" + plan.imageStage +
+                            "'");
+    res.image = *run.get<core::ImageRGBA>(plan.imageStage);
+    res.imageStage = plan.imageStage;
+    for (const auto& [name, image] : run.images_) res.images[name] = *image;
+    res.details = run.details();
+    for (const auto& w : run.warnings())  // a Frame stage may warn once per frame
+        if (std::find(res.warnings.begin(), res.warnings.end(), w) == res.warnings.end())
+            res.warnings.push_back(w);
+    if (!res.warnings.empty()) res.details["warnings"] = res.warnings;
+    if (res.details.contains("params_resolved")) {
+        for (auto it = res.details["params_resolved"].begin();
+             it != res.details["params_resolved"].end(); ++it)
+            res.params[it.key()] = it.value();
+        res.details.erase("params_resolved");
+    }
+    if (options.frames > 1) res.details["frame_seconds"] = frameSeconds;
+    return res;
+}
 
+std::optional<CasterSetup> Session::prepare(const io::Scene& scene, const core::Progress& progress,
+                                            std::vector<std::string>* warnings) {
+    const Plan plan = this->plan(scene);
+    if (!plan.casterSetup) return std::nullopt;
+    Run run(scene, cache_, progress);
+    RunResult res;
+    runStages(plan, run, res, {}, plan.imageStage);
+    if (warnings) *warnings = run.warnings();
+    CasterSetup setup = plan.casterSetup(run);
+    setup.method = plan.method;
+    return setup;
+}
+
+std::vector<double> Session::runStages(const Plan& plan, Run& run, RunResult& res,
+                                       const RunOptions& options, const std::string& stopBefore) {
+    std::vector<double> frameSeconds(std::size_t(options.frames), 0.0);
     for (const Stage& st : plan.stages) {
+        if (st.name == stopBefore) break;
         StageRecord r{st.name, st.kind, false, "", 0.0, "", st.inputs};
         if (!st.skip.empty()) {
             r.reason = st.skip;
@@ -275,25 +312,18 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
         run.artifacts_[st.name] = a;
         res.stages.push_back(r);
     }
-    if (!run.has(plan.imageStage))
-        throw InternalError("plan of '" + plan.method + "' has no image stage '" + plan.imageStage +
-                            "'");
-    res.image = *run.get<core::ImageRGBA>(plan.imageStage);
-    res.imageStage = plan.imageStage;
-    for (const auto& [name, image] : run.images_) res.images[name] = *image;
-    res.details = run.details();
-    for (const auto& w : run.warnings())  // a Frame stage may warn once per frame
-        if (std::find(res.warnings.begin(), res.warnings.end(), w) == res.warnings.end())
-            res.warnings.push_back(w);
-    if (!res.warnings.empty()) res.details["warnings"] = res.warnings;
-    if (res.details.contains("params_resolved")) {
-        for (auto it = res.details["params_resolved"].begin();
-             it != res.details["params_resolved"].end(); ++it)
-            res.params[it.key()] = it.value();
-        res.details.erase("params_resolved");
-    }
-    if (options.frames > 1) res.details["frame_seconds"] = frameSeconds;
-    return res;
+    return frameSeconds;
+}
+
+nlohmann::json cameraDetails(const render::Camera& cam) {
+    return {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
+            {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
+            {"up", {cam.up().x, cam.up().y, cam.up().z}},
+            {"right", {cam.right().x, cam.right().y, cam.right().z}},
+            {"projection",
+             cam.projection() == render::Projection::Perspective ? "perspective" : "orthographic"},
+            {"fov_y_deg", cam.fovY() * 180.0 / 3.14159265358979323846},
+            {"ortho_height_mm", cam.orthoHeight()}};
 }
 
 RunResult renderScene(const io::Scene& scene, const RunOptions& options) {

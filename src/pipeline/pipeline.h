@@ -37,6 +37,8 @@
 #include "core/progress.h"
 #include "io/scene.h"
 #include "pipeline/artifact_cache.h"
+#include "render/camera.h"
+#include "render/ray_caster.h"
 
 namespace voxlight::pipeline {
 
@@ -77,8 +79,26 @@ struct Stage {
     std::function<std::optional<std::uint64_t>(const Run&)> lineage;
 };
 
+/// What a ray-caster method's image stage reads, assembled without rendering: for evaluators of
+/// the same optical model outside the pipeline (the viewer's GLSL ray caster), so that they see
+/// the same volume, TF tables, options (lights resolved), and fitted camera as the CPU caster.
+struct CasterSetup {
+    std::string method;
+    std::shared_ptr<const core::Volume> volume;
+    std::shared_ptr<const optics::TransferFunction> tf;
+    render::CasterTables tables;
+    render::RenderOptions options;
+    std::shared_ptr<const render::Camera> camera;
+};
+
+/// The details' "camera" entry: eye, forward, up, right, projection, fov_y_deg, ortho_height_mm.
+nlohmann::json cameraDetails(const render::Camera& camera);
+
 struct Plan {
     std::string method;
+    /// Set by the methods whose image stage is the CPU ray caster's (not the path tracer's):
+    /// what that stage would read, from a run that has run every stage before it.
+    std::function<CasterSetup(const Run&)> casterSetup;
     nlohmann::json params = nlohmann::json::object();  ///< method params as used (defaults filled)
     std::vector<Stage> stages;
     std::string imageStage = "render";  ///< the Frame stage whose artifact is the image
@@ -209,8 +229,19 @@ class Session {
     std::vector<StageRecord> explain(const io::Scene& scene);
     RunResult run(const io::Scene& scene, const RunOptions& options = {},
                   const core::Progress& progress = core::Progress::none());
+    /// Runs every stage before the image stage (cached as run() caches them) and returns what
+    /// the image stage would read; nullopt when the method does not render with the CPU ray
+    /// caster (Plan::casterSetup unset), without running anything. `warnings` receives the
+    /// run's warnings when given.
+    std::optional<CasterSetup> prepare(const io::Scene& scene,
+                                       const core::Progress& progress = core::Progress::none(),
+                                       std::vector<std::string>* warnings = nullptr);
 
   private:
+    /// Runs the plan's stages in order up to (not including) `stopBefore` ("" = all of them);
+    /// returns the seconds of each frame (the Frame stages' sum per frame).
+    std::vector<double> runStages(const Plan& plan, Run& run, RunResult& res,
+                                  const RunOptions& options, const std::string& stopBefore);
     ArtifactCache cache_;
 };
 

@@ -1375,6 +1375,28 @@ core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
     return film;
 }
 
+/// What the image stage of a ray-caster method reads (Plan::casterSetup), from a run that has run
+/// every stage before it.
+CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options) {
+    CasterSetup c;
+    const auto loaded = run.get<LoadedVolume>("load_volume");
+    const auto tfa = run.get<TfArtifact>("transfer_function");
+    c.volume = std::shared_ptr<const core::Volume>(loaded, &loaded->volume);
+    c.tf = std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf);
+    c.tables.table = tfa->table;
+    c.tables.skipCells = run.get<grid::BrickMajorants>("skip_cells");
+    if (run.has("gradients")) {
+        const auto g = run.get<GradientArtifact>("gradients");
+        c.tables.voxelGradients = g->dense;
+        c.tables.brickedGradients = g->bricked;
+    }
+    c.options = options;
+    if (run.has("lights")) c.options.lights = *run.get<LightList>("lights");
+    if (run.has("light_sh")) c.options.irradianceSh = *run.get<std::vector<glm::vec3>>("light_sh");
+    c.camera = run.get<render::Camera>("camera");
+    return c;
+}
+
 Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     checkPresetName(scene);  // named before the volume is loaded: refuse an unknown one now
     render::RenderOptions options = parseOptions(kind, scene, reader);
@@ -1813,27 +1835,17 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         plan.stages.push_back(frame);
         return plan;
     }
+    plan.casterSetup = [options](const Run& run) { return casterSetupOf(run, options); };
     frame.compute = [options, kind, clipped, isoLattice](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
-        render::CasterTables tables;
-        tables.table = tfa->table;
-        tables.skipCells = run.get<grid::BrickMajorants>("skip_cells");
-        if (run.has("gradients")) {
-            const auto g = run.get<GradientArtifact>("gradients");
-            tables.voxelGradients = g->dense;
-            tables.brickedGradients = g->bricked;
-        }
-        render::RenderOptions o = options;
-        if (run.has("lights")) o.lights = *run.get<LightList>("lights");
-        if (run.has("light_sh")) o.irradianceSh = *run.get<std::vector<glm::vec3>>("light_sh");
-        const auto camera = run.get<render::Camera>("camera");
+        const CasterSetup setup = casterSetupOf(run, options);
+        const render::RenderOptions& o = setup.options;
+        const auto& camera = setup.camera;
         render::RenderStats stats;
         try {
-            const render::RayCaster caster(
-                std::shared_ptr<const core::Volume>(loaded, &loaded->volume),
-                std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf), o, tables);
+            const render::RayCaster caster(setup.volume, setup.tf, o, setup.tables);
             core::Stopwatch sw;
             std::shared_ptr<core::ImageRGBA> film;
             if (isSh(kind)) {
@@ -1891,15 +1903,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             if (loaded->nonFinite > 0)
                 d["nonfinite_voxels"] = loaded->nonFinite;  // rendered as the TF's lowest value
             const render::Camera& cam = *camera;
-            d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
-                           {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},
-                           {"up", {cam.up().x, cam.up().y, cam.up().z}},
-                           {"right", {cam.right().x, cam.right().y, cam.right().z}},
-                           {"projection", cam.projection() == render::Projection::Perspective
-                                              ? "perspective"
-                                              : "orthographic"},
-                           {"fov_y_deg", cam.fovY() * 180.0 / 3.14159265358979323846},
-                           {"ortho_height_mm", cam.orthoHeight()}};
+            d["camera"] = cameraDetails(cam);
             d["counters"] = {
                 {"rays", stats.rays},
                 {"samples", stats.samples},

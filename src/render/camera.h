@@ -81,6 +81,15 @@ class Camera {
         double x0 = 0.0, y0 = 0.0, w0 = 1.0;
     };
     ProjectiveMap projectiveMap() const;
+    /// generateAt()'s per-pixel constants, for evaluators outside this class (the viewer's GLSL
+    /// ray caster): sx = px·pixelScale.x − 1, sy = 1 − py·pixelScale.y; a perspective ray leaves
+    /// eye() along normalize(forward() + sx·rightStep + sy·upStep), an orthographic one leaves
+    /// eye() + sx·rightStep + sy·upStep along forward().
+    struct PixelMap {
+        glm::dvec2 pixelScale{1.0};
+        glm::dvec3 rightStep{0.0}, upStep{0.0};
+    };
+    PixelMap pixelMap() const { return {{pixelScaleX_, pixelScaleY_}, rightStep_, upStep_}; }
     int width() const { return width_; }
     int height() const { return height_; }
     const glm::dvec3& eye() const { return eye_; }

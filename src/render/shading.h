@@ -193,8 +193,9 @@ class BlinnPhongShader {
         return glm::max(e, glm::vec3(0.f));  // ringing of the truncation can dip below 0
     }
 
-  private:
-    /// A light as the per-sample loop reads it (a flat copy of a lights::Light).
+  public:
+    /// A light as the per-sample loop reads it (a flat copy of a lights::Light); public for
+    /// evaluators of the same shading outside this class (the viewer's GLSL ray caster).
     struct Emitter {
         bool directional = false;
         bool oneSided = false;         ///< rect/disk: emits toward emitterNormal only
@@ -204,7 +205,12 @@ class BlinnPhongShader {
         float minDistance = 1.f;       ///< point-like: clamps 1/d², mm
         glm::vec3 emitterNormal{0.f};  ///< oneSided: unit emission direction
     };
+    /// The lights but environment maps, flattened, in the order given.
+    const std::vector<Emitter>& emitters() const { return lights_; }
+    /// Whether an environment light adds its SH irradiance.
+    bool hasEnvironment() const { return hasEnvironment_; }
 
+  private:
     BlinnPhongParams params_;
     std::vector<Emitter> lights_;
     bool hasEnvironment_ = false;

@@ -111,6 +111,17 @@ void RenderWorker::loop() {
         pending_.reset();
         cancel_ = false;
         runningGeneration_ = request.generation;
+        if (request.prepareOnly) {
+            runningFull_ = true;
+            busy_ = true;
+            lock.unlock();
+            preparePass(request);
+            lock.lock();
+            busy_ = false;
+            runningFull_ = false;
+            if (stop_) return;
+            continue;
+        }
         const bool needCoarse = coarseDone_ != request.generation;
         // Coarse first, for a picture within a fraction of the full render's time.
         if (needCoarse) {
@@ -198,6 +209,8 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
         core::Stopwatch sw;
         pipeline::RunOptions runOptions;
         runOptions.staleFields = true;  // old shading at once after a TF change or a cut
+        runOptions.frames = coarse ? 1 : std::clamp(request.frames, 1, pipeline::kMaxFrames);
+        out.frames = runOptions.frames;
         pipeline::RunResult r = session_->run(scene, runOptions, progress);
         for (const auto& st : r.stages)
             if (st.stale) {
@@ -205,6 +218,8 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
                 if (staleFields) *staleFields += st.name + ":" + st.wantedKey + " ";
             }
         out.seconds = sw.seconds();
+        for (const pipeline::StageRecord& st : r.stages)
+            if (st.kind == pipeline::StageKind::Frame && st.ran) out.frameSeconds += st.seconds;
         const auto denoised = r.images.find("denoised");
         const core::ImageRGBA& film = denoised != r.images.end() ? denoised->second : r.image;
         out.width = film.width;
@@ -223,6 +238,38 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
     std::lock_guard lock(resultMutex_);
     result_ = std::move(out);
     return ok;
+}
+
+void RenderWorker::preparePass(const RenderRequest& request) {
+    RenderedImage out;
+    out.generation = request.generation;
+    out.method = request.scene.method.name;
+    out.prepared = true;
+    out.exposureStops = request.scene.image.exposureStops;
+    out.display = request.scene.image.display;
+    fraction_ = 0.0;
+    const core::Progress progress([this](const std::string&, double f) { fraction_ = f; },
+                                  &cancel_);
+    try {
+        core::Stopwatch sw;
+        std::optional<pipeline::CasterSetup> setup =
+            session_->prepare(request.scene, progress, &out.warnings);
+        out.seconds = sw.seconds();
+        if (setup) {
+            out.width = setup->camera->width();
+            out.height = setup->camera->height();
+            out.camera = pipeline::cameraDetails(*setup->camera);
+            out.setup = std::make_shared<const pipeline::CasterSetup>(std::move(*setup));
+        }
+    } catch (const CancelledError&) {
+        ++cancelled_;
+        return;
+    } catch (const std::exception& e) {
+        out.error = e.what();
+    }
+    ++completed_;
+    std::lock_guard lock(resultMutex_);
+    result_ = std::move(out);
 }
 
 }  // namespace voxlight::viewer

@@ -33,7 +33,8 @@
 
 namespace voxlight::pipeline {
 class Session;
-}
+struct CasterSetup;
+}  // namespace voxlight::pipeline
 
 namespace voxlight::viewer {
 
@@ -41,6 +42,12 @@ struct RenderRequest {
     io::Scene scene;               ///< the full-resolution scene
     std::uint64_t generation = 0;  ///< the state's number: equal numbers are equal scenes
     bool interacting = false;      ///< the user is dragging: coarse only
+    /// Only prepare what the image stage reads (pipeline::Session::prepare), no pixels: for the
+    /// GLSL ray caster, which renders on the UI thread. No coarse pass.
+    bool prepareOnly = false;
+    /// Full pass: run the Frame stages this many times (the start-up measurement; the image and
+    /// RenderedImage::frameSeconds are the median frame's).
+    int frames = 1;
 };
 
 /// A finished render, display-encoded as the CLI's PNG is (render::toDisplay with the scene's
@@ -51,7 +58,17 @@ struct RenderedImage {
     int width = 0, height = 0;
     std::vector<std::uint8_t> rgba;  ///< row 0 = top
     double seconds = 0.0;            ///< the pipeline run, wall clock
-    nlohmann::json camera;           ///< the camera as used (pipeline details "camera")
+    /// The Frame stages (camera, render) of one frame, median over the request's frames.
+    double frameSeconds = 0.0;
+    int frames = 1;  ///< the frames frameSeconds is the median of
+    /// prepareOnly: what the image stage would read; null when the scene's method does not render
+    /// with the CPU ray caster (then `method` names it).
+    std::shared_ptr<const pipeline::CasterSetup> setup;
+    bool prepared = false;       ///< a prepareOnly result (no pixels)
+    std::string method;          ///< prepareOnly: the scene's method
+    double exposureStops = 0.0;  ///< prepareOnly: the scene's display settings (io::ImageDesc)
+    std::string display;
+    nlohmann::json camera;  ///< the camera as used (pipeline details "camera")
     std::vector<std::string> warnings;
     std::string error;  ///< non-empty: the render failed (an InputError's message); no pixels
     /// Shaded from an earlier state's visibility fields (the new ones are being computed; the
@@ -101,6 +118,7 @@ class RenderWorker {
     void fieldLoop();
     /// False when cancelled; `stale`: some field stood in for this state's.
     bool renderPass(const RenderRequest& request, bool coarse, std::string* staleFields = nullptr);
+    void preparePass(const RenderRequest& request);
 
     WorkerOptions options_;
     mutable std::mutex mutex_;

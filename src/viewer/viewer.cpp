@@ -25,6 +25,7 @@
 #include "core/error.h"
 #include "core/timing.h"
 #include "session/session.h"
+#include "viewer/gl_ray_caster.h"
 #include "viewer/render_worker.h"
 #include "viewer/tf_editor.h"
 #include "viewer/view_state.h"
@@ -46,6 +47,13 @@ constexpr double kSlowFrameSeconds = 0.050;
 /// Clip-plane gizmo: a left click this close (window pixels) to a plane's handle grabs it; the
 /// normal's arrow length.
 constexpr float kHandleGrabPixels = 12.f, kArrowPixels = 36.f;
+/// Start-up measurement: timed frames of each path (the GL path's first frame, which uploads the
+/// volume and compiles the shader's machine code, is not counted).
+constexpr int kMeasureFrames = 3;
+/// The GL path's timing stops when its probe (the central quarter of the image, ×4) or a frame is
+/// already this many times the CPU's median: on a software rasteriser a GL frame can take
+/// seconds, and the UI waits for each.
+constexpr double kClearlySlower = 3.0;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -139,6 +147,18 @@ class Viewer {
   public:
     Viewer(const ViewerOptions& options, GLFWwindow* window) : options_(options), window_(window) {
         if (!options_.record.empty()) recordPath_ = options_.record;
+        choice_ = options_.renderer;
+        if (choice_ != RendererChoice::Cpu) {
+            // GL errors never end the viewer: without a working GLSL path the CPU image is shown.
+            gl_ = std::make_unique<GlRayCaster>();
+            std::string why;
+            if (!gl_->init(why)) {
+                glError_ = why;
+                gl_.reset();
+                if (options_.log || choice_ == RendererChoice::Gpu)
+                    std::fprintf(stderr, "view: GLSL ray caster off: %s\n", why.c_str());
+            }
+        }
     }
     ~Viewer() {
         *loadCancel_ = true;  // closing: the futures' destructors wait for the cancelled loads
@@ -212,6 +232,13 @@ class Viewer {
     std::string saveRecording(const std::string& path);
     void submit(bool interacting);
     void receive();
+    // The renderer: the start-up measurement and the choice (see ViewerOptions::renderer).
+    void restartMeasurement();
+    void updateRenderer();
+    void choose(bool gpu, const std::string& reason);
+    /// Renders the prepared state with the GLSL ray caster and shows it; false (and back to the
+    /// CPU path, with the reason) when the GL fails.
+    bool renderGl(const RenderedImage& prepared);
     void startLoad(const std::string& path);
     void pollLoad();
     void handleImageMouse();
@@ -292,6 +319,22 @@ class Viewer {
     bool ptReady_ = false, ptShow_ = true;
     std::string ptMessage_;
 
+    // The GLSL path and the choice of renderer.
+    RendererChoice choice_ = RendererChoice::Auto;
+    std::unique_ptr<GlRayCaster> gl_;  ///< null: no working GLSL path (glError_ says why)
+    std::string glError_;
+    enum class Measure { Waiting, Prepare, CpuFrames, GlFrames, Done } measure_ = Measure::Waiting;
+    bool gpu_ = false;      ///< the GLSL path draws the image
+    bool shownGl_ = false;  ///< the image shown is the GLSL path's
+    std::string rendererReason_ = "measuring both paths ...";
+    std::optional<RenderedImage> prepared_;  ///< newest prepared state (GLSL path)
+    std::vector<double> glMeasured_;         ///< timed GL frames of the measurement
+    int glFramesRun_ = 0;
+    std::uint64_t measureGen_ = 0;  ///< the state being measured
+    int cpuFrames_ = 0;             ///< frames behind cpuMeasured_
+    double cpuMeasured_ = 0.0;      ///< the CPU's median frame of the measurement
+    Timings glTimes_;
+
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
     Timings frameWork_, frameInterval_, coarseTimes_, fullTimes_;
@@ -312,6 +355,7 @@ void Viewer::adopt(LoadedScene scene) {
     lookAt_.reset();
     cameraResetGen_ = generation_ + 1;
     path_ = loaded_->scene.source;
+    restartMeasurement();
     if (!options_.record.empty() || recorder_) {
         // A newly opened volume starts a new session (a session holds one scene).
         recorder_.emplace(loaded_->scene, "recorded by voxlight view");
@@ -343,7 +387,9 @@ void Viewer::submit(bool interacting) {
     try {
         io::Scene scene = sceneFromDocument(doc, loaded_->scene.source);
         if (!interacting) recordState(scene);
-        worker_.submit({std::move(scene), generation_, interacting});
+        RenderRequest request{std::move(scene), generation_, interacting};
+        request.prepareOnly = gpu_;  // the GLSL path renders on this thread
+        worker_.submit(std::move(request));
         renderError_.clear();
     } catch (const std::exception& e) {
         renderError_ = e.what();
@@ -357,6 +403,19 @@ void Viewer::receive() {
         renderError_ = r->error;
         return;
     }
+    if (r->prepared) {
+        // For the GLSL path (or its measurement): render it here when it draws the image.
+        prepared_ = std::move(*r);
+        if (gpu_ && prepared_->generation >= shownGen_) renderGl(*prepared_);
+        return;
+    }
+    if (measure_ == Measure::CpuFrames && !r->coarse && r->frameSeconds > 0.0 &&
+        r->generation == measureGen_) {
+        cpuMeasured_ = r->frameSeconds;
+        cpuFrames_ = r->frames;
+        measure_ = Measure::GlFrames;
+    }
+    if (gpu_) return;  // a CPU image of a state asked before the switch
     (r->coarse ? coarseTimes_ : fullTimes_).add(r->seconds);
     if (options_.log)
         std::fprintf(stderr, "view: render %s %dx%d in %.3f s (state %llu)%s\n",
@@ -379,9 +438,181 @@ void Viewer::receive() {
     texW_ = r->width, texH_ = r->height;
     shownFull_ = !r->coarse;
     shownStale_ = r->staleShading;
+    shownGl_ = false;
     shownGen_ = r->generation;
     renderWarnings_ = r->warnings;
     if (!r->camera.is_null()) renderedCamera_ = r->camera, renderedCameraGen_ = r->generation;
+}
+
+void Viewer::restartMeasurement() {
+    measure_ = Measure::Waiting;
+    glMeasured_.clear();
+    glFramesRun_ = 0;
+    cpuMeasured_ = 0.0;
+    gpu_ = false;
+    rendererReason_ = "measuring both paths ...";
+}
+
+void Viewer::choose(bool gpu, const std::string& reason) {
+    measure_ = Measure::Done;
+    rendererReason_ = reason;
+    // Said with --log, and always when the GLSL path was asked for and is not used.
+    if (options_.log || (choice_ == RendererChoice::Gpu && !gpu))
+        std::fprintf(stderr, "view: renderer %s: %s\n", gpu ? "gpu (GLSL)" : "cpu", reason.c_str());
+    if (gpu == gpu_) return;
+    gpu_ = gpu;
+    // The new path renders the current state (the GLSL path from a prepared state).
+    if (gpu_ && prepared_ && prepared_->generation == generation_ && prepared_->setup)
+        renderGl(*prepared_);
+    else
+        changed();
+}
+
+bool Viewer::renderGl(const RenderedImage& p) {
+    std::string why;
+    if (!gl_) {
+        why = glError_;
+    } else if (!p.setup) {
+        why = glUnsupportedReason(p.method, nullptr);
+    } else {
+        try {
+            core::Stopwatch sw;
+            const bool ok = gl_->render(*p.setup, float(p.exposureStops),
+                                        render::displayFromString(p.display), why);
+            glFinish();  // the frame's real cost (the GL queues its work)
+            if (ok) {
+                glTimes_.add(sw.seconds());
+                if (options_.log)
+                    std::fprintf(stderr, "view: GLSL frame %dx%d in %.3f s (state %llu)\n",
+                                 gl_->width(), gl_->height(), glTimes_.last(),
+                                 (unsigned long long)p.generation);
+                texW_ = gl_->width(), texH_ = gl_->height();
+                shownFull_ = true;
+                shownGl_ = true;
+                shownStale_ = false;
+                shownGen_ = p.generation;
+                renderWarnings_ = p.warnings;
+                if (!p.camera.is_null())
+                    renderedCamera_ = p.camera, renderedCameraGen_ = p.generation;
+                return true;
+            }
+        } catch (const std::exception& e) {
+            why = e.what();
+        }
+    }
+    choose(false, "the GLSL path failed, the CPU draws: " + why);
+    return false;
+}
+
+void Viewer::updateRenderer() {
+    if (!loaded_ || measure_ == Measure::Done) return;
+    const int w = imageW_, h = imageH_;
+    // A new state while measuring (its requests replace the measurement's): start again once
+    // its full image is shown.
+    if (measure_ != Measure::Waiting && generation_ != measureGen_) {
+        measure_ = Measure::Waiting;
+        glMeasured_.clear();
+        glFramesRun_ = 0;
+        return;
+    }
+    switch (measure_) {
+        case Measure::Waiting:
+            // After the first full CPU image of the state (the volume and tables are loaded).
+            if (!shownFull_ || shownGen_ != generation_ || dirty_) return;
+            if (choice_ == RendererChoice::Cpu) return choose(false, "--renderer cpu");
+            if (!gl_) return choose(false, "no GLSL path: " + glError_);
+            prepared_.reset();
+            measureGen_ = generation_;
+            {
+                json doc = doc_;
+                doc["image"]["width"] = w;
+                doc["image"]["height"] = h;
+                RenderRequest request{sceneFromDocument(doc, loaded_->scene.source), generation_,
+                                      false};
+                request.prepareOnly = true;
+                worker_.submit(std::move(request));
+            }
+            measure_ = Measure::Prepare;
+            return;
+        case Measure::Prepare: {
+            if (!prepared_) return;
+            const std::string no = glUnsupportedReason(prepared_->method, prepared_->setup.get());
+            if (!no.empty()) return choose(false, "the scene needs the CPU path: " + no);
+            if (choice_ == RendererChoice::Gpu) return choose(true, "--renderer gpu");
+            // The CPU's frame: the same state rendered kMeasureFrames times, median.
+            json doc = doc_;
+            doc["image"]["width"] = w;
+            doc["image"]["height"] = h;
+            RenderRequest request{sceneFromDocument(doc, loaded_->scene.source), generation_,
+                                  false};
+            request.frames = kMeasureFrames;
+            worker_.submit(std::move(request));
+            measure_ = Measure::CpuFrames;
+            return;
+        }
+        case Measure::CpuFrames:
+            return;  // receive() moves on when the timed frames arrive
+        case Measure::GlFrames: {
+            // One GL frame per UI frame (the UI keeps its events between them).
+            // First a warm-up on a corner (uploads, the shader's machine code), untimed; then the
+            // central quarter of the image as a probe: on a software rasteriser a full GL frame
+            // takes seconds and the UI waits for it, so a probe that is already clearly slower
+            // than the CPU's frame ends the measurement; else full frames, median.
+            const int run = glFramesRun_++;
+            const GlRayCaster::Scope scope = run == 0   ? GlRayCaster::Scope::WarmUp
+                                             : run == 1 ? GlRayCaster::Scope::CentreQuarter
+                                                        : GlRayCaster::Scope::Full;
+            std::string why;
+            core::Stopwatch sw;
+            bool ok = false;
+            try {
+                ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
+                                 render::displayFromString(prepared_->display), why, scope);
+            } catch (const std::exception& e) {
+                why = e.what();
+            }
+            glFinish();
+            const double seconds = sw.seconds();
+            if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
+            if (options_.log)
+                std::fprintf(stderr, "view: measuring: GLSL %s %.3f s\n",
+                             run == 0   ? "warm-up (uploads, shader compile; 8x8 pixels)"
+                             : run == 1 ? "central quarter of the image"
+                                        : "frame",
+                             seconds);
+            if (run == 0) return;
+            if (run == 1) {
+                if (4.0 * seconds > kClearlySlower * cpuMeasured_) {
+                    char reason[320];
+                    std::snprintf(reason, sizeof reason,
+                                  "measured at %dx%d: GLSL %.3f s for the central quarter of the "
+                                  "image (%s; a full frame about %.1f s), CPU ray caster %.3f s "
+                                  "per frame (median of %d) -> the CPU path is faster",
+                                  w, h, seconds, gl_->glRenderer().c_str(), 4.0 * seconds,
+                                  cpuMeasured_, cpuFrames_);
+                    return choose(false, reason);
+                }
+                return;
+            }
+            glMeasured_.push_back(seconds);
+            const bool enough = int(glMeasured_.size()) >= kMeasureFrames ||
+                                seconds > kClearlySlower * cpuMeasured_;
+            if (!enough) return;
+            std::vector<double> g = glMeasured_;
+            std::sort(g.begin(), g.end());
+            const double gl = g[g.size() / 2];
+            const bool gpu = gl < cpuMeasured_;
+            char reason[320];
+            std::snprintf(reason, sizeof reason,
+                          "measured at %dx%d: GLSL %.3f s per frame (median of %zu, %s), CPU "
+                          "ray caster %.3f s (median of %d) -> the %s is faster",
+                          w, h, gl, g.size(), gl_->glRenderer().c_str(), cpuMeasured_, cpuFrames_,
+                          gpu ? "GLSL path" : "CPU path");
+            return choose(gpu, reason);
+        }
+        case Measure::Done:
+            return;
+    }
 }
 
 void Viewer::startLoad(const std::string& path) {
@@ -527,8 +758,9 @@ void Viewer::runScript() {
         scriptDragMoved_ = true;
         return;
     }
+    // Steps run on the renderer the viewer chose (after the start-up measurement).
     if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ || shownStale_ ||
-        shownGen_ != generation_ || loading_.valid())
+        shownGen_ != generation_ || loading_.valid() || measure_ != Measure::Done)
         return;
     const ScriptStep& st = options_.script[scriptNext_++];
     switch (st.kind) {
@@ -822,7 +1054,7 @@ void Viewer::handleKeys() {
 
 void Viewer::drawImage() {
     ImDrawList* bg = ImGui::GetBackgroundDrawList();
-    if (!texture_ || texW_ < 1 || texH_ < 1) {
+    if ((!texture_ && !shownGl_) || texW_ < 1 || texH_ < 1) {
         bg->AddText(ImVec2(20, 20), IM_COL32(200, 200, 200, 255),
                     loaded_ ? "rendering ..."
                             : "open a scene, volume or DICOM folder (panel, or drop it here)");
@@ -835,7 +1067,8 @@ void Viewer::drawImage() {
     const float x0 = std::floor((float(imageW_) - w) / 2),
                 y0 = std::floor((float(imageH_) - h) / 2);
     const bool pt = pathTraceShown() && ptW_ == texW_ && ptH_ == texH_;
-    bg->AddImage((ImTextureID)(intptr_t)(pt ? ptTexture_ : texture_), ImVec2(x0, y0),
+    const GLuint live = shownGl_ && gl_ ? GLuint(gl_->texture()) : texture_;
+    bg->AddImage((ImTextureID)(intptr_t)(pt ? ptTexture_ : live), ImVec2(x0, y0),
                  ImVec2(x0 + w, y0 + h));
     drawX0_ = x0, drawY0_ = y0, drawW_ = w, drawH_ = h;
     drawGizmo(bg);
@@ -1196,6 +1429,27 @@ void Viewer::drawPanel() {
         ImGui::EndDisabled();
         if (!recordMessage_.empty()) ImGui::TextWrapped("%s", recordMessage_.c_str());
     }
+    if (ImGui::CollapsingHeader("Renderer", ImGuiTreeNodeFlags_DefaultOpen)) {
+        ImGui::Text("active: %s", measure_ != Measure::Done ? "CPU ray caster (measuring)"
+                                  : gpu_                    ? "GLSL ray caster (GPU)"
+                                                            : "CPU ray caster");
+        ImGui::TextWrapped("why: %s", rendererReason_.c_str());
+        if (gl_) ImGui::TextDisabled("GL: %s", gl_->glRenderer().c_str());
+        int c = int(choice_);
+        const char* names[] = {"auto", "gpu", "cpu"};
+        ImGui::SetNextItemWidth(120.f);
+        if (ImGui::Combo("renderer", &c, names, 3) && c != int(choice_)) {
+            choice_ = RendererChoice(c);
+            if (choice_ != RendererChoice::Cpu && !gl_ && glError_.empty()) {
+                gl_ = std::make_unique<GlRayCaster>();
+                if (!gl_->init(glError_)) gl_.reset();
+            }
+            restartMeasurement();
+            changed();
+        }
+        if (glTimes_.count > 0)
+            ImGui::Text("GLSL frame    %.3f s (%zu)", glTimes_.last(), std::size_t(glTimes_.count));
+    }
     if (ImGui::CollapsingHeader("Stats", ImGuiTreeNodeFlags_DefaultOpen)) {
         const RenderWorker::Status st = worker_.status();
         ImGui::Text("UI frame work  %.1f ms (mean %.1f, max %.1f)", frameWork_.last() * 1e3,
@@ -1284,6 +1538,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
         scriptDragMoved_ = false;
         handleKeys();
         handleImageMouse();
+        updateRenderer();
         runScript();
         const double tInput = work.seconds();
         drawImage();
@@ -1311,8 +1566,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ++frames_;
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
             scriptNext_ >= options_.script.size() && scriptDragFrames_ == 0 &&
-            (ptGen_ != generation_ || ptReady_) && shownFull_ && !shownStale_ &&
-            shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ && texH_ == imageH_)
+            (ptGen_ != generation_ || ptReady_) && measure_ == Measure::Done && shownFull_ &&
+            !shownStale_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
+            texH_ == imageH_)
             shot = readWindow();
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.

@@ -23,6 +23,7 @@
 
 #include "core/image.h"
 #include "io/scene.h"
+#include "viewer/gl_support.h"
 #include "viewer/loaded_scene.h"
 #include "viewer/view_state.h"
 
@@ -52,6 +53,12 @@ struct ViewerOptions {
     /// key, a panel edit), timed from the first — and write it here when the viewer closes (or,
     /// scripted, before it returns). The panel's Session section saves it on demand too.
     std::string record;
+    /// Which path draws the image: Auto measures both when a volume is loaded (a few frames of
+    /// the GLSL ray caster, timed with glFinish, against the CPU worker's median frame) and keeps
+    /// the faster; Gpu / Cpu force one. A scene the GLSL path cannot do (gl_support.h), a context
+    /// without OpenGL 4.5 or a shader that does not compile fall back to the CPU path, and the
+    /// stats panel (and --log) says why. Scripted screenshots wait for the choice.
+    RendererChoice renderer = RendererChoice::Auto;
     /// Raised (e.g. by SIGINT): close the window and return.
     const std::atomic<bool>* quit = nullptr;
 };

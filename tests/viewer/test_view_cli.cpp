@@ -1,10 +1,13 @@
 // SPDX-License-Identifier: MIT
 // `voxlight view` end to end: the scripted screenshot's image area equals `voxlight render`'s image
-// of the same scene (one renderer, shown pixel for pixel), and bad input fails before any window.
+// of the same scene (one renderer, shown pixel for pixel), the GLSL ray caster's image agrees with
+// the CPU ray caster's within named tolerances, a scene the GLSL path cannot do falls back to the
+// CPU with its reason, and bad input fails before any window.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
 #include <array>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <fstream>
@@ -79,13 +82,14 @@ Result runViewUnder(const std::string& display, const std::string& args, const t
 }
 
 /// `voxlight view` of dir/scene.json running dir/steps.json, recording dir/rec.json, screenshot
-/// dir/shot.png, under `display` (displayPrefix()); `extra` options before the scene.
+/// dir/shot.png, under `display` (displayPrefix()), on the CPU path; `extra` options before the
+/// scene.
 Result runScriptedView(const std::string& display, const test::TempDir& dir,
                        const std::string& extra = "") {
     return runViewUnder(display,
-                        "view -q " + extra + quoted(dir / "scene.json") + " --script " +
-                            quoted(dir / "steps.json") + " --record " + quoted(dir / "rec.json") +
-                            " --screenshot " + quoted(dir / "shot.png"),
+                        "view -q --renderer cpu " + extra + quoted(dir / "scene.json") +
+                            " --script " + quoted(dir / "steps.json") + " --record " +
+                            quoted(dir / "rec.json") + " --screenshot " + quoted(dir / "shot.png"),
                         dir);
 }
 }  // namespace
@@ -106,10 +110,10 @@ TEST(ViewCli, ScreenshotImageAreaEqualsTheCpuRender) {
                                     quoted(tmp / "scene.json") + " -o " + quoted(tmp / "cpu.png"),
                                 tmp.path());
     ASSERT_EQ(cpu.code, 0) << cpu.err;
-    const Result view =
-        runShell(prefix + VOXLIGHT_BINARY + " view -q " + quoted(tmp / "scene.json") +
-                     " --screenshot " + quoted(tmp / "shot.png") + " --frames 5",
-                 tmp.path());
+    const Result view = runShell(prefix + VOXLIGHT_BINARY + " view -q --renderer cpu " +
+                                     quoted(tmp / "scene.json") + " --screenshot " +
+                                     quoted(tmp / "shot.png") + " --frames 5",
+                                 tmp.path());
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
     ASSERT_EQ(view.code, 0) << view.err;
@@ -380,6 +384,224 @@ TEST(ViewCli, PathTracingThisViewShowsThePathTracersImageOfIt) {
                 }
     EXPECT_LE(worstPt, kScreenshotTolLevels + 1e-3f);
     EXPECT_GT(worstLive, 20.f) << "the live gradient image is shown, not the path tracer's";
+}
+
+namespace {
+/// How the screenshot's image area differs from a CPU render (8-bit levels, RGB, the orientation
+/// letters left out).
+struct Agreement {
+    double meanAbs = 0.0;        ///< mean |difference| over channels
+    double fractionOver2 = 0.0;  ///< channels off by more than 2 levels
+    double psnr = 0.0;           ///< dB, peak 255
+    float worst = 0.f;
+};
+Agreement compareImageArea(const io::ImageRGBA& cpu, const io::ImageRGBA& shot) {
+    Agreement a;
+    double sum = 0.0, sq = 0.0;
+    std::size_t n = 0, over = 0;
+    for (int y = 0; y < cpu.height; ++y)
+        for (int x = 0; x < cpu.width; ++x) {
+            if (inLabel(x, y, cpu.width, cpu.height)) continue;
+            for (int c = 0; c < 3; ++c) {
+                const double d = std::abs(double(cpu.at(x, y)[c]) - shot.at(x, y)[c]) * 255.0;
+                sum += d;
+                sq += d * d;
+                over += d > 2.0 + 1e-3;
+                a.worst = std::max(a.worst, float(d));
+                ++n;
+            }
+        }
+    a.meanAbs = sum / double(n);
+    a.fractionOver2 = double(over) / double(n);
+    a.psnr = sq > 0.0 ? 10.0 * std::log10(255.0 * 255.0 / (sq / double(n))) : INFINITY;
+    return a;
+}
+
+// Tolerances of the GLSL image against the CPU ray caster's (same scene, same 8-bit mapping).
+// They are not bit-identical: the texture unit interpolates (the trilinear values and the six
+// gradient taps) where the CPU interpolates in float with FMA and reads a precomputed int16
+// central-difference table (equal up to rounding), the ray set-up runs in float (the CPU's in
+// double), the pre-integration table's cumulative integrals are float pairs (the CPU's double),
+// and the specular power is pow() (the CPU interpolates a table). That moves a sample by far
+// less than a display level except where a ray grazes a steep TF edge. Measured under Mesa
+// llvmpipe 22.3 (xvfb; it filters in float): these two scenes mean 0.0002 levels, no channel
+// over 2 levels, worst 1, PSNR 84–85 dB; the 256³ torso at 512²: mean 0.0008, 0.0004 % over 2
+// levels (one pixel, worst 24), PSNR 74 dB. A hardware GPU filters with fixed-point weights
+// (8 bits of fraction on common ones; not measurable on this GPU-less machine): the limits
+// leave ×60 headroom on the mean for that and still catch a real mismatch: the GL path without
+// its per-pixel jitter gave mean 1.94 and 0.15 levels, 14.7 % and 0.77 % of channels over 2
+// levels on these two scenes (PSNR 31 and 53 dB: PSNR alone misses the second). The issue's own
+// floor is PSNR ≥ 35 dB.
+constexpr double kGlMeanAbsLevels = 0.05;
+constexpr double kGlFractionOver2 = 0.001;
+constexpr double kGlMinPsnrDb = 35.0;
+
+/// `voxlight view --renderer gpu` of dir/scene.json against `voxlight render` of it.
+struct GlRun {
+    bool skipped = false;
+    std::string why;
+    Agreement agreement;
+    std::string err;
+};
+GlRun runGlAgainstCpu(const test::TempDir& tmp, const std::string& display) {
+    GlRun out;
+    const Result cpu = runShell(std::string(VOXLIGHT_BINARY) + " render -q " +
+                                    quoted(tmp / "scene.json") + " -o " + quoted(tmp / "cpu.png"),
+                                tmp.path());
+    EXPECT_EQ(cpu.code, 0) << cpu.err;
+    // The clip-plane gizmo is drawn over the image: hidden, as G does, for the comparison.
+    std::ofstream(tmp / "steps.json") << R"([{"gizmo": false}])";
+    const Result view = runShell(
+        display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
+            " --script " + quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / "shot.png"),
+        tmp.path());
+    out.err = view.err;
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos) {
+        out.skipped = true;
+        out.why = "no OpenGL 4.5 window on this machine: " + view.err;
+        return out;
+    }
+    EXPECT_EQ(view.code, 0) << view.err;
+    if (view.code != 0 || cpu.code != 0) return out;
+    const io::ImageRGBA a = io::readImage(tmp / "cpu.png");
+    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
+    EXPECT_EQ(s.width, a.width + kPanelWidth);
+    EXPECT_EQ(s.height, a.height);
+    out.agreement = compareImageArea(a, s);
+    return out;
+}
+}  // namespace
+
+// Item 3 of the issue: the GLSL ray caster's image of a phantom scene (gradient shading with a
+// directional and a point light, a clip plane; then emission–absorption in a crop box) equals the
+// CPU ray caster's within the named tolerances.
+TEST(ViewCli, GlslImageAgreesWithTheCpuRayCaster) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    const char* scenes[] = {
+        R"({"volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-bone",
+            "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+            "lights": [{"type": "directional", "direction": [0.3, 1, -0.4], "intensity": 0.8},
+                       {"type": "point", "position": [-150, -250, 150], "intensity": 40000}],
+            "clip_planes": [{"point": [0, 20, 0], "normal": [0, 1, 0]}],
+            "image": {"width": 240, "height": 200}})",
+        R"({"volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-soft-tissue",
+            "method": "emission-absorption", "camera": {"azimuth": -40, "elevation": 25},
+            "crop_box": {"min": [-140, -90, -20], "max": [140, 90, 170]},
+            "image": {"width": 240, "height": 200, "display": "srgb"}})"};
+    for (const char* scene : scenes) {
+        test::TempDir tmp;
+        std::ofstream(tmp / "scene.json") << scene;
+        const GlRun r = runGlAgainstCpu(tmp, *display);
+        if (r.skipped) GTEST_SKIP() << r.why;
+        // The GLSL path drew it (not a fallback to the CPU image).
+        EXPECT_NE(r.err.find("renderer gpu (GLSL): --renderer gpu"), std::string::npos) << r.err;
+        const Agreement& a = r.agreement;
+        std::printf(
+            "GLSL vs CPU: mean %.4f levels, %.4f %% over 2 levels, worst %.0f, PSNR %.1f dB\n",
+            a.meanAbs, 100.0 * a.fractionOver2, a.worst, a.psnr);
+        EXPECT_LE(a.meanAbs, kGlMeanAbsLevels) << scene;
+        EXPECT_LE(a.fractionOver2, kGlFractionOver2) << scene;
+        EXPECT_GE(a.psnr, kGlMinPsnrDb) << scene;
+    }
+}
+
+// On the GLSL path the gestures work as on the CPU path (the camera continues from the prepared
+// state's): a scripted orbit, window/level drag and zoom, recorded and replayed on the CPU — the
+// replay's last frame agrees with the screenshot within the GLSL tolerances.
+TEST(ViewCli, AScriptedExplorationOnTheGlslPathReplaysToTheScreenshot) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json")
+        << R"([{"orbit": [60, 10]}, {"window": [40, -30]}, {"zoom": 2}])";
+    const Result view = runShell(
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
+            " --script " + quoted(tmp / "steps.json") + " --record " + quoted(tmp / "rec.json") +
+            " --screenshot " + quoted(tmp / "shot.png"),
+        tmp.path());
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    // One GLSL frame per state: the first and one per step.
+    std::size_t glFrames = 0;
+    for (std::size_t at = view.err.find("view: GLSL frame 160x128"); at != std::string::npos;
+         at = view.err.find("view: GLSL frame 160x128", at + 1))
+        ++glFrames;
+    EXPECT_GE(glFrames, 4u) << view.err;
+    const Result replay =
+        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
+                     " --out " + quoted(tmp / "frames"),
+                 tmp.path());
+    ASSERT_EQ(replay.code, 0) << replay.err;
+    ASSERT_TRUE(fs::exists(tmp / "frames" / "frame_00003.png"));
+    ASSERT_FALSE(fs::exists(tmp / "frames" / "frame_00004.png"));
+    const io::ImageRGBA last = io::readImage(tmp / "frames" / "frame_00003.png");
+    const io::ImageRGBA first = io::readImage(tmp / "frames" / "frame_00000.png");
+    const Agreement a = compareImageArea(last, io::readImage(tmp / "shot.png"));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+    EXPECT_NE(first.pixels, last.pixels) << "the steps changed nothing";
+}
+
+// A scene the GLSL path cannot do (here: nine lights, one more than the shader holds) is drawn by
+// the CPU ray caster even with --renderer gpu, and the viewer says why on stderr (and in the
+// Renderer panel); the image is the CPU's.
+TEST(ViewCli, ASceneTheGlslPathCannotDoFallsBackToTheCpuWithItsReason) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::string lights;
+    for (int i = 0; i < 9; ++i)
+        lights += std::string(i ? ", " : "") + R"({"type": "directional", "direction": [)" +
+                  std::to_string(0.1 * i) + R"(, 1, -0.3], "intensity": 0.12})";
+    std::ofstream(tmp / "scene.json")
+        << R"({"volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+               "method": "gradient", "lights": [)"
+        << lights << R"(], "image": {"width": 160, "height": 128}})";
+    const GlRun r = runGlAgainstCpu(tmp, *display);
+    if (r.skipped) GTEST_SKIP() << r.why;
+    EXPECT_NE(r.err.find("view: renderer cpu: the scene needs the CPU path: 9 lights"),
+              std::string::npos)
+        << r.err;
+    EXPECT_LE(r.agreement.worst, kScreenshotTolLevels + 1e-3f);
+}
+
+// A GL failure never ends the viewer: a volume longer than the GL's 3D textures (16384 voxels
+// along i, voxlight's own limit; GL_MAX_3D_TEXTURE_SIZE is 2048 on llvmpipe, 2048–16384 on GPUs)
+// makes the GLSL path give up with one line, and the CPU draws the image.
+TEST(ViewCli, AGlFailureFallsBackToTheCpuWithOneLine) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    constexpr int nx = 16384, ny = 4, nz = 4;
+    {
+        std::ofstream f(tmp / "long.nrrd", std::ios::binary);
+        f << "NRRD0004\ntype: uint8\ndimension: 3\nsizes: " << nx << " " << ny << " " << nz
+          << "\nencoding: raw\nspacing: 0.1 1 1\n\n";
+        for (int k = 0; k < nz; ++k)
+            for (int j = 0; j < ny; ++j)
+                for (int i = 0; i < nx; ++i)
+                    f.put(char(j >= 1 && j <= 2 && k >= 1 && k <= 2 ? 200 : 0));
+    }
+    std::ofstream(tmp / "scene.json") << R"({"volume": "long.nrrd",
+        "transfer_function": {"points": [{"value": 0, "extinction": 0},
+                                         {"value": 255, "color": [1, 0.8, 0.6], "extinction": 0.5}]},
+        "method": "gradient", "image": {"width": 160, "height": 128}})";
+    const GlRun r = runGlAgainstCpu(tmp, *display);
+    if (r.skipped) GTEST_SKIP() << r.why;
+    if (r.err.find("the GLSL path failed") == std::string::npos &&
+        r.err.find("renderer gpu (GLSL)") != std::string::npos)
+        GTEST_SKIP() << "this GL holds 16384-voxel 3D textures: nothing to fall back from";
+    EXPECT_NE(r.err.find("view: renderer cpu: the GLSL path failed, the CPU draws: the volume "
+                         "(16384x4x4) exceeds this GL's 3D textures"),
+              std::string::npos)
+        << r.err;
+    EXPECT_LE(r.agreement.worst, kScreenshotTolLevels + 1e-3f);
 }
 
 TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {

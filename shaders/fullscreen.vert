@@ -1,0 +1,7 @@
+// SPDX-License-Identifier: MIT
+// One triangle that covers the viewport (no vertex buffer: the positions come from gl_VertexID).
+#version 450 core
+void main() {
+    const vec2 p = vec2(float((gl_VertexID & 1) << 2) - 1.0, float((gl_VertexID & 2) << 1) - 1.0);
+    gl_Position = vec4(p, 0.0, 1.0);
+}

@@ -1,0 +1,84 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The viewer's GLSL ray caster: shaders/raycast.frag (embedded at build time) evaluates the CPU
+// ray caster's emission–absorption and gradient (Blinn–Phong) modes from the same inputs —
+// pipeline::CasterSetup: the volume as a 3D texture (R16 for integer voxels, R32F for float),
+// the TF's pre-integration table as a 2D texture of its nodes and cumulative integrals, the skip
+// cells' skip distances as a 3D texture (empty-space skipping), the same step, opacity, lights,
+// clip planes, crop box, early termination and per-pixel jitter, and the pipeline's fitted camera — into a float film, then shaders/display.frag maps it to 8 bits as
+// the CLI's PNG is mapped (exposure, display transform). The image stays in a texture for the
+// window to draw; readDisplay()/readFilm() read it back (tests, screenshots).
+//
+// Needs a current OpenGL 4.5 context for every call but the constructor. GL errors never throw
+// or abort: init() and render() return false with one line saying why, and the viewer shows the
+// CPU image instead. Which scenes it can do at all: viewer/gl_support.h.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "core/image.h"
+#include "pipeline/pipeline.h"
+#include "render/tonemap.h"
+
+namespace voxlight::viewer {
+
+class GlRayCaster {
+  public:
+    GlRayCaster() = default;
+    ~GlRayCaster();  ///< deletes its GL objects (the context must still be current)
+    GlRayCaster(const GlRayCaster&) = delete;
+    GlRayCaster& operator=(const GlRayCaster&) = delete;
+
+    /// Checks the context (OpenGL ≥ 4.5) and compiles the shaders; false with the reason (the
+    /// GL version, or the compiler's first message) otherwise.
+    bool init(std::string& why);
+    bool ready() const { return raycast_ != 0; }
+    /// The renderer string of the context (e.g. "llvmpipe (LLVM 15.0.6, 256 bits)").
+    const std::string& glRenderer() const { return renderer_; }
+
+    /// Renders `setup` (glUnsupportedReason() empty) at its camera's size into texture().
+    /// Uploads the volume, the TF table and the jitter only when they changed since the last
+    /// call. Does not wait for the GPU (glFinish() for timing). False with the reason on failure
+    /// (volume larger than the GL's 3D textures, out of memory, a GL error).
+    /// Which pixels a render() computes: all, a kWarmUpPixels² corner (uploads, and the first draw
+    /// that makes a GL compile the shader's machine code — which a timing must not include), or
+    /// the central half of each side (a quarter of the pixels, where the volume is: a cheap probe
+    /// of the frame's cost that over- rather than underestimates it).
+    enum class Scope { Full, WarmUp, CentreQuarter };
+    bool render(const pipeline::CasterSetup& setup, float exposureStops, render::Display display,
+                std::string& why, Scope scope = Scope::Full);
+    static constexpr int kWarmUpPixels = 8;
+    /// The display image (RGBA8, row 0 = the image's top); 0 before the first render.
+    unsigned texture() const { return displayTex_; }
+    int width() const { return width_; }
+    int height() const { return height_; }
+    /// texture()'s pixels, 4 bytes each, row 0 = the image's top.
+    std::vector<std::uint8_t> readDisplay() const;
+    /// The linear film (radiance + T·background, alpha = coverage), row 0 = the image's top.
+    core::ImageRGBA readFilm() const;
+
+  private:
+    bool uploadVolume(const core::Volume& volume, std::string& why);
+    void uploadTable(const optics::TfTable& table);
+    void uploadSkipCells(const grid::BrickMajorants& cells);
+    void uploadJitter(int width, int height, bool jitter, std::uint64_t seed);
+    bool ensureTargets(int width, int height, std::string& why);
+    void release();
+
+    std::string renderer_;
+    unsigned raycast_ = 0, display_ = 0, vao_ = 0;
+    unsigned volumeTex_ = 0, tfTex_ = 0, jitterTex_ = 0, skipTex_ = 0;
+    unsigned filmTex_ = 0, displayTex_ = 0, filmFbo_ = 0, displayFbo_ = 0;
+    int width_ = 0, height_ = 0;
+    // What is uploaded (held, so that a pointer is never that of a newer object).
+    std::shared_ptr<const core::Volume> volume_;
+    std::shared_ptr<const optics::TfTable> table_;
+    std::shared_ptr<const grid::BrickMajorants> skipCells_;
+    float valueScale_ = 1.f, valueOffset_ = 0.f;
+    int jitterW_ = 0, jitterH_ = 0;
+    bool jitterOn_ = false;
+    std::uint64_t jitterSeed_ = 0;
+};
+
+}  // namespace voxlight::viewer

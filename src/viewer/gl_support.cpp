@@ -1,0 +1,64 @@
+// SPDX-License-Identifier: MIT
+#include "viewer/gl_support.h"
+
+#include "core/error.h"
+#include "lights/environment_light.h"
+
+namespace voxlight::viewer {
+
+RendererChoice rendererChoiceFromString(const std::string& name) {
+    if (name == "auto") return RendererChoice::Auto;
+    if (name == "gpu") return RendererChoice::Gpu;
+    if (name == "cpu") return RendererChoice::Cpu;
+    throw InputError("command line", "--renderer", "'" + name + "' is not a renderer",
+                     "choose one of: auto, gpu, cpu");
+}
+
+std::string toString(RendererChoice c) {
+    switch (c) {
+        case RendererChoice::Auto:
+            return "auto";
+        case RendererChoice::Gpu:
+            return "gpu";
+        case RendererChoice::Cpu:
+            return "cpu";
+    }
+    return "?";
+}
+
+std::string glUnsupportedReason(const std::string& method, const pipeline::CasterSetup* setup) {
+    const std::string only =
+        "the GLSL ray caster does methods 'gradient' and "
+        "'emission-absorption' only";
+    if (!setup || (method != "gradient" && method != "emission-absorption"))
+        return "method '" + method + "' is rendered on the CPU: " + only;
+    const render::RenderOptions& o = setup->options;
+    if (o.mode != render::Mode::Gradient && o.mode != render::Mode::EmissionAbsorption)
+        return "render mode '" + render::toString(o.mode) + "': " + only;
+    if (o.mode == render::Mode::Gradient) {
+        int lights = 0;
+        for (const auto& l : o.lights) {
+            if (dynamic_cast<const lights::EnvironmentLight*>(l.get()))
+                return "an environment light: its SH irradiance is shaded on the CPU only";
+            ++lights;
+        }
+        if (lights > kMaxGlLights)
+            return std::to_string(lights) + " lights: the GLSL ray caster holds at most " +
+                   std::to_string(kMaxGlLights);
+        if (!o.centralDifferences)
+            return "forward-difference gradients (central_differences false): the GLSL ray "
+                   "caster takes central differences only";
+    }
+    if (int(o.clipPlanes.size()) > kMaxGlClipPlanes)
+        return std::to_string(o.clipPlanes.size()) +
+               " clip planes: the GLSL ray caster holds at most " +
+               std::to_string(kMaxGlClipPlanes);
+    // The CPU marcher splits pre-integrated segments longer than a voxel where the value profile
+    // is not linear (dvr_march.h kLinearityFraction); the shader does not.
+    if (o.preintegrated && o.stepVoxels * 1.001f > 1.f)
+        return "a step over one voxel: the CPU ray caster refines such segments, the GLSL ray "
+               "caster does not";
+    return {};
+}
+
+}  // namespace voxlight::viewer
