@@ -231,6 +231,8 @@ class Viewer {
     bool pathTraceShown() const { return ptReady_ && ptGen_ == generation_ && ptShow_; }
     std::string saveRecording(const std::string& path);
     void submit(bool interacting);
+    /// The current view as a scene of w × h pixels (the document's method unless `method` is set).
+    io::Scene sceneAt(int w, int h, const json& method = json()) const;
     void receive();
     // The renderer: the start-up measurement and the choice (see ViewerOptions::renderer).
     void restartMeasurement();
@@ -379,13 +381,18 @@ void Viewer::snapView(const std::string& view) {
     setCamera(namedViewJson(view, doc_.value("camera", json::object())));
 }
 
+io::Scene Viewer::sceneAt(int w, int h, const json& method) const {
+    json doc = doc_;
+    doc["image"]["width"] = w;
+    doc["image"]["height"] = h;
+    if (!method.is_null()) doc["method"] = method;
+    return sceneFromDocument(doc, loaded_->scene.source);
+}
+
 void Viewer::submit(bool interacting) {
     if (!loaded_ || imageW_ < 1 || imageH_ < 1) return;
-    json doc = doc_;
-    doc["image"]["width"] = imageW_;
-    doc["image"]["height"] = imageH_;
     try {
-        io::Scene scene = sceneFromDocument(doc, loaded_->scene.source);
+        io::Scene scene = sceneAt(imageW_, imageH_);
         if (!interacting) recordState(scene);
         RenderRequest request{std::move(scene), generation_, interacting};
         request.prepareOnly = gpu_;  // the GLSL path renders on this thread
@@ -524,11 +531,7 @@ void Viewer::updateRenderer() {
             prepared_.reset();
             measureGen_ = generation_;
             {
-                json doc = doc_;
-                doc["image"]["width"] = w;
-                doc["image"]["height"] = h;
-                RenderRequest request{sceneFromDocument(doc, loaded_->scene.source), generation_,
-                                      false};
+                RenderRequest request{sceneAt(w, h), generation_, false};
                 request.prepareOnly = true;
                 worker_.submit(std::move(request));
             }
@@ -540,11 +543,7 @@ void Viewer::updateRenderer() {
             if (!no.empty()) return choose(false, "the scene needs the CPU path: " + no);
             if (choice_ == RendererChoice::Gpu) return choose(true, "--renderer gpu");
             // The CPU's frame: the same state rendered kMeasureFrames times, median.
-            json doc = doc_;
-            doc["image"]["width"] = w;
-            doc["image"]["height"] = h;
-            RenderRequest request{sceneFromDocument(doc, loaded_->scene.source), generation_,
-                                  false};
+            RenderRequest request{sceneAt(w, h), generation_, false};
             request.frames = kMeasureFrames;
             worker_.submit(std::move(request));
             measure_ = Measure::CpuFrames;
@@ -922,12 +921,10 @@ std::optional<ImVec2> Viewer::toWindow(const render::Camera& cam, const glm::dve
 
 void Viewer::startPathTrace(int spp) {
     if (!loaded_ || imageW_ < 1 || imageH_ < 1) return;
-    json doc = doc_;
-    doc["image"]["width"] = imageW_;
-    doc["image"]["height"] = imageH_;
-    doc["method"] = {{"name", "pathtrace"}, {"params", {{"spp", spp}}}};
     try {
-        ptWorker_.submit({sceneFromDocument(doc, loaded_->scene.source), generation_, false});
+        ptWorker_.submit(
+            {sceneAt(imageW_, imageH_, {{"name", "pathtrace"}, {"params", {{"spp", spp}}}}),
+             generation_, false});
         ptGen_ = generation_;
         ptReady_ = false, ptShow_ = true;
         ptMessage_ = "path tracing " + std::to_string(spp) + " spp ...";

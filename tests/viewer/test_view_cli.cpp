@@ -147,6 +147,43 @@ TEST(ViewCli, ScreenshotImageAreaEqualsTheCpuRender) {
     EXPECT_EQ(files, 2);
 }
 
+/// The replayed frames dir/NAME/frame_00000.png, … in order.
+std::vector<io::ImageRGBA> readFrames(const fs::path& dir) {
+    std::vector<io::ImageRGBA> frames;
+    for (int i = 0;; ++i) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%05d.png", i);
+        if (!fs::exists(dir / name)) break;
+        frames.push_back(io::readImage(dir / name));
+    }
+    return frames;
+}
+
+/// Replays dir/rec.json into dir/frames and checks what both scripted-session tests check: `count`
+/// frames (one per settled state), each step changing the picture, and the last equal to the
+/// screenshot's image area within kScreenshotTolLevels (same renderer, same state).
+void expectReplayMatchesScreenshot(const test::TempDir& tmp, std::size_t count) {
+    const Result replay =
+        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
+                     " --out " + quoted(tmp / "frames"),
+                 tmp.path());
+    ASSERT_EQ(replay.code, 0) << replay.err;
+    const std::vector<io::ImageRGBA> frames = readFrames(tmp / "frames");
+    ASSERT_EQ(frames.size(), count);
+    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
+    const io::ImageRGBA& f = frames.back();
+    ASSERT_EQ(s.width, f.width + kPanelWidth);
+    float worst = 0.f;
+    for (int y = 0; y < f.height; ++y)
+        for (int x = 0; x < f.width; ++x)
+            if (!inLabel(x, y, f.width, f.height))
+                for (int c = 0; c < 3; ++c)
+                    worst = std::max(worst, std::abs(f.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
+    EXPECT_LE(worst, kScreenshotTolLevels + 1e-3f);
+    for (std::size_t i = 1; i < frames.size(); ++i)
+        EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
+}
+
 // The issue's scripted UI check: steps run through the mouse's and keys' code paths (orbit,
 // window/level drag, a named view, orbit again, wheel zoom) while the viewer records the session;
 // `voxlight replay` of it gives one frame per settled state, the last equal to the screenshot's
@@ -166,44 +203,7 @@ TEST(ViewCli, AScriptedExplorationRecordsASessionThatReplaysToTheScreenshot) {
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
     ASSERT_EQ(view.code, 0) << view.err;
-    const Result replay =
-        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
-                     " --out " + quoted(tmp / "frames"),
-                 tmp.path());
-    ASSERT_EQ(replay.code, 0) << replay.err;
-    // The first state and one per step.
-    std::vector<io::ImageRGBA> frames;
-    for (int i = 0;; ++i) {
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%05d.png", i);
-        if (!fs::exists(tmp / "frames" / name)) break;
-        frames.push_back(io::readImage(tmp / "frames" / name));
-    }
-    ASSERT_EQ(frames.size(), 6u);
-    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
-    const io::ImageRGBA& last = frames.back();
-    ASSERT_EQ(s.width, last.width + kPanelWidth);
-    float worst = 0.f;
-    for (int y = 0; y < last.height; ++y)
-        for (int x = 0; x < last.width; ++x)
-            if (!inLabel(x, y, last.width, last.height))
-                for (int c = 0; c < 3; ++c)
-                    worst = std::max(worst, std::abs(last.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
-    EXPECT_LE(worst, kScreenshotTolLevels + 1e-3f);
-    for (std::size_t i = 1; i < frames.size(); ++i)
-        EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
-}
-
-/// The replayed frames dir/NAME/frame_00000.png, … in order.
-std::vector<io::ImageRGBA> readFrames(const fs::path& dir) {
-    std::vector<io::ImageRGBA> frames;
-    for (int i = 0;; ++i) {
-        char name[32];
-        std::snprintf(name, sizeof name, "frame_%05d.png", i);
-        if (!fs::exists(dir / name)) break;
-        frames.push_back(io::readImage(dir / name));
-    }
-    return frames;
+    expectReplayMatchesScreenshot(tmp, 6);  // the first state and one per step
 }
 
 // Issue #15's scripted session ("change TF, add and move a clip plane, move a light, save")
@@ -242,25 +242,7 @@ TEST(ViewCli, ScriptedClipPlaneAndLightEditsRecordASessionThatReplaysToTheScreen
     const nlohmann::json& added = rec["keyframes"][2];
     ASSERT_TRUE(added.contains("clip_planes") && added.contains("camera")) << added.dump();
     EXPECT_TRUE(added["camera"].contains("eye")) << added.dump();
-    const Result replay =
-        runShell(std::string(VOXLIGHT_BINARY) + " replay -q " + quoted(tmp / "rec.json") +
-                     " --out " + quoted(tmp / "frames"),
-                 tmp.path());
-    ASSERT_EQ(replay.code, 0) << replay.err;
-    const std::vector<io::ImageRGBA> frames = readFrames(tmp / "frames");
-    ASSERT_EQ(frames.size(), 8u);  // the first state and one per step that changes the scene
-    const io::ImageRGBA s = io::readImage(tmp / "shot.png");
-    const io::ImageRGBA& f = frames.back();
-    ASSERT_EQ(s.width, f.width + kPanelWidth);
-    float worst = 0.f;
-    for (int y = 0; y < f.height; ++y)
-        for (int x = 0; x < f.width; ++x)
-            if (!inLabel(x, y, f.width, f.height))
-                for (int c = 0; c < 3; ++c)
-                    worst = std::max(worst, std::abs(f.at(x, y)[c] - s.at(x, y)[c]) * 255.f);
-    EXPECT_LE(worst, kScreenshotTolLevels + 1e-3f);
-    for (std::size_t i = 1; i < frames.size(); ++i)
-        EXPECT_NE(frames[i].pixels, frames[i - 1].pixels) << "step " << i << " changed nothing";
+    expectReplayMatchesScreenshot(tmp, 8);  // the first state and one per step that changes it
 }
 
 // The issue's "logged UI frame ≤ 50 ms during a clip-plane drag": a scripted gizmo drag over many
