@@ -230,7 +230,8 @@ class TfTable {
         if (u > 0.0 && u < double(kTableCells)) {
             const int cell = int(u);
             const double x = (u - double(cell)) * cell_;
-            // One 16-byte node per cell (the fused table's two 48-byte nodes missed the cache).
+            // One 16-byte node per cell instead of two 48-byte fused nodes: less memory
+            // traffic (the visibility rays' gain was within noise on a loaded machine).
             const SigmaNode& a = sigmaNodes_[std::size_t(cell)];
             return a.cum + double(a.f) * x +
                    (double(a.fNext) - double(a.f)) * x * x * (0.5 * invCellD_);

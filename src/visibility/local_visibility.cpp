@@ -195,8 +195,8 @@ struct OriginValue {
 };
 
 /// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment). Computes what
-/// opticalDepthReference computes with less work per step (profile of the 256³ torso at 1:16:
-/// the TF table's integrals and the pre-integration's division were ≈ 35 % of the rays' time):
+/// opticalDepthReference computes with less work per step (a small gain: the table is ≈ 3 % of
+/// the rays' time; see the README's profile of the TF update):
 /// (i) a step whose two values lie in one transparent tail of the TF (TfTable::zeroBelow /
 /// zeroAbove: σt ≡ 0 there) adds nothing and skips the table, its integrals read only when a later
 /// step needs them; (ii) with `atOrigin` (the ray starts at the point's origin, t = 0) the origin's
