@@ -222,13 +222,18 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
     bool haveFront = false, frontStored = false, haveIFront = false;
     float sFront = 0.f;
     double iFront = 0.0;
+    // The cell of the last step and its step length: a ray at 1-voxel steps stays 2–4 steps in
+    // one 4³ cell, and the visibility flag and block level need not be read again.
+    std::size_t lastCell = SIZE_MAX;
+    float lastStepVoxels = 0.f;
     while (t < length) {
         const glm::vec3 p = origin + t * d;
         // Empty space: a cell whose value range the TF makes transparent holds σt = 0 (exactly,
         // at every level-0 sample it covers), so the ray jumps to the cell's exit.
         const glm::ivec3 c = glm::clamp(glm::ivec3(p * (1.f / kCell)), glm::ivec3(0), cells - 1);
-        if (!grid.cellVisible(std::size_t(c.x) +
-                              std::size_t(cells.x) * (c.y + std::size_t(cells.y) * c.z))) {
+        const std::size_t cell =
+            std::size_t(c.x) + std::size_t(cells.x) * (c.y + std::size_t(cells.y) * c.z);
+        if (cell != lastCell && !grid.cellVisible(cell)) {
             float exit = INFINITY;
             for (int a = 0; a < 3; ++a)
                 if (ray.inv[a] != INFINITY)
@@ -239,10 +244,13 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
             continue;
         }
         // Step length from the level of the block holding the cell (blocks are 4 cells wide).
-        const int level = grid.level(grid.indexOf(c >> 2));
-        const float stepVoxels =
-            level == kNone ? kMaxStepVoxels : std::min(float(levelSpacing(level)), kMaxStepVoxels);
-        const float dt = std::min(stepVoxels * h, length - t);
+        if (cell != lastCell) {
+            const int level = grid.level(grid.indexOf(c >> 2));
+            lastStepVoxels = level == kNone ? kMaxStepVoxels
+                                            : std::min(float(levelSpacing(level)), kMaxStepVoxels);
+            lastCell = cell;
+        }
+        const float dt = std::min(lastStepVoxels * h, length - t);
         if (!haveFront) {
             if (t == 0.f && atOrigin) {
                 if (!atOrigin->read) {
