@@ -202,6 +202,9 @@ TfTable::TfTable(const TransferFunction& tf) {
             fused_[i].f[1 + c] = weighted_[i][c];
         }
     }
+    sigmaNodes_.resize(kTableCells);
+    for (std::size_t i = 0; i < std::size_t(kTableCells); ++i)
+        sigmaNodes_[i] = {cumSigma_[i], sigma_[i], sigma_[i + 1]};
     // Transparent ends, for the O(1) rejection of segments that see no extinction at all.
     std::size_t first = 0, last = n - 1;
     while (first < n && sigma_[first] <= 0.f) ++first;

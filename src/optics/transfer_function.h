@@ -230,10 +230,11 @@ class TfTable {
         if (u > 0.0 && u < double(kTableCells)) {
             const int cell = int(u);
             const double x = (u - double(cell)) * cell_;
-            const FusedNode& a = fused_[std::size_t(cell)];
-            const FusedNode& b = fused_[std::size_t(cell) + 1];
-            return a.cum[0] + double(a.f[0]) * x +
-                   (double(b.f[0]) - double(a.f[0])) * x * x * (0.5 * invCellD_);
+            // One 16-byte node per cell instead of two 48-byte fused nodes: less memory
+            // traffic (the visibility rays' gain was within noise on a loaded machine).
+            const SigmaNode& a = sigmaNodes_[std::size_t(cell)];
+            return a.cum + double(a.f) * x +
+                   (double(a.fNext) - double(a.f)) * x * x * (0.5 * invCellD_);
         }
         const FusedNode& e = u > 0.0 ? fused_.back() : fused_.front();
         const double x =
@@ -358,6 +359,12 @@ class TfTable {
         float f[4];     ///< sigma_, weighted_[0..2]
     };
     std::vector<FusedNode> fused_;  // kTableCells + 1, interleaved for integrals()
+    /// Per cell: ∫σt up to its lower node, σt at its two nodes (sigmaIntegral's hot table).
+    struct alignas(16) SigmaNode {
+        double cum;
+        float f, fNext;
+    };
+    std::vector<SigmaNode> sigmaNodes_;  // kTableCells
 };
 
 /// A closed interval of values; empty when lo > hi (the default).

@@ -120,9 +120,10 @@ struct RayDir {
     }
 };
 
-/// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment).
-double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayDir& ray,
-                    float length, float h, std::uint64_t& samples) {
+/// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment): the slow
+/// reference that opticalDepth must reproduce (rayTransmittanceReference; tests compare them).
+double opticalDepthReference(const ValueField& field, const glm::vec3& origin, const RayDir& ray,
+                             float length, float h, std::uint64_t& samples) {
     constexpr int kCell = BlockPyramid::kCellVoxels;
     double tau = 0.0;
     float t = 0.f;
@@ -186,6 +187,119 @@ double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayD
     return tau;
 }
 
+/// The value at a point's origin, read once for all of its rays (a ray's first step starts there).
+struct OriginValue {
+    bool read = false, stored = false;
+    float s = 0.f;
+    double integral = 0.0;
+};
+
+/// Optical depth along origin + t·d, t ∈ [0, length] mm (see the header comment). Computes what
+/// opticalDepthReference computes with less work per step (a small gain: the table is ≈ 3 % of
+/// the rays' time; see the README's profile of the TF update):
+/// (i) a step whose two values lie in one transparent tail of the TF (TfTable::zeroBelow /
+/// zeroAbove: σt ≡ 0 there) adds nothing and skips the table, its integrals read only when a later
+/// step needs them; (ii) with `atOrigin` (the ray starts at the point's origin, t = 0) the origin's
+/// value is read once per point instead of once per ray. Identical to the reference except where
+/// a value lies within float rounding of a tail's end: the reference's table there integrates
+/// σt ≤ 1e-6 of the first non-zero node's (the renderer's TfTable::segment makes the same cut).
+double opticalDepth(const ValueField& field, const glm::vec3& origin, const RayDir& ray,
+                    float length, float h, std::uint64_t& samples, OriginValue* atOrigin) {
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    double tau = 0.0;
+    float t = 0.f;
+    const glm::vec3& d = ray.d;
+    std::uint64_t n = 0;
+    const MultiresGrid& grid = field.grid;
+    const optics::TfTable& table = field.table;
+    const glm::ivec3 cells = grid.pyramid().cells();
+    const float zeroBelow = table.zeroBelow(), zeroAbove = table.zeroAbove();
+    auto transparent = [&](float a, float b) {
+        return std::max(a, b) <= zeroBelow || std::min(a, b) >= zeroAbove;
+    };
+    // The value at the front of the step and its σt integral (valid once read; the integral only
+    // when haveIFront).
+    bool haveFront = false, frontStored = false, haveIFront = false;
+    float sFront = 0.f;
+    double iFront = 0.0;
+    // The cell of the last step and its step length: a ray at 1-voxel steps stays 2–4 steps in
+    // one 4³ cell, and the visibility flag and block level need not be read again.
+    std::size_t lastCell = SIZE_MAX;
+    float lastStepVoxels = 0.f;
+    while (t < length) {
+        const glm::vec3 p = origin + t * d;
+        // Empty space: a cell whose value range the TF makes transparent holds σt = 0 (exactly,
+        // at every level-0 sample it covers), so the ray jumps to the cell's exit.
+        const glm::ivec3 c = glm::clamp(glm::ivec3(p * (1.f / kCell)), glm::ivec3(0), cells - 1);
+        const std::size_t cell =
+            std::size_t(c.x) + std::size_t(cells.x) * (c.y + std::size_t(cells.y) * c.z);
+        if (cell != lastCell && !grid.cellVisible(cell)) {
+            float exit = INFINITY;
+            for (int a = 0; a < 3; ++a)
+                if (ray.inv[a] != INFINITY)
+                    exit =
+                        std::min(exit, (float(kCell * (c[a] + ray.next[a])) - p[a]) * ray.inv[a]);
+            t += std::max(exit, 0.f) + 1e-3f * h;  // a thousandth of a voxel past the face
+            haveFront = false;
+            continue;
+        }
+        // Step length from the level of the block holding the cell (blocks are 4 cells wide).
+        if (cell != lastCell) {
+            const int level = grid.level(grid.indexOf(c >> 2));
+            lastStepVoxels = level == kNone ? kMaxStepVoxels
+                                            : std::min(float(levelSpacing(level)), kMaxStepVoxels);
+            lastCell = cell;
+        }
+        const float dt = std::min(lastStepVoxels * h, length - t);
+        if (!haveFront) {
+            if (t == 0.f && atOrigin) {
+                if (!atOrigin->read) {
+                    atOrigin->s = field.at(p, atOrigin->stored);
+                    atOrigin->integral = table.sigmaIntegral(atOrigin->s);
+                    atOrigin->read = true;
+                }
+                sFront = atOrigin->s;
+                frontStored = atOrigin->stored;
+                iFront = atOrigin->integral;
+                haveIFront = true;
+            } else {
+                sFront = field.at(p, frontStored);
+                haveIFront = false;
+            }
+            haveFront = true;
+        }
+        bool backStored = false;
+        const float sBack = field.at(origin + (t + dt) * d, backStored);
+        // Pre-integrated: the value varies linearly across the step (between two blocks at kNone
+        // nothing is stored and σt is 0; between two values in a transparent tail σt is 0).
+        bool haveIBack = false;
+        double iBack = 0.0;
+        if (frontStored || backStored) {
+            ++n;
+            if (!transparent(sFront, sBack)) {
+                if (!haveIFront) iFront = table.sigmaIntegral(sFront);
+                iBack = table.sigmaIntegral(sBack);
+                haveIBack = true;
+                tau += preIntegratedStep(
+                    table, sFront, iFront, sBack, iBack, dt, tau,
+                    [&](float x) {
+                        bool st = false;
+                        return field.at(origin + (t + x) * d, st);
+                    },
+                    n);
+                if (tau > kOpaqueDepth) break;
+            }
+        }
+        sFront = sBack;
+        iFront = iBack;
+        haveIFront = haveIBack;
+        frontStored = backStored;
+        t += dt;
+    }
+    samples += n;
+    return tau;
+}
+
 /// The N directions of a field in index space with w_k·Y_i(ω_k) (the projection weights).
 struct RaySet {
     int n = 0, c = 0;
@@ -215,13 +329,15 @@ void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3
                      std::uint64_t& samples) {
     const int C = set.c;
     std::fill(v, v + C, 0.0);
+    OriginValue atOrigin;  // read by the first ray that starts there
     for (int d = 0; d < set.n; ++d) {
         const RayDir& ray = set.rays[std::size_t(d)];
         float ta = 0.f, tb = std::min(radius, ray.boxExit(origin, dims));
         double tau = 0.0;
         if (narrow(d, ta, tb) && tb > ta)
-            tau = ta > 0.f ? opticalDepth(sigma, origin + ta * ray.d, ray, tb - ta, h, samples)
-                           : opticalDepth(sigma, origin, ray, tb, h, samples);
+            tau = ta > 0.f
+                      ? opticalDepth(sigma, origin + ta * ray.d, ray, tb - ta, h, samples, nullptr)
+                      : opticalDepth(sigma, origin, ray, tb, h, samples, &atOrigin);
         // Project this direction's transmittance onto the SH basis.
         const double T = tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // float: 1e-7
         const double* w = set.wy.data() + std::size_t(d) * C;
@@ -327,9 +443,21 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     const float length = std::min(float(radiusVoxels * h), ray.boxExit(origin, grid.dims()));
     std::uint64_t n = 0;
     const ValueField field(grid, table);
-    const double tau = opticalDepth(field, origin, ray, length, float(h), n);
+    const double tau = opticalDepth(field, origin, ray, length, float(h), n, nullptr);
     if (samples) *samples += n;
     return std::exp(-tau);
+}
+
+double rayTransmittanceReference(const MultiresGrid& grid, const optics::TfTable& table,
+                                 const glm::vec3& origin, const glm::dvec3& dir,
+                                 double radiusVoxels) {
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
+    const float length = std::min(float(radiusVoxels * h), ray.boxExit(origin, grid.dims()));
+    std::uint64_t n = 0;
+    const ValueField field(grid, table);
+    return std::exp(-opticalDepthReference(field, origin, ray, length, float(h), n));
 }
 
 namespace {

@@ -29,7 +29,8 @@
 // owner block alone took a step across a bone surface at its midpoint's full σt, or dropped the
 // half voxel past a block face: V 0.37 instead of e^−1 … 1 instead of e^−1 next to a face.)
 // A step with both ends in blocks at kNone integrates nothing (the TF is transparent over every
-// value read there). A ray
+// value read there), nor does one with both values in a transparent tail of the TF (skipped
+// without the table; rayTransmittanceReference is the plain march the tests compare with). A ray
 // stops once its optical depth exceeds kOpaqueDepth (transmittance < 1e-4: the rest changes V by
 // less than that).
 //
@@ -269,5 +270,10 @@ bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& 
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                         const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
                         std::uint64_t* samples = nullptr);
+/// The same by the straightforward march the fast path must reproduce (every step through the
+/// TF table; the slow reference tests compare against).
+double rayTransmittanceReference(const MultiresGrid& grid, const optics::TfTable& table,
+                                 const glm::vec3& origin, const glm::dvec3& dir,
+                                 double radiusVoxels);
 
 }  // namespace voxlight::visibility

@@ -240,3 +240,85 @@ TEST(LocalVisibility, ADenseSurfaceOnABlockFaceAttenuatesAsTheContinuousModel) {
         }
     }
 }
+
+TEST(LocalVisibility, TheFastMarchReproducesTheReferenceMarchAtEveryPointAndDirection) {
+    // computeLocalVisibility's march skips the TF table on steps inside a transparent tail and
+    // reads each point's origin value once for all its rays; rayTransmittanceReference marches
+    // through the table at every step. Volume: textured soft tissue (transparent: the lower
+    // tail), bone slabs with partial-volume faces (dense: sub-steps), a metal rod (above the TF's
+    // upper tail end: transparent again) and air, under a budget so that blocks sit at mixed
+    // levels (steps of 1, 2 and 4 voxels).
+    const core::Volume v = test::makeVolume({48, 40, 44}, [](int i, int j, int k) {
+        if ((i - 30) * (i - 30) + (k - 20) * (k - 20) < 9) return 3000;  // metal rod along y
+        if (k >= 10 && k <= 13) return 900 + 37 * ((i + 2 * j) % 5);     // bone slab
+        if (std::abs(i - 2 * j + 3) < 2) return 500 + 10 * k;            // oblique sheet
+        if (k > 36) return -1000;                                        // air
+        return 40 + (i * 7 + j * 3 + k) % 11;                            // soft tissue
+    });
+    const glm::vec3 c(1.f);
+    const optics::TransferFunction tf({{-1000.f, c, 0.f, glm::vec3(0.f)},
+                                       {100.f, c, 0.f, glm::vec3(0.f)},
+                                       {400.f, c, 0.2f, glm::vec3(0.f)},
+                                       {1000.f, c, 3.f, glm::vec3(0.f)},
+                                       {2000.f, c, 0.5f, glm::vec3(0.f)},
+                                       {2200.f, c, 0.f, glm::vec3(0.f)},
+                                       {3071.f, c, 0.f, glm::vec3(0.f)}},
+                                      {400.f, 1000.f}, "two-tails");
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const optics::TfTable table(tf);
+    ASSERT_GT(table.zeroBelow(), -1000.f);  // both tails exist
+    ASSERT_LT(table.zeroAbove(), 3000.f);
+    const auto grid = std::make_shared<const MultiresGrid>(
+        pyr, selectLod(*pyr, tf, table, LodBudget::fromReduction(3.0, v.voxelCount())));
+    int levels[kNone + 1] = {};
+    for (std::size_t b = 0; b < pyr->blockCount(); ++b) ++levels[grid->level(b)];
+    ASSERT_GT(levels[0], 0);
+    ASSERT_GT(levels[1] + levels[2], 0);
+    LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 32;
+    o.radiusVoxels = 12.0;
+    const LocalVisibility vis = computeLocalVisibility(grid, table, o);
+    const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
+    std::vector<double> y(16);
+    // The fast march and the reference differ only where a value lies within float rounding of a
+    // tail's end (σt ≤ 1e-6 of a node's there); what remains is the field's float transmittance
+    // (e^−τ in float, 1e-7) and float storage, ×√(4π) by the projection: 1e-5 bounds all of it.
+    constexpr double kFastPathTol = 1e-5;
+    // A single ray in double: the same march, so only the tails' rounding can differ.
+    constexpr double kRayTol = 1e-9;
+    const glm::vec3 top(grid->dims() - 1);
+    int compared = 0, occluded = 0;
+    for (std::size_t b = 0; b < pyr->blockCount(); ++b) {
+        const int l = grid->level(b);
+        if (l == kNone) continue;
+        const int n = levelResolution(l);
+        const float* data = vis.blockData(b);
+        for (int k = 0; k < n; ++k)
+            for (int j = 0; j < n; ++j)
+                for (int i = 0; i < n; ++i, data += o.coefficients) {
+                    if ((i + 3 * j + 5 * k) % 7 != 0) continue;  // a sixth of the points
+                    const glm::vec3 x = glm::min(grid->samplePosition(b, l, i, j, k), top);
+                    if (!visibilityNeeded(*grid, x, float(levelSpacing(l)))) continue;
+                    double expected[4] = {};
+                    for (std::size_t r = 0; r < dirs.size(); ++r) {
+                        const double t =
+                            rayTransmittanceReference(*grid, table, x, dirs.directions[r], 12.0);
+                        ASSERT_NEAR(rayTransmittance(*grid, table, x, dirs.directions[r], 12.0), t,
+                                    kRayTol)
+                            << "block " << b << " point " << x.x << "," << x.y << "," << x.z;
+                        occluded += t < 0.5;
+                        sh::evalShUnitDouble(1, dirs.directions[r], y);
+                        for (int q = 0; q < 4; ++q)
+                            expected[q] += dirs.weights[r] * t * y[std::size_t(q)];
+                    }
+                    for (int q = 0; q < 4; ++q)
+                        ASSERT_NEAR(data[q], expected[q], kFastPathTol)
+                            << "block " << b << " level " << l << " point " << x.x << "," << x.y
+                            << "," << x.z << " coefficient " << q;
+                    ++compared;
+                }
+    }
+    EXPECT_GT(compared, 1000);
+    EXPECT_GT(occluded, 1000);  // the volume is not nearly empty for the rays
+}
