@@ -90,7 +90,10 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
     const TransferLayout& layout = transfer.layout;
     const int m = basis.size();
     VL_CHECK_EQ(transfer.basis, m);
+    // Laid out for this volume: res ≤ dims, scale = dims / res.
     VL_CHECK(layout.res == glm::min(layout.res, geo.dims));
+    VL_CHECK(glm::all(glm::lessThan(
+        glm::abs(layout.scale * glm::vec3(layout.res) - glm::vec3(geo.dims)), glm::vec3(1e-3f))));
     VL_CHECK(layout.slot.size() == std::size_t(layout.res.x) * layout.res.y * layout.res.z);
     VL_CHECK_EQ(transfer.values.size(), std::size_t(layout.points) * m * 3);
     PhotonStats stats;

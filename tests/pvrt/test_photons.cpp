@@ -186,16 +186,19 @@ TEST(PvrtPhotons, ZeroDensityAddsNothingAndNoNaN) {
 }
 
 TEST(PvrtPhotons, SameTransferForAnyThreadCount) {
+    // 12 photons per cell on the 32³ box: 69192 photons, two batches of kPhotonsPerBatch.
     const Scene s = makeScene(0.2f, glm::vec3(0.9f, 0.7f, 0.5f));
     const auto basis = pvrt::Basis::sh(2);
-    const auto a = run(s, basis, {.photonsPerCell = 3, .threads = 1});
-    const auto b = run(s, basis, {.photonsPerCell = 3, .threads = 2});
-    const auto c = run(s, basis, {.photonsPerCell = 3, .threads = 0});
+    pvrt::PhotonStats st;
+    const auto a = run(s, basis, {.photonsPerCell = 12, .threads = 1}, &st);
+    ASSERT_GT(std::int64_t(st.photons), pvrt::kPhotonsPerBatch);
+    const auto b = run(s, basis, {.photonsPerCell = 12, .threads = 2});
+    const auto c = run(s, basis, {.photonsPerCell = 12, .threads = 0});
     ASSERT_EQ(a.values.size(), b.values.size());
     EXPECT_TRUE(a.values == b.values);
     EXPECT_TRUE(a.values == c.values);
     // Another seed is another estimate.
-    const auto d = run(s, basis, {.photonsPerCell = 3, .seed = 2, .threads = 2});
+    const auto d = run(s, basis, {.photonsPerCell = 12, .seed = 2, .threads = 2});
     EXPECT_FALSE(a.values == d.values);
 }
 
