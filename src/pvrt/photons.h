@@ -9,6 +9,8 @@
 // coloured by the albedos it met, before the albedo of x. Light reaching x unscattered (the direct
 // part) is not included: direct.h computes it analytically. With maxScatterings = B − 1 the sum
 // direct + indirect is the in-scattered radiance of the path tracer's maxBounces = B.
+// Phase: isotropic at every collision (the transfer stores the isotropic S of transfer.h); a TF's
+// phase g channel and the tracer's phaseG / scattering mode are not used here.
 //
 // Photons (units: world mm, 1/mm, radiance in the basis light's units):
 //   Source  the faces of the volume box that PathTracer::keptInterval clips to: in index space
