@@ -1,0 +1,404 @@
+// SPDX-License-Identifier: MIT
+#include "pvrt/direct.h"
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numbers>
+
+#include "core/error.h"
+#include "core/half_space.h"
+#include "core/timing.h"
+#include "sh/dsf.h"
+
+namespace voxlight::pvrt {
+
+namespace {
+
+/// A kept half-space in index space: signed distance (mm) d(ijk) = c + dot(g, ijk), kept ≥ 0.
+struct IndexPlane {
+    double c = 0;
+    glm::dvec3 g{0.0};
+    double at(const glm::dvec3& ijk) const { return c + glm::dot(g, ijk); }
+};
+
+/// Trilinear interpolation of a per-voxel field at continuous index p, clamped to the grid.
+template <class T>
+double trilinear(const T* f, const glm::ivec3& n, glm::dvec3 p) {
+    const glm::dvec3 hi = glm::dvec3(glm::max(n - 1, glm::ivec3(0)));
+    p = glm::clamp(p, glm::dvec3(0.0), hi);
+    const glm::ivec3 i = glm::min(glm::ivec3(p), glm::max(n - 2, glm::ivec3(0)));
+    const glm::dvec3 t = p - glm::dvec3(i);
+    const std::size_t sy = std::size_t(n.x), sz = std::size_t(n.x) * std::size_t(n.y);
+    const std::size_t dx = n.x > 1 ? 1 : 0, dy = n.y > 1 ? sy : 0, dz = n.z > 1 ? sz : 0;
+    const T* q = f + std::size_t(i.x) + sy * std::size_t(i.y) + sz * std::size_t(i.z);
+    auto lerp = [](double a, double b, double w) { return a + w * (b - a); };
+    const double c00 = lerp(q[0], q[dx], t.x), c10 = lerp(q[dy], q[dy + dx], t.x);
+    const double c01 = lerp(q[dz], q[dz + dx], t.x), c11 = lerp(q[dz + dy], q[dz + dy + dx], t.x);
+    return lerp(lerp(c00, c10, t.y), lerp(c01, c11, t.y), t.z);
+}
+
+/// The per-volume state of the sweep, shared by all directions: physical values, their σt
+/// integrals (TfTable::sigmaIntegral) and the clip half-spaces that remove matter for the light.
+class Sweeper {
+  public:
+    Sweeper(const core::Volume& volume, const optics::TfTable& table, const DirectOptions& o)
+        : table_(table), geometry_(volume.geometry()) {
+        const std::size_t count = std::size_t(volume.voxelCount());
+        value_.resize(count);
+        integral_.resize(count);
+        const glm::ivec3 n = geometry_.dims;
+        volume.visit([&](const auto view) {
+            tbb::parallel_for(0, n.z, [&](int k) {
+                for (int j = 0; j < n.y; ++j)
+                    for (int i = 0; i < n.x; ++i) {
+                        const std::size_t idx = volume.linearIndex(i, j, k);
+                        value_[idx] = view.at(i, j, k);
+                        integral_[idx] = table_.sigmaIntegral(value_[idx]);
+                    }
+            });
+        });
+        // Clip geometry that removes matter for the light, as index-space half-spaces.
+        std::vector<core::HalfSpace> removing;
+        for (const render::ClipPlane& p : o.clipPlanes)
+            if (!p.shadowsFromRemoved) removing.push_back({p.point, glm::normalize(p.normal)});
+        if (o.cropBox && !o.cropBox->shadowsFromRemoved)
+            for (const core::HalfSpace& h : core::boxHalfSpaces(o.cropBox->min, o.cropBox->max))
+                removing.push_back(h);
+        for (const core::HalfSpace& h : removing) {
+            IndexPlane p;
+            p.c = glm::dot(geometry_.origin - h.point, h.normal);
+            p.g = geometry_.spacing * (glm::transpose(geometry_.direction) * h.normal);
+            planes_.push_back(p);
+        }
+    }
+
+    std::size_t voxels() const { return value_.size(); }
+
+    /// T∞ toward the unit world direction `w` into T (voxelCount entries).
+    void sweep(const glm::dvec3& w, std::vector<float>& T) const;
+
+  private:
+    struct Frame;
+    void slowVoxel(const Frame& f, int c, int u, int v, float* T) const;
+
+    const optics::TfTable& table_;
+    core::Geometry geometry_;
+    std::vector<float> value_;
+    std::vector<double> integral_;
+    std::vector<IndexPlane> planes_;
+};
+
+/// One direction's sweep geometry.
+struct Sweeper::Frame {
+    int a = 0, u = 0, v = 0;           ///< main axis and the transverse axes (u: smaller stride)
+    int sa = 1;                        ///< upstream slice = current + sa
+    double step = 0;                   ///< mm from a slice to the next along ω
+    glm::dvec3 delta{0.0};             ///< index offset of the upstream point (delta[a] = sa)
+    glm::ivec3 n{0};                   ///< dims
+    std::size_t stride[3] = {0, 0, 0};
+    int ou = 0, ov = 0;                ///< lower taps of the stencil (−1 or 0)
+    float fu = 0, fv = 0;              ///< bilinear fractions
+    float w00 = 0, w10 = 0, w01 = 0, w11 = 0;
+    std::vector<double> planeDelta;    ///< per plane: d(upstream) − d(voxel), mm
+};
+
+void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
+    glm::dvec3 x;
+    x[f.a] = c, x[f.u] = u, x[f.v] = v;
+    const std::size_t idx = std::size_t(c) * f.stride[f.a] + std::size_t(u) * f.stride[f.u] +
+                            std::size_t(v) * f.stride[f.v];
+    // Where the segment leaves the box sideways (t ∈ [0, 1] from the voxel to the upstream point).
+    double tEnd = 1.0;
+    for (int b : {f.u, f.v}) {
+        const double hi = double(f.n[b] - 1), p = x[b], d = f.delta[b];
+        if (d > 0) tEnd = std::min(tEnd, (hi - p) / d);
+        if (d < 0) tEnd = std::min(tEnd, -p / d);
+    }
+    tEnd = std::max(tEnd, 0.0);
+    float tUp = 1.f;
+    double vEnd;
+    if (tEnd >= 1.0) {
+        // Upstream point inside: bilinear in the previous slice (taps clamped).
+        const std::size_t prev = std::size_t(c + f.sa) * f.stride[f.a];
+        auto tap = [&](const auto* field, int du, int dv) {
+            const int uu = std::clamp(u + f.ou + du, 0, f.n[f.u] - 1);
+            const int vv = std::clamp(v + f.ov + dv, 0, f.n[f.v] - 1);
+            return double(field[prev + std::size_t(uu) * f.stride[f.u] +
+                                std::size_t(vv) * f.stride[f.v]]);
+        };
+        auto bilinear = [&](const auto* field) {
+            return double(f.w00) * tap(field, 0, 0) + double(f.w10) * tap(field, 1, 0) +
+                   double(f.w01) * tap(field, 0, 1) + double(f.w11) * tap(field, 1, 1);
+        };
+        tUp = float(bilinear(T));
+        vEnd = bilinear(value_.data());
+    } else {
+        vEnd = trilinear(value_.data(), f.n, x + tEnd * f.delta);
+    }
+    // The kept part [ta, tb] of the segment [0, tEnd].
+    double ta = 0.0, tb = tEnd;
+    for (std::size_t i = 0; i < planes_.size(); ++i) {
+        const double d0 = planes_[i].at(x), dd = f.planeDelta[i];
+        if (dd == 0.0) {
+            if (d0 < 0.0) tb = ta;
+        } else if (dd > 0.0) {
+            ta = std::max(ta, -d0 / dd);
+        } else {
+            tb = std::min(tb, -d0 / dd);
+        }
+    }
+    double tau = 0.0;
+    if (tb > ta) {
+        const double vx = value_[idx];
+        auto valueAt = [&](double t) { return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx); };
+        const float va = valueAt(ta), vb = valueAt(tb);
+        if (!table_.transparentSegment(va, vb)) {
+            const double ia = ta == 0.0 ? integral_[idx] : table_.sigmaIntegral(va);
+            tau = f.step * (tb - ta) * table_.meanExtinction(va, ia, vb, table_.sigmaIntegral(vb));
+        }
+    }
+    T[idx] = tUp * std::exp(-float(tau));
+}
+
+void Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const {
+    T.assign(value_.size(), 1.f);
+    Frame f;
+    f.n = geometry_.dims;
+    f.stride[0] = 1;
+    f.stride[1] = std::size_t(f.n.x);
+    f.stride[2] = std::size_t(f.n.x) * std::size_t(f.n.y);
+    // Index-space direction (index units per mm) and the main axis.
+    const glm::dvec3 d = (glm::transpose(geometry_.direction) * w) / geometry_.spacing;
+    f.a = 0;
+    for (int b = 1; b < 3; ++b)
+        if (std::abs(d[b]) > std::abs(d[f.a])) f.a = b;
+    VL_CHECK(std::abs(d[f.a]) > 0.0);
+    f.u = f.a == 0 ? 1 : 0;
+    f.v = f.a == 2 ? 1 : 2;
+    f.sa = d[f.a] > 0 ? 1 : -1;
+    f.step = 1.0 / std::abs(d[f.a]);
+    f.delta = d * f.step;
+    f.delta[f.a] = f.sa;
+    auto lowerTap = [](double delta, int& o, float& frac) {
+        o = std::min(int(std::floor(delta)), 0);
+        frac = float(delta - o);
+    };
+    lowerTap(f.delta[f.u], f.ou, f.fu);
+    lowerTap(f.delta[f.v], f.ov, f.fv);
+    f.w00 = (1.f - f.fu) * (1.f - f.fv);
+    f.w10 = f.fu * (1.f - f.fv);
+    f.w01 = (1.f - f.fu) * f.fv;
+    f.w11 = f.fu * f.fv;
+    for (const IndexPlane& p : planes_) f.planeDelta.push_back(glm::dot(p.g, f.delta));
+
+    const int na = f.n[f.a], nu = f.n[f.u], nv = f.n[f.v];
+    // Voxels whose 4 taps are in the grid and whose upstream point is inside the box take the
+    // fast path (fixed stencil); the rest, and every voxel when clip planes remove matter, the
+    // general one.
+    const bool anyPlanes = !planes_.empty();
+    const int uLo = -f.ou, uHi = nu - 2 - f.ou;  // fast u range (inclusive)
+    const double stepF = f.step;
+    const std::ptrdiff_t su = std::ptrdiff_t(f.stride[f.u]), sv = std::ptrdiff_t(f.stride[f.v]);
+    float* t = T.data();
+    const float* val = value_.data();
+    const double* integ = integral_.data();
+    const int first = f.sa > 0 ? na - 1 : 0;
+    for (int s = 1; s < na; ++s) {
+        const int c = first - f.sa * s;
+        const std::ptrdiff_t up = std::ptrdiff_t(f.sa) * std::ptrdiff_t(f.stride[f.a]);
+        tbb::parallel_for(tbb::blocked_range<int>(0, nv), [&](const tbb::blocked_range<int>& r) {
+            for (int v = r.begin(); v < r.end(); ++v) {
+                const bool rowFast = !anyPlanes && v + f.ov >= 0 && v + f.ov + 1 <= nv - 1;
+                const int lo = rowFast ? std::max(uLo, 0) : nu, hi = rowFast ? std::min(uHi, nu - 1) : -1;
+                for (int u = 0; u < nu; ++u) {
+                    if (u < lo || u > hi) {
+                        slowVoxel(f, c, u, v, t);
+                        continue;
+                    }
+                    const std::ptrdiff_t idx = std::ptrdiff_t(c) * std::ptrdiff_t(f.stride[f.a]) +
+                                               std::ptrdiff_t(u) * su + std::ptrdiff_t(v) * sv;
+                    const std::ptrdiff_t q = idx + up + f.ou * su + f.ov * sv;
+                    const float tUp = f.w00 * t[q] + f.w10 * t[q + su] + f.w01 * t[q + sv] +
+                                      f.w11 * t[q + su + sv];
+                    const float vUp = f.w00 * val[q] + f.w10 * val[q + su] +
+                                      f.w01 * val[q + sv] + f.w11 * val[q + su + sv];
+                    const float vx = val[idx];
+                    if (table_.transparentSegment(vx, vUp)) {
+                        t[idx] = tUp;
+                        continue;
+                    }
+                    const float mean =
+                        table_.meanExtinction(vx, integ[idx], vUp, table_.sigmaIntegral(vUp));
+                    t[idx] = tUp * std::exp(-float(stepF * mean));
+                }
+            }
+        });
+    }
+}
+
+/// Trilinear stencil of a point in the voxel grid: base index and fractions (offsets 1, nx, nx·ny,
+/// or 0 along an axis of one voxel).
+struct Stencil {
+    std::uint64_t base = 0;
+    float fx = 0, fy = 0, fz = 0;
+};
+
+Stencil stencilAt(const glm::ivec3& n, glm::vec3 p) {
+    p = glm::clamp(p, glm::vec3(0.f), glm::vec3(glm::max(n - 1, glm::ivec3(0))));
+    const glm::ivec3 i = glm::min(glm::ivec3(p), glm::max(n - 2, glm::ivec3(0)));
+    Stencil s;
+    s.base = std::uint64_t(i.x) + std::uint64_t(n.x) * (std::uint64_t(i.y) + std::uint64_t(n.y) * std::uint64_t(i.z));
+    s.fx = p.x - float(i.x), s.fy = p.y - float(i.y), s.fz = p.z - float(i.z);
+    return s;
+}
+
+float sampleStencil(const float* f, const Stencil& s, std::size_t dx, std::size_t dy,
+                    std::size_t dz) {
+    const float* q = f + s.base;
+    const float c00 = q[0] + s.fx * (q[dx] - q[0]);
+    const float c10 = q[dy] + s.fx * (q[dy + dx] - q[dy]);
+    const float c01 = q[dz] + s.fx * (q[dz + dx] - q[dz]);
+    const float c11 = q[dz + dy] + s.fx * (q[dz + dy + dx] - q[dz + dy]);
+    const float c0 = c00 + s.fy * (c10 - c00), c1 = c01 + s.fy * (c11 - c01);
+    return c0 + s.fz * (c1 - c0);
+}
+
+glm::dvec3 unitTowardLight(const glm::dvec3& w) {
+    const double len = glm::length(w);
+    if (!(len > 0.0) || !std::isfinite(len))
+        throw InternalError("pvrt direct: the direction toward the light must be non-zero and finite");
+    return w / len;
+}
+
+}  // namespace
+
+float sampleVoxelField(const std::vector<float>& field, const glm::ivec3& dims, const glm::vec3& p) {
+    VL_CHECK(field.size() == std::size_t(dims.x) * std::size_t(dims.y) * std::size_t(dims.z));
+    return float(trilinear(field.data(), dims, glm::dvec3(p)));
+}
+
+std::vector<float> sweepTransmittance(const core::Volume& volume, const optics::TfTable& table,
+                                      const glm::dvec3& towardLight, const DirectOptions& options) {
+    const glm::dvec3 w = unitTowardLight(towardLight);
+    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+    std::vector<float> T;
+    arena.execute([&] {
+        const Sweeper sweeper(volume, table, options);
+        sweeper.sweep(w, T);
+    });
+    return T;
+}
+
+DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable& table,
+                              const Basis& basis, Transfer& transfer, const DirectOptions& options,
+                              const core::Progress& progress) {
+    const core::Stopwatch clock;
+    const TransferLayout& layout = transfer.layout;
+    const glm::ivec3 dims = volume.dims();
+    VL_CHECK(transfer.basis == basis.size());
+    VL_CHECK(layout.slot.size() == std::size_t(layout.res.x) * layout.res.y * layout.res.z);
+    VL_CHECK(layout.scale == glm::vec3(dims) / glm::vec3(layout.res));
+    VL_CHECK(transfer.values.size() == std::size_t(layout.points) * transfer.rowSize());
+    if (options.directions != 42 && options.directions != 162 && options.directions != 642)
+        throw InputError("pvrt", "directions",
+                         "the direct part's quadrature has no set of " +
+                             std::to_string(options.directions) + " directions",
+                         "use 42, 162 or 642 directions");
+
+    // Quadrature directions and weights; the basis's own DSF when it is the same set, so that
+    // direction j feeds basis light j alone.
+    const bool sameDsf = basis.kind() == BasisKind::Dsf && basis.size() == options.directions;
+    std::shared_ptr<const sh::Dsf> own;
+    if (!sameDsf) own = std::make_shared<const sh::Dsf>(options.directions);
+    const sh::Dsf& quad = sameDsf ? *basis.dsf() : *own;
+    const int J = quad.size();
+    const int m = basis.size();
+
+    // Trilinear stencils of the stored points in the voxel grid.
+    const std::vector<glm::ivec3> points = layout.storedPoints();
+    const std::size_t P = points.size();
+    std::vector<Stencil> stencils(P);
+    for (std::size_t p = 0; p < P; ++p) stencils[p] = stencilAt(dims, layout.position(points[p]));
+    const std::size_t dx = dims.x > 1 ? 1 : 0;
+    const std::size_t dy = dims.y > 1 ? std::size_t(dims.x) : 0;
+    const std::size_t dz = dims.z > 1 ? std::size_t(dims.x) * std::size_t(dims.y) : 0;
+
+    DirectStats stats;
+    stats.directions = J;
+    const int batch = std::min(kDirectionBatch, J);
+    std::vector<float> Tvol, Tpts(std::size_t(batch) * P);
+    struct Entry {
+        int k;
+        float c;
+    };
+    std::vector<std::vector<Entry>> entries(static_cast<std::size_t>(batch));
+    std::vector<int> idx(std::size_t(basis.maxSupport()));
+    std::vector<float> val(std::size_t(basis.maxSupport()));
+    const double inv4Pi = 1.0 / (4.0 * std::numbers::pi);
+
+    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        const Sweeper sweeper(volume, table, options);
+        for (int j0 = 0; j0 < J; j0 += batch) {
+            const int nb = std::min(batch, J - j0);
+            for (int b = 0; b < nb; ++b) {
+                const int j = j0 + b;
+                progress.report("pvrt direct", double(j) / double(J));
+                const glm::dvec3 w = quad.directions()[std::size_t(j)];
+                // Basis lights seen from ω_j, with the quadrature weight and the phase.
+                const double scale = quad.basisSolidAngles()[std::size_t(j)] * inv4Pi;
+                auto& e = entries[std::size_t(b)];
+                e.clear();
+                if (sameDsf) {
+                    e.push_back({j, float(scale)});
+                } else {
+                    const int count = basis.evaluate(w, idx.data(), val.data());
+                    for (int i = 0; i < count; ++i)
+                        if (val[std::size_t(i)] != 0.f)
+                            e.push_back({idx[std::size_t(i)], float(scale * val[std::size_t(i)])});
+                }
+                // T∞ of this direction at every voxel, then at the stored points.
+                sweeper.sweep(w, Tvol);
+                stats.voxelUpdates += sweeper.voxels();
+                float* out = Tpts.data() + std::size_t(b) * P;
+                tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P),
+                                  [&](const tbb::blocked_range<std::size_t>& r) {
+                                      for (std::size_t p = r.begin(); p < r.end(); ++p)
+                                          out[p] = sampleStencil(Tvol.data(), stencils[p], dx, dy, dz);
+                                  });
+            }
+            // Add the batch into the rows, directions in order.
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), [&](const tbb::blocked_range<std::size_t>& r) {
+                std::vector<double> acc(static_cast<std::size_t>(m));
+                for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                    float* row = transfer.row(std::int32_t(p));
+                    if (basis.kind() == BasisKind::Dsf) {
+                        for (int b = 0; b < nb; ++b) {
+                            const float t = Tpts[std::size_t(b) * P + p];
+                            for (const Entry& e : entries[std::size_t(b)])
+                                for (int c = 0; c < 3; ++c) row[e.k * 3 + c] += t * e.c;
+                        }
+                        continue;
+                    }
+                    std::fill(acc.begin(), acc.end(), 0.0);
+                    for (int b = 0; b < nb; ++b) {
+                        const double t = Tpts[std::size_t(b) * P + p];
+                        for (const Entry& e : entries[std::size_t(b)]) acc[std::size_t(e.k)] += t * e.c;
+                    }
+                    for (int k = 0; k < m; ++k)
+                        for (int c = 0; c < 3; ++c) row[k * 3 + c] += float(acc[std::size_t(k)]);
+                }
+            });
+        }
+    });
+    progress.report("pvrt direct", 1.0);
+    stats.seconds = clock.seconds();
+    return stats;
+}
+
+}  // namespace voxlight::pvrt

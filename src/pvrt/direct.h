@@ -1,0 +1,85 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The direct part of PVRT's transfer (Zhang, Dong & Ma 2013 §6, "direct illumination"): light of
+// basis light k that reaches a stored point x unscattered,
+//   t_k^dir(x) = (1/4π) ∫ T∞(x, ω) B_k(ω) dω,   T∞(x, ω) = exp(−∫_0^∞ σt(x + sω) ds),
+// added equally to R, G and B of every stored point (transfer.h; isotropic phase 1/4π, before the
+// albedo). ω points from x toward the distant light; the medium is the box of the voxel centres
+// (core::Geometry::worldBounds, as the path tracer), σt = 0 outside it.
+//
+// Quadrature: the directions ω_j of the icosahedral DSF set of `directions` (42, 162 or 642;
+// sh/dsf.h) with weights A_j = its basis solid angles (Σ A_j = 4π), so
+//   t_k^dir(x) ≈ (1/4π) Σ_j A_j T∞(x, ω_j) B_k(ω_j).
+// With the DSF basis of the same count the directions are the basis directions, B_k(ω_j) = δ_jk,
+// and each direction feeds one basis light exactly (t_k = A_k T∞(x, ω_k)/4π).
+//
+// T∞ for all voxels of one direction at once: a slice sweep (semi-Lagrangian propagation). The
+// slices are taken across the axis a on which ω has its largest index-space component, starting
+// at the slice nearest the light (T = 1 there: it lies on the box face). A voxel x of the next
+// slice takes T(x) = T(x + s·ω)·exp(−τ), where s = the distance (mm) at which x + s·ω lies exactly
+// in the previous slice; there T and the value are bilinear in that slice (the transverse offset
+// is the same for every voxel, so it is a fixed 4-tap stencil). τ = s·mean σt over the segment,
+// pre-integrated (optics::TfTable::meanExtinction) for the value varying linearly between the two
+// ends, so a sharp TF step between two voxels gets its exact share. A segment that leaves the box
+// sideways ends there (T = 1 beyond). The bilinear re-sampling blurs T across the sweep by up to
+// about a voxel per slice-to-slice diffusion (a thin shadow edge widens with the distance it
+// travels; tests/pvrt/test_direct.cpp measures it).
+//
+// Clip geometry: a clip plane or crop box with shadowsFromRemoved == false removes its matter for
+// the light too: σt = 0 outside the kept (convex) region, applied exactly per segment (the kept
+// part of each segment, with the value interpolated along it). Planes with shadowsFromRemoved ==
+// true are ignored here (their matter still casts shadows).
+//
+// Parallel within a slice (oneTBB), every voxel computed by the same arithmetic: results are
+// bit-identical for any thread count. One float T volume per direction in flight, and T at the
+// stored points for a batch of kDirectionBatch directions.
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <optional>
+#include <vector>
+
+#include "core/progress.h"
+#include "core/volume.h"
+#include "optics/transfer_function.h"
+#include "pvrt/basis.h"
+#include "pvrt/transfer.h"
+#include "render/ray_caster.h"
+
+namespace voxlight::pvrt {
+
+/// Directions whose transmittance at the stored points is held before they are added into the
+/// transfer rows (each row is then read and written once per batch, not once per direction).
+inline constexpr int kDirectionBatch = 32;
+
+struct DirectOptions {
+    int directions = 162;  ///< quadrature directions: 42, 162 or 642 (InputError otherwise)
+    int threads = 0;       ///< 0 = all hardware threads
+    std::vector<render::ClipPlane> clipPlanes;
+    std::optional<render::CropBox> cropBox;
+};
+
+struct DirectStats {
+    int directions = 0;
+    std::uint64_t voxelUpdates = 0;  ///< swept voxels over all directions
+    double seconds = 0;
+};
+
+/// T∞(x, ω) at every voxel centre (x fastest, core::Volume::linearIndex) for the distant light in
+/// world direction `towardLight` (normalised here; InternalError if zero), by the slice sweep
+/// above. Uses options.threads and the clip geometry; ignores options.directions.
+std::vector<float> sweepTransmittance(const core::Volume& volume, const optics::TfTable& table,
+                                      const glm::dvec3& towardLight, const DirectOptions& options);
+
+/// Adds t_k^dir to R, G and B of every stored point of `transfer` (its layout must be made for
+/// `volume`, its basis count basis.size(); InternalError otherwise). Progress stage "pvrt direct",
+/// one report per direction; throws CancelledError when cancelled (the transfer is then partly
+/// filled).
+DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable& table,
+                              const Basis& basis, Transfer& transfer, const DirectOptions& options,
+                              const core::Progress& progress = core::Progress::none());
+
+/// Trilinear interpolation of a per-voxel float field (x fastest) at continuous voxel coordinate
+/// p, clamped to the grid (the transfer's stored points read T this way).
+float sampleVoxelField(const std::vector<float>& field, const glm::ivec3& dims, const glm::vec3& p);
+
+}  // namespace voxlight::pvrt
