@@ -95,16 +95,16 @@ class Sweeper {
 
 /// One direction's sweep geometry.
 struct Sweeper::Frame {
-    int a = 0, u = 0, v = 0;           ///< main axis and the transverse axes (u: smaller stride)
-    int sa = 1;                        ///< upstream slice = current + sa
-    double step = 0;                   ///< mm from a slice to the next along ω
-    glm::dvec3 delta{0.0};             ///< index offset of the upstream point (delta[a] = sa)
-    glm::ivec3 n{0};                   ///< dims
+    int a = 0, u = 0, v = 0;  ///< main axis and the transverse axes (u: smaller stride)
+    int sa = 1;               ///< upstream slice = current + sa
+    double step = 0;          ///< mm from a slice to the next along ω
+    glm::dvec3 delta{0.0};    ///< index offset of the upstream point (delta[a] = sa)
+    glm::ivec3 n{0};          ///< dims
     std::size_t stride[3] = {0, 0, 0};
-    int ou = 0, ov = 0;                ///< lower taps of the stencil (−1 or 0)
-    float fu = 0, fv = 0;              ///< bilinear fractions
+    int ou = 0, ov = 0;    ///< lower taps of the stencil (−1 or 0)
+    float fu = 0, fv = 0;  ///< bilinear fractions
     float w00 = 0, w10 = 0, w01 = 0, w11 = 0;
-    std::vector<double> planeDelta;    ///< per plane: d(upstream) − d(voxel), mm
+    std::vector<double> planeDelta;  ///< per plane: d(upstream) − d(voxel), mm
 };
 
 void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
@@ -128,8 +128,8 @@ void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
         auto tap = [&](const auto* field, int du, int dv) {
             const int uu = std::clamp(u + f.ou + du, 0, f.n[f.u] - 1);
             const int vv = std::clamp(v + f.ov + dv, 0, f.n[f.v] - 1);
-            return double(field[prev + std::size_t(uu) * f.stride[f.u] +
-                                std::size_t(vv) * f.stride[f.v]]);
+            return double(
+                field[prev + std::size_t(uu) * f.stride[f.u] + std::size_t(vv) * f.stride[f.v]]);
         };
         auto bilinear = [&](const auto* field) {
             return double(f.w00) * tap(field, 0, 0) + double(f.w10) * tap(field, 1, 0) +
@@ -155,7 +155,9 @@ void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
     double tau = 0.0;
     if (tb > ta) {
         const double vx = value_[idx];
-        auto valueAt = [&](double t) { return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx); };
+        auto valueAt = [&](double t) {
+            return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx);
+        };
         const float va = valueAt(ta), vb = valueAt(tb);
         if (!table_.transparentSegment(va, vb)) {
             const double ia = ta == 0.0 ? integral_[idx] : table_.sigmaIntegral(va);
@@ -214,7 +216,8 @@ void Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const {
         tbb::parallel_for(tbb::blocked_range<int>(0, nv), [&](const tbb::blocked_range<int>& r) {
             for (int v = r.begin(); v < r.end(); ++v) {
                 const bool rowFast = !anyPlanes && v + f.ov >= 0 && v + f.ov + 1 <= nv - 1;
-                const int lo = rowFast ? std::max(uLo, 0) : nu, hi = rowFast ? std::min(uHi, nu - 1) : -1;
+                const int lo = rowFast ? std::max(uLo, 0) : nu,
+                          hi = rowFast ? std::min(uHi, nu - 1) : -1;
                 for (int u = 0; u < nu; ++u) {
                     if (u < lo || u > hi) {
                         slowVoxel(f, c, u, v, t);
@@ -225,8 +228,8 @@ void Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const {
                     const std::ptrdiff_t q = idx + up + f.ou * su + f.ov * sv;
                     const float tUp = f.w00 * t[q] + f.w10 * t[q + su] + f.w01 * t[q + sv] +
                                       f.w11 * t[q + su + sv];
-                    const float vUp = f.w00 * val[q] + f.w10 * val[q + su] +
-                                      f.w01 * val[q + sv] + f.w11 * val[q + su + sv];
+                    const float vUp = f.w00 * val[q] + f.w10 * val[q + su] + f.w01 * val[q + sv] +
+                                      f.w11 * val[q + su + sv];
                     const float vx = val[idx];
                     if (table_.transparentSegment(vx, vUp)) {
                         t[idx] = tUp;
@@ -252,7 +255,8 @@ Stencil stencilAt(const glm::ivec3& n, glm::vec3 p) {
     p = glm::clamp(p, glm::vec3(0.f), glm::vec3(glm::max(n - 1, glm::ivec3(0))));
     const glm::ivec3 i = glm::min(glm::ivec3(p), glm::max(n - 2, glm::ivec3(0)));
     Stencil s;
-    s.base = std::uint64_t(i.x) + std::uint64_t(n.x) * (std::uint64_t(i.y) + std::uint64_t(n.y) * std::uint64_t(i.z));
+    s.base = std::uint64_t(i.x) +
+             std::uint64_t(n.x) * (std::uint64_t(i.y) + std::uint64_t(n.y) * std::uint64_t(i.z));
     s.fx = p.x - float(i.x), s.fy = p.y - float(i.y), s.fz = p.z - float(i.z);
     return s;
 }
@@ -271,13 +275,15 @@ float sampleStencil(const float* f, const Stencil& s, std::size_t dx, std::size_
 glm::dvec3 unitTowardLight(const glm::dvec3& w) {
     const double len = glm::length(w);
     if (!(len > 0.0) || !std::isfinite(len))
-        throw InternalError("pvrt direct: the direction toward the light must be non-zero and finite");
+        throw InternalError(
+            "pvrt direct: the direction toward the light must be non-zero and finite");
     return w / len;
 }
 
 }  // namespace
 
-float sampleVoxelField(const std::vector<float>& field, const glm::ivec3& dims, const glm::vec3& p) {
+float sampleVoxelField(const std::vector<float>& field, const glm::ivec3& dims,
+                       const glm::vec3& p) {
     VL_CHECK(field.size() == std::size_t(dims.x) * std::size_t(dims.y) * std::size_t(dims.z));
     return float(trilinear(field.data(), dims, glm::dvec3(p)));
 }
@@ -369,31 +375,36 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                 tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P),
                                   [&](const tbb::blocked_range<std::size_t>& r) {
                                       for (std::size_t p = r.begin(); p < r.end(); ++p)
-                                          out[p] = sampleStencil(Tvol.data(), stencils[p], dx, dy, dz);
+                                          out[p] =
+                                              sampleStencil(Tvol.data(), stencils[p], dx, dy, dz);
                                   });
             }
             // Add the batch into the rows, directions in order.
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), [&](const tbb::blocked_range<std::size_t>& r) {
-                std::vector<double> acc(static_cast<std::size_t>(m));
-                for (std::size_t p = r.begin(); p < r.end(); ++p) {
-                    float* row = transfer.row(std::int32_t(p));
-                    if (basis.kind() == BasisKind::Dsf) {
-                        for (int b = 0; b < nb; ++b) {
-                            const float t = Tpts[std::size_t(b) * P + p];
-                            for (const Entry& e : entries[std::size_t(b)])
-                                for (int c = 0; c < 3; ++c) row[e.k * 3 + c] += t * e.c;
-                        }
-                        continue;
-                    }
-                    std::fill(acc.begin(), acc.end(), 0.0);
-                    for (int b = 0; b < nb; ++b) {
-                        const double t = Tpts[std::size_t(b) * P + p];
-                        for (const Entry& e : entries[std::size_t(b)]) acc[std::size_t(e.k)] += t * e.c;
-                    }
-                    for (int k = 0; k < m; ++k)
-                        for (int c = 0; c < 3; ++c) row[k * 3 + c] += float(acc[std::size_t(k)]);
-                }
-            });
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P),
+                              [&](const tbb::blocked_range<std::size_t>& r) {
+                                  std::vector<double> acc(static_cast<std::size_t>(m));
+                                  for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                                      float* row = transfer.row(std::int32_t(p));
+                                      if (basis.kind() == BasisKind::Dsf) {
+                                          for (int b = 0; b < nb; ++b) {
+                                              const float t = Tpts[std::size_t(b) * P + p];
+                                              for (const Entry& e : entries[std::size_t(b)])
+                                                  for (int c = 0; c < 3; ++c)
+                                                      row[e.k * 3 + c] += t * e.c;
+                                          }
+                                          continue;
+                                      }
+                                      std::fill(acc.begin(), acc.end(), 0.0);
+                                      for (int b = 0; b < nb; ++b) {
+                                          const double t = Tpts[std::size_t(b) * P + p];
+                                          for (const Entry& e : entries[std::size_t(b)])
+                                              acc[std::size_t(e.k)] += t * e.c;
+                                      }
+                                      for (int k = 0; k < m; ++k)
+                                          for (int c = 0; c < 3; ++c)
+                                              row[k * 3 + c] += float(acc[std::size_t(k)]);
+                                  }
+                              });
         }
     });
     progress.report("pvrt direct", 1.0);
