@@ -136,6 +136,7 @@ struct Sweeper::Frame {
     int ou = 0, ov = 0;    ///< lower taps of the stencil (−1 or 0)
     float fu = 0, fv = 0;  ///< bilinear fractions
     float w00 = 0, w10 = 0, w01 = 0, w11 = 0;
+    float cu[4] = {}, cv[4] = {};    ///< Catmull–Rom weights of taps o−1 … o+2
     std::vector<double> planeDelta;  ///< per plane: d(upstream) − d(voxel), mm
 };
 
@@ -227,6 +228,15 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
     f.w10 = f.fu * (1.f - f.fv);
     f.w01 = (1.f - f.fu) * f.fv;
     f.w11 = f.fu * f.fv;
+    auto catmullRom = [](float x, float* w) {
+        const float x2 = x * x, x3 = x2 * x;
+        w[0] = 0.5f * (-x3 + 2.f * x2 - x);
+        w[1] = 0.5f * (3.f * x3 - 5.f * x2 + 2.f);
+        w[2] = 0.5f * (-3.f * x3 + 4.f * x2 + x);
+        w[3] = 0.5f * (x3 - x2);
+    };
+    catmullRom(f.fu, f.cu);
+    catmullRom(f.fv, f.cv);
     for (const IndexPlane& p : planes_) f.planeDelta.push_back(glm::dot(p.g, f.delta));
 
     const int na = f.n[f.a], nu = f.n[f.u], nv = f.n[f.v];
@@ -235,8 +245,12 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
     // general one.
     const bool anyPlanes = !planes_.empty();
     const int uLo = -f.ou, uHi = nu - 2 - f.ou;  // fast u range (inclusive)
+    const int cuLo = uLo + 1, cuHi = uHi - 1;    // range with all 4×4 cubic taps
     const double stepF = f.step;
-    const std::ptrdiff_t su = std::ptrdiff_t(f.stride[f.u]), sv = std::ptrdiff_t(f.stride[f.v]);
+    // Both orderings make u the contiguous axis (natural: x for sweeps along y or z; x-major: y).
+    VL_CHECK(f.stride[f.u] == 1);
+    constexpr std::ptrdiff_t su = 1;
+    const std::ptrdiff_t sv = std::ptrdiff_t(f.stride[f.v]);
     float* t = T.data();
     const float* val = f.fields->value.data();
     const double* integ = f.fields->integral.data();
@@ -247,8 +261,11 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
         tbb::parallel_for(tbb::blocked_range<int>(0, nv), [&](const tbb::blocked_range<int>& r) {
             for (int v = r.begin(); v < r.end(); ++v) {
                 const bool rowFast = !anyPlanes && v + f.ov >= 0 && v + f.ov + 1 <= nv - 1;
+                const bool rowCubic = rowFast && v + f.ov - 1 >= 0 && v + f.ov + 2 <= nv - 1;
                 const int lo = rowFast ? std::max(uLo, 0) : nu,
                           hi = rowFast ? std::min(uHi, nu - 1) : -1;
+                const int clo = rowCubic ? std::max(cuLo, 0) : nu,
+                          chi = rowCubic ? std::min(cuHi, nu - 1) : -1;
                 for (int u = 0; u < nu; ++u) {
                     if (u < lo || u > hi) {
                         slowVoxel(f, c, u, v, t);
@@ -257,8 +274,23 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
                     const std::ptrdiff_t idx = std::ptrdiff_t(c) * std::ptrdiff_t(f.stride[f.a]) +
                                                std::ptrdiff_t(u) * su + std::ptrdiff_t(v) * sv;
                     const std::ptrdiff_t q = idx + up + f.ou * su + f.ov * sv;
-                    const float tUp = f.w00 * t[q] + f.w10 * t[q + su] + f.w01 * t[q + sv] +
-                                      f.w11 * t[q + su + sv];
+                    const float t00 = t[q], t10 = t[q + su], t01 = t[q + sv], t11 = t[q + su + sv];
+                    const float tMin = std::min(std::min(t00, t10), std::min(t01, t11));
+                    const float tMax = std::max(std::max(t00, t10), std::max(t01, t11));
+                    float tUp;
+                    if (tMin == tMax) {
+                        tUp = tMin;  // what the clamped cubic would give (most of empty space)
+                    } else if (u >= clo && u <= chi) {
+                        // Catmull–Rom, clamped to the 4 nearest taps (no new extrema).
+                        const float* r = t + q - su - sv;
+                        float sum = 0.f;
+                        for (int y = 0; y < 4; ++y, r += sv)
+                            sum += f.cv[y] * (f.cu[0] * r[0] + f.cu[1] * r[su] +
+                                              f.cu[2] * r[2 * su] + f.cu[3] * r[3 * su]);
+                        tUp = std::clamp(sum, tMin, tMax);
+                    } else {
+                        tUp = f.w00 * t00 + f.w10 * t10 + f.w01 * t01 + f.w11 * t11;
+                    }
                     const float vUp = f.w00 * val[q] + f.w10 * val[q + su] + f.w01 * val[q + sv] +
                                       f.w11 * val[q + su + sv];
                     const float vx = val[idx];

@@ -145,14 +145,14 @@ std::ostream& operator<<(std::ostream& os, const ErrorStats& s) {
     return os << "max " << s.max << " mean " << s.mean << " p95 " << s.p95;
 }
 
-/// Oblique sweeps re-sample T bilinearly once per slice: a first-order semi-Lagrangian scheme
-/// whose numerical diffusion widens a kink of T (the slab's faces, the rays that leave the box
-/// sideways) to ≈ √(N·f(1−f)) voxels after N slices (f: the transverse fraction), ≈ 2.5 voxels
-/// across the 32³ slab. Measured on the slab (T ∈ [0.13, 1]): mean ≤ 0.013, p95 ≤ 0.06, max ≤
-/// 0.27 (right at a sideways exit).
-constexpr double kBlurMeanTol = 0.02;
-constexpr double kBlurP95Tol = 0.1;
-constexpr double kBlurMaxTol = 0.35;
+/// Oblique sweeps re-sample T once per slice (semi-Lagrangian): the clamped Catmull–Rom keeps the
+/// numerical diffusion small where T is smooth, but a kink or step of T (the slab's faces, the
+/// rays that leave the box sideways, where the bilinear edge ring takes over) still widens by
+/// about a voxel. Measured on the 32³ slab (T ∈ [0.13, 1]): mean ≤ 0.007, p95 ≤ 0.052, max ≤
+/// 0.22 (right at a sideways exit); plain bilinear gave mean ≤ 0.013, p95 ≤ 0.085, max 0.26.
+constexpr double kBlurMeanTol = 0.01;
+constexpr double kBlurP95Tol = 0.08;
+constexpr double kBlurMaxTol = 0.3;
 
 TEST(PvrtSweep, SlabObliqueWithinTheSweepsBlur) {
     const core::Volume v = core::makePhantom("slab", {.size = 32});
@@ -178,11 +178,11 @@ TEST(PvrtSweep, SlabObliqueWithinTheSweepsBlur) {
 }
 
 /// Inside the sphere (≥ 1.5 voxels from its surface) T∞ = exp(−σ·chord). Along an axis only the
-/// curved face's partial voxels err (measured max 7e-4); obliquely the blur adds (measured max
-/// 0.021, mean 0.0066 with σ·r = 1 on a 32³ sphere).
+/// curved face's partial voxels err (measured max 7e-4); obliquely the re-sampling adds (measured
+/// max 0.015, mean 0.001 with σ·r = 1 on a 32³ sphere; bilinear: 0.021, 0.0066).
 constexpr double kSphereAxisTol = 2e-3;
-constexpr double kSphereMaxTol = 0.04;
-constexpr double kSphereMeanTol = 0.01;
+constexpr double kSphereMaxTol = 0.03;
+constexpr double kSphereMeanTol = 0.002;
 
 TEST(PvrtSweep, SphereInteriorMatchesTheChord) {
     const core::Volume v = core::makePhantom("sphere", {.size = 32});
@@ -209,11 +209,12 @@ TEST(PvrtSweep, SphereInteriorMatchesTheChord) {
 
 /// Against a fine march (0.1-voxel midpoint rule on the trilinear value) through the 48³ torso
 /// under ct-soft-tissue: bone is nearly opaque (σt 1/mm = 8.3 per voxel), so its shadow edges are
-/// steps of T that the sweep blurs (max up to 0.55 at a few voxels); the mean and the 95th
-/// percentile say whether the field is right. Measured: axis mean 2e-4, oblique mean ≤ 0.024.
+/// steps of T that the sweep blurs (max 0.48 at a few voxels); the mean and the 95th percentile
+/// say whether the field is right. Measured: axis max 0.0064; oblique mean ≤ 0.014, p95 ≤ 0.077
+/// (bilinear: 0.023, 0.145).
 constexpr double kTorsoAxisMaxTol = 0.01;
-constexpr double kTorsoMeanTol = 0.04;
-constexpr double kTorsoP95Tol = 0.15;
+constexpr double kTorsoMeanTol = 0.025;
+constexpr double kTorsoP95Tol = 0.12;
 
 TEST(PvrtSweep, TorsoAgainstAFineMarch) {
     const core::Volume v = core::makePhantom("torso", {.size = 48});
