@@ -36,8 +36,13 @@
 // true are ignored here (their matter still casts shadows).
 //
 // Parallel within a slice (oneTBB), every voxel computed by the same arithmetic: results are
-// bit-identical for any thread count. One float T volume per direction in flight, and T at the
-// stored points for a batch of kDirectionBatch directions.
+// bit-identical for any thread count. Memory: the values and their σt integrals in two voxel
+// orderings (natural, and x-major so that sweeps across x read contiguous slices), 24 bytes per
+// voxel; one float T volume per direction in flight; T at the stored points for a batch of
+// kDirectionBatch directions (4·kDirectionBatch bytes per stored point).
+// Cost: one sweep per direction over every voxel (128³ torso, 162 directions, 2 cores: a few
+// seconds; see the timing test), independent of the basis; the basis only costs the final
+// accumulation (m multiply-adds per point and direction for SH, one for DSF).
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <optional>
@@ -57,8 +62,11 @@ namespace voxlight::pvrt {
 inline constexpr int kDirectionBatch = 32;
 
 struct DirectOptions {
-    int directions = 162;  ///< quadrature directions: 42, 162 or 642 (InputError otherwise)
-    int threads = 0;       ///< 0 = all hardware threads
+    /// Quadrature directions: 42, 162 or 642 (InputError otherwise). With a DSF basis use its own
+    /// count (each basis light then gets exactly its direction's T∞); fewer directions than DSF
+    /// basis lights leave most basis lights with a few quadrature points in their support.
+    int directions = 162;
+    int threads = 0;  ///< 0 = all hardware threads
     std::vector<render::ClipPlane> clipPlanes;
     std::optional<render::CropBox> cropBox;
 };

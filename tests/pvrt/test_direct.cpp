@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <iostream>
@@ -455,6 +456,32 @@ TEST(PvrtDirect, HugeExtinctionStaysFinite) {
     pvrt::Transfer tr(fullLayout(v.dims(), glm::ivec3(8)), 9);
     pvrt::addDirectTransfer(v, table, pvrt::Basis::sh(3), tr, threads(2));
     for (float x : tr.values) ASSERT_TRUE(std::isfinite(x));
+}
+
+TEST(PvrtDirect, ReportsProgressAndCanBeCancelled) {
+    const core::Volume v = core::makePhantom("sphere", {.size = 8});
+    const optics::TfTable table(test::stepTf(0.01f, glm::vec3(1.f)));
+    pvrt::Transfer tr(fullLayout(v.dims(), glm::ivec3(2)), 1);
+    pvrt::DirectOptions o;
+    o.directions = 42;
+    std::atomic<bool> cancel{false};
+    int reports = 0, cancelAt = 10;
+    double last = -1;
+    const core::Progress progress(
+        [&](const std::string& stage, double fraction) {
+            EXPECT_EQ(stage, "pvrt direct");
+            EXPECT_GE(fraction, last);
+            last = fraction;
+            if (++reports == cancelAt) cancel = true;
+        },
+        &cancel);
+    EXPECT_THROW(pvrt::addDirectTransfer(v, table, pvrt::Basis::sh(1), tr, o, progress),
+                 CancelledError);
+    EXPECT_EQ(reports, 10);
+    cancel = false;
+    reports = 0, last = -1, cancelAt = -1;
+    pvrt::addDirectTransfer(v, table, pvrt::Basis::sh(1), tr, o, progress);
+    EXPECT_EQ(last, 1.0);
 }
 
 TEST(PvrtDirect, RejectsAnUnknownDirectionCount) {
