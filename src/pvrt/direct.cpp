@@ -117,6 +117,13 @@ class Sweeper {
   private:
     struct Frame;
     void slowVoxel(const Frame& f, int c, int u, int v, float* T) const;
+    /// The kept part [ta, tb] of the segment's parameter range [ta, tb] (in: the range inside the
+    /// box) under the clip half-spaces, for the voxel at index x.
+    void keep(const Frame& f, const glm::dvec3& x, double& ta, double& tb) const;
+    /// Optical depth of the kept part [ta, tb] of the segment from voxel idx (t = 0) to the point
+    /// at t = tEnd whose value is vEnd (value linear in between).
+    double keptDepth(const Frame& f, std::size_t idx, double tEnd, double vEnd, double ta,
+                     double tb) const;
 
     const optics::TfTable& table_;
     core::Geometry geometry_;
@@ -173,8 +180,12 @@ void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
     } else {
         vEnd = trilinear(f.fields->value.data(), f.n, f.fields->strides, x + tEnd * f.delta);
     }
-    // The kept part [ta, tb] of the segment [0, tEnd].
     double ta = 0.0, tb = tEnd;
+    keep(f, x, ta, tb);
+    T[idx] = tUp * std::exp(-float(keptDepth(f, idx, tEnd, vEnd, ta, tb)));
+}
+
+void Sweeper::keep(const Frame& f, const glm::dvec3& x, double& ta, double& tb) const {
     for (std::size_t i = 0; i < planes_.size(); ++i) {
         const double d0 = planes_[i].at(x), dd = f.planeDelta[i];
         if (dd == 0.0) {
@@ -185,19 +196,17 @@ void Sweeper::slowVoxel(const Frame& f, int c, int u, int v, float* T) const {
             tb = std::min(tb, -d0 / dd);
         }
     }
-    double tau = 0.0;
-    if (tb > ta) {
-        const double vx = f.fields->value[idx];
-        auto valueAt = [&](double t) {
-            return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx);
-        };
-        const float va = valueAt(ta), vb = valueAt(tb);
-        if (!table_.transparentSegment(va, vb)) {
-            const double ia = ta == 0.0 ? f.fields->integral[idx] : table_.sigmaIntegral(va);
-            tau = f.step * (tb - ta) * table_.meanExtinction(va, ia, vb, table_.sigmaIntegral(vb));
-        }
-    }
-    T[idx] = tUp * std::exp(-float(tau));
+}
+
+double Sweeper::keptDepth(const Frame& f, std::size_t idx, double tEnd, double vEnd, double ta,
+                          double tb) const {
+    if (!(tb > ta)) return 0.0;
+    const double vx = f.fields->value[idx];
+    auto valueAt = [&](double t) { return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx); };
+    const float va = valueAt(ta), vb = valueAt(tb);
+    if (table_.transparentSegment(va, vb)) return 0.0;
+    const double ia = ta == 0.0 ? f.fields->integral[idx] : table_.sigmaIntegral(va);
+    return f.step * (tb - ta) * table_.meanExtinction(va, ia, vb, table_.sigmaIntegral(vb));
 }
 
 const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const {
@@ -240,9 +249,9 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
     for (const IndexPlane& p : planes_) f.planeDelta.push_back(glm::dot(p.g, f.delta));
 
     const int na = f.n[f.a], nu = f.n[f.u], nv = f.n[f.v];
-    // Voxels whose 4 taps are in the grid and whose upstream point is inside the box take the
-    // fast path (fixed stencil); the rest, and every voxel when clip planes remove matter, the
-    // general one.
+    // Voxels whose 4 taps are in the grid (so their upstream point is inside the box) take the
+    // fixed stencil, bicubic where its 4×4 taps are in the grid too; the ring next to the box's
+    // sides the general path.
     const bool anyPlanes = !planes_.empty();
     const int uLo = -f.ou, uHi = nu - 2 - f.ou;  // fast u range (inclusive)
     const int cuLo = uLo + 1, cuHi = uHi - 1;    // range with all 4×4 cubic taps
@@ -260,7 +269,7 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
         const std::ptrdiff_t up = std::ptrdiff_t(f.sa) * std::ptrdiff_t(f.stride[f.a]);
         tbb::parallel_for(tbb::blocked_range<int>(0, nv), [&](const tbb::blocked_range<int>& r) {
             for (int v = r.begin(); v < r.end(); ++v) {
-                const bool rowFast = !anyPlanes && v + f.ov >= 0 && v + f.ov + 1 <= nv - 1;
+                const bool rowFast = v + f.ov >= 0 && v + f.ov + 1 <= nv - 1;
                 const bool rowCubic = rowFast && v + f.ov - 1 >= 0 && v + f.ov + 2 <= nv - 1;
                 const int lo = rowFast ? std::max(uLo, 0) : nu,
                           hi = rowFast ? std::min(uHi, nu - 1) : -1;
@@ -294,6 +303,19 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
                     const float vUp = f.w00 * val[q] + f.w10 * val[q + su] + f.w01 * val[q + sv] +
                                       f.w11 * val[q + su + sv];
                     const float vx = val[idx];
+                    if (anyPlanes) {
+                        // A segment not wholly kept: its kept part (T = 1 upstream stays as is).
+                        glm::dvec3 x;
+                        x[f.a] = c, x[f.u] = u, x[f.v] = v;
+                        double ta = 0.0, tb = 1.0;
+                        keep(f, x, ta, tb);
+                        if (ta > 0.0 || tb < 1.0) {
+                            t[idx] =
+                                tUp *
+                                std::exp(-float(keptDepth(f, std::size_t(idx), 1.0, vUp, ta, tb)));
+                            continue;
+                        }
+                    }
                     if (table_.transparentSegment(vx, vUp)) {
                         t[idx] = tUp;
                         continue;

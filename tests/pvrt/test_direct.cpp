@@ -276,6 +276,11 @@ TEST(PvrtSweep, ClipGeometryRemovesMatterForTheLight) {
     EXPECT_LT(e.mean, kBlurMeanTol) << e;
     EXPECT_LT(e.p95, kBlurP95Tol) << e;
     EXPECT_LT(e.max, kBlurMaxTol) << e;
+    // A plane that keeps the whole box changes no bit.
+    pvrt::DirectOptions all = threads(2);
+    all.clipPlanes.push_back({box[0] - 1.0, glm::normalize(glm::dvec3(1, 2, 3)), false});
+    EXPECT_EQ(pvrt::sweepTransmittance(v, table, w, all),
+              pvrt::sweepTransmittance(v, table, w, threads(2)));
 }
 
 // --- addDirectTransfer ---------------------------------------------------------------------
