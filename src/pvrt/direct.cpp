@@ -9,6 +9,7 @@
 #include <cmath>
 #include <limits>
 #include <numbers>
+#include <ostream>
 
 #include "core/error.h"
 #include "core/half_space.h"
@@ -381,6 +382,11 @@ glm::dvec3 unitTowardLight(const glm::dvec3& w) {
 
 }  // namespace
 
+std::ostream& operator<<(std::ostream& os, const DirectStats& s) {
+    return os << "DirectStats{directions " << s.directions << ", voxel updates " << s.voxelUpdates
+              << ", " << s.seconds << " s}";
+}
+
 float sampleVoxelField(const std::vector<float>& field, const glm::ivec3& dims,
                        const glm::vec3& p) {
     VL_CHECK(field.size() == std::size_t(dims.x) * std::size_t(dims.y) * std::size_t(dims.z));
@@ -428,6 +434,9 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                              std::to_string(options.directions) + " directions",
                          "use 42, 162 or 642 directions");
 
+    DirectStats stats;
+    if (layout.points == 0) return stats;
+
     // Quadrature directions and weights; the basis's own DSF when it is the same set, so that
     // direction j feeds basis light j alone.
     const bool sameDsf = basis.kind() == BasisKind::Dsf && basis.size() == options.directions;
@@ -443,7 +452,6 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
     const PointSampler naturalPoints(dims, Strides::natural(dims), layout, points);
     const PointSampler xMajorPoints(dims, Strides::xMajor(dims), layout, points);
 
-    DirectStats stats;
     stats.directions = J;
     const int batch = std::min(kDirectionBatch, J);
     std::vector<float> Tvol, Tpts(std::size_t(batch) * P);

@@ -45,6 +45,7 @@
 // accumulation (m multiply-adds per point and direction for SH, one for DSF).
 #include <cstdint>
 #include <glm/glm.hpp>
+#include <iosfwd>
 #include <optional>
 #include <vector>
 
@@ -76,6 +77,7 @@ struct DirectStats {
     std::uint64_t voxelUpdates = 0;  ///< swept voxels over all directions
     double seconds = 0;
 };
+std::ostream& operator<<(std::ostream& os, const DirectStats& s);
 
 /// T∞(x, ω) at every voxel centre (x fastest, core::Volume::linearIndex) for the distant light in
 /// world direction `towardLight` (normalised here; InternalError if zero), by the slice sweep
@@ -86,7 +88,7 @@ std::vector<float> sweepTransmittance(const core::Volume& volume, const optics::
 /// Adds t_k^dir to R, G and B of every stored point of `transfer` (its layout must be made for
 /// `volume`, its basis count basis.size(); InternalError otherwise). Progress stage "pvrt direct",
 /// one report per direction; throws CancelledError when cancelled (the transfer is then partly
-/// filled).
+/// filled). No stored points: nothing to do (no sweep runs).
 DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable& table,
                               const Basis& basis, Transfer& transfer, const DirectOptions& options,
                               const core::Progress& progress = core::Progress::none());
