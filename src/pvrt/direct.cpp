@@ -460,6 +460,7 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
         float c;
     };
     std::vector<std::vector<Entry>> entries(static_cast<std::size_t>(batch));
+    std::vector<float> coefficients(std::size_t(batch) * std::size_t(m));
     std::vector<int> idx(std::size_t(basis.maxSupport()));
     std::vector<float> val(std::size_t(basis.maxSupport()));
     const double inv4Pi = 1.0 / (4.0 * std::numbers::pi);
@@ -496,32 +497,38 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                                           out[p] = at(Tvol.data(), p);
                                   });
             }
-            // Add the batch into the rows, directions in order.
-            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P),
-                              [&](const tbb::blocked_range<std::size_t>& r) {
-                                  std::vector<double> acc(static_cast<std::size_t>(m));
-                                  for (std::size_t p = r.begin(); p < r.end(); ++p) {
-                                      float* row = transfer.row(std::int32_t(p));
-                                      if (basis.kind() == BasisKind::Dsf) {
-                                          for (int b = 0; b < nb; ++b) {
-                                              const float t = Tpts[std::size_t(b) * P + p];
-                                              for (const Entry& e : entries[std::size_t(b)])
-                                                  for (int c = 0; c < 3; ++c)
-                                                      row[e.k * 3 + c] += t * e.c;
-                                          }
-                                          continue;
-                                      }
-                                      std::fill(acc.begin(), acc.end(), 0.0);
-                                      for (int b = 0; b < nb; ++b) {
-                                          const double t = Tpts[std::size_t(b) * P + p];
-                                          for (const Entry& e : entries[std::size_t(b)])
-                                              acc[std::size_t(e.k)] += t * e.c;
-                                      }
-                                      for (int k = 0; k < m; ++k)
-                                          for (int c = 0; c < 3; ++c)
-                                              row[k * 3 + c] += float(acc[std::size_t(k)]);
-                                  }
-                              });
+            // Add the batch into the rows, directions in order: SH through the dense nb × m
+            // coefficient matrix (contiguous in k), DSF through its few entries per direction.
+            const bool dense = basis.kind() == BasisKind::Sh;
+            if (dense) {
+                std::fill(coefficients.begin(), coefficients.end(), 0.f);
+                for (int b = 0; b < nb; ++b)
+                    for (const Entry& e : entries[std::size_t(b)])
+                        coefficients[std::size_t(b) * std::size_t(m) + std::size_t(e.k)] = e.c;
+            }
+            auto addRows = [&](const tbb::blocked_range<std::size_t>& r) {
+                std::vector<double> acc(static_cast<std::size_t>(m));
+                for (std::size_t p = r.begin(); p < r.end(); ++p) {
+                    float* row = transfer.row(std::int32_t(p));
+                    if (!dense) {
+                        for (int b = 0; b < nb; ++b) {
+                            const float t = Tpts[std::size_t(b) * P + p];
+                            for (const Entry& e : entries[std::size_t(b)])
+                                for (int c = 0; c < 3; ++c) row[e.k * 3 + c] += t * e.c;
+                        }
+                        continue;
+                    }
+                    std::fill(acc.begin(), acc.end(), 0.0);
+                    for (int b = 0; b < nb; ++b) {
+                        const double t = Tpts[std::size_t(b) * P + p];
+                        const float* cb = coefficients.data() + std::size_t(b) * std::size_t(m);
+                        for (int k = 0; k < m; ++k) acc[std::size_t(k)] += t * double(cb[k]);
+                    }
+                    for (int k = 0; k < m; ++k)
+                        for (int c = 0; c < 3; ++c) row[k * 3 + c] += float(acc[std::size_t(k)]);
+                }
+            };
+            tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), addRows);
         }
     });
     progress.report("pvrt direct", 1.0);
