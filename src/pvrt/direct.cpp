@@ -62,14 +62,14 @@ double trilinear(const T* f, const glm::ivec3& n, const Strides& st, glm::dvec3 
     return lerp(lerp(c00, c10, t.y), lerp(c01, c11, t.y), t.z);
 }
 
-/// Physical values and their σt integrals (TfTable::sigmaIntegral) in one voxel ordering.
+/// Physical values in one voxel ordering (their σt integrals are looked up where a segment is not
+/// transparent: storing them would triple the memory for a few per cent of time).
 struct Fields {
     Strides strides;
     std::vector<float> value;
-    std::vector<double> integral;
 
-    Fields(const core::Volume& volume, const optics::TfTable& table, const Strides& st)
-        : strides(st), value(std::size_t(volume.voxelCount())), integral(value.size()) {
+    Fields(const core::Volume& volume, const Strides& st)
+        : strides(st), value(std::size_t(volume.voxelCount())) {
         const glm::ivec3 n = volume.dims();
         volume.visit([&](const auto view) {
             tbb::parallel_for(0, n.z, [&](int k) {
@@ -77,7 +77,6 @@ struct Fields {
                     for (int i = 0; i < n.x; ++i) {
                         const std::size_t idx = strides.at(i, j, k);
                         value[idx] = view.at(i, j, k);
-                        integral[idx] = table.sigmaIntegral(value[idx]);
                     }
             });
         });
@@ -92,8 +91,8 @@ class Sweeper {
     Sweeper(const core::Volume& volume, const optics::TfTable& table, const DirectOptions& o)
         : table_(table),
           geometry_(volume.geometry()),
-          natural_(volume, table, Strides::natural(volume.dims())),
-          xMajor_(volume, table, Strides::xMajor(volume.dims())) {
+          natural_(volume, Strides::natural(volume.dims())),
+          xMajor_(volume, Strides::xMajor(volume.dims())) {
         // Clip geometry that removes matter for the light, as index-space half-spaces.
         std::vector<core::HalfSpace> removing;
         for (const render::ClipPlane& p : o.clipPlanes)
@@ -206,7 +205,7 @@ double Sweeper::keptDepth(const Frame& f, std::size_t idx, double tEnd, double v
     auto valueAt = [&](double t) { return float(tEnd > 0 ? vx + (t / tEnd) * (vEnd - vx) : vx); };
     const float va = valueAt(ta), vb = valueAt(tb);
     if (table_.transparentSegment(va, vb)) return 0.0;
-    const double ia = ta == 0.0 ? f.fields->integral[idx] : table_.sigmaIntegral(va);
+    const double ia = table_.sigmaIntegral(va);
     return f.step * (tb - ta) * table_.meanExtinction(va, ia, vb, table_.sigmaIntegral(vb));
 }
 
@@ -263,7 +262,6 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
     const std::ptrdiff_t sv = std::ptrdiff_t(f.stride[f.v]);
     float* t = T.data();
     const float* val = f.fields->value.data();
-    const double* integ = f.fields->integral.data();
     const int first = f.sa > 0 ? na - 1 : 0;
     for (int s = 1; s < na; ++s) {
         const int c = first - f.sa * s;
@@ -321,8 +319,8 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
                         t[idx] = tUp;
                         continue;
                     }
-                    const float mean =
-                        table_.meanExtinction(vx, integ[idx], vUp, table_.sigmaIntegral(vUp));
+                    const float mean = table_.meanExtinction(vx, table_.sigmaIntegral(vx), vUp,
+                                                             table_.sigmaIntegral(vUp));
                     t[idx] = tUp * std::exp(-float(stepF * mean));
                 }
             }

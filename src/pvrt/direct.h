@@ -36,8 +36,8 @@
 // true are ignored here (their matter still casts shadows).
 //
 // Parallel within a slice (oneTBB), every voxel computed by the same arithmetic: results are
-// bit-identical for any thread count. Memory: the values and their σt integrals in two voxel
-// orderings (natural, and x-major so that sweeps across x read contiguous slices), 24 bytes per
+// bit-identical for any thread count. Memory: the physical values as float in two voxel
+// orderings (natural, and x-major so that sweeps across x read contiguous slices), 8 bytes per
 // voxel; one float T volume per direction in flight; T at the stored points for a batch of
 // kDirectionBatch directions (4·kDirectionBatch bytes per stored point).
 // Cost: one sweep per direction over every voxel (128³ torso, 162 directions, 2 cores: a few
