@@ -303,7 +303,7 @@ const Strides& Sweeper::sweep(const glm::dvec3& w, std::vector<float>& T) const 
                                       f.w11 * val[q + su + sv];
                     const float vx = val[idx];
                     if (anyPlanes) {
-                        // A segment not wholly kept: its kept part (T = 1 upstream stays as is).
+                        // A segment that crosses a clip plane attenuates over its kept part only.
                         glm::dvec3 x;
                         x[f.a] = c, x[f.u] = u, x[f.v] = v;
                         double ta = 0.0, tb = 1.0;
