@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
-// The direct part of PVRT's transfer (Zhang, Dong & Ma 2013 §6, "direct illumination"): light of
-// basis light k that reaches a stored point x unscattered,
+// The direct part of PVRT's transfer (Zhang, Dong & Ma 2013: per voxel, the reduced radiance
+// T∞·basis over a set of directions, times the phase): light of basis light k that reaches a
+// stored point x unscattered,
 //   t_k^dir(x) = (1/4π) ∫ T∞(x, ω) B_k(ω) dω,   T∞(x, ω) = exp(−∫_0^∞ σt(x + sω) ds),
 // added equally to R, G and B of every stored point (transfer.h; isotropic phase 1/4π, before the
 // albedo). ω points from x toward the distant light; the medium is the box of the voxel centres
@@ -27,8 +28,8 @@
 // pre-integration's linear-value assumption). Obliquely, re-sampling T once per slice diffuses it
 // numerically: smooth T stays accurate, but a kink or step of T (a shadow edge, the faces of a
 // slab) widens by about a voxel; the clamped bicubic halves the mean error of plain bilinear
-// re-sampling for ~30 % more time (tests/pvrt/test_direct.cpp measures both against closed forms
-// and a fine march).
+// re-sampling for ~30 % more time (tests/pvrt/test_direct.cpp measures the errors against closed
+// forms and a fine march; its tolerances quote both schemes).
 //
 // Clip geometry: a clip plane or crop box with shadowsFromRemoved == false removes its matter for
 // the light too: σt = 0 outside the kept (convex) region, applied exactly per segment (the kept
