@@ -11,6 +11,8 @@
 #include <Eigen/Dense>
 #include <algorithm>
 #include <cmath>
+#include <cstring>
+#include <limits>
 #include <ostream>
 #include <string>
 
@@ -86,12 +88,12 @@ void checkFinite(std::span<const float> rows, int dim, const core::Progress& pro
     });
     for (const std::size_t i : firstBad)
         if (i < rows.size())
-            throw InputError("pvrt",
-                             "transfer[" + std::to_string(i / dim) + "][" +
-                                 std::to_string(i % dim) + "]",
-                             "is " + std::to_string(rows[i]) + ", not a finite number",
-                             "the transfer precompute produced NaN or infinity; compress only "
-                             "finite transfer rows");
+            throw InputError(
+                "pvrt",
+                "transfer[" + std::to_string(i / dim) + "][" + std::to_string(i % dim) + "]",
+                "is " + std::to_string(rows[i]) + ", not a finite number",
+                "the transfer precompute produced NaN or infinity; compress only "
+                "finite transfer rows");
 }
 
 // ---- k-means -----------------------------------------------------------------------------------
@@ -101,10 +103,10 @@ struct KMeans {
     int dim = 0;
     Blocks blocks;
     int k = 0;
-    std::vector<float> centres;        ///< k × dim
-    std::vector<std::int32_t> label;   ///< per row
-    std::vector<float> dist;           ///< per row: squared distance to its centre
-    std::vector<float> norm2;          ///< per row: |x|²
+    std::vector<float> centres;       ///< k × dim
+    std::vector<std::int32_t> label;  ///< per row
+    std::vector<float> dist;          ///< per row: squared distance to its centre
+    std::vector<float> norm2;         ///< per row: |x|²
 
     const float* row(std::size_t i) const { return data + i * std::size_t(dim); }
 };
@@ -114,7 +116,11 @@ float squaredDistance(const float* a, const float* b, int dim) {
         .squaredNorm();
 }
 
+/// Relative slack on the triangle-inequality test that lets k-means++ seeding skip a row.
+constexpr float kSeedSkipMargin = 1.001f;
+
 /// k-means++ seeding (D² sampling) from `seed`; stops early when every row coincides with a seed.
+/// Leaves each row's nearest seed in km.label and its squared distance in km.dist.
 void seedKMeansPlusPlus(KMeans& km, int clusters, std::uint64_t seed,
                         const core::Progress& progress) {
     const std::size_t n = km.blocks.rows;
@@ -129,9 +135,12 @@ void seedKMeansPlusPlus(KMeans& km, int clusters, std::uint64_t seed,
     d2.assign(n, 0.f);
     std::vector<double> blockSum(km.blocks.count());
     forEachBlock(km.blocks, progress, [&](std::size_t, std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i)
+        for (std::size_t i = begin; i < end; ++i) {
             d2[i] = squaredDistance(km.row(i), km.row(first), km.dim);
+            km.label[i] = 0;
+        }
     });
+    std::vector<float> between;  // |c_t − c_a|² for the newest centre t and every a < t
     for (int t = 1; t < clusters; ++t) {
         // Sample a row with probability ∝ D²: block sums in block order, then a scan in the block.
         forEachBlock(km.blocks, progress, [&](std::size_t b, std::size_t begin, std::size_t end) {
@@ -158,13 +167,67 @@ void seedKMeansPlusPlus(KMeans& km, int clusters, std::uint64_t seed,
         }
         VL_CHECK_LT(pick, n);
         addCentre(pick);
-        const float* c = km.centres.data() + std::size_t(km.k - 1) * km.dim;
+        // D² update. A row whose nearest seed a has |c_t − c_a| ≥ 2|x − c_a| cannot be nearer
+        // to c_t (triangle inequality) and is not read (kSeedSkipMargin absorbs rounding).
+        const float* c = km.centres.data() + std::size_t(t) * km.dim;
+        between.resize(std::size_t(t));
+        for (int a = 0; a < t; ++a)
+            between[a] = squaredDistance(c, km.centres.data() + std::size_t(a) * km.dim, km.dim);
         forEachBlock(km.blocks, progress, [&](std::size_t, std::size_t begin, std::size_t end) {
-            for (std::size_t i = begin; i < end; ++i)
-                d2[i] = std::min(d2[i], squaredDistance(km.row(i), c, km.dim));
+            for (std::size_t i = begin; i < end; ++i) {
+                if (between[km.label[i]] >= 4 * kSeedSkipMargin * d2[i]) continue;
+                const float d = squaredDistance(km.row(i), c, km.dim);
+                if (d < d2[i]) {
+                    d2[i] = d;
+                    km.label[i] = t;
+                }
+            }
         });
         if (t % 8 == 0) progress.report("CPCA k-means", 0.2 * t / clusters);
     }
+}
+
+/// argmin_c cn[c] − 2·dot[c] (lowest c on ties) and its value: kLanes running minima in one SIMD
+/// register (GCC/Clang vector extensions: AVX on x86-64-v3, SSE pairs otherwise), then the lanes
+/// compared in index order, then the remainder.
+std::int32_t nearest(const float* cn, const float* dot, int k, float& bestOut) {
+    constexpr int kLanes = 8;
+    using Floats = float __attribute__((vector_size(kLanes * sizeof(float))));
+    using Ints = std::int32_t __attribute__((vector_size(kLanes * sizeof(std::int32_t))));
+    std::int32_t bestIndex = -1;
+    float bestValue = std::numeric_limits<float>::infinity();
+    int c = 0;
+    if (k >= kLanes) {
+        Floats best, a, d;
+        std::memcpy(&a, cn, sizeof a);
+        std::memcpy(&d, dot, sizeof d);
+        best = a - 2 * d;
+        Ints index{0, 1, 2, 3, 4, 5, 6, 7}, current = index;
+        for (c = kLanes; c + kLanes <= k; c += kLanes) {
+            current += kLanes;
+            std::memcpy(&a, cn + c, sizeof a);
+            std::memcpy(&d, dot + c, sizeof d);
+            const Floats s = a - 2 * d;
+            const Ints lower = s < best;  // all bits set where lower
+            best = Floats((Ints(s) & lower) | (Ints(best) & ~lower));
+            index = (current & lower) | (index & ~lower);
+        }
+        for (int l = 0; l < kLanes; ++l)
+            if (bestIndex < 0 || best[l] < bestValue ||
+                (best[l] == bestValue && index[l] < bestIndex)) {
+                bestValue = best[l];
+                bestIndex = index[l];
+            }
+    }
+    for (; c < k; ++c) {
+        const float s = cn[c] - 2 * dot[c];
+        if (bestIndex < 0 || s < bestValue) {
+            bestValue = s;
+            bestIndex = c;
+        }
+    }
+    bestOut = bestValue;
+    return bestIndex;
 }
 
 /// Assigns every row to its nearest centre (lowest index on ties); returns how many rows changed.
@@ -174,19 +237,14 @@ std::size_t assign(KMeans& km, const core::Progress& progress) {
     std::vector<std::size_t> changed(km.blocks.count(), 0);
     forEachBlock(km.blocks, progress, [&](std::size_t b, std::size_t begin, std::size_t end) {
         const ConstRowsF x(km.row(begin), Eigen::Index(end - begin), km.dim);
-        // |x − c|² = |x|² − 2x·c + |c|²: one GEMM per block.
-        const Eigen::MatrixXf dots = x * centres.transpose();
+        // |x − c|² = |x|² − 2x·c + |c|²: one GEMM per block, k × rows so that the scores of a row
+        // are contiguous.
+        Eigen::MatrixXf dots(km.k, Eigen::Index(end - begin));
+        dots.noalias() = centres * x.transpose();
         for (std::size_t i = begin; i < end; ++i) {
-            const Eigen::Index r = Eigen::Index(i - begin);
-            std::int32_t best = 0;
-            float bestD = cn[0] - 2 * dots(r, 0);
-            for (int c = 1; c < km.k; ++c) {
-                const float d = cn[c] - 2 * dots(r, c);
-                if (d < bestD) {
-                    bestD = d;
-                    best = c;
-                }
-            }
+            float bestD;
+            const std::int32_t best =
+                nearest(cn.data(), dots.col(Eigen::Index(i - begin)).data(), km.k, bestD);
             if (km.label[i] != best) ++changed[b];
             km.label[i] = best;
             km.dist[i] = std::max(0.f, km.norm2[i] + bestD);
@@ -202,9 +260,7 @@ struct Members {
     std::vector<std::size_t> offset;
     std::vector<std::size_t> order;
     std::size_t size(int c) const { return offset[c + 1] - offset[c]; }
-    std::span<const std::size_t> of(int c) const {
-        return {order.data() + offset[c], size(c)};
-    }
+    std::span<const std::size_t> of(int c) const { return {order.data() + offset[c], size(c)}; }
 };
 
 Members members(const std::vector<std::int32_t>& label, int k) {
@@ -231,7 +287,12 @@ void reseedEmpty(KMeans& km) {
                 far = km.dist[i];
                 pick = i;
             }
-        if (pick == km.blocks.rows) continue;  // nothing to split: stays empty, dropped later
+        // Nothing to split (dist comes from |x|² − 2x·c + |c|², so recheck the farthest row
+        // exactly: rows equal to their centre must not be moved): stays empty, dropped later.
+        if (pick == km.blocks.rows ||
+            squaredDistance(km.row(pick), km.centres.data() + std::size_t(km.label[pick]) * km.dim,
+                            km.dim) == 0.f)
+            continue;
         --count[km.label[pick]];
         ++count[c];
         km.label[pick] = c;
@@ -306,8 +367,8 @@ Directions principalDirections(const Eigen::MatrixXd& a, int want, std::uint64_t
     for (Eigen::Index j = 0; j < p; ++j)
         for (Eigen::Index i = 0; i < dim; ++i)
             omega(i, j) = 2 * core::toUnitDouble(core::hashCounters(
-                                  std::uint64_t(clusterIndex), std::uint64_t(j),
-                                  std::uint64_t(i), seed ^ 0x7063615f72616e64ULL)) -
+                                  std::uint64_t(clusterIndex), std::uint64_t(j), std::uint64_t(i),
+                                  seed ^ 0x7063615f72616e64ULL)) -
                           1;
     Eigen::MatrixXd q = orthonormalise(a * omega);
     for (int it = 0; it < kPowerIterations; ++it) {

@@ -77,13 +77,13 @@ inline constexpr int kOversampling = 10;
 inline constexpr double kRankTolerance = 1e-5;
 
 struct Cpca {
-    int dim = 0;         ///< floats per row
-    int clusters = 0;    ///< clusters kept (≤ CpcaOptions::clusters)
-    int components = 0;  ///< N
-    std::vector<float> means;             ///< clusters × dim
-    std::vector<float> basis;             ///< clusters × components × dim, orthonormal rows or 0
-    std::vector<std::int32_t> cluster;    ///< per row, in 0…clusters−1
-    std::vector<float> weights;           ///< rows × components
+    int dim = 0;                        ///< floats per row
+    int clusters = 0;                   ///< clusters kept (≤ CpcaOptions::clusters)
+    int components = 0;                 ///< N
+    std::vector<float> means;           ///< clusters × dim
+    std::vector<float> basis;           ///< clusters × components × dim, orthonormal rows or 0
+    std::vector<std::int32_t> cluster;  ///< per row, in 0…clusters−1
+    std::vector<float> weights;         ///< rows × components
     /// sqrt(Σ|x − rec(x)|² / Σ|x|²) over all rows (reconstruct() in float, sums in double); 0
     /// when every row is 0.
     double relativeL2Error = 0;
