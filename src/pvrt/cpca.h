@@ -17,10 +17,12 @@
 //     iteration. Means are the (double) averages of the members in row order.
 //     - Fewer distinct rows than clusters (in particular fewer rows): seeding stops when every row
 //       coincides with a seed, so there are as many clusters as distinct rows (at most).
-//     - A cluster that empties during Lloyd is re-seeded with the row farthest from its centre
-//       (lowest row index on ties) whose cluster keeps at least one member. Clusters that still
-//       end empty are dropped; `clusters` is the number kept, ≤ options.clusters, numbered
-//       0…clusters−1 in seed order.
+//     - A cluster that an assignment leaves empty is re-seeded, before the next update, with the
+//       row farthest from its centre (lowest row index on ties) whose cluster keeps a member.
+//       Clusters empty after the last assignment (or with no row left to take) are dropped;
+//       `clusters` is the number kept, ≤ options.clusters, numbered 0…clusters−1 in seed order.
+//     Seeding skips the distance of a row to a new seed when the triangle inequality shows it
+//     cannot be nearer than the row's current seed; worst case O(rows·clusters·dim).
 //  2. PCA per cluster (n members, centred member matrix A, n × dim), keeping the top N directions:
 //     - min(n, dim) ≤ kExactPcaLimit (128): exact, from the symmetric eigendecomposition (double)
 //       of the Gram matrix A·Aᵀ (n × n) when n < dim, else of the covariance Aᵀ·A (dim × dim).
