@@ -4,7 +4,7 @@
 // (Cpca::radiance). Synthetic transfer-like rows: 96 groups, each a mean plus 8 directions of
 // strength × 0.6 per direction and 1% noise, so the data are neither exactly clusterable nor of
 // low rank. Sizes: 200k rows × dim 48 (SH 16 × RGB, the project's target: well under 10 s on 2
-// cores), 50k × 486 (DSF 162 × RGB) and 20k × 1926 (DSF 642 × RGB, where clusters of > 128 rows
+// cores), 500k × 48, 50k and 500k × 486 (DSF 162 × RGB) and 20k × 1926 (DSF 642 × RGB, where clusters of > 128 rows
 // take the randomized subspace iteration). 128 clusters, 4 components, 20 Lloyd iterations, at 1
 // and 2 threads (same result). Counters: rows/s, the relative L2 error and the compressed MB.
 // Run with --benchmark_repetitions=3 for medians.
@@ -68,7 +68,9 @@ BENCHMARK(BM_CompressCpca)
     ->ArgNames({"rows", "dim", "threads"})
     ->Args({200000, 48, 1})
     ->Args({200000, 48, 2})
+    ->Args({500000, 48, 2})
     ->Args({50000, 486, 2})
+    ->Args({500000, 486, 2})
     ->Args({20000, 1926, 2})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
