@@ -11,6 +11,8 @@
 #include <atomic>
 #include <cmath>
 #include <limits>
+#include <string>
+#include <utility>
 #include <vector>
 
 #include "core/error.h"
@@ -457,6 +459,20 @@ TEST(Cpca, SameResultForAnyThreadCount) {
         EXPECT_EQ(one.weights, two.weights);
         EXPECT_EQ(one.relativeL2Error, two.relativeL2Error);
     }
+}
+
+TEST(Cpca, ReportsProgressInOrder) {
+    const auto x = structured(4, 2, 12, 5000, 0.01f, 53);
+    std::vector<std::pair<std::string, double>> reports;
+    const core::Progress progress(
+        [&](const std::string& stage, double f) { reports.emplace_back(stage, f); }, nullptr);
+    pvrt::compressCpca(x, 12, pvrt::CpcaOptions{}, progress);
+    ASSERT_FALSE(reports.empty());
+    for (std::size_t i = 1; i < reports.size(); ++i)
+        if (reports[i].first == reports[i - 1].first)
+            EXPECT_GE(reports[i].second, reports[i - 1].second) << reports[i].first;
+    EXPECT_EQ(reports.front().first, "CPCA k-means");
+    EXPECT_EQ(reports.back(), std::make_pair(std::string("CPCA PCA"), 1.0));
 }
 
 TEST(Cpca, Cancellable) {
