@@ -473,8 +473,9 @@ std::size_t Cpca::bytes() const {
 
 std::ostream& operator<<(std::ostream& os, const Cpca& c) {
     return os << "Cpca{rows " << c.rows() << ", dim " << c.dim << ", clusters " << c.clusters
-              << ", components " << c.components << ", relative L2 error " << c.relativeL2Error
-              << ", " << c.bytes() << " bytes}";
+              << ", components " << c.components << ", " << c.iterations
+              << " Lloyd iterations, relative L2 error " << c.relativeL2Error << ", " << c.bytes()
+              << " bytes}";
 }
 
 Cpca compressCpca(std::span<const float> rows, int dim, const CpcaOptions& options,
@@ -511,6 +512,7 @@ Cpca compressCpca(std::span<const float> rows, int dim, const CpcaOptions& optio
             reseedEmpty(km);
             updateCentres(km, progress);
             const std::size_t changed = assign(km, progress);
+            ++out.iterations;
             progress.report("CPCA k-means", 0.2 + 0.8 * (it + 1) / options.iterations);
             if (changed == 0) break;
         }

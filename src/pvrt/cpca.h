@@ -91,6 +91,8 @@ struct Cpca {
     /// sqrt(Σ|x − rec(x)|² / Σ|x|²) over all rows (reconstruct() in float, sums in double); 0
     /// when every row is 0.
     double relativeL2Error = 0;
+    /// Lloyd iterations run (fewer than CpcaOptions::iterations when no row changed cluster).
+    int iterations = 0;
 
     std::size_t rows() const { return cluster.size(); }
     const float* mean(int c) const { return means.data() + std::size_t(c) * dim; }
