@@ -270,6 +270,54 @@ Volume makeSlab(int n, const PhantomOptions& o, const Progress& progress) {
     return v;
 }
 
+/// Value noise on the integer lattice: a hash of the cell corner, smoothly interpolated — a
+/// deterministic stand-in for smoke (no RNG state, the same volume on every machine).
+double latticeValue(int x, int y, int z) {
+    std::uint32_t h = std::uint32_t(x) * 0x8da6b343u ^ std::uint32_t(y) * 0xd8163841u ^
+                      std::uint32_t(z) * 0xcb1ab31fu;
+    h ^= h >> 13;
+    h *= 0x5bd1e995u;
+    h ^= h >> 15;
+    return double(h & 0xffffffu) / double(0xffffff);
+}
+double valueNoise(const glm::dvec3& p) {
+    const glm::dvec3 f0 = glm::floor(p);
+    const glm::ivec3 i(f0);
+    glm::dvec3 f = p - f0;
+    f = f * f * (3.0 - 2.0 * f);  // smoothstep: C1 across cells
+    double c[2][2][2];
+    for (int dz = 0; dz < 2; ++dz)
+        for (int dy = 0; dy < 2; ++dy)
+            for (int dx = 0; dx < 2; ++dx)
+                c[dz][dy][dx] = latticeValue(i.x + dx, i.y + dy, i.z + dz);
+    auto lerp = [](double a, double b, double t) { return a + (b - a) * t; };
+    return lerp(lerp(lerp(c[0][0][0], c[0][0][1], f.x), lerp(c[0][1][0], c[0][1][1], f.x), f.y),
+                lerp(lerp(c[1][0][0], c[1][0][1], f.x), lerp(c[1][1][0], c[1][1][1], f.x), f.y),
+                f.z);
+}
+
+Volume makeCloud(int n, const PhantomOptions& o, const Progress& progress) {
+    Volume v(cubeGeometry(n, double(n), o), VoxelType::Float32);
+    v.modality = Modality::Synthetic;
+    v.description =
+        "phantom cloud: smoke-like density in [0, 1] (4 octaves of value noise in a "
+        "soft ball)";
+    const auto b = v.geometry().worldBounds();
+    const glm::dvec3 c = 0.5 * (b[0] + b[1]);
+    const double r = 0.42 * minComponent(b[1] - b[0]);
+    fill<float>(v, "phantom", progress, [&](const glm::dvec3& p, int, int, int) {
+        const glm::dvec3 q = (p - c) / r;  // unit ball
+        double noise = 0.0, amp = 0.5;
+        glm::dvec3 x = q * 3.0;
+        for (int octave = 0; octave < 4; ++octave, amp *= 0.5, x *= 2.03)
+            noise += amp * valueNoise(x);
+        // Density: noise thresholded, fading out toward the ball's edge.
+        const double fade = std::clamp(1.0 - glm::length(q), 0.0, 1.0);
+        return float(std::clamp((noise - 0.35) * 2.5 * std::sqrt(fade) * 1.6, 0.0, 1.0));
+    });
+    return v;
+}
+
 }  // namespace
 
 SphereFacts spherePhantomFacts(const Geometry& g) {
@@ -289,7 +337,8 @@ std::vector<std::pair<std::string, std::string>> phantomCatalog() {
          "sphere and torus on a perfectly flat plate (Kronander 2012 corner case), uint8, 128^3"},
         {"torso", "CT-like torso in HU with stented aorta, spine, ribs, lungs, int16, 256^3"},
         {"sphere", "homogeneous sphere (value 1) for exact optics tests, float32, 64^3"},
-        {"slab", "homogeneous slab (value 1) for exact optics tests, float32, 64^3"}};
+        {"slab", "homogeneous slab (value 1) for exact optics tests, float32, 64^3"},
+        {"cloud", "smoke-like density in [0, 1] for scattering tests, float32, 64^3"}};
 }
 
 Volume makePhantomImpl(const std::string& name, const PhantomOptions& options,
@@ -316,6 +365,7 @@ Volume makePhantomImpl(const std::string& name, const PhantomOptions& options,
     if (name == "torso") return makeTorso(sizeOr(256), options, progress);
     if (name == "sphere") return makeSphere(sizeOr(64), options, progress);
     if (name == "slab") return makeSlab(sizeOr(64), options, progress);
+    if (name == "cloud") return makeCloud(sizeOr(64), options, progress);
     std::string names;
     for (const auto& [n, d] : phantomCatalog()) names += (names.empty() ? "" : ", ") + n;
     throw InputError("phantom", "name", "unknown phantom '" + name + "'",

@@ -539,6 +539,8 @@ float PathTracer::extinctionAt(const glm::dvec3& p) const {
 
 const optics::TfTable& PathTracer::table() const { return *impl_->table; }
 
+const core::Volume& PathTracer::volume() const { return *impl_->volume; }
+
 optics::TfSample PathTracer::mediumAt(const glm::dvec3& p) const {
     return impl_->volume->visit([&](const auto& v) {
         const glm::dvec3 ijk = impl_->indexOf(p);

@@ -191,6 +191,8 @@ class PathTracer {
     const Options& options() const { return options_; }
     /// The TF table the tracer reads.
     const optics::TfTable& table() const;
+    /// The volume the tracer reads (its geometry places the box keptInterval clips to).
+    const core::Volume& volume() const;
 
   private:
     struct Impl;

@@ -10,10 +10,10 @@ namespace voxlight::pvrt {
 
 Basis Basis::sh(int order, const char* field) {
     if (order < 1 || order > kMaxShOrder)
-        throw InputError("pvrt", field,
-                               "SH order " + std::to_string(order) + " is outside 1…" +
-                                   std::to_string(kMaxShOrder),
-                               "use an order from 1 (1 basis light) to 6 (36 basis lights)");
+        throw InputError(
+            "pvrt", field,
+            "SH order " + std::to_string(order) + " is outside 1…" + std::to_string(kMaxShOrder),
+            "use an order from 1 (1 basis light) to 6 (36 basis lights)");
     Basis b;
     b.kind_ = BasisKind::Sh;
     b.band_ = order - 1;
@@ -24,8 +24,8 @@ Basis Basis::sh(int order, const char* field) {
 Basis Basis::dsf(int count, const char* field) {
     if (count != 42 && count != 162 && count != 642)
         throw InputError("pvrt", field,
-                               "DSF with " + std::to_string(count) + " directions is not offered",
-                               "use 42, 162 or 642 directions");
+                         "DSF with " + std::to_string(count) + " directions is not offered",
+                         "use 42, 162 or 642 directions");
     Basis b;
     b.kind_ = BasisKind::Dsf;
     b.dsf_ = std::make_shared<const sh::Dsf>(count);

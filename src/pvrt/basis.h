@@ -52,7 +52,8 @@ class Basis {
 
     /// c_k of the scene's lights added together (m RGB entries). Point and area lights →
     /// InputError naming the light (PVRT precomputes for distant lighting only).
-    std::vector<glm::vec3> project(std::span<const std::shared_ptr<const lights::Light>> lights) const;
+    std::vector<glm::vec3> project(
+        std::span<const std::shared_ptr<const lights::Light>> lights) const;
 
   private:
     BasisKind kind_ = BasisKind::Sh;

@@ -22,10 +22,10 @@ std::vector<glm::ivec3> TransferLayout::storedPoints() const {
 TransferLayout makeTransferLayout(const core::Volume& volume, const grid::BrickMajorants& cells,
                                   int resolution) {
     if (resolution < 1)
-        throw InputError("pvrt", "method.params.resolution",
-                               "must be at least 1 point per axis (got " +
-                                   std::to_string(resolution) + ")",
-                               "use e.g. 64 (points per axis, capped at the volume's size)");
+        throw InputError(
+            "pvrt", "method.params.resolution",
+            "must be at least 1 point per axis (got " + std::to_string(resolution) + ")",
+            "use e.g. 64 (points per axis, capped at the volume's size)");
     const glm::ivec3 dims = volume.dims();
     TransferLayout l;
     l.res = glm::min(glm::ivec3(resolution), dims);

@@ -32,14 +32,15 @@
 namespace voxlight::pvrt {
 
 struct TransferLayout {
-    glm::ivec3 res{0};      ///< points per axis
-    glm::vec3 scale{1.f};   ///< voxels per grid step along each axis (dims / res)
+    glm::ivec3 res{0};     ///< points per axis
+    glm::vec3 scale{1.f};  ///< voxels per grid step along each axis (dims / res)
     /// Per grid point (x fastest): its stored index, or −1 (nothing visible uses it).
     std::vector<std::int32_t> slot;
     std::int32_t points = 0;  ///< stored points
 
     std::size_t linear(const glm::ivec3& g) const {
-        return std::size_t(g.x) + std::size_t(res.x) * (std::size_t(g.y) + std::size_t(res.y) * g.z);
+        return std::size_t(g.x) +
+               std::size_t(res.x) * (std::size_t(g.y) + std::size_t(res.y) * g.z);
     }
     /// Voxel coordinate of grid point g.
     glm::vec3 position(const glm::ivec3& g) const { return (glm::vec3(g) + 0.5f) * scale - 0.5f; }

@@ -1,0 +1,94 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// The indirect part of PVRT's transfer (Zhang, Dong & Ma 2013 §4.2): volumetric photon mapping
+// with photons cast from the volume's boundary and splatted onto the transfer grid.
+//
+// What it adds: t_k^ind(x) (RGB) at every stored point x of the transfer (transfer.h), the
+// in-scattered radiance S(x) = (1/4π)∫ L_in(x, ω) dω (isotropic phase) of the light that the
+// incident distant radiance B_k (basis.h) brings to x after 1 … maxScatterings scattering events,
+// coloured by the albedos it met, before the albedo of x. Light reaching x unscattered (the direct
+// part) is not included: direct.h computes it analytically. With maxScatterings = B − 1 the sum
+// direct + indirect is the in-scattered radiance of the path tracer's maxBounces = B.
+// Phase: isotropic at every collision (the transfer stores the isotropic S of transfer.h); a TF's
+// phase g channel and the tracer's phaseG / scattering mode are not used here.
+//
+// Photons (units: world mm, 1/mm, radiance in the basis light's units):
+//   Source  the faces of the volume box that PathTracer::keptInterval clips to: in index space
+//           [0, n−1] per axis (voxel centres), [−½, ½] on an axis of one voxel. Each face is cut
+//           into boundary cells of about one transfer-grid step per side (⌈extent / step⌉ cells
+//           per side, at least 1); photonsPerCell photons per cell, position uniform in the cell,
+//           inward direction d cosine-distributed about the inward normal. Outside the box there
+//           is no matter, so the radiance entering through a face from direction −d is B_k(−d),
+//           and a photon carries the flux Φ_k = B_k(−d)·π·ΔA / photonsPerCell (ΔA the cell's
+//           area in mm²; the cosine and the pdf cos/π cancel). For SH Φ_k may be negative (Zhang
+//           allows it): the estimator stays linear and unbiased.
+//   Paths   the trajectory does not depend on k: each photon is traced once and carries all m
+//           fluxes. Free flights by the path tracer's delta tracking (PathTracer::freeFlight)
+//           inside keptInterval — matter removed by clip planes or the crop box neither
+//           scatters nor attenuates photons. At a real collision x_c the throughput β (RGB, the
+//           product of the albedos of the earlier collisions, divided by roulette survival) is
+//           that of light scattered `s` times so far; then β ×= a(x_c), s += 1, a new isotropic
+//           direction, Russian roulette once s ≥ rouletteAfter (survival q = max channel of β,
+//           clamped to [0.05, 1], as the path tracer), and the path ends after maxScatterings
+//           scatterings or when it leaves the box.
+//   Estimate the collision estimator of the fluence φ (collision density σt·φ, so each collision
+//           counts Φ_k·β/σt(x_c)), smoothed by the poly6 kernel
+//             W(r) = 315 / (64π h⁹) · (h² − r²)³,  r < h  (∫W dV = 1)
+//           with r the world distance (mm; anisotropic voxels included) between x_c and the grid
+//           point, h = kernelRadiusCells × the largest transfer-grid step (mm) of the three axes:
+//             t_k^ind(x) += W(|x − x_c|) · Φ_k · β / (σt(x_c) · 4π)
+//           for every collision with s ≥ 1 (the light arriving there has scattered at least once)
+//           and σt(x_c) > 0. The expectation is (1/4π)∫ W(x − y) φ_ind(y) dy over the matter (σt >
+//           0): the indirect S blurred by the kernel — unbiased for that; against S(x) itself
+//           biased by the blur (≈ (h²/22)·∇²S in smooth matter: the kernel's variance per axis
+//           is h²/11) and short within h of the matter's boundary, where part of the kernel lies
+//           in empty space. Empty points (slot −1) get nothing.
+//
+// Determinism: photon p's random numbers are core::CounterRng(p, seed). Photons are traced in
+// fixed batches, their collision events kept in photon order; the splat runs in parallel over
+// disjoint z-slabs of the grid, each adding the events that reach it in photon order. So every
+// stored value is the same sum in the same order for any thread count (bit-identical).
+// Memory: the events of one batch (kPhotonsPerBatch photons, ~28 bytes per collision).
+#include <cstdint>
+
+#include "core/progress.h"
+#include "pathtrace/path_tracer.h"
+#include "pvrt/basis.h"
+#include "pvrt/transfer.h"
+
+namespace voxlight::pvrt {
+
+struct PhotonOptions {
+    /// Photons per boundary cell (Zhang's NP: 1/10/100), ≥ 1.
+    int photonsPerCell = 10;
+    /// Poly6 radius h in transfer-grid steps (the largest axis step; Zhang: h = c·Δl), > 0.
+    float kernelRadiusCells = 2.f;
+    /// Scattering events a photon may have had before it is splatted (the path tracer's
+    /// maxBounces − 1), ≥ 0; 0 adds nothing.
+    int maxScatterings = 7;
+    /// Scatterings before Russian roulette may end a photon, ≥ 0.
+    int rouletteAfter = 3;
+    std::uint64_t seed = 1;
+    int threads = 0;  ///< 0 = all
+};
+
+struct PhotonStats {
+    std::uint64_t photons = 0;     ///< photons cast
+    std::uint64_t collisions = 0;  ///< real collisions
+    std::uint64_t splats = 0;      ///< collisions splatted (s ≥ 1, σt > 0)
+    double seconds = 0.0;
+};
+
+/// Photons the tracer handles per batch (bounds the event memory).
+inline constexpr std::int64_t kPhotonsPerBatch = std::int64_t(1) << 16;
+
+/// Adds the indirect transfer t_k^ind(x) (RGB) of every basis light to every stored point of
+/// `transfer` (see the header comment). `transfer` must be laid out for `medium.volume()` with
+/// `basis.size()` basis lights (InternalError otherwise); bad options → InputError (source
+/// "pvrt", field = the option's name). Reports stage "indirect transfer (photons)" and throws
+/// CancelledError when `progress` is cancelled (the transfer then holds part of the sum).
+PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis& basis,
+                                Transfer& transfer, const PhotonOptions& options,
+                                const core::Progress& progress);
+
+}  // namespace voxlight::pvrt
