@@ -75,6 +75,12 @@
 #include "pipeline/iso_shading.h"
 #include "pipeline/registry.h"
 #include "pipeline/scene_inputs.h"
+#include "pvrt/basis.h"
+#include "pvrt/cpca.h"
+#include "pvrt/direct.h"
+#include "pvrt/photons.h"
+#include "pvrt/radiance.h"
+#include "pvrt/transfer.h"
 #include "render/framing.h"
 #include "render/ray_caster.h"
 #include "render/sh_shading.h"
@@ -267,7 +273,8 @@ enum class Kind {
     ShLocal,
     ShGlobal,
     Ritschel,
-    PathTrace
+    PathTrace,
+    Pvrt
 };
 
 render::Mode modeOf(Kind k) {
@@ -287,6 +294,7 @@ render::Mode modeOf(Kind k) {
         case Kind::ShLocal:  // DVR traversal and skip rule; shading by render/sh_shading.h
         case Kind::ShGlobal:
         case Kind::Ritschel:
+        case Kind::Pvrt:  // DVR traversal; shading from the radiance volume (pvrt/radiance.h)
             return render::Mode::EmissionAbsorption;
     }
     throw InternalError("unknown ray-caster method");
@@ -298,7 +306,7 @@ bool isSh(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal || k == Kin
 bool isKronander(Kind k) { return k == Kind::ShLocal || k == Kind::ShGlobal; }
 bool isLit(Kind k) {
     return k == Kind::Gradient || k == Kind::Iso || k == Kind::IsoLattice || isSh(k) ||
-           k == Kind::PathTrace;
+           k == Kind::PathTrace || k == Kind::Pvrt;
 }
 
 /// sh-local's and sh-global's own parameters (see the header comment).
@@ -1247,6 +1255,317 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
     plan.stages.push_back(clip);
 }
 
+// ---- PVRT stages -------------------------------------------------------------------------------
+
+/// pvrt's parameters (method.params): the basis of the lights, where transfer is stored, the
+/// direct part's quadrature, the photons of the indirect part and the CPCA compression.
+struct PvrtParams {
+    std::string basis = "sh";
+    int order = 4;         ///< SH order (basis sh): order² basis lights
+    int directions = 162;  ///< DSF directions (basis dsf)
+    int resolution = 64;   ///< transfer grid points per axis (capped at the volume's size)
+    int quadrature = 162;  ///< directions of the direct part's transmittance sweeps
+    bool multiple = true;  ///< the "multiple_scattering" effect with max_bounces > 1
+    int maxBounces = 1;
+    pvrt::PhotonOptions photons;
+    int clusters = 128;  ///< CPCA clusters; 0 = uncompressed transfer
+    int components = 4;
+    int threads = 0;
+
+    pvrt::Basis makeBasis() const {
+        return basis == "sh" ? pvrt::Basis::sh(order) : pvrt::Basis::dsf(directions);
+    }
+    json directKey() const {
+        return {{"basis", basis},
+                {"order", order},
+                {"directions", directions},
+                {"resolution", resolution},
+                {"quadrature", quadrature}};
+    }
+    json photonKey() const {
+        return {{"photons", photons.photonsPerCell},
+                {"kernel_radius", photons.kernelRadiusCells},
+                {"max_scatterings", photons.maxScatterings},
+                {"roulette_after", photons.rouletteAfter},
+                {"seed", photons.seed}};
+    }
+    json cpcaKey() const { return {{"clusters", clusters}, {"components", components}}; }
+};
+
+PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& o, ParamReader& p) {
+    PvrtParams s;
+    s.threads = o.threads;
+    s.basis = p.choice("basis", "sh", {"sh", "dsf"});
+    if (s.basis == "sh") {
+        s.order = p.integer("order", 4, 1, pvrt::Basis::kMaxShOrder);
+        if (p.has("directions"))
+            p.fail("directions", "applies to basis 'dsf' only",
+                   "remove it, or set basis to \"dsf\"");
+    } else {
+        s.directions = p.integer("directions", 162, 42, 642);
+        if (s.directions != 42 && s.directions != 162 && s.directions != 642)
+            p.fail("directions", "must be 42, 162 or 642, got " + std::to_string(s.directions),
+                   "the DSF direction sets of a subdivided icosahedron");
+        if (p.has("order"))
+            p.fail("order", "applies to basis 'sh' only", "remove it, or set basis to \"sh\"");
+    }
+    s.resolution = p.integer("resolution", 64, 1, 1024);
+    // DSF: the basis directions themselves by default (each feeds its own basis light exactly,
+    // pvrt/direct.h); a coarser set would miss basis functions narrower than its spacing.
+    const int dsfCount = s.basis == "dsf" ? s.directions : 0;
+    s.quadrature = p.integer("quadrature", std::max(162, dsfCount), 42, 642);
+    if (s.quadrature != 42 && s.quadrature != 162 && s.quadrature != 642)
+        p.fail("quadrature", "must be 42, 162 or 642, got " + std::to_string(s.quadrature),
+               "directions of the direct part's transmittance sweeps (icosahedral sets)");
+    if (s.quadrature < dsfCount)
+        p.fail("quadrature",
+               std::to_string(s.quadrature) + " directions cannot integrate the " +
+                   std::to_string(dsfCount) + " narrower basis functions of DSF-" +
+                   std::to_string(dsfCount),
+               "leave quadrature out (the DSF's own directions) or use at least " +
+                   std::to_string(dsfCount));
+    const bool multiple = wantsEffect(scene, "multiple_scattering");
+    if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
+        p.fail("max_bounces",
+               "asks for more than one bounce but the scene's effects omit "
+               "'multiple_scattering'",
+               "add \"multiple_scattering\" to effects or set max_bounces to 1");
+    s.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
+    s.multiple = s.maxBounces > 1;
+    s.photons.maxScatterings = s.maxBounces - 1;
+    s.photons.photonsPerCell = p.integer("photons", 10, 1, 100000);
+    s.photons.kernelRadiusCells = float(p.number("kernel_radius", 2.0, 0.5, 16.0));
+    s.photons.seed = o.seed;
+    s.photons.threads = o.threads;
+    s.clusters = p.integer("clusters", 128, 0, 1 << 20);
+    if (s.clusters == 0 && p.has("components"))
+        p.fail("components", "applies only with CPCA (clusters > 0)",
+               "remove it, or set clusters to e.g. 128");
+    s.components = s.clusters > 0 ? p.integer("components", 4, 0, 64) : 0;
+    return s;
+}
+
+const Codec& pvrtTransferCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& t = *a.as<pvrt::Transfer>();
+            w.pod(t.layout.res);
+            w.pod(t.layout.scale);
+            w.pod(t.layout.points);
+            w.pod(t.basis);
+            w.array(t.layout.slot);
+            w.array(t.values);
+        },
+        [](ByteReader& r) {
+            auto t = std::make_shared<pvrt::Transfer>();
+            t->layout.res = r.pod<glm::ivec3>();
+            t->layout.scale = r.pod<glm::vec3>();
+            t->layout.points = r.pod<std::int32_t>();
+            t->basis = r.pod<int>();
+            t->layout.slot = r.array<std::int32_t>(kMaxCells);
+            t->values = r.array<float>(kMaxCells * 64);
+            const glm::ivec3 res = t->layout.res;
+            if (res.x < 1 || res.y < 1 || res.z < 1 || res.x > core::kMaxDim ||
+                res.y > core::kMaxDim || res.z > core::kMaxDim || t->basis < 1 || t->basis > 4096 ||
+                t->layout.points < 0 ||
+                t->layout.slot.size() != std::size_t(res.x) * res.y * res.z ||
+                t->values.size() != std::size_t(t->layout.points) * t->basis * 3 ||
+                !(t->layout.scale.x > 0.f && t->layout.scale.y > 0.f && t->layout.scale.z > 0.f))
+                badPayload("PVRT transfer sizes do not fit together");
+            std::int32_t next = 0;  // stored points are numbered in grid order
+            for (std::int32_t s : t->layout.slot)
+                if (s >= 0 && s != next++) badPayload("PVRT transfer slots out of order");
+            if (next != t->layout.points) badPayload("PVRT transfer slot count");
+            for (float v : t->values)
+                if (!std::isfinite(v)) badPayload("non-finite PVRT transfer");
+            const std::size_t bytes = t->bytes();
+            return Artifact::of<pvrt::Transfer>(std::move(t), bytes);
+        }};
+    return c;
+}
+
+/// pvrt_direct ← volume + TF + skip cells + basis/resolution/quadrature + the cuts that remove
+/// matter for the light; pvrt_transfer ← pvrt_direct + photons (skipped without multiple
+/// scattering: the direct transfer is the transfer); pvrt_cpca ← the transfer + clusters/
+/// components (skipped for clusters 0). A light or camera change reruns none of them: only the
+/// Frame stage pvrt_radiance. Returns the name of the stage whose transfer the render reads.
+std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::RenderOptions& o,
+                          const LightCuts& cuts) {
+    const json directKey = {{"params", params.directKey()}, {"cuts", cuts.key}};
+    Stage direct{"pvrt_direct",
+                 StageKind::Precompute,
+                 {"skip_cells", "transfer_function", "method", "clip_planes", "crop_box"}};
+    direct.key = [directKey](const Run& run) {
+        return KeyBuilder(run, "pvrt_direct")
+            .stage("load_volume")
+            .stage("transfer_function")
+            .stage("skip_cells")
+            .json(directKey)
+            .value();
+    };
+    direct.compute = [params, o](Run& run) {
+        const core::Volume& v = run.get<LoadedVolume>("load_volume")->volume;
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        const auto cells = run.get<grid::BrickMajorants>("skip_cells");
+        const pvrt::Basis basis = params.makeBasis();
+        pvrt::TransferLayout layout;
+        try {
+            layout = pvrt::makeTransferLayout(v, *cells, params.resolution);
+        } catch (const InputError& e) {
+            rethrowAsScene(run.scene(), e);
+        }
+        auto t = std::make_shared<pvrt::Transfer>(std::move(layout), basis.size());
+        pvrt::DirectOptions d;
+        d.directions = params.quadrature;
+        d.threads = params.threads;
+        d.clipPlanes = o.clipPlanes;
+        d.cropBox = o.cropBox;
+        const pvrt::DirectStats st =
+            pvrt::addDirectTransfer(v, *tfa->table, basis, *t, d, run.progress());
+        run.details()["pvrt_direct"] = {{"basis", basis.name()},
+                                        {"points", t->layout.points},
+                                        {"grid", dims(t->layout.res)},
+                                        {"quadrature", st.directions},
+                                        {"seconds", st.seconds}};
+        const std::size_t bytes = t->bytes();
+        return Artifact::of<pvrt::Transfer>(std::move(t), bytes);
+    };
+    direct.codec = &pvrtTransferCodec();
+    direct.describe = [](const Run&, const Artifact& a) {
+        const auto& t = *a.as<pvrt::Transfer>();
+        return std::to_string(t.layout.points) + " points of " + dims(t.layout.res) + " × " +
+               std::to_string(t.basis) + " basis lights, direct part, " +
+               std::to_string(t.bytes() >> 20) + " MB";
+    };
+    plan.stages.push_back(direct);
+
+    const json photonKey = {{"params", params.photonKey()}, {"cuts", cuts.key}};
+    Stage indirect{"pvrt_transfer", StageKind::Precompute, {"pvrt_direct", "method"}};
+    if (!params.multiple)
+        indirect.skip =
+            "not needed: single scattering (no 'multiple_scattering' effect or max_bounces 1)";
+    indirect.key = [photonKey](const Run& run) {
+        return KeyBuilder(run, "pvrt_transfer").stage("pvrt_direct").json(photonKey).value();
+    };
+    indirect.compute = [params, o](Run& run) {
+        const auto loaded = run.get<LoadedVolume>("load_volume");
+        const auto tfa = run.get<TfArtifact>("transfer_function");
+        pathtrace::Options po;
+        po.threads = params.threads;
+        po.clipPlanes = o.clipPlanes;
+        po.cropBox = o.cropBox;
+        // The tracer shares the loaded volume (no copy): an aliasing pointer kept alive by it.
+        const std::shared_ptr<const core::Volume> volume(loaded, &loaded->volume);
+        const pathtrace::PathTracer medium(volume, tfa->table,
+                                           run.get<grid::BrickMajorants>("skip_cells"), po);
+        auto t = std::make_shared<pvrt::Transfer>(*run.get<pvrt::Transfer>("pvrt_direct"));
+        const pvrt::PhotonStats st = pvrt::addIndirectTransfer(medium, params.makeBasis(), *t,
+                                                               params.photons, run.progress());
+        run.details()["pvrt_photons"] = {{"photons", st.photons},
+                                         {"collisions", st.collisions},
+                                         {"splats", st.splats},
+                                         {"seconds", st.seconds}};
+        const std::size_t bytes = t->bytes();
+        return Artifact::of<pvrt::Transfer>(std::move(t), bytes);
+    };
+    indirect.codec = &pvrtTransferCodec();
+    indirect.describe = [](const Run& run, const Artifact& a) {
+        const auto& t = *a.as<pvrt::Transfer>();
+        const json& d = run.details().value("pvrt_photons", json::object());
+        return "direct + indirect transfer of " + std::to_string(t.layout.points) + " points" +
+               (d.empty() ? std::string()
+                          : ", " + std::to_string(d["photons"].get<std::uint64_t>()) + " photons");
+    };
+    plan.stages.push_back(indirect);
+    const std::string transferStage = params.multiple ? "pvrt_transfer" : "pvrt_direct";
+
+    const json cpcaKey = params.cpcaKey();
+    Stage cpca{"pvrt_cpca", StageKind::Precompute, {transferStage, "method"}};
+    if (params.clusters == 0) cpca.skip = "not needed: clusters 0 (uncompressed transfer)";
+    cpca.key = [cpcaKey, transferStage](const Run& run) {
+        return KeyBuilder(run, "pvrt_cpca").stage(transferStage).json(cpcaKey).value();
+    };
+    cpca.compute = [params, transferStage](Run& run) {
+        const auto t = run.get<pvrt::Transfer>(transferStage);
+        pvrt::CpcaOptions co;
+        co.clusters = params.clusters;
+        co.components = params.components;
+        co.seed = params.photons.seed;
+        co.threads = params.threads;
+        auto c = std::make_shared<pvrt::Cpca>(
+            pvrt::compressCpca(t->values, int(t->rowSize()), co, run.progress()));
+        run.details()["pvrt_cpca"] = {{"clusters", c->clusters},
+                                      {"components", c->components},
+                                      {"relative_l2_error", c->relativeL2Error}};
+        const std::size_t bytes = c->bytes();
+        return Artifact::of<pvrt::Cpca>(std::move(c), bytes);
+    };
+    cpca.notOnDisk = "not yet kept on disk: recomputed from the cached transfer";
+    cpca.describe = [](const Run&, const Artifact& a) {
+        const auto& c = *a.as<pvrt::Cpca>();
+        std::ostringstream os;
+        os << c.clusters << " clusters × " << c.components << " components, relative L2 error "
+           << 100.0 * c.relativeL2Error << " %";
+        return os.str();
+    };
+    plan.stages.push_back(cpca);
+
+    // Per light change: the lights (or the camera's headlight, when the scene has none) projected
+    // into the basis and combined. Kept in memory, so a camera move under fixed lights reuses it.
+    Stage radiance{"pvrt_radiance",
+                   StageKind::Precompute,
+                   {transferStage, "pvrt_cpca", "lights", "camera (headlight only)"}};
+    const bool compressed = params.clusters > 0;
+    radiance.key = [transferStage, compressed](const Run& run) {
+        KeyBuilder k(run, "pvrt_radiance");
+        k.stage(transferStage).stage("lights");
+        if (compressed) k.stage("pvrt_cpca");
+        if (run.scene().lights.empty()) k.stage("camera");
+        return k.value();
+    };
+    radiance.notOnDisk = "recomputed per light change in milliseconds";
+    radiance.compute = [params, transferStage, compressed](Run& run) {
+        const auto t = run.get<pvrt::Transfer>(transferStage);
+        std::vector<std::shared_ptr<const lights::Light>> ls = *run.get<LightList>("lights");
+        if (ls.empty())
+            ls.push_back(render::headlight(*run.get<render::Camera>("camera"),
+                                           render::kVolumetricHeadlightIrradiance));
+        std::vector<glm::vec3> c;
+        try {
+            c = params.makeBasis().project(ls);
+        } catch (const InputError& e) {
+            rethrowAsScene(run.scene(), e);
+        }
+        core::Stopwatch sw;
+        std::shared_ptr<pvrt::RadianceVolume> r;
+        if (compressed) {
+            const auto cp = run.get<pvrt::Cpca>("pvrt_cpca");
+            std::vector<glm::vec3> perPoint(std::size_t(t->layout.points));
+            cp->radiance(c, perPoint);
+            r = std::make_shared<pvrt::RadianceVolume>(pvrt::scatterRadiance(t->layout, perPoint));
+        } else {
+            r = std::make_shared<pvrt::RadianceVolume>(
+                pvrt::combineTransfer(*t, c, params.threads));
+        }
+        run.details()["pvrt_radiance"] = {{"seconds", sw.seconds()},
+                                          {"clamped_points", r->clamped}};
+        const std::size_t bytes = r->bytes();
+        return Artifact::of<pvrt::RadianceVolume>(std::move(r), bytes);
+    };
+    radiance.describe = [](const Run& run, const Artifact& a) {
+        const auto& r = *a.as<pvrt::RadianceVolume>();
+        std::ostringstream os;
+        os << "radiance volume " << dims(r.res);
+        const json& d = run.details().value("pvrt_radiance", json::object());
+        if (!d.empty()) os << " in " << 1e3 * d["seconds"].get<double>() << " ms";
+        if (r.clamped) os << ", " << r.clamped << " points clamped at 0";
+        return os.str();
+    };
+    plan.stages.push_back(radiance);
+    return transferStage;
+}
+
 // ---- The plan ----------------------------------------------------------------------------------
 
 /// iso-lattice's lattice (pipeline/iso_shading.h): the volume's float copy and skip bricks its
@@ -1411,6 +1730,17 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     const visibility::HierarchicalVisibilityOptions ritschelParams =
         kind == Kind::Ritschel ? parseRitschelParams(scene, reader)
                                : visibility::HierarchicalVisibilityOptions{};
+    const PvrtParams pvrtParams =
+        kind == Kind::Pvrt ? parsePvrtParams(scene, options, reader) : PvrtParams{};
+    if (kind == Kind::Pvrt)
+        for (std::size_t i = 0; i < scene.lights.size(); ++i)
+            if (scene.lights[i].type != "directional" && scene.lights[i].type != "environment")
+                throw InputError(scene.source, "lights[" + std::to_string(i) + "].type",
+                                 "a " + scene.lights[i].type +
+                                     " light is not distant: method 'pvrt' precomputes transfer "
+                                     "for distant lighting only",
+                                 "use directional or environment lights, or method 'sh-global' "
+                                 "or 'pathtrace'");
     const IsoLatticeParams isoLattice =
         kind == Kind::IsoLattice ? parseIsoLatticeParams(scene, reader) : IsoLatticeParams{};
     if (kind == Kind::IsoLattice) {
@@ -1658,6 +1988,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     else if (isSh(kind))
         sh.skip = "not needed: " + scene.method.name +
                   " projects the lights' radiance SH itself, per frame";
+    else if (kind == Kind::Pvrt)
+        sh.skip = "not needed: pvrt projects the lights into its basis itself, per frame";
     else if (!hasEnvironmentLight(scene))
         sh.skip = "not needed: no environment light";
     // Keyed on the environment lights alone: moving a directional light re-projects no map.
@@ -1689,7 +2021,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             {"min", {options.cropBox->min.x, options.cropBox->min.y, options.cropBox->min.z}},
             {"max", {options.cropBox->max.x, options.cropBox->max.y, options.cropBox->max.z}}};
     const bool voxelsByTf = kind == Kind::Gradient || kind == Kind::EmissionAbsorption ||
-                            kind == Kind::PathTrace || isSh(kind);
+                            kind == Kind::PathTrace || isSh(kind) || kind == Kind::Pvrt;
     Stage framing{"framing", StageKind::Precompute,
                   voxelsByTf ? std::vector<std::string>{"skip_cells", "transfer_function",
                                                         "clip_planes", "crop_box"}
@@ -1766,6 +2098,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         }
     };
     plan.stages.push_back(camera);
+    if (kind == Kind::Pvrt) addPvrtStages(plan, pvrtParams, options, cuts);
 
     Stage frame{"render",
                 StageKind::Frame,
@@ -1775,6 +2108,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         frame.inputs.push_back(clipped ? "clip_local_visibility" : "local_visibility");
     if (kind == Kind::ShGlobal) frame.inputs.push_back("global_visibility");
     if (kind == Kind::IsoLattice) frame.inputs.push_back("illumination_lattice");
+    if (kind == Kind::Pvrt) frame.inputs.push_back("pvrt_radiance");
     if (kind == Kind::Ritschel)
         frame.inputs.push_back(clipped ? "clip_hierarchical_visibility"
                                        : "hierarchical_visibility");
@@ -1790,6 +2124,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         if (isKronander(kind)) k.stage(clipped ? "clip_local_visibility" : "local_visibility");
         if (kind == Kind::ShGlobal) k.stage("global_visibility");
         if (kind == Kind::IsoLattice) k.stage("illumination_lattice");
+        if (kind == Kind::Pvrt) k.stage("pvrt_radiance");
         if (kind == Kind::Ritschel)
             k.stage(clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility");
         return k.json(optionsKey).value();
@@ -1866,6 +2201,11 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                     model = render::makeShVisibilityModel(caster, *camera, global,
                                                           lightLocalVisibility(run, clipped), band);
                 }
+                film = std::make_shared<core::ImageRGBA>(
+                    caster.render(*camera, *model, run.progress(), &stats));
+            } else if (kind == Kind::Pvrt) {
+                const auto model = pvrt::makePvrtModel(
+                    caster, *camera, run.get<pvrt::RadianceVolume>("pvrt_radiance"));
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else if (kind == Kind::IsoLattice) {
@@ -2006,6 +2346,13 @@ const RegisterMethod kIsoLattice(rayCasterMethod(
      "lattice_memory_mb", "lattice_texels", "vicinity_radius", "ambient", "diffuse", "specular",
      "shininess"},
     {}));
+const RegisterMethod kPvrt(rayCasterMethod(
+    Kind::Pvrt, "pvrt",
+    "precomputed volume radiance transfer (Zhang 2013): single and multiple scattering under "
+    "dynamic distant lights through SH or DSF basis lights, photon-mapped indirect light, CPCA",
+    {"basis", "order", "directions", "resolution", "quadrature", "max_bounces", "photons",
+     "kernel_radius", "clusters", "components"},
+    {"local_shadows", "global_shadows", "multiple_scattering"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",
     {"iso_value", "ambient", "diffuse"}, {}));

@@ -94,7 +94,8 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
 
 TEST(Cli, SceneOfAnUnregisteredMethodIsRefusedNamingTheRegisteredOnes) {
     test::TempDir tmp;
-    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "torso"}, "method": "pvrt"})";
+    std::ofstream(tmp / "scene.json")
+        << R"({"volume": {"phantom": "torso"}, "method": "radiosity"})";
     const Result r = run("scene '" + (tmp / "scene.json").string() + "'", tmp.path());
     EXPECT_EQ(r.code, 2) << r.err;
     EXPECT_NE(r.err.find("method.name"), std::string::npos) << r.err;

@@ -50,7 +50,7 @@ TEST(SceneRender, RejectsUnknownParamsUnimplementedMethodsAndUnsupportedLights) 
         EXPECT_EQ(e.field(), "method.params.shinyness");
     }
     d = base();
-    d["method"] = "pvrt";  // not implemented yet: not registered
+    d["method"] = "radiosity";  // not a method voxlight has
     EXPECT_THROW(pipeline::Session().plan(scene(d)), InputError);
     d = base();
     d["method"] = "no-such-method";

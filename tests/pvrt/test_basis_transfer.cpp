@@ -114,3 +114,50 @@ TEST(PvrtTransferLayout, AnEmptyVolumeStoresNothing) {
 }
 
 }  // namespace
+
+#include "pvrt/direct.h"
+#include "pvrt/radiance.h"
+
+namespace {
+
+TEST(PvrtRadiance, ASphereUnderADirectionalLightMatchesTheClosedForm) {
+    // Direct part only, DSF 642 (holds a directional light within its kernel radius), transfer
+    // at every voxel: S(x) = E·exp(−σ·d(x))/(4π), d = the distance from x to the sphere's surface
+    // toward the light.
+    constexpr float kSigma = 0.15f;
+    const auto m = test::makeMedium("sphere", test::stepTf(kSigma, glm::vec3(0.9f)), 32);
+    const auto facts = core::spherePhantomFacts(m.volume->geometry());
+    const auto basis = pvrt::Basis::dsf(642);
+    pvrt::Transfer t(pvrt::makeTransferLayout(*m.volume, *m.cells, 32), basis.size());
+    pvrt::DirectOptions o;
+    o.directions = 642;
+    pvrt::addDirectTransfer(*m.volume, *m.table, basis, t, o);
+    const glm::dvec3 l = glm::normalize(glm::dvec3(0.5, 0.6, -0.62));
+    const float e = 6.f;
+    std::vector<std::shared_ptr<const lights::Light>> ls{
+        std::make_shared<lights::DirectionalLight>(glm::vec3(e), glm::vec3(l))};
+    const auto r = pvrt::combineTransfer(t, basis.project(ls));
+    double worst = 0;
+    int n = 0;
+    for (int z = 0; z < 32; z += 3)
+        for (int y = 0; y < 32; y += 3)
+            for (int x = 0; x < 32; x += 3) {
+                const glm::dvec3 p = m.volume->geometry().indexToWorld(glm::dvec3(x, y, z));
+                const glm::dvec3 q = p - facts.centre;
+                const double b = glm::dot(q, l), c = glm::dot(q, q) - facts.radius * facts.radius;
+                if (c > -4.0) continue;  // two voxels inside: away from the ramp of the surface
+                const double d = -b + std::sqrt(b * b - c);
+                const double want = e * std::exp(-kSigma * d) / (4.0 * std::numbers::pi);
+                const double got = r.sample(glm::vec3(x, y, z)).x;
+                worst = std::max(worst, std::abs(got - want) / want);
+                ++n;
+            }
+    std::printf("sphere: %d points, worst relative error %.4f\n", n, worst);
+    EXPECT_GT(n, 100);
+    // The ramp of the surface (one voxel: value 0.5 at the radius) shifts the effective edge by
+    // up to half a voxel: exp(0.15 · 0.5) − 1 = 8 %.
+    constexpr double kSphereTol = 0.08;
+    EXPECT_LT(worst, kSphereTol);
+}
+
+}  // namespace
