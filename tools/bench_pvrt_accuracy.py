@@ -38,7 +38,7 @@ from bench_sh_accuracy import DATASETS, errors, render
 from voxlight_cli import read_exr
 
 SIZE = 128
-DEFAULTS = {"basis": "sh", "order": 4, "photons": 10, "clusters": 128}
+DEFAULTS = {"basis": "sh", "order": 4, "photons": 100, "clusters": 128}
 SWEEPS = [  # (label, list of param overrides) — one axis at a time from DEFAULTS
     ("basis", [{"basis": "sh", "order": 2}, {"basis": "sh", "order": 4},
                {"basis": "sh", "order": 6}, {"basis": "dsf", "directions": 42},
@@ -108,7 +108,7 @@ def main():
               (name, ref_st["pathtrace"]["spp"], 100 * floor, ref_wall), flush=True)
 
         def row(label, params, effects=MULTIPLE, method="pvrt"):
-            tag = "%s-%s-%s" % (name, method, "-".join("%s%s" % kv for kv in sorted(params.items())))
+            tag = "%s-%s-%s-%s" % (name, method, label, "-".join("%s%s" % kv for kv in sorted(params.items())))
             png, exr, st, pre, _ = render(voxlight, scene, tag, args.work, method, params, effects)
             rmse, off, nrmse, diff = errors(ref_png, ref_lin, png, read_exr(exr, args.work))
             frame = stage_seconds(st, ["pvrt_radiance"], "frame")
