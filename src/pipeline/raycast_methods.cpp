@@ -1263,6 +1263,10 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
 /// 64³ grid — seconds on 2 cores.
 constexpr int kDefaultPhotonsPerCell = 100;
 
+/// Default budget of one PVRT transfer: a sixth of this kind of machine's 24 GB, so that the
+/// direct transfer, its copy with the photons and the CPCA's working copy fit beside the volume.
+constexpr double kDefaultPvrtMemoryMb = 4096.0;
+
 /// pvrt's parameters (method.params): the basis of the lights, where transfer is stored, the
 /// direct part's quadrature, the photons of the indirect part and the CPCA compression.
 struct PvrtParams {
@@ -1277,6 +1281,9 @@ struct PvrtParams {
     int clusters = 128;  ///< CPCA clusters; 0 = uncompressed transfer
     int components = 4;
     int threads = 0;
+    /// Largest transfer (MB) the precompute may build; the photon stage holds two (the direct
+    /// one it copies and its own).
+    double memoryMb = kDefaultPvrtMemoryMb;
 
     pvrt::Basis makeBasis() const {
         return basis == "sh" ? pvrt::Basis::sh(order) : pvrt::Basis::dsf(directions);
@@ -1348,6 +1355,7 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
         p.fail("components", "applies only with CPCA (clusters > 0)",
                "remove it, or set clusters to e.g. 128");
     s.components = s.clusters > 0 ? p.integer("components", 4, 0, 64) : 0;
+    s.memoryMb = p.number("memory_mb", kDefaultPvrtMemoryMb, 1.0, 1e7);
     return s;
 }
 
@@ -1420,6 +1428,18 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
             layout = pvrt::makeTransferLayout(v, *cells, params.resolution);
         } catch (const InputError& e) {
             rethrowAsScene(run.scene(), e);
+        }
+        // The budget before the allocation: a volume too large for the settings is a clear error,
+        // not an out-of-memory kill.
+        const double mb = double(layout.points) * basis.size() * 3 * sizeof(float) / 1048576.0;
+        if (mb > params.memoryMb) {
+            std::ostringstream os;
+            os << "the transfer would take " << std::llround(mb) << " MB (" << layout.points
+               << " points × " << basis.size() << " basis lights × RGB), over memory_mb "
+               << params.memoryMb;
+            throw InputError(run.scene().source, "method.params.resolution", os.str(),
+                             "lower resolution, use fewer basis lights (order, directions) or "
+                             "raise method.params.memory_mb");
         }
         auto t = std::make_shared<pvrt::Transfer>(std::move(layout), basis.size());
         pvrt::DirectOptions d;
@@ -2357,7 +2377,7 @@ const RegisterMethod kPvrt(rayCasterMethod(
     "precomputed volume radiance transfer (Zhang 2013): single and multiple scattering under "
     "dynamic distant lights through SH or DSF basis lights, photon-mapped indirect light, CPCA",
     {"basis", "order", "directions", "resolution", "quadrature", "max_bounces", "photons",
-     "kernel_radius", "clusters", "components"},
+     "kernel_radius", "clusters", "components", "memory_mb"},
     {"local_shadows", "global_shadows", "multiple_scattering"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

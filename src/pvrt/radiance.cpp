@@ -116,9 +116,9 @@ class PvrtShader {
 
 }  // namespace
 
-std::unique_ptr<render::ShadingModel> makePvrtModel(const render::RayCaster& caster,
-                                                    const render::Camera& camera,
-                                                    std::shared_ptr<const RadianceVolume> radiance) {
+std::unique_ptr<render::ShadingModel> makePvrtModel(
+    const render::RayCaster& caster, const render::Camera& camera,
+    std::shared_ptr<const RadianceVolume> radiance) {
     return std::make_unique<render::detail::DvrModel<PvrtShader>>(
         "pvrt", PvrtShader(std::move(radiance), caster.volume().geometry()),
         render::PixelFootprint(caster, camera));

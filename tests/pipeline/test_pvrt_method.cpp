@@ -24,22 +24,23 @@ io::Scene scene(const json& doc) { return io::parseScene(doc, "test.json", ".");
 /// optical radius of ~1.7, where both single and multiple scattering show — white albedo 0.9.
 json cloudScene(const std::string& method, const json& params, bool multiple) {
     const json white = {0.9, 0.9, 0.9};
-    json d = {{"volume", {{"phantom", "sphere"}, {"size", 32}}},
-              {"transfer_function",
-               {{"points",
-                 {{{"value", 0.0}, {"color", white}, {"extinction", 0}},
-                  {{"value", 0.49}, {"color", white}, {"extinction", 0}},
-                  {{"value", 0.51}, {"color", white}, {"extinction", 0.15}},
-                  {{"value", 1.0}, {"color", white}, {"extinction", 0.15}}}},
-                {"window", {{"level", 0.5}, {"width", 1.0}}}}},
-              {"method", {{"name", method}, {"params", params}}},
-              {"lights", json::array({{{"type", "directional"},
-                                       {"direction", {0.5, 0.6, -0.62}},
-                                       {"intensity", 6}}})},
-              {"camera", {{"view", "anterior"}}},
-              {"image", {{"width", 40}, {"height", 40}}}};
-    d["effects"] = multiple ? json{"global_shadows", "multiple_scattering"}
-                            : json{"global_shadows"};
+    json d = {
+        {"volume", {{"phantom", "sphere"}, {"size", 32}}},
+        {"transfer_function",
+         {{"points",
+           {{{"value", 0.0}, {"color", white}, {"extinction", 0}},
+            {{"value", 0.49}, {"color", white}, {"extinction", 0}},
+            {{"value", 0.51}, {"color", white}, {"extinction", 0.15}},
+            {{"value", 1.0}, {"color", white}, {"extinction", 0.15}}}},
+          {"window", {{"level", 0.5}, {"width", 1.0}}}}},
+        {"method", {{"name", method}, {"params", params}}},
+        {"lights",
+         json::array(
+             {{{"type", "directional"}, {"direction", {0.5, 0.6, -0.62}}, {"intensity", 6}}})},
+        {"camera", {{"view", "anterior"}}},
+        {"image", {{"width", 40}, {"height", 40}}}};
+    d["effects"] =
+        multiple ? json{"global_shadows", "multiple_scattering"} : json{"global_shadows"};
     return d;
 }
 
@@ -110,18 +111,22 @@ TEST(PvrtMethod, MultipleScatteringMatchesThePathTracer) {
     const RunResult single = session.run(scene(cloudScene("pathtrace", referenceParams(1), false)));
     // 200 photons per boundary cell (~1.2 M photons): the photon noise of the indirect part
     // below the tolerance; the kernel (2 grid steps) keeps its bias at the edge small.
-    const RunResult pvrt = session.run(scene(cloudScene(
-        "pvrt", {{"basis", "dsf"}, {"directions", 162}, {"resolution", 32}, {"photons", 200},
-                 {"clusters", 0}},
-        true)));
+    const RunResult pvrt = session.run(scene(cloudScene("pvrt",
+                                                        {{"basis", "dsf"},
+                                                         {"directions", 162},
+                                                         {"resolution", 32},
+                                                         {"photons", 200},
+                                                         {"clusters", 0}},
+                                                        true)));
     ASSERT_TRUE(pvrt.stage("pvrt_transfer").ran);
     EXPECT_TRUE(allFiniteNonNegative(pvrt.image));
     // Multiple scattering matters here: without it the image is far darker.
     const double missing = relativeL2(single.image, ref.image);
     const double err = relativeL2(pvrt.image, ref.image);
-    std::printf("multiple scattering: pvrt relative L2 %.4f (single scattering alone %.4f); mean "
-                "red pvrt %.4f reference %.4f\n",
-                err, missing, meanRed(pvrt.image), meanRed(ref.image));
+    std::printf(
+        "multiple scattering: pvrt relative L2 %.4f (single scattering alone %.4f); mean "
+        "red pvrt %.4f reference %.4f\n",
+        err, missing, meanRed(pvrt.image), meanRed(ref.image));
     EXPECT_GT(missing, 0.15);
     // Measured 0.069 (mean within 2.5 %): photon noise, the kernel's bias at the edge (low), and
     // the reference's noise (2.4 % NRMS at 1024 spp with 16 bounces).
@@ -169,9 +174,9 @@ TEST(PvrtMethod, ALightOrCameraChangeRerunsNoPrecompute) {
     EXPECT_EQ(ranStages(session.run(scene(d))),
               (std::set<std::string>{"pvrt_cpca", "pvrt_radiance", "camera", "render"}));
     d["method"]["params"]["photons"] = 3;  // photons, then everything downstream
-    EXPECT_EQ(ranStages(session.run(scene(d))),
-              (std::set<std::string>{"pvrt_transfer", "pvrt_cpca", "pvrt_radiance", "camera",
-                                     "render"}));
+    EXPECT_EQ(
+        ranStages(session.run(scene(d))),
+        (std::set<std::string>{"pvrt_transfer", "pvrt_cpca", "pvrt_radiance", "camera", "render"}));
 }
 
 TEST(PvrtMethod, WithoutLightsTheHeadlightFollowsTheCamera) {
@@ -206,8 +211,8 @@ TEST(PvrtMethod, ParamsAndLightsAreCheckedWithTheFieldNamed) {
     fails(cloudScene("pvrt", {{"basis", "dsf"}, {"directions", 642}, {"quadrature", 162}}, true),
           "method.params.quadrature");
     json point = cloudScene("pvrt", json::object(), true);
-    point["lights"] = json::array(
-        {{{"type", "point"}, {"position", {0, -100, 0}}, {"intensity", 1e4}}});
+    point["lights"] =
+        json::array({{{"type", "point"}, {"position", {0, -100, 0}}, {"intensity", 1e4}}});
     fails(point, "lights[0].type");
 }
 
@@ -228,6 +233,20 @@ TEST(PvrtMethod, TheDiskCacheServesTheTransferBitForBit) {
     EXPECT_NE(again.stage("pvrt_transfer").reason.find("(disk)"), std::string::npos)
         << again.stage("pvrt_transfer").reason;
     EXPECT_EQ(again.image.pixels, first.pixels);
+}
+
+TEST(PvrtMethod, ATransferOverTheMemoryBudgetIsAClearError) {
+    // 32³ points × 642 basis lights × RGB would be ~0.25 GB: over a 10 MB budget.
+    json d = cloudScene(
+        "pvrt", {{"basis", "dsf"}, {"directions", 642}, {"resolution", 32}, {"memory_mb", 10}},
+        false);
+    try {
+        Session().run(scene(d));
+        ADD_FAILURE() << "a transfer over the budget was built";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.resolution");
+        EXPECT_NE(std::string(e.what()).find("memory_mb"), std::string::npos) << e.what();
+    }
 }
 
 TEST(PvrtMethod, EmptyAndOpaqueTransferFunctionsStayFinite) {
