@@ -258,3 +258,22 @@ TEST(PvrtMethod, EmptyAndOpaqueTransferFunctionsStayFinite) {
         EXPECT_TRUE(allFiniteNonNegative(r.image)) << "sigma " << sigma;
     }
 }
+
+TEST(PvrtMethod, TurningAnEnvironmentMapReprojectsOnlyTheLights) {
+    VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
+    for (const char* basis : {"sh", "dsf"}) {
+        Session session;
+        json d = cloudScene("pvrt", {{"basis", basis}, {"resolution", 16}, {"clusters", 0}}, false);
+        d["lights"] = json::array(
+            {{{"type", "environment"}, {"path", env.string()}, {"rotation", {0, 0, 0}}}});
+        const RunResult a = session.run(scene(d));
+        EXPECT_TRUE(allFiniteNonNegative(a.image)) << basis;
+        EXPECT_GT(meanRed(a.image), 0.0) << basis;
+        d["lights"][0]["rotation"] = {0, 0, 90};
+        const RunResult b = session.run(scene(d));
+        EXPECT_EQ(ranStages(b),
+                  (std::set<std::string>{"lights", "pvrt_radiance", "camera", "render"}))
+            << basis;
+        EXPECT_NE(a.image.pixels, b.image.pixels) << basis;
+    }
+}
