@@ -87,7 +87,18 @@ def main():
     ap.add_argument("--docs", default=None)
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
     ap.add_argument("--quick", action="store_true", help="defaults only (a check after a change)")
+    ap.add_argument("--report-only", action="store_true",
+                    help="rebuild the table and plot from WORK/results.csv (pictures untouched)")
     args = ap.parse_args()
+    if args.report_only:
+        with open(os.path.join(args.work, "results.csv")) as f:
+            rows = list(csv.DictReader(f))
+        for r in rows:
+            for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
+                      "light_change_s", "reference_nrms"):
+                r[k] = float(r[k])
+        report(rows, [], args.docs)
+        return
     sweeps = [("defaults", [{}])] if args.quick else SWEEPS
     voxlight = os.path.abspath(args.voxlight)
     os.makedirs(args.work, exist_ok=True)
@@ -147,6 +158,15 @@ def main():
     report(rows, pictures, args.docs)
 
 
+def short_label(axis, setting):
+    """The value an axis varies, from a row's setting string ("sh16", "dsf162", "100")."""
+    kv = dict(item.split("=") for item in setting.split())
+    if axis == "basis":
+        return ("sh%d" % int(kv["order"]) ** 2 if kv["basis"] == "sh"
+                else "dsf" + kv["directions"])
+    return kv.get(axis, "")
+
+
 def report(rows, pictures, docs):
     lines = ["| scene | method | axis | setting | RMSE (/255) | pixels off > 2/255 | NRMSE | "
              "precompute s | light change ms |", "|---|---|---|---|---|---|---|---|---|"]
@@ -173,8 +193,8 @@ def report(rows, pictures, docs):
                 ax.plot([r["precompute_s"] for r in s], [r["rmse_255"] for r in s], "-o", ms=3,
                         label="pvrt " + label)
                 for r in s:
-                    ax.annotate(r["setting"].replace("basis=", ""), (r["precompute_s"],
-                                r["rmse_255"]), fontsize=6)
+                    ax.annotate(short_label(label, r["setting"]), (r["precompute_s"],
+                                r["rmse_255"]), fontsize=7)
         for r in rows:
             if r["scene"] == scene and r["axis"] in ("single", "sh-global"):
                 ax.plot([r["precompute_s"]], [r["rmse_255"]], "x", label=r["axis"])
