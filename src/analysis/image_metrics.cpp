@@ -482,6 +482,14 @@ std::ostream& operator<<(std::ostream& os, const ErrorStats& s) {
     return os << "ErrorStats{rmse " << s.rmse << ", nrmse " << s.nrmse << ", psnr " << s.psnrDb
               << " dB (peak " << s.peak << "), " << s.pixels << " pixels}";
 }
+std::ostream& operator<<(std::ostream& os, const SsimResult& r) {
+    return os << "SsimResult{mean " << r.mean << ", map " << r.map.width << "x" << r.map.height
+              << "}";
+}
+std::ostream& operator<<(std::ostream& os, const FlipResult& r) {
+    return os << "FlipResult{mean " << r.mean << ", map " << r.map.width << "x" << r.map.height
+              << "}";
+}
 std::ostream& operator<<(std::ostream& os, Encoding e) {
     return os << (e == Encoding::Display ? "display" : "linear");
 }

@@ -23,6 +23,9 @@
 // display-encoded images: a Linear image is clamped to [0, 1] and sRGB-encoded first (no tone
 // mapping: tone-map HDR images with values above 1 before comparing them this way).
 //
+// Non-finite values: RMSE, NRMSE and PSNR propagate them (a NaN pixel makes them NaN); SSIM and
+// FLIP read NaN and negative values as 0 and values above 1 as 1, like any display.
+//
 // Coverage. MetricOptions::mask, when not empty, holds one byte per pixel (row 0 = top); the
 // scalar results average only over pixels whose byte is non-zero ("covered"). coverageMask() makes
 // one from the images' alpha (the renderer's film stores coverage there). The mask selects pixels
@@ -165,5 +168,7 @@ void magma(float t, float rgb[3]);
 
 std::ostream& operator<<(std::ostream& os, const ErrorStats& s);
 std::ostream& operator<<(std::ostream& os, Encoding e);
+std::ostream& operator<<(std::ostream& os, const SsimResult& r);
+std::ostream& operator<<(std::ostream& os, const FlipResult& r);
 
 }  // namespace voxlight::analysis
