@@ -55,5 +55,6 @@ Command addRenderCommand(CLI::App& app);
 Command addIsoCommand(CLI::App& app);
 Command addReplayCommand(CLI::App& app);
 Command addViewCommand(CLI::App& app);
+Command addCompareCommand(CLI::App& app);
 
 }  // namespace voxlight::app

@@ -13,7 +13,7 @@ int main(int argc, char** argv) {
     app.set_version_flag("--version", "voxlight 0.1.0");
     std::vector<Command> commands = {
         addInfoCommand(app), addPhantomCommand(app), addSceneCommand(app), addRenderCommand(app),
-        addIsoCommand(app),  addReplayCommand(app),  addViewCommand(app)};
+        addIsoCommand(app),  addReplayCommand(app),  addViewCommand(app),  addCompareCommand(app)};
     try {
         app.parse(argc, argv);
     } catch (const CLI::CallForHelp& e) {

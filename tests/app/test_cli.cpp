@@ -508,3 +508,52 @@ TEST(Cli, ThePathTracersDenoiserChangesThePngOnlyAndABadValueIsOneLine) {
     EXPECT_NE(r.err.find("method.params.denoise"), std::string::npos) << r.err;
     EXPECT_FALSE(fs::exists(tmp / "bad.png"));
 }
+
+TEST(Cli, CompareReportsMetricsAsJsonAndWritesTheMap) {
+    test::TempDir tmp;
+    core::ImageRGBA a(32, 24), b(32, 24), small(16, 24);
+    for (int y = 0; y < 24; ++y)
+        for (int x = 0; x < 32; ++x) {
+            float* p = a.at(x, y);
+            p[0] = p[1] = p[2] = x < 16 ? 0.2f : 0.8f, p[3] = 1.0f;
+            float* t = b.at(x, y);
+            t[0] = t[1] = t[2] = x < 18 ? 0.2f : 0.8f, t[3] = 1.0f;  // the edge moved 2 pixels
+        }
+    io::writeImage(a, tmp / "a.png");
+    io::writeImage(b, tmp / "b.png");
+    io::writeImage(small, tmp / "small.png");
+    Result r = run("compare --json " + q(tmp / "a.png") + " " + q(tmp / "b.png") + " --map " +
+                       q(tmp / "map.png"),
+                   tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const auto j = nlohmann::json::parse(r.out);
+    EXPECT_EQ(j["width"], 32);
+    EXPECT_EQ(j["encoding"], "display");
+    for (const char* key : {"rmse", "nrmse", "psnr_db", "ssim", "flip", "detect"})
+        EXPECT_TRUE(j[key].is_number()) << key << "\n" << r.out;
+    EXPECT_GT(j["flip"].get<double>(), 0.0);
+    EXPECT_LT(j["ssim"].get<double>(), 1.0);
+    const core::ImageRGBA map = io::readImage(tmp / "map.png");
+    EXPECT_EQ(map.width, 32);
+    // Identical images: PSNR infinite (null in JSON), text lines one per metric asked for.
+    r = run("compare --json " + q(tmp / "a.png") + " " + q(tmp / "a.png"), tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(nlohmann::json::parse(r.out)["psnr_db"].is_null()) << r.out;
+    r = run("compare --metrics rmse,ssim " + q(tmp / "a.png") + " " + q(tmp / "b.png"), tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(lineCount(r.out), 2u) << r.out;
+    EXPECT_EQ(r.out.rfind("rmse:", 0), 0u) << r.out;
+    // Bad input: one line, exit 2, no map.
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"compare " + q(tmp / "a.png") + " " + q(tmp / "small.png"), "16x24"},
+        {"compare " + q(tmp / "a.png") + " " + q(tmp / "missing.png"), "does not exist"},
+        {"compare --metrics rmse,nope " + q(tmp / "a.png") + " " + q(tmp / "b.png"), "nope"},
+    };
+    for (const auto& [args, word] : cases) {
+        const Result e = run(args + " --map " + q(tmp / "bad.png"), tmp.path());
+        EXPECT_EQ(e.code, 2) << args << "\n" << e.err;
+        EXPECT_EQ(lineCount(e.err), 1u) << args << "\n" << e.err;
+        EXPECT_NE(e.err.find(word), std::string::npos) << args << "\n" << e.err;
+        EXPECT_FALSE(fs::exists(tmp / "bad.png")) << args;
+    }
+}
