@@ -27,6 +27,7 @@ A benchmark, not a test: the references take most of its time.
 """
 import argparse
 import csv
+import glob
 import json
 import os
 import subprocess
@@ -36,7 +37,7 @@ import numpy as np
 from PIL import Image
 
 from bench_sh_accuracy import DATASETS, errors, render
-from voxlight_cli import read_exr
+from voxlight_cli import mosaic, read_exr
 
 SIZE = 128
 DEFAULTS = {"basis": "sh", "order": 4, "photons": 100, "clusters": 128}
@@ -88,7 +89,7 @@ def main():
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
     ap.add_argument("--quick", action="store_true", help="defaults only (a check after a change)")
     ap.add_argument("--report-only", action="store_true",
-                    help="rebuild the table and plot from WORK/results.csv (pictures untouched)")
+                    help="rebuild the table, plot and pictures from WORK (results.csv and its images)")
     args = ap.parse_args()
     if args.report_only:
         with open(os.path.join(args.work, "results.csv")) as f:
@@ -97,7 +98,8 @@ def main():
             for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
                       "light_change_s", "reference_nrms"):
                 r[k] = float(r[k])
-        report(rows, [], args.docs)
+        report(rows, sorted({r["scene"] for r in rows}, key=[r["scene"] for r in rows].index),
+               args.docs, args.work)
         return
     sweeps = [("defaults", [{}])] if args.quick else SWEEPS
     voxlight = os.path.abspath(args.voxlight)
@@ -121,9 +123,10 @@ def main():
               (name, ref_st["pathtrace"]["spp"], 100 * floor, ref_wall), flush=True)
 
         def row(label, params, effects=MULTIPLE, method="pvrt"):
+            """Renders one setting and appends its row of the table."""
             tag = "%s-%s-%s-%s" % (name, method, label, "-".join("%s%s" % kv for kv in sorted(params.items())))
             png, exr, st, pre, _ = render(voxlight, scene, tag, args.work, method, params, effects)
-            rmse, off, nrmse, diff = errors(ref_png, ref_lin, png, read_exr(exr, args.work))
+            rmse, off, nrmse, _ = errors(ref_png, ref_lin, png, read_exr(exr, args.work))
             frame = stage_seconds(st, ["pvrt_radiance"], "frame")
             r = {"scene": name, "method": method, "axis": label,
                  "setting": " ".join("%s=%s" % kv for kv in sorted(params.items())) or "defaults",
@@ -134,7 +137,6 @@ def main():
             print("  %-9s %-9s %-28s RMSE %6.2f/255  off %5.1f %%  NRMSE %.3f  precompute %6.2f s"
                   "  light change %.1f ms" % (method, label, r["setting"], rmse, off, nrmse, pre,
                                               1e3 * frame), flush=True)
-            return png, diff
 
         for label, variants in sweeps:
             for v in variants:
@@ -143,19 +145,33 @@ def main():
                     params.pop("order")
                 params.update(v)
                 row(label, params)
-        pvrt_png, diff = row("pictures", dict(DEFAULTS))
-        single_png, _ = row("single", dict(DEFAULTS, max_bounces=1), ["global_shadows"])
-        shg_png, _ = row("sh-global", {}, ["global_shadows"], "sh-global")
-        heat = np.clip(diff / 32.0, 0, 1)
-        err = np.stack([heat * 255, np.zeros_like(heat), (1 - heat) * 40], axis=2).astype(np.uint8)
-        pictures.append([Image.open(p).convert("RGB")
-                         for p in (ref_png, pvrt_png, single_png, shg_png)] +
-                        [Image.fromarray(err)])
+        row("pictures", dict(DEFAULTS))
+        row("single", dict(DEFAULTS, max_bounces=1), ["global_shadows"])
+        row("sh-global", {}, ["global_shadows"], "sh-global")
+        pictures.append(name)
     with open(os.path.join(args.work, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()
         w.writerows(rows)
-    report(rows, pictures, args.docs)
+    report(rows, pictures, args.docs, args.work)
+
+
+def picture_row(scene, work):
+    """reference | pvrt defaults | pvrt single scattering | sh-global | pvrt error map (full red
+    at 32/255), from the images the runs left in WORK."""
+    def one(pattern):
+        found = sorted(glob.glob(os.path.join(work, pattern)))
+        return found[0] if found else None
+    names = [scene + "-reference.png", scene + "-pvrt-pictures-*.png",
+             scene + "-pvrt-single-*.png", scene + "-sh-global-sh-global-*.png"]
+    paths = [one(n) for n in names]
+    if None in paths:
+        return None
+    a = np.asarray(Image.open(paths[0]).convert("RGB"), dtype=np.float64)
+    b = np.asarray(Image.open(paths[1]).convert("RGB"), dtype=np.float64)
+    heat = np.clip(np.abs(a - b).max(axis=2) / 32.0, 0, 1)
+    err = np.stack([heat * 255, np.zeros_like(heat), (1 - heat) * 40], axis=2).astype(np.uint8)
+    return [(Image.open(p), None) for p in paths] + [(Image.fromarray(err), None)]
 
 
 def short_label(axis, setting):
@@ -167,7 +183,7 @@ def short_label(axis, setting):
     return kv.get(axis, "")
 
 
-def report(rows, pictures, docs):
+def report(rows, pictures, docs, work):
     lines = ["| scene | method | axis | setting | RMSE (/255) | pixels off > 2/255 | NRMSE | "
              "precompute s | light change ms |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -206,14 +222,13 @@ def report(rows, pictures, docs):
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(os.path.join(docs, "accuracy-vs-time.png"), dpi=110)
-    if pictures:
-        w, h = pictures[0][0].size
-        sheet = Image.new("RGB", (w * 5, h * len(pictures)))
-        for row_, ims in enumerate(pictures):
-            for col, im in enumerate(ims):
-                sheet.paste(im.resize((w, h)), (col * w, row_ * h))
-        sheet.save(os.path.join(docs, "comparison.png"))
-
+    rows_ = [r for r in (picture_row(scene, work) for scene in pictures) if r]
+    if rows_:
+        mosaic(rows_, os.path.join(docs, "comparison.png"),
+               col_labels=["path tracer", "pvrt", "pvrt 1 bounce", "sh-global",
+                           "pvrt error"],
+               row_labels=[scene for scene in pictures if picture_row(scene, work)],
+               row_label_w=110)
 
 if __name__ == "__main__":
     main()

@@ -549,6 +549,19 @@ std::optional<pathtrace::DenoiseOptions> parseDenoiseParams(const io::Scene& sce
     return d;
 }
 
+/// `max_bounces` of the multiple-scattering methods (pathtrace, pvrt): the "multiple_scattering"
+/// effect decides the default (kDefaultMaxBounces, else 1), and more than one bounce without it
+/// is refused.
+int parseMaxBounces(const io::Scene& scene, ParamReader& p) {
+    const bool multiple = wantsEffect(scene, "multiple_scattering");
+    if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
+        p.fail("max_bounces",
+               "asks for more than one bounce but the scene's effects omit "
+               "'multiple_scattering'",
+               "add \"multiple_scattering\" to effects or set max_bounces to 1");
+    return p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
+}
+
 /// The path tracer's options from the scene and method.params. Multiple scattering is the
 /// "multiple_scattering" effect: without it paths stop after one scattering event.
 pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::RenderOptions& o,
@@ -558,13 +571,7 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
     t.samplesPerPixel = p.integer("spp", reference ? kReferenceMaxSpp : 64, 1, 1 << 20);
     t.maxSeconds = p.number("seconds", 0.0, 0.0, 1e6);
     t.targetError = p.number("target_error", reference ? kReferenceTargetError : 0.0, 0.0, 1.0);
-    const bool multiple = wantsEffect(scene, "multiple_scattering");
-    if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
-        p.fail("max_bounces",
-               "asks for more than one bounce but the scene's effects omit "
-               "'multiple_scattering'",
-               "add \"multiple_scattering\" to effects or set max_bounces to 1");
-    t.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
+    t.maxBounces = parseMaxBounces(scene, p);
     t.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
     const std::string scattering = p.choice("scattering", "phase", {"phase", "brdf", "hybrid"});
     t.scattering = scattering == "brdf"     ? pathtrace::Scattering::Brdf
@@ -1337,13 +1344,7 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
                    std::to_string(dsfCount),
                "leave quadrature out (the DSF's own directions) or use at least " +
                    std::to_string(dsfCount));
-    const bool multiple = wantsEffect(scene, "multiple_scattering");
-    if (!multiple && p.has("max_bounces") && p.integer("max_bounces", 1, 1, 1000) > 1)
-        p.fail("max_bounces",
-               "asks for more than one bounce but the scene's effects omit "
-               "'multiple_scattering'",
-               "add \"multiple_scattering\" to effects or set max_bounces to 1");
-    s.maxBounces = p.integer("max_bounces", multiple ? kDefaultMaxBounces : 1, 1, 1000);
+    s.maxBounces = parseMaxBounces(scene, p);
     s.multiple = s.maxBounces > 1;
     s.photons.maxScatterings = s.maxBounces - 1;
     s.photons.photonsPerCell = p.integer("photons", kDefaultPhotonsPerCell, 1, 100000);

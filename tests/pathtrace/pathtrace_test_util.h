@@ -21,18 +21,24 @@ struct Medium {
     }
 };
 
-inline Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf,
-                         int size = 32) {
+/// A medium of any volume (e.g. a phantom with its geometry changed) under `tf`.
+inline Medium makeMedium(std::shared_ptr<const core::Volume> v,
+                         const optics::TransferFunction& tf) {
     Medium s;
-    auto v = std::make_shared<core::Volume>(core::makePhantom(phantom, {.size = size}));
     s.table = std::make_shared<optics::TfTable>(tf);
     const grid::BrickGrid grid = grid::BrickGrid::build(*v);
     render::RenderOptions ro;
     ro.mode = render::Mode::EmissionAbsorption;
     s.cells =
         std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *s.table, ro));
-    s.volume = v;
+    s.volume = std::move(v);
     return s;
+}
+
+inline Medium makeMedium(const std::string& phantom, const optics::TransferFunction& tf,
+                         int size = 32) {
+    return makeMedium(std::make_shared<core::Volume>(core::makePhantom(phantom, {.size = size})),
+                      tf);
 }
 
 /// A TF that is empty below value 0.5 and holds σt = `sigma` with albedo `albedo` above (a sharp

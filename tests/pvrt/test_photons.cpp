@@ -41,15 +41,7 @@ Scene makeTiltedScene(float sigma, glm::vec3 albedo, int size, glm::dvec3 spacin
     core::Geometry& g = v->geometry();
     g.direction = glm::dmat3(glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1), glm::dvec3(1, 0, 0));
     g.origin = -(g.direction * (0.5 * glm::dvec3(g.dims - 1) * g.spacing));
-    const optics::TransferFunction tf = test::stepTf(sigma, albedo);
-    test::Medium m;
-    m.table = std::make_shared<optics::TfTable>(tf);
-    const grid::BrickGrid grid = grid::BrickGrid::build(*v);
-    render::RenderOptions ro;
-    ro.mode = render::Mode::EmissionAbsorption;
-    m.cells =
-        std::make_shared<grid::BrickMajorants>(render::buildSkipCells(*v, grid, tf, *m.table, ro));
-    m.volume = v;
+    test::Medium m = test::makeMedium(v, test::stepTf(sigma, albedo));
     pathtrace::PathTracer t = m.tracer();
     pvrt::TransferLayout l = pvrt::makeTransferLayout(*m.volume, *m.cells, resolution);
     return {std::move(m), std::move(t), std::move(l)};
