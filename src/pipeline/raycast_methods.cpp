@@ -1400,6 +1400,50 @@ const Codec& pvrtTransferCodec() {
     return c;
 }
 
+const Codec& pvrtCpcaCodec() {
+    static const Codec c{
+        1,
+        [](const Artifact& a, ByteWriter& w) {
+            const auto& p = *a.as<pvrt::Cpca>();
+            w.pod(p.dim);
+            w.pod(p.clusters);
+            w.pod(p.components);
+            w.pod(p.iterations);
+            w.pod(p.relativeL2Error);
+            w.array(p.means);
+            w.array(p.basis);
+            w.array(p.cluster);
+            w.array(p.weights);
+        },
+        [](ByteReader& r) {
+            auto p = std::make_shared<pvrt::Cpca>();
+            p->dim = r.pod<int>();
+            p->clusters = r.pod<int>();
+            p->components = r.pod<int>();
+            p->iterations = r.pod<int>();
+            p->relativeL2Error = r.pod<double>();
+            p->means = r.array<float>(kMaxCells);
+            p->basis = r.array<float>(kMaxCells);
+            p->cluster = r.array<std::int32_t>(kMaxCells);
+            p->weights = r.array<float>(kMaxCells);
+            const std::size_t rows = p->cluster.size();
+            if (p->dim < 1 || p->clusters < 0 || p->components < 0 || p->components > 64 ||
+                p->means.size() != std::size_t(p->clusters) * p->dim ||
+                p->basis.size() != std::size_t(p->clusters) * p->components * p->dim ||
+                p->weights.size() != rows * std::size_t(p->components) ||
+                !std::isfinite(p->relativeL2Error))
+                badPayload("CPCA sizes do not fit together");
+            for (std::int32_t k : p->cluster)
+                if (k < 0 || k >= p->clusters) badPayload("CPCA cluster index out of range");
+            for (const auto* v : {&p->means, &p->basis, &p->weights})
+                for (float x : *v)
+                    if (!std::isfinite(x)) badPayload("non-finite CPCA value");
+            const std::size_t bytes = p->bytes();
+            return Artifact::of<pvrt::Cpca>(std::move(p), bytes);
+        }};
+    return c;
+}
+
 /// pvrt_direct ← volume + TF + skip cells + basis/resolution/quadrature + the cuts that remove
 /// matter for the light; pvrt_transfer ← pvrt_direct + photons (skipped without multiple
 /// scattering: the direct transfer is the transfer); pvrt_cpca ← the transfer + clusters/
@@ -1528,7 +1572,7 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         const std::size_t bytes = c->bytes();
         return Artifact::of<pvrt::Cpca>(std::move(c), bytes);
     };
-    cpca.notOnDisk = "not yet kept on disk: recomputed from the cached transfer";
+    cpca.codec = &pvrtCpcaCodec();
     cpca.describe = [](const Run&, const Artifact& a) {
         const auto& c = *a.as<pvrt::Cpca>();
         std::ostringstream os;

@@ -216,7 +216,7 @@ TEST(PvrtMethod, ParamsAndLightsAreCheckedWithTheFieldNamed) {
     fails(point, "lights[0].type");
 }
 
-TEST(PvrtMethod, TheDiskCacheServesTheTransferBitForBit) {
+TEST(PvrtMethod, TheDiskCacheServesTheTransferAndCpcaBitForBit) {
     const test::TempDir tmp;
     const json d = cloudScene("pvrt", {{"resolution", 16}, {"photons", 2}, {"clusters", 8}}, true);
     core::ImageRGBA first;
@@ -232,6 +232,8 @@ TEST(PvrtMethod, TheDiskCacheServesTheTransferBitForBit) {
     EXPECT_FALSE(again.stage("pvrt_transfer").ran);
     EXPECT_NE(again.stage("pvrt_transfer").reason.find("(disk)"), std::string::npos)
         << again.stage("pvrt_transfer").reason;
+    EXPECT_NE(again.stage("pvrt_cpca").reason.find("(disk)"), std::string::npos)
+        << again.stage("pvrt_cpca").reason;
     EXPECT_EQ(again.image.pixels, first.pixels);
 }
 
