@@ -39,6 +39,7 @@
 
 #include <algorithm>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -1086,11 +1087,33 @@ bool metaBool(const MetaHeader& h, const fs::path& path, const std::string& key,
                      "fix the MetaImage header");
 }
 
+/// A MetaScratch directory older than this belongs to a process that was killed (SIGKILL skips
+/// the destructor): reading a header takes seconds, so an hour is safe. They hold only a small
+/// header and symbolic links, never data, so removing them cannot lose anything.
+constexpr std::chrono::hours kStaleScratchAge{1};
+
+/// Removes the stale voxlight-mhd-* directories under `tmp` (errors ignored: another process may
+/// remove the same one at the same time).
+void removeStaleMetaScratch(const fs::path& tmp) {
+    std::error_code ec;
+    const auto now = fs::file_time_type::clock::now();
+    for (fs::directory_iterator it(tmp, ec), end; !ec && it != end; it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        if (name.rfind("voxlight-mhd-", 0) != 0 || !it->is_directory(ec) || it->is_symlink(ec))
+            continue;
+        const auto age = now - fs::last_write_time(it->path(), ec);
+        if (!ec && age > kStaleScratchAge) fs::remove_all(it->path(), ec);
+        ec.clear();
+    }
+}
+
 /// The header MetaIO is given instead of the user's (see readMeta), in a private temporary
-/// directory with links to the data files under short names; removed when this goes away.
+/// directory with links to the data files under short names; removed when this goes away (and
+/// by a later read, once stale, when the process was killed before that).
 class MetaScratch {
   public:
     MetaScratch() {
+        removeStaleMetaScratch(fs::temp_directory_path());
         std::string dir = (fs::temp_directory_path() / "voxlight-mhd-XXXXXX").string();
         if (!::mkdtemp(dir.data()))
             throw std::runtime_error("cannot create a temporary directory in " +

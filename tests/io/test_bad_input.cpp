@@ -412,6 +412,30 @@ TEST(BadInput, MetaImageReadThroughACanonicalHeader) {
     ASSERT_EQ(::unsetenv("TMPDIR"), 0);
 }
 
+// A process killed while reading (SIGKILL: no destructor) leaves its private directory behind;
+// the next read removes those older than an hour, and only those.
+TEST(BadInput, MetaImageStaleScratchDirectoriesAreRemoved) {
+    test::TempDir tmp, scratch;
+    ASSERT_EQ(::setenv("TMPDIR", scratch.path().c_str(), 1), 0);
+    const fs::path stale = scratch.path() / "voxlight-mhd-killed",
+                   fresh = scratch.path() / "voxlight-mhd-running",
+                   other = scratch.path() / "someone-elses";
+    for (const fs::path& d : {stale, fresh, other}) {
+        fs::create_directories(d);
+        writeText(d / "h.mhd", "x");
+    }
+    const auto twoHoursAgo = fs::file_time_type::clock::now() - std::chrono::hours(2);
+    fs::last_write_time(stale, twoHoursAgo);
+    fs::last_write_time(other, twoHoursAgo);
+    writeText(tmp / "d.raw", std::string(400, '\1'));
+    writeText(tmp / "ok.mhd", mhdText("NDims = 3\nDimSize = 10 10 2\n", "d.raw"));
+    EXPECT_EQ(io::readVolume(tmp / "ok.mhd").dims(), glm::ivec3(10, 10, 2));
+    EXPECT_FALSE(fs::exists(stale));
+    EXPECT_TRUE(fs::exists(fresh)) << "a directory another process may be using";
+    EXPECT_TRUE(fs::exists(other)) << "not voxlight's";
+    ASSERT_EQ(::unsetenv("TMPDIR"), 0);
+}
+
 TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
     test::TempDir tmp;
     writeText(tmp / "m.raw", std::string(400, '\0'));
