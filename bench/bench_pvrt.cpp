@@ -3,7 +3,8 @@
 // on the 32³ sphere phantom (σt 0.15/mm, albedo 0.9, transfer grid 32³) and the 128³ torso
 // phantom under ct-soft-tissue (transfer grid 64³), 10 photons per boundary cell, kernel 2 grid
 // steps, 7 scatterings, for the bases SH order 4 (16 lights) and DSF 162. Counters: photons/s,
-// collisions and splats per photon, stored points.
+// collisions and splats per photon, stored points. BM_DirectTorso128: the direct part (slice
+// sweeps, 162 directions, SH order 4) on the same torso at transfer grids 64³ and 128³.
 // bench-deps: pvrt pathtrace render grid optics core
 #include <benchmark/benchmark.h>
 
@@ -12,6 +13,7 @@
 #include "core/phantoms.h"
 #include "grid/brick_grid.h"
 #include "optics/presets.h"
+#include "pvrt/direct.h"
 #include "pvrt/photons.h"
 #include "render/ray_caster.h"
 
@@ -81,8 +83,27 @@ void BM_PhotonsTorso128(benchmark::State& state) {
     run(state, torso(), state.range(0) ? pvrt::Basis::dsf(162) : pvrt::Basis::sh(4));
 }
 
+/// The direct part on the 128³ torso, SH order 4, 162 quadrature directions, transfer grid 64³
+/// (arg 64) and 128³ (arg 128): the slice sweeps and their projection into the basis.
+void BM_DirectTorso128(benchmark::State& state) {
+    const Scene& s = torso();
+    const pvrt::Basis basis = pvrt::Basis::sh(4);
+    const pvrt::TransferLayout layout =
+        pvrt::makeTransferLayout(*s.volume, *s.cells, int(state.range(0)));
+    pvrt::DirectStats st;
+    for (auto _ : state) {
+        pvrt::Transfer t(layout, basis.size());
+        st = pvrt::addDirectTransfer(*s.volume, *s.table, basis, t, {});
+        benchmark::DoNotOptimize(t.values.data());
+    }
+    state.counters["voxel updates/s"] =
+        benchmark::Counter(double(st.voxelUpdates), benchmark::Counter::kIsIterationInvariantRate);
+    state.counters["points"] = double(layout.points);
+}
+
 BENCHMARK(BM_PhotonsSphere32)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
 BENCHMARK(BM_PhotonsTorso128)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_DirectTorso128)->Arg(64)->Arg(128)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace
 

@@ -8,13 +8,10 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
-#include <ctime>
-#include <iostream>
 #include <numbers>
 
 #include "core/error.h"
 #include "core/phantoms.h"
-#include "core/timing.h"
 #include "lights/light.h"
 #include "optics/presets.h"
 #include "pathtrace/pathtrace_test_util.h"
@@ -546,39 +543,6 @@ TEST(PvrtDirect, RejectsAnUnknownDirectionCount) {
     pvrt::DirectOptions o;
     o.directions = 100;
     EXPECT_THROW(pvrt::addDirectTransfer(v, table, pvrt::Basis::sh(1), tr, o), InputError);
-}
-
-}  // namespace
-
-namespace {
-
-// The figure PVRT's budget needs (≤ 60 s for a whole 128³ SH-16 precompute on 2 cores): run with
-// --gtest_also_run_disabled_tests --gtest_filter='*DirectTiming*'.
-TEST(PvrtDirect, DISABLED_DirectTimingTorso128) {
-    core::Stopwatch clock;
-    const test::Medium m = test::makeMedium("torso", optics::makePreset("ct-soft-tissue"), 128);
-    std::cout << "phantom + skip cells " << clock.seconds() << " s\n";
-    const pvrt::Basis basis = pvrt::Basis::sh(4);
-    for (int res : {64, 128}) {
-        const auto layout = pvrt::makeTransferLayout(*m.volume, *m.cells, res);
-        pvrt::Transfer tr(layout, basis.size());
-        pvrt::DirectOptions o;
-        o.directions = 162;
-        const std::clock_t cpu = std::clock();
-        const auto s = pvrt::addDirectTransfer(*m.volume, *m.table, basis, tr, o);
-        const double cpuSeconds = double(std::clock() - cpu) / CLOCKS_PER_SEC;
-        std::cout << "resolution " << res << ": " << layout.points << " stored points, "
-                  << s.directions << " directions, " << s.voxelUpdates << " voxel updates, "
-                  << s.seconds << " s wall, " << cpuSeconds << " s CPU (all threads) ("
-                  << double(s.voxelUpdates) / s.seconds / 1e6 << " M voxel updates/s)\n";
-    }
-    for (const glm::dvec3 w :
-         {glm::dvec3(1, 0.3, 0.2), glm::dvec3(0.3, 1, 0.2), glm::dvec3(0.2, 0.3, 1)}) {
-        clock.restart();
-        const auto T = pvrt::sweepTransmittance(*m.volume, *m.table, w, {});
-        std::cout << "one sweep toward " << w.x << "," << w.y << "," << w.z
-                  << " (incl. per-volume setup) " << clock.seconds() << " s\n";
-    }
 }
 
 }  // namespace
