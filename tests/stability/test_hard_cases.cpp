@@ -111,40 +111,40 @@ TEST(HardCases, EveryMethodRendersFiniteOrRefusesClearly) {
         const auto path = writeHard(h, tmp.path());
         const glm::dvec3 centre = 0.5 * glm::dvec3(h.dims - 1) * h.spacing;
         for (const std::string& variant : variants)
-        for (double sigma : {0.0, 0.05, 1e6}) {
-            for (const std::string& method : methods) {
-                json volume = path.string();
-                if (variant == "nonfinite-min")
-                    volume = {{"path", path.string()}, {"nonfinite", "min"}};
-                json d = {{"volume", volume},
-                          {"transfer_function", tfOf(sigma)},
-                          {"method", methodOf(method)},
-                          {"lights", json::array({{{"type", "directional"},
-                                                   {"direction", {0.3, 0.4, -0.8}},
-                                                   {"intensity", 4}}})},
-                          {"image", {{"width", 12}, {"height", 10}}}};
-                if (variant == "clip-all")
-                    d["clip_planes"] = json::array(
-                        {{{"point", {-1e5, 0, 0}}, {"normal", {-1, 0, 0}}}});
-                if (variant == "clip-half")
-                    d["clip_planes"] = json::array({{{"point", {centre.x, centre.y, centre.z}},
-                                                     {"normal", {0, 0, 1}},
-                                                     {"shadows_from_removed", true}}});
-                if (variant == "camera-inside")
-                    d["camera"] = {{"eye", {centre.x, centre.y, centre.z}},
-                                   {"target", {centre.x, centre.y + 1.0, centre.z}}};
-                const std::string what = h.name + " " + variant + " σt " +
-                                         std::to_string(sigma) + " " + method;
-                try {
-                    const auto r = pipeline::renderScene(io::parseScene(d, "hard.json", "."));
-                    expectSane(r.image, what);
-                    ++rendered;
-                } catch (const InputError& e) {
-                    ++refused;  // a clear refusal is allowed; say which, for the record
-                    std::printf("refused: %s: %s\n", what.c_str(), e.what());
+            for (double sigma : {0.0, 0.05, 1e6}) {
+                for (const std::string& method : methods) {
+                    json volume = path.string();
+                    if (variant == "nonfinite-min")
+                        volume = {{"path", path.string()}, {"nonfinite", "min"}};
+                    json d = {{"volume", volume},
+                              {"transfer_function", tfOf(sigma)},
+                              {"method", methodOf(method)},
+                              {"lights", json::array({{{"type", "directional"},
+                                                       {"direction", {0.3, 0.4, -0.8}},
+                                                       {"intensity", 4}}})},
+                              {"image", {{"width", 12}, {"height", 10}}}};
+                    if (variant == "clip-all")
+                        d["clip_planes"] =
+                            json::array({{{"point", {-1e5, 0, 0}}, {"normal", {-1, 0, 0}}}});
+                    if (variant == "clip-half")
+                        d["clip_planes"] = json::array({{{"point", {centre.x, centre.y, centre.z}},
+                                                         {"normal", {0, 0, 1}},
+                                                         {"shadows_from_removed", true}}});
+                    if (variant == "camera-inside")
+                        d["camera"] = {{"eye", {centre.x, centre.y, centre.z}},
+                                       {"target", {centre.x, centre.y + 1.0, centre.z}}};
+                    const std::string what =
+                        h.name + " " + variant + " σt " + std::to_string(sigma) + " " + method;
+                    try {
+                        const auto r = pipeline::renderScene(io::parseScene(d, "hard.json", "."));
+                        expectSane(r.image, what);
+                        ++rendered;
+                    } catch (const InputError& e) {
+                        ++refused;  // a clear refusal is allowed; say which, for the record
+                        std::printf("refused: %s: %s\n", what.c_str(), e.what());
+                    }
                 }
             }
-        }
     }
     std::printf("%d renders, %d refusals\n", rendered, refused);
     EXPECT_GT(rendered, refused);
