@@ -117,7 +117,10 @@ template <class Value>
     if (depth <= kRefineDepth) return depth;
     // Dense: the value is linear only within a voxel, so a step across a surface (where it
     // kinks) is split into sub-steps, each pre-integrated.
-    const int k = std::min(int(std::ceil(depth / kRefineDepth)), kMaxSubSteps);
+    // Clamped before the conversion: an extreme σt × step (10⁶/mm over metres) or a NaN depth
+    // would overflow int (found by tests/stability under UBSan: k = INT_MIN gave depth 0).
+    const double want = std::ceil(depth / kRefineDepth);
+    const int k = want < double(kMaxSubSteps) ? std::max(int(want), 1) : kMaxSubSteps;
     const float sub = dt / float(k);
     depth = 0.0;
     float s0 = sFront;
