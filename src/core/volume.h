@@ -81,6 +81,14 @@ struct Geometry {
     glm::dvec3 worldToIndex(const glm::dvec3& p) const {
         return (glm::transpose(direction) * (p - origin)) / spacing;
     }
+    /// The linear part of worldToIndex, diag(1/spacing) · directionᵀ, for loops that apply it to
+    /// many points: worldToIndex(p) = worldToIndexMatrix() · (p − origin).
+    glm::dmat3 worldToIndexMatrix() const {
+        glm::dmat3 m = glm::transpose(direction);
+        for (int c = 0; c < 3; ++c)
+            for (int r = 0; r < 3; ++r) m[c][r] /= spacing[r];
+        return m;
+    }
     /// Physical extent between the first and last voxel centres along each axis, mm.
     glm::dvec3 extent() const { return glm::dvec3(glm::max(dims - 1, glm::ivec3(0))) * spacing; }
     /// Axis-aligned world bounding box of the voxel centres: {min, max}.

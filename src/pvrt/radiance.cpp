@@ -31,6 +31,14 @@ glm::vec3 RadianceVolume::sample(const glm::vec3& p) const {
 }
 
 namespace {
+/// S clamped at 0 in every channel (NaN → 0 too: max(NaN, 0) would keep it); true when it was
+/// negative or NaN somewhere (the count the stats report).
+bool clampAtZero(glm::vec3& v) {
+    const bool clamped = !(v.x >= 0.f && v.y >= 0.f && v.z >= 0.f);
+    for (int c = 0; c < 3; ++c) v[c] = v[c] > 0.f ? v[c] : 0.f;
+    return clamped;
+}
+
 RadianceVolume emptyLike(const TransferLayout& layout) {
     RadianceVolume r;
     r.res = layout.res;
@@ -59,9 +67,7 @@ RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::ve
                 glm::vec3 sum(0.f);
                 for (int k = 0; k < m; ++k, t += 3)
                     sum += glm::vec3(t[0], t[1], t[2]) * light[std::size_t(k)];
-                if (!(sum.x >= 0.f && sum.y >= 0.f && sum.z >= 0.f)) ++clamped;
-                // NaN → 0 as well: max(NaN, 0) would keep it.
-                for (int c = 0; c < 3; ++c) sum[c] = sum[c] > 0.f ? sum[c] : 0.f;
+                clamped += clampAtZero(sum) ? 1 : 0;
                 r.values[i] = sum;
             }
             clampedPerSlice[std::size_t(z)] = clamped;
@@ -80,8 +86,7 @@ RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm
         const std::int32_t s = layout.slot[i];
         if (s < 0) continue;
         glm::vec3 v = perPoint[std::size_t(s)];
-        if (!(v.x >= 0.f && v.y >= 0.f && v.z >= 0.f)) ++r.clamped;
-        for (int c = 0; c < 3; ++c) v[c] = v[c] > 0.f ? v[c] : 0.f;
+        r.clamped += clampAtZero(v) ? 1 : 0;
         r.values[i] = v;
     }
     return r;
@@ -96,13 +101,9 @@ class PvrtShader {
     /// Segments are shaded where their light is scattered (render/dvr_march.h meanScatterDepth).
     static constexpr bool kScatterAtMeanDepth = true;
     PvrtShader(std::shared_ptr<const RadianceVolume> radiance, const core::Geometry& geometry)
-        : radiance_(std::move(radiance)) {
-        // world → index: diag(1/spacing) · Dᵀ · (x − origin)
-        worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
-        for (int c = 0; c < 3; ++c)
-            for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
-        origin_ = glm::vec3(geometry.origin);
-    }
+        : radiance_(std::move(radiance)),
+          worldToIndex_(geometry.worldToIndexMatrix()),
+          origin_(geometry.origin) {}
     render::Scatter scatter(const render::ShadeInput& in) const {
         return {radiance_->sample(worldToIndex_ * (in.position - origin_)), glm::vec3(0.f)};
     }

@@ -325,9 +325,7 @@ RayCaster::RayCaster(std::shared_ptr<const core::Volume> volumePtr,
         indexBoxLo_[a] = n > 1 ? 0.0 : -0.5;
         indexBoxHi_[a] = n > 1 ? double(n - 1) : 0.5;
     }
-    worldToIndexMatrix_ = glm::transpose(g.direction);
-    for (int c = 0; c < 3; ++c)
-        for (int a = 0; a < 3; ++a) worldToIndexMatrix_[c][a] /= g.spacing[a];
+    worldToIndexMatrix_ = g.worldToIndexMatrix();
     weakGradient_ = kWeakGradientFraction * tf.window().width;
     isoValue_ = resolveIsoValue(tf, options_);
     const grid::BrickMajorants& cells = *tables_.skipCells;

@@ -92,9 +92,7 @@ ShCutFaceShader::ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibil
     VL_CHECK(global_->coefficients() == local_->coefficients());
     for (const core::HalfSpace& f : faces)
         faces_.push_back({glm::vec3(f.point), glm::vec3(f.normal)});
-    worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
-    for (int c = 0; c < 3; ++c)
-        for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
+    worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
     origin_ = glm::vec3(geometry.origin);
 }
 

@@ -83,10 +83,7 @@ class ShVisibilityShader {
                        std::span<const std::shared_ptr<const lights::Light>> lights,
                        std::span<const double> window = {}, float ambient = 0.f)
         : field_(std::move(field)), lights_(field_->coefficients(), lights, window, ambient) {
-        // world → index: diag(1/spacing) · Dᵀ · (x − origin)
-        worldToIndex_ = glm::mat3(glm::transpose(geometry.direction));
-        for (int c = 0; c < 3; ++c)
-            for (int r = 0; r < 3; ++r) worldToIndex_[c][r] /= float(geometry.spacing[r]);
+        worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
         origin_ = glm::vec3(geometry.origin);
     }
 
