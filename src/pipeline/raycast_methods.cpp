@@ -1602,13 +1602,14 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         if (ls.empty())
             ls.push_back(render::headlight(*run.get<render::Camera>("camera"),
                                            render::kVolumetricHeadlightIrradiance));
+        // The light change's time includes projecting the lights into the basis.
+        core::Stopwatch sw;
         std::vector<glm::vec3> c;
         try {
             c = params.makeBasis().project(ls);
         } catch (const InputError& e) {
             rethrowAsScene(run.scene(), e);
         }
-        core::Stopwatch sw;
         std::shared_ptr<pvrt::RadianceVolume> r;
         if (compressed) {
             const auto cp = run.get<pvrt::Cpca>("pvrt_cpca");

@@ -2,6 +2,8 @@
 #include "pvrt/basis.h"
 
 #include <algorithm>
+#include <map>
+#include <mutex>
 
 #include "core/error.h"
 #include "sh/sh_basis.h"
@@ -26,9 +28,18 @@ Basis Basis::dsf(int count, const char* field) {
         throw InputError("pvrt", field,
                          "DSF with " + std::to_string(count) + " directions is not offered",
                          "use 42, 162 or 642 directions");
+    // A DSF's direction set and lookup lists take ~10 ms to build (642): built once per process
+    // and shared, so a light change (which makes its Basis again) does not pay for it.
+    static std::mutex mutex;
+    static std::map<int, std::shared_ptr<const sh::Dsf>> built;
     Basis b;
     b.kind_ = BasisKind::Dsf;
-    b.dsf_ = std::make_shared<const sh::Dsf>(count);
+    {
+        const std::lock_guard lock(mutex);
+        auto& d = built[count];
+        if (!d) d = std::make_shared<const sh::Dsf>(count);
+        b.dsf_ = d;
+    }
     b.size_ = count;
     return b;
 }
