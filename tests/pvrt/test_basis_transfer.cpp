@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-// PVRT basis lights (projection of distant lights, refusal of the others) and the transfer grid's
-// layout (which points are stored).
+// PVRT basis lights (projection of distant lights, refusal of the others), the transfer grid's
+// layout (which points are stored), and the radiance volume of a sphere against its closed form.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -10,6 +10,8 @@
 #include "lights/light.h"
 #include "pathtrace/pathtrace_test_util.h"
 #include "pvrt/basis.h"
+#include "pvrt/direct.h"
+#include "pvrt/radiance.h"
 #include "pvrt/transfer.h"
 #include "sh/sh_basis.h"
 
@@ -114,9 +116,6 @@ TEST(PvrtTransferLayout, AnEmptyVolumeStoresNothing) {
 }
 
 }  // namespace
-
-#include "pvrt/direct.h"
-#include "pvrt/radiance.h"
 
 namespace {
 
