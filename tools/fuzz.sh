@@ -95,6 +95,15 @@ run_one() {
   found=$(find "$findings" -maxdepth 1 -type f -newer "$log.start" 2>/dev/null | wc -l)
   printf '%-14s %9s executions in %5s s, %6s exec/s, %d finding(s)%s\n' "$t" "${execs:-?}" \
     "$elapsed" "${rate:-?}" "$found" "$([ $rc -ne 0 ] && echo " (exit $rc; see $log)")"
+  if [ $rc -ne 0 ] || [ "$found" -ne 0 ]; then
+    # The log and the input stay in build-fuzz/ (gone with a CI machine): show what matters here,
+    # the report and the input as hex, so a finding can be reproduced from the CI log alone.
+    grep -v -E '^(#[0-9]+|INFO:|MS:|stat::|Dictionary:|Done )' "$log" | tail -n 40 | sed "s/^/  $t| /" >&2
+    for f in $(find "$findings" -maxdepth 1 -type f -newer "$log.start" 2>/dev/null | head -n 3); do
+      echo "  $t| input $(basename "$f") ($(stat -c %s "$f") bytes), base64:" >&2
+      head -c 16384 "$f" | base64 -w 120 | sed "s/^/  $t|   /" >&2
+    done
+  fi
   [ $rc -eq 0 ] && [ "$found" -eq 0 ]
 }
 
