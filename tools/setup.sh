@@ -8,7 +8,7 @@ packages=(
   libvtk9-dev libgdcm-dev libgdcm-tools libvtkgdcm-dev
   libcgal-dev libopenmesh-dev libglfw3-dev libglm-dev libopenimageio-dev openimageio-tools
   libtbb-dev libeigen3-dev zlib1g-dev nlohmann-json3-dev libcli11-dev libimgui-dev libstb-dev
-  libtinygltf-dev
+  libtinygltf-dev libopenmpi-dev openmpi-bin
   libgtest-dev libgmock-dev libbenchmark-dev clang-format
   clang-14 libclang-rt-14-dev
   xvfb xauth mesa-utils libgl1-mesa-dri libgl-dev libegl-dev

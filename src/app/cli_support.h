@@ -56,5 +56,6 @@ Command addIsoCommand(CLI::App& app);
 Command addReplayCommand(CLI::App& app);
 Command addViewCommand(CLI::App& app);
 Command addCompareCommand(CLI::App& app);
+Command addSweepCommand(CLI::App& app);
 
 }  // namespace voxlight::app

@@ -309,6 +309,7 @@ std::vector<double> Session::runStages(const Plan& plan, Run& run, RunResult& re
         if (st.warnings)
             for (const auto& w : st.warnings(a)) run.warn(w);
         run.keys_[st.name] = st.outputKey ? st.outputKey(run, a) : key;
+        r.bytes = a.bytes;
         run.artifacts_[st.name] = a;
         res.stages.push_back(r);
     }

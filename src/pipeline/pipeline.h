@@ -112,6 +112,8 @@ struct StageRecord {
     double seconds = 0.0;  ///< Frame stages: the median frame
     std::string key;       ///< 16 hex digits, or "" when unknown / not needed
     std::vector<std::string> inputs;
+    /// Size of the stage's artifact (ArtifactCache's accounting; 0 when not needed).
+    std::size_t bytes = 0;
     /// The artifact is an earlier field of the stage's lineage, not this scene's
     /// (RunOptions::staleFields; the reason says so too); `wantedKey` is the key of the field
     /// this scene needs (16 hex digits), `key` the stand-in's.

@@ -557,3 +557,113 @@ TEST(Cli, CompareReportsMetricsAsJsonAndWritesTheMap) {
         EXPECT_FALSE(fs::exists(tmp / "bad.png")) << args;
     }
 }
+
+TEST(Cli, SweepWritesOneCsvRowPerVariantWithItsImageAndErrorMap) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "sweep.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16},
+                "lights": [{"type": "directional", "direction": [0, 0, -1]}]},
+      "reference": {"params": {"spp": 16}},
+      "runs": [{"method": "gradient"},
+               {"method": "pathtrace", "params": {"spp": 16}, "effects": ["global_shadows"]},
+               {"method": "sh-local", "label": "local", "effects": ["local_shadows"],
+                "axes": {"rays": [16, 32]}}]})";
+    const fs::path out = tmp / "out";
+    const Result r = run("sweep -q " + q(tmp / "sweep.json") + " --out " + q(out), tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    std::ifstream csv(out / "results.csv");
+    std::vector<std::string> lines;
+    for (std::string l; std::getline(csv, l);) lines.push_back(l);
+    ASSERT_EQ(lines.size(), 1u + 5u);  // header, gradient, pathtrace, local base, rays 16, rays 32
+    EXPECT_EQ(lines[0].substr(0, 14), "index,id,label");
+    // The path tracer with the reference's own params renders the reference: no error.
+    EXPECT_NE(lines[2].find(",0,0,inf,1,0,0,"), std::string::npos) << lines[2];
+    for (const char* id :
+         {"gradient", "pathtrace", "local-base", "local-rays-16", "local-rays-32"}) {
+        EXPECT_TRUE(fs::exists(out / "images" / (std::string(id) + ".png"))) << id;
+        EXPECT_TRUE(fs::exists(out / "maps" / (std::string(id) + ".png"))) << id;
+    }
+    EXPECT_TRUE(fs::exists(out / "reference.png"));
+    EXPECT_TRUE(fs::exists(out / "reference.json"));
+    for (const auto& e : fs::recursive_directory_iterator(out))
+        EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
+}
+
+TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "sweep.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16}},
+      "runs": [{"method": "gradient"}, {"method": "sh-local", "axes": {"rays": [16, -4]}}]})";
+    std::ofstream(tmp / "list.json") << R"([1, 2])";
+    std::ofstream(tmp / "file") << "x";
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out"), "runs[1].axes.rays=-4"},
+        {"sweep " + q(tmp / "list.json") + " --out " + q(tmp / "out"), "not an object"},
+        {"sweep " + q(tmp / "missing.json") + " --out " + q(tmp / "out"), "missing.json"},
+        {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "file"), "--out"},
+        {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out") + " --only nobody",
+         "--only"},
+    };
+    for (const auto& [args, word] : cases) {
+        const Result r = run(args, tmp.path());
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+        EXPECT_NE(r.err.find(word), std::string::npos) << args << "\n" << r.err;
+        EXPECT_FALSE(fs::exists(tmp / "out")) << args;
+    }
+}
+
+TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
+    const fs::path module = fs::path(VOXLIGHT_BINARY).parent_path() / "libvoxlight_mpi.so";
+    if (!fs::exists(module) || runShell("command -v mpirun", ".").code != 0)
+        GTEST_SKIP() << "built without MPI or no mpirun (Debian: libopenmpi-dev, openmpi-bin)";
+    test::TempDir tmp;
+    std::ofstream(tmp / "sweep.json") << R"({
+      "scene": {"volume": {"phantom": "torso", "size": 24}, "image": {"width": 16, "height": 16},
+                "transfer_function": "ct-bone",
+                "lights": [{"type": "directional", "direction": [0.3, 0.5, -0.8]}]},
+      "reference": {"params": {"spp": 16}},
+      "runs": [{"method": "gradient"},
+               {"method": "sh-local", "effects": ["local_shadows"], "axes": {"rays": [16, 64]}},
+               {"method": "ritschel", "effects": ["global_shadows"]},
+               {"method": "pathtrace", "effects": ["global_shadows"], "axes": {"spp": [4, 8]}}]})";
+    const Result one =
+        run("sweep -q " + q(tmp / "sweep.json") + " --out " + q(tmp / "one"), tmp.path());
+    ASSERT_EQ(one.code, 0) << one.err;
+    // Three ranks on two cores: the split (variant i on rank i mod 3) must not change a number.
+    const Result three =
+        runShell("mpirun --allow-run-as-root --oversubscribe -n 3 " + std::string(VOXLIGHT_BINARY) +
+                     " sweep -q " + q(tmp / "sweep.json") + " --out " + q(tmp / "three"),
+                 tmp.path());
+    ASSERT_EQ(three.code, 0) << three.err;
+    // Every column but precompute_s and frame_s (8 and 9: seconds) is identical.
+    auto withoutSeconds = [](const fs::path& csv) {
+        std::ifstream in(csv);
+        std::vector<std::string> rows;
+        for (std::string l; std::getline(in, l);) {
+            std::vector<std::string> cells;
+            std::string cell;
+            bool quoted = false;
+            for (char c : l) {
+                if (c == '"') quoted = !quoted;
+                if (c == ',' && !quoted) {
+                    cells.push_back(cell);
+                    cell.clear();
+                } else {
+                    cell += c;
+                }
+            }
+            cells.push_back(cell);
+            cells.erase(cells.begin() + 7, cells.begin() + 9);
+            std::string joined;
+            for (const auto& x : cells) joined += x + ",";
+            rows.push_back(joined);
+        }
+        return rows;
+    };
+    const auto a = withoutSeconds(tmp / "one" / "results.csv");
+    EXPECT_EQ(a.size(), 1u + 1u + 3u + 1u + 3u);
+    EXPECT_EQ(withoutSeconds(tmp / "three" / "results.csv"), a);
+    for (const char* id : {"gradient", "sh-local-rays-64", "pathtrace-spp-8"})
+        EXPECT_TRUE(fs::exists(tmp / "three" / "maps" / (std::string(id) + ".png"))) << id;
+}

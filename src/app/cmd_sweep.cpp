@@ -1,0 +1,293 @@
+// SPDX-License-Identifier: MIT
+// voxlight sweep SWEEP.json --out DIR [--only LABEL,...] [--cache DIR] [--no-images] [-q]
+// What accuracy costs in time (analysis/sweep.h, docs/sweeps.md): renders the path-traced
+// reference of the sweep's scene (kept in the pipeline's disk cache, DIR/cache unless --cache),
+// then every variant of every run, and writes
+//   DIR/results.csv          one row per variant: params, precompute s, frame s, memory, metrics
+//   DIR/reference.png, .json the reference's display image; its spp, estimated error, seconds
+//   DIR/images/ID.png        each variant's display image        (unless --no-images)
+//   DIR/maps/ID.png          its FLIP error map (magma, 0..0.5)   (unless --no-images)
+// tools/sweep_report.py DIR then draws the plots (error against time per method, the Pareto front)
+// and writes DIR/report.md.
+//
+// Every variant is validated and planned before the reference renders, so a bad sweep fails at
+// once with one line and writes nothing. Files are written atomically as they are made, and
+// results.csv is rewritten after every variant: a Ctrl-C keeps every row finished so far.
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <memory>
+#include <set>
+
+#include "analysis/sweep.h"
+#include "app/cli_support.h"
+#include "app/mpi_module.h"
+#include "app/output_files.h"
+#include "core/timing.h"
+#include "io/image.h"
+#include "io/module_loader.h"
+
+namespace voxlight::app {
+
+namespace {
+namespace fs = std::filesystem;
+
+/// Writes `writer`'s file to `target` via a temporary (complete or absent, never half-written).
+void writeAtomically(const fs::path& target, const std::function<void(const fs::path&)>& writer) {
+    OutputFiles files;
+    files.write(target, "--out", writer);
+    files.commit();
+}
+
+void writeCsv(const fs::path& path, const std::vector<analysis::SweepRow>& rows) {
+    std::string text = analysis::sweepCsvHeader();
+    for (const auto& r : rows) text += "\n" + analysis::sweepCsvRow(r);
+    writeAtomically(path, [&](const fs::path& p) { writeTextFile(p, text); });
+}
+
+std::string describe(const analysis::SweepItem& it) {
+    if (!it.axis.empty()) return it.label + " " + it.axis + "=" + it.value.dump();
+    if (it.id.find("-grid-") != std::string::npos) return it.label + " " + it.params.dump();
+    return it.label + " (base)";
+}
+
+/// The ranks of an `mpirun -n K voxlight sweep` launch (K > 1: Open MPI through its module), or
+/// one rank. Rank 0 reports; the other ranks' stderr goes to /dev/null (every rank validates the
+/// same sweep and would print the same error), their failures reach rank 0 with their rows.
+class Ranks {
+  public:
+    Ranks() {
+        const char* n = std::getenv("OMPI_COMM_WORLD_SIZE");
+        if (!n || std::atoi(n) <= 1) return;
+        static const io::detail::LoadedModule loaded = io::detail::loadModule(
+            mpi_module::kFileName, mpi_module::kEntryPoint, mpi_module::kAbiVersion);
+        if (!loaded.api)
+            throw InputError("command line", "mpirun",
+                             "this voxlight cannot run a sweep as MPI ranks: " + loaded.error,
+                             "install libopenmpi-dev and rebuild (tools/setup.sh), or run the "
+                             "sweep without mpirun");
+        api_ = static_cast<const mpi_module::Api*>(loaded.api);
+        std::string error;
+        if (!api_->init(&rank_, &size_, &error))
+            throw InputError("command line", "mpirun", error, "check the MPI launch");
+        if (rank_ != 0) {
+            const int null = ::open("/dev/null", O_WRONLY);
+            if (null >= 0) ::dup2(null, STDERR_FILENO), ::close(null);
+        }
+    }
+    Ranks(const Ranks&) = delete;
+    Ranks& operator=(const Ranks&) = delete;
+    ~Ranks() {
+        if (api_) api_->finalize();
+    }
+    int rank() const { return rank_; }
+    int size() const { return size_; }
+    bool allTrue(bool ok) const { return api_ ? api_->allTrue(ok) : ok; }
+    std::vector<std::string> gather(const std::string& mine) const {
+        if (!api_) return {mine};
+        std::vector<std::string> all;
+        api_->gather(mine, &all);
+        return all;
+    }
+
+  private:
+    const mpi_module::Api* api_ = nullptr;
+    int rank_ = 0, size_ = 1;
+};
+
+/// A rank's rows for rank 0: CSV rows, one per line; a line starting with '!' is the rank's error
+/// ("!2 message": exit code and one line).
+constexpr char kRankError = '!';
+
+}  // namespace
+
+Command addSweepCommand(CLI::App& app) {
+    Command c;
+    c.sub = app.add_subcommand(
+        "sweep",
+        "What accuracy costs in time: render every variant of a sweep and measure it against the "
+        "path-traced reference (CSV, images, error maps; docs/sweeps.md)");
+    auto sweepPath = std::make_shared<std::string>();
+    auto outDir = std::make_shared<std::string>();
+    auto only = std::make_shared<std::vector<std::string>>();
+    auto cacheDir = std::make_shared<std::string>();
+    auto noImages = std::make_shared<bool>(false);
+    auto quiet = std::make_shared<bool>(false);
+    c.sub->add_option("SWEEP", *sweepPath, "Sweep file (JSON)")->required();
+    c.sub->add_option("--out", *outDir, "Folder for results.csv, images and maps (created)")
+        ->required();
+    c.sub->add_option("--only", *only, "Run only the runs with these labels (comma-separated)")
+        ->delimiter(',');
+    c.sub->add_option("--cache", *cacheDir,
+                      "Disk cache for the reference (default: DIR/cache; shared safely)");
+    c.sub->add_flag("--no-images", *noImages, "Write only results.csv and the reference");
+    c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
+    c.run = [=] {
+        core::Stopwatch total;
+        const Ranks ranks;  // before anything prints: the other ranks report through rank 0
+        const bool lead = ranks.rank() == 0;
+        const bool talk = lead && !*quiet;
+        const fs::path dir = *outDir;
+        std::error_code ec;
+        if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
+            throw InputError("command line", "--out", "'" + *outDir + "' is not a folder",
+                             "give a folder (it is created if missing)");
+        const analysis::SweepSpec spec = analysis::loadSweep(*sweepPath);
+        std::vector<analysis::SweepItem> items = analysis::expandSweep(spec);
+        if (!only->empty()) {
+            std::set<std::string> labels;
+            for (const auto& r : spec.runs) labels.insert(r.label);
+            for (const auto& l : *only)
+                if (!labels.count(l))
+                    throw InputError("command line", "--only", "no run is labelled '" + l + "'",
+                                     "labels in " + *sweepPath + ": " +
+                                         joinNames({labels.begin(), labels.end()}));
+            std::erase_if(items, [&](const analysis::SweepItem& it) {
+                return std::find(only->begin(), only->end(), it.label) == only->end();
+            });
+        }
+        pipeline::Session variants, references;
+        analysis::validateSweep(spec, items, variants);
+
+        // A bar on a terminal; in a log, one line per variant is enough (no 10 % lines).
+        const core::Progress progress = talk && isatty(STDERR_FILENO)
+                                            ? terminalProgress(false)
+                                            : core::Progress({}, &cancelFlag());
+        references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
+        analysis::SweepRunner runner(spec, variants, references);
+
+        // Rank 0 makes the folders and the reference (into the disk cache, where the other ranks
+        // find it); the others wait for it, and stop when it failed.
+        bool ok = true;
+        std::exception_ptr failure;
+        if (lead) try {
+                fs::create_directories(dir, ec);
+                if (!*noImages) {
+                    fs::create_directories(dir / "images", ec);
+                    fs::create_directories(dir / "maps", ec);
+                }
+                if (ec || !fs::is_directory(dir))
+                    throw InputError("command line", "--out", "cannot create '" + *outDir + "'",
+                                     ec ? ec.message() : "check the path and its permissions");
+                const analysis::SweepReference& ref = runner.reference(progress);
+                writeAtomically(dir / "reference.png",
+                                [&](const fs::path& p) { io::writeImage(ref.display, p); });
+                nlohmann::json refJson = {{"sweep", spec.name},
+                                          {"spp", ref.spp},
+                                          {"relative_std_error", ref.relativeStdError},
+                                          {"seconds", ref.seconds},
+                                          {"cached", ref.cached},
+                                          {"params", spec.referenceParams},
+                                          {"effects", spec.referenceEffects},
+                                          {"frames", spec.frames},
+                                          {"ranks", ranks.size()},
+                                          {"scene", spec.scene}};
+                writeAtomically(dir / "reference.json", [&](const fs::path& p) {
+                    writeTextFile(
+                        p, refJson.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
+                });
+                if (talk)
+                    std::fprintf(
+                        stderr, "%s: reference %lld spp, estimated error %.2f %% (%s)\n",
+                        spec.name.c_str(), ref.spp, 100.0 * ref.relativeStdError,
+                        ref.cached ? "cached" : (std::to_string(ref.seconds) + " s").c_str());
+            } catch (...) {
+                ok = false;
+                failure = std::current_exception();
+            }
+        if (!ranks.allTrue(ok)) {
+            if (failure) std::rethrow_exception(failure);
+            return kExitBadInput;  // rank 0 says why
+        }
+
+        // Variant i runs on rank i mod K (static: the same split for the same sweep and K).
+        std::vector<analysis::SweepRow> rows;
+        std::string error;  // "code message" of this rank's failure
+        try {
+            for (std::size_t i = std::size_t(ranks.rank()); i < items.size();
+                 i += std::size_t(ranks.size())) {
+                throwIfCancelled();
+                analysis::SweepImages images;
+                analysis::SweepRow row =
+                    runner.run(items[i], progress, *noImages ? nullptr : &images);
+                if (!*noImages) {
+                    const std::string file = row.item.id + ".png";
+                    writeAtomically(dir / "images" / file,
+                                    [&](const fs::path& p) { io::writeImage(images.display, p); });
+                    writeAtomically(dir / "maps" / file,
+                                    [&](const fs::path& p) { io::writeImage(images.errorMap, p); });
+                }
+                for (const auto& w : row.warnings)
+                    std::fprintf(stderr, "voxlight: warning: %s: %s\n", row.item.id.c_str(),
+                                 w.c_str());
+                if (talk)
+                    std::fprintf(stderr,
+                                 "[%zu/%zu] %-40s precompute %7.2f s  frame %6.3f s  NRMSE %.4f  "
+                                 "FLIP %.4f  SSIM %.4f\n",
+                                 i + 1, items.size(), describe(row.item).c_str(),
+                                 row.precomputeSeconds, row.frameSeconds, row.nrmse, row.flip,
+                                 row.ssim);
+                rows.push_back(std::move(row));
+                if (ranks.size() == 1) writeCsv(dir / "results.csv", rows);
+            }
+        } catch (const CancelledError&) {
+            if (ranks.size() == 1) throw;
+            error = std::to_string(kExitCancelled) + " cancelled";
+        } catch (const InputError& e) {
+            if (ranks.size() == 1) throw;
+            error = std::to_string(kExitBadInput) + " " + e.what();
+        } catch (const std::exception& e) {
+            if (ranks.size() == 1) throw;
+            error = std::to_string(kExitInternal) + " internal error: " + e.what();
+        }
+        if (ranks.size() > 1) {
+            std::string mine;
+            for (const auto& r : rows) mine += analysis::sweepCsvRow(r) + "\n";
+            if (!error.empty()) mine += kRankError + error + "\n";
+            const std::vector<std::string> all = ranks.gather(mine);
+            if (!lead) return error.empty() ? kExitOk : std::atoi(error.c_str());
+            // Rank 0: every rank's rows back in sweep order; the first failure decides the exit.
+            std::vector<std::pair<std::size_t, std::string>> lines;
+            int code = kExitOk;
+            for (std::size_t r = 0; r < all.size(); ++r) {
+                std::size_t at = 0;
+                while (at < all[r].size()) {
+                    std::size_t nl = all[r].find('\n', at);
+                    if (nl == std::string::npos) nl = all[r].size();
+                    const std::string line = all[r].substr(at, nl - at);
+                    at = nl + 1;
+                    if (!line.empty() && line[0] == kRankError) {
+                        const int c = std::atoi(line.c_str() + 1);
+                        const std::string msg = line.substr(line.find(' ') + 1);
+                        std::fprintf(stderr, "voxlight: error: rank %zu: %s\n", r, msg.c_str());
+                        if (code == kExitOk) code = c;
+                    } else if (!line.empty()) {
+                        lines.emplace_back(std::strtoull(line.c_str(), nullptr, 10), line);
+                    }
+                }
+            }
+            std::sort(lines.begin(), lines.end());
+            std::string text = analysis::sweepCsvHeader();
+            for (const auto& [index, line] : lines) text += "\n" + line;
+            writeAtomically(dir / "results.csv",
+                            [&](const fs::path& p) { writeTextFile(p, text); });
+            if (code != kExitOk) return code;
+            if (talk)
+                std::fprintf(stderr, "%zu ranks; rows of the other ranks are in the CSV\n",
+                             all.size());
+        }
+        if (talk)
+            std::fprintf(stderr,
+                         "wrote %s (%zu variants, %.1f s); plots and report: "
+                         "tools/sweep_report.py %s\n",
+                         (dir / "results.csv").c_str(), items.size(), total.seconds(), dir.c_str());
+        return kExitOk;
+    };
+    return c;
+}
+
+}  // namespace voxlight::app

@@ -1,0 +1,294 @@
+#!/usr/bin/python3
+# SPDX-License-Identifier: MIT
+"""Plots and a Markdown report of `voxlight sweep` results: what accuracy costs in time.
+
+    tools/sweep_report.py DIR [DIR ...] [--docs OUT] [--metric nrmse|flip|rmse_255|detected]
+
+Each DIR is a `voxlight sweep --out DIR` folder (results.csv, reference.json, reference.png,
+images/, maps/). For each it writes DIR/accuracy-vs-time.png (error against precompute seconds and
+against frame seconds, one line per run, each point labelled with the value of the axis it varies;
+the reference's own estimated error as a dotted floor), DIR/pareto.png (every variant by total
+seconds = precompute + one frame; the Pareto front across methods joined), DIR/sheet.png
+(reference | the most accurate variant of each run | its FLIP map) and DIR/report.md.
+
+With --docs OUT the plots and sheets are copied to OUT/NAME-*.png and one OUT/report.md covers every
+DIR, followed by the papers' own figures for the same trade-offs (../shared/papers/NOTES.md) so our
+curves can be read beside them. Needs Debian's python3-matplotlib, python3-numpy, python3-pil.
+"""
+import argparse
+import csv
+import json
+import math
+import os
+import shutil
+import sys
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from PIL import Image  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from voxlight_cli import mosaic  # noqa: E402
+
+METRICS = {
+    "nrmse": "relative RMSE of the radiance (NRMSE)",
+    "flip": "mean FLIP (display images)",
+    "rmse_255": "RMSE of the display images (1/255 steps)",
+    "detected": "fraction of pixels with FLIP > 0.05",
+}
+
+# What each method's paper reports for the same trade-off (from ../shared/papers/NOTES.md, their
+# hardware and data): the numbers our curves are read beside.
+PAPERS = {
+    "sh-local": ("Kronander et al. 2012, Figs. 8–12",
+                 "error (fraction of pixels HDR-VDP detects, >75 %) falls with rays up to a knee at "
+                 "40–60 rays, time linear in rays; 1/4/9/16 SH coefficients (1 = ambient "
+                 "occlusion); radius optimum 12–16 voxels; TF update 0.15–1.63 s on a GTX 295 "
+                 "(engine 256³: 0.35 s local + 0.1 s global)."),
+    "sh-global": ("Kronander et al. 2012, Figs. 8–12",
+                  "global visibility adds 0.05–1.16 s to a TF update; error falls with the global "
+                  "grid's resolution and with data reduction toward 1:1."),
+    "ritschel": ("Ritschel 2007, Table 1",
+                 "setup 70.4 s at 1:1, 12.3 s at 1:2, 4.0 s at 1:4, 2.3 s at 1:8 sub-sampling "
+                 "(engine/foot 256³, N = 400, 8800 GTX); memory 256/64/16/4 MB; frame 36–76 ms."),
+    "pathtrace": ("Kroes et al. 2012, Fig. 11",
+                  "10 % NRMS against the converged image \"in a fraction of a second\" (GTX 470); "
+                  "error ∝ 1/sqrt(spp)."),
+    "pvrt": ("Zhang et al. 2013, Tables 1–2",
+             "L2 error < 1 % against volumetric photon mapping with 10 photons per boundary voxel "
+             "(DSF); CPCA 128 clusters 0.9 %, 32 clusters 2.2 %; precompute 73–395 s for "
+             "256³–512³ (GTX 460M); light change ~1 ms."),
+    "iso-lattice": ("Wyman et al. 2006, Fig. 11", "lattice error falls with samples per texel."),
+}
+
+
+def number(v):
+    try:
+        return float(v)
+    except ValueError:
+        return float("nan")
+
+
+def load(d):
+    with open(os.path.join(d, "results.csv"), newline="") as f:
+        rows = list(csv.DictReader(f))
+    for r in rows:
+        for k in ("precompute_s", "frame_s", "memory_mb", "nrmse", "rmse_255", "psnr_db", "ssim",
+                  "flip", "detected", "reference_error"):
+            r[k] = number(r[k])
+        r["total_s"] = r["precompute_s"] + r["frame_s"]
+    with open(os.path.join(d, "reference.json")) as f:
+        ref = json.load(f)
+    return rows, ref
+
+
+def runs_of(rows):
+    """{label: [rows]} in file order."""
+    out = {}
+    for r in rows:
+        out.setdefault(r["label"], []).append(r)
+    return out
+
+
+def point_label(r):
+    if r["axis"]:
+        return "%s=%s" % (r["axis"], r["value"])
+    return "base" if r["id"].endswith("-base") else ""
+
+
+def pareto(rows, metric):
+    """Rows on the Pareto front of (total seconds, error): no other is both faster and better."""
+    pts = sorted((r for r in rows if math.isfinite(r[metric])), key=lambda r: (r["total_s"],
+                                                                             r[metric]))
+    front, best = [], math.inf
+    for r in pts:
+        if r[metric] < best:
+            front.append(r)
+            best = r[metric]
+    return front
+
+
+def plot_accuracy(rows, ref, metric, out):
+    fig, axes = plt.subplots(1, 2, figsize=(12, 4.8), sharey=True)
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (label, rs) in enumerate(runs_of(rows).items()):
+        c = colours[i % len(colours)]
+        for ax, x in zip(axes, ("precompute_s", "frame_s")):
+            # One polyline per axis varied (through the base), so each curve is one parameter.
+            groups = {}
+            for r in rs:
+                groups.setdefault(r["axis"], []).append(r)
+            base = groups.pop("", [])
+            first = True
+            for axis, g in groups.items():
+                g = sorted(base + g, key=lambda r: number(r["value"]) if r["value"] else 0)
+                ax.plot([r[x] for r in g], [r[metric] for r in g], "-", color=c, alpha=0.35)
+            for r in rs:
+                ax.plot(r[x], r[metric], "o", color=c, ms=5, label=label if first else None)
+                first = False
+                t = point_label(r)
+                if t and x == "precompute_s":
+                    ax.annotate(t, (r[x], r[metric]), fontsize=6, xytext=(3, 2),
+                                textcoords="offset points", color=c)
+    floor = ref.get("relative_std_error", 0)
+    for ax, x in zip(axes, ("precompute seconds (what a TF change costs)", "frame seconds")):
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_xlabel(x)
+        ax.grid(True, which="both", alpha=0.25)
+        if metric == "nrmse" and floor > 0:
+            ax.axhline(floor, ls=":", color="grey")
+            ax.text(ax.get_xlim()[0], floor, " reference's own error", fontsize=7, va="bottom",
+                    color="grey")
+    axes[0].set_ylabel(METRICS[metric])
+    axes[0].legend(fontsize=8)
+    fig.suptitle("%s: %s against the path-traced reference (%d spp)" %
+                 (ref.get("sweep", ""), METRICS[metric], ref.get("spp", 0)), fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def plot_pareto(rows, ref, metric, out):
+    fig, ax = plt.subplots(figsize=(7, 4.8))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for i, (label, rs) in enumerate(runs_of(rows).items()):
+        ax.plot([r["total_s"] for r in rs], [r[metric] for r in rs], "o",
+                color=colours[i % len(colours)], ms=5, alpha=0.7, label=label)
+    front = pareto(rows, metric)
+    ax.plot([r["total_s"] for r in front], [r[metric] for r in front], "k-", lw=1,
+            label="Pareto front")
+    for r in front:
+        ax.annotate(r["id"], (r["total_s"], r[metric]), fontsize=6, xytext=(3, 3),
+                    textcoords="offset points")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("seconds: precompute + one frame")
+    ax.set_ylabel(METRICS[metric])
+    ax.grid(True, which="both", alpha=0.25)
+    ax.legend(fontsize=8)
+    ax.set_title("%s: which method is best for the time spent" % ref.get("sweep", ""),
+                 fontsize=10)
+    fig.tight_layout()
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+
+
+def best_of(rs, metric):
+    finite = [r for r in rs if math.isfinite(r[metric])]
+    return min(finite, key=lambda r: r[metric]) if finite else rs[0]
+
+
+def sheet(d, rows, metric, out):
+    ref = Image.open(os.path.join(d, "reference.png"))
+    top, bottom = [(ref, "reference")], [(Image.new("RGB", ref.size), "FLIP maps 0..0.5")]
+    for label, rs in runs_of(rows).items():
+        b = best_of(rs, metric)
+        img = os.path.join(d, "images", b["id"] + ".png")
+        mp = os.path.join(d, "maps", b["id"] + ".png")
+        if not (os.path.exists(img) and os.path.exists(mp)):
+            continue
+        top.append((Image.open(img), "%s %s" % (label, point_label(b))))
+        bottom.append((Image.open(mp), "%s %.3f" % (metric, b[metric])))
+    scale = max(1, 192 // ref.size[0])
+    rows_ = [[(im.resize((im.size[0] * scale, im.size[1] * scale)), c) for im, c in row]
+             for row in (top, bottom)]
+    mosaic(rows_, out)
+
+
+def table(rows, metric):
+    lines = ["| run | varied | precompute s | frame s | memory MB | NRMSE | FLIP | SSIM | "
+             "detected | RMSE /255 |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
+    front = {r["id"] for r in pareto(rows, metric)}
+    for r in rows:
+        mark = " ◆" if r["id"] in front else ""
+        lines.append("| %s | %s%s | %.2f | %.3f | %.1f | %.3f | %.3f | %.3f | %.2f | %.1f |" % (
+            r["label"], point_label(r) or "—", mark, r["precompute_s"], r["frame_s"],
+            r["memory_mb"], r["nrmse"], r["flip"], r["ssim"], r["detected"], r["rmse_255"]))
+    return "\n".join(lines)
+
+
+def section(d, name, rows, ref, metric, prefix):
+    scene = ref.get("scene", {})
+    vol = scene.get("volume")
+    img = scene.get("image", {})
+    s = ["## %s" % name, ""]
+    s.append("Scene: volume `%s`, TF `%s`, %s×%s pixels. Reference: path tracer %s, %d spp, "
+             "estimated error %.1f %% (%s). Each variant's time is charged in full for every "
+             "precomputed field it reads (docs/sweeps.md); frame = median of %d." % (
+                 json.dumps(vol) if isinstance(vol, dict) else os.path.basename(str(vol)),
+                 scene.get("transfer_function", "?") if isinstance(
+                     scene.get("transfer_function"), str) else "explicit points",
+                 img.get("width", "?"), img.get("height", "?"),
+                 json.dumps(ref.get("params", {})), ref.get("spp", 0),
+                 100 * ref.get("relative_std_error", 0),
+                 "cached" if ref.get("cached") else "%.0f s" % ref.get("seconds", 0),
+                 ref.get("frames", 1)))
+    s += ["", "![accuracy against time](%saccuracy-vs-time.png)" % prefix, "",
+          "![Pareto front](%spareto.png)" % prefix, "",
+          "![reference and the most accurate variant of each run](%ssheet.png)" % prefix, "",
+          "◆ = on the Pareto front of (precompute + one frame, %s)." % metric, "",
+          table(rows, metric), ""]
+    front = pareto(rows, metric)
+    if front:
+        s.append("Pareto front, fastest first: " + ", ".join(
+            "`%s` (%.2f s, %.3f)" % (r["id"], r["total_s"], r[metric]) for r in front) + ".")
+        s.append("")
+    return s
+
+
+def papers_section(labels):
+    s = ["## Beside the papers", "",
+         "Their numbers come from their own GPUs, data and error measures; ours from 2 CPU cores. "
+         "Read the shape of the curves (where error stops falling, how time grows with each "
+         "parameter), not the absolute values.", ""]
+    for label in labels:
+        for key, (where, text) in PAPERS.items():
+            if label == key or label.startswith(key + "-"):
+                s.append("- **%s** — %s: %s" % (label, where, text))
+                break
+    return s + [""]
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("dirs", nargs="+")
+    ap.add_argument("--docs", default=None, help="copy plots and write one report.md here")
+    ap.add_argument("--metric", default="nrmse", choices=sorted(METRICS))
+    args = ap.parse_args()
+    combined, labels = ["# What accuracy costs in time", "",
+                        "Generated by `tools/run_sweeps.sh` (`voxlight sweep` over "
+                        "`datasets/sweeps/*.json`, then `tools/sweep_report.py`); "
+                        "regenerate it when a method changes.", ""], []
+    for d in args.dirs:
+        rows, ref = load(d)
+        if not rows:
+            print("%s: no rows" % d, file=sys.stderr)
+            continue
+        name = ref.get("sweep") or os.path.basename(os.path.normpath(d))
+        plot_accuracy(rows, ref, args.metric, os.path.join(d, "accuracy-vs-time.png"))
+        plot_pareto(rows, ref, args.metric, os.path.join(d, "pareto.png"))
+        sheet(d, rows, args.metric, os.path.join(d, "sheet.png"))
+        with open(os.path.join(d, "report.md"), "w") as f:
+            f.write("\n".join(section(d, name, rows, ref, args.metric, "") +
+                              papers_section(list(runs_of(rows)))) + "\n")
+        print("wrote %s" % os.path.join(d, "report.md"))
+        if args.docs:
+            os.makedirs(args.docs, exist_ok=True)
+            for p in ("accuracy-vs-time.png", "pareto.png", "sheet.png"):
+                shutil.copy(os.path.join(d, p), os.path.join(args.docs, "%s-%s" % (name, p)))
+            shutil.copy(os.path.join(d, "results.csv"),
+                        os.path.join(args.docs, "%s-results.csv" % name))
+            combined += section(d, name, rows, ref, args.metric, name + "-")
+            labels += [l for l in runs_of(rows) if l not in labels]
+    if args.docs:
+        with open(os.path.join(args.docs, "report.md"), "w") as f:
+            f.write("\n".join(combined + papers_section(labels)) + "\n")
+        print("wrote %s" % os.path.join(args.docs, "report.md"))
+
+
+if __name__ == "__main__":
+    main()
