@@ -37,6 +37,12 @@ constexpr double kUnitNormalTol = 1e-6;
 // Mean of 10⁶ equal doubles summed in double: each addition rounds by ≤ ½ ulp of a sum ≤ 10⁶ c,
 // so the mean is off by ≤ 10⁶ · 2⁻⁵³ ≈ 1.1e-10 of c; the float output rounds it to 6e-8.
 constexpr double kMillionMeanRelTol = 1e-7;
+// A Bernoulli stream of 2²⁰ samples: the mean lies within this many standard errors of its closed
+// form (a false failure once in ~10⁶ seeds; the seed is fixed, so the test is deterministic).
+constexpr double kBernoulliSigmas = 5.0;
+// The accumulated standard error against √(p(1−p)/n)·e: the sample variance of 2²⁰ Bernoulli
+// draws is off by ~√(2/n) ≈ 0.14 % (1σ); 1 % is 7σ.
+constexpr double kBernoulliStdErrorRelTol = 0.01;
 // Standard error of a constant stream is 0; Σv²/n − mean² cancels to ~1e-10 c², so √(var/n)
 // stays below 1e-8 c.
 constexpr double kMillionStdErrorRelTol = 1e-8;
@@ -316,4 +322,47 @@ TEST(HardCases, PathTracerAccumulatesAMillionSamples) {
         EXPECT_LE(se.pixels[2], kMillionStdErrorRelTol) << c;
         EXPECT_TRUE(std::isfinite(st.relativeStdError));
     }
+}
+
+TEST(HardCases, PathTracerAccumulatesAMillionBernoulliSamples) {
+    // A non-constant stream with a closed form: one pixel whose ray (pixel centre, no jitter)
+    // crosses a homogeneous medium of σt with albedo 0 and emission e. Each sample is e (the path
+    // collided: probability p = 1 − exp(−σt·D), D the ray's length in the box) or 0 (it left into
+    // a black background). After 2²⁰ samples: mean e·p, standard error e·√(p(1−p)/n).
+    core::Geometry g;
+    g.dims = {8, 8, 8};
+    auto v = std::make_shared<core::Volume>(g, core::VoxelType::Float32);
+    std::fill_n(v->dataAs<float>(), v->voxelCount(), 1.f);
+    const float sigma = 0.1f, e = 2.f;
+    const optics::TransferFunction tf(
+        {{0.f, glm::vec3(0.f), sigma, glm::vec3(e)}, {2.f, glm::vec3(0.f), sigma, glm::vec3(e)}},
+        {1.f, 2.f}, "emissive");
+    const Medium m = makeMedium(v, tf);
+    const glm::dvec3 hi(7.0);  // the tracer's box: voxel centres 0..n−1 (spacing 1, origin 0)
+    const render::Camera cam(render::CameraSpec{}, glm::dvec3(0.0), hi, 1, 1);
+    const render::Ray ray = cam.generateThroughLens(0.5, 0.5, 0.0, 0.0);
+    double t0 = 0.0, t1 = INFINITY;  // slab test, independent of the tracer's
+    for (int a = 0; a < 3; ++a) {
+        double ta = (0.0 - ray.origin[a]) / ray.direction[a];
+        double tb = (hi[a] - ray.origin[a]) / ray.direction[a];
+        if (ta > tb) std::swap(ta, tb);
+        t0 = std::max(t0, ta), t1 = std::min(t1, tb);
+    }
+    ASSERT_GT(t1, t0);
+    const double p = -std::expm1(-double(sigma) * (t1 - t0));
+    pathtrace::Options o;
+    o.samplesPerPixel = 1 << 20;
+    o.pixelJitter = false;
+    o.threads = 1;
+    pathtrace::Stats st;
+    core::ImageRGBA se;
+    const core::ImageRGBA im = m.tracer(o).render(cam, core::Progress::none(), &st, &se);
+    ASSERT_EQ(st.samplesPerPixel, 1 << 20);
+    const double n = st.samplesPerPixel;
+    const double expectedSe = e * std::sqrt(p * (1.0 - p) / n);
+    std::printf("p %.6f: mean %.6f (closed form %.6f), std error %.4g (closed form %.4g)\n", p,
+                im.pixels[0], e * p, se.pixels[0], expectedSe);
+    EXPECT_NEAR(im.pixels[0], e * p, kBernoulliSigmas * expectedSe) << "p " << p;
+    EXPECT_NEAR(im.pixels[3], p, kBernoulliSigmas * expectedSe / e) << "coverage";
+    EXPECT_NEAR(se.pixels[0], expectedSe, kBernoulliStdErrorRelTol * expectedSe) << "p " << p;
 }
