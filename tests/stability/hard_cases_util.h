@@ -43,6 +43,14 @@ inline std::filesystem::path writeHard(const HardVolume& h, const std::filesyste
     return path;
 }
 
+/// A ball of value 600 (σt 0.3/mm under tfOf(0.3)) of radius 3.2 voxels around voxel (4, 4, 4) of a
+/// 9³ volume, in a thin ramp (values 0..80: σt ≤ 0.12/mm): a small scene with shadows in it.
+inline float ballValue(int i, int j, int k) {
+    const double r2 = (i - 4.0) * (i - 4.0) + (j - 4.0) * (j - 4.0) + (k - 4.0) * (k - 4.0);
+    return r2 <= 3.2 * 3.2 ? 600.f : float(10 * i);
+}
+inline const HardVolume kBall{"ball", {9, 9, 9}, {1, 1, 1}, ballValue};
+
 /// Every registered method's name.
 inline std::vector<std::string> allMethods() {
     std::vector<std::string> methods;
@@ -72,6 +80,21 @@ inline nlohmann::json tfOf(double sigma) {
              {{{"value", 0.0}, {"color", white}, {"extinction", 0.0}},
               {{"value", 200.0}, {"color", white}, {"extinction", sigma}},
               {{"value", 1000.0}, {"color", white}, {"extinction", sigma}}}}};
+}
+
+/// A 12×10 scene of `volume` under tfOf(0.3) with `method` (a method object, e.g. methodOf(name))
+/// and `lights` (default: one oblique directional light).
+inline nlohmann::json hardScene(const std::filesystem::path& volume, const nlohmann::json& method,
+                                nlohmann::json lights = nullptr) {
+    using nlohmann::json;
+    if (lights.is_null())
+        lights = json::array(
+            {{{"type", "directional"}, {"direction", {0.3, 0.4, -0.8}}, {"intensity", 4}}});
+    return {{"volume", volume.string()},
+            {"transfer_function", tfOf(0.3)},
+            {"method", method},
+            {"lights", std::move(lights)},
+            {"image", {{"width", 12}, {"height", 10}}}};
 }
 
 /// Finite, non-negative radiance and coverage in [0, 1].

@@ -56,22 +56,6 @@ float cone(int i, int j, int k) {
 }
 const HardVolume kCone{"cone", {9, 9, 9}, {1, 1, 1}, cone};
 
-float ball(int i, int j, int k) {
-    const double r2 = (i - 4.0) * (i - 4.0) + (j - 4.0) * (j - 4.0) + (k - 4.0) * (k - 4.0);
-    return r2 <= 3.2 * 3.2 ? 600.f : float(10 * i);
-}
-const HardVolume kBall{"ball", {9, 9, 9}, {1, 1, 1}, ball};
-
-json sceneOf(const std::filesystem::path& volume, const json& method) {
-    return {{"volume", volume.string()},
-            {"transfer_function", tfOf(0.3)},
-            {"method", method},
-            {"lights",
-             json::array(
-                 {{{"type", "directional"}, {"direction", {0.3, 0.4, -0.8}}, {"intensity", 4}}})},
-            {"image", {{"width", 12}, {"height", 10}}}};
-}
-
 json plane(double x, double nx, bool shadowsFromRemoved) {
     return {
         {"point", {x, 0, 0}}, {"normal", {nx, 0, 0}}, {"shadows_from_removed", shadowsFromRemoved}};
@@ -166,7 +150,7 @@ TEST(HardCases, IsovaluesAtVoxelValuesAndTheDataExtremes) {
             m["params"]["iso_value"] = iso;
             const std::string what = method + " iso_value " + std::to_string(iso);
             try {
-                const auto r = pipeline::renderScene(io::parseScene(sceneOf(path, m), "h", "."));
+                const auto r = pipeline::renderScene(io::parseScene(hardScene(path, m), "h", "."));
                 expectSane(r.image, what);
             } catch (const InputError& e) {
                 std::printf("refused: %s: %s\n", what.c_str(), e.what());
@@ -181,7 +165,7 @@ TEST(HardCases, ClipPlanesOnVoxelPlanesAndWithAnEmptyIntersection) {
     const auto path = writeHard(kBall, tmp.path());
     const double last = kBall.dims.x - 1;  // x of the last voxel plane (the box's far face), mm
     for (const std::string& method : allMethods()) {
-        json d = sceneOf(path, methodOf(method));
+        json d = hardScene(path, methodOf(method));
         const auto base = renderOrRefuse(d, method + " unclipped");
         if (!base) continue;
         expectSane(base->image, method);
@@ -265,7 +249,7 @@ TEST(HardCases, AVolumeOverTheMemoryBudget) {
          "budget"},
     };
     for (const Over& o : overs) {
-        const json d = sceneOf(path, {{"name", o.method}, {"params", o.params}});
+        const json d = hardScene(path, {{"name", o.method}, {"params", o.params}});
         try {
             pipeline::renderScene(io::parseScene(d, "h", "."));
             ADD_FAILURE() << o.method << ": a volume over the budget rendered";
@@ -280,7 +264,7 @@ TEST(HardCases, AVolumeOverTheMemoryBudget) {
     // is a coarser field, not an error. The smallest budget the scene allows must render.
     for (const std::string method : {"sh-local", "sh-global"}) {
         const json d =
-            sceneOf(path, {{"name", method}, {"params", {{"rays", 8}, {"lod_budget_mb", 1e-3}}}});
+            hardScene(path, {{"name", method}, {"params", {{"rays", 8}, {"lod_budget_mb", 1e-3}}}});
         const auto r = pipeline::renderScene(io::parseScene(d, "h", "."));
         expectSane(r.image, method + " lod_budget_mb 1e-3");
     }
@@ -288,7 +272,7 @@ TEST(HardCases, AVolumeOverTheMemoryBudget) {
     // every method must still render.
     for (const std::string& method : allMethods()) {
         pipeline::Session session(1);
-        const json d = sceneOf(path, methodOf(method));
+        const json d = hardScene(path, methodOf(method));
         try {
             const auto r = session.run(io::parseScene(d, "h", "."));
             expectSane(r.image, method + " with a 1-byte cache");

@@ -63,22 +63,6 @@ std::set<std::string> everyMethod() {
     return {m.begin(), m.end()};
 }
 
-// A ball of value 600 (σt 0.3/mm under tfOf(0.3)) of radius 3.2 voxels around voxel (4, 4, 4) of a
-// 9³ volume, in a thin ramp (values 0..80: σt ≤ 0.12/mm).
-float ball(int i, int j, int k) {
-    const double r2 = (i - 4.0) * (i - 4.0) + (j - 4.0) * (j - 4.0) + (k - 4.0) * (k - 4.0);
-    return r2 <= 3.2 * 3.2 ? 600.f : float(10 * i);
-}
-const HardVolume kBall{"ball", {9, 9, 9}, {1, 1, 1}, ball};
-
-json sceneOf(const std::filesystem::path& volume, const std::string& method, json lights) {
-    return {{"volume", volume.string()},
-            {"transfer_function", tfOf(0.3)},
-            {"method", methodOf(method)},
-            {"lights", std::move(lights)},
-            {"image", {{"width", 12}, {"height", 10}}}};
-}
-
 /// Renders `lights` through every method; the ones in `mustRender` may not refuse. Returns how
 /// many rendered.
 int renderEveryMethod(const std::filesystem::path& volume, const json& lights,
@@ -87,7 +71,7 @@ int renderEveryMethod(const std::filesystem::path& volume, const json& lights,
     int rendered = 0;
     for (const std::string& method : allMethods()) {
         const std::string w = what + " " + method;
-        json d = sceneOf(volume, method, lights);
+        json d = hardScene(volume, methodOf(method), lights);
         if (!camera.is_null()) d["camera"] = camera;
         const auto r = renderOrRefuse(d, w);
         if (!r) {
