@@ -344,6 +344,18 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
         std::abs(stored - std::round(stored)) <= 1e-9 * std::max(1.0, std::abs(stored))) {
         stored = std::round(stored) - (slope > 0 ? kIntegerIsoNudge : -kIntegerIsoNudge);
         st.nudged = true;
+        // An isovalue within the rule's tolerance of the data's lower end snaps to it, and the
+        // nudge then leaves the range: every voxel would be inside and the mesh empty. That is
+        // the lower end itself, and refused like it.
+        const double storedLo = (lo - volume.mapping.intercept) / slope,
+                     storedHi = (hi - volume.mapping.intercept) / slope;
+        if (!(stored > std::min(storedLo, storedHi) && stored < std::max(storedLo, storedHi)))
+            throw InputError("isosurface", "isovalue",
+                             number(options.isovalue) +
+                                 " rounds to the lower end of the data range [" + number(lo) +
+                                 ", " + number(hi) + "] (integer data)",
+                             "choose an isovalue strictly between " + number(lo) + " and " +
+                                 number(hi) + ", not equal to " + number(lo) + " up to rounding");
     }
     st.storedIsovalue = stored;
 

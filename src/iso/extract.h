@@ -89,7 +89,8 @@ struct Extraction {
 
 /// Extracts the isosurface. Throws InputError (source "isosurface") with field "volume" when the
 /// volume is flat (min = max: there is no surface), with field "isovalue" when the isovalue is not
-/// strictly inside (min, max) — the message names the range; the caller maps the field to its own
+/// strictly inside (min, max), or on integer data rounds to the min (the integer rule would move it
+/// below the data) — the message names the range; the caller maps the field to its own
 /// option or key.
 /// An empty mesh is returned only when clipping removed everything. Throws CancelledError through
 /// `progress`; InputError (field "iso module") when the VTK module cannot be loaded.

@@ -36,6 +36,15 @@ std::string toString(Mode m) {
 }
 
 namespace {
+/// Relative distance along a ray (of max(1, |t|)) within which a clip plane's or crop face's entry
+/// counts as the volume box's own entry: a plane on the box's face removes nothing, so it must not
+/// turn the face into a cut face (plane-normal shading) depending on how t rounded. The two
+/// entries are computed differently (world vs. index space) and differ by ~1e-15 relative.
+constexpr double kEntryTieRelTol = 1e-9;
+bool beyondEntry(double t, double tn) {
+    return t > tn + kEntryTieRelTol * std::max(1.0, std::abs(tn));
+}
+
 /// Finer majorant cells inside the non-empty bricks of `coarse` (empty bricks stay empty).
 template <class F>
 grid::BrickMajorants refineMajorants(const core::Volume& volume, const grid::BrickMajorants& coarse,
@@ -382,9 +391,11 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
         const double t = -a / b;
         if (b > 0.0) {
             if (t > tn) {
+                if (beyondEntry(t, tn)) {
+                    r.clipEntry = true;
+                    r.entryNormal = -glm::vec3(c.normal);
+                }
                 tn = t;
-                r.clipEntry = true;
-                r.entryNormal = -glm::vec3(c.normal);
             }
         } else {
             tf = std::min(tf, t);
@@ -401,10 +412,12 @@ RaySegment RayCaster::setupRay(const Camera& camera, int x, int y) const {
             double t1 = (box.min[a] - ray.origin[a]) / d, t2 = (box.max[a] - ray.origin[a]) / d;
             if (t1 > t2) std::swap(t1, t2);
             if (t1 > tn) {
+                if (beyondEntry(t1, tn)) {
+                    r.clipEntry = true;
+                    r.entryNormal = glm::vec3(0.f);
+                    r.entryNormal[a] = d > 0 ? -1.f : 1.f;
+                }
                 tn = t1;
-                r.clipEntry = true;
-                r.entryNormal = glm::vec3(0.f);
-                r.entryNormal[a] = d > 0 ? -1.f : 1.f;
             }
             tf = std::min(tf, t2);
         }

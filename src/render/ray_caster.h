@@ -25,7 +25,8 @@
 // Clipping: the kept region is the intersection of the half-spaces dot(x − p, n) ≥ 0 and the crop
 // box. Where a ray enters through a clip plane or crop face, samples within kClipFaceBandVoxels of
 // the entry are shaded with the plane's normal where the gradient is weak (the cut face of a
-// homogeneous organ), as clinical viewers do.
+// homogeneous organ), as clinical viewers do. A plane or crop face on the volume box's own entry
+// face (up to rounding) removes nothing there and is no cut face.
 //
 // Output: core::ImageRGBA with *linear* radiance + T·background in RGB and coverage 1 − T in alpha.
 // Non-finite voxels never produce non-finite pixels (NaN samples act as the TF's lowest value).
