@@ -1,9 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "analysis/sweep.h"
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <set>
 
 #include "core/error.h"
@@ -64,6 +66,13 @@ std::string safeId(std::string s) {
 
 std::string runField(std::size_t i) { return "runs[" + std::to_string(i) + "]"; }
 
+/// Where reference `index` was written: "reference", or the first run that names it.
+std::string referenceField(const SweepSpec& spec, std::size_t index) {
+    for (std::size_t i = 0; index > 0 && i < spec.runs.size(); ++i)
+        if (spec.runs[i].reference == index) return runField(i) + ".reference";
+    return "reference";
+}
+
 io::Scene sceneWithMethod(const SweepSpec& spec, const std::string& method, const json& params,
                           const std::optional<std::vector<std::string>>& effects,
                           const std::string& what) {
@@ -90,6 +99,28 @@ std::string csvField(const std::string& s) {
     std::string q = "\"";
     for (char c : s) q += c == '"' ? std::string("\"\"") : std::string(1, c);
     return q + "\"";
+}
+
+SweepReferenceSpec parseReference(const json& r, const std::string& source,
+                                  const std::string& field) {
+    if (!r.is_object())
+        throw InputError(source, field, "is " + typeName(r) + ", not an object",
+                         "write {\"method\": ..., \"params\": {...}, \"effects\": [...]}");
+    checkKeys(r, {"method", "params", "effects"}, source, field);
+    SweepReferenceSpec ref;
+    if (r.contains("method")) {
+        if (!r["method"].is_string())
+            throw InputError(source, field + ".method", "is not a string");
+        ref.method = r["method"].get<std::string>();
+        if (ref.method != "pathtrace") ref.params = json::object(), ref.effects.reset();
+    }
+    if (r.contains("params")) {
+        if (!r["params"].is_object())
+            throw InputError(source, field + ".params", "is not an object");
+        ref.params = r["params"];
+    }
+    if (r.contains("effects")) ref.effects = stringList(r["effects"], source, field + ".effects");
+    return ref;
 }
 
 }  // namespace
@@ -136,20 +167,8 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
     }
     // The scene's own method and effects give way to each run's.
     spec.scene.erase("method");
-    if (doc.contains("reference")) {
-        const json& r = doc["reference"];
-        if (!r.is_object())
-            throw InputError(source, "reference", "is " + typeName(r) + ", not an object",
-                             "write {\"params\": {...}, \"effects\": [...]}");
-        checkKeys(r, {"params", "effects"}, source, "reference");
-        if (r.contains("params")) {
-            if (!r["params"].is_object())
-                throw InputError(source, "reference.params", "is not an object");
-            spec.referenceParams = r["params"];
-        }
-        if (r.contains("effects"))
-            spec.referenceEffects = stringList(r["effects"], source, "reference.effects");
-    }
+    if (doc.contains("reference"))
+        spec.references[0] = parseReference(doc["reference"], source, "reference");
     if (doc.contains("frames")) {
         const json& f = doc["frames"];
         if (!f.is_number_integer() || f.get<long long>() < 1 ||
@@ -168,7 +187,8 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
         const std::string where = runField(i);
         if (!r.is_object())
             throw InputError(source, where, "is " + typeName(r) + ", not an object");
-        checkKeys(r, {"method", "label", "params", "effects", "axes", "combine"}, source, where);
+        checkKeys(r, {"method", "label", "params", "effects", "axes", "combine", "reference"},
+                  source, where);
         SweepRun run;
         if (!r.contains("method") || !r["method"].is_string())
             throw InputError(source, where + ".method", "must be a method name (string)");
@@ -210,6 +230,13 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
                 throw InputError(source, where + ".combine",
                                  "must be \"one-at-a-time\" or \"grid\"");
             run.grid = c == "grid";
+        }
+        if (r.contains("reference")) {
+            const SweepReferenceSpec ref =
+                parseReference(r["reference"], source, where + ".reference");
+            const auto same = std::find(spec.references.begin(), spec.references.end(), ref);
+            run.reference = std::size_t(same - spec.references.begin());
+            if (same == spec.references.end()) spec.references.push_back(ref);
         }
         spec.runs.push_back(std::move(run));
     }
@@ -257,6 +284,7 @@ std::vector<SweepItem> expandSweep(const SweepSpec& spec) {
         it.value = value;
         it.params = params;
         it.effects = run.effects;
+        it.reference = run.reference;
         items.push_back(std::move(it));
     };
     for (const SweepRun& run : spec.runs) {
@@ -307,9 +335,9 @@ io::Scene variantScene(const SweepSpec& spec, const SweepItem& item) {
     return sceneWithMethod(spec, item.method, item.params, item.effects, itemWhere(spec, item));
 }
 
-io::Scene referenceScene(const SweepSpec& spec) {
-    return sceneWithMethod(spec, "pathtrace", spec.referenceParams, spec.referenceEffects,
-                           "reference");
+io::Scene referenceScene(const SweepSpec& spec, std::size_t index) {
+    const SweepReferenceSpec& r = spec.references.at(index);
+    return sceneWithMethod(spec, r.method, r.params, r.effects, referenceField(spec, index));
 }
 
 void validateSweep(const SweepSpec& spec, const std::vector<SweepItem>& items,
@@ -321,7 +349,8 @@ void validateSweep(const SweepSpec& spec, const std::vector<SweepItem>& items,
             throw InputError(spec.source, what + ": " + e.field(), e.problem(), e.fix());
         }
     };
-    check(referenceScene(spec), "reference");
+    for (std::size_t i = 0; i < spec.references.size(); ++i)
+        check(referenceScene(spec, i), referenceField(spec, i));
     for (const SweepItem& it : items) check(variantScene(spec, it), itemWhere(spec, it));
 }
 
@@ -336,28 +365,28 @@ core::ImageRGBA displayOf(const core::ImageRGBA& linear, const io::Scene& s) {
 }
 }  // namespace
 
-const SweepReference& SweepRunner::reference(const core::Progress& progress) {
-    if (reference_) return *reference_;
-    const io::Scene s = referenceScene(spec_);
+const SweepReference& SweepRunner::reference(std::size_t index, const core::Progress& progress) {
+    if (const auto it = references_done_.find(index); it != references_done_.end())
+        return it->second;
+    const io::Scene s = referenceScene(spec_, index);
     pipeline::RunResult r = references_.run(s, {}, progress);
     SweepReference ref;
     ref.linear = std::move(r.image);
     ref.display = displayOf(ref.linear, s);
     const json& pt = r.details.contains("pathtrace") ? r.details["pathtrace"] : json::object();
-    ref.relativeStdError = pt.value("relative_std_error", 0.0);
+    ref.relativeStdError = pt.value("relative_std_error", std::numeric_limits<double>::quiet_NaN());
     ref.spp = pt.value("spp", 0LL);
     for (const auto& st : r.stages)
         if (st.ran && st.kind != pipeline::StageKind::Input) ref.seconds += st.seconds;
     // Served from the cache: the reference stage (params "reference": true) did not run.
     for (const auto& st : r.stages)
         if (st.name == "reference") ref.cached = !st.ran;
-    reference_ = std::move(ref);
-    return *reference_;
+    return references_done_.emplace(index, std::move(ref)).first->second;
 }
 
 SweepRow SweepRunner::run(const SweepItem& item, const core::Progress& progress,
                           SweepImages* images) {
-    const SweepReference& ref = reference(progress);
+    const SweepReference& ref = reference(item.reference, progress);
     const io::Scene s = variantScene(spec_, item);
     pipeline::RunResult r =
         variants_.run(s, {.frames = item.method == "pathtrace" ? 1 : spec_.frames}, progress);
@@ -407,7 +436,7 @@ SweepRow SweepRunner::run(const SweepItem& item, const core::Progress& progress,
 
 std::string sweepCsvHeader() {
     return "index,id,label,method,axis,value,params,precompute_s,frame_s,memory_mb,nrmse,rmse_255,"
-           "psnr_db,ssim,flip,detected,reference_error";
+           "psnr_db,ssim,flip,detected,reference_error,reference";
 }
 
 std::string sweepCsvRow(const SweepRow& row) {
@@ -421,7 +450,7 @@ std::string sweepCsvRow(const SweepRow& row) {
     for (double v : {row.precomputeSeconds, row.frameSeconds, row.memoryMb, row.nrmse, row.rmse255,
                      row.psnrDb, row.ssim, row.flip, row.detected, row.referenceError})
         s += "," + number(v);
-    return s;
+    return s + "," + std::to_string(it.reference);
 }
 
 }  // namespace voxlight::analysis

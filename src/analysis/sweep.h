@@ -11,11 +11,14 @@
 //                                                // an inline scene (paths relative to the sweep)
 //     "overrides": ["image.width=96", ...],      // optional, applied to the scene (as --set)
 //     "reference": {"params": {"reference": true}, "effects": ["global_shadows"]},  // pathtrace
+//                                                // ("method" too: default pathtrace)
 //     "frames": 3,                               // frames timed per variant (median), 1..100
 //     "runs": [
 //       {"method": "sh-local", "label": "sh-local", "params": {...}, "effects": [...],
 //        "axes": {"rays": [16, 64, 256], "coefficients": [1, 4, 9, 16]},
-//        "combine": "one-at-a-time" | "grid"},
+//        "combine": "one-at-a-time" | "grid",
+//        "reference": {"method": "iso-lattice", "params": {"shading": "paths"}}},  // optional:
+//                                                // this run's own reference (another model)
 //       {"method": "gradient"}                   // no axes: one variant (a baseline)
 //     ]
 //   }
@@ -39,7 +42,10 @@
 //   flip         display images (mean LDR-FLIP over covered pixels)
 //   detected     fraction of covered pixels with FLIP above 0.05 (detectionFraction)
 // The reference's own estimated relative error (its `relative_std_error`) is the floor no
-// variant's nrmse can be expected to fall below; the CSV carries it on every row.
+// variant's nrmse can be expected to fall below; the CSV carries it on every row (nan when the
+// reference is not the path tracer's). A run with its own "reference" (the isosurface methods: the
+// path tracer renders the volume, not the surface) is measured against that one; the CSV's last
+// column says which (0 = the sweep's).
 //
 // Determinism: the errors are those of deterministic renders (fixed seeds), so they repeat
 // exactly for any thread count or distribution of the variants; the seconds do not.
@@ -64,6 +70,15 @@ inline constexpr int kMaxSweepFrames = 100;
 /// FLIP value above which a pixel counts as a detected difference (DetectionOptions' default).
 inline constexpr double kSweepDetectionThreshold = 0.05;
 
+/// A reference image's render: method, params, effects (the sweep's scene otherwise).
+struct SweepReferenceSpec {
+    std::string method = "pathtrace";
+    nlohmann::json params = {{"reference", true}};
+    /// Unset: the scene's (a reference of another method than pathtrace without "effects").
+    std::optional<std::vector<std::string>> effects = std::vector<std::string>{"global_shadows"};
+    bool operator==(const SweepReferenceSpec&) const = default;
+};
+
 struct SweepRun {
     std::string label;                                 ///< "label", default the method's name
     std::string method;                                ///< a registered method
@@ -71,6 +86,7 @@ struct SweepRun {
     std::optional<std::vector<std::string>> effects;   ///< unset: the scene's
     std::vector<std::pair<std::string, std::vector<nlohmann::json>>> axes;  ///< in file order
     bool grid = false;                                                      ///< "combine": "grid"
+    std::size_t reference = 0;  ///< index into SweepSpec::references
 };
 
 struct SweepSpec {
@@ -78,8 +94,8 @@ struct SweepSpec {
     std::string name;
     nlohmann::json scene;            ///< the scene document, overrides applied
     std::filesystem::path sceneDir;  ///< relative paths in `scene` resolve against it
-    nlohmann::json referenceParams = {{"reference", true}};
-    std::vector<std::string> referenceEffects = {"global_shadows"};
+    /// [0] the sweep's reference; runs with their own add theirs (identical ones shared).
+    std::vector<SweepReferenceSpec> references = {SweepReferenceSpec{}};
     int frames = 1;
     std::vector<SweepRun> runs;
 };
@@ -100,6 +116,7 @@ struct SweepItem {
     nlohmann::json value;   ///< its value (null for a base or a grid point)
     nlohmann::json params;  ///< the variant's full params
     std::optional<std::vector<std::string>> effects;
+    std::size_t reference = 0;  ///< index into SweepSpec::references
 };
 
 /// Every variant of the sweep in order (runs in file order; see the header comment).
@@ -107,8 +124,8 @@ std::vector<SweepItem> expandSweep(const SweepSpec& spec);
 
 /// The variant's scene, parsed (InputError naming the sweep, the run and the key when invalid).
 io::Scene variantScene(const SweepSpec& spec, const SweepItem& item);
-/// The reference's scene: method pathtrace with the reference's params and effects.
-io::Scene referenceScene(const SweepSpec& spec);
+/// Reference `index`'s scene: its method, params and effects on the sweep's scene.
+io::Scene referenceScene(const SweepSpec& spec, std::size_t index = 0);
 /// Parses and plans every variant and the reference without rendering (strict params).
 void validateSweep(const SweepSpec& spec, const std::vector<SweepItem>& items,
                    const pipeline::Session& session);
@@ -126,7 +143,7 @@ struct SweepRow {
     SweepItem item;
     double precomputeSeconds = 0, frameSeconds = 0, memoryMb = 0;
     double nrmse = 0, rmse255 = 0, psnrDb = 0, ssim = 0, flip = 0, detected = 0;
-    double referenceError = 0;  ///< SweepReference::relativeStdError
+    double referenceError = 0;  ///< SweepReference::relativeStdError (nan: not estimated)
     std::vector<std::string> warnings;
 };
 
@@ -145,8 +162,9 @@ class SweepRunner {
     /// `variants` renders the variants (memory cache only, so costs are this process's);
     /// `references` the reference (give it a disk cache directory to keep references across runs).
     SweepRunner(const SweepSpec& spec, pipeline::Session& variants, pipeline::Session& references);
-    /// The reference image (rendered on first use).
-    const SweepReference& reference(const core::Progress& progress = core::Progress::none());
+    /// Reference `index` (rendered on first use).
+    const SweepReference& reference(std::size_t index = 0,
+                                    const core::Progress& progress = core::Progress::none());
     /// Renders one variant and measures it. `images`, when given, receives its pictures.
     SweepRow run(const SweepItem& item, const core::Progress& progress = core::Progress::none(),
                  SweepImages* images = nullptr);
@@ -155,13 +173,13 @@ class SweepRunner {
     const SweepSpec& spec_;
     pipeline::Session& variants_;
     pipeline::Session& references_;
-    std::optional<SweepReference> reference_;
+    std::map<std::size_t, SweepReference> references_done_;
     std::map<std::string, double> cost_;  ///< "stage:key" → seconds when computed
 };
 
 /// The CSV's header line and one row (no newline). Columns: index, id, label, method, axis,
 /// value, params (compact JSON), precompute_s, frame_s, memory_mb, nrmse, rmse_255, psnr_db,
-/// ssim, flip, detected, reference_error. Fields with commas or quotes are quoted (RFC 4180).
+/// ssim, flip, detected, reference_error, reference (index). Fields with commas or quotes are quoted (RFC 4180).
 std::string sweepCsvHeader();
 std::string sweepCsvRow(const SweepRow& row);
 

@@ -17,6 +17,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -173,28 +174,54 @@ Command addSweepCommand(CLI::App& app) {
                 if (ec || !fs::is_directory(dir))
                     throw InputError("command line", "--out", "cannot create '" + *outDir + "'",
                                      ec ? ec.message() : "check the path and its permissions");
-                const analysis::SweepReference& ref = runner.reference(progress);
-                writeAtomically(dir / "reference.png",
-                                [&](const fs::path& p) { io::writeImage(ref.display, p); });
-                nlohmann::json refJson = {{"sweep", spec.name},
-                                          {"spp", ref.spp},
-                                          {"relative_std_error", ref.relativeStdError},
-                                          {"seconds", ref.seconds},
-                                          {"cached", ref.cached},
-                                          {"params", spec.referenceParams},
-                                          {"effects", spec.referenceEffects},
-                                          {"frames", spec.frames},
-                                          {"ranks", ranks.size()},
-                                          {"scene", spec.scene}};
+                // Every reference a variant of this run needs: the sweep's first (reference.png),
+                // then the runs' own (reference-N.png).
+                std::set<std::size_t> needed = {0};
+                for (const auto& it : items) needed.insert(it.reference);
+                nlohmann::json refJson;
+                for (const std::size_t k : needed) {
+                    const analysis::SweepReference& ref = runner.reference(k, progress);
+                    const std::string png =
+                        k == 0 ? "reference.png" : "reference-" + std::to_string(k) + ".png";
+                    writeAtomically(dir / png,
+                                    [&](const fs::path& p) { io::writeImage(ref.display, p); });
+                    const auto& rs = spec.references[k];
+                    nlohmann::json j = {
+                        {"image", png},
+                        {"method", rs.method},
+                        {"params", rs.params},
+                        {"effects", rs.effects ? nlohmann::json(*rs.effects) : nlohmann::json()},
+                        {"spp", ref.spp},
+                        {"relative_std_error", std::isfinite(ref.relativeStdError)
+                                                   ? nlohmann::json(ref.relativeStdError)
+                                                   : nlohmann::json()},
+                        {"seconds", ref.seconds},
+                        {"cached", ref.cached}};
+                    if (k == 0) {
+                        refJson = j;
+                        refJson["sweep"] = spec.name;
+                        refJson["frames"] = spec.frames;
+                        refJson["ranks"] = ranks.size();
+                        refJson["scene"] = spec.scene;
+                        refJson["others"] = nlohmann::json::array();
+                    } else {
+                        refJson["others"].push_back(j);
+                    }
+                    if (talk)
+                        std::fprintf(
+                            stderr, "%s: reference %s %s: %s (%s)\n", spec.name.c_str(),
+                            std::to_string(k).c_str(), rs.method.c_str(),
+                            rs.method == "pathtrace"
+                                ? (std::to_string(ref.spp) + " spp, estimated error " +
+                                   std::to_string(100.0 * ref.relativeStdError) + " %")
+                                      .c_str()
+                                : rs.params.dump().c_str(),
+                            ref.cached ? "cached" : (std::to_string(ref.seconds) + " s").c_str());
+                }
                 writeAtomically(dir / "reference.json", [&](const fs::path& p) {
                     writeTextFile(
                         p, refJson.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
                 });
-                if (talk)
-                    std::fprintf(
-                        stderr, "%s: reference %lld spp, estimated error %.2f %% (%s)\n",
-                        spec.name.c_str(), ref.spp, 100.0 * ref.relativeStdError,
-                        ref.cached ? "cached" : (std::to_string(ref.seconds) + " s").c_str());
             } catch (...) {
                 ok = false;
                 failure = std::current_exception();

@@ -252,3 +252,32 @@ TEST(Sweep, CsvRowsHaveTheHeadersColumnsAndQuoteParams) {
     EXPECT_NE(line.find("\"{\"\"coefficients\"\":4,\"\"rays\"\":64}\""), std::string::npos) << line;
     EXPECT_NE(line.find(",inf,"), std::string::npos) << line;
 }
+
+TEST(Sweep, ARunWithItsOwnReferenceIsMeasuredAgainstIt) {
+    // The isosurface methods are not the volume's optical model: their reference is the same
+    // isosurface with paths traced from every hit point (Wyman Fig. 11's), not the path tracer.
+    const SweepSpec spec = parse(tinySweep(json::parse(R"([
+        {"method": "gradient"},
+        {"method": "iso-lattice", "label": "iso", "params": {"iso_value": 300, "samples": 8},
+         "reference": {"method": "iso-lattice",
+                       "params": {"iso_value": 300, "shading": "paths", "samples": 8}},
+         "axes": {"shading": ["paths", "lattice"]}}
+    ])")));
+    ASSERT_EQ(spec.references.size(), 2u);
+    EXPECT_EQ(spec.references[1].method, "iso-lattice");
+    pipeline::Session variants, references;
+    SweepRunner runner(spec, variants, references);
+    const auto items = expandSweep(spec);  // gradient, iso base, iso paths, iso lattice
+    ASSERT_EQ(items.size(), 4u);
+    EXPECT_EQ(items[0].reference, 0u);
+    EXPECT_EQ(items[2].reference, 1u);
+    const SweepRow paths = runner.run(items[2]);
+    EXPECT_EQ(paths.nrmse, 0.0);                    // the reference's own render, deterministic
+    EXPECT_TRUE(std::isnan(paths.referenceError));  // only the path tracer estimates its own
+    const SweepRow lattice = runner.run(items[3]);
+    EXPECT_GT(lattice.nrmse, 0.0);
+    EXPECT_LT(lattice.nrmse, 1.0);
+    const std::string line = sweepCsvRow(lattice);
+    EXPECT_EQ(line.substr(line.rfind(',')), ",1");
+    EXPECT_GT(runner.run(items[0]).referenceError, 0.0);  // gradient: the path tracer's
+}
