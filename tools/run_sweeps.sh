@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # SPDX-License-Identifier: MIT
-# The ready set of sweeps (datasets/sweeps/*.json) and their report in docs/sweeps/:
+# The ready set of sweeps (datasets/sweeps/*.json) and their report in docs/accuracy/:
 #
 #   tools/run_sweeps.sh [--work DIR] [--voxlight build/voxlight] [SWEEP.json ...]
 #
 # Runs `voxlight sweep` on each (results in WORK/NAME, default /tmp/voxlight-sweeps; the path-traced
 # references are kept in WORK/cache, so a second run renders only the variants), then
-# tools/sweep_report.py over all of them with --docs docs/sweeps. A sweep whose volume is absent
+# tools/sweep_report.py over all of them with --docs docs/accuracy. A sweep whose volume is absent
 # (the real CT lives in ../shared/datasets) is skipped with a note. Regenerate the report when a
 # method changes. A benchmark, not a test: its seconds depend on the machine and its load.
 set -euo pipefail
@@ -40,4 +40,4 @@ for s in "${sweeps[@]}"; do
   echo "$name: $(grep -c '^\[' "$work/$name.log") variants in $((SECONDS - start)) s" >&2
   dirs+=("$work/$name")
 done
-/usr/bin/python3 tools/sweep_report.py "${dirs[@]}" --docs docs/sweeps
+/usr/bin/python3 tools/sweep_report.py "${dirs[@]}" --docs docs/accuracy

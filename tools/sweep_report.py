@@ -252,6 +252,23 @@ def section(d, name, rows, ref, metric, prefix):
     return s
 
 
+# Axes along which a larger value is *less* accurate (coarser); every other axis: more accurate.
+COARSER_WITH = {"data_reduction", "subsample"}
+# A change smaller than this (relative) from the least to the most accurate setting reads "flat".
+FLAT = 0.05
+
+
+def trend(g, axis, metric):
+    """'falls', 'flat' or 'rises': the error from the least to the most accurate numeric setting."""
+    g = [r for r in g if math.isfinite(number(r["value"])) and math.isfinite(r[metric])]
+    if len(g) < 2:
+        return ""
+    g = sorted(g, key=lambda r: number(r["value"]), reverse=axis in COARSER_WITH)
+    a, b = g[0][metric], g[-1][metric]
+    change = (b - a) / a if a > 0 else 0.0
+    return "falls" if change < -FLAT else "**rises**" if change > FLAT else "**flat**"
+
+
 def ours(rs, metric):
     """Our curve of one run in words: per axis, value → error (precompute s, frame s)."""
     base = [r for r in rs if r["id"].endswith("-base")]
@@ -265,13 +282,18 @@ def ours(rs, metric):
             axes.setdefault(r["axis"], []).append(r)
     for axis, g in axes.items():
         g = sorted(g, key=lambda r: number(r["value"]))
-        parts.append("%s " % axis + ", ".join(
+        t = trend(g, axis, metric)
+        parts.append("%s%s: " % (axis, " (%s)" % t if t else "") + ", ".join(
             "%s → %.3f (%.2f s + %.3f s)" % (r["value"], r[metric], r["precompute_s"],
                                             r["frame_s"]) for r in g))
     if not parts:
         r = rs[0]
         parts.append("%.3f (%.2f s + %.3f s)" % (r[metric], r["precompute_s"], r["frame_s"]))
     return "; ".join(parts)
+
+
+FINDINGS = os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "datasets", "sweeps",
+                        "findings.md")
 
 
 def papers_section(sweeps, metric):
@@ -291,7 +313,12 @@ def papers_section(sweeps, metric):
         s.append("- **%s** — %s: %s" % (key, where, text))
         for name, label, rs in mine:
             s.append("  - ours, %s / `%s`: %s" % (name, label, ours(rs, metric)))
-    return s + [""]
+    s += ["", "(falls / flat / rises: the error from the least to the most accurate setting of "
+          "an axis, flat within %d %%.)" % round(100 * FLAT), ""]
+    if os.path.exists(FINDINGS):
+        with open(FINDINGS) as f:
+            s += [f.read()]
+    return s
 
 
 def main():
