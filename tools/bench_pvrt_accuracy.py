@@ -23,6 +23,10 @@ map, full red at 32/255). Run from the repository root:
 
     tools/bench_pvrt_accuracy.py [--voxlight build/voxlight] [--work /tmp/pvrt-accuracy] [--docs docs/pvrt]
 
+--set KEY=VALUE (repeatable; VALUE as JSON, else a string) changes the defaults every row starts
+from, e.g. --set estimator=collision; --axes photons runs one sweep only, and --no-extras leaves
+out the pictures, single-scattering and sh-global rows.
+
 A benchmark, not a test: the references take most of its time.
 """
 import argparse
@@ -88,6 +92,13 @@ def main():
     ap.add_argument("--docs", default=None)
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
     ap.add_argument("--quick", action="store_true", help="defaults only (a check after a change)")
+    ap.add_argument("--axes", default=None,
+                    help="comma-separated subset of the sweeps (%s; defaults: the defaults alone)"
+                    % ", ".join(label for label, _ in SWEEPS))
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a pvrt param of every row (VALUE as JSON, else a string)")
+    ap.add_argument("--no-extras", action="store_true",
+                    help="leave out the pictures, single-scattering and sh-global rows")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the table, plot and pictures from WORK (results.csv and its images)")
     args = ap.parse_args()
@@ -102,6 +113,18 @@ def main():
                args.docs, args.work)
         return
     sweeps = [("defaults", [{}])] if args.quick else SWEEPS
+    if args.axes:
+        wanted = args.axes.split(",")
+        sweeps = [sw for sw in SWEEPS if sw[0] in wanted]
+        if "defaults" in wanted:
+            sweeps.append(("defaults", [{}]))
+    defaults = dict(DEFAULTS)
+    for kv in args.set:
+        key, _, value = kv.partition("=")
+        try:
+            defaults[key] = json.loads(value)
+        except ValueError:
+            defaults[key] = value
     voxlight = os.path.abspath(args.voxlight)
     os.makedirs(args.work, exist_ok=True)
     cache = os.path.join(args.work, "cache")
@@ -140,15 +163,16 @@ def main():
 
         for label, variants in sweeps:
             for v in variants:
-                params = dict(DEFAULTS)
+                params = dict(defaults)
                 if "directions" in v:
                     params.pop("order")
                 params.update(v)
                 row(label, params)
-        row("pictures", dict(DEFAULTS))
-        row("single", dict(DEFAULTS, max_bounces=1), ["global_shadows"])
-        row("sh-global", {}, ["global_shadows"], "sh-global")
-        pictures.append(name)
+        if not args.no_extras:
+            row("pictures", dict(defaults))
+            row("single", dict(defaults, max_bounces=1), ["global_shadows"])
+            row("sh-global", {}, ["global_shadows"], "sh-global")
+            pictures.append(name)
     with open(os.path.join(args.work, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()

@@ -1270,6 +1270,9 @@ void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptio
 /// 64³ grid — seconds on 2 cores.
 constexpr int kDefaultPhotonsPerCell = 100;
 
+/// What the photons score by default (pvrt/photons.h): "collision" or "track-length".
+constexpr const char* kDefaultEstimator = "collision";
+
 /// Default budget of one PVRT transfer: a sixth of this kind of machine's 24 GB, so that the
 /// direct transfer, its copy with the photons and the CPCA's working copy fit beside the volume.
 constexpr double kDefaultPvrtMemoryMb = 4096.0;
@@ -1307,6 +1310,8 @@ struct PvrtParams {
                 {"kernel_radius", photons.kernelRadiusCells},
                 {"max_scatterings", photons.maxScatterings},
                 {"roulette_after", photons.rouletteAfter},
+                {"estimator",
+                 photons.estimator == pvrt::Estimator::TrackLength ? "track-length" : "collision"},
                 {"seed", photons.seed}};
     }
     json cpcaKey() const { return {{"clusters", clusters}, {"components", components}}; }
@@ -1349,6 +1354,10 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
     s.photons.maxScatterings = s.maxBounces - 1;
     s.photons.photonsPerCell = p.integer("photons", kDefaultPhotonsPerCell, 1, 100000);
     s.photons.kernelRadiusCells = float(p.number("kernel_radius", 2.0, 0.5, 16.0));
+    s.photons.estimator =
+        p.choice("estimator", kDefaultEstimator, {"collision", "track-length"}) == "track-length"
+            ? pvrt::Estimator::TrackLength
+            : pvrt::Estimator::Collision;
     s.photons.seed = o.seed;
     s.photons.threads = o.threads;
     s.clusters = p.integer("clusters", 128, 0, 1 << 20);
@@ -2423,7 +2432,7 @@ const RegisterMethod kPvrt(rayCasterMethod(
     "precomputed volume radiance transfer (Zhang 2013): single and multiple scattering under "
     "dynamic distant lights through SH or DSF basis lights, photon-mapped indirect light, CPCA",
     {"basis", "order", "directions", "resolution", "quadrature", "max_bounces", "photons",
-     "kernel_radius", "clusters", "components", "memory_mb"},
+     "kernel_radius", "estimator", "clusters", "components", "memory_mb"},
     {"local_shadows", "global_shadows", "multiple_scattering"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

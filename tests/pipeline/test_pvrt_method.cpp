@@ -177,6 +177,13 @@ TEST(PvrtMethod, ALightOrCameraChangeRerunsNoPrecompute) {
     EXPECT_EQ(
         ranStages(session.run(scene(d))),
         (std::set<std::string>{"pvrt_transfer", "pvrt_cpca", "pvrt_radiance", "camera", "render"}));
+    d["method"]["params"]["photons"] = 4;
+    d["method"]["params"]["estimator"] = "collision";
+    session.run(scene(d));
+    d["method"]["params"]["estimator"] = "track-length";  // photons, then everything downstream
+    EXPECT_EQ(
+        ranStages(session.run(scene(d))),
+        (std::set<std::string>{"pvrt_transfer", "pvrt_cpca", "pvrt_radiance", "camera", "render"}));
 }
 
 TEST(PvrtMethod, WithoutLightsTheHeadlightFollowsTheCamera) {
@@ -208,6 +215,7 @@ TEST(PvrtMethod, ParamsAndLightsAreCheckedWithTheFieldNamed) {
     fails(cloudScene("pvrt", {{"clusters", 0}, {"components", 2}}, true),
           "method.params.components");
     fails(cloudScene("pvrt", {{"max_bounces", 4}}, false), "method.params.max_bounces");
+    fails(cloudScene("pvrt", {{"estimator", "collisions"}}, true), "method.params.estimator");
     fails(cloudScene("pvrt", {{"basis", "dsf"}, {"directions", 642}, {"quadrature", 162}}, true),
           "method.params.quadrature");
     json point = cloudScene("pvrt", json::object(), true);
