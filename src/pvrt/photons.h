@@ -90,7 +90,7 @@ struct PhotonOptions {
     int maxScatterings = 7;
     /// Scatterings before Russian roulette may end a photon, ≥ 0.
     int rouletteAfter = 3;
-    Estimator estimator = Estimator::Collision;
+    Estimator estimator = Estimator::TrackLength;
     std::uint64_t seed = 1;
     int threads = 0;  ///< 0 = all
 };
