@@ -2,8 +2,9 @@
 // PVRT's indirect transfer (pvrt/photons.h): volumetric photon mapping from the volume's boundary
 // on the 32³ sphere phantom (σt 0.15/mm, albedo 0.9, transfer grid 32³) and the 128³ torso
 // phantom under ct-soft-tissue (transfer grid 64³), 10 photons per boundary cell, kernel 2 grid
-// steps, 7 scatterings, for the bases SH order 4 (16 lights) and DSF 162. Counters: photons/s,
-// collisions and splats per photon, stored points. BM_DirectTorso128: the direct part (slice
+// steps, 7 scatterings, for the bases SH order 4 (16 lights) and DSF 162 (first arg 0 / 1), with
+// the track-length and the collision estimator (second arg 0 / 1). Counters: photons/s,
+// collisions and splats (flights or collisions scored) per photon, stored points. BM_DirectTorso128: the direct part (slice
 // sweeps, 162 directions, SH order 4) on the same torso at transfer grids 64³ and 128³.
 // bench-deps: pvrt pathtrace render grid optics core
 #include <benchmark/benchmark.h>
@@ -60,12 +61,14 @@ const Scene& torso() {
 }
 
 void run(benchmark::State& state, const Scene& s, const pvrt::Basis& basis) {
+    const pvrt::PhotonOptions options{.estimator = state.range(1) ? pvrt::Estimator::Collision
+                                                                  : pvrt::Estimator::TrackLength};
     const pathtrace::PathTracer tracer(s.volume, s.table, s.cells, {});
     const pvrt::TransferLayout layout = pvrt::makeTransferLayout(*s.volume, *s.cells, s.resolution);
     pvrt::PhotonStats st;
     for (auto _ : state) {
         pvrt::Transfer t(layout, basis.size());
-        st = pvrt::addIndirectTransfer(tracer, basis, t, {}, core::Progress::none());
+        st = pvrt::addIndirectTransfer(tracer, basis, t, options, core::Progress::none());
         benchmark::DoNotOptimize(t.values.data());
     }
     state.counters["photons/s"] =
@@ -101,8 +104,14 @@ void BM_DirectTorso128(benchmark::State& state) {
     state.counters["points"] = double(layout.points);
 }
 
-BENCHMARK(BM_PhotonsSphere32)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK(BM_PhotonsTorso128)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_PhotonsSphere32)
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK(BM_PhotonsTorso128)
+    ->ArgsProduct({{0, 1}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK(BM_DirectTorso128)->Arg(64)->Arg(128)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 }  // namespace

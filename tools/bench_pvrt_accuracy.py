@@ -6,7 +6,7 @@ Zhang, Dong & Ma 2013 Tables 1–2 and Figs. 10–13 on our data. For each scene
 `cloud` phantom, the torso phantom under a soft-tissue TF, one real abdominal CT) the multiple-
 scattering ground truth is traced once by the path tracer's reference mode (cached on disk in
 WORK/cache), then pvrt is rendered with one setting varied at a time from the defaults: the basis
-(SH order 2/4/6, DSF 42/162/642), photons per boundary cell 1/10/100, the transfer grid
+(SH order 2/4/6, DSF 42/162/642), photons per boundary cell 1/10/30/100, the transfer grid
 (32/64/128 points per axis, capped at the volume's size) and CPCA clusters 0 (uncompressed)/32/
 64/128/256. Each pvrt run is a fresh process without cache, so its precompute
 seconds (the sum of the PVRT stages it ran) are what a TF change costs; its frame seconds are the
@@ -22,6 +22,10 @@ DIR/comparison.png (reference | pvrt defaults | pvrt single scattering | sh-glob
 map, full red at 32/255). Run from the repository root:
 
     tools/bench_pvrt_accuracy.py [--voxlight build/voxlight] [--work /tmp/pvrt-accuracy] [--docs docs/pvrt]
+
+--set KEY=VALUE (repeatable; VALUE as JSON, else a string) changes the defaults every row starts
+from, e.g. --set estimator=collision; --axes photons runs one sweep only, and --no-extras leaves
+out the pictures, single-scattering and sh-global rows.
 
 A benchmark, not a test: the references take most of its time.
 """
@@ -40,12 +44,12 @@ from bench_sh_accuracy import DATASETS, errors, render
 from voxlight_cli import mosaic, read_exr
 
 SIZE = 128
-DEFAULTS = {"basis": "sh", "order": 4, "photons": 100, "clusters": 128}
+DEFAULTS = {"basis": "sh", "order": 4, "photons": 30, "clusters": 128}  # the estimator: pvrt's
 SWEEPS = [  # (label, list of param overrides) — one axis at a time from DEFAULTS
     ("basis", [{"basis": "sh", "order": 2}, {"basis": "sh", "order": 4},
                {"basis": "sh", "order": 6}, {"basis": "dsf", "directions": 42},
                {"basis": "dsf", "directions": 162}, {"basis": "dsf", "directions": 642}]),
-    ("photons", [{"photons": 1}, {"photons": 10}, {"photons": 100}]),
+    ("photons", [{"photons": 1}, {"photons": 10}, {"photons": 30}, {"photons": 100}]),
     ("resolution", [{"resolution": 32}, {"resolution": 64}, {"resolution": 128}]),
     ("clusters", [{"clusters": 0}, {"clusters": 32}, {"clusters": 64}, {"clusters": 128},
                   {"clusters": 256}]),
@@ -88,6 +92,13 @@ def main():
     ap.add_argument("--docs", default=None)
     ap.add_argument("--scenes", default=None, help="comma-separated subset of scene names")
     ap.add_argument("--quick", action="store_true", help="defaults only (a check after a change)")
+    ap.add_argument("--axes", default=None,
+                    help="comma-separated subset of the sweeps (%s; defaults: the defaults alone)"
+                    % ", ".join(label for label, _ in SWEEPS))
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                    help="override a pvrt param of every row (VALUE as JSON, else a string)")
+    ap.add_argument("--no-extras", action="store_true",
+                    help="leave out the pictures, single-scattering and sh-global rows")
     ap.add_argument("--report-only", action="store_true",
                     help="rebuild the table, plot and pictures from WORK (results.csv and its images)")
     args = ap.parse_args()
@@ -102,6 +113,18 @@ def main():
                args.docs, args.work)
         return
     sweeps = [("defaults", [{}])] if args.quick else SWEEPS
+    if args.axes:
+        wanted = args.axes.split(",")
+        sweeps = [sw for sw in SWEEPS if sw[0] in wanted]
+        if "defaults" in wanted:
+            sweeps.append(("defaults", [{}]))
+    defaults = dict(DEFAULTS)
+    for kv in args.set:
+        key, _, value = kv.partition("=")
+        try:
+            defaults[key] = json.loads(value)
+        except ValueError:
+            defaults[key] = value
     voxlight = os.path.abspath(args.voxlight)
     os.makedirs(args.work, exist_ok=True)
     cache = os.path.join(args.work, "cache")
@@ -140,15 +163,16 @@ def main():
 
         for label, variants in sweeps:
             for v in variants:
-                params = dict(DEFAULTS)
+                params = dict(defaults)
                 if "directions" in v:
                     params.pop("order")
                 params.update(v)
                 row(label, params)
-        row("pictures", dict(DEFAULTS))
-        row("single", dict(DEFAULTS, max_bounces=1), ["global_shadows"])
-        row("sh-global", {}, ["global_shadows"], "sh-global")
-        pictures.append(name)
+        if not args.no_extras:
+            row("pictures", dict(defaults))
+            row("single", dict(defaults, max_bounces=1), ["global_shadows"])
+            row("sh-global", {}, ["global_shadows"], "sh-global")
+            pictures.append(name)
     with open(os.path.join(args.work, "results.csv"), "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
         w.writeheader()

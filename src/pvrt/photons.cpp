@@ -43,13 +43,33 @@ struct Face {
     std::int64_t firstCell = 0;
 };
 
-/// A collision to splat: position (mm along the volume's axes from voxel (0,0,0): ijk·spacing),
-/// the RGB weight β/(σt·4π), and the photon (index within the batch).
+/// A collision or a free flight to splat: its position, or the flight's start p and end q (mm
+/// along the volume's axes from voxel (0,0,0): ijk·spacing; q = p for a collision), the RGB
+/// weight (β/(σt·4π) for a collision, β/4π for a flight) and the photon (index within the batch).
 struct Event {
-    glm::vec3 p;
+    glm::vec3 p, q;
     glm::vec3 w;
     std::uint32_t photon;
 };
+
+/// ∫ (c² − u²)³ du from 0 to u (|u| ≤ c): the poly6 kernel's profile along a line at distance
+/// r⊥ from the point, c² = h² − r⊥².
+double poly6Line(double u, double c2) {
+    const double u2 = u * u;
+    return u * (c2 * c2 * c2 - c2 * c2 * u2 + 0.6 * c2 * u2 * u2 - u2 * u2 * u2 / 7.0);
+}
+
+/// Narrows [s0, s1] to the s where |a + s·d − centre| < h (one axis of a line a + s·d).
+void narrowToSlab(double a, double d, double centre, double h, double& s0, double& s1) {
+    if (std::abs(d) < 1e-12) {
+        if (std::abs(a - centre) >= h) s1 = s0 - 1.0;
+        return;
+    }
+    double lo = (centre - h - a) / d, hi = (centre + h - a) / d;
+    if (lo > hi) std::swap(lo, hi);
+    s0 = std::max(s0, lo);
+    s1 = std::min(s1, hi);
+}
 
 /// Per photon of a batch: where its m fluxes start in the batch's flux arrays, and how many.
 struct PhotonFluxes {
@@ -77,6 +97,9 @@ void checkOptions(const PhotonOptions& o) {
     if (o.rouletteAfter < 0)
         throw InputError("pvrt", "roulette_after",
                          "must be at least 0 (got " + std::to_string(o.rouletteAfter) + ")");
+    if (o.estimator != Estimator::Collision && o.estimator != Estimator::TrackLength)
+        throw InputError("pvrt", "estimator", "is not an estimator",
+                         "use \"collision\" or \"track-length\"");
 }
 
 }  // namespace
@@ -160,6 +183,17 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
         lo = std::max(0, int(std::ceil(g - radiusSteps[a])));
         hi = std::min(layout.res[a] - 1, int(std::floor(g + radiusSteps[a])));
     };
+    // Grid-coordinate range [lo, hi] of the points whose coordinate along axis a lies within
+    // [loMm − r, hiMm + r], r = h or 0 (one point of slack each side; the exact test is per
+    // point).
+    auto spanRange = [&](double loMm, double hiMm, int a, int& lo, int& hi, bool widen = true) {
+        const double r = widen ? double(radiusSteps[a]) : 0.0;
+        const double gl = (loMm / geo.spacing[a] + 0.5) / double(scale[a]) - 0.5;
+        const double gh = (hiMm / geo.spacing[a] + 0.5) / double(scale[a]) - 0.5;
+        lo = std::max(0, int(std::ceil(gl - r)) - 1);
+        hi = std::min(layout.res[a] - 1, int(std::floor(gh + r)) + 1);
+    };
+    const bool trackLength = options.estimator == Estimator::TrackLength;
 
     const int maxSupport = basis.maxSupport();
     const std::int64_t batches = (photons + kPhotonsPerBatch - 1) / kPhotonsPerBatch;
@@ -229,14 +263,26 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         double t0 = 0.0, t1 = INFINITY;
                         if (!medium.keptInterval(ray, t0, t1)) break;
                         const std::optional<double> t = medium.freeFlight(ray, t0, t1, rng);
+                        // Track-length estimator: the flight from here to the next collision
+                        // (or out of the kept region), if the light has scattered before.
+                        if (trackLength && scatterings >= 1) {
+                            const double tEnd = t ? *t : t1;
+                            if (tEnd > t0 && std::isfinite(tEnd)) {
+                                const glm::dvec3 a = geo.worldToIndex(x + t0 * d) * geo.spacing;
+                                const glm::dvec3 b = geo.worldToIndex(x + tEnd * d) * geo.spacing;
+                                chunk.events.push_back({glm::vec3(a), glm::vec3(b),
+                                                        glm::vec3(beta * kInvFourPi),
+                                                        std::uint32_t(local)});
+                            }
+                        }
                         if (!t) break;
                         ++chunk.collisions;
                         x += *t * d;
                         const optics::TfSample s = medium.mediumAt(x);
                         // Collision estimator of the fluence of light scattered ≥ 1 times.
-                        if (scatterings >= 1 && s.extinction > 0.f) {
+                        if (!trackLength && scatterings >= 1 && s.extinction > 0.f) {
                             const glm::dvec3 p = geo.worldToIndex(x) * geo.spacing;
-                            chunk.events.push_back({glm::vec3(p),
+                            chunk.events.push_back({glm::vec3(p), glm::vec3(p),
                                                     glm::vec3(beta * (kInvFourPi / s.extinction)),
                                                     std::uint32_t(local)});
                         }
@@ -265,8 +311,113 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                 const int z0 = slab * slabPlanes;
                 const int z1 = std::min(layout.res.z - 1, z0 + slabPlanes - 1);
                 if (z0 > z1) return;
+                // Adds kernel weight kw (× the photon's fluxes) to stored point `slot`.
+                auto add = [&](const PhotonFluxes& pf, std::int32_t slot, const glm::vec3& kw) {
+                    const int* idx = fluxIndex.data() + pf.first;
+                    const float* val = fluxValue.data() + pf.first;
+                    float* row = transfer.row(slot);
+                    for (std::uint32_t j = 0; j < pf.count; ++j) {
+                        float* dst = row + std::size_t(idx[j]) * 3;
+                        dst[0] += val[j] * kw.x;
+                        dst[1] += val[j] * kw.y;
+                        dst[2] += val[j] * kw.z;
+                    }
+                };
+                // A flight's weighted fluxes Φ_j·w (RGB), computed once per flight: each point
+                // then adds W's line integral times them (contiguous when the basis lights are
+                // 0 … m−1, as for SH: a vectorisable loop).
+                std::vector<float> weighted(std::size_t(maxSupport) * 3);
+                // A flight a → b: every grid point of the slab within h of the segment gets
+                // W integrated along it. The z planes, then per plane the rows and per row the
+                // points, are bounded by the part of the segment within h of them (per row
+                // exactly: where the row is within h of the flight's line).
+                auto splatFlight = [&](const Event& e) {
+                    const glm::dvec3 a(e.p), b(e.q);
+                    const double len = glm::length(b - a);
+                    if (!(len > 0.0)) return;
+                    const glm::dvec3 dir = (b - a) / len;
+                    const PhotonFluxes& pf = photonFluxes[e.photon];
+                    const int* idx = fluxIndex.data() + pf.first;
+                    const float* val = fluxValue.data() + pf.first;
+                    bool dense = true;
+                    for (std::uint32_t j = 0; j < pf.count; ++j) {
+                        weighted[3 * j] = val[j] * e.w.x;
+                        weighted[3 * j + 1] = val[j] * e.w.y;
+                        weighted[3 * j + 2] = val[j] * e.w.z;
+                        dense = dense && idx[j] == int(j);
+                    }
+                    const float* wv = weighted.data();
+                    const std::size_t n3 = std::size_t(pf.count) * 3;
+                    int zlo, zhi;
+                    spanRange(std::min(a.z, b.z), std::max(a.z, b.z), 2, zlo, zhi);
+                    zlo = std::max(zlo, z0);
+                    zhi = std::min(zhi, z1);
+                    for (int gz = zlo; gz <= zhi; ++gz) {
+                        const double pz = pointMm[2][std::size_t(gz)];
+                        double sz0 = 0.0, sz1 = len;
+                        narrowToSlab(a.z, dir.z, pz, h, sz0, sz1);
+                        if (sz0 > sz1) continue;
+                        const double ya = a.y + sz0 * dir.y, yb = a.y + sz1 * dir.y;
+                        int ylo, yhi;
+                        spanRange(std::min(ya, yb), std::max(ya, yb), 1, ylo, yhi);
+                        for (int gy = ylo; gy <= yhi; ++gy) {
+                            const double py = pointMm[1][std::size_t(gy)];
+                            double s0 = sz0, s1 = sz1;
+                            narrowToSlab(a.y, dir.y, py, h, s0, s1);
+                            if (s0 > s1) continue;
+                            const double xa = a.x + s0 * dir.x, xb = a.x + s1 * dir.x;
+                            double xmin = std::min(xa, xb) - h, xmax = std::max(xa, xb) + h;
+                            // Within h of the flight's line: A·X² + B·X + C < 0.
+                            const glm::dvec3 q(-a.x, py - a.y, pz - a.z);
+                            const double qd = glm::dot(q, dir);
+                            const double qa = 1.0 - dir.x * dir.x;
+                            const double qb = 2.0 * (q.x - qd * dir.x);
+                            const double qc = glm::dot(q, q) - qd * qd - h2;
+                            if (qa > 1e-9) {
+                                const double disc = qb * qb - 4.0 * qa * qc;
+                                if (disc <= 0.0) continue;
+                                const double root = std::sqrt(disc);
+                                xmin = std::max(xmin, (-qb - root) / (2.0 * qa));
+                                xmax = std::min(xmax, (-qb + root) / (2.0 * qa));
+                                if (xmin > xmax) continue;
+                            }
+                            int xlo, xhi;
+                            spanRange(xmin, xmax, 0, xlo, xhi, false);
+                            for (int gx = xlo; gx <= xhi; ++gx) {
+                                const std::int32_t slot = layout.slot[layout.linear({gx, gy, gz})];
+                                if (slot < 0) continue;
+                                const glm::dvec3 rel =
+                                    glm::dvec3(pointMm[0][std::size_t(gx)], py, pz) - a;
+                                const double along = glm::dot(rel, dir);
+                                const double c2 = h2 - (glm::dot(rel, rel) - along * along);
+                                if (!(c2 > 0.0)) continue;
+                                const double c = std::sqrt(c2);
+                                const double u0 = std::max(-along, -c);
+                                const double u1 = std::min(len - along, c);
+                                if (!(u1 > u0)) continue;
+                                const float k =
+                                    float(kernelNorm * (poly6Line(u1, c2) - poly6Line(u0, c2)));
+                                float* row = transfer.row(slot);
+                                if (dense) {
+                                    for (std::size_t i = 0; i < n3; ++i) row[i] += k * wv[i];
+                                } else {
+                                    for (std::uint32_t j = 0; j < pf.count; ++j) {
+                                        float* dst = row + std::size_t(idx[j]) * 3;
+                                        dst[0] += k * wv[3 * j];
+                                        dst[1] += k * wv[3 * j + 1];
+                                        dst[2] += k * wv[3 * j + 2];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                };
                 for (const Chunk& chunk : chunks)
                     for (const Event& e : chunk.events) {
+                        if (trackLength) {
+                            splatFlight(e);
+                            continue;
+                        }
                         int zlo, zhi;
                         pointRange(e.p, 2, zlo, zhi);
                         zlo = std::max(zlo, z0);
@@ -276,8 +427,6 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         pointRange(e.p, 1, ylo, yhi);
                         pointRange(e.p, 0, xlo, xhi);
                         const PhotonFluxes& pf = photonFluxes[e.photon];
-                        const int* idx = fluxIndex.data() + pf.first;
-                        const float* val = fluxValue.data() + pf.first;
                         for (int gz = zlo; gz <= zhi; ++gz) {
                             const float dz = pointMm[2][std::size_t(gz)] - e.p.z;
                             for (int gy = ylo; gy <= yhi; ++gy) {
@@ -292,14 +441,7 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                                     const double r2 = double(dx * dx + dyz);
                                     if (r2 >= h2) continue;
                                     const double u = h2 - r2;
-                                    const glm::vec3 kw = float(kernelNorm * u * u * u) * e.w;
-                                    float* row = transfer.row(slot);
-                                    for (std::uint32_t j = 0; j < pf.count; ++j) {
-                                        float* dst = row + std::size_t(idx[j]) * 3;
-                                        dst[0] += val[j] * kw.x;
-                                        dst[1] += val[j] * kw.y;
-                                        dst[2] += val[j] * kw.z;
-                                    }
+                                    add(pf, slot, float(kernelNorm * u * u * u) * e.w);
                                 }
                             }
                         }

@@ -31,24 +31,43 @@
 //           direction, Russian roulette once s ≥ rouletteAfter (survival q = max channel of β,
 //           clamped to [0.05, 1], as the path tracer), and the path ends after maxScatterings
 //           scatterings or when it leaves the box.
-//   Estimate the collision estimator of the fluence φ (collision density σt·φ, so each collision
-//           counts Φ_k·β/σt(x_c)), smoothed by the poly6 kernel
+//   Estimate one of two estimators of the fluence φ_ind of the light scattered ≥ 1 times (per
+//           unit photon flux), smoothed by the poly6 kernel
 //             W(r) = 315 / (64π h⁹) · (h² − r²)³,  r < h  (∫W dV = 1)
-//           with r the world distance (mm; anisotropic voxels included) between x_c and the grid
-//           point, h = kernelRadiusCells × the largest transfer-grid step (mm) of the three axes:
-//             t_k^ind(x) += W(|x − x_c|) · Φ_k · β / (σt(x_c) · 4π)
-//           for every collision with s ≥ 1 (the light arriving there has scattered at least once)
-//           and σt(x_c) > 0. The expectation is (1/4π)∫ W(x − y) φ_ind(y) dy over the matter (σt >
-//           0): the indirect S blurred by the kernel — unbiased for that; against S(x) itself
-//           biased by the blur (≈ (h²/22)·∇²S in smooth matter: the kernel's variance per axis
-//           is h²/11) and short within h of the matter's boundary, where part of the kernel lies
-//           in empty space. Empty points (slot −1) get nothing.
+//           with r the world distance (mm; anisotropic voxels included) between the grid point x
+//           and a point y of the photon's path, h = kernelRadiusCells × the largest transfer-grid
+//           step (mm) of the three axes. Both add to t_k^ind(x) an unbiased estimate of
+//             (1/4π) ∫ W(x − y) φ_ind,k(y) dy
+//           (S = φ/4π: the isotropic in-scattered radiance before the albedo of x), and differ in
+//           which photon events they score and over which region the integral runs:
+//     collision     (Estimator::Collision) at every real collision x_c after s ≥ 1 scatterings
+//           with σt(x_c) > 0 (the collision density is σt·φ, so each collision counts
+//           Φ_k·β/σt(x_c)):
+//             t_k^ind(x) += W(|x − x_c|) · Φ_k · β / (σt(x_c) · 4π);
+//           the integral runs over the matter (σt > 0) only.
+//     track-length  (Estimator::TrackLength) along every free flight [y0, y1] that starts after
+//           s ≥ 1 scatterings (from the collision to the next real collision, or to where the
+//           photon leaves the kept region; the expected length a photon travels through dV is
+//           φ dV, null collisions of the delta tracking included, so this is unbiased in any
+//           medium):
+//             t_k^ind(x) += Φ_k · β / 4π · ∫_{y0}^{y1} W(|x − y|) dl,
+//           the line integral exact (a polynomial in the distance along the flight:
+//           ∫(c² − u²)³ du = c⁶u − c⁴u³ + ⅗c²u⁵ − u⁷/7 with c² = h² − r⊥²). Every photon that
+//           scattered once scores along its whole onward path, so it has far less noise than the
+//           collision estimator in thin matter, where a photon collides ~once; it costs the grid
+//           points of the flights' capsules (radius h) instead of the collisions' balls. Its
+//           integral runs over the whole kept region: within h of the matter's boundary it
+//           counts the fluence in the empty space beside the matter too (φ is continuous there),
+//           where the collision estimator comes out short.
+//           Either way: against S(x) itself biased by the blur (≈ (h²/22)·∇²S in smooth matter:
+//           the kernel's variance per axis is h²/11); in matter farther than h from empty space
+//           both have the same expectation. Empty points (slot −1) get nothing.
 //
 // Determinism: photon p's random numbers are core::CounterRng(p, seed). Photons are traced in
-// fixed batches, their collision events kept in photon order; the splat runs in parallel over
+// fixed batches, their events (collisions or flights) kept in photon order; the splat runs in parallel over
 // disjoint z-slabs of the grid, each adding the events that reach it in photon order. So every
 // stored value is the same sum in the same order for any thread count (bit-identical).
-// Memory: the events of one batch (kPhotonsPerBatch photons, ~28 bytes per collision).
+// Memory: the events of one batch (kPhotonsPerBatch photons, ~40 bytes per collision or flight).
 #include <cstdint>
 
 #include "core/progress.h"
@@ -57,6 +76,9 @@
 #include "pvrt/transfer.h"
 
 namespace voxlight::pvrt {
+
+/// What the photons score (see the header comment).
+enum class Estimator { Collision, TrackLength };
 
 struct PhotonOptions {
     /// Photons per boundary cell (Zhang's NP: 1/10/100), ≥ 1.
@@ -68,6 +90,7 @@ struct PhotonOptions {
     int maxScatterings = 7;
     /// Scatterings before Russian roulette may end a photon, ≥ 0.
     int rouletteAfter = 3;
+    Estimator estimator = Estimator::TrackLength;
     std::uint64_t seed = 1;
     int threads = 0;  ///< 0 = all
 };
@@ -75,7 +98,7 @@ struct PhotonOptions {
 struct PhotonStats {
     std::uint64_t photons = 0;     ///< photons cast
     std::uint64_t collisions = 0;  ///< real collisions
-    std::uint64_t splats = 0;      ///< collisions splatted (s ≥ 1, σt > 0)
+    std::uint64_t splats = 0;      ///< collisions (s ≥ 1, σt > 0) or flights splatted
     double seconds = 0.0;
 };
 

@@ -81,8 +81,9 @@ glm::dvec3 uniformSphere(core::CounterRng& rng) {
 
 /// Independent estimate of what the photons estimate at world point x: the indirect in-scattered
 /// radiance S_ind,k (light scattered 1 … maxScatterings times) averaged over the poly6 kernel of
-/// radius h around x, over the matter only (σt > 0) — exactly the expectation of the photons'
-/// collision estimator, so the comparison has no kernel-blur bias, only noise.
+/// radius h around x, over the matter only (σt > 0; `matterOnly`, the collision estimator) or
+/// over all the box (the track-length estimator) — exactly the expectation of the photons'
+/// estimator, so the comparison has no kernel-blur bias, only noise.
 /// Backward walk: y drawn from the kernel; S_ind(y) = E[L_ind(y, ω)] with ω uniform (isotropic
 /// phase); delta tracking from y samples the next vertex z_j with pdf T·σt, which leaves the
 /// weight a(z_j)·S(z_j); S(z_j)'s direct part (1/4π)∫T∞ B_k by one uniform direction ω' and a
@@ -92,7 +93,7 @@ struct Estimate {
     std::vector<double> mean, stdErr;
 };
 Estimate reference(const Scene& s, const pvrt::Basis& basis, const glm::dvec3& x, double h,
-                   int maxScatterings, int samples, std::uint64_t seed) {
+                   int maxScatterings, int samples, std::uint64_t seed, bool matterOnly) {
     const int m = basis.size();
     // [k·3 + c], then Σ_k per channel at [m·3 + c].
     std::vector<double> sum(std::size_t(m + 1) * 3, 0.0), sum2(sum.size(), 0.0), one(sum.size());
@@ -114,7 +115,7 @@ Estimate reference(const Scene& s, const pvrt::Basis& basis, const glm::dvec3& x
                 break;
             }
         }
-        if (s.tracer.extinctionAt(y) > 0.f) {
+        if (!matterOnly || s.tracer.extinctionAt(y) > 0.f) {
             glm::dvec3 pos = y, beta(1.0);
             for (int j = 1; j <= maxScatterings; ++j) {
                 const pathtrace::Ray ray{pos, uniformSphere(rng)};
@@ -154,12 +155,14 @@ Estimate reference(const Scene& s, const pvrt::Basis& basis, const glm::dvec3& x
 
 TEST(PvrtPhotons, AlbedoZeroAddsExactlyNothing) {
     const Scene s = makeScene(0.2f, glm::vec3(0.f));
-    pvrt::PhotonStats st;
-    const auto t = run(s, pvrt::Basis::sh(2), {.photonsPerCell = 2}, &st);
-    ASSERT_GT(s.layout.points, 0);
-    EXPECT_GT(st.collisions, 0u);
-    EXPECT_EQ(st.splats, 0u);
-    for (float v : t.values) ASSERT_EQ(v, 0.f);
+    for (const pvrt::Estimator e : {pvrt::Estimator::Collision, pvrt::Estimator::TrackLength}) {
+        pvrt::PhotonStats st;
+        const auto t = run(s, pvrt::Basis::sh(2), {.photonsPerCell = 2, .estimator = e}, &st);
+        ASSERT_GT(s.layout.points, 0);
+        EXPECT_GT(st.collisions, 0u);
+        EXPECT_EQ(st.splats, 0u);
+        for (float v : t.values) ASSERT_EQ(v, 0.f);
+    }
 }
 
 TEST(PvrtPhotons, ZeroDensityAddsNothingAndNoNaN) {
@@ -169,29 +172,35 @@ TEST(PvrtPhotons, ZeroDensityAddsNothingAndNoNaN) {
     Scene s = makeScene(0.f, glm::vec3(0.9f));
     s.layout.points = 0;
     for (auto& slot : s.layout.slot) slot = s.layout.points++;
-    pvrt::PhotonStats st;
-    const auto t = run(s, pvrt::Basis::sh(2), {.photonsPerCell = 1}, &st);
     EXPECT_EQ(s0.layout.points, 0);
-    EXPECT_GT(st.photons, 0u);
-    EXPECT_EQ(st.collisions, 0u);
-    for (float v : t.values) ASSERT_EQ(v, 0.f);
+    for (const pvrt::Estimator e : {pvrt::Estimator::Collision, pvrt::Estimator::TrackLength}) {
+        pvrt::PhotonStats st;
+        const auto t = run(s, pvrt::Basis::sh(2), {.photonsPerCell = 1, .estimator = e}, &st);
+        EXPECT_GT(st.photons, 0u);
+        EXPECT_EQ(st.collisions, 0u);
+        for (float v : t.values) ASSERT_EQ(v, 0.f);
+    }
 }
 
 TEST(PvrtPhotons, SameTransferForAnyThreadCount) {
     // 12 photons per cell on the 32³ box: 69192 photons, two batches of kPhotonsPerBatch.
     const Scene s = makeScene(0.2f, glm::vec3(0.9f, 0.7f, 0.5f));
     const auto basis = pvrt::Basis::sh(2);
-    pvrt::PhotonStats st;
-    const auto a = run(s, basis, {.photonsPerCell = 12, .threads = 1}, &st);
-    ASSERT_GT(std::int64_t(st.photons), pvrt::kPhotonsPerBatch);
-    const auto b = run(s, basis, {.photonsPerCell = 12, .threads = 2});
-    const auto c = run(s, basis, {.photonsPerCell = 12, .threads = 0});
-    ASSERT_EQ(a.values.size(), b.values.size());
-    EXPECT_TRUE(a.values == b.values);
-    EXPECT_TRUE(a.values == c.values);
-    // Another seed is another estimate.
-    const auto d = run(s, basis, {.photonsPerCell = 12, .seed = 2, .threads = 2});
-    EXPECT_FALSE(a.values == d.values);
+    for (const pvrt::Estimator e : {pvrt::Estimator::Collision, pvrt::Estimator::TrackLength}) {
+        SCOPED_TRACE(e == pvrt::Estimator::Collision ? "collision" : "track-length");
+        pvrt::PhotonStats st;
+        const auto a = run(s, basis, {.photonsPerCell = 12, .estimator = e, .threads = 1}, &st);
+        ASSERT_GT(std::int64_t(st.photons), pvrt::kPhotonsPerBatch);
+        const auto b = run(s, basis, {.photonsPerCell = 12, .estimator = e, .threads = 2});
+        const auto c = run(s, basis, {.photonsPerCell = 12, .estimator = e, .threads = 0});
+        ASSERT_EQ(a.values.size(), b.values.size());
+        EXPECT_TRUE(a.values == b.values);
+        EXPECT_TRUE(a.values == c.values);
+        // Another seed is another estimate.
+        const auto d =
+            run(s, basis, {.photonsPerCell = 12, .estimator = e, .seed = 2, .threads = 2});
+        EXPECT_FALSE(a.values == d.values);
+    }
 }
 
 TEST(PvrtPhotons, NegativeShFluxesStayFinite) {
@@ -218,6 +227,10 @@ TEST(PvrtPhotons, RejectsBadOptions) {
                                            core::Progress::none()),
                  InputError);
     EXPECT_THROW(pvrt::addIndirectTransfer(s.tracer, basis, t, {.maxScatterings = -1},
+                                           core::Progress::none()),
+                 InputError);
+    EXPECT_THROW(pvrt::addIndirectTransfer(s.tracer, basis, t,
+                                           {.estimator = static_cast<pvrt::Estimator>(7)},
                                            core::Progress::none()),
                  InputError);
 }
@@ -251,7 +264,8 @@ void expectMatchesReference(const Scene& s, const pvrt::Basis& basis, pvrt::Phot
         const std::int32_t slot = slotNear(s, at[p]);
         ASSERT_GE(slot, 0);
         const glm::dvec3 x = pointWorld(s, slot);
-        const Estimate ref = reference(s, basis, x, h, o.maxScatterings, refSamples, 7 + p);
+        const Estimate ref = reference(s, basis, x, h, o.maxScatterings, refSamples, 7 + p,
+                                       o.estimator == pvrt::Estimator::Collision);
         std::string table;
         double worst = 0.0;
         // Each basis light, and their sum (k = m: less noisy, so more sensitive).
@@ -291,20 +305,39 @@ void expectMatchesReference(const Scene& s, const pvrt::Basis& basis, pvrt::Phot
 constexpr double kMaxZ = 5.0;
 constexpr int kSeeds = 16;
 
-TEST(PvrtPhotons, MatchesABackwardMonteCarloEstimateInASphere) {
+/// The reference tests run for each estimator (the reference integrates over the matter only
+/// for the collision estimator, over the whole box for the track-length one). The track-length
+/// estimator costs ~5× more per photon with a kernel of 4 grid steps and has a fraction of the
+/// noise, so it gets a quarter of the photons where that keeps the test fast.
+int photonsFor(pvrt::Estimator e, int collisionPhotons) {
+    return e == pvrt::Estimator::TrackLength ? collisionPhotons / 4 : collisionPhotons;
+}
+class PvrtPhotonsEstimator : public testing::TestWithParam<pvrt::Estimator> {};
+
+INSTANTIATE_TEST_SUITE_P(Estimators, PvrtPhotonsEstimator,
+                         testing::Values(pvrt::Estimator::Collision, pvrt::Estimator::TrackLength),
+                         [](const testing::TestParamInfo<pvrt::Estimator>& info) {
+                             return info.param == pvrt::Estimator::Collision ? "Collision"
+                                                                             : "TrackLength";
+                         });
+
+TEST_P(PvrtPhotonsEstimator, MatchesABackwardMonteCarloEstimateInASphere) {
     // Homogeneous sphere, radius ≈ 10.9 mm, σt·radius ≈ 1.6, coloured albedo; SH order 2 (a
     // constant and three linear basis lights, negative over half the sphere of directions).
     const Scene s = makeScene(0.15f, glm::vec3(0.9f, 0.8f, 0.6f));
-    expectMatchesReference(
-        s, pvrt::Basis::sh(2),
-        {.photonsPerCell = 32, .kernelRadiusCells = 4.f, .maxScatterings = 3, .rouletteAfter = 1},
-        kSeeds,
-        {glm::dvec3(0.0), glm::dvec3(5.0, 0.0, 0.0), glm::dvec3(0.0, -3.0, 6.0),
-         glm::dvec3(-8.0, 2.0, 0.0)},
-        100000, kMaxZ);
+    expectMatchesReference(s, pvrt::Basis::sh(2),
+                           {.photonsPerCell = photonsFor(GetParam(), 32),
+                            .kernelRadiusCells = 4.f,
+                            .maxScatterings = 3,
+                            .rouletteAfter = 1,
+                            .estimator = GetParam()},
+                           kSeeds,
+                           {glm::dvec3(0.0), glm::dvec3(5.0, 0.0, 0.0), glm::dvec3(0.0, -3.0, 6.0),
+                            glm::dvec3(-8.0, 2.0, 0.0)},
+                           100000, kMaxZ);
 }
 
-TEST(PvrtPhotons, FurnaceStaysBelowTheInfiniteMediumBound) {
+TEST_P(PvrtPhotonsEstimator, FurnaceStaysBelowTheInfiniteMediumBound) {
     // A uniform environment of radiance L = Y_00 (SH order 1) around a sphere (σt·radius ≈ 3.3)
     // of albedo 0.99: the radiance inside never exceeds L (the medium only removes and
     // redistributes it), so neither does the in-scattered S = (1/4π)∫L dω, nor its indirect
@@ -312,7 +345,9 @@ TEST(PvrtPhotons, FurnaceStaysBelowTheInfiniteMediumBound) {
     const Scene s = makeScene(0.3f, glm::vec3(0.99f));
     const auto basis = pvrt::Basis::sh(1);
     const double L = 0.5 / std::sqrt(kPi);
-    const pvrt::PhotonOptions o{.photonsPerCell = 32, .maxScatterings = 200};
+    const pvrt::PhotonOptions o{.photonsPerCell = photonsFor(GetParam(), 32),
+                                .maxScatterings = 200,
+                                .estimator = GetParam()};
     const auto t = run(s, basis, o);
     // Positive fluxes: every value ≥ 0; the mean over the central ball (radius 4 mm, ~250
     // points: noise ~1%) below L.
@@ -330,20 +365,118 @@ TEST(PvrtPhotons, FurnaceStaysBelowTheInfiniteMediumBound) {
     EXPECT_LT(sum / n, L);
     // And the centre against the reference with the same long paths.
     expectMatchesReference(s, basis,
-                           {.photonsPerCell = 8, .kernelRadiusCells = 4.f, .maxScatterings = 200},
+                           {.photonsPerCell = photonsFor(GetParam(), 8),
+                            .kernelRadiusCells = 4.f,
+                            .maxScatterings = 200,
+                            .estimator = GetParam()},
                            kSeeds, {glm::dvec3(0.0), glm::dvec3(0.0, 0.0, 8.0)}, 100000, kMaxZ);
 }
 
-TEST(PvrtPhotons, MatchesTheReferenceOnAnisotropicRotatedVoxelsWithADsfBasis) {
+TEST_P(PvrtPhotonsEstimator, MatchesTheReferenceOnAnisotropicRotatedVoxelsWithADsfBasis) {
     // 28 voxels of 1 × 1 × 1.6 mm, axes rotated in the world, transfer grid 14³ (2 voxels per
     // step: grid steps 2, 2, 3.2 mm), DSF 42: the kernel's world distances, the boundary cells'
     // areas and normals, and the sparse basis all enter.
     const Scene s =
         makeTiltedScene(0.15f, glm::vec3(0.85f, 0.7f, 0.5f), 28, glm::dvec3(1.0, 1.0, 1.6), 14);
-    expectMatchesReference(
-        s, pvrt::Basis::dsf(42),
-        {.photonsPerCell = 32, .kernelRadiusCells = 2.f, .maxScatterings = 2, .rouletteAfter = 1},
-        kSeeds, {glm::dvec3(0.0), glm::dvec3(3.0, -4.0, 2.0)}, 100000, kMaxZ);
+    expectMatchesReference(s, pvrt::Basis::dsf(42),
+                           {.photonsPerCell = 32,
+                            .kernelRadiusCells = 2.f,
+                            .maxScatterings = 2,
+                            .rouletteAfter = 1,
+                            .estimator = GetParam()},
+                           kSeeds, {glm::dvec3(0.0), glm::dvec3(3.0, -4.0, 2.0)}, 100000, kMaxZ);
+}
+
+TEST(PvrtPhotons, TrackLengthAgreesWithTheCollisionEstimatorWithLessNoise) {
+    // Thin homogeneous sphere (radius ≈ 10.9 mm, σt·radius ≈ 0.8: a photon collides about once),
+    // SH order 2, 16 seeds of each estimator at equal photons. At the stored points whose kernel
+    // lies in the matter (≥ h inside the sphere) both estimate the same (1/4π)∫W φ_ind: their
+    // seed means, summed over the points of each octant and over all of them (per basis light
+    // and channel: 9 × 12 sums, each over hundreds of points, so nearly normal), must agree
+    // within kMaxZ combined standard errors. The track-length estimator's variance across seeds,
+    // summed over those points, must be well below the collision estimator's.
+    const Scene s = makeScene(0.075f, glm::vec3(0.9f, 0.8f, 0.6f));
+    const auto basis = pvrt::Basis::sh(2);
+    const int m = basis.size();
+    const pvrt::PhotonOptions base{
+        .photonsPerCell = 8, .kernelRadiusCells = 2.f, .maxScatterings = 4, .rouletteAfter = 1};
+    const auto& geo = s.medium.volume->geometry();
+    const double h = base.kernelRadiusCells * double(s.layout.scale.x) * geo.spacing.x;
+    // The sphere phantom's radius: 0.35 of the box (about 10.9 mm here); keep 1 mm of margin.
+    const double inner = 0.35 * 31.0 * geo.spacing.x - h - 1.0;
+    std::vector<std::int32_t> slots;
+    std::vector<int> octant;
+    for (const glm::ivec3& g : s.layout.storedPoints()) {
+        const glm::dvec3 x = geo.indexToWorld(glm::dvec3(s.layout.position(g)));
+        if (glm::length(x) >= inner) continue;
+        slots.push_back(s.layout.slot[s.layout.linear(g)]);
+        octant.push_back((x.x > 0) + 2 * (x.y > 0) + 4 * (x.z > 0));
+    }
+    ASSERT_GT(slots.size(), 1000u);
+    const std::size_t dim = std::size_t(m) * 3;
+    constexpr std::size_t kGroups = 9;  // the eight octants, then all points
+    // Per estimator: per (point, value) the seed mean and variance, and per (group, value) the
+    // sum over the group's points' seed mean and variance.
+    struct Moments {
+        std::vector<double> mean, var, sumMean, sumVar;
+    };
+    auto moments = [&](pvrt::Estimator e) {
+        Moments r{std::vector<double>(slots.size() * dim, 0.0),
+                  std::vector<double>(slots.size() * dim, 0.0),
+                  std::vector<double>(kGroups * dim, 0.0), std::vector<double>(kGroups * dim, 0.0)};
+        std::vector<double> sq(r.mean.size(), 0.0), sumSq(kGroups * dim, 0.0);
+        for (int seed = 0; seed < kSeeds; ++seed) {
+            pvrt::PhotonOptions o = base;
+            o.estimator = e;
+            o.seed = std::uint64_t(301 + seed);
+            const pvrt::Transfer t = run(s, basis, o);
+            std::vector<double> total(kGroups * dim, 0.0);
+            for (std::size_t p = 0; p < slots.size(); ++p)
+                for (std::size_t i = 0; i < dim; ++i) {
+                    const double v = t.row(slots[p])[i];
+                    r.mean[p * dim + i] += v;
+                    sq[p * dim + i] += v * v;
+                    total[std::size_t(octant[p]) * dim + i] += v;
+                    total[(kGroups - 1) * dim + i] += v;
+                }
+            for (std::size_t i = 0; i < total.size(); ++i) {
+                r.sumMean[i] += total[i];
+                sumSq[i] += total[i] * total[i];
+            }
+        }
+        auto finish = [](double& mean, double& var, double sq2) {
+            mean /= kSeeds;
+            var = std::max(0.0, (sq2 - kSeeds * mean * mean) / (kSeeds - 1));
+        };
+        for (std::size_t i = 0; i < r.mean.size(); ++i) finish(r.mean[i], r.var[i], sq[i]);
+        for (std::size_t i = 0; i < r.sumMean.size(); ++i)
+            finish(r.sumMean[i], r.sumVar[i], sumSq[i]);
+        return r;
+    };
+    const Moments col = moments(pvrt::Estimator::Collision);
+    const Moments trk = moments(pvrt::Estimator::TrackLength);
+    auto z = [](double ma, double va, double mb, double vb) {
+        const double se = std::sqrt((va + vb) / kSeeds);
+        return se > 0.0 ? (ma - mb) / se : 0.0;
+    };
+    double worst = 0.0;
+    for (std::size_t i = 0; i < col.sumMean.size(); ++i) {
+        const double zi = z(trk.sumMean[i], trk.sumVar[i], col.sumMean[i], col.sumVar[i]);
+        worst = std::max(worst, std::abs(zi));
+        EXPECT_LE(std::abs(zi), kMaxZ)
+            << "group " << i / dim << " value " << i % dim << ": track-length " << trk.sumMean[i]
+            << " collision " << col.sumMean[i];
+    }
+    double colVar = 0.0, trkVar = 0.0;
+    for (std::size_t i = 0; i < col.var.size(); ++i) {
+        colVar += col.var[i];
+        trkVar += trk.var[i];
+    }
+    std::printf(
+        "%zu points inside: worst |z| of the group sums %.2f; summed per-point variance "
+        "across seeds: track-length / collision = %.3f\n",
+        slots.size(), worst, trkVar / colVar);
+    EXPECT_LT(trkVar, 0.5 * colVar);
 }
 
 }  // namespace
