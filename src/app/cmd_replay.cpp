@@ -29,6 +29,7 @@
 
 #include "app/cli_support.h"
 #include "app/output_files.h"
+#include "app/ranks.h"
 #include "app/render_output.h"
 #include "core/timing.h"
 #include "pipeline/pipeline.h"
@@ -151,6 +152,7 @@ Command addReplayCommand(CLI::App& app) {
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
+        const Ranks ranks;  // mpirun -n K: the frames split over K ranks (app/ranks.h)
         // Outputs first (nothing is rendered for a path that cannot be written).
         checkOutputs({{"--stats", *stats, {".json"}},
                       {"--video", *video, {".mp4", ".mkv", ".mov", ".webm"}}});
@@ -213,72 +215,108 @@ Command addReplayCommand(CLI::App& app) {
         if (!video->empty()) ffmpeg = findOnPath("ffmpeg");
 
         // The frames: one pipeline session, each frame written as soon as it is done.
+        // Rank 0 makes the folder; with MPI the others wait for it.
         const bool created = !fs::exists(dir, ec);
-        fs::create_directories(dir, ec);
-        if (ec)
+        if (ranks.lead()) fs::create_directories(dir, ec);
+        if (!ranks.allTrue(!ec)) {
+            if (!ranks.lead()) return kExitBadInput;  // rank 0 says why
             throw InputError("command line", "--out",
                              "cannot create '" + *outDir + "': " + ec.message(),
                              "create it first, or give another --out");
+        }
         json frames = json::array();
         std::size_t done = 0;
         std::vector<double> frameSeconds;
-        try {
-            for (std::size_t i = 0; i < scenes.size(); ++i) {
-                core::Stopwatch sw;
-                // A frame's stages show a bar on a terminal, one per frame so that only a frame
-                // taking over a second shows one; elsewhere the line per frame is the progress
-                // (plain lines for every stage of every frame would drown it).
-                const core::Progress progress =
-                    terminalProgress(*quiet || !::isatty(STDERR_FILENO));
-                pipeline::RunResult r = pipe.run(scenes[i], {}, progress);
-                throwIfCancelled();
-                const fs::path file = dir / frameName(i);
-                OutputFiles files;
-                files.write(file, "--out",
-                            [&](const fs::path& p) { writeDisplayImage(r, scenes[i], p); });
-                throwIfCancelled();
-                files.commit();
-                ++done;
-                const double seconds = sw.seconds();
-                frameSeconds.push_back(seconds);
-                std::vector<std::string> ran, cached;
-                json stages = json::array();
-                for (const auto& st : r.stages) {
-                    stages.push_back(pipeline::toJson(st));
-                    if (st.ran) ran.push_back(st.name);
-                    if (st.reason.rfind("cached", 0) == 0) cached.push_back(st.name);
-                }
-                frames.push_back({{"index", i},
-                                  {"time", times[i]},
-                                  {"file", frameName(i)},
-                                  {"seconds", seconds},
-                                  {"ran", ran},
-                                  {"cached", cached},
-                                  {"warnings", r.warnings},
-                                  {"stages", stages}});
-                for (const auto& w : r.warnings)
-                    std::fprintf(stderr, "voxlight: warning: frame %zu: %s\n", i, w.c_str());
-                if (!*quiet)
-                    std::fprintf(stderr, "frame %zu/%zu (t = %.3f s): %.2f s, ran: %s\n", i + 1,
-                                 scenes.size(), times[i], seconds,
-                                 ran.empty() ? "-" : [&] {
-                                     std::string s;
-                                     for (const auto& n : ran) s += (s.empty() ? "" : " ") + n;
-                                     return s;
-                                 }().c_str());
+        // One frame: rendered, written atomically, its stats entry returned.
+        auto renderFrame = [&](std::size_t i) {
+            core::Stopwatch sw;
+            // A frame's stages show a bar on a terminal, one per frame so that only a frame
+            // taking over a second shows one; elsewhere the line per frame is the progress
+            // (plain lines for every stage of every frame would drown it).
+            const core::Progress progress = terminalProgress(*quiet || !::isatty(STDERR_FILENO));
+            pipeline::RunResult r = pipe.run(scenes[i], {}, progress);
+            throwIfCancelled();
+            const fs::path file = dir / frameName(i);
+            OutputFiles files;
+            files.write(file, "--out",
+                        [&](const fs::path& p) { writeDisplayImage(r, scenes[i], p); });
+            throwIfCancelled();
+            files.commit();
+            ++done;
+            const double seconds = sw.seconds();
+            std::vector<std::string> ran, cached;
+            json stages = json::array();
+            for (const auto& st : r.stages) {
+                stages.push_back(pipeline::toJson(st));
+                if (st.ran) ran.push_back(st.name);
+                if (st.reason.rfind("cached", 0) == 0) cached.push_back(st.name);
             }
-        } catch (const CancelledError&) {
-            if (done == 0 && created) fs::remove(dir, ec);  // empty: as if never run
-            std::fprintf(stderr,
-                         "\nvoxlight: cancelled after %zu of %zu frames; the %zu written are "
-                         "complete, nothing is half-written\n",
-                         done, scenes.size(), done);
-            return kExitCancelled;
-        } catch (...) {
-            // A failure in the first frame (a volume file that does not read) leaves no folder
-            // behind that this run created; later ones keep the whole frames before them.
-            if (done == 0 && created) fs::remove(dir, ec);
-            throw;
+            for (const auto& w : r.warnings)
+                std::fprintf(stderr, "voxlight: warning: frame %zu: %s\n", i, w.c_str());
+            if (!*quiet)
+                std::fprintf(stderr, "frame %zu/%zu (t = %.3f s): %.2f s, ran: %s\n", i + 1,
+                             scenes.size(), times[i], seconds, ran.empty() ? "-" : [&] {
+                                 std::string s;
+                                 for (const auto& n : ran) s += (s.empty() ? "" : " ") + n;
+                                 return s;
+                             }().c_str());
+            return json{
+                {"index", i}, {"time", times[i]}, {"file", frameName(i)},   {"seconds", seconds},
+                {"ran", ran}, {"cached", cached}, {"warnings", r.warnings}, {"stages", stages}};
+        };
+        if (ranks.size() == 1) {
+            try {
+                for (std::size_t i = 0; i < scenes.size(); ++i) {
+                    frames.push_back(renderFrame(i));
+                    frameSeconds.push_back(frames.back()["seconds"].get<double>());
+                }
+            } catch (const CancelledError&) {
+                if (done == 0 && created) fs::remove(dir, ec);  // empty: as if never run
+                std::fprintf(stderr,
+                             "\nvoxlight: cancelled after %zu of %zu frames; the %zu written are "
+                             "complete, nothing is half-written\n",
+                             done, scenes.size(), done);
+                return kExitCancelled;
+            } catch (...) {
+                // A failure in the first frame (a volume file that does not read) leaves no
+                // folder behind that this run created; later ones keep the whole frames before.
+                if (done == 0 && created) fs::remove(dir, ec);
+                throw;
+            }
+        } else {
+            // MPI ranks: rank r renders the contiguous block [n·r/K, n·(r+1)/K), so consecutive
+            // frames keep reusing one pipeline session's stages as in one process; rank 0 gathers
+            // every frame's stats entry and writes the stats and the video.
+            const std::size_t n = scenes.size(), k = std::size_t(ranks.size()),
+                              r = std::size_t(ranks.rank());
+            std::string mine;
+            const std::string error = runRankWork(ranks, [&] {
+                for (std::size_t i = n * r / k; i < n * (r + 1) / k; ++i)
+                    mine +=
+                        renderFrame(i).dump(-1, ' ', false, json::error_handler_t::replace) + "\n";
+            });
+            if (!error.empty()) mine += error + "\n";
+            const std::vector<std::string> all = ranks.gather(mine);
+            if (!ranks.lead()) return error.empty() ? kExitOk : std::atoi(error.c_str() + 1);
+            std::vector<std::string> lines;
+            const int code = collectRankLines(all, lines);
+            std::vector<json> entries;
+            for (const auto& l : lines) entries.push_back(json::parse(l));
+            std::sort(entries.begin(), entries.end(), [](const json& a, const json& b) {
+                return a["index"].get<std::size_t>() < b["index"].get<std::size_t>();
+            });
+            for (auto& e : entries) {
+                frameSeconds.push_back(e["seconds"].get<double>());
+                frames.push_back(std::move(e));
+            }
+            if (code != kExitOk) {
+                std::fprintf(stderr,
+                             "voxlight: %zu of %zu frames written (complete); no stats or "
+                             "video\n",
+                             frames.size(), scenes.size());
+                return code;
+            }
+            if (!*quiet) std::fprintf(stderr, "%zu ranks rendered %zu frames\n", k, frames.size());
         }
 
         // Frames of an earlier, longer replay into the same folder would join a video made from

@@ -26,11 +26,10 @@
 
 #include "analysis/sweep.h"
 #include "app/cli_support.h"
-#include "app/mpi_module.h"
 #include "app/output_files.h"
+#include "app/ranks.h"
 #include "core/timing.h"
 #include "io/image.h"
-#include "io/module_loader.h"
 
 namespace voxlight::app {
 
@@ -55,54 +54,6 @@ std::string describe(const analysis::SweepItem& it) {
     if (it.id.find("-grid-") != std::string::npos) return it.label + " " + it.params.dump();
     return it.label + " (base)";
 }
-
-/// The ranks of an `mpirun -n K voxlight sweep` launch (K > 1: Open MPI through its module), or
-/// one rank. Rank 0 reports; the other ranks' stderr goes to /dev/null (every rank validates the
-/// same sweep and would print the same error), their failures reach rank 0 with their rows.
-class Ranks {
-  public:
-    Ranks() {
-        const char* n = std::getenv("OMPI_COMM_WORLD_SIZE");
-        if (!n || std::atoi(n) <= 1) return;
-        static const io::detail::LoadedModule loaded = io::detail::loadModule(
-            mpi_module::kFileName, mpi_module::kEntryPoint, mpi_module::kAbiVersion);
-        if (!loaded.api)
-            throw InputError("command line", "mpirun",
-                             "this voxlight cannot run a sweep as MPI ranks: " + loaded.error,
-                             "install libopenmpi-dev and rebuild (tools/setup.sh), or run the "
-                             "sweep without mpirun");
-        api_ = static_cast<const mpi_module::Api*>(loaded.api);
-        std::string error;
-        if (!api_->init(&rank_, &size_, &error))
-            throw InputError("command line", "mpirun", error, "check the MPI launch");
-        if (rank_ != 0) {
-            const int null = ::open("/dev/null", O_WRONLY);
-            if (null >= 0) ::dup2(null, STDERR_FILENO), ::close(null);
-        }
-    }
-    Ranks(const Ranks&) = delete;
-    Ranks& operator=(const Ranks&) = delete;
-    ~Ranks() {
-        if (api_) api_->finalize();
-    }
-    int rank() const { return rank_; }
-    int size() const { return size_; }
-    bool allTrue(bool ok) const { return api_ ? api_->allTrue(ok) : ok; }
-    std::vector<std::string> gather(const std::string& mine) const {
-        if (!api_) return {mine};
-        std::vector<std::string> all;
-        api_->gather(mine, &all);
-        return all;
-    }
-
-  private:
-    const mpi_module::Api* api_ = nullptr;
-    int rank_ = 0, size_ = 1;
-};
-
-/// A rank's rows for rank 0: CSV rows, one per line; a line starting with '!' is the rank's error
-/// ("!2 message": exit code and one line).
-constexpr char kRankError = '!';
 
 }  // namespace
 
@@ -233,8 +184,7 @@ Command addSweepCommand(CLI::App& app) {
 
         // Variant i runs on rank i mod K (static: the same split for the same sweep and K).
         std::vector<analysis::SweepRow> rows;
-        std::string error;  // "code message" of this rank's failure
-        try {
+        const std::string error = runRankWork(ranks, [&] {
             for (std::size_t i = std::size_t(ranks.rank()); i < items.size();
                  i += std::size_t(ranks.size())) {
                 throwIfCancelled();
@@ -261,42 +211,19 @@ Command addSweepCommand(CLI::App& app) {
                 rows.push_back(std::move(row));
                 if (ranks.size() == 1) writeCsv(dir / "results.csv", rows);
             }
-        } catch (const CancelledError&) {
-            if (ranks.size() == 1) throw;
-            error = std::to_string(kExitCancelled) + " cancelled";
-        } catch (const InputError& e) {
-            if (ranks.size() == 1) throw;
-            error = std::to_string(kExitBadInput) + " " + e.what();
-        } catch (const std::exception& e) {
-            if (ranks.size() == 1) throw;
-            error = std::to_string(kExitInternal) + " internal error: " + e.what();
-        }
+        });
         if (ranks.size() > 1) {
             std::string mine;
             for (const auto& r : rows) mine += analysis::sweepCsvRow(r) + "\n";
-            if (!error.empty()) mine += kRankError + error + "\n";
+            if (!error.empty()) mine += error + "\n";
             const std::vector<std::string> all = ranks.gather(mine);
-            if (!lead) return error.empty() ? kExitOk : std::atoi(error.c_str());
+            if (!lead) return error.empty() ? kExitOk : std::atoi(error.c_str() + 1);
             // Rank 0: every rank's rows back in sweep order; the first failure decides the exit.
+            std::vector<std::string> gathered;
+            const int code = collectRankLines(all, gathered);
             std::vector<std::pair<std::size_t, std::string>> lines;
-            int code = kExitOk;
-            for (std::size_t r = 0; r < all.size(); ++r) {
-                std::size_t at = 0;
-                while (at < all[r].size()) {
-                    std::size_t nl = all[r].find('\n', at);
-                    if (nl == std::string::npos) nl = all[r].size();
-                    const std::string line = all[r].substr(at, nl - at);
-                    at = nl + 1;
-                    if (!line.empty() && line[0] == kRankError) {
-                        const int c = std::atoi(line.c_str() + 1);
-                        const std::string msg = line.substr(line.find(' ') + 1);
-                        std::fprintf(stderr, "voxlight: error: rank %zu: %s\n", r, msg.c_str());
-                        if (code == kExitOk) code = c;
-                    } else if (!line.empty()) {
-                        lines.emplace_back(std::strtoull(line.c_str(), nullptr, 10), line);
-                    }
-                }
-            }
+            for (const auto& l : gathered)
+                lines.emplace_back(std::strtoull(l.c_str(), nullptr, 10), l);
             std::sort(lines.begin(), lines.end());
             std::string text = analysis::sweepCsvHeader();
             for (const auto& [index, line] : lines) text += "\n" + line;

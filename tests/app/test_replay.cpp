@@ -284,3 +284,37 @@ TEST(Replay, CtrlCKeepsOnlyWholeFrames) {
         EXPECT_EQ(files.size(), 81u);
     }
 }
+
+TEST(Replay, OverMpiRanksWritesTheSameFramesAndStatsAsOneProcess) {
+    const fs::path module = fs::path(VOXLIGHT_BINARY).parent_path() / "libvoxlight_mpi.so";
+    if (!fs::exists(module) || test::runShell("command -v mpirun", ".").code != 0)
+        GTEST_SKIP() << "built without MPI or no mpirun (Debian: libopenmpi-dev, openmpi-bin)";
+    test::TempDir tmp;
+    writeJson(tmp / "s.json", smallSession());
+    Result r = run("replay " + q(tmp / "s.json") + " --out " + q(tmp / "one") +
+                       " --fps 4 -q --stats " + q(tmp / "one.json"),
+                   tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    // 9 frames over 2 ranks: frames 0-3 on rank 0, 4-8 on rank 1.
+    r = test::runShell("mpirun --allow-run-as-root --oversubscribe -n 2 " +
+                           std::string(VOXLIGHT_BINARY) + " replay " + q(tmp / "s.json") +
+                           " --out " + q(tmp / "two") + " --fps 4 -q --stats " +
+                           q(tmp / "two.json"),
+                       tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    ASSERT_EQ(listing(tmp / "two"), listing(tmp / "one"));
+    for (const auto& name : listing(tmp / "one"))
+        EXPECT_EQ(io::readImage(tmp / "two" / name).pixels,
+                  io::readImage(tmp / "one" / name).pixels)
+            << name;
+    const json a = json::parse(std::ifstream(tmp / "one.json"));
+    const json b = json::parse(std::ifstream(tmp / "two.json"));
+    ASSERT_EQ(b["frames"].size(), a["frames"].size());
+    for (std::size_t i = 0; i < a["frames"].size(); ++i) {
+        EXPECT_EQ(b["frames"][i]["index"], i);
+        EXPECT_EQ(b["frames"][i]["file"], a["frames"][i]["file"]);
+    }
+    // Rank 1 starts its block from an empty cache: its first frame recomputes what rank 0's
+    // first frame did, and the frames after it reuse them as in one process.
+    EXPECT_EQ(b["frames"][5]["ran"], a["frames"][5]["ran"]);
+}
