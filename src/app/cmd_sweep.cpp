@@ -182,11 +182,14 @@ Command addSweepCommand(CLI::App& app) {
             return kExitBadInput;  // rank 0 says why
         }
 
-        // Variant i runs on rank i mod K (static: the same split for the same sweep and K).
+        // Rank r runs the contiguous block [n·r/K, n·(r+1)/K) of the variants (static: the same
+        // split for the same sweep and K). Neighbours are mostly one run's variants, which share
+        // stages (the volume's tables, a base field): a block keeps that reuse inside a rank.
         std::vector<analysis::SweepRow> rows;
+        const std::size_t n = items.size(), k = std::size_t(ranks.size()),
+                          r = std::size_t(ranks.rank());
         const std::string error = runRankWork(ranks, [&] {
-            for (std::size_t i = std::size_t(ranks.rank()); i < items.size();
-                 i += std::size_t(ranks.size())) {
+            for (std::size_t i = n * r / k; i < n * (r + 1) / k; ++i) {
                 throwIfCancelled();
                 analysis::SweepImages images;
                 analysis::SweepRow row =
