@@ -35,7 +35,7 @@ constexpr double kEaRadianceRelTol = 1e-4;
 constexpr double kPathSigmas = 5.0;
 // Mean radiance of sh-local, sh-global, ritschel (4 coefficients, 16 rays) and pvrt (8³, 2
 // photons) over noise against the path tracer: these are approximations, their per-pixel NRMSE
-// against it 0.4–0.9 on real scans (docs/sweeps/report.md); measured mean ratios here 0.64–1.74.
+// against it 0.4–0.9 on real scans (docs/accuracy/report.md); measured mean ratios here 0.64–1.74.
 // A factor 2.5 still catches a lost or doubled light or missing shadows (gradient and
 // emission-absorption, which ignore the light's attenuation, are 5–18× off on these volumes).
 constexpr double kNoiseMeanRatio = 2.5;
