@@ -10,6 +10,7 @@
 
 #include "core/error.h"
 #include "core/hash.h"
+#include "io/json_field.h"
 #include "render/tonemap.h"
 
 namespace voxlight::analysis {
@@ -19,43 +20,33 @@ using nlohmann::json;
 
 namespace {
 
-std::string typeName(const json& v) { return v.type_name(); }
-
-/// Checks that `doc` holds only `allowed` keys (a typo is an error, not a silently ignored key).
-void checkKeys(const json& doc, const std::set<std::string>& allowed, const std::string& source,
-               const std::string& where) {
-    for (const auto& [k, v] : doc.items()) {
-        (void)v;
-        if (!allowed.count(k))
-            throw InputError(source, where.empty() ? k : where + "." + k, "is not a known key",
-                             "use one of: " + joinNames(std::vector<std::string>(allowed.begin(),
-                                                                                 allowed.end())));
-    }
-}
-
-std::vector<std::string> stringList(const json& v, const std::string& source,
-                                    const std::string& field) {
-    if (!v.is_array())
-        throw InputError(source, field, "is " + typeName(v) + ", not an array of strings",
-                         "write e.g. [\"global_shadows\"]");
+/// An array of strings (effects, overrides).
+std::vector<std::string> strings(const io::Field& f) {
+    if (!f.isArray())
+        f.fail("must be an array of strings, got " + io::typeName(f.raw()) + " " +
+                   io::shortDump(f.raw()),
+               "write e.g. [\"global_shadows\"]");
     std::vector<std::string> out;
-    for (std::size_t i = 0; i < v.size(); ++i) {
-        if (!v[i].is_string())
-            throw InputError(source, field + "[" + std::to_string(i) + "]",
-                             "is " + typeName(v[i]) + ", not a string");
-        out.push_back(v[i].get<std::string>());
-    }
+    for (std::size_t i = 0; i < f.size(); ++i) out.push_back(f.at(i).string());
     return out;
 }
 
-/// A value's text in an id: numbers and strings as written, anything else compact JSON.
-std::string valueText(const json& v) {
-    std::string s = v.is_string() ? v.get<std::string>() : v.dump();
-    for (char& c : s)
-        if (!(std::isalnum(static_cast<unsigned char>(c)) || c == '.' || c == '-' || c == '_'))
-            c = '_';
+/// A non-empty string.
+std::string name(const io::Field& f) {
+    std::string s = f.string();
+    if (s.empty()) f.fail("must not be empty");
     return s;
 }
+
+/// A JSON object, as given (method params: the method's own parser checks them).
+json object(const io::Field& f) {
+    f.expectObject();
+    return f.raw();
+}
+
+/// A value's text in an id: strings as written, anything else compact JSON (safeId makes it a file
+/// name).
+std::string valueText(const json& v) { return v.is_string() ? v.get<std::string>() : v.dump(); }
 
 std::string safeId(std::string s) {
     for (char& c : s)
@@ -101,139 +92,95 @@ std::string csvField(const std::string& s) {
     return q + "\"";
 }
 
-SweepReferenceSpec parseReference(const json& r, const std::string& source,
-                                  const std::string& field) {
-    if (!r.is_object())
-        throw InputError(source, field, "is " + typeName(r) + ", not an object",
-                         "write {\"method\": ..., \"params\": {...}, \"effects\": [...]}");
-    checkKeys(r, {"method", "params", "effects"}, source, field);
+SweepReferenceSpec parseReference(const io::Field& r) {
+    r.allowOnly({"method", "params", "effects"});
     SweepReferenceSpec ref;
-    if (r.contains("method")) {
-        if (!r["method"].is_string())
-            throw InputError(source, field + ".method", "is not a string");
-        ref.method = r["method"].get<std::string>();
+    if (r.has("method")) {
+        ref.method = name(r.child("method"));
         if (ref.method != "pathtrace") ref.params = json::object(), ref.effects.reset();
     }
-    if (r.contains("params")) {
-        if (!r["params"].is_object())
-            throw InputError(source, field + ".params", "is not an object");
-        ref.params = r["params"];
-    }
-    if (r.contains("effects")) ref.effects = stringList(r["effects"], source, field + ".effects");
+    if (r.has("params")) ref.params = object(r.child("params"));
+    if (r.has("effects")) ref.effects = strings(r.child("effects"));
     return ref;
 }
 
 }  // namespace
 
 SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path& baseDir) {
-    if (!doc.is_object())
-        throw InputError(source, "(top level)", "is " + typeName(doc) + ", not an object",
-                         "a sweep is {\"scene\": ..., \"runs\": [...]}; see docs/sweeps.md");
-    checkKeys(doc, {"name", "scene", "overrides", "reference", "frames", "runs"}, source, "");
+    const io::Field top(doc, "", source);
+    if (!top.isObject())
+        top.fail("a sweep must be a JSON object, got " + io::typeName(doc),
+                 "a sweep is {\"scene\": ..., \"runs\": [...]}; see docs/sweeps.md");
+    top.allowOnly({"name", "scene", "overrides", "reference", "frames", "runs"});
     SweepSpec spec;
     spec.source = source;
     spec.name = fs::path(source).stem().string();
-    if (doc.contains("name")) {
-        if (!doc["name"].is_string() || doc["name"].get<std::string>().empty())
-            throw InputError(source, "name", "must be a non-empty string");
-        spec.name = doc["name"].get<std::string>();
-    }
-    if (!doc.contains("scene"))
-        throw InputError(source, "scene", "is missing",
-                         "give a scene file (relative to the sweep) or an inline scene object");
-    const json& scene = doc["scene"];
-    if (scene.is_string()) {
-        fs::path p = scene.get<std::string>();
+    if (top.has("name")) spec.name = name(top.child("name"));
+    const io::Field scene = top.child("scene");
+    if (scene.isString()) {
+        fs::path p = scene.string();
         if (p.is_relative()) p = baseDir / p;
         try {
             spec.scene = io::readJsonFile(p);
         } catch (const InputError& e) {
-            throw InputError(source, "scene", e.what());
+            scene.fail(e.what());
         }
         spec.sceneDir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
-    } else if (scene.is_object()) {
-        spec.scene = scene;
+    } else if (scene.isObject()) {
+        spec.scene = scene.raw();
         spec.sceneDir = baseDir;
     } else {
-        throw InputError(source, "scene", "is " + typeName(scene) + ", not a file name or object");
+        scene.fail(top.has("scene") ? "must be a scene file name or an inline scene object, got " +
+                                          io::typeName(scene.raw())
+                                    : "is missing",
+                   "give a scene file (relative to the sweep) or an inline scene object");
     }
-    if (doc.contains("overrides")) {
-        const std::vector<std::string> o = stringList(doc["overrides"], source, "overrides");
+    if (top.has("overrides")) {
+        const io::Field o = top.child("overrides");
+        const std::vector<std::string> assignments = strings(o);
         try {
-            io::applyOverrides(spec.scene, o);
+            io::applyOverrides(spec.scene, assignments);
         } catch (const InputError& e) {
-            throw InputError(source, "overrides", e.what());
+            o.fail(e.what());
         }
     }
     // The scene's own method and effects give way to each run's.
     spec.scene.erase("method");
-    if (doc.contains("reference"))
-        spec.references[0] = parseReference(doc["reference"], source, "reference");
-    if (doc.contains("frames")) {
-        const json& f = doc["frames"];
-        if (!f.is_number_integer() || f.get<long long>() < 1 ||
-            f.get<long long>() > kMaxSweepFrames)
-            throw InputError(source, "frames",
-                             "must be an integer in 1.." + std::to_string(kMaxSweepFrames));
-        spec.frames = f.get<int>();
-    }
-    if (!doc.contains("runs") || !doc["runs"].is_array() || doc["runs"].empty())
-        throw InputError(source, "runs", "must be a non-empty array of runs",
-                         "e.g. [{\"method\": \"gradient\"}, {\"method\": \"sh-local\", \"axes\": "
-                         "{\"rays\": [16, 64]}}]");
+    if (top.has("reference")) spec.references[0] = parseReference(top.child("reference"));
+    top.get("frames", spec.frames, 1, kMaxSweepFrames);
+    const io::Field runs = top.child("runs");
+    if (!runs.isArray() || runs.size() == 0)
+        runs.fail("must be a non-empty array of runs",
+                  "e.g. [{\"method\": \"gradient\"}, {\"method\": \"sh-local\", \"axes\": "
+                  "{\"rays\": [16, 64]}}]");
     std::set<std::string> labels;
-    for (std::size_t i = 0; i < doc["runs"].size(); ++i) {
-        const json& r = doc["runs"][i];
-        const std::string where = runField(i);
-        if (!r.is_object())
-            throw InputError(source, where, "is " + typeName(r) + ", not an object");
-        checkKeys(r, {"method", "label", "params", "effects", "axes", "combine", "reference"},
-                  source, where);
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+        const io::Field r = runs.at(i);
+        r.allowOnly({"method", "label", "params", "effects", "axes", "combine", "reference"});
         SweepRun run;
-        if (!r.contains("method") || !r["method"].is_string())
-            throw InputError(source, where + ".method", "must be a method name (string)");
-        run.method = r["method"].get<std::string>();
-        run.label = run.method;
-        if (r.contains("label")) {
-            if (!r["label"].is_string() || r["label"].get<std::string>().empty())
-                throw InputError(source, where + ".label", "must be a non-empty string");
-            run.label = r["label"].get<std::string>();
-        }
+        run.method = name(r.child("method"));
+        run.label = r.has("label") ? name(r.child("label")) : run.method;
         if (!labels.insert(run.label).second)
-            throw InputError(source, where + ".label", "'" + run.label + "' is used twice",
-                             "give each run of the same method its own \"label\"");
-        if (r.contains("params")) {
-            if (!r["params"].is_object())
-                throw InputError(source, where + ".params",
-                                 "is " + typeName(r["params"]) + ", not an object");
-            run.params = r["params"];
-        }
-        if (r.contains("effects"))
-            run.effects = stringList(r["effects"], source, where + ".effects");
-        if (r.contains("axes")) {
-            const json& axes = r["axes"];
-            if (!axes.is_object())
-                throw InputError(source, where + ".axes",
-                                 "is " + typeName(axes) + ", not an object of value lists");
+            r.child("label").fail("'" + run.label + "' is used twice",
+                                  "give each run of the same method its own \"label\"");
+        if (r.has("params")) run.params = object(r.child("params"));
+        if (r.has("effects")) run.effects = strings(r.child("effects"));
+        if (r.has("axes")) {
+            const io::Field axes = r.child("axes");
+            axes.expectObject();
             // nlohmann's object keeps keys sorted; the order of the axes is that order.
-            for (const auto& [name, values] : axes.items()) {
-                const std::string f = where + ".axes." + name;
+            for (const auto& [key, values] : axes.raw().items()) {
                 if (!values.is_array() || values.empty())
-                    throw InputError(source, f, "must be a non-empty array of values",
-                                     "e.g. [16, 64, 256]");
-                run.axes.emplace_back(name, std::vector<json>(values.begin(), values.end()));
+                    axes.child(key).fail("must be a non-empty array of values",
+                                         "e.g. [16, 64, 256]");
+                run.axes.emplace_back(key, std::vector<json>(values.begin(), values.end()));
             }
         }
-        if (r.contains("combine")) {
-            const json& c = r["combine"];
-            if (!c.is_string() || (c != "one-at-a-time" && c != "grid"))
-                throw InputError(source, where + ".combine",
-                                 "must be \"one-at-a-time\" or \"grid\"");
-            run.grid = c == "grid";
-        }
-        if (r.contains("reference")) {
-            const SweepReferenceSpec ref =
-                parseReference(r["reference"], source, where + ".reference");
+        std::string combine = "one-at-a-time";
+        r.get("combine", combine, {"one-at-a-time", "grid"});
+        run.grid = combine == "grid";
+        if (r.has("reference")) {
+            const SweepReferenceSpec ref = parseReference(r.child("reference"));
             const auto same = std::find(spec.references.begin(), spec.references.end(), ref);
             run.reference = std::size_t(same - spec.references.begin());
             if (same == spec.references.end()) spec.references.push_back(ref);

@@ -15,6 +15,7 @@
 #include <sstream>
 
 #include "core/error.h"
+#include "io/json_field.h"
 
 namespace voxlight::session {
 
@@ -43,20 +44,8 @@ constexpr double kNearlyParallelCos = 0.9995;
 /// Directions this close to opposite have no unique slerp: the part is held instead.
 constexpr double kOppositeCos = -0.999999;
 
-std::string typeName(const json& j) {
-    if (j.is_null()) return "null";
-    if (j.is_boolean()) return "a boolean";
-    if (j.is_string()) return "a string";
-    if (j.is_array()) return "an array";
-    if (j.is_object()) return "an object";
-    if (j.is_number()) return "a number";
-    return "an unsupported value";
-}
-
-std::string shortDump(const json& j) {
-    std::string s = j.dump(-1, ' ', false, json::error_handler_t::replace);
-    return s.size() > 40 ? s.substr(0, 37) + "..." : s;
-}
+using io::shortDump;
+using io::typeName;
 
 std::string number(double v) {
     std::ostringstream os;
