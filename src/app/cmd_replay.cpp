@@ -363,6 +363,7 @@ Command addReplayCommand(CLI::App& app) {
                       {"frames_total", scenes.size()},
                       {"fps", interpolate ? json(*fps) : json(nullptr)},
                       {"method", scenes.front().method.name},
+                      {"ranks", ranks.size()},
                       {"frame_seconds_min", sorted.front()},
                       {"frame_seconds_median", sorted[sorted.size() / 2]},
                       {"frame_seconds_max", sorted.back()},

@@ -598,7 +598,7 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
     std::ofstream(tmp / "file") << "x";
     const std::vector<std::pair<std::string, std::string>> cases = {
         {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out"), "runs[1].axes.rays=-4"},
-        {"sweep " + q(tmp / "list.json") + " --out " + q(tmp / "out"), "not an object"},
+        {"sweep " + q(tmp / "list.json") + " --out " + q(tmp / "out"), "must be a JSON object"},
         {"sweep " + q(tmp / "missing.json") + " --out " + q(tmp / "out"), "missing.json"},
         {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "file"), "--out"},
         {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out") + " --only nobody",
@@ -666,4 +666,11 @@ TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
     EXPECT_EQ(withoutSeconds(tmp / "three" / "results.csv"), a);
     for (const char* id : {"gradient", "sh-local-rays-64", "pathtrace-spp-8"})
         EXPECT_TRUE(fs::exists(tmp / "three" / "maps" / (std::string(id) + ".png"))) << id;
+    // ... and it really ran as 3 ranks (3 whole sweeps side by side would write the same files).
+    const nlohmann::json ref1 =
+        nlohmann::json::parse(std::ifstream(tmp / "one" / "reference.json"));
+    const nlohmann::json ref3 =
+        nlohmann::json::parse(std::ifstream(tmp / "three" / "reference.json"));
+    EXPECT_EQ(ref1["ranks"], 1);
+    EXPECT_EQ(ref3["ranks"], 3);
 }

@@ -310,6 +310,8 @@ TEST(Replay, OverMpiRanksWritesTheSameFramesAndStatsAsOneProcess) {
     const json a = json::parse(std::ifstream(tmp / "one.json"));
     const json b = json::parse(std::ifstream(tmp / "two.json"));
     ASSERT_EQ(b["frames"].size(), a["frames"].size());
+    EXPECT_EQ(a["ranks"], 1);
+    EXPECT_EQ(b["ranks"], 2);  // two ranks, not two whole replays side by side
     for (std::size_t i = 0; i < a["frames"].size(); ++i) {
         EXPECT_EQ(b["frames"][i]["index"], i);
         EXPECT_EQ(b["frames"][i]["file"], a["frames"][i]["file"]);
