@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 // SH visibility TF-update time (Kronander 2012 Table 1's "TF update"): LOD selection + local
 // visibility on the 256³ torso phantom, 4 SH coefficients, 32 rays, r_s 16 voxels, at several
-// data-reduction ratios (1:16, 1:32, 1:64), for the CT presets ct-bone and ct-soft-tissue. The block pyramid is built
+// data-reduction ratios (1:16, 1:32, 1:64), for the CT presets ct-bone and ct-soft-tissue, each by
+// the march (32 rays) and by the line sweep (26 lattice rays; ratios printed at the end). The block
+// pyramid is built
 // once per volume (reported separately as BM_BlockPyramid). Counters: visibility rays/s and
 // σt samples/s, grid samples and the visibility's MB.
 // BM_VsLocal: Ritschel's hierarchical visibility (opacity pyramid + field, to the volume's
@@ -46,14 +48,19 @@ std::shared_ptr<const visibility::BlockPyramid> torsoPyramid() {
 
 const char* const kPresets[] = {"ct-bone", "ct-soft-tissue"};
 
+/// arg 0: preset; arg 1: data reduction; arg 2: 0 = the march (32 rays), 1 = the line sweep (its
+/// 26 lattice rays; the end of the run prints sweep / march per preset and reduction).
 void BM_TfUpdate(benchmark::State& state) {
     const auto pyramid = torsoPyramid();
     const optics::TransferFunction tf = optics::makePreset(kPresets[state.range(0)]);
     const double ratio = double(state.range(1));
+    const bool sweep = state.range(2) == 1;
     visibility::LocalVisibilityOptions o;
     o.coefficients = 4;
-    o.rays = 32;
+    o.rays = sweep ? visibility::kSweepRaysCoarse : 32;
     o.radiusVoxels = 16.0;
+    o.algorithm =
+        sweep ? visibility::VisibilityAlgorithm::Sweep : visibility::VisibilityAlgorithm::March;
     std::uint64_t rays = 0, samples = 0, points = 0, bytes = 0, skipped = 0;
     for (auto _ : state) {
         // A TF change: table, LOD selection, local visibility.
@@ -70,7 +77,8 @@ void BM_TfUpdate(benchmark::State& state) {
         skipped = vis.pointsSkipped();
         benchmark::DoNotOptimize(vis.blockData(0));
     }
-    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)));
+    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)) +
+                   (sweep ? " sweep" : " march"));
     state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
     state.counters["samples/s"] = benchmark::Counter(double(samples), benchmark::Counter::kIsRate);
     state.counters["grid_points"] = double(points);
@@ -78,7 +86,7 @@ void BM_TfUpdate(benchmark::State& state) {
     state.counters["points_skipped"] = double(skipped);
 }
 BENCHMARK(BM_TfUpdate)
-    ->ArgsProduct({{0, 1}, {16, 32, 64}})
+    ->ArgsProduct({{0, 1}, {16, 32, 64}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()  // the CPU column counts every thread, not the main one alone
     ->UseRealTime()
@@ -251,16 +259,32 @@ BENCHMARK(BM_TfEdit)
 class RatioReporter : public benchmark::ConsoleReporter {
   public:
     void ReportRuns(const std::vector<Run>& runs) override {
-        for (const Run& r : runs)
+        for (const Run& r : runs) {
+            if (r.run_type == Run::RT_Iteration &&
+                r.run_name.function_name.find("BM_TfUpdate") != std::string::npos)
+                update_[r.run_name.args] = {r.GetAdjustedRealTime(), r.GetAdjustedCPUTime()};
             if (r.aggregate_name == "median") {
                 if (r.run_name.function_name.find("BM_VsLocal") != std::string::npos)
                     median_[r.run_name.args] = r.GetAdjustedRealTime();
                 if (r.run_name.function_name.find("BM_TfEdit") != std::string::npos)
                     edit_[r.run_name.args] = r.GetAdjustedRealTime();
             }
+        }
         ConsoleReporter::ReportRuns(runs);
     }
     void printRatios() const {
+        for (int p = 0; p < 2; ++p)
+            for (int r : {16, 32, 64}) {
+                const std::string key = std::to_string(p) + "/" + std::to_string(r) + "/";
+                const auto march = update_.find(key + "0"), sweep = update_.find(key + "1");
+                if (march == update_.end() || sweep == update_.end()) continue;
+                std::printf(
+                    "TF update %s 1:%d, sweep / march: wall %.0f / %.0f ms = %.3f, process CPU "
+                    "%.0f / %.0f ms = %.3f\n",
+                    kPresets[p], r, sweep->second.first, march->second.first,
+                    sweep->second.first / march->second.first, sweep->second.second,
+                    march->second.second, sweep->second.second / march->second.second);
+            }
         for (int v : kPairs) {
             const auto local = median_.find("0/" + std::to_string(v));
             const auto rit = median_.find("1/" + std::to_string(v));
@@ -279,6 +303,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
 
   private:
     std::map<std::string, double> median_, edit_;
+    std::map<std::string, std::pair<double, double>> update_;  ///< BM_TfUpdate: wall, CPU
 };
 
 }  // namespace

@@ -333,8 +333,19 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
     if (c != 1 && c != 4 && c != 9 && c != 16)
         p.fail("coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(c),
                "1 is ambient occlusion; 4, 9, 16 are SH bands 1, 2, 3");
-    s.visibility.rays = p.integer("rays", std::max(32, visibility::kMinRaysPerCoefficient * c),
-                                  visibility::kMinRaysPerCoefficient * c, 4096);
+    const bool sweep = p.choice("algorithm", "march", {"march", "sweep"}) == "sweep";
+    s.visibility.algorithm =
+        sweep ? visibility::VisibilityAlgorithm::Sweep : visibility::VisibilityAlgorithm::March;
+    s.visibility.rays =
+        p.integer("rays",
+                  sweep ? (c > 9 ? visibility::kSweepRaysFine : visibility::kSweepRaysCoarse)
+                        : std::max(32, visibility::kMinRaysPerCoefficient * c),
+                  visibility::kMinRaysPerCoefficient * c, 4096);
+    if (sweep && s.visibility.rays != visibility::kSweepRaysCoarse &&
+        s.visibility.rays != visibility::kSweepRaysFine)
+        p.fail("rays",
+               "must be 26 or 98 with algorithm sweep, got " + std::to_string(s.visibility.rays),
+               "the sweep's rays are the lattice steps: 26 (|v| ≤ 1 per axis) or 98 (≤ 2)");
     s.visibility.radiusVoxels = p.number("radius", 16.0, 0.5, 256.0);
     s.visibility.threads = scene.render.threads;
     if (p.has("lod_budget_mb") && p.has("data_reduction"))
@@ -936,8 +947,9 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
     plan.stages.push_back(grid);
 
     const visibility::LocalVisibilityOptions vo = params.visibility;
-    const json visKey = {
+    json visKey = {
         {"rays", vo.rays}, {"coefficients", vo.coefficients}, {"radius", vo.radiusVoxels}};
+    if (vo.algorithm == visibility::VisibilityAlgorithm::Sweep) visKey["algorithm"] = "sweep";
     Stage vis{"local_visibility",
               StageKind::Precompute,
               {"multires_grid", "transfer_function", "method"}};
@@ -2405,7 +2417,7 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "SH local visibility on a multiresolution grid (Kronander 2012): soft self-shadowing "
     "within "
     "a radius under directional, point and environment lights",
-    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "window",
+    {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb", "window",
      "window_strength", "ambient"},
     {"local_shadows"}));
 const RegisterMethod kShGlobal(rayCasterMethod(
@@ -2413,8 +2425,8 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "SH global visibility (Kronander 2012 eq. 11): local visibility chained in steps of its "
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
-    {"rays", "coefficients", "radius", "data_reduction", "lod_budget_mb", "global_resolution",
-     "global_near", "window", "window_strength", "ambient"},
+    {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb",
+     "global_resolution", "global_near", "window", "window_strength", "ambient"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",

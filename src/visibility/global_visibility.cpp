@@ -29,7 +29,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     const LocalVisibility& local = *localPtr;
     const MultiresGrid& grid = local.grid();
     const int C = local.coefficients();
-    const sh::SphereSamples dirs = visibilityDirections(local.rays(), C);
+    const sh::SphereSamples& dirs = local.directions();
     const int N = int(dirs.size());
     const core::Geometry& geo = grid.pyramid().geometry();
     const glm::ivec3 dims = grid.dims();

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <numbers>
 #include <thread>
+#include <utility>
 
 #include "core/error.h"
 #include "core/timing.h"
@@ -30,6 +31,13 @@ void checkOptions(const LocalVisibilityOptions& o) {
                              ", 65536] for " + std::to_string(o.coefficients) +
                              " coefficients, got " + std::to_string(o.rays),
                          "use more rays or fewer coefficients");
+    if (o.algorithm == VisibilityAlgorithm::Sweep && o.rays != kSweepRaysCoarse &&
+        o.rays != kSweepRaysFine)
+        throw InputError("local visibility", "rays",
+                         "must be " + std::to_string(kSweepRaysCoarse) + " or " +
+                             std::to_string(kSweepRaysFine) + " with the line sweep, got " +
+                             std::to_string(o.rays),
+                         "the sweep's directions are the lattice steps: give 26 or 98");
     if (!(o.radiusVoxels > 0.0) || !std::isfinite(o.radiusVoxels))
         throw InputError("local visibility", "radius", "must be a finite number of voxels > 0",
                          "give e.g. 16");
@@ -306,8 +314,8 @@ struct RaySet {
     std::vector<glm::dvec3> world;  ///< ω_k, world unit vectors
     std::vector<RayDir> rays;
     std::vector<double> wy;  ///< n × c
-    RaySet(const core::Geometry& g, int rayCount, int coefficients) : n(rayCount), c(coefficients) {
-        const sh::SphereSamples dirs = visibilityDirections(rayCount, coefficients);
+    RaySet(const core::Geometry& g, const sh::SphereSamples& dirs, int coefficients)
+        : n(int(dirs.size())), c(coefficients) {
         wy.resize(std::size_t(n) * c);
         std::vector<double> y(static_cast<std::size_t>(sh::kMaxCoeffs));
         for (int k = 0; k < n; ++k) {
@@ -434,6 +442,57 @@ void correctVisibilityWeights(sh::SphereSamples& s, int coefficients) {
                             std::to_string(coefficients) + " coefficients");
 }
 
+std::vector<glm::ivec3> latticeSteps(int rays) {
+    int m = 0;
+    if (rays == kSweepRaysCoarse) m = 1;
+    if (rays == kSweepRaysFine) m = 2;
+    if (m == 0)
+        throw InputError("local visibility", "rays",
+                         "must be " + std::to_string(kSweepRaysCoarse) + " or " +
+                             std::to_string(kSweepRaysFine) + " with the line sweep, got " +
+                             std::to_string(rays),
+                         "the sweep's directions are the lattice steps: give 26 or 98");
+    std::vector<glm::ivec3> steps;
+    for (int z = -m; z <= m; ++z)
+        for (int y = -m; y <= m; ++y)
+            for (int x = -m; x <= m; ++x) {
+                if (x == 0 && y == 0 && z == 0) continue;
+                // Primitive: no common divisor > 1 (so no lattice point is skipped between two).
+                int g = std::abs(x);
+                for (int c : {std::abs(y), std::abs(z)}) {
+                    int a = g, b = c;
+                    while (b) a = std::exchange(b, a % b);
+                    g = a;
+                }
+                if (g == 1) steps.emplace_back(x, y, z);
+            }
+    VL_CHECK_EQ(int(steps.size()), rays);
+    return steps;
+}
+
+sh::SphereSamples latticeDirections(const core::Geometry& g, int rays, int coefficients) {
+    const std::vector<glm::ivec3> steps = latticeSteps(rays);
+    sh::SphereSamples s;
+    for (const glm::ivec3& v : steps)
+        s.directions.push_back(glm::normalize(g.direction * (glm::dvec3(v) * g.spacing)));
+    // Voronoi cells: the share of nearly uniform points nearest to each direction.
+    const sh::SphereSamples probe = sh::fibonacciSamples(kSweepWeightPoints);
+    std::vector<std::uint32_t> count(s.size(), 0);
+    for (const glm::dvec3& p : probe.directions) {
+        std::size_t best = 0;
+        double bestDot = -2.0;
+        for (std::size_t k = 0; k < s.size(); ++k) {
+            const double d = glm::dot(p, s.directions[k]);
+            if (d > bestDot) bestDot = d, best = k;
+        }
+        ++count[best];
+    }
+    for (std::size_t k = 0; k < s.size(); ++k)
+        s.weights.push_back(4.0 * std::numbers::pi * double(count[k]) / double(probe.size()));
+    correctVisibilityWeights(s, coefficients);
+    return s;
+}
+
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                         const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
                         std::uint64_t* samples) {
@@ -488,13 +547,13 @@ struct TraceCounts {
 /// V^L at every sample point of `blocks` (stored blocks of `grid`), written at data + offset[b];
 /// parallel over blocks, each point alone with a fixed order of operations.
 TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
-                        const LocalVisibilityOptions& options,
+                        const LocalVisibilityOptions& options, const sh::SphereSamples& directions,
                         const std::vector<std::size_t>& blocks, float* data,
                         const std::vector<std::size_t>& offset, const core::Progress& progress) {
     const int C = options.coefficients, N = options.rays;
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
-    const RaySet set(g, N, C);
+    const RaySet set(g, directions, C);
     const ValueField sigma(grid, table);
     const float radius = float(options.radiusVoxels * h), hf = float(h);
 
@@ -532,6 +591,241 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 skippedTotal += skipped;
                 const std::size_t now = done.fetch_add(range.size()) + range.size();
                 if (std::this_thread::get_id() == caller)  // workers only stop taking blocks
+                    progress.report("local visibility", double(now) / double(blocks.size()));
+            });
+    });
+    if (progress.cancelled()) throw CancelledError();
+    progress.report("local visibility", 1.0);
+    return {samplesTotal, raysTotal, skippedTotal};
+}
+
+/// V^L at every sample point of the stored blocks by the line sweep (header comment), written at
+/// data + offset[b]. `directions`: latticeDirections of `steps`. Level-0 blocks are swept block by
+/// block: per direction, each lattice line through the block is integrated from its first traced
+/// point in the block to R past its last (reading on past the block's faces). Points of coarser
+/// blocks lie s voxels apart, so a line holds at most a few of a block's points and sharing saves
+/// nothing over their own rays, which the march takes in s-voxel steps: they are marched along the
+/// same directions.
+TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
+                        const LocalVisibilityOptions& options, const sh::SphereSamples& directions,
+                        const std::vector<glm::ivec3>& steps,
+                        const std::vector<std::size_t>& blocks, float* data,
+                        const std::vector<std::size_t>& offset, const core::Progress& progress) {
+    const int C = options.coefficients, N = int(steps.size());
+    const BlockPyramid& pyr = grid.pyramid();
+    const core::Geometry& g = pyr.geometry();
+    const glm::ivec3 dims = grid.dims();
+    const double h = core::minComponent(g.spacing);
+    const RaySet set(g, directions, C);
+    const ValueField field(grid, table);
+    const float radius = float(options.radiusVoxels * h), hf = float(h);
+    const float zeroBelow = table.zeroBelow(), zeroAbove = table.zeroAbove();
+    auto transparent = [&](float a, float b) {
+        return std::max(a, b) <= zeroBelow || std::min(a, b) >= zeroAbove;
+    };
+    struct Dir {
+        glm::ivec3 v;
+        glm::vec3 dv;
+        float stepMm = 0.f, subMm = 0.f;
+        int q = 1;
+        double reach = 0.0;  ///< lattice steps to R
+    };
+    std::vector<Dir> dirs;
+    for (const glm::ivec3& v : steps) {
+        Dir d;
+        d.v = v;
+        d.dv = glm::vec3(v);
+        d.stepMm = float(glm::length(glm::dvec3(v) * g.spacing));
+        d.q = std::max(1, int(std::ceil(float(glm::length(glm::dvec3(v))) - 1e-4f)));
+        d.subMm = d.stepMm / float(d.q);
+        d.reach = double(radius) / double(d.stepMm);
+        dirs.push_back(d);
+    }
+
+    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
+    std::atomic<std::size_t> done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    progress.report("local visibility", 0.0);
+    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(
+            tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
+                if (progress.cancelled()) return;
+                std::uint64_t samples = 0, traced = 0, skipped = 0;
+                double v[16];
+                std::vector<std::uint8_t> swept(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
+                std::vector<double> P;    // optical depth from a line's first traced point
+                std::vector<float> S;     // the value at each sub-step
+                std::vector<int> onLine;  // in-block point indices along a line, −1 = not traced
+                for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                    const std::size_t b = blocks[r];
+                    const bool level0 = grid.level(b) == 0;
+                    float* blockData = data + offset[b];
+                    std::size_t index = 0;
+                    forEachSamplePoint(grid, b, C, blockData,
+                                       [&](const glm::vec3& origin, float* dst, float spacing) {
+                                           const std::size_t me = index++;
+                                           if (level0) swept[me] = 0;
+                                           if (!visibilityNeeded(grid, origin, spacing)) {
+                                               setEmpty(dst, C);
+                                               ++skipped;
+                                               return;
+                                           }
+                                           traced += std::uint64_t(N);
+                                           // Level 0 on the voxel lattice (a partial edge block's points past
+                                           // the volume are clamped onto it: those are marched).
+                                           if (level0 && origin == glm::floor(origin) &&
+                                               glm::ivec3(origin) ==
+                                                   pyr.blockCoord(b) * kBlockSize +
+                                                       glm::ivec3(int(me % 16), int(me / 16 % 16),
+                                                                  int(me / 256))) {
+                                               swept[me] = 1;
+                                               std::fill(dst, dst + C, 0.f);
+                                               return;
+                                           }
+                                           pointVisibility(
+                                               field, set, origin, dims, radius, hf,
+                                               [](int, float&, float&) { return true; }, v,
+                                               samples);
+                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                                       });
+                    if (!level0) continue;
+                    const glm::ivec3 base = pyr.blockCoord(b) * kBlockSize;
+                    const glm::ivec3 blockHi = glm::min(base + kBlockSize, dims) - 1;
+                    auto inBlock = [&](const glm::ivec3& x) {
+                        return glm::all(glm::greaterThanEqual(x, base)) &&
+                               glm::all(glm::lessThanEqual(x, blockHi));
+                    };
+                    auto inVolume = [&](const glm::ivec3& x) {
+                        return glm::all(glm::greaterThanEqual(x, glm::ivec3(0))) &&
+                               glm::all(glm::lessThan(x, dims));
+                    };
+                    for (int k = 0; k < N; ++k) {
+                        const Dir& d = dirs[std::size_t(k)];
+                        const double* wy = set.wy.data() + std::size_t(k) * C;
+                        for (int z = base.z; z <= blockHi.z; ++z)
+                            for (int y = base.y; y <= blockHi.y; ++y)
+                                for (int x = base.x; x <= blockHi.x; ++x) {
+                                    const glm::ivec3 head(x, y, z);
+                                    if (inBlock(head - d.v)) continue;  // not a line's first
+                                    onLine.clear();
+                                    int first = -1, last = -1;
+                                    for (glm::ivec3 p = head; inBlock(p); p += d.v) {
+                                        const glm::ivec3 l = p - base;
+                                        const int i = l.x + kBlockSize * (l.y + kBlockSize * l.z);
+                                        const bool mine = swept[std::size_t(i)] != 0;
+                                        if (mine) {
+                                            if (first < 0) first = int(onLine.size());
+                                            last = int(onLine.size());
+                                        }
+                                        onLine.push_back(mine ? i : -1);
+                                    }
+                                    if (first < 0) continue;
+                                    // P at every sub-step from the first traced point, over
+                                    // lattice steps inside the volume, to R past the last (then
+                                    // constant: outside the volume is empty); S the values there.
+                                    const int q = d.q;
+                                    const int want = last + int(std::ceil(d.reach)) + 1;
+                                    const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
+                                    P.assign(subs, 0.0);
+                                    S.assign(subs, 0.f);
+                                    bool st = false;
+                                    glm::ivec3 at = head + first * d.v;
+                                    const std::size_t m0 = std::size_t(first) * std::size_t(q);
+                                    // Lattice points are voxels: read directly (trilinear
+                                    // weights 0 there give the same value).
+                                    S[m0] = field.voxel(at.x, at.y, at.z);
+                                    double iFront = 0.0;
+                                    bool haveIFront = false;
+                                    int t = first;
+                                    for (; t < want; ++t, at += d.v) {
+                                        const glm::ivec3 next = at + d.v;
+                                        if (!inVolume(next)) break;
+                                        const glm::vec3 a(at);
+                                        const std::size_t m = std::size_t(t) * std::size_t(q);
+                                        for (int j = 1; j <= q; ++j) {
+                                            const float sFront = S[m + std::size_t(j) - 1];
+                                            const float sBack =
+                                                j == q ? field.voxel(next.x, next.y, next.z)
+                                                       : field.at(a + (float(j) / float(q)) * d.dv,
+                                                                  st);
+                                            S[m + std::size_t(j)] = sBack;
+                                            ++samples;
+                                            bool haveIBack = false;
+                                            double iBack = 0.0, tau = 0.0;
+                                            if (!transparent(sFront, sBack)) {
+                                                if (!haveIFront)
+                                                    iFront = table.sigmaIntegral(sFront);
+                                                iBack = table.sigmaIntegral(sBack);
+                                                haveIBack = true;
+                                                const glm::vec3 from =
+                                                    a + (float(j - 1) / float(q)) * d.dv;
+                                                tau = preIntegratedStep(
+                                                    table, sFront, iFront, sBack, iBack, d.subMm,
+                                                    0.0,
+                                                    [&](float mm) {
+                                                        bool s2 = false;
+                                                        return field.at(
+                                                            from + (mm / d.stepMm) * d.dv, s2);
+                                                    },
+                                                    samples);
+                                            }
+                                            P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
+                                            iFront = iBack;
+                                            haveIFront = haveIBack;
+                                        }
+                                    }
+                                    // P and S valid on sub-steps [m0, lastSub].
+                                    const std::size_t lastSub = std::size_t(t) * std::size_t(q);
+                                    for (int u = first; u <= last; ++u) {
+                                        const int i = onLine[std::size_t(u)];
+                                        if (i < 0) continue;
+                                        const std::size_t mu = std::size_t(u) * std::size_t(q);
+                                        // The ray's end R past the point, in sub-steps.
+                                        const double e = double(mu) + d.reach * double(q);
+                                        double pEnd;
+                                        if (e >= double(lastSub)) {
+                                            pEnd = P[lastSub];
+                                        } else {
+                                            // Up to the sub-step before the end, then the
+                                            // partial sub-step pre-integrated to the end's value
+                                            // (as the march's shortened last step).
+                                            const std::size_t e0 = std::size_t(e);
+                                            const float f = float(e - double(e0));
+                                            pEnd = P[e0];
+                                            const float s0 = S[e0], s1 = S[e0 + 1];
+                                            if (f > 0.f && !transparent(s0, s1)) {
+                                                const glm::vec3 from =
+                                                    glm::vec3(head) + (float(e0) / float(q)) * d.dv;
+                                                const float sEnd =
+                                                    field.at(from + (f / float(q)) * d.dv, st);
+                                                ++samples;
+                                                if (!transparent(s0, sEnd))
+                                                    pEnd += preIntegratedStep(
+                                                        table, s0, table.sigmaIntegral(s0), sEnd,
+                                                        table.sigmaIntegral(sEnd), f * d.subMm, 0.0,
+                                                        [&](float mm) {
+                                                            bool s2 = false;
+                                                            return field.at(
+                                                                from + (mm / d.stepMm) * d.dv, s2);
+                                                        },
+                                                        samples);
+                                            }
+                                        }
+                                        const double tau = pEnd - P[mu];
+                                        const double T =
+                                            tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;
+                                        float* dst = blockData + std::size_t(i) * std::size_t(C);
+                                        for (int c = 0; c < C; ++c) dst[c] += float(T * wy[c]);
+                                    }
+                                }
+                    }
+                }
+                samplesTotal += samples;
+                raysTotal += traced;
+                skippedTotal += skipped;
+                const std::size_t now = done.fetch_add(range.size()) + range.size();
+                if (std::this_thread::get_id() == caller)
                     progress.report("local visibility", double(now) / double(blocks.size()));
             });
     });
@@ -611,10 +905,19 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
     out.coefficients_ = options.coefficients;
     out.rays_ = options.rays;
     out.radius_ = options.radiusVoxels;
+    out.algorithm_ = options.algorithm;
+    const core::Geometry& g = gridPtr->pyramid().geometry();
+    const bool sweep = options.algorithm == VisibilityAlgorithm::Sweep;
+    out.directions_ = std::make_shared<const sh::SphereSamples>(
+        sweep ? latticeDirections(g, options.rays, options.coefficients)
+              : visibilityDirections(options.rays, options.coefficients));
     std::vector<std::size_t> stored;
     out.data_.assign(layoutBlocks(*gridPtr, options.coefficients, out.offset_, stored), 0.f);
     const TraceCounts n =
-        traceBlocks(*gridPtr, table, options, stored, out.data_.data(), out.offset_, progress);
+        sweep ? sweepBlocks(*gridPtr, table, options, *out.directions_, latticeSteps(options.rays),
+                            stored, out.data_.data(), out.offset_, progress)
+              : traceBlocks(*gridPtr, table, options, *out.directions_, stored, out.data_.data(),
+                            out.offset_, progress);
     out.samplesTaken_ = n.samples;
     out.raysTraced_ = n.rays;
     out.pointsSkipped_ = n.skipped;
@@ -654,6 +957,10 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
     if (previous.rays_ != options.rays || previous.coefficients_ != options.coefficients ||
         previous.radius_ != options.radiusVoxels)
         return full("the previous field has other rays, coefficients or radius");
+    if (previous.algorithm_ != options.algorithm)
+        return full("the previous field was integrated by another algorithm");
+    if (options.algorithm == VisibilityAlgorithm::Sweep)
+        return full("the line sweep recomputes every point (a partial update is the march's)");
 
     const MultiresGrid& before = previous.grid();
     const auto profile =
@@ -674,6 +981,8 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
     out.coefficients_ = options.coefficients;
     out.rays_ = options.rays;
     out.radius_ = options.radiusVoxels;
+    out.algorithm_ = options.algorithm;
+    out.directions_ = previous.directions_;
     std::vector<std::size_t> stored;
     out.data_.assign(layoutBlocks(grid, options.coefficients, out.offset_, stored), 0.f);
     std::vector<std::size_t> trace;
@@ -714,8 +1023,8 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
             std::copy_n(previous.blockData(b), m, out.data_.data() + out.offset_[b]);
         }
     }
-    const TraceCounts counts =
-        traceBlocks(grid, table, options, trace, out.data_.data(), out.offset_, progress);
+    const TraceCounts counts = traceBlocks(grid, table, options, *out.directions_, trace,
+                                           out.data_.data(), out.offset_, progress);
     out.samplesTaken_ = counts.samples;
     out.raysTraced_ = counts.rays;
     out.pointsSkipped_ = counts.skipped;
@@ -733,7 +1042,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
     const int C = base.coefficients(), N = base.rays();
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
-    const RaySet set(g, N, C);
+    const RaySet set(g, base.directions(), C);
     const float radius = float(base.radiusVoxels() * h), hf = float(h);
 
     // Each half-space in index space: distance(i) = dot(grad, i) + offset (mm, exact: the world

@@ -55,6 +55,25 @@
 // costs rays in a slab of width 2R around it, not the whole field, and the unclipped field stays
 // cached for the next move.
 //
+// Line sweep (algorithm Sweep, method param `algorithm: "sweep"`): the same V^L with the rays
+// shared between points. The directions are the primitive integer steps v of the voxel lattice
+// with |v_a| ≤ 1 (26 rays) or ≤ 2 (98 rays), ω = D·(v ⊙ spacing)/|v ⊙ spacing| in world space,
+// weighted by their Voronoi cells on the sphere (counted on 2¹⁸ Fibonacci points) and then
+// corrected as visibilityDirections' weights are. Every lattice point lies on exactly one line
+// x₀ + t·v (t integer) of each direction, so per direction one pass along every line accumulates
+// the optical depth P(t) from the line's start — pre-integrated between values read
+// trilinearly in the voxels at sub-steps of |v|/q ≤ 1 voxel (q = ⌈|v|⌉), each split further where
+// deeper than kRefineDepth, as the march's steps are — and a point at t gets
+//   τ = P(t + n) − P(t),   n = R / |v ⊙ spacing|   (fractional: P linear within a lattice step),
+// i.e. its ray to R, at the cost of O(1) per point and direction instead of R/step samples. Level-0
+// samples lie on the integer lattice; every coarser level's samples lie on the lattice shifted by
+// (½, ½, ½) (16·b + (j + ½)·s − ½ with s even), which has its own lines. A line is integrated only
+// from its first traced point to R past its last. The steps follow the voxels, not the LOD (finer
+// than the march in coarse blocks; the LOD still sets where V is stored). Points off both lattices
+// (samples of a partial edge block clamped onto the volume) are marched alone along the same
+// directions. The result is identical for any thread count (each point's directions are summed in
+// one fixed order). A TF update under the sweep recomputes in full.
+//
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only
 // the blocks the change can reach, with a result identical bit for bit to computeLocalVisibility.
@@ -139,12 +158,33 @@ template <class Value>
 /// for every allowed count by tests/visibility).
 inline constexpr int kMinRaysPerCoefficient = 2;
 
+/// How V^L's rays are integrated (header comment).
+enum class VisibilityAlgorithm {
+    March,  ///< each point's N rays marched alone (spherical Fibonacci directions, any N)
+    Sweep,  ///< lattice directions (26 or 98), prefix sums along shared lattice lines
+};
+
+/// The ray counts of the line sweep: the primitive lattice steps with |v_a| ≤ 1 and ≤ 2.
+inline constexpr int kSweepRaysCoarse = 26;
+inline constexpr int kSweepRaysFine = 98;
+/// Fibonacci points that measure the sweep directions' Voronoi cells (solid-angle error of a
+/// weight ≈ 4π/2¹⁸ per boundary point; the weight correction then makes the low bands exact).
+inline constexpr int kSweepWeightPoints = 1 << 18;
+
 struct LocalVisibilityOptions {
-    int rays = 32;               ///< N ≥ kMinRaysPerCoefficient · coefficients
+    int rays = 32;               ///< N ≥ kMinRaysPerCoefficient · coefficients (sweep: 26 or 98)
     int coefficients = 4;        ///< 1, 4, 9 or 16
     double radiusVoxels = 16.0;  ///< r_s in units of the smallest spacing, > 0
     int threads = 0;             ///< 0 = all hardware threads
+    VisibilityAlgorithm algorithm = VisibilityAlgorithm::March;
 };
+
+/// The primitive lattice steps of the sweep: 26 (|v_a| ≤ 1) or 98 (|v_a| ≤ 2), in a fixed order;
+/// InputError for other counts.
+std::vector<glm::ivec3> latticeSteps(int rays);
+/// The sweep's world directions (one per latticeSteps(rays) entry, in `geometry`'s frame) with
+/// Voronoi weights corrected for `coefficients` (header comment).
+sh::SphereSamples latticeDirections(const core::Geometry& geometry, int rays, int coefficients);
 
 /// The N directions and their corrected weights (see header comment). InputError when N or the
 /// coefficient count is not allowed.
@@ -199,6 +239,9 @@ class LocalVisibility {
     /// First float of a block's coefficients (meaningless for kNone blocks).
     const float* blockData(std::size_t block) const { return data_.data() + offset_[block]; }
     std::size_t bytes() const { return data_.size() * sizeof(float); }
+    VisibilityAlgorithm algorithm() const { return algorithm_; }
+    /// The ray directions and weights the field was projected with.
+    const sh::SphereSamples& directions() const { return *directions_; }
     std::uint64_t raysTraced() const { return raysTraced_; }
     std::uint64_t samplesTaken() const { return samplesTaken_; }
     /// Grid points far from anything visible (set to empty space's value without rays).
@@ -226,6 +269,8 @@ class LocalVisibility {
                                                     const core::Progress&, ClipUpdateStats*);
     std::shared_ptr<const MultiresGrid> grid_;
     std::shared_ptr<const optics::TfTable::ExtinctionProfile> extinction_;
+    std::shared_ptr<const sh::SphereSamples> directions_;
+    VisibilityAlgorithm algorithm_ = VisibilityAlgorithm::March;
     int coefficients_ = 0, rays_ = 0;
     double radius_ = 0.0;
     std::vector<std::size_t> offset_;

@@ -237,6 +237,43 @@ TEST(ShLocal, ParamsAreReadStrictly) {
     }
 }
 
+TEST(ShLocal, TheLineSweepIsAParamOfItsOwnStageAndServesShGlobal) {
+    Session session;
+    json d = shScene();
+    d["method"]["params"] = {{"data_reduction", 2}};
+    const RunResult march = session.run(scene(d));
+    d["method"]["params"]["algorithm"] = "sweep";  // 26 lattice rays by default
+    const RunResult sweep = session.run(scene(d));
+    // Another field (its own key): local visibility reruns, nothing before it.
+    EXPECT_EQ(ranStages(sweep), (std::set<std::string>{"local_visibility", "camera", "render"}));
+    EXPECT_TRUE(allFinite(sweep.image));
+    EXPECT_NE(sweep.image.pixels, march.image.pixels);
+    // The two agree as two quadratures of the same visibility (mean radiance within 5 %).
+    double a = 0.0, b = 0.0;
+    for (std::size_t i = 0; i < march.image.pixels.size(); ++i) {
+        a += march.image.pixels[i];
+        b += sweep.image.pixels[i];
+    }
+    EXPECT_GT(a, 0.0);
+    EXPECT_NEAR(b / a, 1.0, 0.05);
+    // sh-global chains the swept field along its own lattice directions.
+    d["method"]["name"] = "sh-global";
+    const RunResult global = session.run(scene(d));
+    EXPECT_EQ(ranStages(global), (std::set<std::string>{"global_visibility", "camera", "render"}));
+    EXPECT_TRUE(allFinite(global.image));
+    d["method"]["name"] = "sh-local";
+    d["method"]["params"]["rays"] = 32;
+    try {
+        session.plan(scene(d));
+        ADD_FAILURE() << "the sweep accepted 32 rays";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.rays");
+    }
+    d["method"]["params"]["rays"] = 98;
+    d["method"]["params"]["algorithm"] = "sweeps";
+    EXPECT_THROW(session.plan(scene(d)), InputError);
+}
+
 TEST(ShLocal, OpaqueAndTransparentTfsAndALightOnAGridPointStayFinite) {
     json d = shScene();
     // The phantom is centred on the world origin: voxel 16 of 32 lies half a spacing past it. Put

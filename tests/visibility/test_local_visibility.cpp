@@ -270,8 +270,9 @@ TEST(LocalVisibility, TheFastMarchReproducesTheReferenceMarchAtEveryPointAndDire
     ASSERT_LT(table.zeroAbove(), 3000.f);
     const auto grid = std::make_shared<const MultiresGrid>(
         pyr, selectLod(*pyr, tf, table, LodBudget::fromReduction(3.0, v.voxelCount())));
-    int levels[kNone + 1] = {};
-    for (std::size_t b = 0; b < pyr->blockCount(); ++b) ++levels[grid->level(b)];
+    int levels[kLevels] = {};  // blocks per level (kNone not counted)
+    for (std::size_t b = 0; b < pyr->blockCount(); ++b)
+        if (grid->level(b) != kNone) ++levels[grid->level(b)];
     ASSERT_GT(levels[0], 0);
     ASSERT_GT(levels[1] + levels[2], 0);
     LocalVisibilityOptions o;
