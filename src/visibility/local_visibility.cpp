@@ -9,6 +9,7 @@
 #include <atomic>
 #include <cmath>
 #include <numbers>
+#include <numeric>
 #include <thread>
 #include <utility>
 
@@ -69,8 +70,13 @@ struct ValueField {
     }
 
     [[gnu::always_inline]] float at(const glm::vec3& pIn, bool& stored) const {
+        stored = grid.level(grid.ownerBlock(glm::clamp(pIn, glm::vec3(0.f), top))) != kNone;
+        return value(pIn);
+    }
+
+    /// The trilinear value alone (the line sweep needs no owner block).
+    [[gnu::always_inline]] float value(const glm::vec3& pIn) const {
         const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), top);
-        stored = grid.level(grid.ownerBlock(p)) != kNone;
         const glm::ivec3 c = glm::min(glm::ivec3(p), lastCorner);
         const glm::vec3 f = p - glm::vec3(c);
         const int di = c.x < int(top.x) ? 1 : 0, dj = c.y < int(top.y) ? 1 : 0,
@@ -623,11 +629,16 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     auto transparent = [&](float a, float b) {
         return std::max(a, b) <= zeroBelow || std::min(a, b) >= zeroAbove;
     };
+    // Sub-steps per lattice step: the trilinear value along a line kinks where it crosses a voxel
+    // plane, so every crossing must be a sub-step end (pre-integration takes the value linear
+    // between ends). From a voxel a step v crosses the planes of axis a at multiples of 1/|v_a|;
+    // from the shifted lattice at odd multiples of 1/(2|v_a|): q is a multiple of lcm(|v_a|)
+    // (×2 when shifted), and at least ⌈|v|⌉ so sub-steps stay within about a voxel.
     struct Dir {
         glm::ivec3 v;
         glm::vec3 dv;
-        float stepMm = 0.f, subMm = 0.f;
-        int q = 1;
+        float stepMm = 0.f;
+        int q[2] = {1, 1};   ///< sub-steps per lattice step: voxel lattice, shifted lattice
         double reach = 0.0;  ///< lattice steps to R
     };
     std::vector<Dir> dirs;
@@ -636,8 +647,14 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         d.v = v;
         d.dv = glm::vec3(v);
         d.stepMm = float(glm::length(glm::dvec3(v) * g.spacing));
-        d.q = std::max(1, int(std::ceil(float(glm::length(glm::dvec3(v))) - 1e-4f)));
-        d.subMm = d.stepMm / float(d.q);
+        int kinks = 1;
+        for (int a = 0; a < 3; ++a)
+            if (v[a] != 0) kinks = std::lcm(kinks, std::abs(v[a]));
+        const int minQ = std::max(1, int(std::ceil(float(glm::length(glm::dvec3(v))) - 1e-4f)));
+        for (int half = 0; half < 2; ++half) {
+            const int base = kinks * (half ? 2 : 1);
+            d.q[half] = base * ((minQ + base - 1) / base);
+        }
         d.reach = double(radius) / double(d.stepMm);
         dirs.push_back(d);
     }
@@ -659,96 +676,110 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 std::vector<int> onLine;  // in-block point indices along a line, −1 = not traced
                 for (std::size_t r = range.begin(); r != range.end(); ++r) {
                     const std::size_t b = blocks[r];
-                    const bool level0 = grid.level(b) == 0;
+                    const int level = grid.level(b), n = levelResolution(level);
+                    const int spacing = levelSpacing(level);
+                    const bool half = level > 0;  // on the lattice shifted by (½, ½, ½)
+                    const glm::vec3 p0 = grid.samplePosition(b, level, 0, 0, 0);
                     float* blockData = data + offset[b];
                     std::size_t index = 0;
-                    forEachSamplePoint(grid, b, C, blockData,
-                                       [&](const glm::vec3& origin, float* dst, float spacing) {
-                                           const std::size_t me = index++;
-                                           if (level0) swept[me] = 0;
-                                           if (!visibilityNeeded(grid, origin, spacing)) {
-                                               setEmpty(dst, C);
-                                               ++skipped;
-                                               return;
-                                           }
-                                           traced += std::uint64_t(N);
-                                           // Level 0 on the voxel lattice (a partial edge block's points past
-                                           // the volume are clamped onto it: those are marched).
-                                           if (level0 && origin == glm::floor(origin) &&
-                                               glm::ivec3(origin) ==
-                                                   pyr.blockCoord(b) * kBlockSize +
-                                                       glm::ivec3(int(me % 16), int(me / 16 % 16),
-                                                                  int(me / 256))) {
-                                               swept[me] = 1;
-                                               std::fill(dst, dst + C, 0.f);
-                                               return;
-                                           }
-                                           pointVisibility(
-                                               field, set, origin, dims, radius, hf,
-                                               [](int, float&, float&) { return true; }, v,
-                                               samples);
-                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                                       });
-                    if (!level0) continue;
-                    const glm::ivec3 base = pyr.blockCoord(b) * kBlockSize;
-                    const glm::ivec3 blockHi = glm::min(base + kBlockSize, dims) - 1;
-                    auto inBlock = [&](const glm::ivec3& x) {
-                        return glm::all(glm::greaterThanEqual(x, base)) &&
-                               glm::all(glm::lessThanEqual(x, blockHi));
+                    bool any = false;
+                    forEachSamplePoint(
+                        grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
+                            const std::size_t me = index++;
+                            swept[me] = 0;
+                            if (!visibilityNeeded(grid, origin, s)) {
+                                setEmpty(dst, C);
+                                ++skipped;
+                                return;
+                            }
+                            traced += std::uint64_t(N);
+                            const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
+                            if (origin == p0 + float(spacing) * glm::vec3(j)) {
+                                swept[me] = 1;
+                                any = true;
+                                std::fill(dst, dst + C, 0.f);
+                                return;
+                            }
+                            // A partial edge block's point past the volume,
+                            // clamped onto it (off the lattice): marched.
+                            pointVisibility(
+                                field, set, origin, dims, radius, hf,
+                                [](int, float&, float&) { return true; }, v, samples);
+                            for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                        });
+                    if (!any) continue;
+                    auto inBlock = [&](const glm::ivec3& j) {
+                        return glm::all(glm::greaterThanEqual(j, glm::ivec3(0))) &&
+                               glm::all(glm::lessThan(j, glm::ivec3(n)));
                     };
-                    auto inVolume = [&](const glm::ivec3& x) {
-                        return glm::all(glm::greaterThanEqual(x, glm::ivec3(0))) &&
-                               glm::all(glm::lessThan(x, dims));
+                    const glm::vec3 top(dims - 1);
+                    auto inVolume = [&](const glm::vec3& x) {
+                        return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
+                               glm::all(glm::lessThanEqual(x, top));
                     };
                     for (int k = 0; k < N; ++k) {
                         const Dir& d = dirs[std::size_t(k)];
                         const double* wy = set.wy.data() + std::size_t(k) * C;
-                        for (int z = base.z; z <= blockHi.z; ++z)
-                            for (int y = base.y; y <= blockHi.y; ++y)
-                                for (int x = base.x; x <= blockHi.x; ++x) {
+                        // The block's points on one lattice line lie `spacing` lattice steps
+                        // apart (v is primitive and the spacing a power of two), i.e. at sample
+                        // indices j + m·v.
+                        for (int z = 0; z < n; ++z)
+                            for (int y = 0; y < n; ++y)
+                                for (int x = 0; x < n; ++x) {
                                     const glm::ivec3 head(x, y, z);
                                     if (inBlock(head - d.v)) continue;  // not a line's first
                                     onLine.clear();
-                                    int first = -1, last = -1;
-                                    for (glm::ivec3 p = head; inBlock(p); p += d.v) {
-                                        const glm::ivec3 l = p - base;
-                                        const int i = l.x + kBlockSize * (l.y + kBlockSize * l.z);
+                                    int mFirst = -1, mLast = -1;
+                                    for (glm::ivec3 j = head; inBlock(j); j += d.v) {
+                                        const int i = j.x + n * (j.y + n * j.z);
                                         const bool mine = swept[std::size_t(i)] != 0;
                                         if (mine) {
-                                            if (first < 0) first = int(onLine.size());
-                                            last = int(onLine.size());
+                                            if (mFirst < 0) mFirst = int(onLine.size());
+                                            mLast = int(onLine.size());
                                         }
                                         onLine.push_back(mine ? i : -1);
                                     }
-                                    if (first < 0) continue;
+                                    if (mFirst < 0) continue;
+                                    const int first = mFirst * spacing, last = mLast * spacing;
+                                    const glm::vec3 lineStart =
+                                        p0 + float(spacing) * glm::vec3(head);
                                     // P at every sub-step from the first traced point, over
                                     // lattice steps inside the volume, to R past the last (then
                                     // constant: outside the volume is empty); S the values there.
-                                    const int q = d.q;
+                                    // Lattice t lies at lineStart + t·v.
+                                    const int q = d.q[half ? 1 : 0];
+                                    const float subMm = d.stepMm / float(q);
                                     const int want = last + int(std::ceil(d.reach)) + 1;
                                     const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
                                     P.assign(subs, 0.0);
                                     S.assign(subs, 0.f);
-                                    bool st = false;
-                                    glm::ivec3 at = head + first * d.v;
+                                    auto latticeValue = [&](const glm::vec3& x) {
+                                        // Voxels are read directly (trilinear weights 0 there
+                                        // give the same value).
+                                        return half ? field.value(x)
+                                                    : field.voxel(int(x.x), int(x.y), int(x.z));
+                                    };
+                                    auto along = [&](const glm::vec3& from) {
+                                        return [&, from](float mm) {
+                                            return field.value(from + (mm / d.stepMm) * d.dv);
+                                        };
+                                    };
+                                    glm::vec3 at = lineStart + float(first) * d.dv;
                                     const std::size_t m0 = std::size_t(first) * std::size_t(q);
-                                    // Lattice points are voxels: read directly (trilinear
-                                    // weights 0 there give the same value).
-                                    S[m0] = field.voxel(at.x, at.y, at.z);
+                                    S[m0] = latticeValue(at);
                                     double iFront = 0.0;
                                     bool haveIFront = false;
                                     int t = first;
-                                    for (; t < want; ++t, at += d.v) {
-                                        const glm::ivec3 next = at + d.v;
+                                    for (; t < want; ++t) {
+                                        const glm::vec3 next = lineStart + float(t + 1) * d.dv;
                                         if (!inVolume(next)) break;
-                                        const glm::vec3 a(at);
                                         const std::size_t m = std::size_t(t) * std::size_t(q);
                                         for (int j = 1; j <= q; ++j) {
                                             const float sFront = S[m + std::size_t(j) - 1];
                                             const float sBack =
-                                                j == q ? field.voxel(next.x, next.y, next.z)
-                                                       : field.at(a + (float(j) / float(q)) * d.dv,
-                                                                  st);
+                                                j == q ? latticeValue(next)
+                                                       : field.value(at +
+                                                                     (float(j) / float(q)) * d.dv);
                                             S[m + std::size_t(j)] = sBack;
                                             ++samples;
                                             bool haveIBack = false;
@@ -758,59 +789,72 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                                     iFront = table.sigmaIntegral(sFront);
                                                 iBack = table.sigmaIntegral(sBack);
                                                 haveIBack = true;
-                                                const glm::vec3 from =
-                                                    a + (float(j - 1) / float(q)) * d.dv;
                                                 tau = preIntegratedStep(
-                                                    table, sFront, iFront, sBack, iBack, d.subMm,
-                                                    0.0,
-                                                    [&](float mm) {
-                                                        bool s2 = false;
-                                                        return field.at(
-                                                            from + (mm / d.stepMm) * d.dv, s2);
-                                                    },
+                                                    table, sFront, iFront, sBack, iBack, subMm, 0.0,
+                                                    along(at + (float(j - 1) / float(q)) * d.dv),
                                                     samples);
                                             }
                                             P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
                                             iFront = iBack;
                                             haveIFront = haveIBack;
                                         }
+                                        at = next;
                                     }
-                                    // P and S valid on sub-steps [m0, lastSub].
+                                    // P and S valid on sub-steps [m0, lastSub]. A line that left
+                                    // the volume ends at the box face (the march's box exit), a
+                                    // fraction φ of a lattice step past its last point.
                                     const std::size_t lastSub = std::size_t(t) * std::size_t(q);
-                                    for (int u = first; u <= last; ++u) {
-                                        const int i = onLine[std::size_t(u)];
+                                    double exitSub = double(lastSub), pExit = P[lastSub];
+                                    // Optical depth from sub-step e0 to `f` sub-steps past it
+                                    // (f ≤ 1, or the exit's fraction), pre-integrated to the
+                                    // value there.
+                                    auto partial = [&](std::size_t e0, float f) {
+                                        const glm::vec3 from =
+                                            lineStart + (float(e0) / float(q)) * d.dv;
+                                        const float s0 = S[e0];
+                                        const float sEnd =
+                                            field.value(from + (f / float(q)) * d.dv);
+                                        ++samples;
+                                        if (transparent(s0, sEnd)) return 0.0;
+                                        return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
+                                                                 sEnd, table.sigmaIntegral(sEnd),
+                                                                 f * subMm, 0.0, along(from),
+                                                                 samples);
+                                    };
+                                    if (t < want) {
+                                        float phi = 1.f;
+                                        for (int ax = 0; ax < 3; ++ax) {
+                                            if (d.v[ax] > 0)
+                                                phi = std::min(phi,
+                                                               (top[ax] - at[ax]) / float(d.v[ax]));
+                                            if (d.v[ax] < 0)
+                                                phi = std::min(phi, at[ax] / float(-d.v[ax]));
+                                        }
+                                        if (phi > 0.f) {
+                                            exitSub += double(phi) * double(q);
+                                            pExit += partial(lastSub, phi * float(q));
+                                        }
+                                    }
+                                    for (int mi = mFirst; mi <= mLast; ++mi) {
+                                        const int i = onLine[std::size_t(mi)];
                                         if (i < 0) continue;
-                                        const std::size_t mu = std::size_t(u) * std::size_t(q);
-                                        // The ray's end R past the point, in sub-steps.
+                                        const std::size_t mu =
+                                            std::size_t(mi * spacing) * std::size_t(q);
+                                        // The ray's end R past the point, in sub-steps: up to the
+                                        // sub-step before it, then the partial sub-step
+                                        // pre-integrated to the end's value (as the march's
+                                        // shortened last step).
                                         const double e = double(mu) + d.reach * double(q);
                                         double pEnd;
-                                        if (e >= double(lastSub)) {
-                                            pEnd = P[lastSub];
+                                        if (e >= exitSub) {
+                                            pEnd = pExit;
                                         } else {
-                                            // Up to the sub-step before the end, then the
-                                            // partial sub-step pre-integrated to the end's value
-                                            // (as the march's shortened last step).
                                             const std::size_t e0 = std::size_t(e);
                                             const float f = float(e - double(e0));
                                             pEnd = P[e0];
-                                            const float s0 = S[e0], s1 = S[e0 + 1];
-                                            if (f > 0.f && !transparent(s0, s1)) {
-                                                const glm::vec3 from =
-                                                    glm::vec3(head) + (float(e0) / float(q)) * d.dv;
-                                                const float sEnd =
-                                                    field.at(from + (f / float(q)) * d.dv, st);
-                                                ++samples;
-                                                if (!transparent(s0, sEnd))
-                                                    pEnd += preIntegratedStep(
-                                                        table, s0, table.sigmaIntegral(s0), sEnd,
-                                                        table.sigmaIntegral(sEnd), f * d.subMm, 0.0,
-                                                        [&](float mm) {
-                                                            bool s2 = false;
-                                                            return field.at(
-                                                                from + (mm / d.stepMm) * d.dv, s2);
-                                                        },
-                                                        samples);
-                                            }
+                                            if (f > 0.f &&
+                                                (e0 >= lastSub || !transparent(S[e0], S[e0 + 1])))
+                                                pEnd += partial(e0, f);
                                         }
                                         const double tau = pEnd - P[mu];
                                         const double T =

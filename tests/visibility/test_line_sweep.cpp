@@ -80,7 +80,10 @@ FieldError errorAgainstTruth(const core::Volume& v, const MultiresGrid& grid,
             for (int j = 0; j < n; ++j)
                 for (int i = 0; i < n; ++i, data += C) {
                     if ((i + 3 * j + 5 * k) % 5 != 0) continue;  // a fifth of the points
-                    const glm::vec3 x = glm::min(grid.samplePosition(b, l, i, j, k), top);
+                    const glm::vec3 x = grid.samplePosition(b, l, i, j, k);
+                    // Points of a partial edge block past the volume are clamped onto it and
+                    // marched by both algorithms: left out.
+                    if (x != glm::min(x, top)) continue;
                     if (!visibilityNeeded(grid, x, float(levelSpacing(l)))) continue;
                     std::vector<double> truth(std::size_t(C), 0.0);
                     for (std::size_t r = 0; r < dirs.size(); ++r) {
@@ -215,30 +218,27 @@ TEST(LineSweep, FollowsTheContinuousModelAsCloselyAsTheMarch) {
     LocalVisibilityOptions mo = sweepOptions(32, 4, 12.0);
     mo.algorithm = VisibilityAlgorithm::March;
     const LocalVisibility march = computeLocalVisibility(grid, table, mo);
-    const FieldError es = errorAgainstTruth(v, *grid, table, sweep, 0);
-    const FieldError em = errorAgainstTruth(v, *grid, table, march, 0);
-    for (int l = 1; l < 3; ++l) {
-        const FieldError cs = errorAgainstTruth(v, *grid, table, sweep, l);
-        const FieldError cm = errorAgainstTruth(v, *grid, table, march, l);
-        std::printf("level %d: sweep max %.4f mean %.5f, march max %.4f mean %.5f (%d points)\n", l,
-                    cs.maxV0, cs.meanV0, cm.maxV0, cm.meanV0, cs.compared);
-    }
-    std::printf(
-        "V_0 against the continuous model (|V_0| ≤ %.3f): sweep max %.4f mean %.5f, march "
-        "max %.4f mean %.5f (%d / %d points)\n",
-        kSqrt4Pi, es.maxV0, es.meanV0, em.maxV0, em.meanV0, es.compared, em.compared);
-    ASSERT_GT(es.compared, 500);
     // Both integrate pre-integrated steps with the value linear between their ends (split where
-    // deeper than kRefineDepth) and end with a partial step pre-integrated to the end's value; the
-    // sweep steps ≤ 1 voxel everywhere, the march follows the LOD (2–4 voxels across coarse
-    // blocks) and jumps across invisible cells. Measured at level 0 (V_0, scale √(4π) = 3.54):
-    // sweep max 0.020, mean 0.0023; march max 0.16, mean 0.028 (coarse levels are marched by
-    // both: mean 0.14 / 0.12 at level 1). kSweepTol: 2 % of √(4π) at every swept point, 3.5× the
-    // sweep's measured maximum; and the sweep's mean error must stay below the march's.
+    // deeper than kRefineDepth) and end with a partial step pre-integrated to the end's value.
+    // The sweep's sub-steps end at every voxel plane a line crosses (where the trilinear value
+    // kinks) and stay within about a voxel; the march steps 1, 2 or 4 voxels as the LOD says,
+    // across voxel planes, and jumps across invisible cells. Measured (V_0, scale √(4π) = 3.54):
+    // sweep max 0.020 / 0.027 / 0.005 at levels 0 / 1 / 2, means 0.0024 / 0.0020 / 0.0003;
+    // march max 0.16 / 0.63 / 0.25, means 0.031 / 0.12 / 0.045. kSweepTol (2 % of √(4π)) is 2.6×
+    // the sweep's largest error; its mean must stay below a fifth of the march's.
     const double kSweepTol = 0.02 * kSqrt4Pi;
-    EXPECT_LT(es.maxV0, kSweepTol);
-    EXPECT_LT(es.maxAny, kSweepTol);
-    EXPECT_LT(es.meanV0, em.meanV0);
+    for (int l = 0; l < 3; ++l) {
+        const FieldError es = errorAgainstTruth(v, *grid, table, sweep, l);
+        const FieldError em = errorAgainstTruth(v, *grid, table, march, l);
+        std::printf(
+            "level %d, V_0 against the continuous model: sweep max %.4f mean %.5f, march "
+            "max %.4f mean %.5f (%d points)\n",
+            l, es.maxV0, es.meanV0, em.maxV0, em.meanV0, es.compared);
+        ASSERT_GT(es.compared, l == 2 ? 10 : 500) << l;
+        EXPECT_LT(es.maxV0, kSweepTol) << l;
+        EXPECT_LT(es.maxAny, kSweepTol) << l;
+        EXPECT_LT(es.meanV0, 0.2 * em.meanV0) << l;
+    }
 }
 
 TEST(LineSweep, IdenticalForAnyThreadCount) {
