@@ -633,13 +633,41 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     // plane, so every crossing must be a sub-step end (pre-integration takes the value linear
     // between ends). From a voxel a step v crosses the planes of axis a at multiples of 1/|v_a|;
     // from the shifted lattice at odd multiples of 1/(2|v_a|): q is a multiple of lcm(|v_a|)
-    // (×2 when shifted), and at least ⌈|v|⌉ so sub-steps stay within about a voxel.
+    // (×2 when shifted), and at least ⌈|v|⌉ so sub-steps stay within about a voxel.    // The flat voxel array the lines read (the pyramid's level 0 in x-fastest order): every line
+    // of a direction sees its sub-steps at the same fractional positions, so each sub-step's value
+    // is a fixed stencil — the non-zero trilinear weights and their voxel offsets from the lattice
+    // point's voxel — read with no position arithmetic.
+    struct Stencil {
+        int n = 0;
+        std::ptrdiff_t offset[8] = {};
+        float weight[8] = {};
+    };
+    const std::ptrdiff_t sy = dims.x, sz = std::ptrdiff_t(dims.x) * dims.y;
     struct Dir {
         glm::ivec3 v;
         glm::vec3 dv;
         float stepMm = 0.f;
-        int q[2] = {1, 1};   ///< sub-steps per lattice step: voxel lattice, shifted lattice
-        double reach = 0.0;  ///< lattice steps to R
+        int q[2] = {1, 1};         ///< sub-steps per lattice step: voxel lattice, shifted lattice
+        double reach = 0.0;        ///< lattice steps to R
+        std::ptrdiff_t delta = 0;  ///< voxel index change per lattice step
+        std::vector<Stencil> stencil[2];  ///< per lattice: sub-steps 0…q (q: the next point)
+    };
+    auto makeStencil = [&](const glm::dvec3& rel) {
+        // rel: the position relative to the lattice point's voxel (floor of its coordinates).
+        Stencil st;
+        const glm::dvec3 fl = glm::floor(rel);
+        const glm::dvec3 f = rel - fl;
+        for (int c = 0; c < 8; ++c) {
+            const glm::ivec3 o((c & 1) ? 1 : 0, (c & 2) ? 1 : 0, (c & 4) ? 1 : 0);
+            double w = 1.0;
+            for (int a = 0; a < 3; ++a) w *= o[a] ? f[a] : 1.0 - f[a];
+            if (!(w > 0.0)) continue;
+            const glm::ivec3 at = glm::ivec3(fl) + o;
+            st.offset[st.n] = at.x + sy * at.y + sz * at.z;
+            st.weight[st.n] = float(w);
+            ++st.n;
+        }
+        return st;
     };
     std::vector<Dir> dirs;
     for (const glm::ivec3& v : steps) {
@@ -656,8 +684,62 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             d.q[half] = base * ((minQ + base - 1) / base);
         }
         d.reach = double(radius) / double(d.stepMm);
+        d.delta = v.x + sy * v.y + sz * v.z;
+        for (int half = 0; half < 2; ++half)
+            for (int j = 0; j <= d.q[half]; ++j)
+                d.stencil[half].push_back(makeStencil(glm::dvec3(half ? 0.5 : 0.0) +
+                                                      glm::dvec3(v) * (double(j) / d.q[half])));
         dirs.push_back(d);
     }
+    std::vector<float> flat(std::size_t(dims.x) * dims.y * dims.z);
+    {
+        tbb::task_arena copyArena(options.threads > 0 ? options.threads
+                                                      : tbb::task_arena::automatic);
+        copyArena.execute([&] {
+            tbb::parallel_for(0, dims.z, [&](int z) {
+                for (int y = 0; y < dims.y; ++y)
+                    for (int x = 0; x < dims.x; ++x)
+                        flat[std::size_t(x + sy * y + sz * z)] = field.voxel(x, y, z);
+            });
+        });
+    }
+    auto read = [&](std::ptrdiff_t base, const Stencil& st) {
+        float value = 0.f;
+        for (int c = 0; c < st.n; ++c)
+            value += st.weight[c] * flat[std::size_t(base + st.offset[c])];
+        return value;
+    };
+
+    // Empty space: a 4³ cell whose value range the TF makes transparent holds σt = 0 at every
+    // trilinear sample inside it (LodSelection::cellVisible). A lattice step (≤ 2 voxels per
+    // axis) that starts in a cell whose 26 neighbours are transparent too stays inside them, so
+    // it integrates nothing and reads no value ("quiet" cells).
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    const glm::ivec3 cells = pyr.cells();
+    std::vector<std::uint8_t> quiet(std::size_t(cells.x) * cells.y * cells.z, 0);
+    auto cellIndex = [&](int x, int y, int z) {
+        return std::size_t(x) + std::size_t(cells.x) * (std::size_t(y) + std::size_t(cells.y) * z);
+    };
+    for (int z = 0; z < cells.z; ++z)
+        for (int y = 0; y < cells.y; ++y)
+            for (int x = 0; x < cells.x; ++x) {
+                bool all = true;
+                for (int dz = -1; dz <= 1 && all; ++dz)
+                    for (int dy = -1; dy <= 1 && all; ++dy)
+                        for (int dx = -1; dx <= 1 && all; ++dx) {
+                            const int cx = x + dx, cy = y + dy, cz = z + dz;
+                            if (cx < 0 || cy < 0 || cz < 0 || cx >= cells.x || cy >= cells.y ||
+                                cz >= cells.z)
+                                continue;  // outside the volume: nothing there
+                            all = !grid.cellVisible(cellIndex(cx, cy, cz));
+                        }
+                quiet[cellIndex(x, y, z)] = all;
+            }
+    auto quietAt = [&](const glm::vec3& p) {
+        const glm::ivec3 c =
+            glm::clamp(glm::ivec3(p * (1.f / float(kCell))), glm::ivec3(0), cells - 1);
+        return quiet[cellIndex(c.x, c.y, c.z)] != 0;
+    };
 
     std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
     std::atomic<std::size_t> done{0};
@@ -670,6 +752,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 if (progress.cancelled()) return;
                 std::uint64_t samples = 0, traced = 0, skipped = 0;
                 double v[16];
+                std::vector<std::uint8_t> stepQuiet;  // per lattice step of a line
                 std::vector<std::uint8_t> swept(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
                 std::vector<double> P;    // optical depth from a line's first traced point
                 std::vector<float> S;     // the value at each sub-step
@@ -753,33 +836,43 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
                                     P.assign(subs, 0.0);
                                     S.assign(subs, 0.f);
-                                    auto latticeValue = [&](const glm::vec3& x) {
-                                        // Voxels are read directly (trilinear weights 0 there
-                                        // give the same value).
-                                        return half ? field.value(x)
-                                                    : field.voxel(int(x.x), int(x.y), int(x.z));
+                                    const std::vector<Stencil>& sten = d.stencil[half ? 1 : 0];
+                                    // The voxel index of lattice point t's floor: base0 + t·delta.
+                                    const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
+                                    const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
+                                    auto latticeValue = [&](int tt) {
+                                        return read(base0 + tt * d.delta, sten[0]);
                                     };
                                     auto along = [&](const glm::vec3& from) {
                                         return [&, from](float mm) {
                                             return field.value(from + (mm / d.stepMm) * d.dv);
                                         };
                                     };
+                                    stepQuiet.assign(std::size_t(want) + 1, 0);
                                     glm::vec3 at = lineStart + float(first) * d.dv;
-                                    const std::size_t m0 = std::size_t(first) * std::size_t(q);
-                                    S[m0] = latticeValue(at);
                                     double iFront = 0.0;
-                                    bool haveIFront = false;
+                                    bool haveIFront = false, haveStart = false;
                                     int t = first;
                                     for (; t < want; ++t) {
                                         const glm::vec3 next = lineStart + float(t + 1) * d.dv;
                                         if (!inVolume(next)) break;
                                         const std::size_t m = std::size_t(t) * std::size_t(q);
+                                        if (quietAt(at)) {
+                                            // Transparent throughout: nothing to integrate or
+                                            // read (S stays unread there).
+                                            stepQuiet[std::size_t(t)] = 1;
+                                            for (int j = 1; j <= q; ++j)
+                                                P[m + std::size_t(j)] = P[m];
+                                            haveStart = haveIFront = false;
+                                            at = next;
+                                            continue;
+                                        }
+                                        if (!haveStart) S[m] = latticeValue(t);
+                                        const std::ptrdiff_t base = base0 + t * d.delta;
+                                        haveStart = true;
                                         for (int j = 1; j <= q; ++j) {
                                             const float sFront = S[m + std::size_t(j) - 1];
-                                            const float sBack =
-                                                j == q ? latticeValue(next)
-                                                       : field.value(at +
-                                                                     (float(j) / float(q)) * d.dv);
+                                            const float sBack = read(base, sten[std::size_t(j)]);
                                             S[m + std::size_t(j)] = sBack;
                                             ++samples;
                                             bool haveIBack = false;
@@ -811,7 +904,13 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     auto partial = [&](std::size_t e0, float f) {
                                         const glm::vec3 from =
                                             lineStart + (float(e0) / float(q)) * d.dv;
-                                        const float s0 = S[e0];
+                                        if (stepQuiet[e0 / std::size_t(q)] ||
+                                            (e0 == lastSub && quietAt(from)))
+                                            return 0.0;  // inside quiet cells' neighbourhood
+                                        if (e0 < lastSub && transparent(S[e0], S[e0 + 1]))
+                                            return 0.0;  // the whole sub-step is
+                                        const float s0 =
+                                            e0 == lastSub && !haveStart ? latticeValue(t) : S[e0];
                                         const float sEnd =
                                             field.value(from + (f / float(q)) * d.dv);
                                         ++samples;
@@ -852,9 +951,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             const std::size_t e0 = std::size_t(e);
                                             const float f = float(e - double(e0));
                                             pEnd = P[e0];
-                                            if (f > 0.f &&
-                                                (e0 >= lastSub || !transparent(S[e0], S[e0 + 1])))
-                                                pEnd += partial(e0, f);
+                                            if (f > 0.f) pEnd += partial(e0, f);
                                         }
                                         const double tau = pEnd - P[mu];
                                         const double T =
