@@ -651,6 +651,11 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         double reach = 0.0;        ///< lattice steps to R
         std::ptrdiff_t delta = 0;  ///< voxel index change per lattice step
         std::vector<Stencil> stencil[2];  ///< per lattice: sub-steps 0…q (q: the next point)
+        /// A ray's end, R past its point: endSub whole sub-steps and endFrac of one more, and the
+        /// stencil of the value there (the same for every point of the lattice).
+        std::size_t endSub[2] = {0, 0};
+        float endFrac[2] = {0.f, 0.f};
+        Stencil end[2];
     };
     auto makeStencil = [&](const glm::dvec3& rel) {
         // rel: the position relative to the lattice point's voxel (floor of its coordinates).
@@ -685,6 +690,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         }
         d.reach = double(radius) / double(d.stepMm);
         d.delta = v.x + sy * v.y + sz * v.z;
+        for (int half = 0; half < 2; ++half) {
+            const double subs = d.reach * double(d.q[half]);
+            d.endSub[half] = std::size_t(subs);
+            d.endFrac[half] = float(subs - std::floor(subs));
+            d.end[half] = makeStencil(glm::dvec3(half ? 0.5 : 0.0) + glm::dvec3(v) * d.reach);
+        }
         for (int half = 0; half < 2; ++half)
             for (int j = 0; j <= d.q[half]; ++j)
                 d.stencil[half].push_back(makeStencil(glm::dvec3(half ? 0.5 : 0.0) +
@@ -901,7 +912,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     // Optical depth from sub-step e0 to `f` sub-steps past it
                                     // (f ≤ 1, or the exit's fraction), pre-integrated to the
                                     // value there.
-                                    auto partial = [&](std::size_t e0, float f) {
+                                    auto partial = [&](std::size_t e0, float f, float sEnd) {
                                         const glm::vec3 from =
                                             lineStart + (float(e0) / float(q)) * d.dv;
                                         if (stepQuiet[e0 / std::size_t(q)] ||
@@ -911,8 +922,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             return 0.0;  // the whole sub-step is
                                         const float s0 =
                                             e0 == lastSub && !haveStart ? latticeValue(t) : S[e0];
-                                        const float sEnd =
-                                            field.value(from + (f / float(q)) * d.dv);
+                                        if (std::isnan(sEnd))
+                                            sEnd = field.value(from + (f / float(q)) * d.dv);
                                         ++samples;
                                         if (transparent(s0, sEnd)) return 0.0;
                                         return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
@@ -931,7 +942,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         }
                                         if (phi > 0.f) {
                                             exitSub += double(phi) * double(q);
-                                            pExit += partial(lastSub, phi * float(q));
+                                            pExit += partial(lastSub, phi * float(q), NAN);
                                         }
                                     }
                                     for (int mi = mFirst; mi <= mLast; ++mi) {
@@ -943,15 +954,19 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         // sub-step before it, then the partial sub-step
                                         // pre-integrated to the end's value (as the march's
                                         // shortened last step).
-                                        const double e = double(mu) + d.reach * double(q);
+                                        const std::size_t e0 = mu + d.endSub[half ? 1 : 0];
+                                        const float f = d.endFrac[half ? 1 : 0];
                                         double pEnd;
-                                        if (e >= exitSub) {
+                                        if (double(e0) + double(f) >= exitSub) {
                                             pEnd = pExit;
                                         } else {
-                                            const std::size_t e0 = std::size_t(e);
-                                            const float f = float(e - double(e0));
                                             pEnd = P[e0];
-                                            if (f > 0.f) pEnd += partial(e0, f);
+                                            if (f > 0.f)
+                                                pEnd += partial(
+                                                    e0, f,
+                                                    read(base0 +
+                                                             std::ptrdiff_t(mi * spacing) * d.delta,
+                                                         d.end[half ? 1 : 0]));
                                         }
                                         const double tau = pEnd - P[mu];
                                         const double T =
