@@ -758,232 +758,253 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     progress.report("local visibility", 0.0);
     tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
     arena.execute([&] {
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
-                if (progress.cancelled()) return;
-                std::uint64_t samples = 0, traced = 0, skipped = 0;
-                double v[16];
-                std::vector<std::uint8_t> stepQuiet;  // per lattice step of a line
-                std::vector<std::uint8_t> swept(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
-                std::vector<double> P;    // optical depth from a line's first traced point
-                std::vector<float> S;     // the value at each sub-step
-                std::vector<int> onLine;  // in-block point indices along a line, −1 = not traced
-                for (std::size_t r = range.begin(); r != range.end(); ++r) {
-                    const std::size_t b = blocks[r];
-                    const int level = grid.level(b), n = levelResolution(level);
-                    const int spacing = levelSpacing(level);
-                    const bool half = level > 0;  // on the lattice shifted by (½, ½, ½)
-                    const glm::vec3 p0 = grid.samplePosition(b, level, 0, 0, 0);
-                    float* blockData = data + offset[b];
-                    std::size_t index = 0;
-                    bool any = false;
-                    forEachSamplePoint(
-                        grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
-                            const std::size_t me = index++;
-                            swept[me] = 0;
-                            if (!visibilityNeeded(grid, origin, s)) {
-                                setEmpty(dst, C);
-                                ++skipped;
-                                return;
-                            }
-                            traced += std::uint64_t(N);
-                            const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
-                            if (origin == p0 + float(spacing) * glm::vec3(j)) {
-                                swept[me] = 1;
-                                any = true;
-                                std::fill(dst, dst + C, 0.f);
-                                return;
-                            }
-                            // A partial edge block's point past the volume,
-                            // clamped onto it (off the lattice): marched.
-                            pointVisibility(
-                                field, set, origin, dims, radius, hf,
-                                [](int, float&, float&) { return true; }, v, samples);
-                            for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                        });
-                    if (!any) continue;
-                    auto inBlock = [&](const glm::ivec3& j) {
-                        return glm::all(glm::greaterThanEqual(j, glm::ivec3(0))) &&
-                               glm::all(glm::lessThan(j, glm::ivec3(n)));
-                    };
-                    const glm::vec3 top(dims - 1);
-                    auto inVolume = [&](const glm::vec3& x) {
-                        return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
-                               glm::all(glm::lessThanEqual(x, top));
-                    };
-                    for (int k = 0; k < N; ++k) {
-                        const Dir& d = dirs[std::size_t(k)];
-                        const double* wy = set.wy.data() + std::size_t(k) * C;
-                        // The block's points on one lattice line lie `spacing` lattice steps
-                        // apart (v is primitive and the spacing a power of two), i.e. at sample
-                        // indices j + m·v.
-                        for (int z = 0; z < n; ++z)
-                            for (int y = 0; y < n; ++y)
-                                for (int x = 0; x < n; ++x) {
-                                    const glm::ivec3 head(x, y, z);
-                                    if (inBlock(head - d.v)) continue;  // not a line's first
-                                    onLine.clear();
-                                    int mFirst = -1, mLast = -1;
-                                    for (glm::ivec3 j = head; inBlock(j); j += d.v) {
-                                        const int i = j.x + n * (j.y + n * j.z);
-                                        const bool mine = swept[std::size_t(i)] != 0;
-                                        if (mine) {
-                                            if (mFirst < 0) mFirst = int(onLine.size());
-                                            mLast = int(onLine.size());
-                                        }
-                                        onLine.push_back(mine ? i : -1);
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto&
+                                                                                        range) {
+            if (progress.cancelled()) return;
+            std::uint64_t samples = 0, traced = 0, skipped = 0;
+            double v[16];
+            std::vector<std::uint8_t> stepQuiet;                      // per lattice step of a line
+            std::vector<std::pair<std::size_t, std::size_t>> copies;  // clamped ← source
+            std::vector<std::uint8_t> swept(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
+            std::vector<double> P;    // optical depth from a line's first traced point
+            std::vector<float> S;     // the value at each sub-step
+            std::vector<int> onLine;  // in-block point indices along a line, −1 = not traced
+            for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                const std::size_t b = blocks[r];
+                const int level = grid.level(b), n = levelResolution(level);
+                const int spacing = levelSpacing(level);
+                const bool half = level > 0;  // on the lattice shifted by (½, ½, ½)
+                const glm::vec3 p0 = grid.samplePosition(b, level, 0, 0, 0);
+                float* blockData = data + offset[b];
+                std::size_t index = 0;
+                bool any = false;
+                copies.clear();
+                forEachSamplePoint(
+                    grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
+                        const std::size_t me = index++;
+                        swept[me] = 0;
+                        if (!visibilityNeeded(grid, origin, s)) {
+                            setEmpty(dst, C);
+                            ++skipped;
+                            return;
+                        }
+                        traced += std::uint64_t(N);
+                        const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
+                        if (origin == p0 + float(spacing) * glm::vec3(j)) {
+                            swept[me] = 1;
+                            any = true;
+                            std::fill(dst, dst + C, 0.f);
+                            return;
+                        }
+                        // A partial edge block's point past the volume, clamped onto it
+                        // (off the lattice). No shaded sample inside the volume reads it
+                        // (forEachSamplePoint), so it takes the value of the block's last
+                        // point inside the volume along each axis it passes (for level 0
+                        // the point at its clamped position itself) once the block is swept;
+                        // marched only when the block has no such point.
+                        glm::ivec3 src = j;
+                        for (int a = 0; a < 3; ++a) {
+                            const int last =
+                                int(std::floor((float(dims[a] - 1) - p0[a]) / float(spacing)));
+                            src[a] = std::min(j[a], last);
+                        }
+                        if (glm::all(glm::greaterThanEqual(src, glm::ivec3(0)))) {
+                            copies.emplace_back(me, std::size_t(src.x + n * (src.y + n * src.z)));
+                            return;
+                        }
+                        pointVisibility(
+                            field, set, origin, dims, radius, hf,
+                            [](int, float&, float&) { return true; }, v, samples);
+                        for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                    });
+                // Copies (clamped points) after the block's lines are done.
+                const auto copyClamped = [&] {
+                    for (const auto& [to, from] : copies)
+                        std::copy_n(blockData + from * std::size_t(C), C,
+                                    blockData + to * std::size_t(C));
+                };
+                if (!any) {
+                    copyClamped();
+                    continue;
+                }
+                auto inBlock = [&](const glm::ivec3& j) {
+                    return glm::all(glm::greaterThanEqual(j, glm::ivec3(0))) &&
+                           glm::all(glm::lessThan(j, glm::ivec3(n)));
+                };
+                const glm::vec3 top(dims - 1);
+                auto inVolume = [&](const glm::vec3& x) {
+                    return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
+                           glm::all(glm::lessThanEqual(x, top));
+                };
+                for (int k = 0; k < N; ++k) {
+                    const Dir& d = dirs[std::size_t(k)];
+                    const double* wy = set.wy.data() + std::size_t(k) * C;
+                    // The block's points on one lattice line lie `spacing` lattice steps
+                    // apart (v is primitive and the spacing a power of two), i.e. at sample
+                    // indices j + m·v.
+                    for (int z = 0; z < n; ++z)
+                        for (int y = 0; y < n; ++y)
+                            for (int x = 0; x < n; ++x) {
+                                const glm::ivec3 head(x, y, z);
+                                if (inBlock(head - d.v)) continue;  // not a line's first
+                                onLine.clear();
+                                int mFirst = -1, mLast = -1;
+                                for (glm::ivec3 j = head; inBlock(j); j += d.v) {
+                                    const int i = j.x + n * (j.y + n * j.z);
+                                    const bool mine = swept[std::size_t(i)] != 0;
+                                    if (mine) {
+                                        if (mFirst < 0) mFirst = int(onLine.size());
+                                        mLast = int(onLine.size());
                                     }
-                                    if (mFirst < 0) continue;
-                                    const int first = mFirst * spacing, last = mLast * spacing;
-                                    const glm::vec3 lineStart =
-                                        p0 + float(spacing) * glm::vec3(head);
-                                    // P at every sub-step from the first traced point, over
-                                    // lattice steps inside the volume, to R past the last (then
-                                    // constant: outside the volume is empty); S the values there.
-                                    // Lattice t lies at lineStart + t·v.
-                                    const int q = d.q[half ? 1 : 0];
-                                    const float subMm = d.stepMm / float(q);
-                                    const int want = last + int(std::ceil(d.reach)) + 1;
-                                    const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
-                                    P.assign(subs, 0.0);
-                                    S.assign(subs, 0.f);
-                                    const std::vector<Stencil>& sten = d.stencil[half ? 1 : 0];
-                                    // The voxel index of lattice point t's floor: base0 + t·delta.
-                                    const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
-                                    const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
-                                    auto latticeValue = [&](int tt) {
-                                        return read(base0 + tt * d.delta, sten[0]);
+                                    onLine.push_back(mine ? i : -1);
+                                }
+                                if (mFirst < 0) continue;
+                                const int first = mFirst * spacing, last = mLast * spacing;
+                                const glm::vec3 lineStart = p0 + float(spacing) * glm::vec3(head);
+                                // P at every sub-step from the first traced point, over
+                                // lattice steps inside the volume, to R past the last (then
+                                // constant: outside the volume is empty); S the values there.
+                                // Lattice t lies at lineStart + t·v.
+                                const int q = d.q[half ? 1 : 0];
+                                const float subMm = d.stepMm / float(q);
+                                const int want = last + int(std::ceil(d.reach)) + 1;
+                                const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
+                                P.assign(subs, 0.0);
+                                S.assign(subs, 0.f);
+                                const std::vector<Stencil>& sten = d.stencil[half ? 1 : 0];
+                                // The voxel index of lattice point t's floor: base0 + t·delta.
+                                const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
+                                const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
+                                auto latticeValue = [&](int tt) {
+                                    return read(base0 + tt * d.delta, sten[0]);
+                                };
+                                auto along = [&](const glm::vec3& from) {
+                                    return [&, from](float mm) {
+                                        return field.value(from + (mm / d.stepMm) * d.dv);
                                     };
-                                    auto along = [&](const glm::vec3& from) {
-                                        return [&, from](float mm) {
-                                            return field.value(from + (mm / d.stepMm) * d.dv);
-                                        };
-                                    };
-                                    stepQuiet.assign(std::size_t(want) + 1, 0);
-                                    glm::vec3 at = lineStart + float(first) * d.dv;
-                                    double iFront = 0.0;
-                                    bool haveIFront = false, haveStart = false;
-                                    int t = first;
-                                    for (; t < want; ++t) {
-                                        const glm::vec3 next = lineStart + float(t + 1) * d.dv;
-                                        if (!inVolume(next)) break;
-                                        const std::size_t m = std::size_t(t) * std::size_t(q);
-                                        if (quietAt(at)) {
-                                            // Transparent throughout: nothing to integrate or
-                                            // read (S stays unread there).
-                                            stepQuiet[std::size_t(t)] = 1;
-                                            for (int j = 1; j <= q; ++j)
-                                                P[m + std::size_t(j)] = P[m];
-                                            haveStart = haveIFront = false;
-                                            at = next;
-                                            continue;
-                                        }
-                                        if (!haveStart) S[m] = latticeValue(t);
-                                        const std::ptrdiff_t base = base0 + t * d.delta;
-                                        haveStart = true;
-                                        for (int j = 1; j <= q; ++j) {
-                                            const float sFront = S[m + std::size_t(j) - 1];
-                                            const float sBack = read(base, sten[std::size_t(j)]);
-                                            S[m + std::size_t(j)] = sBack;
-                                            ++samples;
-                                            bool haveIBack = false;
-                                            double iBack = 0.0, tau = 0.0;
-                                            if (!transparent(sFront, sBack)) {
-                                                if (!haveIFront)
-                                                    iFront = table.sigmaIntegral(sFront);
-                                                iBack = table.sigmaIntegral(sBack);
-                                                haveIBack = true;
-                                                tau = preIntegratedStep(
-                                                    table, sFront, iFront, sBack, iBack, subMm, 0.0,
-                                                    along(at + (float(j - 1) / float(q)) * d.dv),
-                                                    samples);
-                                            }
-                                            P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
-                                            iFront = iBack;
-                                            haveIFront = haveIBack;
-                                        }
+                                };
+                                stepQuiet.assign(std::size_t(want) + 1, 0);
+                                glm::vec3 at = lineStart + float(first) * d.dv;
+                                double iFront = 0.0;
+                                bool haveIFront = false, haveStart = false;
+                                int t = first;
+                                for (; t < want; ++t) {
+                                    const glm::vec3 next = lineStart + float(t + 1) * d.dv;
+                                    if (!inVolume(next)) break;
+                                    const std::size_t m = std::size_t(t) * std::size_t(q);
+                                    if (quietAt(at)) {
+                                        // Transparent throughout: nothing to integrate or
+                                        // read (S stays unread there).
+                                        stepQuiet[std::size_t(t)] = 1;
+                                        for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = P[m];
+                                        haveStart = haveIFront = false;
                                         at = next;
+                                        continue;
                                     }
-                                    // P and S valid on sub-steps [m0, lastSub]. A line that left
-                                    // the volume ends at the box face (the march's box exit), a
-                                    // fraction φ of a lattice step past its last point.
-                                    const std::size_t lastSub = std::size_t(t) * std::size_t(q);
-                                    double exitSub = double(lastSub), pExit = P[lastSub];
-                                    // Optical depth from sub-step e0 to `f` sub-steps past it
-                                    // (f ≤ 1, or the exit's fraction), pre-integrated to the
-                                    // value there.
-                                    auto partial = [&](std::size_t e0, float f, float sEnd) {
-                                        const glm::vec3 from =
-                                            lineStart + (float(e0) / float(q)) * d.dv;
-                                        if (stepQuiet[e0 / std::size_t(q)] ||
-                                            (e0 == lastSub && quietAt(from)))
-                                            return 0.0;  // inside quiet cells' neighbourhood
-                                        if (e0 < lastSub && transparent(S[e0], S[e0 + 1]))
-                                            return 0.0;  // the whole sub-step is
-                                        const float s0 =
-                                            e0 == lastSub && !haveStart ? latticeValue(t) : S[e0];
-                                        if (std::isnan(sEnd))
-                                            sEnd = field.value(from + (f / float(q)) * d.dv);
+                                    if (!haveStart) S[m] = latticeValue(t);
+                                    const std::ptrdiff_t base = base0 + t * d.delta;
+                                    haveStart = true;
+                                    for (int j = 1; j <= q; ++j) {
+                                        const float sFront = S[m + std::size_t(j) - 1];
+                                        const float sBack = read(base, sten[std::size_t(j)]);
+                                        S[m + std::size_t(j)] = sBack;
                                         ++samples;
-                                        if (transparent(s0, sEnd)) return 0.0;
-                                        return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
-                                                                 sEnd, table.sigmaIntegral(sEnd),
-                                                                 f * subMm, 0.0, along(from),
-                                                                 samples);
-                                    };
-                                    if (t < want) {
-                                        float phi = 1.f;
-                                        for (int ax = 0; ax < 3; ++ax) {
-                                            if (d.v[ax] > 0)
-                                                phi = std::min(phi,
-                                                               (top[ax] - at[ax]) / float(d.v[ax]));
-                                            if (d.v[ax] < 0)
-                                                phi = std::min(phi, at[ax] / float(-d.v[ax]));
+                                        bool haveIBack = false;
+                                        double iBack = 0.0, tau = 0.0;
+                                        if (!transparent(sFront, sBack)) {
+                                            if (!haveIFront) iFront = table.sigmaIntegral(sFront);
+                                            iBack = table.sigmaIntegral(sBack);
+                                            haveIBack = true;
+                                            tau = preIntegratedStep(
+                                                table, sFront, iFront, sBack, iBack, subMm, 0.0,
+                                                along(at + (float(j - 1) / float(q)) * d.dv),
+                                                samples);
                                         }
-                                        if (phi > 0.f) {
-                                            exitSub += double(phi) * double(q);
-                                            pExit += partial(lastSub, phi * float(q), NAN);
-                                        }
+                                        P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
+                                        iFront = iBack;
+                                        haveIFront = haveIBack;
                                     }
-                                    for (int mi = mFirst; mi <= mLast; ++mi) {
-                                        const int i = onLine[std::size_t(mi)];
-                                        if (i < 0) continue;
-                                        const std::size_t mu =
-                                            std::size_t(mi * spacing) * std::size_t(q);
-                                        // The ray's end R past the point, in sub-steps: up to the
-                                        // sub-step before it, then the partial sub-step
-                                        // pre-integrated to the end's value (as the march's
-                                        // shortened last step).
-                                        const std::size_t e0 = mu + d.endSub[half ? 1 : 0];
-                                        const float f = d.endFrac[half ? 1 : 0];
-                                        double pEnd;
-                                        if (double(e0) + double(f) >= exitSub) {
-                                            pEnd = pExit;
-                                        } else {
-                                            pEnd = P[e0];
-                                            if (f > 0.f)
-                                                pEnd += partial(
-                                                    e0, f,
-                                                    read(base0 +
-                                                             std::ptrdiff_t(mi * spacing) * d.delta,
-                                                         d.end[half ? 1 : 0]));
-                                        }
-                                        const double tau = pEnd - P[mu];
-                                        const double T =
-                                            tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;
-                                        float* dst = blockData + std::size_t(i) * std::size_t(C);
-                                        for (int c = 0; c < C; ++c) dst[c] += float(T * wy[c]);
+                                    at = next;
+                                }
+                                // P and S valid on sub-steps [m0, lastSub]. A line that left
+                                // the volume ends at the box face (the march's box exit), a
+                                // fraction φ of a lattice step past its last point.
+                                const std::size_t lastSub = std::size_t(t) * std::size_t(q);
+                                double exitSub = double(lastSub), pExit = P[lastSub];
+                                // Optical depth from sub-step e0 to `f` sub-steps past it
+                                // (f ≤ 1, or the exit's fraction), pre-integrated to the
+                                // value there.
+                                auto partial = [&](std::size_t e0, float f, float sEnd) {
+                                    const glm::vec3 from =
+                                        lineStart + (float(e0) / float(q)) * d.dv;
+                                    if (stepQuiet[e0 / std::size_t(q)] ||
+                                        (e0 == lastSub && quietAt(from)))
+                                        return 0.0;  // inside quiet cells' neighbourhood
+                                    if (e0 < lastSub && transparent(S[e0], S[e0 + 1]))
+                                        return 0.0;  // the whole sub-step is
+                                    const float s0 =
+                                        e0 == lastSub && !haveStart ? latticeValue(t) : S[e0];
+                                    if (std::isnan(sEnd))
+                                        sEnd = field.value(from + (f / float(q)) * d.dv);
+                                    ++samples;
+                                    if (transparent(s0, sEnd)) return 0.0;
+                                    return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
+                                                             sEnd, table.sigmaIntegral(sEnd),
+                                                             f * subMm, 0.0, along(from), samples);
+                                };
+                                if (t < want) {
+                                    float phi = 1.f;
+                                    for (int ax = 0; ax < 3; ++ax) {
+                                        if (d.v[ax] > 0)
+                                            phi =
+                                                std::min(phi, (top[ax] - at[ax]) / float(d.v[ax]));
+                                        if (d.v[ax] < 0)
+                                            phi = std::min(phi, at[ax] / float(-d.v[ax]));
+                                    }
+                                    if (phi > 0.f) {
+                                        exitSub += double(phi) * double(q);
+                                        pExit += partial(lastSub, phi * float(q), NAN);
                                     }
                                 }
-                    }
+                                for (int mi = mFirst; mi <= mLast; ++mi) {
+                                    const int i = onLine[std::size_t(mi)];
+                                    if (i < 0) continue;
+                                    const std::size_t mu =
+                                        std::size_t(mi * spacing) * std::size_t(q);
+                                    // The ray's end R past the point, in sub-steps: up to the
+                                    // sub-step before it, then the partial sub-step
+                                    // pre-integrated to the end's value (as the march's
+                                    // shortened last step).
+                                    const std::size_t e0 = mu + d.endSub[half ? 1 : 0];
+                                    const float f = d.endFrac[half ? 1 : 0];
+                                    double pEnd;
+                                    if (double(e0) + double(f) >= exitSub) {
+                                        pEnd = pExit;
+                                    } else {
+                                        pEnd = P[e0];
+                                        if (f > 0.f)
+                                            pEnd += partial(
+                                                e0, f,
+                                                read(base0 + std::ptrdiff_t(mi * spacing) * d.delta,
+                                                     d.end[half ? 1 : 0]));
+                                    }
+                                    const double tau = pEnd - P[mu];
+                                    const double T =
+                                        tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;
+                                    float* dst = blockData + std::size_t(i) * std::size_t(C);
+                                    for (int c = 0; c < C; ++c) dst[c] += float(T * wy[c]);
+                                }
+                            }
                 }
-                samplesTotal += samples;
-                raysTotal += traced;
-                skippedTotal += skipped;
-                const std::size_t now = done.fetch_add(range.size()) + range.size();
-                if (std::this_thread::get_id() == caller)
-                    progress.report("local visibility", double(now) / double(blocks.size()));
-            });
+                copyClamped();
+            }
+            samplesTotal += samples;
+            raysTotal += traced;
+            skippedTotal += skipped;
+            const std::size_t now = done.fetch_add(range.size()) + range.size();
+            if (std::this_thread::get_id() == caller)
+                progress.report("local visibility", double(now) / double(blocks.size()));
+        });
     });
     if (progress.cancelled()) throw CancelledError();
     progress.report("local visibility", 1.0);
