@@ -248,14 +248,22 @@ TEST(ShLocal, TheLineSweepIsAParamOfItsOwnStageAndServesShGlobal) {
     EXPECT_EQ(ranStages(sweep), (std::set<std::string>{"local_visibility", "camera", "render"}));
     EXPECT_TRUE(allFinite(sweep.image));
     EXPECT_NE(sweep.image.pixels, march.image.pixels);
-    // The two agree as two quadratures of the same visibility (mean radiance within 5 %).
-    double a = 0.0, b = 0.0;
-    for (std::size_t i = 0; i < march.image.pixels.size(); ++i) {
-        a += march.image.pixels[i];
-        b += sweep.image.pixels[i];
-    }
-    EXPECT_GT(a, 0.0);
-    EXPECT_NEAR(b / a, 1.0, 0.05);
+    // Both approximate the same visibility; the reference is the march at full resolution
+    // (every block at 16³: 1-voxel steps) with 256 rays.
+    json ref = d;
+    ref["method"]["params"] = {{"data_reduction", 1}, {"rays", 256}};
+    const RunResult fine = Session().run(scene(ref));
+    auto mean = [](const core::ImageRGBA& im) {
+        double m = 0.0;
+        for (float v : im.pixels) m += v;
+        return m / double(im.pixels.size());
+    };
+    const double r = mean(fine.image), a = mean(march.image), b = mean(sweep.image);
+    // Measured: reference 0.1276, march 0.1529 (+20 %: its 2-voxel steps across the coarse
+    // blocks), sweep 0.1363 (+7 %: what remains is the LOD's coarse points and 26 rays).
+    EXPECT_GT(r, 0.0);
+    EXPECT_NEAR(b / r, 1.0, 0.1);
+    EXPECT_LT(std::abs(b / r - 1.0), 0.5 * std::abs(a / r - 1.0));
     // sh-global chains the swept field along its own lattice directions.
     d["method"]["name"] = "sh-global";
     const RunResult global = session.run(scene(d));
