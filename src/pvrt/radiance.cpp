@@ -115,21 +115,52 @@ RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::ve
     return r;
 }
 
+namespace {
+/// scatterRadiance for n > 1 coefficients (not clamped): 16× the data of n = 1, so parallel over
+/// z-slices of the grid (each writes its own slots; the count is summed per slice in order).
+RadianceVolume scatterCoefficients(const TransferLayout& layout,
+                                   std::span<const glm::vec3> perPoint, int exitance) {
+    RadianceVolume r;
+    r.res = layout.res;
+    r.scale = layout.scale;
+    r.exitance = exitance;
+    r.values.resize(layout.slot.size() * std::size_t(exitance));
+    const std::size_t n = std::size_t(exitance);
+    const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
+    std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, layout.res.z),
+                      [&](const tbb::blocked_range<int>& zs) {
+                          for (int z = zs.begin(); z < zs.end(); ++z) {
+                              std::uint64_t clamped = 0;
+                              for (std::size_t i = perSlice * std::size_t(z);
+                                   i < perSlice * std::size_t(z + 1); ++i) {
+                                  const std::int32_t s = layout.slot[i];
+                                  glm::vec3* dst = r.values.data() + i * n;
+                                  if (s < 0) {
+                                      std::fill(dst, dst + n, glm::vec3(0.f));
+                                      continue;
+                                  }
+                                  std::copy_n(perPoint.data() + std::size_t(s) * n, n, dst);
+                                  clamped += negative(dst[0]) ? 1 : 0;
+                              }
+                              clampedPerSlice[std::size_t(z)] = clamped;
+                          }
+                      });
+    for (std::uint64_t c : clampedPerSlice) r.clamped += c;
+    return r;
+}
+}  // namespace
+
 RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint,
                                int exitance) {
     VL_CHECK(validExitance(exitance));
     VL_CHECK_EQ(perPoint.size(), std::size_t(layout.points) * std::size_t(exitance));
+    if (exitance > 1) return scatterCoefficients(layout, perPoint, exitance);
     RadianceVolume r = emptyLike(layout, exitance);
     for (std::size_t i = 0; i < layout.slot.size(); ++i) {
         const std::int32_t s = layout.slot[i];
         if (s < 0) continue;
-        if (exitance > 1) {
-            const std::size_t n = std::size_t(exitance);
-            for (std::size_t j = 0; j < n; ++j)
-                r.values[i * n + j] = perPoint[std::size_t(s) * n + j];
-            r.clamped += negative(r.values[i * n]) ? 1 : 0;
-            continue;
-        }
+
         glm::vec3 v = perPoint[std::size_t(s)];
         r.clamped += clampAtZero(v) ? 1 : 0;
         r.values[i] = v;
