@@ -459,3 +459,20 @@ TEST(PvrtMethod, ExitanceParamsAreCheckedAndKeyed) {
     e["method"]["params"]["phase_g"] = 0.0;
     EXPECT_EQ(Session().run(scene(e)).image.pixels, a.image.pixels);
 }
+
+TEST(PvrtMethod, ATfPhaseChannelActsAsPhaseGPerSample) {
+    // A TF whose phase channel is 0.6 everywhere against phase_g 0.6 on a TF without one: the
+    // photons read g at each collision, the shader at each sample — the same g, so the same image
+    // up to float rounding of g^l (per sample in float, per ray in double for phase_g).
+    const json params = {
+        {"resolution", 16}, {"photons", 4}, {"clusters", 0}, {"exitance_coefficients", 16}};
+    const json byParam = againstTheLight(cloudScene("pvrt", params, true), 0.6);
+    json byTf = againstTheLight(cloudScene("pvrt", params, true), 0.0);
+    for (auto& p : byTf["transfer_function"]["points"]) p["phase_g"] = 0.6;
+    const RunResult a = Session().run(scene(byParam)), b = Session().run(scene(byTf));
+    const RunResult iso =
+        Session().run(scene(againstTheLight(cloudScene("pvrt", params, true), 0)));
+    constexpr double kFloatRoundingTol = 1e-4;
+    EXPECT_LT(relativeL2(b.image, a.image), kFloatRoundingTol);
+    EXPECT_GT(relativeL2(iso.image, a.image), 0.1);  // and g matters here
+}
