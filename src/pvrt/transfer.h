@@ -75,7 +75,7 @@ inline constexpr int kMaxExitance = 16;
 constexpr bool validExitance(int n) { return n == 1 || n == 4 || n == 9 || n == 16; }
 
 /// The weights w_j = g^{l(j)}·Ŷ_j(−toEye) (j < n) that turn exitance coefficients into the HG
-/// in-scattered radiance toward the eye: L_s = Σ_j w_j t_j (header comment). toEye unit; |g| < 1.
+/// in-scattered radiance toward the eye: L_s = Σ_j w_j t_j (header comment). toEye unit; |g| ≤ 1 (g = 1 gives Ŷ_j(−toEye) alone, for a per-sample g).
 void exitanceWeights(int n, float g, const glm::vec3& toEye, float* w);
 /// Ŷ_j(ω) = √(4π)·Y_j(ω) for j < n at a unit direction ω (double; the photons' and the direct
 /// part's projection weights).
