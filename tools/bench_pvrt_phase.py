@@ -8,7 +8,7 @@ scattering). The multiple-scattering ground truth is the path tracer's reference
 same phase_g (cached in WORK/cache). pvrt is rendered at its defaults (SH-16 basis lights, 64³
 grid, 30 photons per boundary cell, track-length estimator, CPCA 128 clusters) with phase_g 0.6 and
 exitance_coefficients 1 (the isotropic transfer: the photons scatter by HG, the view does not),
-4 and 16; and once at phase_g 0 (today's pvrt, isotropic throughout). Each pvrt run is a fresh
+4, 9 and 16; and once at phase_g 0 (today's pvrt, isotropic throughout). Each pvrt run is a fresh
 process without cache, repeated --runs times for time ranges. Errors as in
 tools/bench_pvrt_accuracy.py (linear NRMSE of the luminance over covered pixels; RMSE in 1/255
 steps on the display image).
@@ -39,6 +39,7 @@ CLOUD_TF = {"points": [{"value": 0.0, "color": [0.95, 0.95, 0.95], "extinction":
 ROWS = [("n=1 g=0 (isotropic pvrt)", {"exitance_coefficients": 1}),
         ("n=1", {"exitance_coefficients": 1, "phase_g": G}),
         ("n=4", {"exitance_coefficients": 4, "phase_g": G}),
+        ("n=9", {"exitance_coefficients": 9, "phase_g": G}),
         ("n=16", {"exitance_coefficients": 16, "phase_g": G})]
 
 
