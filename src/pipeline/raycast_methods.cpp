@@ -1302,6 +1302,12 @@ struct PvrtParams {
     int directions = 162;  ///< DSF directions (basis dsf)
     int resolution = 64;   ///< transfer grid points per axis (capped at the volume's size)
     int quadrature = 162;  ///< directions of the direct part's transmittance sweeps
+    /// SH coefficients of the incident radiance per basis light (pvrt/transfer.h): 1 = isotropic
+    /// S (the default, today's transfer), 4/9/16 = view-dependent Henyey–Greenstein scattering.
+    int exitance = 1;
+    /// HG asymmetry (the path tracer's phase_g): the photons' scattering and, with exitance > 1,
+    /// the render's in-scattering toward the eye; a TF phase g channel overrides it per sample.
+    float phaseG = 0.f;
     bool multiple = true;  ///< the "multiple_scattering" effect with max_bounces > 1
     int maxBounces = 1;
     pvrt::PhotonOptions photons;
@@ -1316,11 +1322,8 @@ struct PvrtParams {
         return basis == "sh" ? pvrt::Basis::sh(order) : pvrt::Basis::dsf(directions);
     }
     json directKey() const {
-        return {{"basis", basis},
-                {"order", order},
-                {"directions", directions},
-                {"resolution", resolution},
-                {"quadrature", quadrature}};
+        return {{"basis", basis},           {"order", order},           {"directions", directions},
+                {"resolution", resolution}, {"quadrature", quadrature}, {"exitance", exitance}};
     }
     json photonKey() const {
         return {{"photons", photons.photonsPerCell},
@@ -1329,7 +1332,8 @@ struct PvrtParams {
                 {"roulette_after", photons.rouletteAfter},
                 {"estimator",
                  photons.estimator == pvrt::Estimator::TrackLength ? "track-length" : "collision"},
-                {"seed", photons.seed}};
+                {"seed", photons.seed},
+                {"phase_g", photons.phaseG}};
     }
     json cpcaKey() const { return {{"clusters", clusters}, {"components", components}}; }
 };
@@ -1366,6 +1370,12 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
                    std::to_string(dsfCount),
                "leave quadrature out (the DSF's own directions) or use at least " +
                    std::to_string(dsfCount));
+    s.exitance = p.integer("exitance_coefficients", 1, 1, pvrt::kMaxExitance);
+    if (!pvrt::validExitance(s.exitance))
+        p.fail("exitance_coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(s.exitance),
+               "SH coefficients of the incident radiance (bands 0…3); 1 = isotropic scattering");
+    s.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
+    s.photons.phaseG = s.phaseG;
     s.maxBounces = parseMaxBounces(scene, p);
     s.multiple = s.maxBounces > 1;
     s.photons.maxScatterings = s.maxBounces - 1;
@@ -1388,13 +1398,14 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
 
 const Codec& pvrtTransferCodec() {
     static const Codec c{
-        1,
+        2,
         [](const Artifact& a, ByteWriter& w) {
             const auto& t = *a.as<pvrt::Transfer>();
             w.pod(t.layout.res);
             w.pod(t.layout.scale);
             w.pod(t.layout.points);
             w.pod(t.basis);
+            w.pod(t.exitance);
             w.array(t.layout.slot);
             w.array(t.values);
         },
@@ -1404,14 +1415,16 @@ const Codec& pvrtTransferCodec() {
             t->layout.scale = r.pod<glm::vec3>();
             t->layout.points = r.pod<std::int32_t>();
             t->basis = r.pod<int>();
+            t->exitance = r.pod<int>();
             t->layout.slot = r.array<std::int32_t>(kMaxCells);
-            t->values = r.array<float>(kMaxCells * 64);
+            t->values = r.array<float>(kMaxCells * 64 * pvrt::kMaxExitance);
             const glm::ivec3 res = t->layout.res;
             if (res.x < 1 || res.y < 1 || res.z < 1 || res.x > core::kMaxDim ||
                 res.y > core::kMaxDim || res.z > core::kMaxDim || t->basis < 1 || t->basis > 4096 ||
                 t->layout.points < 0 ||
                 t->layout.slot.size() != std::size_t(res.x) * res.y * res.z ||
-                t->values.size() != std::size_t(t->layout.points) * t->basis * 3 ||
+                !pvrt::validExitance(t->exitance) ||
+                t->values.size() != std::size_t(t->layout.points) * t->basis * t->exitance * 3 ||
                 !(t->layout.scale.x > 0.f && t->layout.scale.y > 0.f && t->layout.scale.z > 0.f))
                 badPayload("PVRT transfer sizes do not fit together");
             std::int32_t next = 0;  // stored points are numbered in grid order
@@ -1502,17 +1515,19 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         }
         // The budget before the allocation: a volume too large for the settings is a clear error,
         // not an out-of-memory kill.
-        const double mb = double(layout.points) * basis.size() * 3 * sizeof(float) / 1048576.0;
+        const double mb =
+            double(layout.points) * basis.size() * params.exitance * 3 * sizeof(float) / 1048576.0;
         if (mb > params.memoryMb) {
             std::ostringstream os;
             os << "the transfer would take " << std::llround(mb) << " MB (" << layout.points
-               << " points × " << basis.size() << " basis lights × RGB), over memory_mb "
-               << params.memoryMb;
+               << " points × " << basis.size() << " basis lights";
+            if (params.exitance > 1) os << " × " << params.exitance << " exitance coefficients";
+            os << " × RGB), over memory_mb " << params.memoryMb;
             throw InputError(run.scene().source, "method.params.resolution", os.str(),
                              "lower resolution, use fewer basis lights (order, directions) or "
-                             "raise method.params.memory_mb");
+                             "exitance_coefficients, or raise method.params.memory_mb");
         }
-        auto t = std::make_shared<pvrt::Transfer>(std::move(layout), basis.size());
+        auto t = std::make_shared<pvrt::Transfer>(std::move(layout), basis.size(), params.exitance);
         pvrt::DirectOptions d;
         d.directions = params.quadrature;
         d.threads = params.threads;
@@ -1521,6 +1536,8 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         const pvrt::DirectStats st =
             pvrt::addDirectTransfer(v, *tfa->table, basis, *t, d, run.progress());
         run.details()["pvrt_direct"] = {{"basis", basis.name()},
+                                        {"exitance_coefficients", t->exitance},
+                                        {"transfer_mb", double(t->bytes()) / 1048576.0},
                                         {"points", t->layout.points},
                                         {"grid", dims(t->layout.res)},
                                         {"quadrature", st.directions},
@@ -1532,8 +1549,10 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
     direct.describe = [](const Run&, const Artifact& a) {
         const auto& t = *a.as<pvrt::Transfer>();
         return std::to_string(t.layout.points) + " points of " + dims(t.layout.res) + " × " +
-               std::to_string(t.basis) + " basis lights, direct part, " +
-               std::to_string(t.bytes() >> 20) + " MB";
+               std::to_string(t.basis) + " basis lights" +
+               (t.exitance > 1 ? " × " + std::to_string(t.exitance) + " exitance coefficients"
+                               : std::string()) +
+               ", direct part, " + std::to_string(t.bytes() >> 20) + " MB";
     };
     plan.stages.push_back(direct);
 
@@ -1550,6 +1569,7 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         const auto tfa = run.get<TfArtifact>("transfer_function");
         pathtrace::Options po;
         po.threads = params.threads;
+        po.phaseG = params.phaseG;
         po.clipPlanes = o.clipPlanes;
         po.cropBox = o.cropBox;
         // The tracer shares the loaded volume (no copy): an aliasing pointer kept alive by it.
@@ -1594,7 +1614,8 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
             pvrt::compressCpca(t->values, int(t->rowSize()), co, run.progress()));
         run.details()["pvrt_cpca"] = {{"clusters", c->clusters},
                                       {"components", c->components},
-                                      {"relative_l2_error", c->relativeL2Error}};
+                                      {"relative_l2_error", c->relativeL2Error},
+                                      {"cpca_mb", double(c->bytes()) / 1048576.0}};
         const std::size_t bytes = c->bytes();
         return Artifact::of<pvrt::Cpca>(std::move(c), bytes);
     };
@@ -1639,15 +1660,18 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         std::shared_ptr<pvrt::RadianceVolume> r;
         if (compressed) {
             const auto cp = run.get<pvrt::Cpca>("pvrt_cpca");
-            std::vector<glm::vec3> perPoint(std::size_t(t->layout.points));
-            cp->radiance(c, perPoint);
-            r = std::make_shared<pvrt::RadianceVolume>(pvrt::scatterRadiance(t->layout, perPoint));
+            std::vector<glm::vec3> perPoint(std::size_t(t->layout.points) *
+                                            std::size_t(t->exitance));
+            cp->radiance(c, t->exitance, perPoint);
+            r = std::make_shared<pvrt::RadianceVolume>(
+                pvrt::scatterRadiance(t->layout, perPoint, t->exitance));
         } else {
             r = std::make_shared<pvrt::RadianceVolume>(
                 pvrt::combineTransfer(*t, c, params.threads));
         }
         run.details()["pvrt_radiance"] = {{"seconds", sw.seconds()},
-                                          {"clamped_points", r->clamped}};
+                                          {"clamped_points", r->clamped},
+                                          {"radiance_mb", double(r->bytes()) / 1048576.0}};
         const std::size_t bytes = r->bytes();
         return Artifact::of<pvrt::RadianceVolume>(std::move(r), bytes);
     };
@@ -2269,7 +2293,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return plan;
     }
     plan.casterSetup = [options](const Run& run) { return casterSetupOf(run, options); };
-    frame.compute = [options, kind, clipped, isoLattice](Run& run) {
+    frame.compute = [options, kind, clipped, isoLattice, pvrtParams](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -2303,7 +2327,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                     caster.render(*camera, *model, run.progress(), &stats));
             } else if (kind == Kind::Pvrt) {
                 const auto model = pvrt::makePvrtModel(
-                    caster, *camera, run.get<pvrt::RadianceVolume>("pvrt_radiance"));
+                    caster, *camera, run.get<pvrt::RadianceVolume>("pvrt_radiance"),
+                    pvrtParams.phaseG, run.get<TfArtifact>("transfer_function")->table);
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else if (kind == Kind::IsoLattice) {
@@ -2448,8 +2473,8 @@ const RegisterMethod kPvrt(rayCasterMethod(
     Kind::Pvrt, "pvrt",
     "precomputed volume radiance transfer (Zhang 2013): single and multiple scattering under "
     "dynamic distant lights through SH or DSF basis lights, photon-mapped indirect light, CPCA",
-    {"basis", "order", "directions", "resolution", "quadrature", "max_bounces", "photons",
-     "kernel_radius", "estimator", "clusters", "components", "memory_mb"},
+    {"basis", "order", "directions", "resolution", "quadrature", "exitance_coefficients", "phase_g",
+     "max_bounces", "photons", "kernel_radius", "estimator", "clusters", "components", "memory_mb"},
     {"local_shadows", "global_shadows", "multiple_scattering"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

@@ -436,11 +436,19 @@ void Cpca::reconstruct(std::size_t row, float* out) const {
 }
 
 void Cpca::radiance(std::span<const glm::vec3> light, std::span<glm::vec3> out) const {
-    VL_CHECK_EQ(light.size() * 3, std::size_t(dim));
-    VL_CHECK_EQ(out.size(), rows());
-    // Per cluster: mean and components projected onto the light (Zhang eq. 18).
+    radiance(light, 1, out);
+}
+
+void Cpca::radiance(std::span<const glm::vec3> light, int exitance,
+                    std::span<glm::vec3> out) const {
+    VL_CHECK_GE(exitance, 1);
+    const std::size_t n = std::size_t(exitance);
+    VL_CHECK_EQ(light.size() * 3 * n, std::size_t(dim));
+    VL_CHECK_EQ(out.size(), rows() * n);
+    const std::size_t block = light.size() * 3;  // one exitance coefficient's entries
+    // Per cluster: mean and components projected onto the light (Zhang eq. 18), per coefficient.
     const int perCluster = components + 1;
-    std::vector<glm::vec3> projected(std::size_t(clusters) * perCluster);
+    std::vector<glm::vec3> projected(std::size_t(clusters) * perCluster * n);
     auto project = [&](const float* v) {
         glm::dvec3 s(0.0);
         for (std::size_t k = 0; k < light.size(); ++k)
@@ -448,20 +456,26 @@ void Cpca::radiance(std::span<const glm::vec3> light, std::span<glm::vec3> out) 
         return glm::vec3(s);
     };
     forEachIndex(0, clusters, [&](int c) {
-        glm::vec3* p = projected.data() + std::size_t(c) * perCluster;
-        p[0] = project(mean(c));
-        for (int j = 0; j < components; ++j) p[1 + j] = project(component(c, j));
+        glm::vec3* p = projected.data() + std::size_t(c) * perCluster * n;
+        for (std::size_t j = 0; j < n; ++j) {
+            p[j] = project(mean(c) + j * block);
+            for (int i = 0; i < components; ++i)
+                p[(1 + std::size_t(i)) * n + j] = project(component(c, i) + j * block);
+        }
     });
     // Per row: the cluster's projected mean plus the weighted projected components (eq. 19).
     forEachBlock(Blocks{rows()}, core::Progress::none(),
                  [&](std::size_t, std::size_t begin, std::size_t end) {
                      for (std::size_t r = begin; r < end; ++r) {
                          const glm::vec3* p =
-                             projected.data() + std::size_t(cluster[r]) * perCluster;
+                             projected.data() + std::size_t(cluster[r]) * perCluster * n;
                          const float* w = weights.data() + r * std::size_t(components);
-                         glm::vec3 s = p[0];
-                         for (int j = 0; j < components; ++j) s += w[j] * p[1 + j];
-                         out[r] = s;
+                         for (std::size_t j = 0; j < n; ++j) {
+                             glm::vec3 s = p[j];
+                             for (int i = 0; i < components; ++i)
+                                 s += w[i] * p[(1 + std::size_t(i)) * n + j];
+                             out[r * n + j] = s;
+                         }
                      }
                  });
 }

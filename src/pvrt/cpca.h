@@ -108,6 +108,9 @@ struct Cpca {
     /// per row mean·light + Σ_j w_j (b_j·light) (rows × N × 3). Runs in the caller's oneTBB arena;
     /// each output depends only on its row, so the result does not depend on threads.
     void radiance(std::span<const glm::vec3> light, std::span<glm::vec3> out) const;
+    /// The same for rows of n = exitance blocks of m·3 (transfer.h's [j][k][rgb]): out[row·n + j]
+    /// = Σ_k rec(row)[(j·m + k)·3 + ch] · light[k][ch] (dim = n·m·3, out.size() = rows()·n).
+    void radiance(std::span<const glm::vec3> light, int exitance, std::span<glm::vec3> out) const;
     /// Memory of the compressed representation.
     std::size_t bytes() const;
 };

@@ -443,6 +443,10 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
     const sh::Dsf& quad = sameDsf ? *basis.dsf() : *own;
     const int J = quad.size();
     const int m = basis.size();
+    const int n = transfer.exitance;
+    const int cols = n * m;  // row entries per channel
+    VL_CHECK(validExitance(n));
+    std::vector<double> yw(static_cast<std::size_t>(n));
 
     // Trilinear reads of the stored points in both voxel orderings the sweep uses.
     const std::vector<glm::ivec3> points = layout.storedPoints();
@@ -458,7 +462,7 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
         float c;
     };
     std::vector<std::vector<Entry>> entries(static_cast<std::size_t>(batch));
-    std::vector<float> coefficients(std::size_t(batch) * std::size_t(m));
+    std::vector<float> coefficients(std::size_t(batch) * std::size_t(cols));
     std::vector<int> idx(std::size_t(basis.maxSupport()));
     std::vector<float> val(std::size_t(basis.maxSupport()));
     const double inv4Pi = 1.0 / (4.0 * std::numbers::pi);
@@ -474,15 +478,22 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                 const glm::dvec3 w = quad.directions()[std::size_t(j)];
                 // Basis lights seen from ω_j, with the quadrature weight and the phase.
                 const double scale = quad.basisSolidAngles()[std::size_t(j)] * inv4Pi;
+                // Columns je·m + k: exitance coefficient je of basis light k (transfer.h), weighted
+                // by Ŷ_je(ω_j) (exactly 1 for je = 0, so n = 1 is the isotropic sum bit for bit).
                 auto& e = entries[std::size_t(b)];
                 e.clear();
-                if (sameDsf) {
-                    e.push_back({j, float(scale)});
-                } else {
-                    const int count = basis.evaluate(w, idx.data(), val.data());
-                    for (int i = 0; i < count; ++i)
-                        if (val[std::size_t(i)] != 0.f)
-                            e.push_back({idx[std::size_t(i)], float(scale * val[std::size_t(i)])});
+                scaledSh(n, w, yw.data());
+                for (int je = 0; je < n; ++je) {
+                    const double sy = scale * yw[std::size_t(je)];
+                    if (sameDsf) {
+                        e.push_back({je * m + j, float(sy)});
+                    } else {
+                        const int count = basis.evaluate(w, idx.data(), val.data());
+                        for (int i = 0; i < count; ++i)
+                            if (val[std::size_t(i)] != 0.f)
+                                e.push_back({je * m + idx[std::size_t(i)],
+                                             float(sy * val[std::size_t(i)])});
+                    }
                 }
                 // T∞ of this direction at every voxel, then at the stored points.
                 const PointSampler& at =
@@ -502,10 +513,10 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                 std::fill(coefficients.begin(), coefficients.end(), 0.f);
                 for (int b = 0; b < nb; ++b)
                     for (const Entry& e : entries[std::size_t(b)])
-                        coefficients[std::size_t(b) * std::size_t(m) + std::size_t(e.k)] = e.c;
+                        coefficients[std::size_t(b) * std::size_t(cols) + std::size_t(e.k)] = e.c;
             }
             auto addRows = [&](const tbb::blocked_range<std::size_t>& r) {
-                std::vector<double> acc(static_cast<std::size_t>(m));
+                std::vector<double> acc(static_cast<std::size_t>(cols));
                 for (std::size_t p = r.begin(); p < r.end(); ++p) {
                     float* row = transfer.row(std::int32_t(p));
                     if (!dense) {
@@ -519,10 +530,10 @@ DirectStats addDirectTransfer(const core::Volume& volume, const optics::TfTable&
                     std::fill(acc.begin(), acc.end(), 0.0);
                     for (int b = 0; b < nb; ++b) {
                         const double t = Tpts[std::size_t(b) * P + p];
-                        const float* cb = coefficients.data() + std::size_t(b) * std::size_t(m);
-                        for (int k = 0; k < m; ++k) acc[std::size_t(k)] += t * double(cb[k]);
+                        const float* cb = coefficients.data() + std::size_t(b) * std::size_t(cols);
+                        for (int k = 0; k < cols; ++k) acc[std::size_t(k)] += t * double(cb[k]);
                     }
-                    for (int k = 0; k < m; ++k)
+                    for (int k = 0; k < cols; ++k)
                         for (int c = 0; c < 3; ++c) row[k * 3 + c] += float(acc[std::size_t(k)]);
                 }
             };

@@ -13,6 +13,11 @@
 //   t_k^dir(x) ≈ (1/4π) Σ_j A_j T∞(x, ω_j) B_k(ω_j).
 // With the DSF basis of the same count the directions are the basis directions, B_k(ω_j) = δ_jk,
 // and each direction feeds one basis light exactly (t_k = A_k T∞(x, ω_k)/4π).
+// Exitance coefficients (transfer.h, n = transfer.exitance > 1): the same quadrature projects
+// T∞·B_k onto Ŷ_i instead of integrating it,
+//   t_{k,i}^dir(x) ≈ (1/4π) Σ_j A_j T∞(x, ω_j) B_k(ω_j) Ŷ_i(ω_j),
+// the same in R, G and B; i = 0 (Ŷ_0 = 1) is the isotropic sum, bit for bit. The sweeps do not
+// change; only the accumulation grows ×n (n·m multiply-adds per point and direction for SH).
 //
 // T∞ for all voxels of one direction at once: a slice sweep (semi-Lagrangian propagation). The
 // slices are taken across the axis a on which ω has its largest index-space component, starting

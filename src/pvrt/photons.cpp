@@ -50,6 +50,8 @@ struct Event {
     glm::vec3 p, q;
     glm::vec3 w;
     std::uint32_t photon;
+    /// Unit direction the scored light arrives from (−d of the flight; used when n > 1).
+    glm::vec3 from{0.f};
 };
 
 /// ∫ (c² − u²)³ du from 0 to u (|u| ≤ c): the poly6 kernel's profile along a line at distance
@@ -97,6 +99,11 @@ void checkOptions(const PhotonOptions& o) {
     if (o.rouletteAfter < 0)
         throw InputError("pvrt", "roulette_after",
                          "must be at least 0 (got " + std::to_string(o.rouletteAfter) + ")");
+    if (!(std::abs(o.phaseG) < 1.f))
+        throw InputError(
+            "pvrt", "phase_g",
+            "must lie strictly between -1 and 1 (got " + std::to_string(o.phaseG) + ")",
+            "use e.g. 0.6 for forward scattering, 0 for isotropic");
     if (o.estimator != Estimator::Collision && o.estimator != Estimator::TrackLength)
         throw InputError("pvrt", "estimator", "is not an estimator",
                          "use \"collision\" or \"track-length\"");
@@ -118,7 +125,12 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
     VL_CHECK(glm::all(glm::lessThan(
         glm::abs(layout.scale * glm::vec3(layout.res) - glm::vec3(geo.dims)), glm::vec3(1e-3f))));
     VL_CHECK(layout.slot.size() == std::size_t(layout.res.x) * layout.res.y * layout.res.z);
-    VL_CHECK_EQ(transfer.values.size(), std::size_t(layout.points) * m * 3);
+    const int n = transfer.exitance;  // exitance coefficients per basis light (transfer.h)
+    VL_CHECK(validExitance(n));
+    VL_CHECK_EQ(transfer.values.size(), std::size_t(layout.points) * std::size_t(n) * m * 3);
+    // Scattering: HG with the TF's phase g channel where it has one, else options.phaseG; g = 0
+    // keeps the isotropic draw (and so the photons of n = 1, g = 0 bit for bit).
+    const bool phaseChannel = medium.table().hasPhaseG();
     PhotonStats stats;
     if (options.maxScatterings == 0 || layout.points == 0) {
         stats.seconds = clock.seconds();
@@ -272,7 +284,7 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                                 const glm::dvec3 b = geo.worldToIndex(x + tEnd * d) * geo.spacing;
                                 chunk.events.push_back({glm::vec3(a), glm::vec3(b),
                                                         glm::vec3(beta * kInvFourPi),
-                                                        std::uint32_t(local)});
+                                                        std::uint32_t(local), glm::vec3(-d)});
                             }
                         }
                         if (!t) break;
@@ -284,7 +296,7 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                             const glm::dvec3 p = geo.worldToIndex(x) * geo.spacing;
                             chunk.events.push_back({glm::vec3(p), glm::vec3(p),
                                                     glm::vec3(beta * (kInvFourPi / s.extinction)),
-                                                    std::uint32_t(local)});
+                                                    std::uint32_t(local), glm::vec3(-d)});
                         }
                         if (scatterings == options.maxScatterings) break;
                         beta *= glm::dvec3(s.albedo);
@@ -294,6 +306,18 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                                 std::clamp(std::max({beta.x, beta.y, beta.z}), kMinSurvival, 1.0);
                             if (rng.uniformDouble() >= q) break;
                             beta /= q;
+                        }
+                        const float g =
+                            phaseChannel
+                                ? medium.table().surface(medium.volume().sampleWorld(x)).phaseG
+                                : options.phaseG;
+                        if (g != 0.f) {
+                            // HG about the propagation direction (importance sampling: the
+                            // phase over its pdf is 1, so β is unchanged).
+                            const float u1 = float(rng.uniformDouble());
+                            const float u2 = float(rng.uniformDouble());
+                            d = pathtrace::sampleHenyeyGreenstein(d, g, u1, u2);
+                            continue;
                         }
                         // Isotropic new direction.
                         const double cz = 1.0 - 2.0 * rng.uniformDouble();
@@ -312,6 +336,15 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                 const int z1 = std::min(layout.res.z - 1, z0 + slabPlanes - 1);
                 if (z0 > z1) return;
                 // Adds kernel weight kw (× the photon's fluxes) to stored point `slot`.
+                // Ŷ_je of the event's arrival direction (je < n; Ŷ_0 = 1, unused when n = 1).
+                std::array<float, kMaxExitance> ye{};
+                auto arrival = [&](const Event& e) {
+                    if (n == 1) return;
+                    double y[kMaxExitance];
+                    scaledSh(n, glm::normalize(glm::dvec3(e.from)), y);
+                    for (int je = 0; je < n; ++je) ye[std::size_t(je)] = float(y[je]);
+                };
+                const std::size_t block = std::size_t(m) * 3;  // one exitance coefficient's entries
                 auto add = [&](const PhotonFluxes& pf, std::int32_t slot, const glm::vec3& kw) {
                     const int* idx = fluxIndex.data() + pf.first;
                     const float* val = fluxValue.data() + pf.first;
@@ -322,11 +355,21 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         dst[1] += val[j] * kw.y;
                         dst[2] += val[j] * kw.z;
                     }
+                    for (int je = 1; je < n; ++je) {
+                        const glm::vec3 kj = kw * ye[std::size_t(je)];
+                        for (std::uint32_t j = 0; j < pf.count; ++j) {
+                            float* dst = row + std::size_t(je) * block + std::size_t(idx[j]) * 3;
+                            dst[0] += val[j] * kj.x;
+                            dst[1] += val[j] * kj.y;
+                            dst[2] += val[j] * kj.z;
+                        }
+                    }
                 };
                 // A flight's weighted fluxes Φ_j·w (RGB), computed once per flight: each point
                 // then adds W's line integral times them (contiguous when the basis lights are
                 // 0 … m−1, as for SH: a vectorisable loop).
-                std::vector<float> weighted(std::size_t(maxSupport) * 3);
+                // Layout [je][j][rgb]: with dense SH fluxes it matches the row's [je][k][rgb].
+                std::vector<float> weighted(std::size_t(n) * std::size_t(maxSupport) * 3);
                 // A flight a → b: every grid point of the slab within h of the segment gets
                 // W integrated along it. The z planes, then per plane the rows and per row the
                 // points, are bounded by the part of the segment within h of them (per row
@@ -346,8 +389,14 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         weighted[3 * j + 2] = val[j] * e.w.z;
                         dense = dense && idx[j] == int(j);
                     }
+                    dense = dense && (n == 1 || pf.count == std::uint32_t(m));
+                    arrival(e);
+                    const std::size_t c3 = std::size_t(pf.count) * 3;
+                    for (int je = 1; je < n; ++je)
+                        for (std::size_t i = 0; i < c3; ++i)
+                            weighted[std::size_t(je) * c3 + i] = weighted[i] * ye[std::size_t(je)];
                     const float* wv = weighted.data();
-                    const std::size_t n3 = std::size_t(pf.count) * 3;
+                    const std::size_t n3 = c3 * std::size_t(n);
                     int zlo, zhi;
                     spanRange(std::min(a.z, b.z), std::max(a.z, b.z), 2, zlo, zhi);
                     zlo = std::max(zlo, z0);
@@ -401,11 +450,15 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                                 if (dense) {
                                     for (std::size_t i = 0; i < n3; ++i) row[i] += k * wv[i];
                                 } else {
-                                    for (std::uint32_t j = 0; j < pf.count; ++j) {
-                                        float* dst = row + std::size_t(idx[j]) * 3;
-                                        dst[0] += k * wv[3 * j];
-                                        dst[1] += k * wv[3 * j + 1];
-                                        dst[2] += k * wv[3 * j + 2];
+                                    for (int je = 0; je < n; ++je) {
+                                        const float* wj = wv + std::size_t(je) * c3;
+                                        float* rj = row + std::size_t(je) * block;
+                                        for (std::uint32_t j = 0; j < pf.count; ++j) {
+                                            float* dst = rj + std::size_t(idx[j]) * 3;
+                                            dst[0] += k * wj[3 * j];
+                                            dst[1] += k * wj[3 * j + 1];
+                                            dst[2] += k * wj[3 * j + 2];
+                                        }
                                     }
                                 }
                             }
@@ -427,6 +480,7 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         pointRange(e.p, 1, ylo, yhi);
                         pointRange(e.p, 0, xlo, xhi);
                         const PhotonFluxes& pf = photonFluxes[e.photon];
+                        arrival(e);
                         for (int gz = zlo; gz <= zhi; ++gz) {
                             const float dz = pointMm[2][std::size_t(gz)] - e.p.z;
                             for (int gy = ylo; gy <= yhi; ++gy) {

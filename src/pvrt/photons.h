@@ -9,8 +9,14 @@
 // coloured by the albedos it met, before the albedo of x. Light reaching x unscattered (the direct
 // part) is not included: direct.h computes it analytically. With maxScatterings = B − 1 the sum
 // direct + indirect is the in-scattered radiance of the path tracer's maxBounces = B.
-// Phase: isotropic at every collision (the transfer stores the isotropic S of transfer.h); a TF's
-// phase g channel and the tracer's phaseG / scattering mode are not used here.
+// Phase: Henyey–Greenstein at every collision with options.phaseG, or the TF's phase g channel at
+// the collision's value where the TF has one (the path tracer's rule); the new direction is drawn
+// from HG (importance sampling: the phase over its pdf is 1, β is unchanged); g = 0 draws the
+// isotropic direction exactly as before. The tracer's scattering mode (BRDF) is not used here.
+// Exitance coefficients (transfer.h, n = transfer.exitance): every score is also weighted by
+// Ŷ_j(ω_in) of the direction ω_in = −d the scored light arrives from (d the photon's direction
+// of flight), added to coefficient j of the row; the track-length and collision estimators then
+// estimate (1/4π)∫W(x − y) ∫ L_ind(y, ω) Ŷ_j(ω) dω dy. j = 0 (Ŷ_0 = 1) is the isotropic score.
 //
 // Photons (units: world mm, 1/mm, radiance in the basis light's units):
 //   Source  the faces of the volume box that PathTracer::keptInterval clips to: in index space
@@ -27,7 +33,7 @@
 //           inside keptInterval — matter removed by clip planes or the crop box neither
 //           scatters nor attenuates photons. At a real collision x_c the throughput β (RGB, the
 //           product of the albedos of the earlier collisions, divided by roulette survival) is
-//           that of light scattered `s` times so far; then β ×= a(x_c), s += 1, a new isotropic
+//           that of light scattered `s` times so far; then β ×= a(x_c), s += 1, a new (HG, see Phase)
 //           direction, Russian roulette once s ≥ rouletteAfter (survival q = max channel of β,
 //           clamped to [0.05, 1], as the path tracer), and the path ends after maxScatterings
 //           scatterings or when it leaves the box.
@@ -91,6 +97,9 @@ struct PhotonOptions {
     /// Scatterings before Russian roulette may end a photon, ≥ 0.
     int rouletteAfter = 3;
     Estimator estimator = Estimator::TrackLength;
+    /// Henyey–Greenstein asymmetry of the photons' scattering, (−1, 1) (the path tracer's
+    /// phase_g); a TF with a phase g channel overrides it per collision. 0 = isotropic.
+    float phaseG = 0.f;
     std::uint64_t seed = 1;
     int threads = 0;  ///< 0 = all
 };

@@ -6,6 +6,7 @@
 #include <tbb/task_arena.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include "core/error.h"
@@ -30,6 +31,28 @@ glm::vec3 RadianceVolume::sample(const glm::vec3& p) const {
     return glm::mix(glm::mix(c00, c10, f.y), glm::mix(c01, c11, f.y), f.z);
 }
 
+glm::vec3 RadianceVolume::sampleWeighted(const glm::vec3& p, const float* w) const {
+    const glm::vec3 g = glm::clamp((p + 0.5f) / scale - 0.5f, glm::vec3(0.f), glm::vec3(res - 1));
+    const glm::ivec3 i0 = glm::min(glm::ivec3(g), res - 1);
+    const glm::ivec3 i1 = glm::min(i0 + 1, res - 1);
+    const glm::vec3 f = g - glm::vec3(i0);
+    const std::size_t sy = std::size_t(res.x), sz = std::size_t(res.x) * std::size_t(res.y);
+    const int n = exitance;
+    // L_s at each corner (the sum is linear, so blending the sums = summing the blends).
+    auto at = [&](int x, int y, int z) {
+        const glm::vec3* t =
+            values.data() + (std::size_t(x) + sy * std::size_t(y) + sz * std::size_t(z)) * n;
+        glm::vec3 s(0.f);
+        for (int j = 0; j < n; ++j) s += w[j] * t[j];
+        return s;
+    };
+    const glm::vec3 c00 = glm::mix(at(i0.x, i0.y, i0.z), at(i1.x, i0.y, i0.z), f.x);
+    const glm::vec3 c10 = glm::mix(at(i0.x, i1.y, i0.z), at(i1.x, i1.y, i0.z), f.x);
+    const glm::vec3 c01 = glm::mix(at(i0.x, i0.y, i1.z), at(i1.x, i0.y, i1.z), f.x);
+    const glm::vec3 c11 = glm::mix(at(i0.x, i1.y, i1.z), at(i1.x, i1.y, i1.z), f.x);
+    return glm::mix(glm::mix(c00, c10, f.y), glm::mix(c01, c11, f.y), f.z);
+}
+
 namespace {
 /// S clamped at 0 in every channel (NaN → 0 too: max(NaN, 0) would keep it); true when it was
 /// negative or NaN somewhere (the count the stats report).
@@ -39,21 +62,24 @@ bool clampAtZero(glm::vec3& v) {
     return clamped;
 }
 
-RadianceVolume emptyLike(const TransferLayout& layout) {
+RadianceVolume emptyLike(const TransferLayout& layout, int exitance) {
     RadianceVolume r;
     r.res = layout.res;
     r.scale = layout.scale;
-    r.values.assign(layout.slot.size(), glm::vec3(0.f));
+    r.exitance = exitance;
+    r.values.assign(layout.slot.size() * std::size_t(exitance), glm::vec3(0.f));
     return r;
 }
+bool negative(const glm::vec3& v) { return !(v.x >= 0.f && v.y >= 0.f && v.z >= 0.f); }
 }  // namespace
 
 RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::vec3> light,
                                int threads) {
     VL_CHECK_EQ(int(light.size()), transfer.basis);
     const TransferLayout& layout = transfer.layout;
-    RadianceVolume r = emptyLike(layout);
+    RadianceVolume r = emptyLike(layout, transfer.exitance);
     const int m = transfer.basis;
+    const int n = transfer.exitance;
     const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
     std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
     auto body = [&](const tbb::blocked_range<int>& zs) {
@@ -64,6 +90,16 @@ RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::ve
                 const std::int32_t s = layout.slot[i];
                 if (s < 0) continue;
                 const float* t = transfer.row(s);
+                if (n > 1) {
+                    for (int j = 0; j < n; ++j) {
+                        glm::vec3 sum(0.f);
+                        for (int k = 0; k < m; ++k, t += 3)
+                            sum += glm::vec3(t[0], t[1], t[2]) * light[std::size_t(k)];
+                        if (j == 0) clamped += negative(sum) ? 1 : 0;
+                        r.values[i * std::size_t(n) + std::size_t(j)] = sum;
+                    }
+                    continue;
+                }
                 glm::vec3 sum(0.f);
                 for (int k = 0; k < m; ++k, t += 3)
                     sum += glm::vec3(t[0], t[1], t[2]) * light[std::size_t(k)];
@@ -79,12 +115,52 @@ RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::ve
     return r;
 }
 
-RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint) {
-    VL_CHECK_EQ(perPoint.size(), std::size_t(layout.points));
-    RadianceVolume r = emptyLike(layout);
+namespace {
+/// scatterRadiance for n > 1 coefficients (not clamped): 16× the data of n = 1, so parallel over
+/// z-slices of the grid (each writes its own slots; the count is summed per slice in order).
+RadianceVolume scatterCoefficients(const TransferLayout& layout,
+                                   std::span<const glm::vec3> perPoint, int exitance) {
+    RadianceVolume r;
+    r.res = layout.res;
+    r.scale = layout.scale;
+    r.exitance = exitance;
+    r.values.resize(layout.slot.size() * std::size_t(exitance));
+    const std::size_t n = std::size_t(exitance);
+    const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
+    std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
+    tbb::parallel_for(tbb::blocked_range<int>(0, layout.res.z),
+                      [&](const tbb::blocked_range<int>& zs) {
+                          for (int z = zs.begin(); z < zs.end(); ++z) {
+                              std::uint64_t clamped = 0;
+                              for (std::size_t i = perSlice * std::size_t(z);
+                                   i < perSlice * std::size_t(z + 1); ++i) {
+                                  const std::int32_t s = layout.slot[i];
+                                  glm::vec3* dst = r.values.data() + i * n;
+                                  if (s < 0) {
+                                      std::fill(dst, dst + n, glm::vec3(0.f));
+                                      continue;
+                                  }
+                                  std::copy_n(perPoint.data() + std::size_t(s) * n, n, dst);
+                                  clamped += negative(dst[0]) ? 1 : 0;
+                              }
+                              clampedPerSlice[std::size_t(z)] = clamped;
+                          }
+                      });
+    for (std::uint64_t c : clampedPerSlice) r.clamped += c;
+    return r;
+}
+}  // namespace
+
+RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint,
+                               int exitance) {
+    VL_CHECK(validExitance(exitance));
+    VL_CHECK_EQ(perPoint.size(), std::size_t(layout.points) * std::size_t(exitance));
+    if (exitance > 1) return scatterCoefficients(layout, perPoint, exitance);
+    RadianceVolume r = emptyLike(layout, exitance);
     for (std::size_t i = 0; i < layout.slot.size(); ++i) {
         const std::int32_t s = layout.slot[i];
         if (s < 0) continue;
+
         glm::vec3 v = perPoint[std::size_t(s)];
         r.clamped += clampAtZero(v) ? 1 : 0;
         r.values[i] = v;
@@ -115,11 +191,63 @@ class PvrtShader {
     glm::vec3 origin_{0.f};
 };
 
+/// n > 1 exitance coefficients: Henyey–Greenstein in-scattered radiance toward the eye. The
+/// per-ray copy holds the weights g^l·Ŷ_j(−toEye) (toEye is the same along a ray); with a TF
+/// phase g channel only Ŷ_j, and g^l per sample from the TF at the sample's value.
+class PvrtHgShader {
+  public:
+    static constexpr bool kNeedsNormal = false;
+    static constexpr bool kScatterAtMeanDepth = true;
+    PvrtHgShader(std::shared_ptr<const RadianceVolume> radiance, const core::Geometry& geometry,
+                 float g, std::shared_ptr<const optics::TfTable> table)
+        : radiance_(std::move(radiance)),
+          table_(table && table->hasPhaseG() ? std::move(table) : nullptr),
+          worldToIndex_(geometry.worldToIndexMatrix()),
+          origin_(geometry.origin),
+          g_(g) {}
+    render::Scatter scatter(const render::ShadeInput& in) const {
+        const glm::vec3 p = worldToIndex_ * (in.position - origin_);
+        glm::vec3 s;
+        if (table_) {
+            const float g = table_->surface(in.value).phaseG;
+            float w[kMaxExitance];
+            float gl = 1.f;
+            for (int l = 0, j = 0; j < radiance_->exitance; ++l, gl *= g)
+                for (int m = -l; m <= l; ++m, ++j) w[j] = gl * w_[std::size_t(j)];
+            s = radiance_->sampleWeighted(p, w);
+        } else {
+            s = radiance_->sampleWeighted(p, w_.data());
+        }
+        clampAtZero(s);  // radiance is never negative (NaN → 0 too)
+        return {s, glm::vec3(0.f)};
+    }
+    PvrtHgShader forRay(const glm::vec3& toEye) const {
+        PvrtHgShader r = *this;
+        // With a phase channel: Ŷ_j(−toEye) alone (g = 1), the g^l come per sample.
+        exitanceWeights(radiance_->exitance, table_ ? 1.f : g_, toEye, r.w_.data());
+        return r;
+    }
+
+  private:
+    std::shared_ptr<const RadianceVolume> radiance_;
+    std::shared_ptr<const optics::TfTable> table_;
+    glm::mat3 worldToIndex_{1.f};
+    glm::vec3 origin_{0.f};
+    float g_ = 0.f;
+    std::array<float, kMaxExitance> w_{};
+};
+
 }  // namespace
 
-std::unique_ptr<render::ShadingModel> makePvrtModel(
-    const render::RayCaster& caster, const render::Camera& camera,
-    std::shared_ptr<const RadianceVolume> radiance) {
+std::unique_ptr<render::ShadingModel> makePvrtModel(const render::RayCaster& caster,
+                                                    const render::Camera& camera,
+                                                    std::shared_ptr<const RadianceVolume> radiance,
+                                                    float phaseG,
+                                                    std::shared_ptr<const optics::TfTable> table) {
+    if (radiance->exitance > 1)
+        return std::make_unique<render::detail::DvrModel<PvrtHgShader>>(
+            "pvrt", PvrtHgShader(std::move(radiance), caster.volume().geometry(), phaseG, table),
+            render::PixelFootprint(caster, camera));
     return std::make_unique<render::detail::DvrModel<PvrtShader>>(
         "pvrt", PvrtShader(std::move(radiance), caster.volume().geometry()),
         render::PixelFootprint(caster, camera));

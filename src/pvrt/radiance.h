@@ -6,6 +6,13 @@
 // the ordinary ray caster marches the volume with a shader that reads S trilinearly — so a light
 // change costs one pass over the stored points, not a precompute.
 //
+// With n > 1 exitance coefficients (transfer.h) the volume holds, per grid point, the n RGB SH
+// coefficients t_j = Σ_k c_k ⊙ t_{k,j} of the incident radiance instead of S, and the shader
+// evaluates the Henyey–Greenstein in-scattered radiance toward the eye per sample,
+// L_s = Σ_j g^{l(j)} Ŷ_j(−toEye) t_j (exitanceWeights), trilinear in the coefficients, clamped at 0
+// after the sum; g is the method's phase_g, or the TF's phase g channel at the sample's value
+// where the TF has one. n = 1 is the isotropic S, view-independent, exactly as before.
+//
 // S is clamped at 0: a truncated SH expansion of the lighting can ring below zero where the
 // transfer is sharp (radiance never is). The marcher multiplies S by the segment's α and the TF
 // albedo and adds the TF emission (render/shading.h), exactly as for the SH visibility shaders.
@@ -16,6 +23,7 @@
 
 #include "core/progress.h"
 #include "core/volume.h"
+#include "optics/transfer_function.h"
 #include "pvrt/transfer.h"
 #include "render/ray_caster.h"
 
@@ -24,27 +32,37 @@ namespace voxlight::pvrt {
 struct RadianceVolume {
     glm::ivec3 res{0};
     glm::vec3 scale{1.f};  ///< voxels per grid step (TransferLayout::scale)
-    /// RGB in-scattered radiance per grid point (x fastest); 0 where no point is stored.
+    int exitance = 1;      ///< n: RGB entries per grid point (1: S; else SH of L_in, transfer.h)
+    /// Per grid point (x fastest) n RGB entries: S (n = 1) or the exitance coefficients; 0 where
+    /// no point is stored.
     std::vector<glm::vec3> values;
-    /// Stored points whose combination was negative in some channel before the clamp.
+    /// Stored points whose S (n = 1) or whose coefficient 0 (the mean incident radiance, n > 1)
+    /// was negative in some channel: clamped at 0 for n = 1; for n > 1 the coefficients are kept
+    /// and the evaluated L_s is clamped in the shader.
     std::uint64_t clamped = 0;
 
-    /// Trilinear S at continuous voxel coordinate p (clamped to the grid).
+    /// Trilinear S at continuous voxel coordinate p (clamped to the grid); n = 1 only.
     glm::vec3 sample(const glm::vec3& p) const;
+    /// Trilinear Σ_j w_j t_j at p (n weights, exitanceWeights), not clamped.
+    glm::vec3 sampleWeighted(const glm::vec3& p, const float* w) const;
     std::size_t bytes() const { return values.size() * sizeof(glm::vec3); }
 };
 
 /// S = Σ_k c_k ⊙ t_k at every stored point of `transfer` (c: basis-size RGB coefficients).
 /// Parallel over z-slices of the grid, deterministic.
+/// With n = transfer.exitance > 1: t_j = Σ_k c_k ⊙ t_{k,j} per coefficient (not clamped).
 RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::vec3> light,
                                int threads = 0);
-/// The same from per-stored-point radiance already evaluated (e.g. by CPCA): scattered into the
-/// grid and clamped at 0.
-RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint);
+/// The same from per-stored-point radiance already evaluated (e.g. by CPCA; n entries per point,
+/// [point][j]): scattered into the grid, clamped at 0 when n = 1.
+RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint,
+                               int exitance = 1);
 
-/// The ray caster's shading model reading a radiance volume (in-scattered radiance, isotropic).
-std::unique_ptr<render::ShadingModel> makePvrtModel(const render::RayCaster& caster,
-                                                    const render::Camera& camera,
-                                                    std::shared_ptr<const RadianceVolume> radiance);
+/// The ray caster's shading model reading a radiance volume: isotropic S (n = 1), or HG with
+/// asymmetry phaseG (|g| < 1) — per sample the TF's phase g channel instead when `table` has one.
+std::unique_ptr<render::ShadingModel> makePvrtModel(
+    const render::RayCaster& caster, const render::Camera& camera,
+    std::shared_ptr<const RadianceVolume> radiance, float phaseG = 0.f,
+    std::shared_ptr<const optics::TfTable> table = nullptr);
 
 }  // namespace voxlight::pvrt

@@ -3,10 +3,31 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numbers>
+#include <span>
 
 #include "core/error.h"
+#include "sh/sh_basis.h"
 
 namespace voxlight::pvrt {
+
+void scaledSh(int n, const glm::dvec3& unitDir, double* out) {
+    VL_CHECK(validExitance(n));
+    const int band = sh::shBandForCount(n);
+    sh::evalShUnitDouble(band, unitDir, std::span<double>(out, std::size_t(n)));
+    const double s = std::sqrt(4.0 * std::numbers::pi);
+    for (int j = 1; j < n; ++j) out[j] *= s;
+    out[0] = 1.0;  // exactly (√(4π)·Y_0 may round off it): n = 1 stays today's arithmetic
+}
+
+void exitanceWeights(int n, float g, const glm::vec3& toEye, float* w) {
+    VL_CHECK(validExitance(n));
+    double y[kMaxExitance];
+    scaledSh(n, -glm::dvec3(toEye), y);
+    double gl = 1.0;  // g^l, band by band
+    for (int l = 0, j = 0; j < n; ++l, gl *= double(g))
+        for (int m = -l; m <= l; ++m, ++j) w[j] = float(gl * y[j]);
+}
 
 std::vector<glm::ivec3> TransferLayout::storedPoints() const {
     std::vector<glm::ivec3> out(std::size_t(std::max(points, 0)));

@@ -20,8 +20,21 @@
 // (photons.h): light scattered one or more times on its way to x, coloured by the albedos it met.
 // The render combines S(x) = Σ_k c_k ⊙ t_k(x) (radiance.h), or through CPCA (cpca.h).
 //
-// Layout of `values`: [point][k][channel], i.e. value(p, k) = values[(p·m + k)·3 + c]: the
-// transfer matrix of a point is m×3 contiguous floats (the row CPCA clusters).
+// Exitance coefficients (issue #16; anisotropic scattering): with n = 1 (the default) a transfer
+// entry is the isotropic S above. With n = 4, 9 or 16 it is instead the SH projection of the
+// incident radiance L_in(x, ω) (ω toward where the light comes from, as basis.h), in the scaled
+// real SH Ŷ_j = √(4π)·Y_j of sh/sh_basis.h (so Ŷ_0 = 1):
+//   t_{k,j}(x) = (1/4π) ∫ L_in,k(x, ω) Ŷ_j(ω) dω,      j = 0 … n−1 (bands 0 … √n − 1),
+// and t_{k,0} is exactly the isotropic S of n = 1. The render evaluates the Henyey–Greenstein
+// in-scattered radiance toward the eye by Funk–Hecke (HG's zonal coefficients are g^l times the
+// isotropic one):
+//   L_s(x, ω_e) = ∫ p_HG(−ω·ω_e) L_in(x, ω) dω = Σ_j g^{l(j)} t_j(x) Ŷ_j(−ω_e)
+// with ω_e the unit direction from x toward the eye (light arriving from ω propagates along −ω and
+// leaves toward the eye along ω_e: cos θ = −ω·ω_e), see exitanceWeights().
+//
+// Layout of `values`: [point][j][k][channel], i.e. value(p, j, k) = values[((p·n + j)·m + k)·3 +
+// c]: the transfer matrix of a point is n·m×3 contiguous floats (the row CPCA clusters); for n = 1
+// this is today's [point][k][channel].
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <vector>
@@ -56,20 +69,36 @@ struct TransferLayout {
 TransferLayout makeTransferLayout(const core::Volume& volume, const grid::BrickMajorants& cells,
                                   int resolution);
 
+/// Exitance coefficient counts a transfer may have (SH bands 0, 0–1, 0–2, 0–3).
+inline constexpr int kMaxExitance = 16;
+/// True for n ∈ {1, 4, 9, 16}.
+constexpr bool validExitance(int n) { return n == 1 || n == 4 || n == 9 || n == 16; }
+
+/// The weights w_j = g^{l(j)}·Ŷ_j(−toEye) (j < n) that turn exitance coefficients into the HG
+/// in-scattered radiance toward the eye: L_s = Σ_j w_j t_j (header comment). toEye unit; |g| ≤ 1 (g = 1 gives Ŷ_j(−toEye) alone, for a per-sample g).
+void exitanceWeights(int n, float g, const glm::vec3& toEye, float* w);
+/// Ŷ_j(ω) = √(4π)·Y_j(ω) for j < n at a unit direction ω (double; the photons' and the direct
+/// part's projection weights).
+void scaledSh(int n, const glm::dvec3& unitDir, double* out);
+
 struct Transfer {
     TransferLayout layout;
-    int basis = 0;  ///< m
-    /// [point][k][rgb] (see the header comment); points·m·3 floats.
+    int basis = 0;     ///< m
+    int exitance = 1;  ///< n: SH coefficients of L_in per basis light (1 = isotropic S)
+    /// [point][j][k][rgb] (see the header comment); points·n·m·3 floats.
     std::vector<float> values;
 
     Transfer() = default;
-    Transfer(TransferLayout l, int m)
-        : layout(std::move(l)), basis(m), values(std::size_t(layout.points) * m * 3, 0.f) {}
-    float* row(std::int32_t point) { return values.data() + std::size_t(point) * basis * 3; }
+    Transfer(TransferLayout l, int m, int n = 1)
+        : layout(std::move(l)),
+          basis(m),
+          exitance(n),
+          values(std::size_t(layout.points) * std::size_t(n) * m * 3, 0.f) {}
+    float* row(std::int32_t point) { return values.data() + std::size_t(point) * rowSize(); }
     const float* row(std::int32_t point) const {
-        return values.data() + std::size_t(point) * basis * 3;
+        return values.data() + std::size_t(point) * rowSize();
     }
-    std::size_t rowSize() const { return std::size_t(basis) * 3; }
+    std::size_t rowSize() const { return std::size_t(exitance) * std::size_t(basis) * 3; }
     std::size_t bytes() const {
         return values.size() * sizeof(float) + layout.slot.size() * sizeof(std::int32_t);
     }

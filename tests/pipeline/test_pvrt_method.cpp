@@ -288,3 +288,191 @@ TEST(PvrtMethod, TurningAnEnvironmentMapReprojectsOnlyTheLights) {
         EXPECT_NE(a.image.pixels, b.image.pixels) << basis;
     }
 }
+
+// ---- Anisotropic scattering: exitance coefficients and phase_g (issue #16) ---------------------
+
+namespace {
+
+/// The cloud seen against the light (the light behind it, slightly off the view axis: the camera
+/// looks along +y, the light travels along about −y toward it), where forward scattering (g > 0)
+/// brightens the image most.
+/// Orthographic, so that every pixel sees the light's scattering at the same angle.
+json againstTheLight(json d, double g) {
+    d["lights"][0]["direction"] = {-0.25, -1.0, -0.2};
+    d["camera"]["projection"] = "orthographic";
+    if (g != 0.0) d["method"]["params"]["phase_g"] = g;
+    return d;
+}
+
+}  // namespace
+
+TEST(PvrtMethod, HgSingleScatteringMatchesThePathTracerWithTheSameG) {
+    // The direct part alone with 16 exitance coefficients against the path tracer's single
+    // scattering with the same phase_g (0.6, forward, seen against the light); the isotropic
+    // transfer (1 coefficient) renders the same scene as if g were 0 and is far off.
+    Session session;
+    constexpr double kG = 0.6;
+    const RunResult ref =
+        session.run(scene(againstTheLight(cloudScene("pathtrace", referenceParams(1), false), kG)));
+    auto pvrt = [&](int n) {
+        return session.run(scene(againstTheLight(cloudScene("pvrt",
+                                                            {{"basis", "dsf"},
+                                                             {"directions", 642},
+                                                             {"resolution", 32},
+                                                             {"exitance_coefficients", n},
+                                                             {"clusters", 0}},
+                                                            false),
+                                                 kG)));
+    };
+    const RunResult iso = pvrt(1), hg4 = pvrt(4), hg16 = pvrt(16);
+    EXPECT_TRUE(allFiniteNonNegative(hg16.image));
+    const double e1 = relativeL2(iso.image, ref.image), e4 = relativeL2(hg4.image, ref.image),
+                 e16 = relativeL2(hg16.image, ref.image);
+    std::printf(
+        "HG g 0.6 single scattering against the light: relative L2 n=1 %.4f, n=4 %.4f, "
+        "n=16 %.4f; mean red ref %.4f n=1 %.4f n=16 %.4f\n",
+        e1, e4, e16, meanRed(ref.image), meanRed(iso.image), meanRed(hg16.image));
+    // The basis error: single scattering of a directional light sees HG at one angle (the light's
+    // travel direction against the direction toward the eye, cos θ ≈ 0.95 here), and 16
+    // coefficients hold HG's bands 0–3 only: Σ_{l≤3} (2l+1) g^l P_l(cos θ) / 4π instead of HG.
+    const double cosT = 1.0 / std::sqrt(0.25 * 0.25 + 1.0 + 0.2 * 0.2);
+    const double p1 = cosT, p2 = 0.5 * (3 * cosT * cosT - 1),
+                 p3 = 0.5 * (5 * cosT * cosT * cosT - 3 * cosT);
+    const double truncated = 1 + 3 * kG * p1 + 5 * kG * kG * p2 + 7 * kG * kG * kG * p3;
+    const double d = 1 + kG * kG - 2 * kG * cosT;
+    const double ratio = truncated / ((1 - kG * kG) / (d * std::sqrt(d)));
+    core::ImageRGBA scaled = ref.image;
+    for (std::size_t i = 0; i < scaled.pixels.size(); ++i)
+        if (i % 4 != 3) scaled.pixels[i] = float(scaled.pixels[i] * ratio);
+    const double eBasis = relativeL2(hg16.image, scaled);
+    std::printf("band-3 HG / HG at cos θ %.3f: %.3f; n=16 against the reference × that: %.4f\n",
+                cosT, ratio, eBasis);
+    // The same scene isotropic (g = 0) both ways: the grid, quadrature and light-basis errors
+    // that the exitance coefficients do not change.
+    const RunResult refIso =
+        session.run(scene(againstTheLight(cloudScene("pathtrace", referenceParams(1), false), 0)));
+    const RunResult pvrtIso = session.run(scene(againstTheLight(
+        cloudScene("pvrt",
+                   {{"basis", "dsf"}, {"directions", 642}, {"resolution", 32}, {"clusters", 0}},
+                   false),
+        0)));
+    const double eIso = relativeL2(pvrtIso.image, refIso.image);
+    std::printf("isotropic (g = 0) single scattering against the light: relative L2 %.4f\n", eIso);
+    // n = 16 against the path tracer: the truncation above (1 − ratio ≈ 0.15) plus the errors of
+    // the isotropic case (measured 0.156). Against the reference scaled by the truncation ratio
+    // it is as close as the isotropic case is (measured 0.064 against 0.066): the direct part is
+    // exact up to the basis error; the factor leaves room for the references' noise (~1 % each).
+    // n = 1 is several times worse (0.84).
+    constexpr double kHgSingleScatteringTol = 0.25;
+    constexpr double kBasisErrorFactor = 1.5;
+    EXPECT_LT(e16, kHgSingleScatteringTol);
+    EXPECT_LT(eBasis, kBasisErrorFactor * eIso);
+    EXPECT_LT(e16, e1 / 2);
+    EXPECT_LT(e16, e4);
+}
+
+TEST(PvrtMethod, HgMultipleScatteringBeatsTheIsotropicTransfer) {
+    // Multiple scattering with g = 0.6 against the light: photons scatter by HG and score per
+    // arrival direction; 16 coefficients against 1 (the same photons, isotropic view).
+    Session session;
+    constexpr double kG = 0.6;
+    const RunResult ref =
+        session.run(scene(againstTheLight(cloudScene("pathtrace", referenceParams(16), true), kG)));
+    auto pvrt = [&](int n) {
+        return session.run(scene(againstTheLight(cloudScene("pvrt",
+                                                            {{"basis", "dsf"},
+                                                             {"directions", 162},
+                                                             {"resolution", 32},
+                                                             {"photons", 100},
+                                                             {"exitance_coefficients", n},
+                                                             {"clusters", 0}},
+                                                            true),
+                                                 kG)));
+    };
+    const RunResult iso = pvrt(1), hg16 = pvrt(16);
+    EXPECT_TRUE(allFiniteNonNegative(hg16.image));
+    const double e1 = relativeL2(iso.image, ref.image), e16 = relativeL2(hg16.image, ref.image);
+    std::printf(
+        "HG g 0.6 multiple scattering against the light: relative L2 n=1 %.4f, n=16 "
+        "%.4f; mean red ref %.4f n=1 %.4f n=16 %.4f\n",
+        e1, e16, meanRed(ref.image), meanRed(iso.image), meanRed(hg16.image));
+    constexpr double kHgMultipleScatteringTol = 0.35;  // as the single-scattering bound above
+    EXPECT_LT(e16, kHgMultipleScatteringTol);
+    EXPECT_LT(e16, e1 / 2);
+}
+
+TEST(PvrtMethod, ExtremeAsymmetryStaysFinite) {
+    // g = ±0.95 with 16 coefficients and an SH basis (negative basis fluxes), CPCA on: no NaN, no
+    // negative pixel (L_s is clamped at 0 after the sum).
+    for (double g : {-0.95, 0.95}) {
+        const RunResult r =
+            Session().run(scene(againstTheLight(cloudScene("pvrt",
+                                                           {{"resolution", 16},
+                                                            {"photons", 4},
+                                                            {"clusters", 8},
+                                                            {"exitance_coefficients", 16}},
+                                                           true),
+                                                g)));
+        EXPECT_TRUE(allFiniteNonNegative(r.image)) << "g " << g;
+        // Forward scattering toward the eye shows; back-scattering of a sharp light may be
+        // clamped to black (HG at |g| = 0.95 truncated after band 3 rings below 0 there).
+        if (g > 0) EXPECT_GT(meanRed(r.image), 0.0) << "g " << g;
+    }
+}
+
+TEST(PvrtMethod, ExitanceParamsAreCheckedAndKeyed) {
+    auto fails = [](json d, const std::string& field) {
+        try {
+            Session().run(scene(d));
+            ADD_FAILURE() << "accepted: " << d["method"].dump();
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(field), std::string::npos) << e.what();
+        }
+    };
+    fails(cloudScene("pvrt", {{"exitance_coefficients", 5}}, true),
+          "method.params.exitance_coefficients");
+    fails(cloudScene("pvrt", {{"exitance_coefficients", 25}}, true),
+          "method.params.exitance_coefficients");
+    fails(cloudScene("pvrt", {{"phase_g", 1.0}}, true), "method.params.phase_g");
+    // A change of either reruns the precompute it affects (the caches do not mix).
+    Session session;
+    const json base =
+        cloudScene("pvrt", {{"resolution", 16}, {"photons", 2}, {"clusters", 0}}, true);
+    const RunResult a = session.run(scene(base));
+    json d = base;
+    d["method"]["params"]["exitance_coefficients"] = 4;
+    const RunResult b = session.run(scene(d));
+    EXPECT_TRUE(b.stage("pvrt_direct").ran);
+    // At g = 0 the bands ≥ 1 weigh 0: uncompressed, the image is the isotropic one up to where
+    // the clamp at 0 applies (n = 1 clamps S per point before interpolation, n > 1 the
+    // interpolated sum; with CPCA the longer rows would also compress differently).
+    constexpr double kClampOrderTol = 0.02;
+    EXPECT_LT(relativeL2(b.image, a.image), kClampOrderTol);
+    d["method"]["params"]["phase_g"] = 0.5;
+    const RunResult c = session.run(scene(d));
+    EXPECT_FALSE(c.stage("pvrt_direct").ran);
+    EXPECT_TRUE(c.stage("pvrt_transfer").ran);
+    EXPECT_NE(b.image.pixels, c.image.pixels);
+    // The default spelled out is the default: the same image.
+    json e = base;
+    e["method"]["params"]["exitance_coefficients"] = 1;
+    e["method"]["params"]["phase_g"] = 0.0;
+    EXPECT_EQ(Session().run(scene(e)).image.pixels, a.image.pixels);
+}
+
+TEST(PvrtMethod, ATfPhaseChannelActsAsPhaseGPerSample) {
+    // A TF whose phase channel is 0.6 everywhere against phase_g 0.6 on a TF without one: the
+    // photons read g at each collision, the shader at each sample — the same g, so the same image
+    // up to float rounding of g^l (per sample in float, per ray in double for phase_g).
+    const json params = {
+        {"resolution", 16}, {"photons", 4}, {"clusters", 0}, {"exitance_coefficients", 16}};
+    const json byParam = againstTheLight(cloudScene("pvrt", params, true), 0.6);
+    json byTf = againstTheLight(cloudScene("pvrt", params, true), 0.0);
+    for (auto& p : byTf["transfer_function"]["points"]) p["phase_g"] = 0.6;
+    const RunResult a = Session().run(scene(byParam)), b = Session().run(scene(byTf));
+    const RunResult iso =
+        Session().run(scene(againstTheLight(cloudScene("pvrt", params, true), 0)));
+    constexpr double kFloatRoundingTol = 1e-4;
+    EXPECT_LT(relativeL2(b.image, a.image), kFloatRoundingTol);
+    EXPECT_GT(relativeL2(iso.image, a.image), 0.1);  // and g matters here
+}

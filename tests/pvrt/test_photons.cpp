@@ -480,3 +480,37 @@ TEST(PvrtPhotons, TrackLengthAgreesWithTheCollisionEstimatorWithLessNoise) {
 }
 
 }  // namespace
+
+TEST(PvrtPhotons, ExitanceCoefficientZeroIsTheIsotropicTransferBitForBit) {
+    // n = 4: coefficient 0 of every row is the n = 1 transfer exactly (Ŷ_0 = 1, same photons);
+    // the band-1 coefficients carry the direction the light arrives from, so they are not zero.
+    const Scene s = makeScene(0.15f, glm::vec3(0.9f), 16, 16);
+    const pvrt::Basis basis = pvrt::Basis::sh(2);
+    for (pvrt::Estimator e : {pvrt::Estimator::Collision, pvrt::Estimator::TrackLength}) {
+        const pvrt::PhotonOptions o{.photonsPerCell = 4, .estimator = e};
+        const pvrt::Transfer iso = run(s, basis, o);
+        pvrt::Transfer t4(s.layout, basis.size(), 4);
+        pvrt::addIndirectTransfer(s.tracer, basis, t4, o, core::Progress::none());
+        const std::size_t m3 = std::size_t(basis.size()) * 3;
+        double band1 = 0.0;
+        for (std::int32_t p = 0; p < s.layout.points; ++p) {
+            for (std::size_t i = 0; i < m3; ++i) ASSERT_EQ(t4.row(p)[i], iso.row(p)[i]) << p;
+            for (std::size_t i = m3; i < 4 * m3; ++i) band1 += std::abs(t4.row(p)[i]);
+        }
+        EXPECT_GT(band1, 0.0);
+    }
+}
+
+TEST(PvrtPhotons, PhaseGOutsideTheOpenIntervalIsRefusedByName) {
+    const Scene s = makeScene(0.15f, glm::vec3(0.9f), 16, 16);
+    const pvrt::Basis basis = pvrt::Basis::sh(1);
+    for (float g : {1.f, -1.f, NAN}) {
+        pvrt::Transfer t(s.layout, 1, 4);
+        try {
+            pvrt::addIndirectTransfer(s.tracer, basis, t, {.phaseG = g}, core::Progress::none());
+            ADD_FAILURE() << "accepted g " << g;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "phase_g");
+        }
+    }
+}
