@@ -644,7 +644,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     // plane, so every crossing must be a sub-step end (pre-integration takes the value linear
     // between ends). From a voxel a step v crosses the planes of axis a at multiples of 1/|v_a|;
     // from the shifted lattice at odd multiples of 1/(2|v_a|): q is a multiple of lcm(|v_a|)
-    // (×2 when shifted), and at least ⌈|v|⌉ so sub-steps stay within about a voxel.    // The flat voxel array the lines read (the pyramid's level 0 in x-fastest order): every line
+    // (×2 when shifted), and at least as many as below.    // The flat voxel array the lines read (the pyramid's level 0 in x-fastest order): every line
     // of a direction sees its sub-steps at the same fractional positions, so each sub-step's value
     // is a fixed stencil — the non-zero trilinear weights and their voxel offsets from the lattice
     // point's voxel — read with no position arithmetic.
@@ -694,7 +694,10 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         int kinks = 1;
         for (int a = 0; a < 3; ++a)
             if (v[a] != 0) kinks = std::lcm(kinks, std::abs(v[a]));
-        const int minQ = std::max(1, int(std::ceil(float(glm::length(glm::dvec3(v))) - 1e-4f)));
+        // At least ⌈|v|⌉ sub-steps (within about a voxel) and ⌈length / h⌉ (within the smallest
+        // spacing, as the march's level-0 steps: on thick slices a step along z is longer in mm).
+        const int minQ = std::max({1, int(std::ceil(float(glm::length(glm::dvec3(v))) - 1e-4f)),
+                                   int(std::ceil(double(d.stepMm) / h - 1e-4))});
         for (int half = 0; half < 2; ++half) {
             const int base = kinks * (half ? 2 : 1);
             d.q[half] = base * ((minQ + base - 1) / base);
