@@ -667,6 +667,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         std::size_t endSub[2] = {0, 0};
         float endFrac[2] = {0.f, 0.f};
         Stencil end[2];
+        /// The ray of −v from the same point (its line is this one, walked the other way): its
+        /// end lies backSub sub-steps back and backFrac of one forward again.
+        std::size_t backSub[2] = {0, 0};
+        float backFrac[2] = {0.f, 0.f};
+        Stencil back[2];
+        int reverse = -1;  ///< index of −v
     };
     auto makeStencil = [&](const glm::dvec3& rel) {
         // rel: the position relative to the lattice point's voxel (floor of its coordinates).
@@ -709,7 +715,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             d.endSub[half] = std::size_t(subs);
             d.endFrac[half] = float(subs - std::floor(subs));
             d.end[half] = makeStencil(glm::dvec3(half ? 0.5 : 0.0) + glm::dvec3(v) * d.reach);
+            d.backSub[half] = std::size_t(std::ceil(subs));
+            d.backFrac[half] = float(std::ceil(subs) - subs);
+            d.back[half] = makeStencil(glm::dvec3(half ? 0.5 : 0.0) - glm::dvec3(v) * d.reach);
         }
+        d.reverse = int(std::find(steps.begin(), steps.end(), -v) - steps.begin());
+        VL_CHECK(d.reverse < int(steps.size()));
         for (int half = 0; half < 2; ++half)
             for (int j = 0; j <= d.q[half]; ++j)
                 d.stencil[half].push_back(makeStencil(glm::dvec3(half ? 0.5 : 0.0) +
@@ -850,9 +861,13 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                     return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
                            glm::all(glm::lessThanEqual(x, top));
                 };
+                // Per pair ±v, one walk along each line serves both rays of every point on it.
                 for (int k = 0; k < N; ++k) {
                     const Dir& d = dirs[std::size_t(k)];
+                    if (d.reverse < k) continue;  // walked with its twin
                     const double* wy = set.wy.data() + std::size_t(k) * C;
+                    const double* wyBack = set.wy.data() + std::size_t(d.reverse) * C;
+                    const int lat = half ? 1 : 0;
                     // The block's points on one lattice line lie `spacing` lattice steps
                     // apart (v is primitive and the spacing a power of two), i.e. at sample
                     // indices j + m·v.
@@ -874,42 +889,57 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 }
                                 if (mFirst < 0) continue;
                                 const int first = mFirst * spacing, last = mLast * spacing;
+                                // Lattice t lies at lineStart + t·v. P at every sub-step from
+                                // tStart (R before the first traced point, or where the line
+                                // enters the volume) to `want` (R past the last, or where it
+                                // leaves; outside the volume is empty); S the values there.
                                 const glm::vec3 lineStart = p0 + float(spacing) * glm::vec3(head);
-                                // P at every sub-step from the first traced point, over
-                                // lattice steps inside the volume, to R past the last (then
-                                // constant: outside the volume is empty); S the values there.
-                                // Lattice t lies at lineStart + t·v.
-                                const int q = d.q[half ? 1 : 0];
+                                auto position = [&](int tt) {
+                                    return lineStart + float(tt) * d.dv;
+                                };
+                                const int q = d.q[lat];
                                 const float subMm = d.stepMm / float(q);
-                                const int want = last + int(std::ceil(d.reach)) + 1;
-                                const std::size_t subs = std::size_t(want) * std::size_t(q) + 1;
+                                const int reachSteps = int(std::ceil(d.reach)) + 1;
+                                const int want = last + reachSteps;
+                                int tStart = first;
+                                while (tStart > first - reachSteps &&
+                                       inVolume(position(tStart - 1)))
+                                    --tStart;
+                                const bool entered = tStart > first - reachSteps;
+                                const std::size_t subs =
+                                    std::size_t(want - tStart) * std::size_t(q) + 1;
                                 P.assign(subs, 0.0);
                                 S.assign(subs, 0.f);
-                                const std::vector<Stencil>& sten = d.stencil[half ? 1 : 0];
+                                stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
+                                const std::vector<Stencil>& sten = d.stencil[lat];
                                 // The voxel index of lattice point t's floor: base0 + t·delta.
                                 const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
                                 const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
                                 auto latticeValue = [&](int tt) {
                                     return read(base0 + tt * d.delta, sten[0]);
                                 };
-                                auto along = [&](const glm::vec3& from) {
-                                    return [&, from](float mm) {
-                                        return field.value(from + (mm / d.stepMm) * d.dv);
+                                // The position of sub-step index e (relative to tStart).
+                                auto subPosition = [&](double e) {
+                                    return lineStart +
+                                           (float(tStart) + float(e / double(q))) * d.dv;
+                                };
+                                auto along = [&](const glm::vec3& from, float sign) {
+                                    return [&, from, sign](float mm) {
+                                        return field.value(from + (sign * mm / d.stepMm) * d.dv);
                                     };
                                 };
-                                stepQuiet.assign(std::size_t(want) + 1, 0);
-                                glm::vec3 at = lineStart + float(first) * d.dv;
+                                glm::vec3 at = position(tStart);
                                 double iFront = 0.0;
                                 bool haveIFront = false, haveStart = false;
-                                int t = first;
+                                int t = tStart;
                                 for (; t < want; ++t) {
-                                    const glm::vec3 next = lineStart + float(t + 1) * d.dv;
+                                    const glm::vec3 next = position(t + 1);
                                     if (!inVolume(next)) break;
-                                    const std::size_t m = std::size_t(t) * std::size_t(q);
+                                    const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
                                     if (quietAt(at)) {
                                         // Transparent throughout: nothing to integrate or
                                         // read (S stays unread there).
-                                        stepQuiet[std::size_t(t)] = 1;
+                                        stepQuiet[std::size_t(t - tStart)] = 1;
                                         for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = P[m];
                                         haveStart = haveIFront = false;
                                         at = next;
@@ -931,7 +961,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             haveIBack = true;
                                             tau = preIntegratedStep(
                                                 table, sFront, iFront, sBack, iBack, subMm, 0.0,
-                                                along(at + (float(j - 1) / float(q)) * d.dv),
+                                                along(at + (float(j - 1) / float(q)) * d.dv, 1.f),
                                                 samples);
                                         }
                                         P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
@@ -940,73 +970,109 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     }
                                     at = next;
                                 }
-                                // P and S valid on sub-steps [m0, lastSub]. A line that left
-                                // the volume ends at the box face (the march's box exit), a
-                                // fraction φ of a lattice step past its last point.
-                                const std::size_t lastSub = std::size_t(t) * std::size_t(q);
-                                double exitSub = double(lastSub), pExit = P[lastSub];
-                                // Optical depth from sub-step e0 to `f` sub-steps past it
-                                // (f ≤ 1, or the exit's fraction), pre-integrated to the
-                                // value there.
-                                auto partial = [&](std::size_t e0, float f, float sEnd) {
-                                    const glm::vec3 from =
-                                        lineStart + (float(e0) / float(q)) * d.dv;
-                                    if (stepQuiet[e0 / std::size_t(q)] ||
-                                        (e0 == lastSub && quietAt(from)))
+                                // P and S valid on sub-steps [0, lastSub].
+                                const std::size_t lastSub =
+                                    std::size_t(t - tStart) * std::size_t(q);
+                                // Optical depth from sub-step e0 over `f` sub-steps (forward:
+                                // f ≤ 1, or the exit's fraction; sign −1: backward from e0 = 0,
+                                // the entry's fraction), pre-integrated to the value there.
+                                auto partial = [&](std::size_t e0, float f, float sEnd,
+                                                   float sign) {
+                                    const glm::vec3 from = subPosition(double(e0));
+                                    if (sign > 0.f && stepQuiet[e0 / std::size_t(q)])
                                         return 0.0;  // inside quiet cells' neighbourhood
-                                    if (e0 < lastSub && transparent(S[e0], S[e0 + 1]))
+                                    if ((e0 == lastSub || sign < 0.f) && quietAt(from)) return 0.0;
+                                    if (sign > 0.f && e0 < lastSub && transparent(S[e0], S[e0 + 1]))
                                         return 0.0;  // the whole sub-step is
+                                    const bool unread =
+                                        (e0 == lastSub && !haveStart) || (e0 == 0 && stepQuiet[0]);
                                     const float s0 =
-                                        e0 == lastSub && !haveStart ? latticeValue(t) : S[e0];
+                                        unread ? latticeValue(tStart + int(e0 / std::size_t(q)))
+                                               : S[e0];
                                     if (std::isnan(sEnd))
-                                        sEnd = field.value(from + (f / float(q)) * d.dv);
+                                        sEnd = field.value(from + (sign * f / float(q)) * d.dv);
                                     ++samples;
                                     if (transparent(s0, sEnd)) return 0.0;
                                     return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
                                                              sEnd, table.sigmaIntegral(sEnd),
-                                                             f * subMm, 0.0, along(from), samples);
+                                                             f * subMm, 0.0, along(from, sign),
+                                                             samples);
                                 };
-                                if (t < want) {
+                                // A line that leaves (enters) the volume ends at the box face
+                                // (the march's box exit), a fraction φ of a lattice step past
+                                // its last (before its first) point.
+                                auto faceFraction = [&](const glm::vec3& p, float sign) {
                                     float phi = 1.f;
                                     for (int ax = 0; ax < 3; ++ax) {
-                                        if (d.v[ax] > 0)
-                                            phi =
-                                                std::min(phi, (top[ax] - at[ax]) / float(d.v[ax]));
-                                        if (d.v[ax] < 0)
-                                            phi = std::min(phi, at[ax] / float(-d.v[ax]));
+                                        const float va = sign * float(d.v[ax]);
+                                        if (va > 0.f) phi = std::min(phi, (top[ax] - p[ax]) / va);
+                                        if (va < 0.f) phi = std::min(phi, p[ax] / -va);
                                     }
+                                    return std::max(phi, 0.f);
+                                };
+                                double exitSub = double(lastSub), pExit = P[lastSub];
+                                if (t < want) {
+                                    const float phi = faceFraction(at, 1.f);
                                     if (phi > 0.f) {
                                         exitSub += double(phi) * double(q);
-                                        pExit += partial(lastSub, phi * float(q), NAN);
+                                        pExit += partial(lastSub, phi * float(q), NAN, 1.f);
                                     }
+                                }
+                                double entrySub = -1e300, pEntry = 0.0;
+                                if (entered) {
+                                    const float phi = faceFraction(position(tStart), -1.f);
+                                    entrySub = -double(phi) * double(q);
+                                    pEntry =
+                                        phi > 0.f ? -partial(0, phi * float(q), NAN, -1.f) : 0.0;
                                 }
                                 for (int mi = mFirst; mi <= mLast; ++mi) {
                                     const int i = onLine[std::size_t(mi)];
                                     if (i < 0) continue;
+                                    const int tu = mi * spacing;
                                     const std::size_t mu =
-                                        std::size_t(mi * spacing) * std::size_t(q);
-                                    // The ray's end R past the point, in sub-steps: up to the
-                                    // sub-step before it, then the partial sub-step
-                                    // pre-integrated to the end's value (as the march's
-                                    // shortened last step).
-                                    const std::size_t e0 = mu + d.endSub[half ? 1 : 0];
-                                    const float f = d.endFrac[half ? 1 : 0];
-                                    double pEnd;
-                                    if (double(e0) + double(f) >= exitSub) {
-                                        pEnd = pExit;
-                                    } else {
-                                        pEnd = P[e0];
-                                        if (f > 0.f)
-                                            pEnd += partial(
-                                                e0, f,
-                                                read(base0 + std::ptrdiff_t(mi * spacing) * d.delta,
-                                                     d.end[half ? 1 : 0]));
+                                        std::size_t(tu - tStart) * std::size_t(q);
+                                    const std::ptrdiff_t baseU = base0 + tu * d.delta;
+                                    // Each ray's end R from the point, in sub-steps: the whole
+                                    // sub-steps up to it, then the partial one pre-integrated
+                                    // to the end's value (as the march's shortened last step).
+                                    double pEnd, pBack;
+                                    {
+                                        const std::size_t e0 = mu + d.endSub[lat];
+                                        const float f = d.endFrac[lat];
+                                        if (double(e0) + double(f) >= exitSub) {
+                                            pEnd = pExit;
+                                        } else {
+                                            pEnd = P[e0];
+                                            if (f > 0.f)
+                                                pEnd +=
+                                                    partial(e0, f, read(baseU, d.end[lat]), 1.f);
+                                        }
                                     }
-                                    const double tau = pEnd - P[mu];
+                                    {
+                                        const float f = d.backFrac[lat];
+                                        const double e = double(mu) - double(d.backSub[lat]) + f;
+                                        if (e <= entrySub) {
+                                            pBack = pEntry;
+                                        } else if (e < 0.0) {
+                                            // Within the piece before the first lattice point
+                                            // inside the volume.
+                                            pBack = -partial(0, float(-e), NAN, -1.f);
+                                        } else {
+                                            const std::size_t e0 = mu - d.backSub[lat];
+                                            pBack = P[e0];
+                                            if (f > 0.f)
+                                                pBack +=
+                                                    partial(e0, f, read(baseU, d.back[lat]), 1.f);
+                                        }
+                                    }
+                                    const double tau = pEnd - P[mu], tauBack = P[mu] - pBack;
                                     const double T =
                                         tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;
+                                    const double TBack =
+                                        tauBack > 0.0 ? double(std::exp(-float(tauBack))) : 1.0;
                                     float* dst = blockData + std::size_t(i) * std::size_t(C);
-                                    for (int c = 0; c < C; ++c) dst[c] += float(T * wy[c]);
+                                    for (int c = 0; c < C; ++c)
+                                        dst[c] += float(T * wy[c] + TBack * wyBack[c]);
                                 }
                             }
                 }
