@@ -40,6 +40,12 @@
 #include "render/camera.h"
 #include "render/ray_caster.h"
 
+namespace voxlight::visibility {
+class LocalVisibility;
+class GlobalVisibility;
+class HierarchicalVisibility;
+}  // namespace voxlight::visibility
+
 namespace voxlight::pipeline {
 
 enum class StageKind { Input, Precompute, Frame };
@@ -89,6 +95,18 @@ struct CasterSetup {
     render::CasterTables tables;
     render::RenderOptions options;
     std::shared_ptr<const render::Camera> camera;
+    /// The SH methods' visibility fields, exactly those their image stage shades from
+    /// (render/sh_shading.h); all null for the other methods.
+    struct ShFields {
+        /// sh-local's field; sh-global's local field (near the light-removing cut faces, and the
+        /// viewer's local/global switch). Clip-aware when a plane removes matter for the light.
+        std::shared_ptr<const visibility::LocalVisibility> local;
+        std::shared_ptr<const visibility::GlobalVisibility> global;              ///< sh-global
+        std::shared_ptr<const visibility::HierarchicalVisibility> hierarchical;  ///< ritschel
+        /// sh-global: the local field stands in within this distance (mm) of the caster's
+        /// render::lightCutFaces (ShCutFaceShader); 0 = none.
+        float cutBandMm = 0.f;
+    } sh;
 };
 
 /// The details' "camera" entry: eye, forward, up, right, projection, fov_y_deg, ortho_height_mm.

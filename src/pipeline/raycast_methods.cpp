@@ -1782,7 +1782,8 @@ core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
 
 /// What the image stage of a ray-caster method reads (Plan::casterSetup), from a run that has run
 /// every stage before it.
-CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options) {
+CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options, Kind kind,
+                          bool clipped) {
     CasterSetup c;
     const auto loaded = run.get<LoadedVolume>("load_volume");
     const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -1799,6 +1800,18 @@ CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options) 
     if (run.has("lights")) c.options.lights = *run.get<LightList>("lights");
     if (run.has("light_sh")) c.options.irradianceSh = *run.get<std::vector<glm::vec3>>("light_sh");
     c.camera = run.get<render::Camera>("camera");
+    if (kind == Kind::Ritschel) {
+        c.sh.hierarchical = run.get<visibility::HierarchicalVisibility>(
+            clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility");
+    } else if (isKronander(kind)) {
+        c.sh.local = lightLocalVisibility(run, clipped);
+        if (kind == Kind::ShGlobal) {
+            // Local visibility within one global grid spacing of a removing face.
+            c.sh.global = run.get<visibility::GlobalVisibility>("global_visibility");
+            c.sh.cutBandMm = c.sh.global->spacingVoxels() *
+                             float(core::minComponent(loaded->volume.geometry().spacing));
+        }
+    }
     return c;
 }
 
@@ -2256,12 +2269,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         plan.stages.push_back(frame);
         return plan;
     }
-    plan.casterSetup = [options](const Run& run) { return casterSetupOf(run, options); };
+    plan.casterSetup = [options, kind, clipped](const Run& run) {
+        return casterSetupOf(run, options, kind, clipped);
+    };
     frame.compute = [options, kind, clipped, isoLattice](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
-        const CasterSetup setup = casterSetupOf(run, options);
+        const CasterSetup setup = casterSetupOf(run, options, kind, clipped);
         const render::RenderOptions& o = setup.options;
         const auto& camera = setup.camera;
         render::RenderStats stats;
@@ -2271,22 +2286,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             std::shared_ptr<core::ImageRGBA> film;
             if (isSh(kind)) {
                 std::unique_ptr<render::ShadingModel> model;
-                if (kind == Kind::Ritschel) {
-                    model = render::makeShVisibilityModel(
-                        caster, *camera,
-                        run.get<visibility::HierarchicalVisibility>(
-                            clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility"));
-                } else if (kind == Kind::ShLocal) {
-                    model = render::makeShVisibilityModel(caster, *camera,
-                                                          lightLocalVisibility(run, clipped));
-                } else {
-                    // Local visibility within one global grid spacing of a removing face.
-                    const auto global = run.get<visibility::GlobalVisibility>("global_visibility");
-                    const float band = global->spacingVoxels() *
-                                       float(core::minComponent(loaded->volume.geometry().spacing));
-                    model = render::makeShVisibilityModel(caster, *camera, global,
-                                                          lightLocalVisibility(run, clipped), band);
-                }
+                const CasterSetup::ShFields& f = setup.sh;
+                if (kind == Kind::Ritschel)
+                    model = render::makeShVisibilityModel(caster, *camera, f.hierarchical);
+                else if (kind == Kind::ShLocal)
+                    model = render::makeShVisibilityModel(caster, *camera, f.local);
+                else
+                    model = render::makeShVisibilityModel(caster, *camera, f.global, f.local,
+                                                          f.cutBandMm);
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else if (kind == Kind::Pvrt) {

@@ -225,6 +225,7 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
         out.width = film.width;
         out.height = film.height;
         out.rgba = displayBytes(scene, film);
+        if (!coarse) out.film = std::make_shared<const core::ImageRGBA>(std::move(r.image));
         if (r.details.contains("camera")) out.camera = r.details["camera"];
         out.warnings = r.warnings;
     } catch (const CancelledError&) {
@@ -260,6 +261,7 @@ void RenderWorker::preparePass(const RenderRequest& request) {
             out.height = setup->camera->height();
             out.camera = pipeline::cameraDetails(*setup->camera);
             out.setup = std::make_shared<const pipeline::CasterSetup>(std::move(*setup));
+            out.shGrids = shGridCache_.get(*out.setup);
         }
     } catch (const CancelledError&) {
         ++cancelled_;

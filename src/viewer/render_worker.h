@@ -30,6 +30,7 @@
 
 #include "core/image.h"
 #include "io/scene.h"
+#include "viewer/sh_grids.h"
 
 namespace voxlight::pipeline {
 class Session;
@@ -57,13 +58,19 @@ struct RenderedImage {
     bool coarse = false;
     int width = 0, height = 0;
     std::vector<std::uint8_t> rgba;  ///< row 0 = top
-    double seconds = 0.0;            ///< the pipeline run, wall clock
+    /// Full passes: the linear film (radiance + T·background, alpha = coverage; the raw estimate,
+    /// never the denoised one) as `voxlight render --exr` writes it — EXR screenshots.
+    std::shared_ptr<const core::ImageRGBA> film;
+    double seconds = 0.0;  ///< the pipeline run, wall clock
     /// The Frame stages (camera, render) of one frame, median over the request's frames.
     double frameSeconds = 0.0;
     int frames = 1;  ///< the frames frameSeconds is the median of
     /// prepareOnly: what the image stage would read; null when the scene's method does not render
     /// with the CPU ray caster (then `method` names it).
     std::shared_ptr<const pipeline::CasterSetup> setup;
+    /// prepareOnly, SH methods: setup's visibility fields resampled for the GLSL ray caster
+    /// (viewer/sh_grids.h; on this thread, kept per field).
+    ShGrids shGrids;
     bool prepared = false;       ///< a prepareOnly result (no pixels)
     std::string method;          ///< prepareOnly: the scene's method
     double exposureStops = 0.0;  ///< prepareOnly: the scene's display settings (io::ImageDesc)
@@ -136,6 +143,7 @@ class RenderWorker {
     std::optional<RenderedImage> result_;
     /// The session (cache of volume, tables and fields) both threads run scenes through.
     std::unique_ptr<pipeline::Session> session_;
+    ShGridCache shGridCache_;  ///< the worker thread's (preparePass)
     // The field thread (guarded by mutex_): the state whose fields to compute, and the last
     // full request (rendered again when its fields are ready).
     std::optional<RenderRequest> fieldPending_;

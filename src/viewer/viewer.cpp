@@ -10,11 +10,13 @@
 #include <imgui_stdlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <filesystem>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -248,6 +250,11 @@ class Viewer {
     void drawImage();
     void drawPanel();
     core::ImageRGBA readWindow() const;
+    /// The linear radiance film of the image shown (the path-traced one when it shows; the GLSL
+    /// path's film; the CPU worker's): what an EXR screenshot holds. Empty (0×0) before any.
+    core::ImageRGBA shownRadiance() const;
+    /// A screenshot for `path`: the linear film for .exr, else the window as drawn.
+    core::ImageRGBA screenshotFor(const std::string& path) const;
     void logTimes();
 
     ViewerOptions options_;
@@ -319,6 +326,8 @@ class Viewer {
     GLuint ptTexture_ = 0;
     int ptW_ = 0, ptH_ = 0;
     bool ptReady_ = false, ptShow_ = true;
+    /// The films of the CPU image and of the path-traced one shown (EXR screenshots).
+    std::shared_ptr<const core::ImageRGBA> shownFilm_, ptFilm_;
     std::string ptMessage_;
 
     // The GLSL path and the choice of renderer.
@@ -443,6 +452,7 @@ void Viewer::receive() {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     texW_ = r->width, texH_ = r->height;
+    shownFilm_ = r->film;
     shownFull_ = !r->coarse;
     shownStale_ = r->staleShading;
     shownGl_ = false;
@@ -484,15 +494,17 @@ bool Viewer::renderGl(const RenderedImage& p) {
     } else {
         try {
             core::Stopwatch sw;
-            const bool ok = gl_->render(*p.setup, float(p.exposureStops),
+            const bool ok = gl_->render(*p.setup, p.shGrids, float(p.exposureStops),
                                         render::displayFromString(p.display), why);
             glFinish();  // the frame's real cost (the GL queues its work)
             if (ok) {
                 glTimes_.add(sw.seconds());
                 if (options_.log)
-                    std::fprintf(stderr, "view: GLSL frame %dx%d in %.3f s (state %llu)\n",
+                    std::fprintf(stderr,
+                                 "view: GLSL frame %dx%d in %.3f s (state %llu, SH fields "
+                                 "uploaded so far: %zu)\n",
                                  gl_->width(), gl_->height(), glTimes_.last(),
-                                 (unsigned long long)p.generation);
+                                 (unsigned long long)p.generation, gl_->shUploads());
                 texW_ = gl_->width(), texH_ = gl_->height();
                 shownFull_ = true;
                 shownGl_ = true;
@@ -565,7 +577,8 @@ void Viewer::updateRenderer() {
             core::Stopwatch sw;
             bool ok = false;
             try {
-                ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
+                ok = gl_->render(*prepared_->setup, prepared_->shGrids,
+                                 float(prepared_->exposureStops),
                                  render::displayFromString(prepared_->display), why, scope);
             } catch (const std::exception& e) {
                 why = e.what();
@@ -951,6 +964,7 @@ void Viewer::receivePathTrace() {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     ptW_ = r->width, ptH_ = r->height;
+    ptFilm_ = r->film;
     ptReady_ = true;
     char m[96];
     std::snprintf(m, sizeof m, "path traced in %.1f s", r->seconds);
@@ -1488,6 +1502,19 @@ core::ImageRGBA Viewer::readWindow() const {
     return img;
 }
 
+core::ImageRGBA Viewer::shownRadiance() const {
+    if (pathTraceShown() && ptFilm_ && ptW_ == texW_ && ptH_ == texH_) return *ptFilm_;
+    if (shownGl_ && gl_) return gl_->readFilm();
+    if (shownFilm_ && shownFull_) return *shownFilm_;
+    return core::ImageRGBA();
+}
+
+core::ImageRGBA Viewer::screenshotFor(const std::string& path) const {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext == ".exr" ? shownRadiance() : readWindow();
+}
+
 void Viewer::logTimes() {
     if (!options_.log || logClock_.seconds() < 1.0) return;
     logClock_.restart();
@@ -1566,15 +1593,18 @@ std::optional<core::ImageRGBA> Viewer::run() {
             (ptGen_ != generation_ || ptReady_) && measure_ == Measure::Done && shownFull_ &&
             !shownStale_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
             texH_ == imageH_)
-            shot = readWindow();
+            shot = screenshotFor(options_.screenshot);
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.
             shotRequested_ = false;
             shotMessage_ = "writing " + shotPath_ + " ...";
             saving_ = std::async(std::launch::async,
-                                 [save = options_.saveScreenshot, image = readWindow(),
+                                 [save = options_.saveScreenshot, image = screenshotFor(shotPath_),
                                   path = shotPath_]() -> std::string {
                                      try {
+                                         if (image.width < 1)
+                                             return "nothing to save yet: no full-resolution "
+                                                    "image is shown";
                                          save(image, path);
                                          return "wrote " + path;
                                      } catch (const std::exception& e) {
