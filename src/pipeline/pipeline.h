@@ -265,6 +265,15 @@ class Session {
     ArtifactCache cache_;
 };
 
+/// A volume loaded outside the pipeline for `scene`'s volume source (loadSceneVolume: the viewer
+/// reads it once for its info panel and histogram), handed to `session` as the load_volume
+/// stage's artifact under the source's key — so runs of scenes with that source serve it from the
+/// memory cache ("cached") instead of reading the file again, and the session holds the same
+/// voxels, not a copy. Returns `volume`. The caller vouches that `volume` is what
+/// loadSceneVolume(scene) gives (same source, same read options).
+std::shared_ptr<const core::Volume> adoptVolume(Session& session, const io::Scene& scene,
+                                                std::shared_ptr<const core::Volume> volume);
+
 /// Renders one scene with a fresh session (tests, one-off callers).
 RunResult renderScene(const io::Scene& scene, const RunOptions& options = {});
 

@@ -99,7 +99,14 @@ using nlohmann::json;
 // ---- Artifacts -----------------------------------------------------------------------------
 
 struct LoadedVolume {
-    core::Volume volume;
+    /// `data` loaded (or adopted: adoptVolume) for the scene; `volume` refers to it.
+    explicit LoadedVolume(std::shared_ptr<const core::Volume> v)
+        : data(std::move(v)),
+          volume(*data),
+          contentHash(core::contentHash(volume)),
+          nonFinite(volume.countNonFinite()) {}
+    std::shared_ptr<const core::Volume> data;
+    const core::Volume& volume;
     std::uint64_t contentHash = 0;
     std::uint64_t nonFinite = 0;
 };
@@ -1780,6 +1787,17 @@ core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
     return film;
 }
 
+/// The load_volume artifact of `volume`, stored under the source's `identity` (its key).
+Artifact loadedVolumeArtifact(ArtifactCache& cache, std::uint64_t identity,
+                              std::shared_ptr<const core::Volume> volume) {
+    auto v = std::make_shared<const LoadedVolume>(std::move(volume));
+    // What a later process needs to name this volume's artifacts before reading it.
+    cache.putRecord("volume-content", identity, v->contentHash);
+    cache.putRecord("volume-voxels", identity, v->volume.voxelCount());
+    const std::size_t bytes = v->volume.sizeBytes();
+    return Artifact::of<LoadedVolume>(std::move(v), bytes);
+}
+
 /// What the image stage of a ray-caster method reads (Plan::casterSetup), from a run that has run
 /// every stage before it.
 CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options, Kind kind,
@@ -1787,7 +1805,7 @@ CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options, 
     CasterSetup c;
     const auto loaded = run.get<LoadedVolume>("load_volume");
     const auto tfa = run.get<TfArtifact>("transfer_function");
-    c.volume = std::shared_ptr<const core::Volume>(loaded, &loaded->volume);
+    c.volume = loaded->data;
     c.tf = std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf);
     c.tables.table = tfa->table;
     c.tables.skipCells = run.get<grid::BrickMajorants>("skip_cells");
@@ -1886,16 +1904,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return volumeIdentity(run.scene());
     };
     load.compute = [](Run& run) {
-        const std::uint64_t identity = volumeIdentity(run.scene());  // the key it runs under
-        auto v = std::make_shared<LoadedVolume>();
-        v->volume = loadSceneVolume(run.scene(), run.progress());
-        v->contentHash = core::contentHash(v->volume);
-        v->nonFinite = v->volume.countNonFinite();
-        // What a later process needs to name this volume's artifacts before reading it.
-        run.cache().putRecord("volume-content", identity, v->contentHash);
-        run.cache().putRecord("volume-voxels", identity, v->volume.voxelCount());
-        const std::size_t bytes = v->volume.sizeBytes();
-        return Artifact::of<LoadedVolume>(std::move(v), bytes);
+        return loadedVolumeArtifact(
+            run.cache(), volumeIdentity(run.scene()),
+            std::make_shared<const core::Volume>(loadSceneVolume(run.scene(), run.progress())));
     };
     load.warnings = [](const Artifact& a) {  // e.g. a tilted series resampled
         return a.as<LoadedVolume>()->volume.warnings;
@@ -2451,5 +2462,14 @@ const RegisterMethod kIso(rayCasterMethod(
     {"iso_value", "ambient", "diffuse"}, {}));
 
 }  // namespace
+
+std::shared_ptr<const core::Volume> adoptVolume(Session& session, const io::Scene& scene,
+                                                std::shared_ptr<const core::Volume> volume) {
+    VL_CHECK(volume != nullptr);
+    const std::uint64_t identity = volumeIdentity(scene);
+    session.cache().putInMemory("load_volume", identity,
+                                loadedVolumeArtifact(session.cache(), identity, volume));
+    return volume;
+}
 
 }  // namespace voxlight::pipeline

@@ -213,6 +213,8 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
         out.frames = runOptions.frames;
         pipeline::RunResult r = session_->run(scene, runOptions, progress);
         for (const auto& st : r.stages)
+            if (st.ran) out.computedStages.push_back(st.name);
+        for (const auto& st : r.stages)
             if (st.stale) {
                 out.staleShading = true;
                 if (staleFields) *staleFields += st.name + ":" + st.wantedKey + " ";
@@ -239,6 +241,10 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
     std::lock_guard lock(resultMutex_);
     result_ = std::move(out);
     return ok;
+}
+
+void RenderWorker::adoptVolume(const io::Scene& scene, std::shared_ptr<const core::Volume> volume) {
+    pipeline::adoptVolume(*session_, scene, std::move(volume));
 }
 
 void RenderWorker::preparePass(const RenderRequest& request) {

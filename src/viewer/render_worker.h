@@ -77,6 +77,8 @@ struct RenderedImage {
     std::string display;
     nlohmann::json camera;  ///< the camera as used (pipeline details "camera")
     std::vector<std::string> warnings;
+    /// The pipeline stages this pass computed (not served from the cache), in order.
+    std::vector<std::string> computedStages;
     std::string error;  ///< non-empty: the render failed (an InputError's message); no pixels
     /// Shaded from an earlier state's visibility fields (the new ones are being computed; the
     /// same state is rendered again when they are ready).
@@ -103,6 +105,9 @@ class RenderWorker {
     RenderWorker(const RenderWorker&) = delete;
     RenderWorker& operator=(const RenderWorker&) = delete;
 
+    /// Hands the volume the viewer loaded for `scene` (its info and histogram) to the session
+    /// (pipeline::adoptVolume): the worker's runs read it from memory, never from the file again.
+    void adoptVolume(const io::Scene& scene, std::shared_ptr<const core::Volume> volume);
     void submit(RenderRequest request);
     std::optional<RenderedImage> take();
 

@@ -355,6 +355,9 @@ class Viewer {
 
 void Viewer::adopt(LoadedScene scene) {
     loaded_ = std::move(scene);
+    // The volume read for the info panel and histogram is the pipeline's too: read once.
+    worker_.adoptVolume(loaded_->scene, loaded_->volume);
+    ptWorker_.adoptVolume(loaded_->scene, loaded_->volume);
     doc_ = loaded_->document;
     tf_ = loaded_->tf;
     tfEditor_ = {};
