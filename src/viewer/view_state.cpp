@@ -335,7 +335,7 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
                          R"(write e.g. [{"orbit": [40, 0]}, {"view": "L"}])");
     static const char* const kSteps =
         "orbit, pan, zoom, window, view, pathtrace, clip_add, clip_move, clip_drag, clip_edit, "
-        "clip_remove, light_add, light_edit, light_turn, light_remove or gizmo";
+        "clip_remove, light_add, light_edit, light_turn, light_remove, gizmo or drop";
     std::vector<ScriptStep> steps;
     for (std::size_t i = 0; i < doc.size(); ++i) {
         const nlohmann::json& e = doc[i];
@@ -542,6 +542,17 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
         } else if (key == "gizmo") {
             st.kind = ScriptStep::Kind::Gizmo;
             st.a = boolean(v, field) ? 1.0 : 0.0;
+        } else if (key == "drop") {
+            constexpr std::size_t kMaxDropped = 64;
+            st.kind = ScriptStep::Kind::Drop;
+            if (!v.is_array() || v.empty() || v.size() > kMaxDropped)
+                throw InputError(source, field, "must be an array of 1…64 paths",
+                                 R"(write e.g. {"drop": ["ct.nii.gz"]})");
+            for (const auto& x : v) {
+                if (!x.is_string() || x.get<std::string>().empty())
+                    throw InputError(source, field, "must hold non-empty path strings");
+                st.paths.push_back(x.get<std::string>());
+            }
         } else {
             throw InputError(source, field, "is not a script step", "use " + std::string(kSteps));
         }

@@ -99,6 +99,17 @@ void onDrop(GLFWwindow*, int count, const char** paths) {
     std::lock_guard lock(gInputMutex);
     for (int i = 0; i < count; ++i) gDropped.emplace_back(paths[i]);
 }
+/// Paths dropped since the last call (the frame's event phase takes them).
+std::vector<std::string> takeDropped() {
+    std::vector<std::string> dropped;
+    std::lock_guard lock(gInputMutex);
+    dropped.swap(gDropped);
+    return dropped;
+}
+bool dropPending() {
+    std::lock_guard lock(gInputMutex);
+    return !gDropped.empty();
+}
 void onKey(GLFWwindow*, int key, int, int action, int mods) {
     if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
     std::lock_guard lock(gInputMutex);
@@ -243,6 +254,8 @@ class Viewer {
     /// Renders the prepared state with the GLSL ray caster and shows it; false (and back to the
     /// CPU path, with the reason) when the GL fails.
     bool renderGl(const RenderedImage& prepared);
+    /// Opens `path` as the file field's Open button does; a drop on the window comes here too.
+    void openPath(const std::string& path);
     void startLoad(const std::string& path);
     void pollLoad();
     void handleImageMouse();
@@ -630,6 +643,11 @@ void Viewer::updateRenderer() {
     }
 }
 
+void Viewer::openPath(const std::string& path) {
+    path_ = path;
+    startLoad(path_);
+}
+
 void Viewer::startLoad(const std::string& path) {
     if (path.empty()) return;
     if (loading_.valid()) {
@@ -775,7 +793,7 @@ void Viewer::runScript() {
     }
     // Steps run on the renderer the viewer chose (after the start-up measurement).
     if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ || shownStale_ ||
-        shownGen_ != generation_ || loading_.valid() || measure_ != Measure::Done)
+        shownGen_ != generation_ || loading_.valid() || dropPending() || measure_ != Measure::Done)
         return;
     const ScriptStep& st = options_.script[scriptNext_++];
     switch (st.kind) {
@@ -876,6 +894,13 @@ void Viewer::runScript() {
         case ScriptStep::Kind::Gizmo:
             showGizmo_ = st.a != 0.0;
             break;
+        case ScriptStep::Kind::Drop: {
+            // GLFW's drop callback itself; the next frame's events open the last path.
+            std::vector<const char*> paths;
+            for (const std::string& p : st.paths) paths.push_back(p.c_str());
+            onDrop(window_, int(paths.size()), paths.data());
+            break;
+        }
     }
 }
 
@@ -1337,7 +1362,7 @@ void Viewer::drawPanel() {
         if (focusPath_) ImGui::SetKeyboardFocusHere(), focusPath_ = false;
         const bool enter = ImGui::InputText("##path", &path_, ImGuiInputTextFlags_EnterReturnsTrue);
         ImGui::SameLine();
-        if (ImGui::Button("Open") || enter) startLoad(path_);
+        if (ImGui::Button("Open") || enter) openPath(path_);
         if (!loadingPath_.empty()) {
             ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
             ImGui::ProgressBar(float(loadFraction_->load()), ImVec2(-1, 0));
@@ -1537,17 +1562,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         frameClock.restart();
         core::Stopwatch work;
         glfwPollEvents();
-        {
-            std::vector<std::string> dropped;
-            {
-                std::lock_guard lock(gInputMutex);
-                dropped.swap(gDropped);
-            }
-            if (!dropped.empty()) {
-                path_ = dropped.back();
-                startLoad(path_);
-            }
-        }
+        // Files dropped on the window: the last one opens, as if typed into the file field.
+        if (const std::vector<std::string> dropped = takeDropped(); !dropped.empty())
+            openPath(dropped.back());
         const double tEvents = work.seconds();
         pollLoad();
         receive();
@@ -1594,8 +1611,8 @@ std::optional<core::ImageRGBA> Viewer::run() {
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
             scriptNext_ >= options_.script.size() && scriptDragFrames_ == 0 &&
             (ptGen_ != generation_ || ptReady_) && measure_ == Measure::Done && shownFull_ &&
-            !shownStale_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
-            texH_ == imageH_)
+            !shownStale_ && shownGen_ == generation_ && !loading_.valid() && !dropPending() &&
+            texW_ == imageW_ && texH_ == imageH_)
             shot = screenshotFor(options_.screenshot);
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.

@@ -574,6 +574,67 @@ TEST(ViewCli, GlslShFieldsAreUploadedOncePerField) {
     EXPECT_EQ(uploads.back(), 3) << view.err;
 }
 
+// Item 1 of the issue, drag-and-drop: a script step calls GLFW's drop callback itself with a
+// path list, and the viewer opens the last path through the file field's code path. A file that
+// fails to load shows the error (logged) and the current volume stays — the image is still the
+// scene's; a good file then loads and is shown exactly as `voxlight render` draws that volume.
+TEST(ViewCli, DroppedFilesOpenThroughTheFileFieldsPath) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 40}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "broken.mha") << "not a volume";
+    // The volume to drop: a smaller torso, so its image differs from the scene's.
+    const Result ph = runShell(std::string(VOXLIGHT_BINARY) + " phantom torso -o " +
+                                   quoted(tmp / "dropped.mha") + " --size 24",
+                               tmp.path());
+    ASSERT_EQ(ph.code, 0) << ph.err;
+    const Result cpu = runShell(std::string(VOXLIGHT_BINARY) + " render -q " +
+                                    quoted(tmp / "scene.json") + " -o " + quoted(tmp / "cpu.png"),
+                                tmp.path());
+    ASSERT_EQ(cpu.code, 0) << cpu.err;
+    const auto view = [&](const char* first, const char* last, const std::string& shot) {
+        const nlohmann::json steps =
+            nlohmann::json::array({{{"drop", {(tmp / first).string(), (tmp / last).string()}}}});
+        std::ofstream(tmp / "steps.json") << steps.dump();
+        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --renderer cpu " +
+                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+                            " --screenshot " + quoted(tmp / shot),
+                        tmp.path());
+    };
+    // A bad file: the error, and the scene's own image still shown.
+    const Result bad = view("dropped.mha", "broken.mha", "bad.png");
+    if (bad.code != 0 && bad.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << bad.err;
+    ASSERT_EQ(bad.code, 0) << bad.err;
+    EXPECT_NE(bad.err.find("view: could not open " + (tmp / "broken.mha").string()),
+              std::string::npos)
+        << bad.err;
+    EXPECT_EQ(bad.err.find("does not exist"), std::string::npos) << bad.err;  // read, and failed
+    const Agreement kept =
+        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "bad.png"));
+    EXPECT_LE(kept.worst, kScreenshotTolLevels + 1e-3f);
+    // A good one: opened as the file field opens a volume (its modality's default view and TF),
+    // so the image is `voxlight render dropped.mha` at the window's image size.
+    const Result good = view("broken.mha", "dropped.mha", "good.png");
+    ASSERT_EQ(good.code, 0) << good.err;
+    EXPECT_EQ(good.err.find("could not open"), std::string::npos) << good.err;
+    const Result want = runShell(
+        std::string(VOXLIGHT_BINARY) + " render -q " + quoted(tmp / "dropped.mha") +
+            " --set image.width=160 --set image.height=128 -o " + quoted(tmp / "dropped.png"),
+        tmp.path());
+    ASSERT_EQ(want.code, 0) << want.err;
+    const Agreement opened =
+        compareImageArea(io::readImage(tmp / "dropped.png"), io::readImage(tmp / "good.png"));
+    EXPECT_LE(opened.worst, kScreenshotTolLevels + 1e-3f);
+    const Agreement changed =
+        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "good.png"));
+    EXPECT_GT(changed.worst, 10.f) << "the dropped volume was not shown";
+}
+
 // Item 7 of the issue: an EXR screenshot holds the image's linear radiance — on the CPU path
 // exactly what `voxlight render --exr` writes for the same scene (the worker's full pass is the
 // CLI's image bit for bit), on the GLSL path the same within the float film's agreement.

@@ -163,10 +163,22 @@ TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
     EXPECT_EQ(steps[4].view, "left");
     EXPECT_EQ(steps[5].view, "superior");
     const std::vector<std::pair<const char*, const char*>> bad = {
-        {R"({"orbit": [1, 2]})", "script"},           {R"([{"orbit": [1]}])", "[0].orbit"},
-        {R"([{"zoom": "in"}])", "[0].zoom"},          {R"([{"view": "Q"}])", "[0].view"},
-        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"}, {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"},
-        {R"([{"pathtrace": 0.5}])", "[0].pathtrace"}};
+        {R"({"orbit": [1, 2]})", "script"},
+        {R"([{"orbit": [1]}])", "[0].orbit"},
+        {R"([{"zoom": "in"}])", "[0].zoom"},
+        {R"([{"view": "Q"}])", "[0].view"},
+        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"},
+        {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"},
+        {R"([{"pathtrace": 0.5}])", "[0].pathtrace"},
+        {R"([{"drop": []}])", "[0].drop"},
+        {R"([{"drop": "ct.mha"}])", "[0].drop"},
+        {R"([{"drop": ["a.mha", ""]}])", "[0].drop"},
+        {R"([{"drop": [3]}])", "[0].drop"}};
+    const auto drop =
+        viewer::parseScript(json::parse(R"([{"drop": ["a.mha", "b dir/c.nii"]}])"), "steps.json");
+    ASSERT_EQ(drop.size(), 1u);
+    EXPECT_EQ(drop[0].kind, viewer::ScriptStep::Kind::Drop);
+    EXPECT_EQ(drop[0].paths, (std::vector<std::string>{"a.mha", "b dir/c.nii"}));
     for (const auto& [text, field] : bad) {
         try {
             viewer::parseScript(json::parse(text), "steps.json");
