@@ -267,7 +267,10 @@ void RenderWorker::preparePass(const RenderRequest& request) {
             out.height = setup->camera->height();
             out.camera = pipeline::cameraDetails(*setup->camera);
             out.setup = std::make_shared<const pipeline::CasterSetup>(std::move(*setup));
+            const core::Stopwatch resample;
+            const std::size_t before = shGridCache_.resampled();
             out.shGrids = shGridCache_.get(*out.setup);
+            if (shGridCache_.resampled() != before) out.shResampleSeconds = resample.seconds();
         }
     } catch (const CancelledError&) {
         ++cancelled_;

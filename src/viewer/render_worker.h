@@ -71,9 +71,10 @@ struct RenderedImage {
     /// prepareOnly, SH methods: setup's visibility fields resampled for the GLSL ray caster
     /// (viewer/sh_grids.h; on this thread, kept per field).
     ShGrids shGrids;
-    bool prepared = false;       ///< a prepareOnly result (no pixels)
-    std::string method;          ///< prepareOnly: the scene's method
-    double exposureStops = 0.0;  ///< prepareOnly: the scene's display settings (io::ImageDesc)
+    double shResampleSeconds = 0.0;  ///< of the fields resampled for this result (0: all kept)
+    bool prepared = false;           ///< a prepareOnly result (no pixels)
+    std::string method;              ///< prepareOnly: the scene's method
+    double exposureStops = 0.0;      ///< prepareOnly: the scene's display settings (io::ImageDesc)
     std::string display;
     nlohmann::json camera;  ///< the camera as used (pipeline details "camera")
     std::vector<std::string> warnings;

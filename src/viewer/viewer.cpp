@@ -436,6 +436,9 @@ void Viewer::receive() {
         return;
     }
     if (r->prepared) {
+        if (options_.log && r->shResampleSeconds > 0.0)
+            std::fprintf(stderr, "view: SH fields resampled for the GLSL path in %.3f s\n",
+                         r->shResampleSeconds);
         // For the GLSL path (or its measurement): render it here when it draws the image.
         prepared_ = std::move(*r);
         if (gpu_ && prepared_->generation >= shownGen_) renderGl(*prepared_);
