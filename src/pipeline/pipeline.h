@@ -253,9 +253,13 @@ class Session {
     /// the image stage would read; nullopt when the method does not render with the CPU ray
     /// caster (Plan::casterSetup unset), without running anything. `warnings` receives the
     /// run's warnings when given.
+    /// `options.staleFields`: as for run() (an interactive client's interleaved update; the
+    /// setup then holds the stand-in fields). `records`: the stages' records when given.
     std::optional<CasterSetup> prepare(const io::Scene& scene,
                                        const core::Progress& progress = core::Progress::none(),
-                                       std::vector<std::string>* warnings = nullptr);
+                                       std::vector<std::string>* warnings = nullptr,
+                                       const RunOptions& options = {},
+                                       std::vector<StageRecord>* records = nullptr);
 
   private:
     /// Runs the plan's stages in order up to (not including) `stopBefore` ("" = all of them);

@@ -44,7 +44,9 @@ struct RenderRequest {
     std::uint64_t generation = 0;  ///< the state's number: equal numbers are equal scenes
     bool interacting = false;      ///< the user is dragging: coarse only
     /// Only prepare what the image stage reads (pipeline::Session::prepare), no pixels: for the
-    /// GLSL ray caster, which renders on the UI thread. No coarse pass.
+    /// GLSL ray caster, which renders on the UI thread. No coarse pass. After a TF change or a cut
+    /// the setup holds the last fields (staleShading) while the field thread computes the new
+    /// ones; then the same state is prepared again — the interleaved update, as for images.
     bool prepareOnly = false;
     /// Full pass: run the Frame stages this many times (the start-up measurement; the image and
     /// RenderedImage::frameSeconds are the median frame's).
@@ -131,7 +133,12 @@ class RenderWorker {
     void fieldLoop();
     /// False when cancelled; `stale`: some field stood in for this state's.
     bool renderPass(const RenderRequest& request, bool coarse, std::string* staleFields = nullptr);
-    void preparePass(const RenderRequest& request);
+    /// False when cancelled or failed; `staleFields` as renderPass's (the interleaved update
+    /// on the GLSL path: the setup holds the stand-in fields).
+    bool preparePass(const RenderRequest& request, std::string* staleFields = nullptr);
+    /// After a finished full (or prepare) pass of `request` (mutex_ held): remember it, and have
+    /// the field thread compute the fields `stale` names (empty: none stood in).
+    void scheduleFields(const RenderRequest& request, const std::string& stale);
 
     WorkerOptions options_;
     mutable std::mutex mutex_;

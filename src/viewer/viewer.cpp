@@ -521,13 +521,14 @@ bool Viewer::renderGl(const RenderedImage& p) {
                 if (options_.log)
                     std::fprintf(stderr,
                                  "view: GLSL frame %dx%d in %.3f s (state %llu, SH fields "
-                                 "uploaded so far: %zu)\n",
+                                 "uploaded so far: %zu)%s\n",
                                  gl_->width(), gl_->height(), glTimes_.last(),
-                                 (unsigned long long)p.generation, gl_->shUploads());
+                                 (unsigned long long)p.generation, gl_->shUploads(),
+                                 p.staleShading ? " shaded from earlier fields" : "");
                 texW_ = gl_->width(), texH_ = gl_->height();
                 shownFull_ = true;
                 shownGl_ = true;
-                shownStale_ = false;
+                shownStale_ = p.staleShading;
                 shownGen_ = p.generation;
                 renderWarnings_ = p.warnings;
                 if (!p.camera.is_null())

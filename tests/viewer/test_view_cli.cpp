@@ -635,6 +635,51 @@ TEST(ViewCli, DroppedFilesOpenThroughTheFileFieldsPath) {
     EXPECT_GT(changed.worst, 10.f) << "the dropped volume was not shown";
 }
 
+// Kronander's interleaved update on the GLSL path: after a TF change (a window/level drag) the
+// GL image is shaded from the last fields at once, then again from the new ones when the field
+// thread has them; the screenshot waits for those and agrees with the CPU path's of the same
+// script.
+TEST(ViewCli, AfterATfChangeTheGlslPathShowsTheOldShadingThenTheNew) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": {"name": "sh-local", "params": {"rays": 64}},
+        "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json") << R"([{"window": [60, -40]}])";
+    const auto view = [&](const char* renderer, const char* shot) {
+        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --renderer " + renderer + " " +
+                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+                            " --screenshot " + quoted(tmp / shot),
+                        tmp.path());
+    };
+    const Result gl = view("gpu", "gl.png");
+    if (gl.code != 0 && gl.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << gl.err;
+    ASSERT_EQ(gl.code, 0) << gl.err;
+    // The window step's state: a frame from the earlier fields, then one from its own.
+    const std::size_t stale = gl.err.find("shaded from earlier fields");
+    ASSERT_NE(stale, std::string::npos) << gl.err;
+    const std::size_t lineStart = gl.err.rfind("view: GLSL frame", stale);
+    const std::size_t state = gl.err.find("(state ", lineStart);
+    ASSERT_NE(state, std::string::npos);
+    const std::string stateTag = gl.err.substr(state, gl.err.find(',', state) - state);
+    const std::size_t fresh = gl.err.find(stateTag, stale);
+    ASSERT_NE(fresh, std::string::npos) << "no GLSL frame of the state from its own fields\n"
+                                        << gl.err;
+    EXPECT_EQ(gl.err.substr(fresh, gl.err.find('\n', fresh) - fresh).find("earlier"),
+              std::string::npos)
+        << gl.err;
+    const Result cpu = view("cpu", "cpu.png");
+    ASSERT_EQ(cpu.code, 0) << cpu.err;
+    const Agreement a =
+        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "gl.png"));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+}
+
 // Item 7 of the issue: an EXR screenshot holds the image's linear radiance — on the CPU path
 // exactly what `voxlight render --exr` writes for the same scene (the worker's full pass is the
 // CLI's image bit for bit), on the GLSL path the same within the float film's agreement.
