@@ -22,15 +22,17 @@ float ShFieldGrid::at(const glm::ivec3& g, int i) const {
     return glm::unpackHalf1x16(texels[std::size_t(i / 4)][4 * p + std::size_t(i % 4)]);
 }
 
-glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
-                                 std::size_t budgetBytes) {
+glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients, std::size_t budgetBytes,
+                                 int maxPerAxis) {
     VL_CHECK(dims.x > 0 && dims.y > 0 && dims.z > 0);
     VL_CHECK(coefficients >= 1 && coefficients <= 16);
     const double perPoint = double((coefficients + 3) / 4) * 4.0 * sizeof(std::uint16_t);
     const double maxPoints = double(budgetBytes) / perPoint;
     const auto count = [](const glm::ivec3& r) { return double(r.x) * r.y * r.z; };
     const glm::ivec3 fine = (dims - 1) * kShFieldGridOversample + 1;
-    if (count(fine) <= maxPoints) return fine;
+    const bool fits =
+        maxPerAxis <= 0 || (fine.x <= maxPerAxis && fine.y <= maxPerAxis && fine.z <= maxPerAxis);
+    if (fits && count(fine) <= maxPoints) return fine;
     if (count(dims) <= maxPoints) return dims;
     double f = std::cbrt(maxPoints / count(dims));
     for (;;) {
@@ -43,10 +45,11 @@ glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
 
 namespace {
 template <class Field>
-ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t budgetBytes) {
+ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t budgetBytes,
+                     int maxPerAxis) {
     ShFieldGrid g;
     g.coefficients = field.coefficients();
-    g.res = shFieldGridResolution(dims, g.coefficients, budgetBytes);
+    g.res = shFieldGridResolution(dims, g.coefficients, budgetBytes, maxPerAxis);
     const int textures = (g.coefficients + 3) / 4;
     const std::size_t points = std::size_t(g.res.x) * g.res.y * g.res.z;
     g.texels.assign(std::size_t(textures), std::vector<std::uint16_t>(4 * points, 0));
@@ -69,16 +72,16 @@ ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t bud
 }  // namespace
 
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes) {
-    return resample(field, dims, budgetBytes);
+                            std::size_t budgetBytes, int maxPerAxis) {
+    return resample(field, dims, budgetBytes, maxPerAxis);
 }
 ShFieldGrid resampleShField(const visibility::GlobalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes) {
-    return resample(field, dims, budgetBytes);
+                            std::size_t budgetBytes, int maxPerAxis) {
+    return resample(field, dims, budgetBytes, maxPerAxis);
 }
 ShFieldGrid resampleShField(const visibility::HierarchicalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes) {
-    return resample(field, dims, budgetBytes);
+                            std::size_t budgetBytes, int maxPerAxis) {
+    return resample(field, dims, budgetBytes, maxPerAxis);
 }
 
 }  // namespace voxlight::render

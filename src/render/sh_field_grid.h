@@ -48,16 +48,19 @@ struct ShFieldGrid {
 };
 
 /// Points per axis for a volume of `dims` and `coefficients` within `budgetBytes` (see above).
+/// `maxPerAxis` > 0: two points per voxel only where every axis stays within it (a GPU's largest
+/// 3D texture side); one point per voxel otherwise.
 glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
-                                 std::size_t budgetBytes = kShFieldGridBudgetBytes);
+                                 std::size_t budgetBytes = kShFieldGridBudgetBytes,
+                                 int maxPerAxis = 0);
 
 /// The field sampled at every grid point (parallel over z-slices; the same bytes for any thread
-/// count). `dims`: the volume's voxels per axis.
+/// count). `dims`: the volume's voxels per axis; budget and maxPerAxis as above.
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
 ShFieldGrid resampleShField(const visibility::GlobalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
 ShFieldGrid resampleShField(const visibility::HierarchicalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
 
 }  // namespace voxlight::render

@@ -16,8 +16,8 @@ std::shared_ptr<const render::ShFieldGrid> ShGridCache::of(
             entries_.insert(entries_.begin(), e);
             return e.grid;
         }
-    auto grid =
-        std::make_shared<const render::ShFieldGrid>(render::resampleShField(*field, dims, budget_));
+    auto grid = std::make_shared<const render::ShFieldGrid>(
+        render::resampleShField(*field, dims, budget_, kMaxTextureSide));
     ++resampled_;
     entries_.insert(entries_.begin(), Entry{field, grid});
     if (entries_.size() > kKept) entries_.resize(kKept);

@@ -29,6 +29,9 @@ class ShGridCache {
   public:
     /// Fields resampled at most this many at a time are kept (most recently used first).
     static constexpr std::size_t kKept = 4;
+    /// The smallest GL_MAX_3D_TEXTURE_SIZE OpenGL 4.5 allows: two points per voxel only where
+    /// every texture side stays within it (any 4.5 GL then holds the grid of a volume it holds).
+    static constexpr int kMaxTextureSide = 2048;
     explicit ShGridCache(std::size_t budgetBytes = render::kShFieldGridBudgetBytes)
         : budget_(budgetBytes) {}
     /// The grids of `setup.sh`'s fields, resampled when not kept already.

@@ -182,6 +182,11 @@ TEST(ShGrids, ResampledFieldHoldsTheFieldAtItsPointsAndIsMadeOncePerField) {
     // voxel centres from the first to the last.
     const std::size_t full = std::size_t(dims.x) * dims.y * dims.z * 4 * 2;
     EXPECT_EQ(render::resampleShField(*setup->sh.global, dims, full).res, dims);
+    // Two points per voxel only where every side fits a GPU's 3D textures.
+    EXPECT_EQ(render::shFieldGridResolution({1100, 8, 8}, 4), glm::ivec3(2199, 15, 15));
+    EXPECT_EQ(render::shFieldGridResolution({1100, 8, 8}, 4, render::kShFieldGridBudgetBytes,
+                                            viewer::ShGridCache::kMaxTextureSide),
+              glm::ivec3(1100, 8, 8));
     const render::ShFieldGrid half = render::resampleShField(*setup->sh.global, dims, full / 2);
     EXPECT_LE(half.bytes(), full / 2);
     EXPECT_LT(half.res.x, dims.x);
