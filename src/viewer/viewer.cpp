@@ -76,7 +76,8 @@ const char* const kHelp =
     "ctrl+left drag     turn the selected light (horizontal: azimuth,\n"
     "                   vertical: elevation)\n"
     "F1 or H            show / hide this help\n"
-    "F12                save a screenshot (path in the File panel)\n"
+    "F12                save a screenshot (path in the File panel;\n"
+    "                   .exr: the image's linear radiance)\n"
     "Ctrl+O             focus the file field\n"
     "drop a file        open it (scene, volume, DICOM folder)\n"
     "Esc or Q           quit\n";
