@@ -186,6 +186,12 @@ class Viewer {
   private:
     // Scene edits: every change bumps the generation and asks the worker for a new picture.
     void changed() { ++generation_, dirty_ = true; }
+    /// The panel's switch between local and global SH visibility (sh-local / sh-global scenes):
+    /// both fields stay cached (pipeline, resampled grids, GL textures), so switching back and
+    /// forth recomputes nothing once each was shown.
+    void setShVisibility(bool global) {
+        if (switchShVisibility(doc_, global, shStash_)) changed();
+    }
     void setCamera(const json& camera) {
         doc_["camera"] = camera;
         changed();
@@ -276,6 +282,7 @@ class Viewer {
     RenderWorker worker_;
 
     std::optional<LoadedScene> loaded_;
+    json shStash_;                  ///< sh-global's own params while the switch shows sh-local
     json doc_;                      ///< the scene as edited
     optics::TransferFunction tf_;   ///< the TF as edited (explicit after the first edit)
     std::optional<LookAt> lookAt_;  ///< set once the mouse moved the camera
@@ -369,6 +376,7 @@ class Viewer {
 
 void Viewer::adopt(LoadedScene scene) {
     loaded_ = std::move(scene);
+    shStash_ = json();
     // The volume read for the info panel and histogram is the pipeline's too: read once.
     worker_.adoptVolume(loaded_->scene, loaded_->volume);
     ptWorker_.adoptVolume(loaded_->scene, loaded_->volume);
@@ -899,6 +907,9 @@ void Viewer::runScript() {
         case ScriptStep::Kind::Gizmo:
             showGizmo_ = st.a != 0.0;
             break;
+        case ScriptStep::Kind::Shading:
+            setShVisibility(st.view == "global");
+            break;
         case ScriptStep::Kind::Drop: {
             // GLFW's drop callback itself; the next frame's events open the last path.
             std::vector<const char*> paths;
@@ -1401,6 +1412,16 @@ void Viewer::drawPanel() {
             lookAt_.reset();
             cameraResetGen_ = generation_ + 1;
             setCamera(loaded_->document.value("camera", json::object()));
+        }
+    }
+    if (loaded_ && doc_.contains("method") && doc_["method"].is_object()) {
+        const std::string method = doc_["method"].value("name", "");
+        if (method == "sh-local" || method == "sh-global") {
+            ImGui::TextUnformatted("SH visibility");
+            ImGui::SameLine();
+            if (ImGui::RadioButton("local", method == "sh-local")) setShVisibility(false);
+            ImGui::SameLine();
+            if (ImGui::RadioButton("global", method == "sh-global")) setShVisibility(true);
         }
     }
     if (loaded_ && ImGui::CollapsingHeader("Info")) {

@@ -680,6 +680,53 @@ TEST(ViewCli, AfterATfChangeTheGlslPathShowsTheOldShadingThenTheNew) {
     EXPECT_LE(a.fractionOver2, kGlFractionOver2);
 }
 
+// Item 3 of the issue, "local/global switch without recomputation": switching an sh-global scene
+// to local, back and to local again (the panel's switch, script step `shading`) on the GLSL path
+// resamples no field after the first state (sh-global's local field is sh-local's) and uploads
+// the local field once; the last image agrees with `voxlight render` of the scene as sh-local.
+TEST(ViewCli, GlslLocalGlobalSwitchRecomputesNothing) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    const std::string scene = R"({
+        "volume": {"phantom": "torso", "size": 40}, "transfer_function": "ct-bone",
+        "method": {"name": "sh-global", "params": {"rays": 32, "global_resolution": 20}},
+        "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 120, "height": 96}})";
+    std::ofstream(tmp / "scene.json") << scene;
+    nlohmann::json local = nlohmann::json::parse(scene);
+    local["method"] = {{"name", "sh-local"}, {"params", {{"rays", 32}}}};
+    std::ofstream(tmp / "local.json") << local.dump();
+    std::ofstream(tmp / "steps.json")
+        << R"([{"shading": "local"}, {"shading": "global"}, {"shading": "local"}])";
+    const Result view = runShell(
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
+            " --script " + quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / "shot.png"),
+        tmp.path());
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    std::size_t resampled = 0;
+    for (std::size_t at = view.err.find("SH fields resampled"); at != std::string::npos;
+         at = view.err.find("SH fields resampled", at + 1))
+        ++resampled;
+    EXPECT_EQ(resampled, 1u) << view.err;  // global and local together, for the first state
+    std::vector<int> uploads;
+    const std::string key = "SH fields uploaded so far: ";
+    for (std::size_t at = view.err.find(key); at != std::string::npos;
+         at = view.err.find(key, at + 1))
+        uploads.push_back(std::atoi(view.err.c_str() + at + key.size()));
+    EXPECT_EQ(uploads, (std::vector<int>{1, 2, 2, 2})) << view.err;
+    const Result cpu = runShell(std::string(VOXLIGHT_BINARY) + " render -q " +
+                                    quoted(tmp / "local.json") + " -o " + quoted(tmp / "cpu.png"),
+                                tmp.path());
+    ASSERT_EQ(cpu.code, 0) << cpu.err;
+    const Agreement a =
+        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "shot.png"));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+}
+
 // Item 7 of the issue: an EXR screenshot holds the image's linear radiance — on the CPU path
 // exactly what `voxlight render --exr` writes for the same scene (the worker's full pass is the
 // CLI's image bit for bit), on the GLSL path the same within the float film's agreement.

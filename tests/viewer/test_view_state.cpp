@@ -190,6 +190,30 @@ TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
     }
 }
 
+// The local/global switch keeps the shared params (the same local field) and sh-global's own
+// ones for the way back; other methods are left alone.
+TEST(ViewState, ShVisibilitySwitchKeepsTheLocalFieldsParams) {
+    json doc = {{"method",
+                 {{"name", "sh-global"},
+                  {"params", {{"rays", 64}, {"coefficients", 9}, {"global_resolution", 32}}}}}};
+    json stash;
+    EXPECT_FALSE(viewer::switchShVisibility(doc, true, stash));  // already global
+    ASSERT_TRUE(viewer::switchShVisibility(doc, false, stash));
+    EXPECT_EQ(doc["method"]["name"], "sh-local");
+    EXPECT_EQ(doc["method"]["params"], json({{"rays", 64}, {"coefficients", 9}}));
+    ASSERT_TRUE(viewer::switchShVisibility(doc, true, stash));
+    EXPECT_EQ(doc["method"]["name"], "sh-global");
+    EXPECT_EQ(doc["method"]["params"]["global_resolution"], 32);
+    json gradient = {{"method", {{"name", "gradient"}, {"params", json::object()}}}};
+    EXPECT_FALSE(viewer::switchShVisibility(gradient, false, stash));
+    EXPECT_EQ(gradient["method"]["name"], "gradient");
+    const auto steps = viewer::parseScript(json::parse(R"([{"shading": "local"}])"), "s.json");
+    ASSERT_EQ(steps.size(), 1u);
+    EXPECT_EQ(steps[0].kind, viewer::ScriptStep::Kind::Shading);
+    EXPECT_EQ(steps[0].view, "local");
+    EXPECT_THROW(viewer::parseScript(json::parse(R"([{"shading": "far"}])"), "s.json"), InputError);
+}
+
 TEST(ViewScript, ClipPlaneAndLightStepsParse) {
     const auto steps = viewer::parseScript(json::parse(R"([
         {"clip_add": {"normal": [0, 2, 0], "offset": -5, "shadows_from_removed": true}},
