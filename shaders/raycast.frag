@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 // The GLSL mirror of the CPU ray caster's emission–absorption and gradient (Blinn–Phong) modes
+// and its SH visibility shading (sh-local, sh-global, ritschel: render/sh_shading.h)
 // (render/ray_caster.h, render/dvr_march.h, render/shading.h): the same optical model
 // (ARCHITECTURE.md §1), ray set-up, sample lattice, pre-integrated segments, shading normal and
 // lights, written line by line after the C++ so that the two images can be compared pixel by
@@ -12,7 +13,9 @@
 //     table that equals the six taps up to rounding),
 //   - ray set-up in float (the CPU's is double, then rounded to float),
 //   - the pre-integration table's cumulative integrals as float pairs (hi + lo) instead of
-//     double, and the specular power by pow() instead of the CPU's interpolated table.
+//     double, and the specular power by pow() instead of the CPU's interpolated table,
+//   - SH shading: the visibility field resampled (two points per voxel) as half floats and interpolated
+//     by the texture unit (render/sh_field_grid.h) instead of the field's own interpolation.
 // Empty-space skipping: rays are clipped to the box of the non-empty skip cells (the CPU's
 // visibleRange()), and inside it a sample in an empty skip cell jumps ahead by the cell's skip
 // distance (grid::BrickMajorants::skipDistances: the cube of cells within d − 1 is empty) to the
@@ -76,7 +79,7 @@ uniform float uBand;  // kClipFaceBandVoxels in mm
 uniform float uWeak;  // RayCaster::weakGradient()
 uniform vec3 uBackground;
 
-// Shading: 0 emission–absorption (uniform ambient), 1 gradient Blinn–Phong.
+// Shading: 0 emission–absorption (uniform ambient), 1 gradient Blinn–Phong, 2 SH visibility.
 uniform int uMode;
 uniform float uEaAmbient;
 uniform float uAmbient, uDiffuse, uSpecular, uShininess;
@@ -88,6 +91,29 @@ uniform vec3 uLightPosition[kMaxLights];
 uniform vec3 uLightValue[kMaxLights];
 uniform float uLightMinDistance[kMaxLights];
 uniform vec3 uLightEmitterNormal[kMaxLights];
+
+// SH visibility shading (uMode 2; render/sh_shading.h ShLights::shade, ShCutFaceShader): the
+// field resampled on a node-centred grid (render/sh_field_grid.h), coefficients
+// 4t…4t+3 in uShField[t]; sh-global's local field in uShLocal[t] for the cut faces' band.
+const int kMaxShTextures = 4;
+const int kMaxShFaces = 14;  // = viewer/gl_support.h kMaxGlClipPlanes + the crop box's 6
+const int kMaxShPoints = 8;  // = viewer/gl_support.h kMaxGlLights
+const float kInv4Pi = 0.07957747154594767;
+const float kInvSqrt4Pi = 0.28209479177387814;
+uniform int uShCount;  // 1, 4, 9 or 16
+uniform vec3 uShTexScale, uShTexOffset;  // voxel coordinate p → texture coordinate p·scale + offset
+uniform sampler3D uShField[kMaxShTextures];
+uniform sampler3D uShLocal[kMaxShTextures];
+uniform int uShFaceCount;  // faces that remove matter for the light (0: the field alone)
+uniform vec3 uShFacePoint[kMaxShFaces];
+uniform vec3 uShFaceNormal[kMaxShFaces];
+uniform float uShInvBand;
+uniform vec3 uShConstant[16];  // directional + environment + ambient L_i, windowed
+uniform float uShWindow[16];
+uniform int uShPointCount;
+uniform vec3 uShPointPosition[kMaxShPoints];
+uniform vec3 uShPointIntensity[kMaxShPoints];
+uniform float uShPointMinDistance[kMaxShPoints];
 
 struct Segment {
     float sigma;
@@ -231,6 +257,83 @@ void blinnPhong(vec3 position, vec3 normal, vec3 toEye, out vec3 diffuse, out ve
             if (ndh > 0.0) specular += (uSpecular * pow(min(ndh, 1.0), uShininess)) * e;
         }
     }
+}
+
+// ---- SH visibility shading (render/sh_shading.h) ---------------------------------------------
+
+// sh::evalShFixed<3>: real SH without the Condon–Shortley sign, index l(l+1)+m.
+void shBasis(vec3 d, int count, out float y[16]) {
+    const float x = d.x, yy = d.y, z = d.z;
+    y[0] = 0.28209479177387814;
+    if (count <= 1) return;
+    y[1] = 0.48860251190291992 * yy;
+    y[2] = 0.48860251190291992 * z;
+    y[3] = 0.48860251190291992 * x;
+    if (count <= 4) return;
+    const float x2 = x * x, y2 = yy * yy, z2 = z * z;
+    y[4] = 1.0925484305920792 * x * yy;
+    y[5] = 1.0925484305920792 * yy * z;
+    y[6] = 0.31539156525252005 * (3.0 * z2 - 1.0);
+    y[7] = 1.0925484305920792 * x * z;
+    y[8] = 0.54627421529603959 * (x2 - y2);
+    if (count <= 9) return;
+    const float fz5 = 5.0 * z2 - 1.0;
+    y[9] = 0.59004358992664352 * yy * (3.0 * x2 - y2);
+    y[10] = 2.8906114426405538 * x * yy * z;
+    y[11] = 0.45704579946446572 * yy * fz5;
+    y[12] = 0.37317633259011540 * z * (5.0 * z2 - 3.0);
+    y[13] = 0.45704579946446572 * x * fz5;
+    y[14] = 1.4453057213202769 * z * (x2 - y2);
+    y[15] = 0.59004358992664352 * x * (x2 - 3.0 * y2);
+}
+
+// dvr_march.h meanScatterDepth: the α-weighted mean depth of the first scattering in a segment.
+float meanScatterDepth(float tau, float dt) {
+    if (tau < kOpacitySeriesTau) return dt * (0.5 - tau * (1.0 / 12.0));
+    if (tau > 80.0) return dt / tau;
+    return dt * (1.0 / tau - 1.0 / (exp(tau) - 1.0));
+}
+
+// ShVisibilityShader / ShCutFaceShader::scatter at world point x: 1/(4π) Σ L_i V_i, clamped at 0.
+vec3 shShade(vec3 x) {
+    const vec3 tc = (uWorldToIndex * (x - uOrigin)) * uShTexScale + uShTexOffset;
+    float v[16];
+    const int textures = (uShCount + 3) / 4;
+    for (int t = 0; t < textures; ++t) {
+        const vec4 c = texture(uShField[t], tc);
+        v[4 * t] = c.x, v[4 * t + 1] = c.y, v[4 * t + 2] = c.z, v[4 * t + 3] = c.w;
+    }
+    if (uShFaceCount > 0) {
+        // Near a face that removes matter for the light: toward the local field.
+        float d = 1e30;
+        for (int f = 0; f < uShFaceCount; ++f)
+            d = min(d, dot(x - uShFacePoint[f], uShFaceNormal[f]));
+        const float w = clamp(d * uShInvBand, 0.0, 1.0);
+        if (w < 1.0)
+            for (int t = 0; t < textures; ++t) {
+                const vec4 l = texture(uShLocal[t], tc);
+                for (int c = 0; c < 4; ++c) v[4 * t + c] = w * v[4 * t + c] + (1.0 - w) * l[c];
+            }
+    }
+    vec3 sum = vec3(0.0);
+    for (int i = 0; i < uShCount; ++i) sum += uShConstant[i] * v[i];
+    for (int k = 0; k < uShPointCount; ++k) {
+        const vec3 d = uShPointPosition[k] - x;
+        const float dist = length(d);
+        const float r = max(dist, uShPointMinDistance[k]);
+        const vec3 e = uShPointIntensity[k] / (r * r);
+        const float directional = min(1.0, dist / uShPointMinDistance[k]);
+        if (directional > 0.0) {
+            float y[16];
+            shBasis(d / dist, uShCount, y);
+            float s = 0.0;
+            for (int i = 0; i < uShCount; ++i) s += uShWindow[i] * y[i] * v[i];
+            sum += (directional * s) * e;
+        }
+        // The uniform part inside minDistance: c_0 = E/√(4π).
+        sum += ((1.0 - directional) * kInvSqrt4Pi * v[0]) * e;
+    }
+    return max(sum * kInv4Pi, vec3(0.0));
 }
 
 // ---- Ray set-up (RayCaster::setupRay) --------------------------------------------------------
@@ -419,7 +522,10 @@ void main() {
                                 ? tau * (1.0 - 0.5 * tau * (1.0 - tau * (1.0 / 3.0)))
                                 : 1.0 - exp(-tau);
         vec3 diffuse = vec3(uEaAmbient), specular = vec3(0.0);
-        if (uMode == 1) {
+        if (uMode == 2) {
+            // Shaded where the segment's light is scattered (dvr_march.h composite).
+            diffuse = shShade(r.originWorld + (t0 + meanScatterDepth(tau, dt)) * r.dirWorld);
+        } else if (uMode == 1) {
             const bool cutFace = r.clipEntry && (t - r.tNear) < uBand;
             const vec3 n =
                 shadingNormal(gradientAt(p), cutFace ? r.entryNormal : toEye, toEye, uWeak);

@@ -4,7 +4,8 @@
 // The interactive viewer (viewer/viewer.h). The input given on the command line is loaded and
 // checked before the window opens, so a bad scene or a missing volume fails as every command does
 // (one line, exit 2). --screenshot renders N frames without interaction, waits for the
-// full-resolution image and writes the window's content (temporary file, then rename).
+// full-resolution image and writes the window's content (.png), or the image area's linear
+// radiance as `render --exr` writes it (.exr) (temporary file, then rename).
 // --script runs UI steps (viewer/view_state.h ScriptStep) through the mouse's code paths;
 // --record writes the exploration as a session (`voxlight replay` re-renders it) on exit.
 #include <cstdio>
@@ -36,8 +37,8 @@ Command addViewCommand(CLI::App& app) {
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
     c.sub->add_option("--screenshot", *screenshot,
-                      "Scripted run: write the window (PNG) once the full-resolution image shows, "
-                      "then exit");
+                      "Scripted run: write the window (.png) or the image's linear radiance "
+                      "(.exr) once the full-resolution image shows, then exit");
     c.sub->add_option("--frames", *frames, "Scripted run: draw at least N UI frames first")
         ->check(CLI::Range(1, 100000));
     c.sub->add_option("--script", *script,
@@ -59,7 +60,7 @@ Command addViewCommand(CLI::App& app) {
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
     c.run = [=] {
         if (!screenshot->empty()) {
-            checkOutputs({{"--screenshot", *screenshot, {".png"}}});
+            checkOutputs({{"--screenshot", *screenshot, {".png", ".exr"}}});
             if (input->empty())
                 throw InputError("command line", "--screenshot", "needs a scene or volume",
                                  "give SCENE.json or a volume before --screenshot");
@@ -86,7 +87,7 @@ Command addViewCommand(CLI::App& app) {
         options.openInput = [](const std::string& path) { return loadInput(path, {}); };
         options.saveScreenshot = [](const core::ImageRGBA& image, const std::string& path) {
             checkOutputs(
-                {{"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}});
+                {{"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr"}}});
             OutputFiles files;
             files.write(path, "screenshot",
                         [&](const std::filesystem::path& p) { io::writeImage(image, p); });
@@ -102,10 +103,13 @@ Command addViewCommand(CLI::App& app) {
             files.write(*screenshot, "--screenshot",
                         [&](const std::filesystem::path& p) { io::writeImage(*shot, p); });
             files.commit();
-            if (!*quiet)
+            if (!*quiet && shot->width > viewer::kPanelWidth)
                 std::fprintf(stderr, "wrote %s (%dx%d, image area %dx%d at the left)\n",
                              screenshot->c_str(), shot->width, shot->height,
                              shot->width - viewer::kPanelWidth, shot->height);
+            else if (!*quiet)
+                std::fprintf(stderr, "wrote %s (%dx%d, linear radiance of the image area)\n",
+                             screenshot->c_str(), shot->width, shot->height);
         }
         return kExitOk;
     };

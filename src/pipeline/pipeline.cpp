@@ -223,13 +223,16 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
 }
 
 std::optional<CasterSetup> Session::prepare(const io::Scene& scene, const core::Progress& progress,
-                                            std::vector<std::string>* warnings) {
+                                            std::vector<std::string>* warnings,
+                                            const RunOptions& options,
+                                            std::vector<StageRecord>* records) {
     const Plan plan = this->plan(scene);
     if (!plan.casterSetup) return std::nullopt;
     Run run(scene, cache_, progress);
     RunResult res;
-    runStages(plan, run, res, {}, plan.imageStage);
+    runStages(plan, run, res, options, plan.imageStage);
     if (warnings) *warnings = run.warnings();
+    if (records) *records = res.stages;
     CasterSetup setup = plan.casterSetup(run);
     setup.method = plan.method;
     return setup;

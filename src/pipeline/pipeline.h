@@ -40,6 +40,12 @@
 #include "render/camera.h"
 #include "render/ray_caster.h"
 
+namespace voxlight::visibility {
+class LocalVisibility;
+class GlobalVisibility;
+class HierarchicalVisibility;
+}  // namespace voxlight::visibility
+
 namespace voxlight::pipeline {
 
 enum class StageKind { Input, Precompute, Frame };
@@ -89,6 +95,18 @@ struct CasterSetup {
     render::CasterTables tables;
     render::RenderOptions options;
     std::shared_ptr<const render::Camera> camera;
+    /// The SH methods' visibility fields, exactly those their image stage shades from
+    /// (render/sh_shading.h); all null for the other methods.
+    struct ShFields {
+        /// sh-local's field; sh-global's local field (near the light-removing cut faces, and the
+        /// viewer's local/global switch). Clip-aware when a plane removes matter for the light.
+        std::shared_ptr<const visibility::LocalVisibility> local;
+        std::shared_ptr<const visibility::GlobalVisibility> global;              ///< sh-global
+        std::shared_ptr<const visibility::HierarchicalVisibility> hierarchical;  ///< ritschel
+        /// sh-global: the local field stands in within this distance (mm) of the caster's
+        /// render::lightCutFaces (ShCutFaceShader); 0 = none.
+        float cutBandMm = 0.f;
+    } sh;
 };
 
 /// The details' "camera" entry: eye, forward, up, right, projection, fov_y_deg, ortho_height_mm.
@@ -235,9 +253,13 @@ class Session {
     /// the image stage would read; nullopt when the method does not render with the CPU ray
     /// caster (Plan::casterSetup unset), without running anything. `warnings` receives the
     /// run's warnings when given.
+    /// `options.staleFields`: as for run() (an interactive client's interleaved update; the
+    /// setup then holds the stand-in fields). `records`: the stages' records when given.
     std::optional<CasterSetup> prepare(const io::Scene& scene,
                                        const core::Progress& progress = core::Progress::none(),
-                                       std::vector<std::string>* warnings = nullptr);
+                                       std::vector<std::string>* warnings = nullptr,
+                                       const RunOptions& options = {},
+                                       std::vector<StageRecord>* records = nullptr);
 
   private:
     /// Runs the plan's stages in order up to (not including) `stopBefore` ("" = all of them);
@@ -246,6 +268,15 @@ class Session {
                                   const RunOptions& options, const std::string& stopBefore);
     ArtifactCache cache_;
 };
+
+/// A volume loaded outside the pipeline for `scene`'s volume source (loadSceneVolume: the viewer
+/// reads it once for its info panel and histogram), handed to `session` as the load_volume
+/// stage's artifact under the source's key — so runs of scenes with that source serve it from the
+/// memory cache ("cached") instead of reading the file again, and the session holds the same
+/// voxels, not a copy. Returns `volume`. The caller vouches that `volume` is what
+/// loadSceneVolume(scene) gives (same source, same read options).
+std::shared_ptr<const core::Volume> adoptVolume(Session& session, const io::Scene& scene,
+                                                std::shared_ptr<const core::Volume> volume);
 
 /// Renders one scene with a fresh session (tests, one-off callers).
 RunResult renderScene(const io::Scene& scene, const RunOptions& options = {});

@@ -99,7 +99,14 @@ using nlohmann::json;
 // ---- Artifacts -----------------------------------------------------------------------------
 
 struct LoadedVolume {
-    core::Volume volume;
+    /// `data` loaded (or adopted: adoptVolume) for the scene; `volume` refers to it.
+    explicit LoadedVolume(std::shared_ptr<const core::Volume> v)
+        : data(std::move(v)),
+          volume(*data),
+          contentHash(core::contentHash(volume)),
+          nonFinite(volume.countNonFinite()) {}
+    std::shared_ptr<const core::Volume> data;
+    const core::Volume& volume;
     std::uint64_t contentHash = 0;
     std::uint64_t nonFinite = 0;
 };
@@ -1816,13 +1823,25 @@ core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
     return film;
 }
 
+/// The load_volume artifact of `volume`, stored under the source's `identity` (its key).
+Artifact loadedVolumeArtifact(ArtifactCache& cache, std::uint64_t identity,
+                              std::shared_ptr<const core::Volume> volume) {
+    auto v = std::make_shared<const LoadedVolume>(std::move(volume));
+    // What a later process needs to name this volume's artifacts before reading it.
+    cache.putRecord("volume-content", identity, v->contentHash);
+    cache.putRecord("volume-voxels", identity, v->volume.voxelCount());
+    const std::size_t bytes = v->volume.sizeBytes();
+    return Artifact::of<LoadedVolume>(std::move(v), bytes);
+}
+
 /// What the image stage of a ray-caster method reads (Plan::casterSetup), from a run that has run
 /// every stage before it.
-CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options) {
+CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options, Kind kind,
+                          bool clipped) {
     CasterSetup c;
     const auto loaded = run.get<LoadedVolume>("load_volume");
     const auto tfa = run.get<TfArtifact>("transfer_function");
-    c.volume = std::shared_ptr<const core::Volume>(loaded, &loaded->volume);
+    c.volume = loaded->data;
     c.tf = std::shared_ptr<const optics::TransferFunction>(tfa, &tfa->tf);
     c.tables.table = tfa->table;
     c.tables.skipCells = run.get<grid::BrickMajorants>("skip_cells");
@@ -1835,6 +1854,18 @@ CasterSetup casterSetupOf(const Run& run, const render::RenderOptions& options) 
     if (run.has("lights")) c.options.lights = *run.get<LightList>("lights");
     if (run.has("light_sh")) c.options.irradianceSh = *run.get<std::vector<glm::vec3>>("light_sh");
     c.camera = run.get<render::Camera>("camera");
+    if (kind == Kind::Ritschel) {
+        c.sh.hierarchical = run.get<visibility::HierarchicalVisibility>(
+            clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility");
+    } else if (isKronander(kind)) {
+        c.sh.local = lightLocalVisibility(run, clipped);
+        if (kind == Kind::ShGlobal) {
+            // Local visibility within one global grid spacing of a removing face.
+            c.sh.global = run.get<visibility::GlobalVisibility>("global_visibility");
+            c.sh.cutBandMm = c.sh.global->spacingVoxels() *
+                             float(core::minComponent(loaded->volume.geometry().spacing));
+        }
+    }
     return c;
 }
 
@@ -1909,16 +1940,9 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return volumeIdentity(run.scene());
     };
     load.compute = [](Run& run) {
-        const std::uint64_t identity = volumeIdentity(run.scene());  // the key it runs under
-        auto v = std::make_shared<LoadedVolume>();
-        v->volume = loadSceneVolume(run.scene(), run.progress());
-        v->contentHash = core::contentHash(v->volume);
-        v->nonFinite = v->volume.countNonFinite();
-        // What a later process needs to name this volume's artifacts before reading it.
-        run.cache().putRecord("volume-content", identity, v->contentHash);
-        run.cache().putRecord("volume-voxels", identity, v->volume.voxelCount());
-        const std::size_t bytes = v->volume.sizeBytes();
-        return Artifact::of<LoadedVolume>(std::move(v), bytes);
+        return loadedVolumeArtifact(
+            run.cache(), volumeIdentity(run.scene()),
+            std::make_shared<const core::Volume>(loadSceneVolume(run.scene(), run.progress())));
     };
     load.warnings = [](const Artifact& a) {  // e.g. a tilted series resampled
         return a.as<LoadedVolume>()->volume.warnings;
@@ -2292,12 +2316,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         plan.stages.push_back(frame);
         return plan;
     }
-    plan.casterSetup = [options](const Run& run) { return casterSetupOf(run, options); };
+    plan.casterSetup = [options, kind, clipped](const Run& run) {
+        return casterSetupOf(run, options, kind, clipped);
+    };
     frame.compute = [options, kind, clipped, isoLattice, pvrtParams](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
-        const CasterSetup setup = casterSetupOf(run, options);
+        const CasterSetup setup = casterSetupOf(run, options, kind, clipped);
         const render::RenderOptions& o = setup.options;
         const auto& camera = setup.camera;
         render::RenderStats stats;
@@ -2307,22 +2333,14 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             std::shared_ptr<core::ImageRGBA> film;
             if (isSh(kind)) {
                 std::unique_ptr<render::ShadingModel> model;
-                if (kind == Kind::Ritschel) {
-                    model = render::makeShVisibilityModel(
-                        caster, *camera,
-                        run.get<visibility::HierarchicalVisibility>(
-                            clipped ? "clip_hierarchical_visibility" : "hierarchical_visibility"));
-                } else if (kind == Kind::ShLocal) {
-                    model = render::makeShVisibilityModel(caster, *camera,
-                                                          lightLocalVisibility(run, clipped));
-                } else {
-                    // Local visibility within one global grid spacing of a removing face.
-                    const auto global = run.get<visibility::GlobalVisibility>("global_visibility");
-                    const float band = global->spacingVoxels() *
-                                       float(core::minComponent(loaded->volume.geometry().spacing));
-                    model = render::makeShVisibilityModel(caster, *camera, global,
-                                                          lightLocalVisibility(run, clipped), band);
-                }
+                const CasterSetup::ShFields& f = setup.sh;
+                if (kind == Kind::Ritschel)
+                    model = render::makeShVisibilityModel(caster, *camera, f.hierarchical);
+                else if (kind == Kind::ShLocal)
+                    model = render::makeShVisibilityModel(caster, *camera, f.local);
+                else
+                    model = render::makeShVisibilityModel(caster, *camera, f.global, f.local,
+                                                          f.cutBandMm);
                 film = std::make_shared<core::ImageRGBA>(
                     caster.render(*camera, *model, run.progress(), &stats));
             } else if (kind == Kind::Pvrt) {
@@ -2481,5 +2499,14 @@ const RegisterMethod kIso(rayCasterMethod(
     {"iso_value", "ambient", "diffuse"}, {}));
 
 }  // namespace
+
+std::shared_ptr<const core::Volume> adoptVolume(Session& session, const io::Scene& scene,
+                                                std::shared_ptr<const core::Volume> volume) {
+    VL_CHECK(volume != nullptr);
+    const std::uint64_t identity = volumeIdentity(scene);
+    session.cache().putInMemory("load_volume", identity,
+                                loadedVolumeArtifact(session.cache(), identity, volume));
+    return volume;
+}
 
 }  // namespace voxlight::pipeline

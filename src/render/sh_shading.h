@@ -56,11 +56,18 @@ class ShLights {
     /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
     glm::vec3 shade(const glm::vec3& x, const float* v) const;
 
-  private:
+    // What shade() evaluates, for other evaluators of it (the viewer's shaders/raycast.frag).
     struct Point {
         glm::vec3 position, intensity;
         float minDistance;
     };
+    /// The position-independent L_i (directional + environment + ambient), windowed.
+    const glm::vec3* constants() const { return constant_; }
+    /// w_l of coefficient i (1 without a window).
+    float window(int i) const { return window_[i]; }
+    const std::vector<Point>& points() const { return points_; }
+
+  private:
     int coefficients_ = 0;
     glm::vec3 constant_[16] = {};  ///< directional + environment L_i, windowed
     float window_[16] = {};        ///< w_l of each coefficient (1 without a window)

@@ -12,6 +12,7 @@
 
 #include "core/rng.h"
 #include "render/ray_caster.h"
+#include "render/sh_shading.h"
 #include "render/shading.h"
 #include "viewer/embedded_shaders.h"
 #include "viewer/gl_support.h"
@@ -22,6 +23,8 @@ namespace {
 
 /// Rows of the TF texture (shaders/raycast.frag says what each holds).
 constexpr int kTfRows = 8;
+/// First texture units of the SH field's and sh-global's local field's textures (4 each).
+constexpr int kShFieldUnit = 4, kShLocalUnit = 8;
 
 /// The first line of a shader or program info log.
 std::string firstLine(const std::string& log) {
@@ -117,6 +120,10 @@ void GlRayCaster::release() {
     if (vao_) glDeleteVertexArrays(1, &vao_);
     if (raycast_) glDeleteProgram(raycast_);
     if (display_) glDeleteProgram(display_);
+    for (ShUpload& up : shUploaded_)
+        for (GLuint t : up.textures)
+            if (t) glDeleteTextures(1, &t);
+    shUploaded_.clear();
     volumeTex_ = tfTex_ = jitterTex_ = skipTex_ = filmTex_ = displayTex_ = 0;
     filmFbo_ = displayFbo_ = 0;
     vao_ = raycast_ = display_ = 0;
@@ -273,6 +280,50 @@ void GlRayCaster::uploadJitter(int width, int height, bool jitter, std::uint64_t
     jitterW_ = width, jitterH_ = height, jitterOn_ = jitter, jitterSeed_ = seed;
 }
 
+bool GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid,
+                             unsigned out[4], std::string& why) {
+    for (std::size_t i = 0; i < shUploaded_.size(); ++i)
+        if (shUploaded_[i].grid == grid) {
+            std::rotate(shUploaded_.begin(), shUploaded_.begin() + std::ptrdiff_t(i),
+                        shUploaded_.begin() + std::ptrdiff_t(i) + 1);
+            std::copy_n(shUploaded_.front().textures, 4, out);
+            return true;
+        }
+    ShUpload up;
+    up.grid = grid;
+    const glm::ivec3 n = grid->res;
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+    for (int t = 0; t < grid->textures(); ++t) {
+        GLuint tex = 0;
+        glCreateTextures(GL_TEXTURE_3D, 1, &tex);
+        up.textures[t] = tex;
+        glTextureStorage3D(tex, 1, GL_RGBA16F, n.x, n.y, n.z);
+        glTextureSubImage3D(tex, 0, 0, 0, 0, n.x, n.y, n.z, GL_RGBA, GL_HALF_FLOAT,
+                            grid->texels[std::size_t(t)].data());
+        glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+        glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+        for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+            glTextureParameteri(tex, w, GL_CLAMP_TO_EDGE);
+    }
+    if (const std::string e = glErrorText(); !e.empty()) {
+        why = "uploading the SH visibility field (" + std::to_string(n.x) + "x" +
+              std::to_string(n.y) + "x" + std::to_string(n.z) + ", " +
+              std::to_string(grid->coefficients) + " coefficients) as 3D textures: " + e;
+        for (GLuint t : up.textures)
+            if (t) glDeleteTextures(1, &t);
+        return false;
+    }
+    ++shUploads_;
+    shUploaded_.insert(shUploaded_.begin(), up);
+    if (shUploaded_.size() > kKeptShFields) {
+        for (GLuint t : shUploaded_.back().textures)
+            if (t) glDeleteTextures(1, &t);
+        shUploaded_.pop_back();
+    }
+    std::copy_n(up.textures, 4, out);
+    return true;
+}
+
 bool GlRayCaster::ensureTargets(int width, int height, std::string& why) {
     if (filmFbo_ && width == width_ && height == height_) return true;
     for (GLuint* t : {&filmTex_, &displayTex_})
@@ -307,7 +358,7 @@ bool GlRayCaster::ensureTargets(int width, int height, std::string& why) {
     return true;
 }
 
-bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops,
+bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
                          render::Display display, std::string& why, Scope scope) {
     if (!ready()) {
         why = "the GLSL ray caster is not initialised";
@@ -335,6 +386,26 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     if (skipCells_ != setup.tables.skipCells || !skipTex_) {
         uploadSkipCells(*setup.tables.skipCells);
         skipCells_ = setup.tables.skipCells;
+    }
+    // SH methods: the fields' textures (the local one only where sh-global needs it).
+    const bool shMode = setup.sh.local || setup.sh.global || setup.sh.hierarchical;
+    const std::vector<core::HalfSpace> faces = setup.sh.global && setup.sh.cutBandMm > 0.f
+                                                   ? render::lightCutFaces(o)
+                                                   : std::vector<core::HalfSpace>{};
+    unsigned shField[4] = {0, 0, 0, 0}, shLocal[4] = {0, 0, 0, 0};
+    const bool shBlend = shMode && !faces.empty();
+    if (shMode) {
+        if (!sh.field || (shBlend && !sh.local)) {
+            why = "the SH visibility field was not resampled for the GLSL ray caster";
+            return false;
+        }
+        if (shBlend &&
+            (sh.local->res != sh.field->res || sh.local->coefficients != sh.field->coefficients)) {
+            why = "sh-global's local and global fields were resampled on different grids";
+            return false;
+        }
+        if (!shTextures(sh.field, shField, why)) return false;
+        if (shBlend && !shTextures(sh.local, shLocal, why)) return false;
     }
     const int w = camera.width(), h = camera.height();
     if (!ensureTargets(w, h, why)) return false;
@@ -410,8 +481,42 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     u.f("uWeak", caster.weakGradient());
     u.v3("uBackground", o.background);
 
-    u.i("uMode", o.mode == render::Mode::Gradient ? 1 : 0);
+    u.i("uMode", shMode ? 2 : o.mode == render::Mode::Gradient ? 1 : 0);
     u.f("uEaAmbient", o.ambient);
+    if (shMode) {
+        // The lights as ShLights flattens them (none: the volumetric headlight, as the pipeline's
+        // SH models get it).
+        std::vector<std::shared_ptr<const lights::Light>> lights = o.lights;
+        if (lights.empty())
+            lights.push_back(render::headlight(camera, render::kVolumetricHeadlightIrradiance));
+        const render::ShLights shl(sh.field->coefficients, lights, o.shWindow, o.shAmbient);
+        u.i("uShCount", shl.coefficients());
+        // Node-centred grid: texture coordinate (p/step + ½)/res (render/sh_field_grid.h). The
+        // local field's grid (sh-global) has the same points: same volume, same rule.
+        const render::ShFieldGrid& grid = *sh.field;
+        glm::vec3 scale(0.f);
+        for (int a = 0; a < 3; ++a)
+            if (grid.step[a] > 0.f) scale[a] = 1.f / (grid.step[a] * float(grid.res[a]));
+        u.v3("uShTexScale", scale);
+        u.v3("uShTexOffset", 0.5f / glm::vec3(grid.res));
+        for (int i = 0; i < shl.coefficients(); ++i) {
+            u.v3(u.indexed("uShConstant", i).c_str(), shl.constants()[i]);
+            u.f(u.indexed("uShWindow", i).c_str(), shl.window(i));
+        }
+        u.i("uShPointCount", int(shl.points().size()));
+        for (int k = 0; k < int(shl.points().size()); ++k) {
+            const render::ShLights::Point& p = shl.points()[std::size_t(k)];
+            u.v3(u.indexed("uShPointPosition", k).c_str(), p.position);
+            u.v3(u.indexed("uShPointIntensity", k).c_str(), p.intensity);
+            u.f(u.indexed("uShPointMinDistance", k).c_str(), p.minDistance);
+        }
+        u.i("uShFaceCount", shBlend ? int(faces.size()) : 0);
+        for (int f = 0; f < int(faces.size()); ++f) {
+            u.v3(u.indexed("uShFacePoint", f).c_str(), glm::vec3(faces[std::size_t(f)].point));
+            u.v3(u.indexed("uShFaceNormal", f).c_str(), glm::vec3(faces[std::size_t(f)].normal));
+        }
+        u.f("uShInvBand", setup.sh.cutBandMm > 0.f ? 1.f / setup.sh.cutBandMm : 0.f);
+    }
     if (o.mode == render::Mode::Gradient) {
         // The lights as the CPU shader flattens them (a scene without lights: the headlight).
         std::vector<std::shared_ptr<const lights::Light>> lights = o.lights;
@@ -438,6 +543,12 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     u.i("uJitter", 1);
     u.i("uTf", 2);
     u.i("uSkipDistance", 3);
+    // SH fields on units 4–7, sh-global's local field on 8–11 (a unit without a texture of its
+    // own gets the field's, never read: the shader reads ⌈C/4⌉ of them).
+    for (int t = 0; t < 4; ++t) {
+        u.i(u.indexed("uShField", t).c_str(), kShFieldUnit + t);
+        u.i(u.indexed("uShLocal", t).c_str(), kShLocalUnit + t);
+    }
 
     // Save the state ImGui's renderer relies on that we change.
     GLint prevFbo = 0, prevProgram = 0, prevVao = 0, prevViewport[4] = {0, 0, 0, 0};
@@ -469,6 +580,14 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     glBindTextureUnit(1, jitterTex_);
     glBindTextureUnit(2, tfTex_);
     glBindTextureUnit(3, skipTex_);
+    for (int t = 0; t < 4; ++t) {
+        // Every sampler3D unit the program declares holds a 3D texture (an empty unit is
+        // incomplete); the ones past the field's own are never read.
+        const GLuint f = shField[t] ? shField[t] : shField[0] ? shField[0] : volumeTex_;
+        const GLuint l = shLocal[t] ? shLocal[t] : f;
+        glBindTextureUnit(GLuint(kShFieldUnit + t), f);
+        glBindTextureUnit(GLuint(kShLocalUnit + t), l);
+    }
     glDrawArrays(GL_TRIANGLES, 0, 3);
 
     // Pass 2: film → display bytes.
@@ -487,6 +606,10 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, float exposureStops
     glBindTextureUnit(1, 0);
     glBindTextureUnit(2, 0);
     glBindTextureUnit(3, 0);
+    for (int t = 0; t < 4; ++t) {
+        glBindTextureUnit(GLuint(kShFieldUnit + t), 0);
+        glBindTextureUnit(GLuint(kShLocalUnit + t), 0);
+    }
     glBindFramebuffer(GL_DRAW_FRAMEBUFFER, GLuint(prevFbo));
     glUseProgram(GLuint(prevProgram));
     glBindVertexArray(GLuint(prevVao));

@@ -1,11 +1,16 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // The viewer's GLSL ray caster: shaders/raycast.frag (embedded at build time) evaluates the CPU
-// ray caster's emission–absorption and gradient (Blinn–Phong) modes from the same inputs —
+// ray caster's emission–absorption and gradient (Blinn–Phong) modes and its SH visibility
+// shading (sh-local, sh-global, ritschel: render/sh_shading.h) from the same inputs —
 // pipeline::CasterSetup: the volume as a 3D texture (R16 for integer voxels, R32F for float),
 // the TF's pre-integration table as a 2D texture of its nodes and cumulative integrals, the skip
 // cells' skip distances as a 3D texture (empty-space skipping), the same step, opacity, lights,
-// clip planes, crop box, early termination and per-pixel jitter, and the pipeline's fitted camera — into a float film, then shaders/display.frag maps it to 8 bits as
+// clip planes, crop box, early termination and per-pixel jitter, and the pipeline's fitted camera
+// — plus, for the SH methods, the visibility fields resampled as RGBA16F 3D textures
+// (viewer/sh_grids.h; uploaded once per field, the last kKeptShFields kept, so a switch between
+// sh-local and sh-global uploads nothing again) and the lights' SH as uniforms (point lights
+// evaluated per sample, as ShLights::shade does) — into a float film, then shaders/display.frag maps it to 8 bits as
 // the CLI's PNG is mapped (exposure, display transform). The image stays in a texture for the
 // window to draw; readDisplay()/readFilm() read it back (tests, screenshots).
 //
@@ -20,6 +25,7 @@
 #include "core/image.h"
 #include "pipeline/pipeline.h"
 #include "render/tonemap.h"
+#include "viewer/sh_grids.h"
 
 namespace voxlight::viewer {
 
@@ -46,8 +52,12 @@ class GlRayCaster {
     /// the central half of each side (a quarter of the pixels, where the volume is: a cheap probe
     /// of the frame's cost that over- rather than underestimates it).
     enum class Scope { Full, WarmUp, CentreQuarter };
-    bool render(const pipeline::CasterSetup& setup, float exposureStops, render::Display display,
-                std::string& why, Scope scope = Scope::Full);
+    /// `sh`: the SH methods' resampled fields (RenderedImage::shGrids); ignored by the others.
+    bool render(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
+                render::Display display, std::string& why, Scope scope = Scope::Full);
+    /// SH field grids uploaded as textures so far (tests: once per field, not per frame).
+    std::size_t shUploads() const { return shUploads_; }
+    static constexpr std::size_t kKeptShFields = 4;
     static constexpr int kWarmUpPixels = 8;
     /// The display image (RGBA8, row 0 = the image's top); 0 before the first render.
     unsigned texture() const { return displayTex_; }
@@ -64,6 +74,10 @@ class GlRayCaster {
     void uploadSkipCells(const grid::BrickMajorants& cells);
     void uploadJitter(int width, int height, bool jitter, std::uint64_t seed);
     bool ensureTargets(int width, int height, std::string& why);
+    /// The textures of `grid` into out[0..4) (uploaded on first use, 0 past its own); false
+    /// with `why` on a GL error.
+    bool shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid, unsigned out[4],
+                    std::string& why);
     void release();
 
     std::string renderer_;
@@ -76,6 +90,12 @@ class GlRayCaster {
     std::shared_ptr<const optics::TfTable> table_;
     std::shared_ptr<const grid::BrickMajorants> skipCells_;
     float valueScale_ = 1.f, valueOffset_ = 0.f;
+    struct ShUpload {
+        std::shared_ptr<const render::ShFieldGrid> grid;
+        unsigned textures[4] = {0, 0, 0, 0};
+    };
+    std::vector<ShUpload> shUploaded_;  ///< most recently used first
+    std::size_t shUploads_ = 0;
     int jitterW_ = 0, jitterH_ = 0;
     bool jitterOn_ = false;
     std::uint64_t jitterSeed_ = 0;

@@ -28,14 +28,26 @@ std::string toString(RendererChoice c) {
 
 std::string glUnsupportedReason(const std::string& method, const pipeline::CasterSetup* setup) {
     const std::string only =
-        "the GLSL ray caster does methods 'gradient' and "
-        "'emission-absorption' only";
-    if (!setup || (method != "gradient" && method != "emission-absorption"))
+        "the GLSL ray caster does methods 'gradient', 'emission-absorption', 'sh-local', "
+        "'sh-global' and 'ritschel' only";
+    const bool sh = method == "sh-local" || method == "sh-global" || method == "ritschel";
+    if (!setup || (method != "gradient" && method != "emission-absorption" && !sh))
         return "method '" + method + "' is rendered on the CPU: " + only;
     const render::RenderOptions& o = setup->options;
-    if (o.mode != render::Mode::Gradient && o.mode != render::Mode::EmissionAbsorption)
+    if (sh) {
+        const pipeline::CasterSetup::ShFields& f = setup->sh;
+        if (!f.local && !f.global && !f.hierarchical)
+            return "method '" + method + "': no SH visibility field was prepared";
+        int points = 0;
+        for (const auto& l : o.lights)
+            if (dynamic_cast<const lights::PointLight*>(l.get())) ++points;
+        if (points > kMaxGlShPointLights)
+            return std::to_string(points) + " point lights: the GLSL SH shading holds at most " +
+                   std::to_string(kMaxGlShPointLights);
+    } else if (o.mode != render::Mode::Gradient && o.mode != render::Mode::EmissionAbsorption) {
         return "render mode '" + render::toString(o.mode) + "': " + only;
-    if (o.mode == render::Mode::Gradient) {
+    }
+    if (!sh && o.mode == render::Mode::Gradient) {
         int lights = 0;
         for (const auto& l : o.lights) {
             if (dynamic_cast<const lights::EnvironmentLight*>(l.get()))

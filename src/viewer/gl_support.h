@@ -14,6 +14,11 @@ namespace voxlight::viewer {
 /// (its uniform arrays: kMaxLights, kMaxClipPlanes in shaders/raycast.frag).
 inline constexpr int kMaxGlLights = 8;
 inline constexpr int kMaxGlClipPlanes = 8;
+/// SH methods: faces that remove matter for the light (the clip planes and the crop box's six;
+/// kMaxShFaces in shaders/raycast.frag) and point lights (kMaxShPoints; directional and
+/// environment lights are summed into constants on the CPU, any number of them).
+inline constexpr int kMaxGlShFaces = kMaxGlClipPlanes + 6;
+inline constexpr int kMaxGlShPointLights = kMaxGlLights;
 
 /// Which renderer draws the viewer's image: the measurement at start-up picks (Auto), or the user
 /// forces one (`voxlight view --renderer gpu|cpu|auto`).

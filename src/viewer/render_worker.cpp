@@ -115,11 +115,13 @@ void RenderWorker::loop() {
             runningFull_ = true;
             busy_ = true;
             lock.unlock();
-            preparePass(request);
+            std::string stale;
+            const bool done = preparePass(request, &stale);
             lock.lock();
             busy_ = false;
             runningFull_ = false;
             if (stop_) return;
+            if (done) scheduleFields(request, stale);
             continue;
         }
         const bool needCoarse = coarseDone_ != request.generation;
@@ -145,15 +147,19 @@ void RenderWorker::loop() {
         runningFull_ = false;
         if (stop_) return;
         if (!done) continue;
-        lastFull_ = request;
-        // Shaded from earlier fields: have the field thread compute this state's, unless it is
-        // computing them already (a camera or light move needs the same fields: let it go on).
-        if (!stale.empty() && stale != fieldSignature_) {
-            if (fieldBusy_) fieldCancel_ = true;
-            fieldPending_ = request;
-            fieldSignature_ = stale;
-            fieldWake_.notify_one();
-        }
+        scheduleFields(request, stale);
+    }
+}
+
+void RenderWorker::scheduleFields(const RenderRequest& request, const std::string& stale) {
+    lastFull_ = request;
+    // Shaded from earlier fields: have the field thread compute this state's, unless it is
+    // computing them already (a camera or light move needs the same fields: let it go on).
+    if (!stale.empty() && stale != fieldSignature_) {
+        if (fieldBusy_) fieldCancel_ = true;
+        fieldPending_ = request;
+        fieldSignature_ = stale;
+        fieldWake_.notify_one();
     }
 }
 
@@ -213,6 +219,8 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
         out.frames = runOptions.frames;
         pipeline::RunResult r = session_->run(scene, runOptions, progress);
         for (const auto& st : r.stages)
+            if (st.ran) out.computedStages.push_back(st.name);
+        for (const auto& st : r.stages)
             if (st.stale) {
                 out.staleShading = true;
                 if (staleFields) *staleFields += st.name + ":" + st.wantedKey + " ";
@@ -225,6 +233,7 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
         out.width = film.width;
         out.height = film.height;
         out.rgba = displayBytes(scene, film);
+        if (!coarse) out.film = std::make_shared<const core::ImageRGBA>(std::move(r.image));
         if (r.details.contains("camera")) out.camera = r.details["camera"];
         out.warnings = r.warnings;
     } catch (const CancelledError&) {
@@ -240,7 +249,11 @@ bool RenderWorker::renderPass(const RenderRequest& request, bool coarse, std::st
     return ok;
 }
 
-void RenderWorker::preparePass(const RenderRequest& request) {
+void RenderWorker::adoptVolume(const io::Scene& scene, std::shared_ptr<const core::Volume> volume) {
+    pipeline::adoptVolume(*session_, scene, std::move(volume));
+}
+
+bool RenderWorker::preparePass(const RenderRequest& request, std::string* staleFields) {
     RenderedImage out;
     out.generation = request.generation;
     out.method = request.scene.method.name;
@@ -252,24 +265,40 @@ void RenderWorker::preparePass(const RenderRequest& request) {
                                   &cancel_);
     try {
         core::Stopwatch sw;
+        pipeline::RunOptions runOptions;
+        runOptions.staleFields = true;  // old shading at once after a TF change or a cut
+        std::vector<pipeline::StageRecord> records;
         std::optional<pipeline::CasterSetup> setup =
-            session_->prepare(request.scene, progress, &out.warnings);
+            session_->prepare(request.scene, progress, &out.warnings, runOptions, &records);
+        for (const auto& st : records) {
+            if (st.ran) out.computedStages.push_back(st.name);
+            if (st.stale) {
+                out.staleShading = true;
+                if (staleFields) *staleFields += st.name + ":" + st.wantedKey + " ";
+            }
+        }
         out.seconds = sw.seconds();
         if (setup) {
             out.width = setup->camera->width();
             out.height = setup->camera->height();
             out.camera = pipeline::cameraDetails(*setup->camera);
             out.setup = std::make_shared<const pipeline::CasterSetup>(std::move(*setup));
+            const core::Stopwatch resample;
+            const std::size_t before = shGridCache_.resampled();
+            out.shGrids = shGridCache_.get(*out.setup);
+            if (shGridCache_.resampled() != before) out.shResampleSeconds = resample.seconds();
         }
     } catch (const CancelledError&) {
         ++cancelled_;
-        return;
+        return false;
     } catch (const std::exception& e) {
         out.error = e.what();
     }
     ++completed_;
+    const bool ok = out.error.empty();
     std::lock_guard lock(resultMutex_);
     result_ = std::move(out);
+    return ok;
 }
 
 }  // namespace voxlight::viewer

@@ -30,6 +30,7 @@
 
 #include "core/image.h"
 #include "io/scene.h"
+#include "viewer/sh_grids.h"
 
 namespace voxlight::pipeline {
 class Session;
@@ -43,7 +44,9 @@ struct RenderRequest {
     std::uint64_t generation = 0;  ///< the state's number: equal numbers are equal scenes
     bool interacting = false;      ///< the user is dragging: coarse only
     /// Only prepare what the image stage reads (pipeline::Session::prepare), no pixels: for the
-    /// GLSL ray caster, which renders on the UI thread. No coarse pass.
+    /// GLSL ray caster, which renders on the UI thread. No coarse pass. After a TF change or a cut
+    /// the setup holds the last fields (staleShading) while the field thread computes the new
+    /// ones; then the same state is prepared again — the interleaved update, as for images.
     bool prepareOnly = false;
     /// Full pass: run the Frame stages this many times (the start-up measurement; the image and
     /// RenderedImage::frameSeconds are the median frame's).
@@ -57,19 +60,28 @@ struct RenderedImage {
     bool coarse = false;
     int width = 0, height = 0;
     std::vector<std::uint8_t> rgba;  ///< row 0 = top
-    double seconds = 0.0;            ///< the pipeline run, wall clock
+    /// Full passes: the linear film (radiance + T·background, alpha = coverage; the raw estimate,
+    /// never the denoised one) as `voxlight render --exr` writes it — EXR screenshots.
+    std::shared_ptr<const core::ImageRGBA> film;
+    double seconds = 0.0;  ///< the pipeline run, wall clock
     /// The Frame stages (camera, render) of one frame, median over the request's frames.
     double frameSeconds = 0.0;
     int frames = 1;  ///< the frames frameSeconds is the median of
     /// prepareOnly: what the image stage would read; null when the scene's method does not render
     /// with the CPU ray caster (then `method` names it).
     std::shared_ptr<const pipeline::CasterSetup> setup;
-    bool prepared = false;       ///< a prepareOnly result (no pixels)
-    std::string method;          ///< prepareOnly: the scene's method
-    double exposureStops = 0.0;  ///< prepareOnly: the scene's display settings (io::ImageDesc)
+    /// prepareOnly, SH methods: setup's visibility fields resampled for the GLSL ray caster
+    /// (viewer/sh_grids.h; on this thread, kept per field).
+    ShGrids shGrids;
+    double shResampleSeconds = 0.0;  ///< of the fields resampled for this result (0: all kept)
+    bool prepared = false;           ///< a prepareOnly result (no pixels)
+    std::string method;              ///< prepareOnly: the scene's method
+    double exposureStops = 0.0;      ///< prepareOnly: the scene's display settings (io::ImageDesc)
     std::string display;
     nlohmann::json camera;  ///< the camera as used (pipeline details "camera")
     std::vector<std::string> warnings;
+    /// The pipeline stages this pass computed (not served from the cache), in order.
+    std::vector<std::string> computedStages;
     std::string error;  ///< non-empty: the render failed (an InputError's message); no pixels
     /// Shaded from an earlier state's visibility fields (the new ones are being computed; the
     /// same state is rendered again when they are ready).
@@ -96,6 +108,9 @@ class RenderWorker {
     RenderWorker(const RenderWorker&) = delete;
     RenderWorker& operator=(const RenderWorker&) = delete;
 
+    /// Hands the volume the viewer loaded for `scene` (its info and histogram) to the session
+    /// (pipeline::adoptVolume): the worker's runs read it from memory, never from the file again.
+    void adoptVolume(const io::Scene& scene, std::shared_ptr<const core::Volume> volume);
     void submit(RenderRequest request);
     std::optional<RenderedImage> take();
 
@@ -118,7 +133,12 @@ class RenderWorker {
     void fieldLoop();
     /// False when cancelled; `stale`: some field stood in for this state's.
     bool renderPass(const RenderRequest& request, bool coarse, std::string* staleFields = nullptr);
-    void preparePass(const RenderRequest& request);
+    /// False when cancelled or failed; `staleFields` as renderPass's (the interleaved update
+    /// on the GLSL path: the setup holds the stand-in fields).
+    bool preparePass(const RenderRequest& request, std::string* staleFields = nullptr);
+    /// After a finished full (or prepare) pass of `request` (mutex_ held): remember it, and have
+    /// the field thread compute the fields `stale` names (empty: none stood in).
+    void scheduleFields(const RenderRequest& request, const std::string& stale);
 
     WorkerOptions options_;
     mutable std::mutex mutex_;
@@ -136,6 +156,7 @@ class RenderWorker {
     std::optional<RenderedImage> result_;
     /// The session (cache of volume, tables and fields) both threads run scenes through.
     std::unique_ptr<pipeline::Session> session_;
+    ShGridCache shGridCache_;  ///< the worker thread's (preparePass)
     // The field thread (guarded by mutex_): the state whose fields to compute, and the last
     // full request (rendered again when its fields are ready).
     std::optional<RenderRequest> fieldPending_;

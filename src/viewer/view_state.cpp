@@ -329,13 +329,36 @@ double clipDragMm(const io::ClipPlaneDesc& plane, const glm::dvec3& handle,
     return -dy * mmPerPixel * along;
 }
 
+bool switchShVisibility(nlohmann::json& doc, bool global, nlohmann::json& stash) {
+    if (!doc.contains("method")) return false;
+    nlohmann::json& m = doc["method"];
+    if (m.is_string()) m = {{"name", m}, {"params", nlohmann::json::object()}};
+    if (!m.is_object() || !m.contains("name")) return false;
+    const std::string name = m["name"].get<std::string>();
+    if ((name != "sh-local" && name != "sh-global") || (name == "sh-global") == global)
+        return false;
+    if (!m.contains("params") || !m["params"].is_object()) m["params"] = nlohmann::json::object();
+    nlohmann::json& params = m["params"];
+    if (!stash.is_object()) stash = nlohmann::json::object();
+    for (const char* k : {"global_resolution", "global_near"}) {
+        if (global) {
+            if (stash.contains(k)) params[k] = stash[k];
+        } else if (params.contains(k)) {
+            stash[k] = params[k];
+            params.erase(k);
+        }
+    }
+    m["name"] = global ? "sh-global" : "sh-local";
+    return true;
+}
+
 std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source) {
     if (!doc.is_array())
         throw InputError(source, "script", "must be a JSON array of steps",
                          R"(write e.g. [{"orbit": [40, 0]}, {"view": "L"}])");
     static const char* const kSteps =
         "orbit, pan, zoom, window, view, pathtrace, clip_add, clip_move, clip_drag, clip_edit, "
-        "clip_remove, light_add, light_edit, light_turn, light_remove or gizmo";
+        "clip_remove, light_add, light_edit, light_turn, light_remove, gizmo, drop or shading";
     std::vector<ScriptStep> steps;
     for (std::size_t i = 0; i < doc.size(); ++i) {
         const nlohmann::json& e = doc[i];
@@ -542,6 +565,22 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
         } else if (key == "gizmo") {
             st.kind = ScriptStep::Kind::Gizmo;
             st.a = boolean(v, field) ? 1.0 : 0.0;
+        } else if (key == "shading") {
+            st.kind = ScriptStep::Kind::Shading;
+            if (!v.is_string() || (v != "local" && v != "global"))
+                throw InputError(source, field, "must be \"local\" or \"global\"");
+            st.view = v.get<std::string>();
+        } else if (key == "drop") {
+            constexpr std::size_t kMaxDropped = 64;
+            st.kind = ScriptStep::Kind::Drop;
+            if (!v.is_array() || v.empty() || v.size() > kMaxDropped)
+                throw InputError(source, field, "must be an array of 1…64 paths",
+                                 R"(write e.g. {"drop": ["ct.nii.gz"]})");
+            for (const auto& x : v) {
+                if (!x.is_string() || x.get<std::string>().empty())
+                    throw InputError(source, field, "must hold non-empty path strings");
+                st.paths.push_back(x.get<std::string>());
+            }
         } else {
             throw InputError(source, field, "is not a script step", "use " + std::string(kSteps));
         }

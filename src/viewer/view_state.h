@@ -151,6 +151,8 @@ struct ScriptStep {
         LightTurn,    ///< turn light `index` by (a, b) degrees of azimuth and elevation
         LightRemove,  ///< light `index`
         Gizmo,        ///< the G key's state: the clip-plane gizmo shown (a = 1) or hidden (0)
+        Drop,         ///< `paths` dropped on the window (GLFW's drop callback is called)
+        Shading,      ///< the panel's local/global visibility switch: `view` is local or global
     };
     Kind kind = Kind::Orbit;
     double a = 0.0, b = 0.0;
@@ -167,6 +169,7 @@ struct ScriptStep {
     std::string lightType, path;
     std::optional<double> azimuth, elevation, distance, intensity;
     std::optional<glm::dvec3> position, color;
+    std::vector<std::string> paths;  ///< Drop
 };
 /// A script file's steps: a JSON array of one-key objects —
 ///   {"orbit": [dx, dy]}, {"pan": [dx, dy]}, {"zoom": notches}, {"window": [dx, dy]},
@@ -182,10 +185,19 @@ struct ScriptStep {
 ///   {"light_edit": {"index": i, "azimuth": deg, "elevation": deg, "position": [x, y, z],
 ///                   "color": [r, g, b], "intensity": x}},
 ///   {"light_turn": {"index": i, "azimuth": deg, "elevation": deg}} (by these angles),
-///   {"light_remove": i}, {"gizmo": true | false} (the clip-plane gizmo drawn over the image).
+///   {"light_remove": i}, {"gizmo": true | false} (the clip-plane gizmo drawn over the image),
+///   {"drop": ["path", …]} (files dropped on the window, 1…64 non-empty paths; the last opens),
+///   {"shading": "local" | "global"} (the SH visibility switch of an sh-local / sh-global scene).
 /// InputError naming the file and `[i].key.field` for anything else (unknown step or key, a
 /// missing required key, wrong type, non-finite number, out-of-range value, unknown view).
 std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source);
+
+/// The method of scene document `doc` switched between sh-local (global false) and sh-global:
+/// sh-global's own params (global_resolution, global_near) move to `stash` and back, the shared
+/// ones (rays, coefficients, radius, LOD, window, ambient) stay, so both name the same local
+/// field and the pipeline recomputes nothing it has (visibility/ keys). False (doc unchanged)
+/// when the method is neither, or already the one asked for.
+bool switchShVisibility(nlohmann::json& doc, bool global, nlohmann::json& stash);
 
 /// Parses an edited scene document (paths absolute, as io::sceneDocument writes them); `source`
 /// names it in errors.

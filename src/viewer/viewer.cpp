@@ -10,11 +10,13 @@
 #include <imgui_stdlib.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cfloat>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <deque>
+#include <filesystem>
 #include <future>
 #include <memory>
 #include <mutex>
@@ -74,7 +76,8 @@ const char* const kHelp =
     "ctrl+left drag     turn the selected light (horizontal: azimuth,\n"
     "                   vertical: elevation)\n"
     "F1 or H            show / hide this help\n"
-    "F12                save a screenshot (path in the File panel)\n"
+    "F12                save a screenshot (path in the File panel;\n"
+    "                   .exr: the image's linear radiance)\n"
     "Ctrl+O             focus the file field\n"
     "drop a file        open it (scene, volume, DICOM folder)\n"
     "Esc or Q           quit\n";
@@ -96,6 +99,17 @@ std::vector<std::pair<int, int>> gKeyPresses;
 void onDrop(GLFWwindow*, int count, const char** paths) {
     std::lock_guard lock(gInputMutex);
     for (int i = 0; i < count; ++i) gDropped.emplace_back(paths[i]);
+}
+/// Paths dropped since the last call (the frame's event phase takes them).
+std::vector<std::string> takeDropped() {
+    std::vector<std::string> dropped;
+    std::lock_guard lock(gInputMutex);
+    dropped.swap(gDropped);
+    return dropped;
+}
+bool dropPending() {
+    std::lock_guard lock(gInputMutex);
+    return !gDropped.empty();
 }
 void onKey(GLFWwindow*, int key, int, int action, int mods) {
     if (action != GLFW_PRESS && action != GLFW_REPEAT) return;
@@ -172,6 +186,12 @@ class Viewer {
   private:
     // Scene edits: every change bumps the generation and asks the worker for a new picture.
     void changed() { ++generation_, dirty_ = true; }
+    /// The panel's switch between local and global SH visibility (sh-local / sh-global scenes):
+    /// both fields stay cached (pipeline, resampled grids, GL textures), so switching back and
+    /// forth recomputes nothing once each was shown.
+    void setShVisibility(bool global) {
+        if (switchShVisibility(doc_, global, shStash_)) changed();
+    }
     void setCamera(const json& camera) {
         doc_["camera"] = camera;
         changed();
@@ -241,6 +261,8 @@ class Viewer {
     /// Renders the prepared state with the GLSL ray caster and shows it; false (and back to the
     /// CPU path, with the reason) when the GL fails.
     bool renderGl(const RenderedImage& prepared);
+    /// Opens `path` as the file field's Open button does; a drop on the window comes here too.
+    void openPath(const std::string& path);
     void startLoad(const std::string& path);
     void pollLoad();
     void handleImageMouse();
@@ -248,6 +270,11 @@ class Viewer {
     void drawImage();
     void drawPanel();
     core::ImageRGBA readWindow() const;
+    /// The linear radiance film of the image shown (the path-traced one when it shows; the GLSL
+    /// path's film; the CPU worker's): what an EXR screenshot holds. Empty (0×0) before any.
+    core::ImageRGBA shownRadiance() const;
+    /// A screenshot for `path`: the linear film for .exr, else the window as drawn.
+    core::ImageRGBA screenshotFor(const std::string& path) const;
     void logTimes();
 
     ViewerOptions options_;
@@ -255,6 +282,7 @@ class Viewer {
     RenderWorker worker_;
 
     std::optional<LoadedScene> loaded_;
+    json shStash_;                  ///< sh-global's own params while the switch shows sh-local
     json doc_;                      ///< the scene as edited
     optics::TransferFunction tf_;   ///< the TF as edited (explicit after the first edit)
     std::optional<LookAt> lookAt_;  ///< set once the mouse moved the camera
@@ -319,6 +347,8 @@ class Viewer {
     GLuint ptTexture_ = 0;
     int ptW_ = 0, ptH_ = 0;
     bool ptReady_ = false, ptShow_ = true;
+    /// The films of the CPU image and of the path-traced one shown (EXR screenshots).
+    std::shared_ptr<const core::ImageRGBA> shownFilm_, ptFilm_;
     std::string ptMessage_;
 
     // The GLSL path and the choice of renderer.
@@ -346,6 +376,10 @@ class Viewer {
 
 void Viewer::adopt(LoadedScene scene) {
     loaded_ = std::move(scene);
+    shStash_ = json();
+    // The volume read for the info panel and histogram is the pipeline's too: read once.
+    worker_.adoptVolume(loaded_->scene, loaded_->volume);
+    ptWorker_.adoptVolume(loaded_->scene, loaded_->volume);
     doc_ = loaded_->document;
     tf_ = loaded_->tf;
     tfEditor_ = {};
@@ -411,6 +445,9 @@ void Viewer::receive() {
         return;
     }
     if (r->prepared) {
+        if (options_.log && r->shResampleSeconds > 0.0)
+            std::fprintf(stderr, "view: SH fields resampled for the GLSL path in %.3f s\n",
+                         r->shResampleSeconds);
         // For the GLSL path (or its measurement): render it here when it draws the image.
         prepared_ = std::move(*r);
         if (gpu_ && prepared_->generation >= shownGen_) renderGl(*prepared_);
@@ -443,6 +480,7 @@ void Viewer::receive() {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     texW_ = r->width, texH_ = r->height;
+    shownFilm_ = r->film;
     shownFull_ = !r->coarse;
     shownStale_ = r->staleShading;
     shownGl_ = false;
@@ -484,19 +522,22 @@ bool Viewer::renderGl(const RenderedImage& p) {
     } else {
         try {
             core::Stopwatch sw;
-            const bool ok = gl_->render(*p.setup, float(p.exposureStops),
+            const bool ok = gl_->render(*p.setup, p.shGrids, float(p.exposureStops),
                                         render::displayFromString(p.display), why);
             glFinish();  // the frame's real cost (the GL queues its work)
             if (ok) {
                 glTimes_.add(sw.seconds());
                 if (options_.log)
-                    std::fprintf(stderr, "view: GLSL frame %dx%d in %.3f s (state %llu)\n",
+                    std::fprintf(stderr,
+                                 "view: GLSL frame %dx%d in %.3f s (state %llu, SH fields "
+                                 "uploaded so far: %zu)%s\n",
                                  gl_->width(), gl_->height(), glTimes_.last(),
-                                 (unsigned long long)p.generation);
+                                 (unsigned long long)p.generation, gl_->shUploads(),
+                                 p.staleShading ? " shaded from earlier fields" : "");
                 texW_ = gl_->width(), texH_ = gl_->height();
                 shownFull_ = true;
                 shownGl_ = true;
-                shownStale_ = false;
+                shownStale_ = p.staleShading;
                 shownGen_ = p.generation;
                 renderWarnings_ = p.warnings;
                 if (!p.camera.is_null())
@@ -565,7 +606,8 @@ void Viewer::updateRenderer() {
             core::Stopwatch sw;
             bool ok = false;
             try {
-                ok = gl_->render(*prepared_->setup, float(prepared_->exposureStops),
+                ok = gl_->render(*prepared_->setup, prepared_->shGrids,
+                                 float(prepared_->exposureStops),
                                  render::displayFromString(prepared_->display), why, scope);
             } catch (const std::exception& e) {
                 why = e.what();
@@ -612,6 +654,11 @@ void Viewer::updateRenderer() {
         case Measure::Done:
             return;
     }
+}
+
+void Viewer::openPath(const std::string& path) {
+    path_ = path;
+    startLoad(path_);
 }
 
 void Viewer::startLoad(const std::string& path) {
@@ -759,7 +806,7 @@ void Viewer::runScript() {
     }
     // Steps run on the renderer the viewer chose (after the start-up measurement).
     if (scriptNext_ >= options_.script.size() || !loaded_ || dirty_ || !shownFull_ || shownStale_ ||
-        shownGen_ != generation_ || loading_.valid() || measure_ != Measure::Done)
+        shownGen_ != generation_ || loading_.valid() || dropPending() || measure_ != Measure::Done)
         return;
     const ScriptStep& st = options_.script[scriptNext_++];
     switch (st.kind) {
@@ -860,6 +907,16 @@ void Viewer::runScript() {
         case ScriptStep::Kind::Gizmo:
             showGizmo_ = st.a != 0.0;
             break;
+        case ScriptStep::Kind::Shading:
+            setShVisibility(st.view == "global");
+            break;
+        case ScriptStep::Kind::Drop: {
+            // GLFW's drop callback itself; the next frame's events open the last path.
+            std::vector<const char*> paths;
+            for (const std::string& p : st.paths) paths.push_back(p.c_str());
+            onDrop(window_, int(paths.size()), paths.data());
+            break;
+        }
     }
 }
 
@@ -951,6 +1008,7 @@ void Viewer::receivePathTrace() {
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
     glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
     ptW_ = r->width, ptH_ = r->height;
+    ptFilm_ = r->film;
     ptReady_ = true;
     char m[96];
     std::snprintf(m, sizeof m, "path traced in %.1f s", r->seconds);
@@ -1320,7 +1378,7 @@ void Viewer::drawPanel() {
         if (focusPath_) ImGui::SetKeyboardFocusHere(), focusPath_ = false;
         const bool enter = ImGui::InputText("##path", &path_, ImGuiInputTextFlags_EnterReturnsTrue);
         ImGui::SameLine();
-        if (ImGui::Button("Open") || enter) startLoad(path_);
+        if (ImGui::Button("Open") || enter) openPath(path_);
         if (!loadingPath_.empty()) {
             ImGui::TextDisabled("loading %s ...", loadingPath_.c_str());
             ImGui::ProgressBar(float(loadFraction_->load()), ImVec2(-1, 0));
@@ -1354,6 +1412,16 @@ void Viewer::drawPanel() {
             lookAt_.reset();
             cameraResetGen_ = generation_ + 1;
             setCamera(loaded_->document.value("camera", json::object()));
+        }
+    }
+    if (loaded_ && doc_.contains("method") && doc_["method"].is_object()) {
+        const std::string method = doc_["method"].value("name", "");
+        if (method == "sh-local" || method == "sh-global") {
+            ImGui::TextUnformatted("SH visibility");
+            ImGui::SameLine();
+            if (ImGui::RadioButton("local", method == "sh-local")) setShVisibility(false);
+            ImGui::SameLine();
+            if (ImGui::RadioButton("global", method == "sh-global")) setShVisibility(true);
         }
     }
     if (loaded_ && ImGui::CollapsingHeader("Info")) {
@@ -1488,6 +1556,19 @@ core::ImageRGBA Viewer::readWindow() const {
     return img;
 }
 
+core::ImageRGBA Viewer::shownRadiance() const {
+    if (pathTraceShown() && ptFilm_ && ptW_ == texW_ && ptH_ == texH_) return *ptFilm_;
+    if (shownGl_ && gl_) return gl_->readFilm();
+    if (shownFilm_ && shownFull_) return *shownFilm_;
+    return core::ImageRGBA();
+}
+
+core::ImageRGBA Viewer::screenshotFor(const std::string& path) const {
+    std::string ext = std::filesystem::path(path).extension().string();
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext == ".exr" ? shownRadiance() : readWindow();
+}
+
 void Viewer::logTimes() {
     if (!options_.log || logClock_.seconds() < 1.0) return;
     logClock_.restart();
@@ -1507,17 +1588,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
         frameClock.restart();
         core::Stopwatch work;
         glfwPollEvents();
-        {
-            std::vector<std::string> dropped;
-            {
-                std::lock_guard lock(gInputMutex);
-                dropped.swap(gDropped);
-            }
-            if (!dropped.empty()) {
-                path_ = dropped.back();
-                startLoad(path_);
-            }
-        }
+        // Files dropped on the window: the last one opens, as if typed into the file field.
+        if (const std::vector<std::string> dropped = takeDropped(); !dropped.empty())
+            openPath(dropped.back());
         const double tEvents = work.seconds();
         pollLoad();
         receive();
@@ -1564,17 +1637,20 @@ std::optional<core::ImageRGBA> Viewer::run() {
         if (scripted && frames_ >= std::uint64_t(std::max(options_.frames, 1)) && !dirty_ &&
             scriptNext_ >= options_.script.size() && scriptDragFrames_ == 0 &&
             (ptGen_ != generation_ || ptReady_) && measure_ == Measure::Done && shownFull_ &&
-            !shownStale_ && shownGen_ == generation_ && !loading_.valid() && texW_ == imageW_ &&
-            texH_ == imageH_)
-            shot = readWindow();
+            !shownStale_ && shownGen_ == generation_ && !loading_.valid() && !dropPending() &&
+            texW_ == imageW_ && texH_ == imageH_)
+            shot = screenshotFor(options_.screenshot);
         if (shotRequested_ && options_.saveScreenshot && !saving_.valid()) {
             // Read back here (the frame is in the back buffer); encode and write on a thread.
             shotRequested_ = false;
             shotMessage_ = "writing " + shotPath_ + " ...";
             saving_ = std::async(std::launch::async,
-                                 [save = options_.saveScreenshot, image = readWindow(),
+                                 [save = options_.saveScreenshot, image = screenshotFor(shotPath_),
                                   path = shotPath_]() -> std::string {
                                      try {
+                                         if (image.width < 1)
+                                             return "nothing to save yet: no full-resolution "
+                                                    "image is shown";
                                          save(image, path);
                                          return "wrote " + path;
                                      } catch (const std::exception& e) {

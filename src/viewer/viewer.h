@@ -15,7 +15,10 @@
 //
 // Scripted mode (options.screenshot): draws at least options.frames frames, waits — drawing
 // frames, not blocking — until the full-resolution image of the current state is shown, then
-// returns the window's content (the frame as drawn, panels included).
+// returns the window's content (the frame as drawn, panels included) — or, when the screenshot
+// path ends in .exr, the linear radiance film of the image shown (the image area only: the CPU
+// worker's film, the GLSL path's float film or the path tracer's raw estimate, as `voxlight render
+// --exr` writes it). F12 / the panel's button does the same by the path's extension.
 #include <atomic>
 #include <functional>
 #include <optional>
@@ -33,7 +36,8 @@ namespace voxlight::viewer {
 inline constexpr int kPanelWidth = 380;
 
 struct ViewerOptions {
-    /// Non-empty: scripted run that returns a screenshot (the caller writes the file).
+    /// Non-empty: scripted run that returns a screenshot (the caller writes the file; .exr: the
+    /// image's linear radiance, see above).
     std::string screenshot;
     int frames = 1;  ///< scripted: at least this many frames before the screenshot
     double screenshotTimeoutSeconds = 600.0;

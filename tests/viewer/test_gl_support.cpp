@@ -8,8 +8,11 @@
 #include <thread>
 
 #include "pipeline/pipeline.h"
+#include "render/sh_field_grid.h"
+#include "render/sh_shading.h"
 #include "viewer/gl_support.h"
 #include "viewer/render_worker.h"
+#include "viewer/sh_grids.h"
 
 using namespace voxlight;
 using nlohmann::json;
@@ -42,11 +45,23 @@ TEST(GlSupport, GradientAndEmissionAbsorptionAreRenderedOnTheGpu) {
     EXPECT_EQ(reasonFor(withLights), "");
 }
 
+TEST(GlSupport, ShVisibilityMethodsAreRenderedOnTheGpu) {
+    EXPECT_EQ(reasonFor(torsoDoc("sh-local")), "");
+    EXPECT_EQ(reasonFor(torsoDoc("sh-global")), "");
+    EXPECT_EQ(reasonFor(torsoDoc("ritschel")), "");
+    // Directional and environment lights are summed on the CPU: any number of them.
+    json many = torsoDoc("sh-global");
+    many["lights"] = json::array();
+    for (int i = 0; i <= viewer::kMaxGlLights; ++i)
+        many["lights"].push_back({{"type", "directional"}, {"direction", {0.1 * i, 1, 0}}});
+    for (int i = 0; i < viewer::kMaxGlShPointLights; ++i)
+        many["lights"].push_back({{"type", "point"}, {"position", {0, -300, 10 * i}}});
+    EXPECT_EQ(reasonFor(many), "");
+}
+
 TEST(GlSupport, OtherScenesSayWhyTheCpuDrawsThem) {
-    // Methods the shader does not evaluate: SH visibility (a ray-caster method) and the path
-    // tracer (prepare() has nothing for it).
-    EXPECT_NE(reasonFor(torsoDoc("sh-local")).find("method 'sh-local' is rendered on the CPU"),
-              std::string::npos);
+    // Methods the shader does not evaluate: MIP (a ray-caster method) and the path tracer
+    // (prepare() has nothing for it).
     EXPECT_NE(reasonFor(torsoDoc("pathtrace")).find("method 'pathtrace' is rendered on the CPU"),
               std::string::npos);
     EXPECT_NE(reasonFor(torsoDoc("mip")).find("method 'mip'"), std::string::npos);
@@ -60,6 +75,12 @@ TEST(GlSupport, OtherScenesSayWhyTheCpuDrawsThem) {
     EXPECT_NE(reasonFor(coarse).find("a step over one voxel"), std::string::npos);
     json forward = torsoDoc({{"name", "gradient"}, {"params", {{"central_differences", false}}}});
     EXPECT_NE(reasonFor(forward).find("forward-difference"), std::string::npos);
+    json shPoints = torsoDoc("sh-local");
+    shPoints["lights"] = json::array();
+    for (int i = 0; i <= viewer::kMaxGlShPointLights; ++i)
+        shPoints["lights"].push_back({{"type", "point"}, {"position", {0, -300, 10 * i}}});
+    EXPECT_NE(reasonFor(shPoints).find("9 point lights: the GLSL SH shading holds at most 8"),
+              std::string::npos);
     EXPECT_THROW(viewer::rendererChoiceFromString("vulkan"), InputError);
     EXPECT_EQ(viewer::rendererChoiceFromString("gpu"), viewer::RendererChoice::Gpu);
 }
@@ -100,4 +121,97 @@ TEST(RenderWorker, PrepareOnlyRequestsReturnTheSetupWithoutPixels) {
     EXPECT_EQ(r->width, 64);
     EXPECT_EQ(r->height, 48);
     EXPECT_TRUE(r->camera.contains("forward"));
+}
+
+// The SH methods' setup carries the very fields their image stage shades from: a model built
+// from them renders the run's image bit for bit (sh-global with a plane that removes matter for
+// the light: the global field, the clip-aware local one and the cut faces' band).
+TEST(GlSupport, PreparedShFieldsAreWhatTheImageStageShadesFrom) {
+    for (const char* method : {"sh-local", "sh-global", "ritschel"}) {
+        SCOPED_TRACE(method);
+        json doc = torsoDoc({{"name", method}, {"params", {{"rays", 8}}}});
+        doc["clip_planes"] = {
+            {{"point", {0, 0, 0}}, {"normal", {0, 1, 0}}, {"shadows_from_removed", false}}};
+        const io::Scene scene = io::parseScene(doc, "test", "/");
+        pipeline::Session session;
+        const pipeline::RunResult run = session.run(scene);
+        const std::optional<pipeline::CasterSetup> setup = session.prepare(scene);
+        ASSERT_TRUE(setup);
+        const pipeline::CasterSetup::ShFields& f = setup->sh;
+        const render::RayCaster caster(setup->volume, setup->tf, setup->options, setup->tables);
+        std::unique_ptr<render::ShadingModel> model;
+        if (std::string(method) == "ritschel") {
+            ASSERT_TRUE(f.hierarchical);
+            model = render::makeShVisibilityModel(caster, *setup->camera, f.hierarchical);
+        } else if (std::string(method) == "sh-local") {
+            ASSERT_TRUE(f.local);
+            EXPECT_FALSE(f.global);
+            model = render::makeShVisibilityModel(caster, *setup->camera, f.local);
+        } else {
+            ASSERT_TRUE(f.global && f.local);
+            EXPECT_GT(f.cutBandMm, 0.f);
+            model = render::makeShVisibilityModel(caster, *setup->camera, f.global, f.local,
+                                                  f.cutBandMm);
+        }
+        EXPECT_EQ(caster.render(*setup->camera, *model).pixels, run.image.pixels);
+    }
+}
+
+// The resampled grid holds the field's own value at each grid point (within half precision), at
+// one point per voxel within the budget and fewer beyond it; the cache resamples a field once.
+TEST(ShGrids, ResampledFieldHoldsTheFieldAtItsPointsAndIsMadeOncePerField) {
+    const io::Scene scene =
+        io::parseScene(torsoDoc({{"name", "sh-global"}, {"params", {{"rays", 8}}}}), "test", "/");
+    pipeline::Session session;
+    const std::optional<pipeline::CasterSetup> setup = session.prepare(scene);
+    ASSERT_TRUE(setup && setup->sh.global && setup->sh.local);
+    const glm::ivec3 dims = setup->volume->dims();
+    const render::ShFieldGrid grid = render::resampleShField(*setup->sh.global, dims);
+    EXPECT_EQ(grid.res, (dims - 1) * render::kShFieldGridOversample + 1);
+    EXPECT_EQ(grid.step, glm::vec3(1.f / float(render::kShFieldGridOversample)));
+    EXPECT_EQ(grid.coefficients, 4);
+    ASSERT_EQ(grid.textures(), 1);
+    // Half floats: 11 significant bits, |V_i| ≤ √(4π) ≈ 3.54.
+    constexpr float kHalfTol = 3.6f / 2048.f;
+    float v[16];
+    for (const glm::ivec3 g : {glm::ivec3(0), dims, grid.res - 1, glm::ivec3(3, 17, 9)}) {
+        setup->sh.global->sample(grid.position(g), v);
+        for (int i = 0; i < 4; ++i) EXPECT_NEAR(grid.at(g, i), v[i], kHalfTol) << g.x << g.y << g.z;
+    }
+    // One point per voxel within its budget; half of that: fewer points, still spanning the
+    // voxel centres from the first to the last.
+    const std::size_t full = std::size_t(dims.x) * dims.y * dims.z * 4 * 2;
+    EXPECT_EQ(render::resampleShField(*setup->sh.global, dims, full).res, dims);
+    // Two points per voxel only where every side fits a GPU's 3D textures.
+    EXPECT_EQ(render::shFieldGridResolution({1100, 8, 8}, 4), glm::ivec3(2199, 15, 15));
+    EXPECT_EQ(render::shFieldGridResolution({1100, 8, 8}, 4, render::kShFieldGridBudgetBytes,
+                                            viewer::ShGridCache::kMaxTextureSide),
+              glm::ivec3(1100, 8, 8));
+    const render::ShFieldGrid half = render::resampleShField(*setup->sh.global, dims, full / 2);
+    EXPECT_LE(half.bytes(), full / 2);
+    EXPECT_LT(half.res.x, dims.x);
+    EXPECT_FLOAT_EQ(half.position(half.res - 1).x, float(dims.x - 1));
+    const glm::ivec3 g(1, 2, 3);
+    setup->sh.global->sample(half.position(g), v);
+    for (int i = 0; i < 4; ++i) EXPECT_NEAR(half.at(g, i), v[i], kHalfTol);
+
+    viewer::ShGridCache cache;
+    const viewer::ShGrids a = cache.get(*setup);
+    ASSERT_TRUE(a.field && a.local);
+    EXPECT_EQ(cache.resampled(), 2u);
+    // A camera change: the same fields, nothing resampled.
+    json moved = torsoDoc({{"name", "sh-global"}, {"params", {{"rays", 8}}}});
+    moved["camera"]["azimuth"] = 100;
+    const std::optional<pipeline::CasterSetup> again =
+        session.prepare(io::parseScene(moved, "test", "/"));
+    ASSERT_TRUE(again);
+    const viewer::ShGrids b = cache.get(*again);
+    EXPECT_EQ(b.field, a.field);
+    EXPECT_EQ(cache.resampled(), 2u);
+    // Switching to sh-local: its field is sh-global's local one, resampled already.
+    const std::optional<pipeline::CasterSetup> local = session.prepare(
+        io::parseScene(torsoDoc({{"name", "sh-local"}, {"params", {{"rays", 8}}}}), "test", "/"));
+    ASSERT_TRUE(local);
+    EXPECT_EQ(cache.get(*local).field, a.local);
+    EXPECT_EQ(cache.resampled(), 2u);
 }

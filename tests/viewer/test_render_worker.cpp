@@ -6,7 +6,11 @@
 #include <chrono>
 #include <thread>
 
+#include "core/phantoms.h"
+#include "io/volume_io.h"
 #include "pipeline/pipeline.h"
+#include "support/test_support.h"
+#include "viewer/loaded_scene.h"
 #include "viewer/render_worker.h"
 #include "viewer/view_state.h"
 
@@ -138,4 +142,62 @@ TEST(RenderWorker, AfterATfChangeTheOldShadingShowsAtOnceAndTheNewFollows) {
     ASSERT_TRUE(current);
     EXPECT_EQ(current->rgba, viewer::displayBytes(soft, pipeline::renderScene(soft).image));
     EXPECT_FALSE(worker.status().updatingFields);
+}
+
+// The volume is read once per load: the one the viewer reads for its info panel and histogram
+// (prepareScene) is handed to the worker's session (adoptVolume), whose runs then never compute
+// load_volume and hold the very same voxels. Without the hand-over the first pass reads the
+// file itself (the control: the check can fail).
+TEST(RenderWorker, TheVolumeTheViewerLoadedIsThePipelinesReadOnce) {
+    test::TempDir tmp;
+    core::PhantomOptions po;
+    po.size = 32;
+    io::writeVolume(core::makePhantom("torso", po), tmp / "ct.mha");
+    const io::Scene scene = io::parseScene({{"volume", (tmp / "ct.mha").string()},
+                                            {"transfer_function", "ct-bone"},
+                                            {"image", {{"width", 64}, {"height", 64}}}},
+                                           "test", "/");
+    const viewer::LoadedScene loaded = viewer::prepareScene(scene, core::Progress::none());
+    const auto loadsVolume = [](const viewer::RenderedImage& r) {
+        return std::find(r.computedStages.begin(), r.computedStages.end(), "load_volume") !=
+               r.computedStages.end();
+    };
+    // The passes up to the full one (take() keeps only the newest: the coarse one may be gone).
+    const auto passes = [&](viewer::RenderWorker& w) {
+        std::vector<viewer::RenderedImage> out;
+        for (;;) {
+            auto r = next(w);
+            if (!r) {
+                ADD_FAILURE() << "no full pass";
+                return out;
+            }
+            EXPECT_TRUE(r->error.empty()) << r->error;
+            const bool full = !r->coarse;
+            out.push_back(std::move(*r));
+            if (full) return out;
+        }
+    };
+    {
+        viewer::RenderWorker control;
+        control.submit({loaded.scene, 1, false});
+        bool read = false;
+        for (const auto& r : passes(control)) read = read || loadsVolume(r);
+        EXPECT_TRUE(read);
+    }
+    viewer::RenderWorker worker;
+    worker.adoptVolume(loaded.scene, loaded.volume);
+    worker.submit({loaded.scene, 1, false});
+    const std::vector<viewer::RenderedImage> seen = passes(worker);
+    ASSERT_FALSE(seen.empty());
+    EXPECT_FALSE(seen.back().rgba.empty());
+    for (const auto& r : seen) {
+        EXPECT_FALSE(loadsVolume(r)) << (r.coarse ? "coarse" : "full");
+        EXPECT_FALSE(r.computedStages.empty());  // it did compute the others (camera, render)
+    }
+    viewer::RenderRequest prepare{loaded.scene, 2, false};
+    prepare.prepareOnly = true;
+    worker.submit(std::move(prepare));
+    const auto p = next(worker);
+    ASSERT_TRUE(p && p->setup);
+    EXPECT_EQ(p->setup->volume.get(), loaded.volume.get());
 }

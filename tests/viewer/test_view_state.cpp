@@ -163,10 +163,22 @@ TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
     EXPECT_EQ(steps[4].view, "left");
     EXPECT_EQ(steps[5].view, "superior");
     const std::vector<std::pair<const char*, const char*>> bad = {
-        {R"({"orbit": [1, 2]})", "script"},           {R"([{"orbit": [1]}])", "[0].orbit"},
-        {R"([{"zoom": "in"}])", "[0].zoom"},          {R"([{"view": "Q"}])", "[0].view"},
-        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"}, {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"},
-        {R"([{"pathtrace": 0.5}])", "[0].pathtrace"}};
+        {R"({"orbit": [1, 2]})", "script"},
+        {R"([{"orbit": [1]}])", "[0].orbit"},
+        {R"([{"zoom": "in"}])", "[0].zoom"},
+        {R"([{"view": "Q"}])", "[0].view"},
+        {R"([{"orbit": [1, 2], "zoom": 1}])", "[0]"},
+        {R"([{"zoom": 1}, {"spin": 1}])", "[1].spin"},
+        {R"([{"pathtrace": 0.5}])", "[0].pathtrace"},
+        {R"([{"drop": []}])", "[0].drop"},
+        {R"([{"drop": "ct.mha"}])", "[0].drop"},
+        {R"([{"drop": ["a.mha", ""]}])", "[0].drop"},
+        {R"([{"drop": [3]}])", "[0].drop"}};
+    const auto drop =
+        viewer::parseScript(json::parse(R"([{"drop": ["a.mha", "b dir/c.nii"]}])"), "steps.json");
+    ASSERT_EQ(drop.size(), 1u);
+    EXPECT_EQ(drop[0].kind, viewer::ScriptStep::Kind::Drop);
+    EXPECT_EQ(drop[0].paths, (std::vector<std::string>{"a.mha", "b dir/c.nii"}));
     for (const auto& [text, field] : bad) {
         try {
             viewer::parseScript(json::parse(text), "steps.json");
@@ -176,6 +188,30 @@ TEST(ViewScript, StepsParseAndBadStepsNameTheirIndexAndKey) {
             EXPECT_EQ(e.source(), "steps.json");
         }
     }
+}
+
+// The local/global switch keeps the shared params (the same local field) and sh-global's own
+// ones for the way back; other methods are left alone.
+TEST(ViewState, ShVisibilitySwitchKeepsTheLocalFieldsParams) {
+    json doc = {{"method",
+                 {{"name", "sh-global"},
+                  {"params", {{"rays", 64}, {"coefficients", 9}, {"global_resolution", 32}}}}}};
+    json stash;
+    EXPECT_FALSE(viewer::switchShVisibility(doc, true, stash));  // already global
+    ASSERT_TRUE(viewer::switchShVisibility(doc, false, stash));
+    EXPECT_EQ(doc["method"]["name"], "sh-local");
+    EXPECT_EQ(doc["method"]["params"], json({{"rays", 64}, {"coefficients", 9}}));
+    ASSERT_TRUE(viewer::switchShVisibility(doc, true, stash));
+    EXPECT_EQ(doc["method"]["name"], "sh-global");
+    EXPECT_EQ(doc["method"]["params"]["global_resolution"], 32);
+    json gradient = {{"method", {{"name", "gradient"}, {"params", json::object()}}}};
+    EXPECT_FALSE(viewer::switchShVisibility(gradient, false, stash));
+    EXPECT_EQ(gradient["method"]["name"], "gradient");
+    const auto steps = viewer::parseScript(json::parse(R"([{"shading": "local"}])"), "s.json");
+    ASSERT_EQ(steps.size(), 1u);
+    EXPECT_EQ(steps[0].kind, viewer::ScriptStep::Kind::Shading);
+    EXPECT_EQ(steps[0].view, "local");
+    EXPECT_THROW(viewer::parseScript(json::parse(R"([{"shading": "far"}])"), "s.json"), InputError);
 }
 
 TEST(ViewScript, ClipPlaneAndLightStepsParse) {

@@ -1,0 +1,66 @@
+// SPDX-License-Identifier: MIT
+#pragma once
+// An SH visibility field (render/sh_shading.h: local, global or hierarchical) resampled on a
+// regular grid of half floats, four coefficients per texel: what a GPU ray caster reads from 3D
+// textures (the viewer's shaders/raycast.frag, RGBA16F; one texture for 4 coefficients, 3 for 9,
+// 4 for 16). Computed once per field on the CPU (after the visibility stage), uploaded once.
+//
+// Grid: res_a points per axis, point g at voxel coordinate g·step_a, step_a = (dims_a − 1)/(res_a
+// − 1) (node centred: the first and last points on the first and last voxel centres), read at
+// texture coordinate (p/step + ½)/res for voxel coordinate p. Preferred: two points per voxel and
+// axis (step ½, res = 2·(dims − 1) + 1), whose points hold every voxel centre and every point
+// half-way between: the sample points of the fields' own grids (the hierarchical 1:s grid at
+// voxel g·s, the local field's block levels cell centred at (g + ½)·2^k − ½, ½-integers for k ≥ 1)
+// are among them, so the texture's trilinear interpolation reproduces the field's own wherever
+// the field is trilinear between those points. When that exceeds the byte budget: one point per
+// voxel (step 1); beyond that every axis coarser by the same factor.
+// Each point stores field.sample(position) — for sh-global the near ⊗ far product as the CPU
+// shader reads it. Half floats: 11 significant bits (relative 4.9e-4; |V_i| ≤ √(4π)).
+#include <cstddef>
+#include <cstdint>
+#include <glm/glm.hpp>
+#include <vector>
+
+#include "visibility/global_visibility.h"
+#include "visibility/hierarchical_visibility.h"
+#include "visibility/local_visibility.h"
+
+namespace voxlight::render {
+
+/// Default byte budget of one resampled field: 256³ points of 4 coefficients.
+inline constexpr std::size_t kShFieldGridBudgetBytes = std::size_t(128) << 20;
+/// Points per voxel and axis when they fit the budget.
+inline constexpr int kShFieldGridOversample = 2;
+
+struct ShFieldGrid {
+    glm::ivec3 res{0};
+    glm::vec3 step{1.f};  ///< voxels between neighbouring points (0 on an axis of one voxel)
+    int coefficients = 0;
+    /// Voxel coordinate of point g.
+    glm::vec3 position(const glm::ivec3& g) const { return glm::vec3(g) * step; }
+    /// ⌈coefficients/4⌉ textures; texture t holds coefficients 4t…4t+3 of point g at
+    /// texels[t][4·(g.x + res.x·(g.y + res.y·g.z)) + c] (IEEE half floats; 0 past `coefficients`).
+    std::vector<std::vector<std::uint16_t>> texels;
+    int textures() const { return int(texels.size()); }
+    std::size_t bytes() const;
+    /// Coefficient i of point g as a float (tests).
+    float at(const glm::ivec3& g, int i) const;
+};
+
+/// Points per axis for a volume of `dims` and `coefficients` within `budgetBytes` (see above).
+/// `maxPerAxis` > 0: two points per voxel only where every axis stays within it (a GPU's largest
+/// 3D texture side); one point per voxel otherwise.
+glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
+                                 std::size_t budgetBytes = kShFieldGridBudgetBytes,
+                                 int maxPerAxis = 0);
+
+/// The field sampled at every grid point (parallel over z-slices; the same bytes for any thread
+/// count). `dims`: the volume's voxels per axis; budget and maxPerAxis as above.
+ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+ShFieldGrid resampleShField(const visibility::GlobalVisibility& field, const glm::ivec3& dims,
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+ShFieldGrid resampleShField(const visibility::HierarchicalVisibility& field, const glm::ivec3& dims,
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+
+}  // namespace voxlight::render

@@ -1,0 +1,43 @@
+// SPDX-License-Identifier: MIT
+#include "viewer/sh_grids.h"
+
+#include "pipeline/pipeline.h"
+
+namespace voxlight::viewer {
+
+template <class Field>
+std::shared_ptr<const render::ShFieldGrid> ShGridCache::of(
+    const std::shared_ptr<const Field>& field, const glm::ivec3& dims) {
+    if (!field) return nullptr;
+    for (std::size_t i = 0; i < entries_.size(); ++i)
+        if (entries_[i].field.get() == field.get()) {
+            Entry e = entries_[i];
+            entries_.erase(entries_.begin() + std::ptrdiff_t(i));
+            entries_.insert(entries_.begin(), e);
+            return e.grid;
+        }
+    auto grid = std::make_shared<const render::ShFieldGrid>(
+        render::resampleShField(*field, dims, budget_, kMaxTextureSide));
+    ++resampled_;
+    entries_.insert(entries_.begin(), Entry{field, grid});
+    if (entries_.size() > kKept) entries_.resize(kKept);
+    return grid;
+}
+
+ShGrids ShGridCache::get(const pipeline::CasterSetup& setup) {
+    ShGrids g;
+    if (!setup.volume) return g;
+    const glm::ivec3 dims = setup.volume->dims();
+    const pipeline::CasterSetup::ShFields& f = setup.sh;
+    if (f.hierarchical) {
+        g.field = of(f.hierarchical, dims);
+    } else if (f.global) {
+        g.field = of(f.global, dims);
+        g.local = of(f.local, dims);
+    } else if (f.local) {
+        g.field = of(f.local, dims);
+    }
+    return g;
+}
+
+}  // namespace voxlight::viewer
