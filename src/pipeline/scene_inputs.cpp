@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <sstream>
 
 #include "core/hash.h"
@@ -169,6 +170,19 @@ std::pair<glm::dvec3, glm::dvec3> tangentFrame(const glm::dvec3& n) {
     return {t1, glm::cross(n, t1)};
 }
 
+/// The last environment map built (the key: its file's identity, colour × intensity and layout),
+/// kept so that a rotation alone does not read and project the map again.
+struct EnvironmentMapCache {
+    std::mutex mutex;
+    std::uint64_t key = 0;
+    std::shared_ptr<const lights::EnvironmentLight> light;
+    std::size_t builds = 0, turns = 0;
+};
+EnvironmentMapCache& environmentMapCache() {
+    static EnvironmentMapCache cache;
+    return cache;
+}
+
 std::shared_ptr<const lights::Light> buildLight(const io::LightDesc& l) {
     const glm::vec3 power = glm::vec3(l.color * l.intensity);
     if (l.type == "directional")
@@ -184,21 +198,48 @@ std::shared_ptr<const lights::Light> buildLight(const io::LightDesc& l) {
         const glm::dvec3 eu = l.size.x * t1, ev = l.size.y * t2;
         return std::make_shared<lights::RectLight>(power, l.position - 0.5 * (eu + ev), eu, ev);
     }
-    // Environment: the map scaled per channel by colour × intensity.
+    // Environment: the map scaled per channel by colour × intensity. A turn of the same map (the
+    // viewer's lights panel, a session's keyframes) reuses the map and its SH projection: only the
+    // SH rotation is applied (EnvironmentLight::setRotation), no file read or projection.
+    const glm::dvec3 r = glm::radians(l.rotationDeg);
+    const glm::dmat3 rx(1, 0, 0, 0, std::cos(r.x), std::sin(r.x), 0, -std::sin(r.x), std::cos(r.x));
+    const glm::dmat3 ry(std::cos(r.y), 0, -std::sin(r.y), 0, 1, 0, std::sin(r.y), 0, std::cos(r.y));
+    const glm::dmat3 rz(std::cos(r.z), std::sin(r.z), 0, -std::sin(r.z), std::cos(r.z), 0, 0, 0, 1);
+    const glm::dmat3 rotation = rz * ry * rx;  // x, then y, then z (extrinsic), as the scene says
+    core::Hasher key;
+    key.add("environment-map.v1").addPod(power).add(l.layout);
+    addFileIdentity(key, l.path);
+    EnvironmentMapCache& cache = environmentMapCache();
+    {
+        const std::lock_guard<std::mutex> lock(cache.mutex);
+        if (cache.light && cache.key == key.value()) {
+            auto turned = std::make_shared<lights::EnvironmentLight>(*cache.light);
+            turned->setRotation(rotation);
+            ++cache.turns;
+            return turned;
+        }
+    }
     core::ImageRGBA image = io::readHdrImage(l.path);
     for (std::size_t i = 0; i < image.pixels.size(); ++i)
         if (i % 4 != 3) image.pixels[i] *= power[int(i % 4)];
     lights::EnvironmentOptions o;
     o.layout = l.layout == "probe" ? lights::EnvironmentLayout::AngularProbe
                                    : lights::EnvironmentLayout::Equirect;
-    const glm::dvec3 r = glm::radians(l.rotationDeg);
-    const glm::dmat3 rx(1, 0, 0, 0, std::cos(r.x), std::sin(r.x), 0, -std::sin(r.x), std::cos(r.x));
-    const glm::dmat3 ry(std::cos(r.y), 0, -std::sin(r.y), 0, 1, 0, std::sin(r.y), 0, std::cos(r.y));
-    const glm::dmat3 rz(std::cos(r.z), std::sin(r.z), 0, -std::sin(r.z), std::cos(r.z), 0, 0, 0, 1);
-    o.rotation = rz * ry * rx;  // x, then y, then z (extrinsic), as the scene documents
-    return std::make_shared<lights::EnvironmentLight>(image, o, l.path.string());
+    o.rotation = rotation;
+    auto light = std::make_shared<lights::EnvironmentLight>(image, o, l.path.string());
+    const std::lock_guard<std::mutex> lock(cache.mutex);
+    cache.key = key.value();
+    cache.light = light;
+    ++cache.builds;
+    return light;
 }
 }  // namespace
+
+EnvironmentMapCounts environmentMapCounts() {
+    EnvironmentMapCache& cache = environmentMapCache();
+    const std::lock_guard<std::mutex> lock(cache.mutex);
+    return {cache.builds, cache.turns};
+}
 
 std::shared_ptr<const lights::Light> whiteSky() {
     core::ImageRGBA white(64, 32);

@@ -60,6 +60,13 @@ std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& s
 /// isosurface shadings (voxlight iso --bake, method iso-lattice) light a scene without lights
 /// with — an unoccluded Lambertian surface of albedo a then shows radiance a.
 std::shared_ptr<const lights::Light> whiteSky();
+
+/// How often buildLights read and projected an environment map, and how often it only turned the
+/// last one built (same file, colour × intensity and layout; another rotation): for tests.
+struct EnvironmentMapCounts {
+    std::size_t builds = 0, turns = 0;
+};
+EnvironmentMapCounts environmentMapCounts();
 /// Identity of the lights: their JSON and each environment map file's identity.
 std::uint64_t lightsIdentity(const io::Scene& scene);
 /// Identity of the environment lights alone (what their SH irradiance depends on).

@@ -10,6 +10,7 @@
 #include "core/phantoms.h"
 #include "pipeline/pipeline.h"
 #include "pipeline/registry.h"
+#include "pipeline/scene_inputs.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -359,9 +360,23 @@ TEST(ShLocal, TurningAnEnvironmentMapRunsNoVisibilityStage) {
     const RunResult a = session.run(scene(d));
     EXPECT_TRUE(allFinite(a.image));
     d["lights"][0]["rotation"] = {0, 0, 90};
+    const EnvironmentMapCounts before = environmentMapCounts();
     const RunResult b = session.run(scene(d));
     EXPECT_EQ(ranStages(b), (std::set<std::string>{"lights", "camera", "render"}));
     EXPECT_NE(a.image.pixels, b.image.pixels);
+    // The turn read no file and projected nothing: the last map, its SH rotated (issue #15).
+    const EnvironmentMapCounts after = environmentMapCounts();
+    EXPECT_EQ(after.builds, before.builds);
+    EXPECT_EQ(after.turns, before.turns + 1);
+    // The same image as the map built from the file at that rotation: another colour evicts the
+    // cached map, so the next run at the first colour builds afresh.
+    d["lights"][0]["color"] = {1, 1, 0.999};
+    (void)Session().run(scene(d));
+    d["lights"][0]["color"] = {1, 1, 1};
+    const EnvironmentMapCounts mid = environmentMapCounts();
+    const RunResult fresh = Session().run(scene(d));
+    EXPECT_EQ(environmentMapCounts().builds, mid.builds + 1);
+    EXPECT_EQ(fresh.image.pixels, b.image.pixels);
 }
 
 namespace {
