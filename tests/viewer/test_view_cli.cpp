@@ -13,6 +13,7 @@
 #include <fstream>
 #include <nlohmann/json.hpp>
 #include <optional>
+#include <span>
 #include <string>
 #include <vector>
 
@@ -452,6 +453,27 @@ GlRun runGlAgainstCpu(const test::TempDir& tmp, const std::string& display) {
     out.agreement = compareImageArea(a, s);
     return out;
 }
+
+/// Renders each scene on the GLSL path (not a fallback to the CPU image) and against the CPU ray
+/// caster, and holds them to the named GL limits; `what` labels the printed figures. Skips the
+/// calling test when no OpenGL 4.5 window can open here.
+void expectGlslAgreesWithCpu(std::span<const char* const> scenes, const std::string& display,
+                             const char* what) {
+    for (const char* scene : scenes) {
+        test::TempDir tmp;
+        std::ofstream(tmp / "scene.json") << scene;
+        const GlRun r = runGlAgainstCpu(tmp, display);
+        if (r.skipped) GTEST_SKIP() << r.why;
+        EXPECT_NE(r.err.find("renderer gpu (GLSL): --renderer gpu"), std::string::npos) << r.err;
+        const Agreement& a = r.agreement;
+        std::printf(
+            "%s vs CPU: mean %.4f levels, %.4f %% over 2 levels, worst %.0f, PSNR %.1f dB\n", what,
+            a.meanAbs, 100.0 * a.fractionOver2, a.worst, a.psnr);
+        EXPECT_LE(a.meanAbs, kGlMeanAbsLevels) << scene;
+        EXPECT_LE(a.fractionOver2, kGlFractionOver2) << scene;
+        EXPECT_GE(a.psnr, kGlMinPsnrDb) << scene;
+    }
+}
 }  // namespace
 
 // Item 3 of the issue: the GLSL ray caster's image of a phantom scene (gradient shading with a
@@ -471,21 +493,7 @@ TEST(ViewCli, GlslImageAgreesWithTheCpuRayCaster) {
             "method": "emission-absorption", "camera": {"azimuth": -40, "elevation": 25},
             "crop_box": {"min": [-140, -90, -20], "max": [140, 90, 170]},
             "image": {"width": 240, "height": 200, "display": "srgb"}})"};
-    for (const char* scene : scenes) {
-        test::TempDir tmp;
-        std::ofstream(tmp / "scene.json") << scene;
-        const GlRun r = runGlAgainstCpu(tmp, *display);
-        if (r.skipped) GTEST_SKIP() << r.why;
-        // The GLSL path drew it (not a fallback to the CPU image).
-        EXPECT_NE(r.err.find("renderer gpu (GLSL): --renderer gpu"), std::string::npos) << r.err;
-        const Agreement& a = r.agreement;
-        std::printf(
-            "GLSL vs CPU: mean %.4f levels, %.4f %% over 2 levels, worst %.0f, PSNR %.1f dB\n",
-            a.meanAbs, 100.0 * a.fractionOver2, a.worst, a.psnr);
-        EXPECT_LE(a.meanAbs, kGlMeanAbsLevels) << scene;
-        EXPECT_LE(a.fractionOver2, kGlFractionOver2) << scene;
-        EXPECT_GE(a.psnr, kGlMinPsnrDb) << scene;
-    }
+    expectGlslAgreesWithCpu(scenes, *display, "GLSL");
 }
 
 // The GLSL SH shading is held to the gradient path's limits above. On top of that path's
@@ -524,20 +532,7 @@ TEST(ViewCli, GlslShShadingAgreesWithTheCpuRayCaster) {
             "camera": {"azimuth": 120, "elevation": 10},
             "lights": [{"type": "directional", "direction": [-0.5, 0.2, -1], "intensity": 12}],
             "image": {"width": 240, "height": 200}})"};
-    for (const char* scene : scenes) {
-        test::TempDir tmp;
-        std::ofstream(tmp / "scene.json") << scene;
-        const GlRun r = runGlAgainstCpu(tmp, *display);
-        if (r.skipped) GTEST_SKIP() << r.why;
-        EXPECT_NE(r.err.find("renderer gpu (GLSL): --renderer gpu"), std::string::npos) << r.err;
-        const Agreement& a = r.agreement;
-        std::printf(
-            "GLSL SH vs CPU: mean %.4f levels, %.4f %% over 2 levels, worst %.0f, PSNR %.1f dB\n",
-            a.meanAbs, 100.0 * a.fractionOver2, a.worst, a.psnr);
-        EXPECT_LE(a.meanAbs, kGlMeanAbsLevels) << scene;
-        EXPECT_LE(a.fractionOver2, kGlFractionOver2) << scene;
-        EXPECT_GE(a.psnr, kGlMinPsnrDb) << scene;
-    }
+    expectGlslAgreesWithCpu(scenes, *display, "GLSL SH");
 }
 
 // SH fields are uploaded once per field, not per frame: an orbit and a zoom on the GLSL path
