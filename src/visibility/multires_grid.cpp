@@ -296,11 +296,13 @@ MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelec
     for (std::size_t b = 0; b < levelData_.size(); ++b)
         if (selection_.level[b] != kNone) levelData_[b] = pyramid_->data(b, selection_.level[b]);
     // Ramp widths: the finest spacing among a block and its stored neighbours.
+    // Isolated blocks: neither they nor a neighbour are stored.
     ramp_.assign(selection_.level.size(), 1.f);
+    isolated_.assign(selection_.level.size(), 1);
     for (std::size_t b = 0; b < ramp_.size(); ++b) {
-        if (selection_.level[b] == kNone) continue;
         const glm::ivec3 c = pyramid_->blockCoord(b);
-        int w = levelSpacing(selection_.level[b]);
+        const bool stored = selection_.level[b] != kNone;
+        int w = stored ? levelSpacing(selection_.level[b]) : 0;
         for (int dz = -1; dz <= 1; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
                 for (int dx = -1; dx <= 1; ++dx) {
@@ -309,9 +311,11 @@ MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelec
                         glm::any(glm::greaterThanEqual(n, nb)))
                         continue;
                     const int l = selection_.level[pyramid_->blockIndex(n.x, n.y, n.z)];
-                    if (l != kNone) w = std::min(w, levelSpacing(l));
+                    if (l == kNone) continue;
+                    isolated_[b] = 0;
+                    if (stored) w = std::min(w, levelSpacing(l));
                 }
-        ramp_[b] = float(w);
+        if (stored) ramp_[b] = float(w);
     }
 }
 
@@ -328,6 +332,7 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
     for (int a = 0; a < 3; ++a) p[a] = std::min(std::max(pIn[a], 0.f), float(d[a] - 1));
     out.count = 0;
     const std::size_t owner = ownerBlock(p);
+    if (isolated_[owner]) return;
     // Fast path: inside the owner's sample box on every axis only the owner contributes.
     {
         const int l = selection_.level[owner];

@@ -278,6 +278,10 @@ class MultiresGrid {
     std::shared_ptr<const BlockPyramid> pyramid_;
     LodSelection selection_;
     std::vector<float> ramp_;
+    /// 1 where a block and its 26 neighbours are all unstored: no stored block contributes
+    /// anywhere in it (ramps reach at most 8 voxels past a block's face), so weights() returns
+    /// count 0 at once there — most of a transparent TF's volume.
+    std::vector<std::uint8_t> isolated_;
     std::vector<const float*> levelData_;
     glm::vec3 hi_{0.f};     ///< largest index per axis
     glm::ivec3 last_{0};    ///< largest block coordinate per axis
