@@ -20,6 +20,7 @@
 // bench-deps: visibility optics core
 #include <benchmark/benchmark.h>
 
+#include <chrono>
 #include <cstdio>
 #include <map>
 #include <optional>
@@ -93,8 +94,60 @@ BENCHMARK(BM_TfUpdate)
     ->Iterations(2)
     ->Repetitions(1);
 
+/// The TF-update total (Kronander Table 1: local / global / total): table, LOD selection,
+/// local visibility by the line sweep (26 lattice rays, 4 coefficients, r_s 16) and the 64³ global
+/// field from it (arg 2: 0 = piecewise, 1 = recursive integration), per update, at 1:16 and 1:64.
+/// Counters: wall seconds of the local part (LOD
+/// included) and of the global part, medians of 3 runs of 2 updates.
+void BM_TfUpdateTotal(benchmark::State& state) {
+    const auto pyramid = torsoPyramid();
+    const optics::TransferFunction tf = optics::makePreset(kPresets[state.range(0)]);
+    const double ratio = double(state.range(1));
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = visibility::kSweepRaysCoarse;
+    o.radiusVoxels = 16.0;
+    o.algorithm = visibility::VisibilityAlgorithm::Sweep;
+    visibility::GlobalVisibilityOptions go;
+    go.resolution = 64;
+    const bool recursive = state.range(2) == 1;
+    go.integration = recursive ? visibility::GlobalIntegration::Recursive
+                               : visibility::GlobalIntegration::Piecewise;
+    double localSeconds = 0.0, globalSeconds = 0.0;
+    using Clock = std::chrono::steady_clock;
+    for (auto _ : state) {
+        const auto t0 = Clock::now();
+        const optics::TfTable table(tf);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, tf, table,
+                                           visibility::LodBudget::fromReduction(
+                                               ratio, pyramid->geometry().voxelCount())));
+        auto local = std::make_shared<const visibility::LocalVisibility>(
+            visibility::computeLocalVisibility(grid, table, o));
+        const auto t1 = Clock::now();
+        const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
+        benchmark::DoNotOptimize(g.at({0, 0, 0}));
+        const auto t2 = Clock::now();
+        localSeconds += std::chrono::duration<double>(t1 - t0).count();
+        globalSeconds += std::chrono::duration<double>(t2 - t1).count();
+    }
+    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)) +
+                   " sweep + global 64^3" + (recursive ? " recursive" : " piecewise"));
+    state.counters["local_s"] = localSeconds / double(state.iterations());
+    state.counters["global_s"] = globalSeconds / double(state.iterations());
+}
+BENCHMARK(BM_TfUpdateTotal)
+    ->ArgsProduct({{0, 1}, {16, 64}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Iterations(2)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
 /// Global visibility alone (Kronander's "global" column) on the 64³ grid, from the local
-/// visibility of ct-bone at 1:16 (computed once).
+/// visibility of ct-bone at 1:16 (computed once); arg: 0 = piecewise (eq. 11 along every ray),
+/// 1 = recursive integration.
 void BM_GlobalVisibility(benchmark::State& state) {
     static const auto local = [] {
         const auto pyramid = torsoPyramid();
@@ -112,6 +165,9 @@ void BM_GlobalVisibility(benchmark::State& state) {
     }();
     visibility::GlobalVisibilityOptions go;
     go.resolution = 64;
+    go.integration = state.range(0) == 1 ? visibility::GlobalIntegration::Recursive
+                                         : visibility::GlobalIntegration::Piecewise;
+    state.SetLabel(state.range(0) == 1 ? "recursive" : "piecewise");
     std::uint64_t rays = 0;
     for (auto _ : state) {
         const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
@@ -121,6 +177,8 @@ void BM_GlobalVisibility(benchmark::State& state) {
     state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_GlobalVisibility)
+    ->Arg(0)
+    ->Arg(1)
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
@@ -260,8 +318,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
   public:
     void ReportRuns(const std::vector<Run>& runs) override {
         for (const Run& r : runs) {
-            if (r.run_type == Run::RT_Iteration &&
-                r.run_name.function_name.find("BM_TfUpdate") != std::string::npos)
+            if (r.run_type == Run::RT_Iteration && r.run_name.function_name == "BM_TfUpdate")
                 update_[r.run_name.args] = {r.GetAdjustedRealTime(), r.GetAdjustedCPUTime()};
             if (r.aggregate_name == "median") {
                 if (r.run_name.function_name.find("BM_VsLocal") != std::string::npos)

@@ -16,7 +16,9 @@
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims) and global_near ("local": the fine local field at the
 //                         sample times the far grid, default; "grid": Kronander's grid-only V^G —
-//                         visibility/global_visibility.h). Its local stages have the same keys as
+//                         visibility/global_visibility.h) and global_integration ("recursive":
+//                         one piece per grid point and direction, the rest read back from the
+//                         grid, default; "piecewise": eq. 11 along every ray). Its local stages have the same keys as
 //                         sh-local's, so switching between the two recomputes nothing once both
 //                         have run.
 //   ritschel:             hierarchical visibility (Ritschel 2007; visibility/
@@ -364,6 +366,10 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
     if (kind == Kind::ShGlobal) {
         s.global.resolution = p.integer("global_resolution", 64, 1, 1024);
         s.global.nearFromLocal = p.choice("global_near", "local", {"local", "grid"}) == "local";
+        s.global.integration =
+            p.choice("global_integration", "recursive", {"recursive", "piecewise"}) == "recursive"
+                ? visibility::GlobalIntegration::Recursive
+                : visibility::GlobalIntegration::Piecewise;
         s.global.threads = scene.render.threads;
     }
     return s;
@@ -1096,6 +1102,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             .stage(clipped ? "clip_local_visibility" : "local_visibility")
             .integer(std::uint64_t(go.resolution))
             .integer(go.nearFromLocal ? 1 : 0)
+            .integer(std::uint64_t(go.integration))
             .value();
     };
     gv.lineage = [go, clipped, visKey](const Run& run) {
@@ -1105,15 +1112,20 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             .integer(std::uint64_t(go.resolution))
             .integer(go.nearFromLocal ? 1 : 0)
             .integer(clipped ? 1 : 0)
+            .integer(std::uint64_t(go.integration))
             .value();
     };
     gv.compute = [go, clipped](Run& run) {
         auto g = std::make_shared<const visibility::GlobalVisibility>(
             visibility::computeGlobalVisibility(lightLocalVisibility(run, clipped), go,
                                                 run.progress()));
-        run.details()["global_visibility"] = {{"rays_traced", g->raysTraced()},
-                                              {"points_skipped", g->pointsSkipped()},
-                                              {"bytes", g->bytes()}};
+        run.details()["global_visibility"] = {
+            {"rays_traced", g->raysTraced()},
+            {"points_skipped", g->pointsSkipped()},
+            {"bytes", g->bytes()},
+            {"integration", g->integration() == visibility::GlobalIntegration::Recursive
+                                ? "recursive"
+                                : "piecewise"}};
         const std::size_t bytes = g->bytes();
         return Artifact::of<visibility::GlobalVisibility>(std::move(g), bytes);
     };
@@ -1123,7 +1135,9 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
         std::ostringstream os;
         os << g.resolution().x << "x" << g.resolution().y << "x" << g.resolution().z << " points, "
            << g.coefficients() << " SH coefficients, " << (g.bytes() >> 20) << " MB, "
-           << (g.nearFromLocal() ? "near part from the local field" : "grid only");
+           << (g.nearFromLocal() ? "near part from the local field" : "grid only")
+           << (g.integration() == visibility::GlobalIntegration::Recursive ? ", recursive"
+                                                                           : ", piecewise");
         return os.str();
     };
     plan.stages.push_back(gv);
@@ -2469,7 +2483,8 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "radius "
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb",
-     "global_resolution", "global_near", "window", "window_strength", "ambient"},
+     "global_resolution", "global_near", "global_integration", "window", "window_strength",
+     "ambient"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",

@@ -340,7 +340,7 @@ bool switchShVisibility(nlohmann::json& doc, bool global, nlohmann::json& stash)
     if (!m.contains("params") || !m["params"].is_object()) m["params"] = nlohmann::json::object();
     nlohmann::json& params = m["params"];
     if (!stash.is_object()) stash = nlohmann::json::object();
-    for (const char* k : {"global_resolution", "global_near"}) {
+    for (const char* k : {"global_resolution", "global_near", "global_integration"}) {
         if (global) {
             if (stash.contains(k)) params[k] = stash[k];
         } else if (params.contains(k)) {

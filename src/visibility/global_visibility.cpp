@@ -16,6 +16,9 @@ namespace voxlight::visibility {
 
 namespace {
 const float kInvSqrt4Pi = float(1.0 / std::sqrt(4.0 * std::numbers::pi));
+/// Grid steps beyond 1 that a piece must move along its dominant axis for the recursive
+/// integration: its far end's trilinear stencil then lies wholly in planes already computed.
+constexpr float kRecursiveMargin = 1e-3f;
 }  // namespace
 
 GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> localPtr,
@@ -73,6 +76,178 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     const std::thread::id caller = std::this_thread::get_id();
     progress.report("global visibility", 0.0);
     tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
+
+    // Recursive integration: usable when every direction moves at least one grid step (plus a
+    // margin against rounding) along its dominant axis per piece.
+    std::vector<int> dominant(static_cast<std::size_t>(N));
+    bool recursive = options.integration == GlobalIntegration::Recursive;
+    for (int k = 0; k < N; ++k) {
+        const glm::vec3 sg = step[std::size_t(k)] / out.scale_;
+        int a = 0;
+        for (int b = 1; b < 3; ++b)
+            if (std::abs(sg[b]) > std::abs(sg[a])) a = b;
+        dominant[std::size_t(k)] = a;
+        if (!(std::abs(sg[a]) >= 1.f + kRecursiveMargin)) recursive = false;
+    }
+    if (recursive) {
+        out.integration_ = GlobalIntegration::Recursive;
+        const std::size_t P = std::size_t(out.res_.x) * out.res_.y * out.res_.z;
+        // The local field once per grid point; which points are shaded (the rest: empty space).
+        std::vector<float> vl(P * std::size_t(C));
+        std::vector<std::uint8_t> needed(P);
+        arena.execute([&] {
+            tbb::parallel_for(tbb::blocked_range<int>(0, out.res_.z), [&](const auto& range) {
+                for (int gz = range.begin(); gz != range.end(); ++gz)
+                    for (int gy = 0; gy < out.res_.y; ++gy)
+                        for (int gx = 0; gx < out.res_.x; ++gx) {
+                            const glm::ivec3 g(gx, gy, gz);
+                            const std::size_t i = out.index(g);
+                            const glm::vec3 x = glm::min(out.position(g), hi);
+                            local.sample(x, vl.data() + i * std::size_t(C));
+                            needed[i] = visibilityNeeded(grid, x, spacing) ? 1 : 0;
+                        }
+            });
+        });
+        std::vector<double> acc(P * std::size_t(C), 0.0);
+        const glm::ivec3 res = out.res_;
+        // One direction, sequentially: F_k into F, the far part into far.
+        auto direction = [&](int k, float* F, float* far) {
+            const glm::vec3 sk = step[std::size_t(k)];
+            const int a = dominant[std::size_t(k)];
+            const int b = (a + 1) % 3, c = (a + 2) % 3;
+            const bool forward = sk[a] > 0.f;  // the far end lies toward larger a
+            const float* yk = y.data() + std::size_t(k) * C;
+            auto piece = [&](const float* v) {
+                float t = 0.f;
+                for (int i = 0; i < C; ++i) t += v[i] * yk[i];
+                return std::min(std::max(t, 0.f), 1.f);
+            };
+            // F_k's far end sits at grid coordinate g + d for every point g (the grid is regular),
+            // so the trilinear stencil has fixed corners and weights: offsets into F and weights
+            // once per direction; points whose stencil or far end crosses the grid's or the box's
+            // edge take the clamped general read below.
+            const glm::vec3 d = sk / out.scale_;
+            const glm::ivec3 fl(glm::floor(d));
+            const glm::vec3 f = d - glm::vec3(fl);
+            std::ptrdiff_t off[8];
+            float w[8];
+            for (int q = 0; q < 8; ++q) {
+                const glm::ivec3 o = fl + glm::ivec3(q & 1, (q >> 1) & 1, q >> 2);
+                off[q] =
+                    std::ptrdiff_t(o.x) +
+                    std::ptrdiff_t(res.x) * (std::ptrdiff_t(o.y) + std::ptrdiff_t(res.y) * o.z);
+                w[q] = ((q & 1) ? f.x : 1.f - f.x) * ((q & 2) ? f.y : 1.f - f.y) *
+                       ((q & 4) ? f.z : 1.f - f.z);
+            }
+            // Per axis, the points whose far end is inside the box and whose stencil is inside
+            // the grid.
+            glm::ivec3 lo, up;
+            for (int e = 0; e < 3; ++e) {
+                lo[e] = std::max(0, -fl[e]);
+                up[e] = std::min(res[e] - 1, res[e] - 2 - fl[e]);
+                while (lo[e] <= up[e] && !(out.position(glm::ivec3(lo[e]))[e] + sk[e] >= 0.f))
+                    ++lo[e];
+                while (up[e] >= lo[e] && !(out.position(glm::ivec3(up[e]))[e] + sk[e] <= hi[e]))
+                    --up[e];
+            }
+            auto readF = [&](const glm::vec3& u) {  // clamped per axis
+                glm::ivec3 i0, i1;
+                glm::vec3 fr;
+                for (int e = 0; e < 3; ++e) {
+                    const float ue = std::min(std::max(u[e], 0.f), float(res[e] - 1));
+                    i0[e] = int(ue);
+                    i1[e] = std::min(i0[e] + 1, res[e] - 1);
+                    fr[e] = ue - float(i0[e]);
+                }
+                float v = 0.f;
+                for (int q = 0; q < 8; ++q) {
+                    const float wq = ((q & 1) ? fr.x : 1.f - fr.x) * ((q & 2) ? fr.y : 1.f - fr.y) *
+                                     ((q & 4) ? fr.z : 1.f - fr.z);
+                    if (wq == 0.f) continue;
+                    const glm::ivec3 g((q & 1) ? i1.x : i0.x, (q & 2) ? i1.y : i0.y,
+                                       (q & 4) ? i1.z : i0.z);
+                    v += wq * F[out.index(g)];
+                }
+                return v;
+            };
+            float vq[16];
+            for (int n = 0; n < res[a]; ++n) {
+                if (progress.cancelled()) return;
+                glm::ivec3 g;
+                g[a] = forward ? res[a] - 1 - n : n;
+                const bool planeFast = g[a] >= lo[a] && g[a] <= up[a];
+                for (g[c] = 0; g[c] < res[c]; ++g[c])
+                    for (g[b] = 0; g[b] < res[b]; ++g[b]) {
+                        const std::size_t i = out.index(g);
+                        float t = 1.f;
+                        if (planeFast && g[b] >= lo[b] && g[b] <= up[b] && g[c] >= lo[c] &&
+                            g[c] <= up[c]) {
+                            t = 0.f;
+                            const float* Fi = F + i;
+                            for (int q = 0; q < 8; ++q)
+                                if (w[q] != 0.f) t += w[q] * Fi[off[q]];
+                        } else {
+                            const glm::vec3 q = glm::min(out.position(g), hi) + sk;
+                            if (inside(q)) {
+                                const glm::vec3 u = glm::vec3(g) + d;
+                                if (u[a] >= 0.f && u[a] <= float(res[a] - 1)) {
+                                    t = readF(u);
+                                } else {  // past the last plane: its piece, then the box
+                                    local.sample(q, vq);
+                                    t = piece(vq);
+                                }
+                            }
+                        }
+                        far[i] = t;
+                        F[i] = piece(vl.data() + i * std::size_t(C)) * t;
+                    }
+            }
+        };
+        // Directions in fixed groups, each in parallel with its own buffers, summed in k order
+        // after the group: the same sums for any thread count.
+        constexpr int kGroup = 8;
+        std::vector<float> F(std::size_t(kGroup) * P), far(std::size_t(kGroup) * P);
+        for (int k0 = 0; k0 < N; k0 += kGroup) {
+            const int n = std::min(kGroup, N - k0);
+            arena.execute([&] {
+                tbb::parallel_for(0, n, [&](int j) {
+                    direction(k0 + j, F.data() + std::size_t(j) * P,
+                              far.data() + std::size_t(j) * P);
+                });
+            });
+            if (progress.cancelled()) throw CancelledError();
+            const float* src = firstPiece ? far.data() : F.data();
+            arena.execute([&] {
+                tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), [&](const auto& range) {
+                    for (std::size_t i = range.begin(); i != range.end(); ++i)
+                        for (int j = 0; j < n; ++j) {
+                            const double T = src[std::size_t(j) * P + i];
+                            const double* wk = wy.data() + std::size_t(k0 + j) * C;
+                            double* d = acc.data() + i * std::size_t(C);
+                            for (int e = 0; e < C; ++e) d[e] += T * wk[e];
+                        }
+                });
+            });
+            progress.report("global visibility", double(k0 + n) / N);
+        }
+        std::uint64_t shaded = 0;
+        for (std::size_t i = 0; i < P; ++i) {
+            float* dst = out.data_.data() + i * std::size_t(C);
+            if (!needed[i]) {
+                dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
+                continue;
+            }
+            ++shaded;
+            for (int e = 0; e < C; ++e) dst[e] = float(acc[i * std::size_t(C) + e]);
+            if (options.nearFromLocal)
+                out.open_[i] = std::clamp(vl[i * std::size_t(C)] * kInvSqrt4Pi, 0.f, 1.f);
+        }
+        progress.report("global visibility", 1.0);
+        out.rays_ = shaded * std::uint64_t(N);
+        out.skipped_ = P - shaded;
+        return out;
+    }
+
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<int>(0, out.res_.z), [&](const auto& range) {
             if (progress.cancelled()) return;

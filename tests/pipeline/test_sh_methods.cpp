@@ -347,6 +347,18 @@ TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility)
     d["method"]["params"]["global_near"] = "sample";
     EXPECT_THROW(session.run(scene(d)), InputError);
     d["method"]["params"].erase("global_near");
+    // The piecewise integration (eq. 11 along every ray): the global stage alone reruns, and
+    // says which ran.
+    d["method"]["params"]["global_integration"] = "piecewise";
+    const RunResult piecewise = session.run(scene(d));
+    EXPECT_EQ(ranStages(piecewise),
+              (std::set<std::string>{"global_visibility", "camera", "render"}));
+    EXPECT_TRUE(allFinite(piecewise.image));
+    EXPECT_EQ(piecewise.details["global_visibility"]["integration"], "piecewise");
+    EXPECT_EQ(global.details["global_visibility"]["integration"], "recursive");  // the default
+    d["method"]["params"]["global_integration"] = "grid";
+    EXPECT_THROW(session.run(scene(d)), InputError);
+    d["method"]["params"].erase("global_integration");
     d["method"]["name"] = "sh-local";  // sh-local has no global grid to size
     EXPECT_THROW(session.run(scene(d)), InputError);
 }

@@ -4,9 +4,12 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <numbers>
 
+#include "core/phantoms.h"
+#include "optics/presets.h"
 #include "sh/sh_projection.h"
 #include "visibility/global_visibility.h"
 #include "visibility/vis_test_util.h"
@@ -17,6 +20,10 @@ using namespace voxlight::visibility;
 namespace {
 
 const double kSqrt4Pi = std::sqrt(4.0 * std::numbers::pi);
+/// Recursive against piecewise integration on the torso (far V_0 / √(4π), 0…1): mean and max
+/// absolute difference allowed (measured values in the test).
+constexpr double kRecursiveMeanTol = 0.03;
+constexpr double kRecursiveMaxTol = 0.25;
 
 std::shared_ptr<const LocalVisibility> localOf(const core::Volume& v,
                                                const optics::TransferFunction& tf,
@@ -42,37 +49,45 @@ TEST(GlobalVisibility, InAHomogeneousCubeMatchesTheProjectedClosedForm) {
     o.rays = 24;
     o.radiusVoxels = 8.0;
     const auto local = localOf(v, test::rampTf(kSigma), o);
-    GlobalVisibilityOptions go;
-    go.resolution = 12;  // spacing 4 voxels
-    const GlobalVisibility g = computeGlobalVisibility(local, go);
-    EXPECT_EQ(g.resolution(), glm::ivec3(12));
-    const glm::ivec3 gp(6, 5, 7);
-    const glm::vec3 x = g.position(gp);
-    EXPECT_EQ(x, glm::vec3(25.5f, 21.5f, 29.5f));
-    const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
-    const auto expected = sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
-        double d = INFINITY;
-        for (int a = 0; a < 3; ++a) {
-            if (w[a] > 0) d = std::min(d, (47.0 - x[a]) / w[a]);
-            if (w[a] < 0) d = std::min(d, -double(x[a]) / w[a]);
-        }
-        return std::exp(-double(kSigma) * d);
-    });
-    // The last piece's band-2 truncation: it spans [e^(−σ0·r_s), 1] = [0.85, 1], and the ringing of
-    // a 9-coefficient expansion of such a step in ω stays within ≈ 0.15·0.2 = 0.03 per direction;
-    // through the projection (Cauchy–Schwarz, Σ w = 4π) ≤ 0.03·√(4π) ≈ 0.11 per coefficient.
-    // Trilinear interpolation of V^L between grid points adds no error here (interior points are
-    // all the same, and x_j lie on grid points only up to float rounding of the steps).
-    const double kGlobalTol = 0.03 * kSqrt4Pi;
-    float got[9];
-    g.sample(x, got);  // V^L ⊗ V^F at a grid point: no interpolation of the far part
-    for (int i = 0; i < 9; ++i) EXPECT_NEAR(got[i], expected[std::size_t(i)], kGlobalTol) << i;
-    // The test can fail: a missing or doubled piece changes V_0 by ≥ e^(±0.16) − 1 ≈ 15 %.
-    EXPECT_GT(std::abs(expected[0]) * 0.15, 2 * kGlobalTol);
-    // Global sees farther than local: darker in the middle of the cube.
-    float lv[9];
-    local->sample(x, lv);
-    EXPECT_LT(got[0], lv[0] - 0.5f);
+    for (const GlobalIntegration integration :
+         {GlobalIntegration::Piecewise, GlobalIntegration::Recursive}) {
+        SCOPED_TRACE(integration == GlobalIntegration::Recursive ? "recursive" : "piecewise");
+        GlobalVisibilityOptions go;
+        go.resolution = 12;  // spacing 4 voxels
+        go.integration = integration;
+        const GlobalVisibility g = computeGlobalVisibility(local, go);
+        EXPECT_EQ(g.integration(), integration);  // r_s·|ω_a| ≥ 8/√3 voxels > 1 grid step
+        EXPECT_EQ(g.resolution(), glm::ivec3(12));
+        const glm::ivec3 gp(6, 5, 7);
+        const glm::vec3 x = g.position(gp);
+        EXPECT_EQ(x, glm::vec3(25.5f, 21.5f, 29.5f));
+        const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
+        const auto expected = sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
+            double d = INFINITY;
+            for (int a = 0; a < 3; ++a) {
+                if (w[a] > 0) d = std::min(d, (47.0 - x[a]) / w[a]);
+                if (w[a] < 0) d = std::min(d, -double(x[a]) / w[a]);
+            }
+            return std::exp(-double(kSigma) * d);
+        });
+        // The last piece's band-2 truncation: it spans [e^(−σ0·r_s), 1] = [0.85, 1], and the ringing of
+        // a 9-coefficient expansion of such a step in ω stays within ≈ 0.15·0.2 = 0.03 per direction;
+        // through the projection (Cauchy–Schwarz, Σ w = 4π) ≤ 0.03·√(4π) ≈ 0.11 per coefficient.
+        // Trilinear interpolation of V^L between grid points adds no error here (interior points are
+        // all the same, and x_j lie on grid points only up to float rounding of the steps). The
+        // recursive integration interpolates the far transmittance exp(−σ0·d) between grid points
+        // instead: relative error ≤ (σ0·h)²/8 = 8·10⁻⁴ per hop (h = 4 voxels), a few hops here.
+        const double kGlobalTol = 0.03 * kSqrt4Pi;
+        float got[9];
+        g.sample(x, got);  // V^L ⊗ V^F at a grid point: no interpolation of the far part
+        for (int i = 0; i < 9; ++i) EXPECT_NEAR(got[i], expected[std::size_t(i)], kGlobalTol) << i;
+        // The test can fail: a missing or doubled piece changes V_0 by ≥ e^(±0.16) − 1 ≈ 15 %.
+        EXPECT_GT(std::abs(expected[0]) * 0.15, 2 * kGlobalTol);
+        // Global sees farther than local: darker in the middle of the cube.
+        float lv[9];
+        local->sample(x, lv);
+        EXPECT_LT(got[0], lv[0] - 0.5f);
+    }
 }
 
 TEST(GlobalVisibility, EmptySpaceSeesEverythingAndThreadsDoNotMatter) {
@@ -85,15 +100,21 @@ TEST(GlobalVisibility, EmptySpaceSeesEverythingAndThreadsDoNotMatter) {
     const auto local = localOf(v, test::rampTf(0.5f), o);
     GlobalVisibilityOptions go;
     go.resolution = 16;
-    go.threads = 1;
+    for (const GlobalIntegration integration :
+         {GlobalIntegration::Recursive, GlobalIntegration::Piecewise}) {
+        go.integration = integration;
+        go.threads = 1;
+        const GlobalVisibility a = computeGlobalVisibility(local, go);
+        go.threads = 2;
+        const GlobalVisibility b = computeGlobalVisibility(local, go);
+        ASSERT_EQ(a.integration(), integration);
+        ASSERT_EQ(a.bytes(), b.bytes());
+        for (int z = 0; z < 16; ++z)
+            for (int y = 0; y < 16; ++y)
+                for (int x = 0; x < 16; ++x)
+                    ASSERT_EQ(std::memcmp(a.at({x, y, z}), b.at({x, y, z}), 4 * sizeof(float)), 0);
+    }
     const GlobalVisibility a = computeGlobalVisibility(local, go);
-    go.threads = 2;
-    const GlobalVisibility b = computeGlobalVisibility(local, go);
-    ASSERT_EQ(a.bytes(), b.bytes());
-    for (int z = 0; z < 16; ++z)
-        for (int y = 0; y < 16; ++y)
-            for (int x = 0; x < 16; ++x)
-                ASSERT_EQ(std::memcmp(a.at({x, y, z}), b.at({x, y, z}), 4 * sizeof(float)), 0);
     // A corner point looking away from the ball sees almost everything; values stay in range.
     float c[4], n[4];
     a.sample(a.position({0, 0, 0}), c);
@@ -102,7 +123,9 @@ TEST(GlobalVisibility, EmptySpaceSeesEverythingAndThreadsDoNotMatter) {
     // Next to the ball (below it) the direction toward it (+z) is darker: V_2 ∝ z is negative.
     a.sample(a.position({8, 8, 5}), n);  // voxel (16.5, 16.5, 10.5), 5.5 voxels below the centre
     EXPECT_LT(n[2], -0.1f);
-    EXPECT_THROW(computeGlobalVisibility(local, {0, 1}), InputError);
+    GlobalVisibilityOptions none;
+    none.resolution = 0;
+    EXPECT_THROW(computeGlobalVisibility(local, none), InputError);
 }
 
 TEST(GlobalVisibility, ADenseSurfaceBetweenGridPointsIsShadedFromTheFineLocalField) {
@@ -146,4 +169,75 @@ TEST(GlobalVisibility, ADenseSurfaceBetweenGridPointsIsShadedFromTheFineLocalFie
     EXPECT_NEAR(got[0], expected[0], kSurfaceTol * expected[0]);
     EXPECT_LT(gridOnly[0], (1.0 - 2.5 * kSurfaceTol) * expected[0]);  // the test can fail
     EXPECT_NEAR(expected[0], 0.5 * kSqrt4Pi, 0.1 * kSqrt4Pi);         // half the sphere is open
+}
+
+TEST(GlobalVisibility, RecursiveIntegrationFollowsThePiecewiseFieldOnTheTorso) {
+    // The recursive integration reads the far transmittance back from the grid at every hop
+    // (global_visibility.h); on the 96³ torso under ct-bone (bone, air and partial-volume rims:
+    // the hard case for interpolation) its field must stay close to eq. 11 along every ray.
+    core::PhantomOptions po;
+    po.size = 96;
+    const core::Volume v = core::makePhantom("torso", po);
+    const optics::TransferFunction tf = optics::makePreset("ct-bone");
+    LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = kSweepRaysCoarse;
+    o.algorithm = VisibilityAlgorithm::Sweep;
+    o.radiusVoxels = 8.0;
+    const auto local = localOf(v, tf, o);
+    GlobalVisibilityOptions go;
+    go.resolution = 32;  // 3 voxels apart
+    go.integration = GlobalIntegration::Piecewise;
+    const GlobalVisibility piecewise = computeGlobalVisibility(local, go);
+    go.integration = GlobalIntegration::Recursive;
+    const GlobalVisibility recursive = computeGlobalVisibility(local, go);
+    ASSERT_EQ(recursive.integration(), GlobalIntegration::Recursive);
+    EXPECT_EQ(recursive.pointsSkipped(), piecewise.pointsSkipped());
+    double sumDiff = 0.0, maxDiff = 0.0, sumFar = 0.0;
+    int n = 0;
+    for (int z = 0; z < 32; ++z)
+        for (int y = 0; y < 32; ++y)
+            for (int x = 0; x < 32; ++x) {
+                const double a = piecewise.at({x, y, z})[0] / kSqrt4Pi;  // far visibility, 0…1
+                const double b = recursive.at({x, y, z})[0] / kSqrt4Pi;
+                ASSERT_TRUE(std::isfinite(b));
+                if (a > 1.0 - 1e-6 && b > 1.0 - 1e-6) continue;  // open (or skipped) in both
+                sumDiff += std::abs(a - b);
+                maxDiff = std::max(maxDiff, std::abs(a - b));
+                sumFar += 1.0 - a;
+                ++n;
+            }
+    ASSERT_GT(n, 1000);
+    const double meanDiff = sumDiff / n, meanOcclusion = sumFar / n;
+    RecordProperty("mean_abs_diff", std::to_string(meanDiff));
+    RecordProperty("max_abs_diff", std::to_string(maxDiff));
+    std::printf(
+        "recursive vs piecewise far V_0/sqrt(4pi): mean |diff| %.4f, max %.4f, mean "
+        "occlusion %.3f over %d points\n",
+        meanDiff, maxDiff, meanOcclusion, n);
+    // Measured over the 13 856 points not open in both: mean 0.012, max 0.107 (beside a rib,
+    // where a hop's stencil straddles bone), mean occlusion 0.349. The bounds are 2.5× and 2.3×
+    // that; a missing or doubled hop changes the occlusion itself, > 10× the mean bound.
+    EXPECT_LT(meanDiff, kRecursiveMeanTol);
+    EXPECT_LT(maxDiff, kRecursiveMaxTol);
+    EXPECT_GT(meanOcclusion, 10 * kRecursiveMeanTol);  // the test can fail
+}
+
+TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenAPieceIsShorterThanAGridStep) {
+    // r_s 2 voxels under a grid 4 voxels apart: a piece's far end would fall inside the stencil
+    // of points not yet computed, so the piecewise integration runs (and says so).
+    const core::Volume v = test::makeVolume({32, 32, 32}, [](int, int, int) { return 1000; });
+    LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 16;
+    o.radiusVoxels = 2.0;
+    const auto local = localOf(v, test::rampTf(0.05f), o);
+    GlobalVisibilityOptions go;
+    go.resolution = 8;
+    go.integration = GlobalIntegration::Recursive;
+    const GlobalVisibility g = computeGlobalVisibility(local, go);
+    EXPECT_EQ(g.integration(), GlobalIntegration::Piecewise);
+    go.integration = GlobalIntegration::Piecewise;
+    const GlobalVisibility p = computeGlobalVisibility(local, go);
+    EXPECT_EQ(std::memcmp(g.at({3, 4, 5}), p.at({3, 4, 5}), 4 * sizeof(float)), 0);
 }
