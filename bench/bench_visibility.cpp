@@ -15,8 +15,9 @@
 // changes — computed in full (LOD + local visibility) against updateLocalVisibility from the
 // previous field (LOD + only the blocks the edit reaches), 1:16, 32 rays, 4 coefficients, r_s 16.
 // Edits: ct-bone's rim point (250 HU, σt ×2: values 140…450 change), ct-soft-tissue's bone point
-// (600 HU, ×2: 220…3071), its fat point (−90 HU, ×2: −160…−30), and a colour-only change. Counters: blocks recomputed / stored, and how many changed level. Medians of 3; the end
-// prints the ratio per edit (update / full).
+// (600 HU, ×2: 220…3071), its fat point (−90 HU, ×2: −160…−30), and a colour-only change; arg 2:
+// 0 = the march (32 rays), 1 = the line sweep (26). Counters: blocks recomputed / stored, and how
+// many changed level. Medians of 3; the end prints the ratio per edit (update / full).
 // bench-deps: visibility optics core
 #include <benchmark/benchmark.h>
 
@@ -274,10 +275,13 @@ void BM_TfEdit(benchmark::State& state) {
     const auto pyramid = torsoPyramid();
     const auto budget =
         visibility::LodBudget::fromReduction(kReduction, pyramid->geometry().voxelCount());
+    const bool sweep = state.range(2) == 1;
     visibility::LocalVisibilityOptions o;
     o.coefficients = 4;
-    o.rays = 32;
+    o.rays = sweep ? visibility::kSweepRaysCoarse : 32;
     o.radiusVoxels = 16.0;
+    o.algorithm =
+        sweep ? visibility::VisibilityAlgorithm::Sweep : visibility::VisibilityAlgorithm::March;
     const optics::TransferFunction before = optics::makePreset(e.preset), after = edited(e);
     std::optional<visibility::LocalVisibility> previous;
     if (update) {
@@ -298,7 +302,8 @@ void BM_TfEdit(benchmark::State& state) {
                    : visibility::computeLocalVisibility(grid, table, o);
         benchmark::DoNotOptimize(v.blockData(0));
     }
-    state.SetLabel(std::string(e.name) + (update ? " update" : " full"));
+    state.SetLabel(std::string(e.name) + (update ? " update" : " full") +
+                   (sweep ? " sweep" : " march"));
     if (update) {
         state.counters["blocks_recomputed"] = double(st.blocksRecomputed);
         state.counters["blocks"] = double(st.blocks);
@@ -306,7 +311,7 @@ void BM_TfEdit(benchmark::State& state) {
     }
 }
 BENCHMARK(BM_TfEdit)
-    ->ArgsProduct({{0, 1, 2, 3}, {0, 1}})
+    ->ArgsProduct({{0, 1, 2, 3}, {0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime()
     ->Iterations(1)
@@ -349,13 +354,15 @@ class RatioReporter : public benchmark::ConsoleReporter {
             std::printf("Ritschel / local visibility at 1:%d: %.0f / %.0f ms = %.3f\n", v,
                         rit->second, local->second, rit->second / local->second);
         }
-        for (std::size_t e = 0; e < std::size(kEdits); ++e) {
-            const auto full = edit_.find(std::to_string(e) + "/0");
-            const auto upd = edit_.find(std::to_string(e) + "/1");
-            if (full == edit_.end() || upd == edit_.end()) continue;
-            std::printf("TF edit '%s': update / full = %.0f / %.0f ms = %.3f\n", kEdits[e].name,
-                        upd->second, full->second, upd->second / full->second);
-        }
+        for (std::size_t e = 0; e < std::size(kEdits); ++e)
+            for (const char* integrator : {"0", "1"}) {
+                const auto full = edit_.find(std::to_string(e) + "/0/" + integrator);
+                const auto upd = edit_.find(std::to_string(e) + "/1/" + integrator);
+                if (full == edit_.end() || upd == edit_.end()) continue;
+                std::printf("TF edit '%s' (%s): update / full = %.0f / %.0f ms = %.3f\n",
+                            kEdits[e].name, integrator[0] == '1' ? "sweep" : "march", upd->second,
+                            full->second, upd->second / full->second);
+            }
     }
 
   private:

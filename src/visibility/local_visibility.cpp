@@ -644,7 +644,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     // plane, so every crossing must be a sub-step end (pre-integration takes the value linear
     // between ends). From a voxel a step v crosses the planes of axis a at multiples of 1/|v_a|;
     // from the shifted lattice at odd multiples of 1/(2|v_a|): q is a multiple of lcm(|v_a|)
-    // (×2 when shifted), and at least as many as below.    // The flat voxel array the lines read (the pyramid's level 0 in x-fastest order): every line
+    // (×2 when shifted), and at least as many as below.
+    // The flat voxel array the lines read (the pyramid's level 0 in x-fastest order): every line
     // of a direction sees its sub-steps at the same fractional positions, so each sub-step's value
     // is a fixed stencil — the non-zero trilinear weights and their voxel offsets from the lattice
     // point's voxel — read with no position arithmetic.
@@ -1216,8 +1217,6 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
         return full("the previous field has other rays, coefficients or radius");
     if (previous.algorithm_ != options.algorithm)
         return full("the previous field was integrated by another algorithm");
-    if (options.algorithm == VisibilityAlgorithm::Sweep)
-        return full("the line sweep recomputes every point (a partial update is the march's)");
 
     const MultiresGrid& before = previous.grid();
     const auto profile =
@@ -1280,8 +1279,15 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
             std::copy_n(previous.blockData(b), m, out.data_.data() + out.offset_[b]);
         }
     }
-    const TraceCounts counts = traceBlocks(grid, table, options, *out.directions_, trace,
-                                           out.data_.data(), out.offset_, progress);
+    // Either integrator computes a block's points from the voxels alone (the sweep's lines start
+    // at the block's own lattice points and reach R, as the march's rays do), so the blocks
+    // recomputed here get exactly the values a full computation gives.
+    const TraceCounts counts =
+        options.algorithm == VisibilityAlgorithm::Sweep
+            ? sweepBlocks(grid, table, options, *out.directions_, latticeSteps(options.rays), trace,
+                          out.data_.data(), out.offset_, progress)
+            : traceBlocks(grid, table, options, *out.directions_, trace, out.data_.data(),
+                          out.offset_, progress);
     out.samplesTaken_ = counts.samples;
     out.raysTraced_ = counts.rays;
     out.pointsSkipped_ = counts.skipped;

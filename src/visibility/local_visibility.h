@@ -72,7 +72,8 @@
 // than the march in coarse blocks; the LOD still sets where V is stored). Points off both lattices
 // (samples of a partial edge block clamped onto the volume) are marched alone along the same
 // directions. The result is identical for any thread count (each point's directions are summed in
-// one fixed order). A TF update under the sweep recomputes in full.
+// one fixed order). A block's points depend on the voxels alone, as the march's do, so the TF
+// update below recomputes only the blocks an edit reaches under either integrator.
 //
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only

@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // TF update of the local visibility (updateLocalVisibility): bit for bit the field a full
 // computation gives, for edits over a value interval, colour-only edits, LOD reshuffles under a
-// budget and edits that move the TF's end points; and it recomputes only what the edit reaches.
+// budget and edits that move the TF's end points; and it recomputes only what the edit reaches —
+// under the march and under the line sweep.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -67,11 +68,14 @@ struct Field {
     }
 };
 
-Field field() {
+Field field(VisibilityAlgorithm algorithm = VisibilityAlgorithm::March) {
     static const auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(phantom()));
     Field f;
     f.pyramid = pyr;
-    f.options.rays = 8;  // the fewest for 4 coefficients: the test is about which blocks, not V
+    // The fewest for 4 coefficients (the test is about which blocks, not V), or the sweep's 26
+    // lattice steps.
+    f.options.rays = algorithm == VisibilityAlgorithm::Sweep ? kSweepRaysCoarse : 8;
+    f.options.algorithm = algorithm;
     f.options.coefficients = 4;
     // Rays reach past the next block (20 voxels): blocks two apart see each other, three do not.
     f.options.radiusVoxels = 20.0;
@@ -92,10 +96,19 @@ void expectIdentical(const LocalVisibility& a, const LocalVisibility& b) {
     }
 }
 
+/// The edits below, under the march and under the line sweep.
+class TfUpdateBy : public ::testing::TestWithParam<VisibilityAlgorithm> {};
+
 }  // namespace
 
-TEST(TfUpdate, AnEditOverAValueIntervalEqualsAFullComputationAndRecomputesOnlyNearIt) {
-    const Field f = field();
+INSTANTIATE_TEST_SUITE_P(Integrators, TfUpdateBy,
+                         ::testing::Values(VisibilityAlgorithm::March, VisibilityAlgorithm::Sweep),
+                         [](const auto& info) {
+                             return info.param == VisibilityAlgorithm::Sweep ? "Sweep" : "March";
+                         });
+
+TEST_P(TfUpdateBy, AnEditOverAValueIntervalEqualsAFullComputationAndRecomputesOnlyNearIt) {
+    const Field f = field(GetParam());
     const LocalVisibility before = f.full(ctTf(0.f));
     TfUpdateStats st;
     const LocalVisibility after = f.update(before, ctTf(0.4f), st);
@@ -116,7 +129,7 @@ TEST(TfUpdate, AnEditOverAValueIntervalEqualsAFullComputationAndRecomputesOnlyNe
               << st.pointsRecomputed << " of " << st.points << " points\n";
 }
 
-TEST(TfUpdate, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
+TEST_P(TfUpdateBy, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
     // Tissue (40) meets bone (700) exactly on a block face: neither block holds a value in the
     // edited interval (150…300), but a ray step from one to the other integrates σt over the
     // values between its ends, so the edit changes V on both sides and both blocks are sources.
@@ -125,7 +138,8 @@ TEST(TfUpdate, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
         {48, 16, 16}, [](int i, int, int) { return i < 16   ? 40
                                                    : i < 32 ? 700
                                                             : -1000; })));
-    f.options.rays = 8;
+    f.options.algorithm = GetParam();
+    f.options.rays = GetParam() == VisibilityAlgorithm::Sweep ? kSweepRaysCoarse : 8;
     f.options.coefficients = 4;
     f.options.radiusVoxels = 4.0;
     const LocalVisibility before = f.full(ctTf(0.f));
@@ -142,8 +156,8 @@ TEST(TfUpdate, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
     expectIdentical(after, expected);
 }
 
-TEST(TfUpdate, AColourOnlyEditChangesNoValueAndTracesNothing) {
-    const Field f = field();
+TEST_P(TfUpdateBy, AColourOnlyEditChangesNoValueAndTracesNothing) {
+    const Field f = field(GetParam());
     const LocalVisibility before = f.full(ctTf(0.2f));
     TfUpdateStats st;
     const LocalVisibility after = f.update(before, ctTf(0.2f, 0.5f), st);
@@ -153,8 +167,8 @@ TEST(TfUpdate, AColourOnlyEditChangesNoValueAndTracesNothing) {
     expectIdentical(after, f.full(ctTf(0.2f, 0.5f)));
 }
 
-TEST(TfUpdate, UnderABudgetBlocksThatChangeLevelAreRecomputedAndTheFieldStillMatches) {
-    Field f = field();
+TEST_P(TfUpdateBy, UnderABudgetBlocksThatChangeLevelAreRecomputedAndTheFieldStillMatches) {
+    Field f = field(GetParam());
     f.budget = LodBudget::fromReduction(8.0, f.pyramid->geometry().voxelCount());
     const LocalVisibility before = f.full(ctTf(0.f));
     TfUpdateStats st;
@@ -164,8 +178,8 @@ TEST(TfUpdate, UnderABudgetBlocksThatChangeLevelAreRecomputedAndTheFieldStillMat
     expectIdentical(after, f.full(ctTf(1.5f)));
 }
 
-TEST(TfUpdate, MovingAnEndPointRecomputesEverythingAndStillMatches) {
-    const Field f = field();
+TEST_P(TfUpdateBy, MovingAnEndPointRecomputesEverythingAndStillMatches) {
+    const Field f = field(GetParam());
     const LocalVisibility before = f.full(ctTf(0.f));
     TfUpdateStats st;
     const LocalVisibility after = f.update(before, ctTf(0.f, 1.f, -1100.f), st);
@@ -194,4 +208,10 @@ TEST(TfUpdate, AnotherVolumeOrOtherRaysComputeInFullAndSayWhy) {
     moreRays.update(before, ctTf(0.4f), st);
     EXPECT_FALSE(st.incremental);
     EXPECT_NE(st.reason.find("rays"), std::string::npos) << st.reason;
+    Field swept = f;
+    swept.options.algorithm = VisibilityAlgorithm::Sweep;
+    swept.options.rays = kSweepRaysCoarse;
+    swept.update(before, ctTf(0.4f), st);
+    EXPECT_FALSE(st.incremental);
+    EXPECT_NE(st.reason.find("rays"), std::string::npos) << st.reason;  // 8 march rays vs 26
 }
