@@ -24,12 +24,12 @@ using nlohmann::json;
 
 const std::vector<std::string>& stateParts() {
     static const std::vector<std::string> parts = {"camera", "transfer_function", "lights",
-                                                   "clip_planes"};
+                                                   "clip_planes", "method"};
     return parts;
 }
 
 State stateOf(const io::Scene& scene) {
-    return {scene.camera, scene.transferFunction, scene.lights, scene.clipPlanes};
+    return {scene.camera, scene.transferFunction, scene.lights, scene.clipPlanes, scene.method};
 }
 
 namespace {
@@ -343,7 +343,8 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
              "is " + std::to_string(version) + ", written by a newer voxlight (this one reads " +
                  std::to_string(kFormatVersion) + ")",
              "replay it with a newer voxlight");
-    if (version < 1) fail("version", "must be 1, got " + std::to_string(version), "\"version\": 1");
+    if (version < 1)
+        fail("version", "must be 1 or 2, got " + std::to_string(version), "\"version\": 2");
     if (doc.contains("description")) {
         if (!doc["description"].is_string())
             fail("description", "must be a string, got " + typeName(doc["description"]),
@@ -404,6 +405,9 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
         for (auto it = k.begin(); it != k.end(); ++it) {
             if (std::find(allowed.begin(), allowed.end(), it.key()) == allowed.end())
                 fail(at + "." + it.key(), "unknown key", "allowed keys: " + joinNames(allowed));
+            if (it.key() == "method" && version < kMethodPartVersion)
+                fail(at + ".method", "needs version 2 of the format (this file says 1)",
+                     "set \"version\": 2");
             if (it.key() != "time" && it.key() != "note") kf.parts[it.key()] = it.value();
         }
         if (!k.contains("time"))
@@ -492,6 +496,7 @@ void Recorder::record(double seconds, const State& state, const std::string& not
     s.transferFunction = state.transferFunction;
     s.lights = state.lights;
     s.clipPlanes = state.clipPlanes;
+    s.method = state.method;
     const json written = io::sceneDocument(s);
     json full = json::object();
     for (const auto& part : stateParts()) full[part] = written.value(part, json());

@@ -1,24 +1,26 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // Sessions: a recorded exploration — a scene, then a timeline of keyframes, each holding the
-// state of the camera, the transfer function, the lights and the clip planes at a time in seconds.
+// state of the camera, the transfer function, the lights, the clip planes and the method at a time
+// in seconds.
 // `voxlight replay` re-renders them (every keyframe, or a fixed frame rate); the viewer records
-// them through Recorder. The file format (version 1) is specified in docs/sessions.md:
+// them through Recorder. The file format (version 2; version 1 had no "method" part) is specified
+// in docs/sessions.md:
 //
 // {
-//   "format": "voxlight-session", "version": 1,
+//   "format": "voxlight-session", "version": 2,
 //   "description": "free text (optional)",
 //   "scene": "../scenes/demo-torso.json" | { ...a scene document, io/scene.h... },
 //   "keyframes": [
 //     {"time": 0.0},
 //     {"time": 2.5, "camera": {...}, "transfer_function": ..., "lights": [...],
-//                   "clip_planes": [...], "note": "free text (optional)"},
+//                   "clip_planes": [...], "method": ..., "note": "free text (optional)"},
 //     ...
 //   ]
 // }
 //
-// A keyframe holds whole *parts*: each of "camera", "transfer_function", "lights" and
-// "clip_planes" it names replaces that part of the state before it, in the scene file's own
+// A keyframe holds whole *parts*: each of "camera", "transfer_function", "lights", "clip_planes"
+// and "method" it names replaces that part of the state before it, in the scene file's own
 // syntax; the parts it leaves out carry over from the keyframe before (keyframe 0: from the
 // scene). A part set to null goes back to its default (as --set key=null). Times are seconds,
 // finite, ≥ 0 and strictly increasing; there is at least one keyframe.
@@ -57,7 +59,9 @@
 namespace voxlight::session {
 
 /// The session format this code reads and writes ("version"); newer files are refused.
-inline constexpr int kFormatVersion = 1;
+inline constexpr int kFormatVersion = 2;
+/// The first version with the "method" part (the viewer's method and shading switches).
+inline constexpr int kMethodPartVersion = 2;
 /// The "format" value that marks a session file.
 inline constexpr const char* kFormatName = "voxlight-session";
 /// The parts of a scene a keyframe may hold.
@@ -69,8 +73,9 @@ struct State {
     io::TransferFunctionDesc transferFunction;  ///< empty: the modality's default
     std::vector<io::LightDesc> lights;          ///< empty: the headlight
     std::vector<io::ClipPlaneDesc> clipPlanes;
+    io::MethodDesc method;  ///< held between keyframes (a switch of method is a cut)
 };
-/// The state of a scene (its camera, TF, lights and clip planes).
+/// The state of a scene (its camera, TF, lights, clip planes and method).
 State stateOf(const io::Scene& scene);
 
 struct Keyframe {

@@ -722,6 +722,33 @@ TEST(ViewCli, GlslLocalGlobalSwitchRecomputesNothing) {
     EXPECT_LE(a.fractionOver2, kGlFractionOver2);
 }
 
+// Item 6 with item 3's switch: the local/global shading switch is recorded (the session's
+// method part, format version 2), so the replay shades every state as the viewer did.
+TEST(ViewCli, TheLocalGlobalSwitchIsRecordedAndReplayed) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 40}, "transfer_function": "ct-bone",
+        "method": {"name": "sh-global", "params": {"rays": 16, "global_resolution": 20}},
+        "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 120, "height": 96}})";
+    std::ofstream(tmp / "steps.json")
+        << R"([{"shading": "local"}, {"shading": "global"}, {"shading": "local"}])";
+    const Result view = runScriptedView(*display, tmp);
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    const nlohmann::json rec = nlohmann::json::parse(std::ifstream(tmp / "rec.json"));
+    EXPECT_EQ(rec["version"], 2);
+    std::vector<std::string> methods;
+    for (const auto& k : rec["keyframes"])
+        if (k.contains("method")) methods.push_back(k["method"]["name"].get<std::string>());
+    EXPECT_EQ(methods, (std::vector<std::string>{"sh-global", "sh-local", "sh-global", "sh-local"}))
+        << rec.dump();
+    expectReplayMatchesScreenshot(tmp, 4);  // the first state and one per switch
+}
+
 // Item 7 of the issue: an EXR screenshot holds the image's linear radiance — on the CPU path
 // exactly what `voxlight render --exr` writes for the same scene (the worker's full pass is the
 // CLI's image bit for bit), on the GLSL path the same within the float film's agreement.
