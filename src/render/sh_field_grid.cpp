@@ -4,8 +4,10 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <glm/gtc/packing.hpp>
+#include <thread>
 
 #include "core/error.h"
 
@@ -46,7 +48,7 @@ glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients, std::
 namespace {
 template <class Field>
 ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t budgetBytes,
-                     int maxPerAxis) {
+                     int maxPerAxis, const core::Progress& progress) {
     ShFieldGrid g;
     g.coefficients = field.coefficients();
     g.res = shFieldGridResolution(dims, g.coefficients, budgetBytes, maxPerAxis);
@@ -55,7 +57,11 @@ ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t bud
     g.texels.assign(std::size_t(textures), std::vector<std::uint16_t>(4 * points, 0));
     for (int a = 0; a < 3; ++a)
         g.step[a] = g.res[a] > 1 ? float(dims[a] - 1) / float(g.res[a] - 1) : 0.f;
+    std::atomic<int> done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    progress.report("SH field resampling", 0.0);
     tbb::parallel_for(0, g.res.z, [&](int z) {
+        if (progress.cancelled()) return;  // the other slices are skipped, then it throws
         float v[16];
         for (int y = 0; y < g.res.y; ++y)
             for (int x = 0; x < g.res.x; ++x) {
@@ -66,22 +72,30 @@ ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t bud
                     g.texels[std::size_t(c / 4)][4 * i + std::size_t(c % 4)] =
                         glm::packHalf1x16(v[c]);
             }
+        const int now = ++done;
+        if (std::this_thread::get_id() == caller && !progress.cancelled())
+            progress.report("SH field resampling", double(now) / g.res.z);
     });
+    if (progress.cancelled()) throw CancelledError();
+    progress.report("SH field resampling", 1.0);
     return g;
 }
 }  // namespace
 
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes, int maxPerAxis) {
-    return resample(field, dims, budgetBytes, maxPerAxis);
+                            std::size_t budgetBytes, int maxPerAxis,
+                            const core::Progress& progress) {
+    return resample(field, dims, budgetBytes, maxPerAxis, progress);
 }
 ShFieldGrid resampleShField(const visibility::GlobalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes, int maxPerAxis) {
-    return resample(field, dims, budgetBytes, maxPerAxis);
+                            std::size_t budgetBytes, int maxPerAxis,
+                            const core::Progress& progress) {
+    return resample(field, dims, budgetBytes, maxPerAxis, progress);
 }
 ShFieldGrid resampleShField(const visibility::HierarchicalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes, int maxPerAxis) {
-    return resample(field, dims, budgetBytes, maxPerAxis);
+                            std::size_t budgetBytes, int maxPerAxis,
+                            const core::Progress& progress) {
+    return resample(field, dims, budgetBytes, maxPerAxis, progress);
 }
 
 }  // namespace voxlight::render

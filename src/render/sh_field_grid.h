@@ -21,6 +21,7 @@
 #include <glm/glm.hpp>
 #include <vector>
 
+#include "core/progress.h"
 #include "visibility/global_visibility.h"
 #include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
@@ -55,12 +56,16 @@ glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
                                  int maxPerAxis = 0);
 
 /// The field sampled at every grid point (parallel over z-slices; the same bytes for any thread
-/// count). `dims`: the volume's voxels per axis; budget and maxPerAxis as above.
+/// count). `dims`: the volume's voxels per axis; budget and maxPerAxis as above. Reports its
+/// progress ("SH field resampling") and stops within a slice of a cancel (CancelledError).
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0,
+                            const core::Progress& progress = core::Progress::none());
 ShFieldGrid resampleShField(const visibility::GlobalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0,
+                            const core::Progress& progress = core::Progress::none());
 ShFieldGrid resampleShField(const visibility::HierarchicalVisibility& field, const glm::ivec3& dims,
-                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0);
+                            std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0,
+                            const core::Progress& progress = core::Progress::none());
 
 }  // namespace voxlight::render

@@ -285,7 +285,7 @@ bool RenderWorker::preparePass(const RenderRequest& request, std::string* staleF
             out.setup = std::make_shared<const pipeline::CasterSetup>(std::move(*setup));
             const core::Stopwatch resample;
             const std::size_t before = shGridCache_.resampled();
-            out.shGrids = shGridCache_.get(*out.setup);
+            out.shGrids = shGridCache_.get(*out.setup, progress);  // a newer state cancels it
             if (shGridCache_.resampled() != before) out.shResampleSeconds = resample.seconds();
         }
     } catch (const CancelledError&) {

@@ -7,7 +7,8 @@ namespace voxlight::viewer {
 
 template <class Field>
 std::shared_ptr<const render::ShFieldGrid> ShGridCache::of(
-    const std::shared_ptr<const Field>& field, const glm::ivec3& dims) {
+    const std::shared_ptr<const Field>& field, const glm::ivec3& dims,
+    const core::Progress& progress) {
     if (!field) return nullptr;
     for (std::size_t i = 0; i < entries_.size(); ++i)
         if (entries_[i].field.get() == field.get()) {
@@ -17,25 +18,25 @@ std::shared_ptr<const render::ShFieldGrid> ShGridCache::of(
             return e.grid;
         }
     auto grid = std::make_shared<const render::ShFieldGrid>(
-        render::resampleShField(*field, dims, budget_, kMaxTextureSide));
+        render::resampleShField(*field, dims, budget_, kMaxTextureSide, progress));
     ++resampled_;
     entries_.insert(entries_.begin(), Entry{field, grid});
     if (entries_.size() > kKept) entries_.resize(kKept);
     return grid;
 }
 
-ShGrids ShGridCache::get(const pipeline::CasterSetup& setup) {
+ShGrids ShGridCache::get(const pipeline::CasterSetup& setup, const core::Progress& progress) {
     ShGrids g;
     if (!setup.volume) return g;
     const glm::ivec3 dims = setup.volume->dims();
     const pipeline::CasterSetup::ShFields& f = setup.sh;
     if (f.hierarchical) {
-        g.field = of(f.hierarchical, dims);
+        g.field = of(f.hierarchical, dims, progress);
     } else if (f.global) {
-        g.field = of(f.global, dims);
-        g.local = of(f.local, dims);
+        g.field = of(f.global, dims, progress);
+        g.local = of(f.local, dims, progress);
     } else if (f.local) {
-        g.field = of(f.local, dims);
+        g.field = of(f.local, dims, progress);
     }
     return g;
 }

@@ -34,8 +34,10 @@ class ShGridCache {
     static constexpr int kMaxTextureSide = 2048;
     explicit ShGridCache(std::size_t budgetBytes = render::kShFieldGridBudgetBytes)
         : budget_(budgetBytes) {}
-    /// The grids of `setup.sh`'s fields, resampled when not kept already.
-    ShGrids get(const pipeline::CasterSetup& setup);
+    /// The grids of `setup.sh`'s fields, resampled when not kept already. A cancel (through
+    /// `progress`) throws CancelledError and keeps nothing half-made.
+    ShGrids get(const pipeline::CasterSetup& setup,
+                const core::Progress& progress = core::Progress::none());
     /// Fields resampled so far (tests: a second get of the same field resamples nothing).
     std::size_t resampled() const { return resampled_; }
 
@@ -46,7 +48,8 @@ class ShGridCache {
     };
     template <class Field>
     std::shared_ptr<const render::ShFieldGrid> of(const std::shared_ptr<const Field>& field,
-                                                  const glm::ivec3& dims);
+                                                  const glm::ivec3& dims,
+                                                  const core::Progress& progress);
     std::size_t budget_;
     std::vector<Entry> entries_;
     std::size_t resampled_ = 0;

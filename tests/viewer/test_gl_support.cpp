@@ -4,6 +4,7 @@
 // inputs), and the worker's prepare-only requests.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <thread>
 
@@ -214,4 +215,36 @@ TEST(ShGrids, ResampledFieldHoldsTheFieldAtItsPointsAndIsMadeOncePerField) {
     ASSERT_TRUE(local);
     EXPECT_EQ(cache.get(*local).field, a.local);
     EXPECT_EQ(cache.resampled(), 2u);
+}
+
+TEST(ShGrids, ACancelledResamplingKeepsNothingAndTheNextRequestMakesTheGrid) {
+    // The viewer's worker cancels a resampling when a newer state arrives (up to seconds per
+    // field on a 256³ volume): it must stop, report the cancel and cache no half-filled grid.
+    const io::Scene scene =
+        io::parseScene(torsoDoc({{"name", "sh-local"}, {"params", {{"rays", 8}}}}), "test", "/");
+    pipeline::Session session;
+    const std::optional<pipeline::CasterSetup> setup = session.prepare(scene);
+    ASSERT_TRUE(setup && setup->sh.local);
+    std::atomic<bool> cancel{true};
+    std::vector<double> reported;
+    const core::Progress cancelled([&](const std::string&, double f) { reported.push_back(f); },
+                                   &cancel);
+    viewer::ShGridCache cache;
+    EXPECT_THROW(cache.get(*setup, cancelled), CancelledError);
+    EXPECT_EQ(cache.resampled(), 0u);
+    cancel = false;
+    reported.clear();
+    const core::Progress running([&](const std::string&, double f) { reported.push_back(f); },
+                                 &cancel);
+    const viewer::ShGrids g = cache.get(*setup, running);
+    ASSERT_TRUE(g.field);
+    EXPECT_EQ(cache.resampled(), 1u);
+    ASSERT_FALSE(reported.empty());
+    EXPECT_EQ(reported.front(), 0.0);
+    EXPECT_EQ(reported.back(), 1.0);
+    EXPECT_EQ(render::resampleShField(*setup->sh.local, setup->volume->dims(),
+                                      render::kShFieldGridBudgetBytes,
+                                      viewer::ShGridCache::kMaxTextureSide)
+                  .texels,
+              g.field->texels);  // the same grid as an uncancelled resampling
 }
