@@ -561,6 +561,35 @@ struct TraceCounts {
     std::uint64_t samples = 0, rays = 0, skipped = 0;
 };
 
+/// body(range, counts) over the indices [0, blocks) in parallel (one block per task at least) in
+/// an arena of `threads` (0 = all), with the local visibility's progress and cancel (the caller's
+/// thread reports; workers only stop taking blocks); returns the summed counts.
+template <class Body>
+TraceCounts overBlocks(std::size_t blocks, int threads, const core::Progress& progress,
+                       Body&& body) {
+    std::atomic<std::uint64_t> samples{0}, rays{0}, skipped{0};
+    std::atomic<std::size_t> done{0};
+    const std::thread::id caller = std::this_thread::get_id();
+    progress.report("local visibility", 0.0);
+    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const auto& range) {
+            if (progress.cancelled()) return;
+            TraceCounts n;
+            body(range, n);
+            samples += n.samples;
+            rays += n.rays;
+            skipped += n.skipped;
+            const std::size_t now = done.fetch_add(range.size()) + range.size();
+            if (std::this_thread::get_id() == caller)
+                progress.report("local visibility", double(now) / double(blocks));
+        });
+    });
+    if (progress.cancelled()) throw CancelledError();
+    progress.report("local visibility", 1.0);
+    return {samples, rays, skipped};
+}
+
 /// V^L at every sample point of `blocks` (stored blocks of `grid`), written at data + offset[b];
 /// parallel over blocks, each point alone with a fixed order of operations.
 TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
@@ -574,46 +603,29 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     const ValueField sigma(grid, table);
     const float radius = float(options.radiusVoxels * h), hf = float(h);
 
-    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
-    std::atomic<std::size_t> done{0};
-    const std::thread::id caller = std::this_thread::get_id();
-    progress.report("local visibility", 0.0);
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
-    arena.execute([&] {
-        tbb::parallel_for(
-            tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto& range) {
-                if (progress.cancelled()) return;
-                std::uint64_t samples = 0, traced = 0, skipped = 0;
-                double v[16];
-                for (std::size_t r = range.begin(); r != range.end(); ++r) {
-                    const std::size_t b = blocks[r];
-                    forEachSamplePoint(grid, b, C, data + offset[b],
-                                       [&](const glm::vec3& origin, float* dst, float spacing) {
-                                           if (!visibilityNeeded(grid, origin, spacing)) {
-                                               // Never read by a shaded sample: empty space's value.
-                                               setEmpty(dst, C);
-                                               ++skipped;
-                                               return;
-                                           }
-                                           pointVisibility(
-                                               sigma, set, origin, grid.dims(), radius, hf,
-                                               [](int, float&, float&) { return true; }, v,
-                                               samples);
-                                           traced += std::uint64_t(N);
-                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                                       });
-                }
-                samplesTotal += samples;
-                raysTotal += traced;
-                skippedTotal += skipped;
-                const std::size_t now = done.fetch_add(range.size()) + range.size();
-                if (std::this_thread::get_id() == caller)  // workers only stop taking blocks
-                    progress.report("local visibility", double(now) / double(blocks.size()));
-            });
-    });
-    if (progress.cancelled()) throw CancelledError();
-    progress.report("local visibility", 1.0);
-    return {samplesTotal, raysTotal, skippedTotal};
+    return overBlocks(
+        blocks.size(), options.threads, progress, [&](const auto& range, TraceCounts& counts) {
+            std::uint64_t &samples = counts.samples, &traced = counts.rays,
+                          &skipped = counts.skipped;
+            double v[16];
+            for (std::size_t r = range.begin(); r != range.end(); ++r) {
+                const std::size_t b = blocks[r];
+                forEachSamplePoint(grid, b, C, data + offset[b],
+                                   [&](const glm::vec3& origin, float* dst, float spacing) {
+                                       if (!visibilityNeeded(grid, origin, spacing)) {
+                                           // Never read by a shaded sample: empty space's value.
+                                           setEmpty(dst, C);
+                                           ++skipped;
+                                           return;
+                                       }
+                                       pointVisibility(
+                                           sigma, set, origin, grid.dims(), radius, hf,
+                                           [](int, float&, float&) { return true; }, v, samples);
+                                       traced += std::uint64_t(N);
+                                       for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                                   });
+            }
+        });
 }
 
 /// V^L at every sample point of the stored blocks by the line sweep (header comment), written at
@@ -778,16 +790,10 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         return quiet[cellIndex(c.x, c.y, c.z)] != 0;
     };
 
-    std::atomic<std::uint64_t> samplesTotal{0}, raysTotal{0}, skippedTotal{0};
-    std::atomic<std::size_t> done{0};
-    const std::thread::id caller = std::this_thread::get_id();
-    progress.report("local visibility", 0.0);
-    tbb::task_arena arena(options.threads > 0 ? options.threads : tbb::task_arena::automatic);
-    arena.execute([&] {
-        tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks.size(), 1), [&](const auto&
-                                                                                        range) {
-            if (progress.cancelled()) return;
-            std::uint64_t samples = 0, traced = 0, skipped = 0;
+    return overBlocks(
+        blocks.size(), options.threads, progress, [&](const auto& range, TraceCounts& counts) {
+            std::uint64_t &samples = counts.samples, &traced = counts.rays,
+                          &skipped = counts.skipped;
             double v[16];
             std::vector<std::uint8_t> stepQuiet;                      // per lattice step of a line
             std::vector<std::pair<std::size_t, std::size_t>> copies;  // clamped ← source
@@ -1079,17 +1085,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 }
                 copyClamped();
             }
-            samplesTotal += samples;
-            raysTotal += traced;
-            skippedTotal += skipped;
-            const std::size_t now = done.fetch_add(range.size()) + range.size();
-            if (std::this_thread::get_id() == caller)
-                progress.report("local visibility", double(now) / double(blocks.size()));
         });
-    });
-    if (progress.cancelled()) throw CancelledError();
-    progress.report("local visibility", 1.0);
-    return {samplesTotal, raysTotal, skippedTotal};
 }
 
 /// Per block of the pyramid: whether a TF change from `before` to `after` (selections; `changed`:
