@@ -1666,12 +1666,9 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         }
         std::shared_ptr<pvrt::RadianceVolume> r;
         if (compressed) {
-            const auto cp = run.get<pvrt::Cpca>("pvrt_cpca");
-            std::vector<glm::vec3> perPoint(std::size_t(t->layout.points) *
-                                            std::size_t(t->exitance));
-            cp->radiance(c, t->exitance, perPoint);
-            r = std::make_shared<pvrt::RadianceVolume>(
-                pvrt::scatterRadiance(t->layout, perPoint, t->exitance));
+            // Straight into the grid in the CPCA domain: no per-point buffer, empty points untouched.
+            r = std::make_shared<pvrt::RadianceVolume>(pvrt::combineCpca(
+                t->layout, *run.get<pvrt::Cpca>("pvrt_cpca"), c, t->exitance, params.threads));
         } else {
             r = std::make_shared<pvrt::RadianceVolume>(
                 pvrt::combineTransfer(*t, c, params.threads));
