@@ -8,10 +8,12 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 
 #include "core/error.h"
 #include "render/dvr_march.h"
 #include "render/footprint.h"
+#include "sh/sh_basis.h"
 
 namespace voxlight::pvrt {
 
@@ -211,23 +213,71 @@ void combinePoint(const float* p, const float* w, int components, float* out) {
     for (int e = 0; e < L; ++e) out[e] = acc[e];
 }
 
+/// exitanceWeights (transfer.h) in float through the fixed-band SH polynomials (sh::evalSh) — per
+/// grid point of EyeFold, where the double recurrence cost more than the combination; equal to it
+/// within float rounding (tests).
+template <int n>
+void eyeWeights(float g, const glm::vec3& toEye, float* w) {
+    constexpr int band = n == 4 ? 1 : n == 9 ? 2 : 3;
+    float y[n];
+    sh::evalSh(band, -toEye, std::span<float>(y, n));
+    const float s = std::sqrt(4.f * std::numbers::pi_v<float>);
+    w[0] = 1.f;
+    float gl = 1.f;
+    for (int l = 1, j = 1; j < n; ++l) {
+        gl *= g;
+        for (int m = -l; m <= l; ++m, ++j) w[j] = gl * s * y[j];
+    }
+}
+
 template <int L>
 void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* projected,
-                   RadianceVolume& r, std::vector<std::uint64_t>& clampedPerSlice,
-                   const tbb::blocked_range<int>& zs) {
+                   const EyeFold* eye, RadianceVolume& r,
+                   std::vector<std::uint64_t>& clampedPerSlice, const tbb::blocked_range<int>& zs) {
     constexpr int n = L / 3;
     const int N = cpca.components;
     const std::size_t perCluster = std::size_t(N + 1) * L;
     const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
+    const std::size_t stride = eye ? 3 : L;  // floats per grid point written
     float* values = &r.values.data()->x;
+    const glm::vec3 orthoToEye = eye ? glm::vec3(-glm::normalize(eye->forward)) : glm::vec3(0.f);
+    // Perspective: eye − x in voxel coordinates, then to world directions (index → world is
+    // direction · diag(spacing); rows of its transpose applied as v · M).
+    const glm::vec3 eyeIndex =
+        eye ? glm::vec3(eye->geometry.worldToIndex(eye->eye)) : glm::vec3(0.f);
+    const glm::mat3 indexToWorld =
+        eye ? glm::mat3(glm::transpose(eye->geometry.direction *
+                                       glm::dmat3(glm::dvec3(eye->geometry.spacing.x, 0, 0),
+                                                  glm::dvec3(0, eye->geometry.spacing.y, 0),
+                                                  glm::dvec3(0, 0, eye->geometry.spacing.z))))
+            : glm::mat3(1.f);
     for (int z = zs.begin(); z < zs.end(); ++z) {
         std::uint64_t clamped = 0;
         for (std::size_t i = perSlice * std::size_t(z); i < perSlice * std::size_t(z + 1); ++i) {
             const std::int32_t s = layout.slot[i];
             if (s < 0) continue;  // stays 0 (fresh zeroed pages)
-            float* out = values + i * L;
+            float* out = values + i * stride;
+            float t[L];
             combinePoint<L>(projected + std::size_t(cpca.cluster[std::size_t(s)]) * perCluster,
-                            cpca.weights.data() + std::size_t(s) * std::size_t(N), N, out);
+                            cpca.weights.data() + std::size_t(s) * std::size_t(N), N,
+                            eye ? t : out);
+            if (eye) {
+                glm::vec3 toEye = orthoToEye;
+                if (!eye->orthographic) {
+                    const std::size_t xy = i - perSlice * std::size_t(z);
+                    const glm::ivec3 g(int(xy % std::size_t(layout.res.x)),
+                                       int(xy / std::size_t(layout.res.x)), z);
+                    toEye = glm::normalize((eyeIndex - layout.position(g)) * indexToWorld);
+                }
+                float w[n];
+                if constexpr (n > 1) eyeWeights<n>(eye->g, toEye, w);
+                glm::vec3 sum(0.f);
+                for (int j = 0; j < n; ++j)
+                    sum += w[j] * glm::vec3(t[3 * j], t[3 * j + 1], t[3 * j + 2]);
+                out[0] = sum.x, out[1] = sum.y, out[2] = sum.z;
+                clamped += negative(sum) ? 1 : 0;
+                continue;
+            }
             glm::vec3 v(out[0], out[1], out[2]);
             if constexpr (n == 1) {
                 clamped += clampAtZero(v) ? 1 : 0;
@@ -242,11 +292,14 @@ void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* 
 }  // namespace
 
 RadianceVolume combineCpca(const TransferLayout& layout, const Cpca& cpca,
-                           std::span<const glm::vec3> light, int exitance, int threads) {
+                           std::span<const glm::vec3> light, int exitance, int threads,
+                           const EyeFold* eye) {
     VL_CHECK(validExitance(exitance));
     VL_CHECK_EQ(cpca.rows(), std::size_t(layout.points));
     static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
-    RadianceVolume r = emptyLike(layout, exitance);
+    if (exitance == 1) eye = nullptr;  // isotropic: nothing to evaluate toward the eye
+    RadianceVolume r = emptyLike(layout, eye ? 1 : exitance);
+    r.towardEye = eye != nullptr;
     std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
     tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
     arena.execute([&] {
@@ -257,22 +310,22 @@ RadianceVolume combineCpca(const TransferLayout& layout, const Cpca& cpca,
         switch (exitance) {
             case 1:
                 run([&](const auto& zs) {
-                    combineSlices<3>(layout, cpca, p, r, clampedPerSlice, zs);
+                    combineSlices<3>(layout, cpca, p, eye, r, clampedPerSlice, zs);
                 });
                 break;
             case 4:
                 run([&](const auto& zs) {
-                    combineSlices<12>(layout, cpca, p, r, clampedPerSlice, zs);
+                    combineSlices<12>(layout, cpca, p, eye, r, clampedPerSlice, zs);
                 });
                 break;
             case 9:
                 run([&](const auto& zs) {
-                    combineSlices<27>(layout, cpca, p, r, clampedPerSlice, zs);
+                    combineSlices<27>(layout, cpca, p, eye, r, clampedPerSlice, zs);
                 });
                 break;
             default:
                 run([&](const auto& zs) {
-                    combineSlices<48>(layout, cpca, p, r, clampedPerSlice, zs);
+                    combineSlices<48>(layout, cpca, p, eye, r, clampedPerSlice, zs);
                 });
                 break;
         }
@@ -294,7 +347,11 @@ class PvrtShader {
           worldToIndex_(geometry.worldToIndexMatrix()),
           origin_(geometry.origin) {}
     render::Scatter scatter(const render::ShadeInput& in) const {
-        return {radiance_->sample(worldToIndex_ * (in.position - origin_)), glm::vec3(0.f)};
+        glm::vec3 s = radiance_->sample(worldToIndex_ * (in.position - origin_));
+        // L_s evaluated toward the eye per grid point (EyeFold) is clamped after the blend, as
+        // the per-sample evaluation; S (n = 1) is ≥ 0 already, so this changes nothing there.
+        clampAtZero(s);
+        return {s, glm::vec3(0.f)};
     }
     const PvrtShader& forRay(const glm::vec3&) const { return *this; }
 

@@ -298,6 +298,49 @@ TEST(PvrtExitance, CpcaDomainCombinationEqualsTheTwoStepOne) {
                     if (layout.slot[i / std::size_t(n)] < 0) ASSERT_EQ(a, 0.f) << i;
                     ASSERT_NEAR(a, b, kFusedTol * magnitude(i, ch)) << i << " " << ch;
                 }
+            // Toward an eye per grid point (EyeFold), perspective and orthographic: Σ_j w_j t_j
+            // with the double exitanceWeights of the direction from each point to the eye.
+            core::Geometry geometry;
+            geometry.dims = {14, 10, 12};
+            geometry.spacing = {0.8, 1.1, 1.3};
+            geometry.origin = {-5.0, 3.0, 2.0};
+            geometry.direction =
+                glm::dmat3(glm::dvec3(0, 1, 0), glm::dvec3(-1, 0, 0), glm::dvec3(0, 0, 1));
+            for (bool orthographic : {false, true}) {
+                if (n == 1) break;
+                const pvrt::EyeFold fold{.g = 0.6f,
+                                         .geometry = geometry,
+                                         .orthographic = orthographic,
+                                         .eye = {40.0, -25.0, 60.0},
+                                         .forward = glm::normalize(glm::dvec3(-1, 0.5, -1.5))};
+                const pvrt::RadianceVolume toward =
+                    pvrt::combineCpca(layout, c, light, n, 2, &fold);
+                ASSERT_TRUE(toward.towardEye);
+                ASSERT_EQ(toward.exitance, 1);
+                ASSERT_EQ(toward.values.size(), layout.slot.size());
+                for (int z = 0; z < layout.res.z; ++z)
+                    for (int y = 0; y < layout.res.y; ++y)
+                        for (int x = 0; x < layout.res.x; ++x) {
+                            const std::size_t i = layout.linear({x, y, z});
+                            const glm::dvec3 world =
+                                geometry.indexToWorld(glm::dvec3(layout.position({x, y, z})));
+                            const glm::vec3 toEye(orthographic ? -fold.forward
+                                                               : glm::normalize(fold.eye - world));
+                            float we[pvrt::kMaxExitance];
+                            pvrt::exitanceWeights(n, fold.g, toEye, we);
+                            for (int ch = 0; ch < 3; ++ch) {
+                                double sum = 0, size = 0;
+                                for (int j = 0; j < n; ++j) {
+                                    const std::size_t e = i * std::size_t(n) + std::size_t(j);
+                                    sum += double(we[j]) * want.values[e][ch];
+                                    size += std::abs(we[j]) * magnitude(e, ch);
+                                }
+                                ASSERT_TRUE(std::isfinite(toward.values[i][ch]));
+                                ASSERT_NEAR(toward.values[i][ch], sum, kFusedTol * size)
+                                    << x << " " << y << " " << z << " " << ch;
+                            }
+                        }
+            }
             float w[pvrt::kMaxExitance];
             pvrt::exitanceWeights(n, 0.6f, glm::normalize(glm::vec3(0.3f, -0.5f, 0.8f)), w);
             for (int k = 0; k < 200; ++k) {
