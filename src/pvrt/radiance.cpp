@@ -271,9 +271,13 @@ void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* 
                 }
                 float w[n];
                 if constexpr (n > 1) eyeWeights<n>(eye->g, toEye, w);
+                // Σ_j w_j t_j per channel: the weights spread over the n·3 entries, one vector
+                // product, then the three channels' sums.
+                float w3[L];
+                for (int e = 0; e < L; ++e) w3[e] = w[e / 3];
+                for (int e = 0; e < L; ++e) t[e] *= w3[e];
                 glm::vec3 sum(0.f);
-                for (int j = 0; j < n; ++j)
-                    sum += w[j] * glm::vec3(t[3 * j], t[3 * j + 1], t[3 * j + 2]);
+                for (int e = 0; e < L; e += 3) sum += glm::vec3(t[e], t[e + 1], t[e + 2]);
                 out[0] = sum.x, out[1] = sum.y, out[2] = sum.z;
                 clamped += negative(sum) ? 1 : 0;
                 continue;
