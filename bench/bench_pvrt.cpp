@@ -6,16 +6,23 @@
 // the track-length and the collision estimator (second arg 0 / 1). Counters: photons/s,
 // collisions and splats (flights or collisions scored) per photon, stored points. BM_DirectTorso128: the direct part (slice
 // sweeps, 162 directions, SH order 4) on the same torso at transfer grids 64³ and 128³.
+// BM_LightChange: pvrt_radiance's combination (pvrt::combineCpca) on the torso's 64³ grid with
+// a synthetic CPCA of the pipeline's shape (128 clusters × 4 components, SH-16 basis lights), for
+// n = 1 and 16 exitance coefficients (first arg), keeping the n coefficients (second arg 0) or
+// evaluated toward a perspective eye per grid point (1).
 // bench-deps: pvrt pathtrace render grid optics core
 #include <benchmark/benchmark.h>
 
+#include <cmath>
 #include <memory>
+#include <vector>
 
 #include "core/phantoms.h"
 #include "grid/brick_grid.h"
 #include "optics/presets.h"
 #include "pvrt/direct.h"
 #include "pvrt/photons.h"
+#include "pvrt/radiance.h"
 #include "render/ray_caster.h"
 
 using namespace voxlight;
@@ -104,6 +111,36 @@ void BM_DirectTorso128(benchmark::State& state) {
     state.counters["points"] = double(layout.points);
 }
 
+void BM_LightChange(benchmark::State& state) {
+    const Scene& s = torso();
+    const int n = int(state.range(0)), m = 16;
+    const pvrt::TransferLayout layout = pvrt::makeTransferLayout(*s.volume, *s.cells, 64);
+    pvrt::Cpca c;
+    c.dim = n * m * 3;
+    c.clusters = 128;
+    c.components = 4;
+    auto pseudo = [](std::size_t i) { return float(std::sin(0.37 * double(i) + 0.1)); };
+    c.means.resize(std::size_t(c.clusters) * c.dim);
+    c.basis.resize(std::size_t(c.clusters) * c.components * c.dim);
+    for (std::size_t i = 0; i < c.means.size(); ++i) c.means[i] = pseudo(i);
+    for (std::size_t i = 0; i < c.basis.size(); ++i) c.basis[i] = 0.1f * pseudo(i + 7);
+    c.cluster.resize(std::size_t(layout.points));
+    c.weights.resize(std::size_t(layout.points) * c.components);
+    for (std::size_t i = 0; i < c.cluster.size(); ++i) c.cluster[i] = std::int32_t(i * 7 % 128);
+    for (std::size_t i = 0; i < c.weights.size(); ++i) c.weights[i] = pseudo(i + 3);
+    std::vector<glm::vec3> light(static_cast<std::size_t>(m));
+    for (int k = 0; k < m; ++k) light[std::size_t(k)] = glm::vec3(pseudo(std::size_t(k) + 11));
+    const pvrt::EyeFold eye{.g = 0.6f,
+                            .geometry = s.volume->geometry(),
+                            .eye = s.volume->geometry().indexToWorld(glm::dvec3(64, -400, 64))};
+    for (auto _ : state) {
+        const pvrt::RadianceVolume r =
+            pvrt::combineCpca(layout, c, light, n, 0, state.range(1) ? &eye : nullptr);
+        benchmark::DoNotOptimize(r.values.data());
+    }
+    state.counters["points"] = double(layout.points);
+}
+
 BENCHMARK(BM_PhotonsSphere32)
     ->ArgsProduct({{0, 1}, {0, 1}})
     ->Unit(benchmark::kMillisecond)
@@ -113,6 +150,12 @@ BENCHMARK(BM_PhotonsTorso128)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 BENCHMARK(BM_DirectTorso128)->Arg(64)->Arg(128)->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_LightChange)
+    ->Args({1, 0})
+    ->Args({16, 0})
+    ->Args({16, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 }  // namespace
 

@@ -64,6 +64,7 @@
 // ritschel local_shadows and global_shadows, sh-local local_shadows.
 #include <cmath>
 #include <map>
+#include <optional>
 #include <sstream>
 
 #include "core/hash.h"
@@ -1329,6 +1330,11 @@ struct PvrtParams {
     /// HG asymmetry (the path tracer's phase_g): the photons' scattering and, with exitance > 1,
     /// the render's in-scattering toward the eye; a TF phase g channel overrides it per sample.
     float phaseG = 0.f;
+    /// exitance > 1: evaluate the coefficients toward the eye once per grid point at the light or
+    /// camera change ("grid", pvrt::EyeFold; one RGB per point), or per sample in the frame
+    /// ("sample": n RGB per point, no rerun on a camera move). "grid" needs CPCA (clusters > 0)
+    /// and no TF phase g channel; otherwise it is per sample.
+    bool evaluateAtGrid = true;
     bool multiple = true;  ///< the "multiple_scattering" effect with max_bounces > 1
     int maxBounces = 1;
     pvrt::PhotonOptions photons;
@@ -1396,6 +1402,7 @@ PvrtParams parsePvrtParams(const io::Scene& scene, const render::RenderOptions& 
         p.fail("exitance_coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(s.exitance),
                "SH coefficients of the incident radiance (bands 0…3); 1 = isotropic scattering");
     s.phaseG = float(p.number("phase_g", 0.0, -0.99, 0.99));
+    s.evaluateAtGrid = p.choice("exitance_evaluation", "grid", {"grid", "sample"}) == "grid";
     s.photons.phaseG = s.phaseG;
     s.maxBounces = parseMaxBounces(scene, p);
     s.multiple = s.maxBounces > 1;
@@ -1652,19 +1659,23 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
 
     // Per light change: the lights (or the camera's headlight, when the scene has none) projected
     // into the basis and combined. Kept in memory, so a camera move under fixed lights reuses it.
-    Stage radiance{"pvrt_radiance",
-                   StageKind::Precompute,
-                   {transferStage, "pvrt_cpca", "lights", "camera (headlight only)"}};
     const bool compressed = params.clusters > 0;
-    radiance.key = [transferStage, compressed](const Run& run) {
+    // n > 1 evaluated toward the eye per grid point: the camera and phase_g are inputs too.
+    const bool towardEye = compressed && params.exitance > 1 && params.evaluateAtGrid;
+    Stage radiance{
+        "pvrt_radiance",
+        StageKind::Precompute,
+        {transferStage, "pvrt_cpca", "lights", towardEye ? "camera" : "camera (headlight only)"}};
+    radiance.key = [transferStage, compressed, towardEye, g = params.phaseG](const Run& run) {
         KeyBuilder k(run, "pvrt_radiance");
         k.stage(transferStage).stage("lights");
         if (compressed) k.stage("pvrt_cpca");
-        if (run.scene().lights.empty()) k.stage("camera");
+        if (run.scene().lights.empty() || towardEye) k.stage("camera");
+        if (towardEye) k.json({{"toward_eye_phase_g", g}});
         return k.value();
     };
     radiance.notOnDisk = "recomputed per light change in milliseconds";
-    radiance.compute = [params, transferStage, compressed](Run& run) {
+    radiance.compute = [params, transferStage, compressed, towardEye](Run& run) {
         const auto t = run.get<pvrt::Transfer>(transferStage);
         std::vector<std::shared_ptr<const lights::Light>> ls = *run.get<LightList>("lights");
         if (ls.empty())
@@ -1680,17 +1691,27 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         }
         std::shared_ptr<pvrt::RadianceVolume> r;
         if (compressed) {
-            const auto cp = run.get<pvrt::Cpca>("pvrt_cpca");
-            std::vector<glm::vec3> perPoint(std::size_t(t->layout.points) *
-                                            std::size_t(t->exitance));
-            cp->radiance(c, t->exitance, perPoint);
+            // Straight into the grid in the CPCA domain: no per-point buffer, empty points untouched.
+            // Toward the eye unless the TF's phase g channel sets g per rendered sample.
+            std::optional<pvrt::EyeFold> eye;
+            if (towardEye && !run.get<TfArtifact>("transfer_function")->table->hasPhaseG()) {
+                const auto cam = run.get<render::Camera>("camera");
+                eye = pvrt::EyeFold{
+                    .g = params.phaseG,
+                    .geometry = run.get<LoadedVolume>("load_volume")->volume.geometry(),
+                    .orthographic = cam->projection() == render::Projection::Orthographic,
+                    .eye = cam->eye(),
+                    .forward = cam->forward()};
+            }
             r = std::make_shared<pvrt::RadianceVolume>(
-                pvrt::scatterRadiance(t->layout, perPoint, t->exitance));
+                pvrt::combineCpca(t->layout, *run.get<pvrt::Cpca>("pvrt_cpca"), c, t->exitance,
+                                  params.threads, eye ? &*eye : nullptr));
         } else {
             r = std::make_shared<pvrt::RadianceVolume>(
                 pvrt::combineTransfer(*t, c, params.threads));
         }
         run.details()["pvrt_radiance"] = {{"seconds", sw.seconds()},
+                                          {"toward_eye", r->towardEye},
                                           {"clamped_points", r->clamped},
                                           {"radiance_mb", double(r->bytes()) / 1048576.0}};
         const std::size_t bytes = r->bytes();
@@ -2507,7 +2528,8 @@ const RegisterMethod kPvrt(rayCasterMethod(
     "precomputed volume radiance transfer (Zhang 2013): single and multiple scattering under "
     "dynamic distant lights through SH or DSF basis lights, photon-mapped indirect light, CPCA",
     {"basis", "order", "directions", "resolution", "quadrature", "exitance_coefficients", "phase_g",
-     "max_bounces", "photons", "kernel_radius", "estimator", "clusters", "components", "memory_mb"},
+     "exitance_evaluation", "max_bounces", "photons", "kernel_radius", "estimator", "clusters",
+     "components", "memory_mb"},
     {"local_shadows", "global_shadows", "multiple_scattering"}));
 const RegisterMethod kIso(rayCasterMethod(
     Kind::Iso, "iso", "direct isosurface: first crossing of the isovalue, Lambertian",

@@ -439,41 +439,51 @@ void Cpca::radiance(std::span<const glm::vec3> light, std::span<glm::vec3> out) 
     radiance(light, 1, out);
 }
 
-void Cpca::radiance(std::span<const glm::vec3> light, int exitance,
-                    std::span<glm::vec3> out) const {
+std::vector<float> Cpca::projectLight(std::span<const glm::vec3> light, int exitance) const {
     VL_CHECK_GE(exitance, 1);
     const std::size_t n = std::size_t(exitance);
     VL_CHECK_EQ(light.size() * 3 * n, std::size_t(dim));
-    VL_CHECK_EQ(out.size(), rows() * n);
     const std::size_t block = light.size() * 3;  // one exitance coefficient's entries
-    // Per cluster: mean and components projected onto the light (Zhang eq. 18), per coefficient.
-    const int perCluster = components + 1;
-    std::vector<glm::vec3> projected(std::size_t(clusters) * perCluster * n);
-    auto project = [&](const float* v) {
+    const std::size_t perCluster = std::size_t(components + 1) * n * 3;
+    std::vector<float> projected(std::size_t(clusters) * perCluster);
+    // Each entry in double, rounded to float once (Zhang eq. 18).
+    auto project = [&](const float* v, float* out) {
         glm::dvec3 s(0.0);
         for (std::size_t k = 0; k < light.size(); ++k)
             for (int ch = 0; ch < 3; ++ch) s[ch] += double(v[k * 3 + ch]) * light[k][ch];
-        return glm::vec3(s);
+        for (int ch = 0; ch < 3; ++ch) out[ch] = float(s[ch]);
     };
     forEachIndex(0, clusters, [&](int c) {
-        glm::vec3* p = projected.data() + std::size_t(c) * perCluster * n;
+        float* p = projected.data() + std::size_t(c) * perCluster;
         for (std::size_t j = 0; j < n; ++j) {
-            p[j] = project(mean(c) + j * block);
+            project(mean(c) + j * block, p + j * 3);
             for (int i = 0; i < components; ++i)
-                p[(1 + std::size_t(i)) * n + j] = project(component(c, i) + j * block);
+                project(component(c, i) + j * block, p + ((1 + std::size_t(i)) * n + j) * 3);
         }
     });
+    return projected;
+}
+
+void Cpca::radiance(std::span<const glm::vec3> light, int exitance,
+                    std::span<glm::vec3> out) const {
+    const std::size_t n = std::size_t(exitance);
+    const std::vector<float> projected = projectLight(light, exitance);
+    VL_CHECK_EQ(out.size(), rows() * n);
+    const std::size_t perCluster = std::size_t(components + 1) * n * 3;
+    auto at = [&](const float* p, std::size_t i, std::size_t j) {
+        const float* v = p + (i * n + j) * 3;
+        return glm::vec3(v[0], v[1], v[2]);
+    };
     // Per row: the cluster's projected mean plus the weighted projected components (eq. 19).
     forEachBlock(Blocks{rows()}, core::Progress::none(),
                  [&](std::size_t, std::size_t begin, std::size_t end) {
                      for (std::size_t r = begin; r < end; ++r) {
-                         const glm::vec3* p =
-                             projected.data() + std::size_t(cluster[r]) * perCluster * n;
+                         const float* p = projected.data() + std::size_t(cluster[r]) * perCluster;
                          const float* w = weights.data() + r * std::size_t(components);
                          for (std::size_t j = 0; j < n; ++j) {
-                             glm::vec3 s = p[j];
+                             glm::vec3 s = at(p, 0, j);
                              for (int i = 0; i < components; ++i)
-                                 s += w[i] * p[(1 + std::size_t(i)) * n + j];
+                                 s += w[i] * at(p, 1 + std::size_t(i), j);
                              out[r * n + j] = s;
                          }
                      }

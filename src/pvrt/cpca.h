@@ -111,6 +111,11 @@ struct Cpca {
     /// The same for rows of n = exitance blocks of m·3 (transfer.h's [j][k][rgb]): out[row·n + j]
     /// = Σ_k rec(row)[(j·m + k)·3 + ch] · light[k][ch] (dim = n·m·3, out.size() = rows()·n).
     void radiance(std::span<const glm::vec3> light, int exitance, std::span<glm::vec3> out) const;
+    /// The lights projected onto every cluster's mean and components (Zhang eq. 18), the first
+    /// half of radiance(): clusters × (N+1) × n × RGB floats, [cluster][0 = mean, 1+i = component
+    /// i][j][channel], each a double sum over the m basis lights rounded to float once. radiance()
+    /// and pvrt::combineCpca (radiance.h) both build on it.
+    std::vector<float> projectLight(std::span<const glm::vec3> light, int exitance) const;
     /// Memory of the compressed representation.
     std::size_t bytes() const;
 };

@@ -8,10 +8,12 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <numbers>
 
 #include "core/error.h"
 #include "render/dvr_march.h"
 #include "render/footprint.h"
+#include "sh/sh_basis.h"
 
 namespace voxlight::pvrt {
 
@@ -31,26 +33,53 @@ glm::vec3 RadianceVolume::sample(const glm::vec3& p) const {
     return glm::mix(glm::mix(c00, c10, f.y), glm::mix(c01, c11, f.y), f.z);
 }
 
+namespace {
+/// Σ_j w_j t_j blended over the 8 trilinear corners, L = n·3 floats per corner: first the corners'
+/// coefficients (8 × L multiply-adds, vectorised with L constant), then one weighted sum per
+/// channel (w3[j·3 + ch] = w_j). The sum is linear, so this equals blending the corners' sums up
+/// to float rounding.
+template <int L>
+glm::vec3 blendWeighted(const float* const* corner, const float* cw, const float* w) {
+    float w3[L];
+    for (int e = 0; e < L; ++e) w3[e] = w[e / 3];
+    float acc[L];
+    for (int e = 0; e < L; ++e) acc[e] = cw[0] * corner[0][e];
+    for (int c = 1; c < 8; ++c)
+        for (int e = 0; e < L; ++e) acc[e] += cw[c] * corner[c][e];
+    for (int e = 0; e < L; ++e) acc[e] *= w3[e];
+    glm::vec3 s(0.f);
+    for (int e = 0; e < L; e += 3) s += glm::vec3(acc[e], acc[e + 1], acc[e + 2]);
+    return s;
+}
+}  // namespace
+
 glm::vec3 RadianceVolume::sampleWeighted(const glm::vec3& p, const float* w) const {
     const glm::vec3 g = glm::clamp((p + 0.5f) / scale - 0.5f, glm::vec3(0.f), glm::vec3(res - 1));
     const glm::ivec3 i0 = glm::min(glm::ivec3(g), res - 1);
     const glm::ivec3 i1 = glm::min(i0 + 1, res - 1);
     const glm::vec3 f = g - glm::vec3(i0);
     const std::size_t sy = std::size_t(res.x), sz = std::size_t(res.x) * std::size_t(res.y);
-    const int n = exitance;
-    // L_s at each corner (the sum is linear, so blending the sums = summing the blends).
+    const std::size_t n = std::size_t(exitance);
+    const float* base = &values.data()->x;
     auto at = [&](int x, int y, int z) {
-        const glm::vec3* t =
-            values.data() + (std::size_t(x) + sy * std::size_t(y) + sz * std::size_t(z)) * n;
-        glm::vec3 s(0.f);
-        for (int j = 0; j < n; ++j) s += w[j] * t[j];
-        return s;
+        return base + (std::size_t(x) + sy * std::size_t(y) + sz * std::size_t(z)) * n * 3;
     };
-    const glm::vec3 c00 = glm::mix(at(i0.x, i0.y, i0.z), at(i1.x, i0.y, i0.z), f.x);
-    const glm::vec3 c10 = glm::mix(at(i0.x, i1.y, i0.z), at(i1.x, i1.y, i0.z), f.x);
-    const glm::vec3 c01 = glm::mix(at(i0.x, i0.y, i1.z), at(i1.x, i0.y, i1.z), f.x);
-    const glm::vec3 c11 = glm::mix(at(i0.x, i1.y, i1.z), at(i1.x, i1.y, i1.z), f.x);
-    return glm::mix(glm::mix(c00, c10, f.y), glm::mix(c01, c11, f.y), f.z);
+    const float* corner[8] = {at(i0.x, i0.y, i0.z), at(i1.x, i0.y, i0.z), at(i0.x, i1.y, i0.z),
+                              at(i1.x, i1.y, i0.z), at(i0.x, i0.y, i1.z), at(i1.x, i0.y, i1.z),
+                              at(i0.x, i1.y, i1.z), at(i1.x, i1.y, i1.z)};
+    const float gx = 1.f - f.x, gy = 1.f - f.y, gz = 1.f - f.z;
+    const float cw[8] = {gx * gy * gz,  f.x * gy * gz,  gx * f.y * gz,  f.x * f.y * gz,
+                         gx * gy * f.z, f.x * gy * f.z, gx * f.y * f.z, f.x * f.y * f.z};
+    switch (exitance) {
+        case 1:
+            return blendWeighted<3>(corner, cw, w);
+        case 4:
+            return blendWeighted<12>(corner, cw, w);
+        case 9:
+            return blendWeighted<27>(corner, cw, w);
+        default:
+            return blendWeighted<48>(corner, cw, w);
+    }
 }
 
 namespace {
@@ -67,7 +96,7 @@ RadianceVolume emptyLike(const TransferLayout& layout, int exitance) {
     r.res = layout.res;
     r.scale = layout.scale;
     r.exitance = exitance;
-    r.values.assign(layout.slot.size() * std::size_t(exitance), glm::vec3(0.f));
+    r.values.resize(layout.slot.size() * std::size_t(exitance));  // zeros (ZeroedAllocator)
     return r;
 }
 bool negative(const glm::vec3& v) { return !(v.x >= 0.f && v.y >= 0.f && v.z >= 0.f); }
@@ -169,6 +198,147 @@ RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm
 }
 
 namespace {
+/// One stored point of combineCpca: out[e] = p[e] + Σ_i w_i·p[(1+i)·L + e], e < L = n·3, summed
+/// in the order of Cpca::radiance (mean first, then the components in order). L is a constant
+/// so the loops vectorise.
+template <int L>
+void combinePoint(const float* p, const float* w, int components, float* out) {
+    float acc[L];
+    for (int e = 0; e < L; ++e) acc[e] = p[e];
+    for (int i = 0; i < components; ++i) {
+        const float wi = w[i];
+        const float* b = p + std::size_t(1 + i) * L;
+        for (int e = 0; e < L; ++e) acc[e] += wi * b[e];
+    }
+    for (int e = 0; e < L; ++e) out[e] = acc[e];
+}
+
+/// exitanceWeights (transfer.h) in float through the fixed-band SH polynomials (sh::evalSh) — per
+/// grid point of EyeFold, where the double recurrence cost more than the combination; equal to it
+/// within float rounding (tests).
+template <int n>
+void eyeWeights(float g, const glm::vec3& toEye, float* w) {
+    constexpr int band = n == 4 ? 1 : n == 9 ? 2 : 3;
+    float y[n];
+    sh::evalSh(band, -toEye, std::span<float>(y, n));
+    const float s = std::sqrt(4.f * std::numbers::pi_v<float>);
+    w[0] = 1.f;
+    float gl = 1.f;
+    for (int l = 1, j = 1; j < n; ++l) {
+        gl *= g;
+        for (int m = -l; m <= l; ++m, ++j) w[j] = gl * s * y[j];
+    }
+}
+
+template <int L>
+void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* projected,
+                   const EyeFold* eye, RadianceVolume& r,
+                   std::vector<std::uint64_t>& clampedPerSlice, const tbb::blocked_range<int>& zs) {
+    constexpr int n = L / 3;
+    const int N = cpca.components;
+    const std::size_t perCluster = std::size_t(N + 1) * L;
+    const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
+    const std::size_t stride = eye ? 3 : L;  // floats per grid point written
+    float* values = &r.values.data()->x;
+    const glm::vec3 orthoToEye = eye ? glm::vec3(-glm::normalize(eye->forward)) : glm::vec3(0.f);
+    // Perspective: eye − x in voxel coordinates, then to world directions (index → world is
+    // direction · diag(spacing); rows of its transpose applied as v · M).
+    const glm::vec3 eyeIndex =
+        eye ? glm::vec3(eye->geometry.worldToIndex(eye->eye)) : glm::vec3(0.f);
+    const glm::mat3 indexToWorld =
+        eye ? glm::mat3(glm::transpose(eye->geometry.direction *
+                                       glm::dmat3(glm::dvec3(eye->geometry.spacing.x, 0, 0),
+                                                  glm::dvec3(0, eye->geometry.spacing.y, 0),
+                                                  glm::dvec3(0, 0, eye->geometry.spacing.z))))
+            : glm::mat3(1.f);
+    for (int z = zs.begin(); z < zs.end(); ++z) {
+        std::uint64_t clamped = 0;
+        for (std::size_t i = perSlice * std::size_t(z); i < perSlice * std::size_t(z + 1); ++i) {
+            const std::int32_t s = layout.slot[i];
+            if (s < 0) continue;  // stays 0 (fresh zeroed pages)
+            float* out = values + i * stride;
+            float t[L];
+            combinePoint<L>(projected + std::size_t(cpca.cluster[std::size_t(s)]) * perCluster,
+                            cpca.weights.data() + std::size_t(s) * std::size_t(N), N,
+                            eye ? t : out);
+            if (eye) {
+                glm::vec3 toEye = orthoToEye;
+                if (!eye->orthographic) {
+                    const std::size_t xy = i - perSlice * std::size_t(z);
+                    const glm::ivec3 g(int(xy % std::size_t(layout.res.x)),
+                                       int(xy / std::size_t(layout.res.x)), z);
+                    toEye = glm::normalize((eyeIndex - layout.position(g)) * indexToWorld);
+                }
+                float w[n];
+                if constexpr (n > 1) eyeWeights<n>(eye->g, toEye, w);
+                // Σ_j w_j t_j per channel: the weights spread over the n·3 entries, one vector
+                // product, then the three channels' sums.
+                float w3[L];
+                for (int e = 0; e < L; ++e) w3[e] = w[e / 3];
+                for (int e = 0; e < L; ++e) t[e] *= w3[e];
+                glm::vec3 sum(0.f);
+                for (int e = 0; e < L; e += 3) sum += glm::vec3(t[e], t[e + 1], t[e + 2]);
+                out[0] = sum.x, out[1] = sum.y, out[2] = sum.z;
+                clamped += negative(sum) ? 1 : 0;
+                continue;
+            }
+            glm::vec3 v(out[0], out[1], out[2]);
+            if constexpr (n == 1) {
+                clamped += clampAtZero(v) ? 1 : 0;
+                out[0] = v.x, out[1] = v.y, out[2] = v.z;
+            } else {
+                clamped += negative(v) ? 1 : 0;
+            }
+        }
+        clampedPerSlice[std::size_t(z)] = clamped;
+    }
+}
+}  // namespace
+
+RadianceVolume combineCpca(const TransferLayout& layout, const Cpca& cpca,
+                           std::span<const glm::vec3> light, int exitance, int threads,
+                           const EyeFold* eye) {
+    VL_CHECK(validExitance(exitance));
+    VL_CHECK_EQ(cpca.rows(), std::size_t(layout.points));
+    static_assert(sizeof(glm::vec3) == 3 * sizeof(float));
+    if (exitance == 1) eye = nullptr;  // isotropic: nothing to evaluate toward the eye
+    RadianceVolume r = emptyLike(layout, eye ? 1 : exitance);
+    r.towardEye = eye != nullptr;
+    std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
+    tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
+    arena.execute([&] {
+        const std::vector<float> projected = cpca.projectLight(light, exitance);
+        const float* p = projected.data();
+        const tbb::blocked_range<int> all(0, layout.res.z);
+        auto run = [&](auto body) { tbb::parallel_for(all, body); };
+        switch (exitance) {
+            case 1:
+                run([&](const auto& zs) {
+                    combineSlices<3>(layout, cpca, p, eye, r, clampedPerSlice, zs);
+                });
+                break;
+            case 4:
+                run([&](const auto& zs) {
+                    combineSlices<12>(layout, cpca, p, eye, r, clampedPerSlice, zs);
+                });
+                break;
+            case 9:
+                run([&](const auto& zs) {
+                    combineSlices<27>(layout, cpca, p, eye, r, clampedPerSlice, zs);
+                });
+                break;
+            default:
+                run([&](const auto& zs) {
+                    combineSlices<48>(layout, cpca, p, eye, r, clampedPerSlice, zs);
+                });
+                break;
+        }
+    });
+    for (std::uint64_t c : clampedPerSlice) r.clamped += c;
+    return r;
+}
+
+namespace {
 
 /// In-scattered radiance from the radiance volume at the sample (isotropic: no view dependence).
 class PvrtShader {
@@ -181,7 +351,11 @@ class PvrtShader {
           worldToIndex_(geometry.worldToIndexMatrix()),
           origin_(geometry.origin) {}
     render::Scatter scatter(const render::ShadeInput& in) const {
-        return {radiance_->sample(worldToIndex_ * (in.position - origin_)), glm::vec3(0.f)};
+        glm::vec3 s = radiance_->sample(worldToIndex_ * (in.position - origin_));
+        // L_s evaluated toward the eye per grid point (EyeFold) is clamped after the blend, as
+        // the per-sample evaluation; S (n = 1) is ≥ 0 already, so this changes nothing there.
+        clampAtZero(s);
+        return {s, glm::vec3(0.f)};
     }
     const PvrtShader& forRay(const glm::vec3&) const { return *this; }
 

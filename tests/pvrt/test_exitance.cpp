@@ -12,6 +12,7 @@
 
 #include "pathtrace/path_tracer.h"
 #include "pvrt/cpca.h"
+#include "pvrt/radiance.h"
 #include "pvrt/transfer.h"
 #include "sh/sh_basis.h"
 
@@ -192,4 +193,166 @@ TEST(PvrtExitance, CpcaCombinesEveryCoefficient) {
                          light[std::size_t(k)][ch];
                 EXPECT_NEAR(out[std::size_t(r * n + j)][ch], s, kFloatTol) << r << " " << j;
             }
+}
+
+namespace {
+
+/// A 7 × 5 × 6 grid where every third point is empty, stored points numbered in grid order.
+pvrt::TransferLayout sparseLayout() {
+    pvrt::TransferLayout l;
+    l.res = {7, 5, 6};
+    l.scale = glm::vec3(2.f);
+    l.slot.assign(7 * 5 * 6, -1);
+    for (std::size_t i = 0; i < l.slot.size(); ++i)
+        if (i % 3 != 1) l.slot[i] = l.points++;
+    return l;
+}
+
+/// The radiance volume the pipeline built before combineCpca: Cpca::radiance per stored point,
+/// then scattered into the grid.
+pvrt::RadianceVolume twoStep(const pvrt::TransferLayout& layout, const pvrt::Cpca& c,
+                             const std::vector<glm::vec3>& light, int n) {
+    std::vector<glm::vec3> perPoint(std::size_t(layout.points) * std::size_t(n));
+    c.radiance(light, n, perPoint);
+    return pvrt::scatterRadiance(layout, perPoint, n);
+}
+
+/// The frame's trilinear Σ_j w_j t_j as it was evaluated before (the corners' sums, blended); with
+/// `magnitude`, the same of |w_j|·|t_j| (the size of the terms, for a rounding tolerance).
+glm::vec3 mixOfSums(const pvrt::RadianceVolume& r, const glm::vec3& p, const float* w,
+                    bool magnitude = false) {
+    const glm::vec3 g =
+        glm::clamp((p + 0.5f) / r.scale - 0.5f, glm::vec3(0.f), glm::vec3(r.res - 1));
+    const glm::ivec3 i0 = glm::min(glm::ivec3(g), r.res - 1);
+    const glm::ivec3 i1 = glm::min(i0 + 1, r.res - 1);
+    const glm::vec3 f = g - glm::vec3(i0);
+    auto at = [&](int x, int y, int z) {
+        const glm::vec3* t =
+            r.values.data() +
+            (std::size_t(x) + std::size_t(r.res.x) * (std::size_t(y) + std::size_t(r.res.y) * z)) *
+                std::size_t(r.exitance);
+        glm::vec3 s(0.f);
+        for (int j = 0; j < r.exitance; ++j)
+            s += magnitude ? std::abs(w[j]) * glm::abs(t[j]) : w[j] * t[j];
+        return s;
+    };
+    const glm::vec3 c00 = glm::mix(at(i0.x, i0.y, i0.z), at(i1.x, i0.y, i0.z), f.x);
+    const glm::vec3 c10 = glm::mix(at(i0.x, i1.y, i0.z), at(i1.x, i1.y, i0.z), f.x);
+    const glm::vec3 c01 = glm::mix(at(i0.x, i0.y, i1.z), at(i1.x, i0.y, i1.z), f.x);
+    const glm::vec3 c11 = glm::mix(at(i0.x, i1.y, i1.z), at(i1.x, i1.y, i1.z), f.x);
+    return glm::mix(glm::mix(c00, c10, f.y), glm::mix(c01, c11, f.y), f.z);
+}
+
+}  // namespace
+
+TEST(PvrtExitance, CpcaDomainCombinationEqualsTheTwoStepOne) {
+    // The light change's fused pass (combineCpca: projected clusters → grid) against the previous
+    // Cpca::radiance + scatterRadiance, and the frame's corner-blended sampleWeighted against the
+    // previous blend of the corners' sums. Rows and lights mix signs (SH basis lights carry
+    // negative flux), so the n > 1 coefficients and some n = 1 sums are negative.
+    // Both are float sums of the same terms: the light change in the same order (only whether a
+    // multiply-add is fused may differ), the frame in another order (blend, then weight). Each of
+    // the ≤ ~200 roundings is ≤ 6e-8 of the running sum, itself ≤ Σ|term|: so the tolerance is
+    // relative to the sum of the terms' magnitudes, not to the (possibly cancelling) result.
+    constexpr float kFusedTol = 2e-5f;
+    const pvrt::TransferLayout layout = sparseLayout();
+    const int m = 4;
+    const std::vector<glm::vec3> light = {
+        {1.2f, 0.9f, 0.7f}, {-0.6f, 0.4f, -1.1f}, {0.3f, -0.8f, 0.5f}, {-0.2f, -0.3f, 0.9f}};
+    for (int n : {1, 4, 9, 16})
+        for (int clusters : {5, int(layout.points)}) {  // the latter: every cluster one member
+            SCOPED_TRACE(testing::Message() << "n " << n << ", clusters " << clusters);
+            const int dim = n * m * 3;
+            std::vector<float> rows(std::size_t(layout.points) * std::size_t(dim));
+            for (std::size_t i = 0; i < rows.size(); ++i)
+                rows[i] =
+                    float(std::sin(0.61 * double(i) + 0.3) + 0.4 * std::cos(0.013 * double(i)));
+            pvrt::CpcaOptions o;
+            o.clusters = clusters;
+            o.components = 3;
+            const pvrt::Cpca c = pvrt::compressCpca(rows, dim, o, core::Progress::none());
+            const pvrt::RadianceVolume want = twoStep(layout, c, light, n);
+            const pvrt::RadianceVolume got = pvrt::combineCpca(layout, c, light, n, 2);
+            ASSERT_EQ(got.values.size(), want.values.size());
+            // Σ|term| per entry: |mean| + Σ_i |w_i|·|component_i|, projected.
+            const std::vector<float> proj = c.projectLight(light, n);
+            auto magnitude = [&](std::size_t i, int ch) {
+                const std::int32_t s = layout.slot[i / std::size_t(n)];
+                if (s < 0) return 0.f;
+                const std::size_t e = (i % std::size_t(n)) * 3 + std::size_t(ch);
+                const float* p = proj.data() + std::size_t(c.cluster[std::size_t(s)]) *
+                                                   std::size_t(c.components + 1) * std::size_t(n) *
+                                                   3;
+                float sum = std::abs(p[e]);
+                for (int k = 0; k < c.components; ++k)
+                    sum += std::abs(c.weights[std::size_t(s) * std::size_t(c.components) + k]) *
+                           std::abs(p[std::size_t(1 + k) * std::size_t(n) * 3 + e]);
+                return sum;
+            };
+            EXPECT_EQ(got.clamped, want.clamped);
+            EXPECT_GT(want.clamped, 0u) << "no negative sums: the test would miss the clamp";
+            for (std::size_t i = 0; i < want.values.size(); ++i)
+                for (int ch = 0; ch < 3; ++ch) {
+                    const float a = got.values[i][ch], b = want.values[i][ch];
+                    ASSERT_TRUE(std::isfinite(a)) << i;
+                    if (layout.slot[i / std::size_t(n)] < 0) ASSERT_EQ(a, 0.f) << i;
+                    ASSERT_NEAR(a, b, kFusedTol * magnitude(i, ch)) << i << " " << ch;
+                }
+            // Toward an eye per grid point (EyeFold), perspective and orthographic: Σ_j w_j t_j
+            // with the double exitanceWeights of the direction from each point to the eye.
+            core::Geometry geometry;
+            geometry.dims = {14, 10, 12};
+            geometry.spacing = {0.8, 1.1, 1.3};
+            geometry.origin = {-5.0, 3.0, 2.0};
+            geometry.direction =
+                glm::dmat3(glm::dvec3(0, 1, 0), glm::dvec3(-1, 0, 0), glm::dvec3(0, 0, 1));
+            for (bool orthographic : {false, true}) {
+                if (n == 1) break;
+                const pvrt::EyeFold fold{.g = 0.6f,
+                                         .geometry = geometry,
+                                         .orthographic = orthographic,
+                                         .eye = {40.0, -25.0, 60.0},
+                                         .forward = glm::normalize(glm::dvec3(-1, 0.5, -1.5))};
+                const pvrt::RadianceVolume toward =
+                    pvrt::combineCpca(layout, c, light, n, 2, &fold);
+                ASSERT_TRUE(toward.towardEye);
+                ASSERT_EQ(toward.exitance, 1);
+                ASSERT_EQ(toward.values.size(), layout.slot.size());
+                for (int z = 0; z < layout.res.z; ++z)
+                    for (int y = 0; y < layout.res.y; ++y)
+                        for (int x = 0; x < layout.res.x; ++x) {
+                            const std::size_t i = layout.linear({x, y, z});
+                            const glm::dvec3 world =
+                                geometry.indexToWorld(glm::dvec3(layout.position({x, y, z})));
+                            const glm::vec3 toEye(orthographic ? -fold.forward
+                                                               : glm::normalize(fold.eye - world));
+                            float we[pvrt::kMaxExitance];
+                            pvrt::exitanceWeights(n, fold.g, toEye, we);
+                            for (int ch = 0; ch < 3; ++ch) {
+                                double sum = 0, size = 0;
+                                for (int j = 0; j < n; ++j) {
+                                    const std::size_t e = i * std::size_t(n) + std::size_t(j);
+                                    sum += double(we[j]) * want.values[e][ch];
+                                    size += std::abs(we[j]) * magnitude(e, ch);
+                                }
+                                ASSERT_TRUE(std::isfinite(toward.values[i][ch]));
+                                ASSERT_NEAR(toward.values[i][ch], sum, kFusedTol * size)
+                                    << x << " " << y << " " << z << " " << ch;
+                            }
+                        }
+            }
+            float w[pvrt::kMaxExitance];
+            pvrt::exitanceWeights(n, 0.6f, glm::normalize(glm::vec3(0.3f, -0.5f, 0.8f)), w);
+            for (int k = 0; k < 200; ++k) {
+                // Points across the grid and past its ends (clamped corners).
+                const glm::vec3 p(-1.f + 0.083f * float(k), 11.f - 0.061f * float(k),
+                                  float(k % 13) - 0.5f);
+                const glm::vec3 a = got.sampleWeighted(p, w), b = mixOfSums(got, p, w);
+                const glm::vec3 size = mixOfSums(got, p, w, true);
+                for (int ch = 0; ch < 3; ++ch) {
+                    ASSERT_TRUE(std::isfinite(a[ch])) << k;
+                    ASSERT_NEAR(a[ch], b[ch], kFusedTol * size[ch]) << k;
+                }
+            }
+        }
 }
