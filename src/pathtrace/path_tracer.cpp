@@ -98,6 +98,42 @@ struct Track {
     float length = 0.f;
 };
 
+/// Octant skip distances (PathTracer::Impl::octant) over a grid of `n` cells (x fastest), 8 per
+/// cell, from nonEmpty(linear index): per octant one sweep against its directions,
+/// D = 1 + the smallest D of the 7 forward neighbours (their cubes of side D − 1 and the cell
+/// itself make up its cube of side D); neighbours past the grid count as empty.
+template <class NonEmpty>
+void octantDistances(const glm::ivec3& n, NonEmpty&& nonEmpty, std::uint8_t* out) {
+    auto index = [&](int x, int y, int z) {
+        return std::size_t(x) +
+               std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
+    };
+    for (int o = 0; o < 8; ++o) {
+        const glm::ivec3 sgn((o & 1) ? -1 : 1, (o & 2) ? -1 : 1, (o & 4) ? -1 : 1);
+        // Forward neighbours first: each axis swept against its direction.
+        auto coord = [&](int a, int m) { return sgn[a] > 0 ? n[a] - 1 - m : m; };
+        for (int mz = 0; mz < n.z; ++mz)
+            for (int my = 0; my < n.y; ++my)
+                for (int mx = 0; mx < n.x; ++mx) {
+                    const int x = coord(0, mx), y = coord(1, my), z = coord(2, mz);
+                    const std::size_t i = index(x, y, z);
+                    if (nonEmpty(i)) {
+                        out[i * 8 + std::size_t(o)] = 0;
+                        continue;
+                    }
+                    int m = 255;
+                    for (int e = 1; e < 8; ++e) {
+                        const int u = x + ((e & 1) ? sgn.x : 0), v = y + ((e & 2) ? sgn.y : 0),
+                                  w = z + ((e & 4) ? sgn.z : 0);
+                        if (u < 0 || v < 0 || w < 0 || u >= n.x || v >= n.y || w >= n.z)
+                            continue;  // past the grid: empty
+                        m = std::min(m, int(out[index(u, v, w) * 8 + std::size_t(o)]));
+                    }
+                    out[i * 8 + std::size_t(o)] = std::uint8_t(std::min(255, m + 1));
+                }
+    }
+}
+
 /// An exponential step of unit rate: −ln(1 − ξ) from a 53-bit ξ (no truncated tail in float).
 float exponentialStep(core::CounterRng& rng) { return float(-std::log(1.0 - rng.uniformDouble())); }
 
@@ -136,6 +172,17 @@ struct PathTracer::Impl {
     std::vector<float> corners;
     int cornerSide = 1;
     bool blockSampling = false;
+    /// Octant skip distances, 8 per skip cell (octant o: bit a set for a negative direction on
+    /// axis a): 0 for a non-empty cell, else the side D of the largest cube of empty cells that
+    /// starts at the cell and extends D − 1 cells along the octant's directions (cells past the
+    /// grid count as empty: a ray never enters them), capped at 255. A ray heading into the
+    /// octant stays in that cube until its D-th boundary crossing on some axis, so it jumps
+    /// there: unlike the symmetric skip distances, matter behind the ray does not shorten the
+    /// jump (most empty cells next to bone have a symmetric distance of 1 or 2).
+    std::vector<std::uint8_t> octant;
+    /// The same per fine cell of each block (block × 8 entries), over the fine majorants, cells
+    /// past the block counting as empty (a piece ends where the ray leaves its block).
+    std::vector<std::uint8_t> fineOctant;
     /// Index-space box of the non-empty skip cells (empty when lo > hi).
     glm::vec3 busyLo{1.f}, busyHi{0.f};
 
@@ -205,6 +252,13 @@ struct PathTracer::Impl {
         return k;
     }
 
+    /// Fills `octant` from the skip cells' majorants.
+    void buildOctants() {
+        octant.assign(cells->size() * 8, 0);
+        octantDistances(
+            counts, [&](std::size_t i) { return cells->majorant(i) > 0.f; }, octant.data());
+    }
+
     /// Fills the fine majorants of every non-empty skip cell.
     void buildFine() {
         const int fs = fineSize, fc = fineCells;
@@ -226,6 +280,7 @@ struct PathTracer::Impl {
         cornerSide = cellSize + 1;
         const std::size_t side = std::size_t(cornerSide), cube = side * side * side;
         if (blockSampling) corners.assign(fineFirst.size() * cube, 0.f);
+        fineOctant.assign(fine.size() * 8, 0);
         const float widen = table->cellWidth();
         volume->visit([&](const auto& v) {
             tbb::parallel_for(std::size_t(0), fineFirst.size(), [&](std::size_t b) {
@@ -278,6 +333,9 @@ struct PathTracer::Impl {
                         }
                 fineUniform[b] =
                     std::all_of(out, out + block, [&](float m) { return m == out[0]; });
+                octantDistances(
+                    glm::ivec3(fc), [&](std::size_t e) { return out[e] > 0.f; },
+                    fineOctant.data() + b * block * 8);
             });
         });
     }
@@ -309,17 +367,19 @@ struct PathTracer::Impl {
         }
         if (!(s1 > s0)) return;
         grid::CellDda dda(*cells, k.o, k.d, s0, s1);
-        const std::uint8_t* dist = cells->skipDistances();
+        const std::uint8_t* oct =
+            octant.data() + ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
         float sa, sb;
         std::size_t i;
-        while (dda.step(sa, sb, i)) {
-            const int d = dist[i];
-            if (d == 0) {
-                if (!voxelCells(k, sa, sb, i, f)) return;
-                continue;
-            }
-            // An empty cell at the centre of an empty cube of radius d − 1 (as forEachNonEmptyRun).
-            if (d >= 3) dda.jump(d - 2);
+        while (!dda.done) {
+            // The current (not yet returned) cell: an empty one starts an empty cube of side D
+            // along the ray's octant, which the ray leaves at its D-th crossing on some axis; the
+            // jump makes the cube's last cell along the ray the current one (CellDda::jump with
+            // radius D − 1 uses only the cube's forward half).
+            const int d = oct[dda.index * 8];
+            if (d >= 2) dda.jump(d - 1);
+            if (!dda.step(sa, sb, i)) return;
+            if (d == 0 && !voxelCells(k, sa, sb, i, f)) return;
         }
     }
 
@@ -341,7 +401,7 @@ struct PathTracer::Impl {
         const int stride[3] = {1, fineCells, fineCells * fineCells};
         // left: steps on the axis before the DDA leaves the block (float rounding).
         int left[3], step[3];
-        float tNext[3], tDelta[3];
+        float tNext[3], tDelta[3], invDelta[3];
         int at = 0;
         for (int a = 0; a < 3; ++a) {
             const int v = std::clamp(int(std::floor(p[a] * invFs)), first[a], last[a]);
@@ -351,18 +411,24 @@ struct PathTracer::Impl {
                 left[a] = last[a] - v;
                 tNext[a] = (float(v + 1) * fs - k.o[a]) * k.invD[a];
                 tDelta[a] = fs * k.invD[a];
+                invDelta[a] = k.d[a] * invFs;
             } else if (k.d[a] < 0.f) {
                 step[a] = -stride[a];
                 left[a] = v - first[a];
                 tNext[a] = (float(v) * fs - k.o[a]) * k.invD[a];
                 tDelta[a] = -fs * k.invD[a];
+                invDelta[a] = -k.d[a] * invFs;
             } else {
                 step[a] = 0;
                 left[a] = 0;
                 tNext[a] = INFINITY;
                 tDelta[a] = INFINITY;
+                invDelta[a] = 0.f;
             }
         }
+        const std::uint8_t* oct = fineOctant.data() +
+                                  b * std::size_t(fineCells * fineCells * fineCells) * 8 +
+                                  ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
         float s = sa;
         while (true) {
             const int a = tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2)
@@ -370,6 +436,32 @@ struct PathTracer::Impl {
             const float e = std::min(tNext[a], sb);
             // A piece of majorant 0 has no collision: no call (every caller skips it).
             const float mj = m[at];
+            if (!(mj > 0.f)) {
+                // An empty fine cell starts an empty cube of side d along the ray's octant: the
+                // ray stays in it until its d-th crossing on some axis (tExit). Past sb: nothing
+                // more in this block; else the cube's last cell along the ray becomes the current
+                // one (at most d − 1 crossings per axis, as CellDda::jump).
+                const int d = oct[std::size_t(at) * 8];
+                if (d >= 2) {
+                    const float r = float(d - 1);
+                    const float tExit =
+                        std::min({tNext[0] + r * tDelta[0], tNext[1] + r * tDelta[1],
+                                  tNext[2] + r * tDelta[2]});
+                    if (!(tExit < sb)) return true;
+                    bool moved = false;
+                    for (int c = 0; c < 3; ++c) {
+                        if (!(tNext[c] < tExit)) continue;
+                        const int j = std::min(
+                            {int(std::ceil((tExit - tNext[c]) * invDelta[c])), d - 1, left[c]});
+                        if (j <= 0) continue;
+                        left[c] -= j;
+                        at += step[c] * j;
+                        tNext[c] += float(j) * tDelta[c];
+                        moved = true;
+                    }
+                    if (moved) continue;  // else (at the block's face) one ordinary step
+                }
+            }
             if (e > s) {
                 if (mj > 0.f && !f(s, e, mj, blk)) return false;
                 s = e;
@@ -560,7 +652,10 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     impl->dims = g.dims;
     impl->fineSize = impl->cellSize % kFineVoxels == 0 ? kFineVoxels : impl->cellSize;
     impl->fineCells = impl->cellSize / impl->fineSize;
-    if (impl->majorantGrid) impl->buildFine();
+    if (impl->majorantGrid) {
+        impl->buildFine();
+        impl->buildOctants();
+    }
     const auto& busy = impl->cells->nonEmptyCellRange();
     if (glm::all(glm::lessThanEqual(busy[0], busy[1]))) {
         constexpr float kPad = 1e-3f;  // voxels
@@ -591,6 +686,83 @@ double PathTracer::transmittance(const Ray& ray, double maxT, core::CounterRng& 
     Counters n;
     return impl_->volume->visit(
         [&](const auto& v) { return impl_->ratioTracking(v, ray, t0, t1, rng, n); });
+}
+
+std::vector<PathTracer::Piece> PathTracer::majorantPieces(const Ray& ray, double t0,
+                                                          double t1) const {
+    std::vector<Piece> out;
+    if (!(t1 > t0)) return out;
+    const Impl& im = *impl_;
+    im.traverse(im.track(ray, t0, t1), [&](float sa, float sb, float m, int) {
+        if (m > 0.f) out.push_back({t0 + double(sa), t0 + double(sb), m});
+        return true;
+    });
+    return out;
+}
+
+std::pair<std::uint64_t, std::uint64_t> PathTracer::checkSkipDistances() const {
+    const Impl& im = *impl_;
+    std::uint64_t checked = 0, bad = 0;
+    // Every entry of an 8-per-cell table over a grid of n cells against nonEmpty(x, y, z): the
+    // non-empty cells in each promised cube (its part inside the grid: cells past it count as
+    // empty) by a summed-volume table.
+    auto check = [&](const glm::ivec3& n, const std::uint8_t* oct, auto&& nonEmpty) {
+        const glm::ivec3 m = n + 1;
+        std::vector<std::uint32_t> sum(std::size_t(m.x) * m.y * m.z, 0);
+        auto at = [&](int x, int y, int z) -> std::uint32_t& {
+            return sum[std::size_t(x) +
+                       std::size_t(m.x) * (std::size_t(y) + std::size_t(m.y) * std::size_t(z))];
+        };
+        for (int z = 0; z < n.z; ++z)
+            for (int y = 0; y < n.y; ++y)
+                for (int x = 0; x < n.x; ++x)
+                    at(x + 1, y + 1, z + 1) = std::uint32_t(nonEmpty(x, y, z)) +
+                                              at(x, y + 1, z + 1) + at(x + 1, y, z + 1) +
+                                              at(x + 1, y + 1, z) - at(x, y, z + 1) -
+                                              at(x, y + 1, z) - at(x + 1, y, z) + at(x, y, z);
+        // Non-empty cells in [lo, hi] (inclusive).
+        auto count = [&](const glm::ivec3& lo, const glm::ivec3& hi) {
+            const glm::ivec3 a = lo, b = hi + 1;
+            return std::int64_t(at(b.x, b.y, b.z)) - at(a.x, b.y, b.z) - at(b.x, a.y, b.z) -
+                   at(b.x, b.y, a.z) + at(a.x, a.y, b.z) + at(a.x, b.y, a.z) + at(b.x, a.y, a.z) -
+                   at(a.x, a.y, a.z);
+        };
+        for (int z = 0; z < n.z; ++z)
+            for (int y = 0; y < n.y; ++y)
+                for (int x = 0; x < n.x; ++x)
+                    for (int o = 0; o < 8; ++o) {
+                        const std::size_t i =
+                            std::size_t(x) +
+                            std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
+                        const int d = oct[i * 8 + std::size_t(o)];
+                        ++checked;
+                        if (d == 0) {
+                            bad += !nonEmpty(x, y, z);
+                            continue;
+                        }
+                        const glm::ivec3 p(x, y, z);
+                        glm::ivec3 lo, hi;
+                        for (int a = 0; a < 3; ++a) {
+                            const bool neg = (o >> a) & 1;
+                            lo[a] = neg ? std::max(0, p[a] - (d - 1)) : p[a];
+                            hi[a] = neg ? p[a] : std::min(n[a] - 1, p[a] + (d - 1));
+                        }
+                        bad += count(lo, hi) != 0;
+                    }
+    };
+    if (!im.majorantGrid) return {0, 0};
+    check(im.counts, im.octant.data(),
+          [&](int x, int y, int z) { return im.cells->majorant(im.cells->index(x, y, z)) > 0.f; });
+    const int fc = im.fineCells;
+    const std::size_t block = std::size_t(fc) * fc * fc;
+    for (std::size_t b = 0; b < im.fineFirst.size(); ++b) {
+        const float* m = im.fine.data() + b * block;
+        check(glm::ivec3(fc), im.fineOctant.data() + b * block * 8, [&](int x, int y, int z) {
+            return m[std::size_t(x) +
+                     std::size_t(fc) * (std::size_t(y) + std::size_t(fc) * std::size_t(z))] > 0.f;
+        });
+    }
+    return {checked, bad};
 }
 
 float PathTracer::extinctionAt(const glm::dvec3& p) const {
