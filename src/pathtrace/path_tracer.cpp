@@ -98,6 +98,42 @@ struct Track {
     float length = 0.f;
 };
 
+/// Octant skip distances (PathTracer::Impl::octant) over a grid of `n` cells (x fastest), 8 per
+/// cell, from nonEmpty(linear index): per octant one sweep against its directions,
+/// D = 1 + the smallest D of the 7 forward neighbours (their cubes of side D − 1 and the cell
+/// itself make up its cube of side D); neighbours past the grid count as empty.
+template <class NonEmpty>
+void octantDistances(const glm::ivec3& n, NonEmpty&& nonEmpty, std::uint8_t* out) {
+    auto index = [&](int x, int y, int z) {
+        return std::size_t(x) +
+               std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
+    };
+    for (int o = 0; o < 8; ++o) {
+        const glm::ivec3 sgn((o & 1) ? -1 : 1, (o & 2) ? -1 : 1, (o & 4) ? -1 : 1);
+        // Forward neighbours first: each axis swept against its direction.
+        auto coord = [&](int a, int m) { return sgn[a] > 0 ? n[a] - 1 - m : m; };
+        for (int mz = 0; mz < n.z; ++mz)
+            for (int my = 0; my < n.y; ++my)
+                for (int mx = 0; mx < n.x; ++mx) {
+                    const int x = coord(0, mx), y = coord(1, my), z = coord(2, mz);
+                    const std::size_t i = index(x, y, z);
+                    if (nonEmpty(i)) {
+                        out[i * 8 + std::size_t(o)] = 0;
+                        continue;
+                    }
+                    int m = 255;
+                    for (int e = 1; e < 8; ++e) {
+                        const int u = x + ((e & 1) ? sgn.x : 0), v = y + ((e & 2) ? sgn.y : 0),
+                                  w = z + ((e & 4) ? sgn.z : 0);
+                        if (u < 0 || v < 0 || w < 0 || u >= n.x || v >= n.y || w >= n.z)
+                            continue;  // past the grid: empty
+                        m = std::min(m, int(out[index(u, v, w) * 8 + std::size_t(o)]));
+                    }
+                    out[i * 8 + std::size_t(o)] = std::uint8_t(std::min(255, m + 1));
+                }
+    }
+}
+
 /// An exponential step of unit rate: −ln(1 − ξ) from a 53-bit ξ (no truncated tail in float).
 float exponentialStep(core::CounterRng& rng) { return float(-std::log(1.0 - rng.uniformDouble())); }
 
@@ -129,6 +165,24 @@ struct PathTracer::Impl {
     std::vector<glm::ivec3> fineFirst, fineLast;  ///< per block: its fine cells (inclusive)
     std::vector<std::uint8_t> fineUniform;        ///< per block: all its entries are equal
     std::vector<float> fine;
+    /// Per block, a copy of the voxels its cells read (cellSize + 1 a side, x fastest; clamped
+    /// at the volume's far faces), as the float the view converts them to: a tracking sample in
+    /// the block reads 4 rows of one small array instead of 4 rows spread over the volume
+    /// (fewer cache lines). blockSampling: on (every axis ≥ 2 voxels).
+    std::vector<float> corners;
+    int cornerSide = 1;
+    bool blockSampling = false;
+    /// Octant skip distances, 8 per skip cell (octant o: bit a set for a negative direction on
+    /// axis a): 0 for a non-empty cell, else the side D of the largest cube of empty cells that
+    /// starts at the cell and extends D − 1 cells along the octant's directions (cells past the
+    /// grid count as empty: a ray never enters them), capped at 255. A ray heading into the
+    /// octant stays in that cube until its D-th boundary crossing on some axis, so it jumps
+    /// there: unlike the symmetric skip distances, matter behind the ray does not shorten the
+    /// jump (most empty cells next to bone have a symmetric distance of 1 or 2).
+    std::vector<std::uint8_t> octant;
+    /// The same per fine cell of each block (block × 8 entries), over the fine majorants, cells
+    /// past the block counting as empty (a piece ends where the ray leaves its block).
+    std::vector<std::uint8_t> fineOctant;
     /// Index-space box of the non-empty skip cells (empty when lo > hi).
     glm::vec3 busyLo{1.f}, busyHi{0.f};
 
@@ -141,6 +195,33 @@ struct PathTracer::Impl {
     template <class View>
     float sigma(const View& v, const glm::vec3& ijk) const {
         return table->extinction(v.sample(ijk.x, ijk.y, ijk.z));
+    }
+
+    /// σt at index point p, as sigma(v, p) bit for bit: the trilinear sample reads block `blk`'s
+    /// corner copy when the cell VolumeView::sample picks (after its clamps) lies in the block,
+    /// else the volume; the same arithmetic on the same floats.
+    template <class View>
+    [[gnu::always_inline]] float sigmaAt(const View& v, int blk, const glm::vec3& p) const {
+        if (blk < 0) return sigma(v, p);
+        const float x = std::min(std::max(p.x, 0.f), float(v.nx - 1));
+        const float y = std::min(std::max(p.y, 0.f), float(v.ny - 1));
+        const float z = std::min(std::max(p.z, 0.f), float(v.nz - 1));
+        const int i = std::min(int(x), v.nx - 2), j = std::min(int(y), v.ny - 2),
+                  kk = std::min(int(z), v.nz - 2);
+        const glm::ivec3 o = fineFirst[std::size_t(blk)] * fineSize;
+        const unsigned li = unsigned(i - o.x), lj = unsigned(j - o.y), lk = unsigned(kk - o.z);
+        const unsigned last = unsigned(cornerSide - 2);
+        if ((li > last) | (lj > last) | (lk > last)) return sigma(v, p);
+        const float fx = x - float(i), fy = y - float(j), fz = z - float(kk);
+        const std::size_t dj = std::size_t(cornerSide), dk = dj * dj;
+        const float* q = corners.data() + std::size_t(blk) * dk * dj + li + dj * lj + dk * lk;
+        const float c00 = q[0] + fx * (q[1] - q[0]);
+        const float c10 = q[dj] + fx * (q[dj + 1] - q[dj]);
+        const float c01 = q[dk] + fx * (q[dk + 1] - q[dk]);
+        const float c11 = q[dk + dj] + fx * (q[dk + dj + 1] - q[dk + dj]);
+        const float c0 = c00 + fy * (c10 - c00);
+        const float c1 = c01 + fy * (c11 - c01);
+        return table->extinction(v.slope * (c0 + fz * (c1 - c0)) + v.intercept);
     }
 
     /// ∇s (value/mm, world) at index point ijk by central differences one voxel apart.
@@ -171,6 +252,13 @@ struct PathTracer::Impl {
         return k;
     }
 
+    /// Fills `octant` from the skip cells' majorants.
+    void buildOctants() {
+        octant.assign(cells->size() * 8, 0);
+        octantDistances(
+            counts, [&](std::size_t i) { return cells->majorant(i) > 0.f; }, octant.data());
+    }
+
     /// Fills the fine majorants of every non-empty skip cell.
     void buildFine() {
         const int fs = fineSize, fc = fineCells;
@@ -188,6 +276,11 @@ struct PathTracer::Impl {
                 }
         fine.assign(fineFirst.size() * block, 0.f);
         fineUniform.assign(fineFirst.size(), 0);
+        blockSampling = dims.x >= 2 && dims.y >= 2 && dims.z >= 2;
+        cornerSide = cellSize + 1;
+        const std::size_t side = std::size_t(cornerSide), cube = side * side * side;
+        if (blockSampling) corners.assign(fineFirst.size() * cube, 0.f);
+        fineOctant.assign(fine.size() * 8, 0);
         const float widen = table->cellWidth();
         volume->visit([&](const auto& v) {
             tbb::parallel_for(std::size_t(0), fineFirst.size(), [&](std::size_t b) {
@@ -195,6 +288,19 @@ struct PathTracer::Impl {
                 const float coarse =
                     cells->majorant(cells->index(first.x / fc, first.y / fc, first.z / fc));
                 float* out = fine.data() + b * block;
+                if (blockSampling) {
+                    const glm::ivec3 o = first * fs;
+                    float* c = corners.data() + b * cube;
+                    for (std::size_t z = 0; z < side; ++z)
+                        for (std::size_t y = 0; y < side; ++y)
+                            for (std::size_t x = 0; x < side; ++x) {
+                                const glm::ivec3 at =
+                                    glm::min(o + glm::ivec3(int(x), int(y), int(z)), dims - 1);
+                                c[x + side * (y + side * z)] =
+                                    float(v.data[std::size_t(at.x) + v.sy * std::size_t(at.y) +
+                                                 v.sz * std::size_t(at.z)]);
+                            }
+                }
                 for (std::size_t e = 0; e < block; ++e) out[e] = coarse;  // cells past the grid
                 for (int k = first.z; k <= last.z; ++k)
                     for (int j = first.y; j <= last.y; ++j)
@@ -227,19 +333,23 @@ struct PathTracer::Impl {
                         }
                 fineUniform[b] =
                     std::all_of(out, out + block, [&](float m) { return m == out[0]; });
+                octantDistances(
+                    glm::ivec3(fc), [&](std::size_t e) { return out[e] > 0.f; },
+                    fineOctant.data() + b * block * 8);
             });
         });
     }
 
-    /// Calls f(sa, sb, majorant) for consecutive pieces of the track with a constant majorant
-    /// until f returns false: the skip cells by a DDA (Amanatides & Woo), empty ones crossed in
+    /// Calls f(sa, sb, majorant, block) for consecutive pieces of the track with a constant
+    /// majorant until f returns false (block: the fine block whose corner copy sigmaAt may read,
+    /// or −1): the skip cells by a DDA (Amanatides & Woo), empty ones crossed in
     /// jumps (their skip distances), non-empty ones in voxel cells with the fine majorants. Under
     /// one global majorant: one piece.
     template <class F>
     void traverse(const Track& k, F&& f) const {
         if (!(k.length > 0.f)) return;
         if (!majorantGrid) {
-            f(0.f, k.length, globalMajorant);
+            f(0.f, k.length, globalMajorant, -1);
             return;
         }
         // Only the part inside the box of the non-empty skip cells (outside it every cell is
@@ -257,68 +367,109 @@ struct PathTracer::Impl {
         }
         if (!(s1 > s0)) return;
         grid::CellDda dda(*cells, k.o, k.d, s0, s1);
-        const std::uint8_t* dist = cells->skipDistances();
+        const std::uint8_t* oct =
+            octant.data() + ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
         float sa, sb;
         std::size_t i;
-        while (dda.step(sa, sb, i)) {
-            const int d = dist[i];
-            if (d == 0) {
-                if (!voxelCells(k, sa, sb, i, f)) return;
-                continue;
-            }
-            // An empty cell at the centre of an empty cube of radius d − 1 (as forEachNonEmptyRun).
-            if (d >= 3) dda.jump(d - 2);
+        while (!dda.done) {
+            // The current (not yet returned) cell: an empty one starts an empty cube of side D
+            // along the ray's octant, which the ray leaves at its D-th crossing on some axis; the
+            // jump makes the cube's last cell along the ray the current one (CellDda::jump with
+            // radius D − 1 uses only the cube's forward half).
+            const int d = oct[dda.index * 8];
+            if (d >= 2) dda.jump(d - 1);
+            if (!dda.step(sa, sb, i)) return;
+            if (d == 0 && !voxelCells(k, sa, sb, i, f)) return;
         }
     }
 
     /// The piece [sa, sb] of the track inside non-empty skip cell `cell`, by a DDA over its fine
     /// cells; false when f stopped.
     template <class F>
-    bool voxelCells(const Track& k, float sa, float sb, std::size_t cell, F&& f) const {
+    [[gnu::always_inline]] bool voxelCells(const Track& k, float sa, float sb, std::size_t cell,
+                                           F&& f) const {
         const std::int32_t slot = fineSlot[cell];
         const float coarse = cells->majorant(cell);
-        if (slot < 0) return f(sa, sb, coarse);
+        if (slot < 0) return f(sa, sb, coarse, -1);
         const std::size_t b = std::size_t(slot);
         const float* m = fine.data() + b * std::size_t(fineCells * fineCells * fineCells);
-        if (fineUniform[b]) return f(sa, sb, m[0]);
+        const int blk = blockSampling ? slot : -1;
+        if (fineUniform[b]) return f(sa, sb, m[0], blk);
         const glm::ivec3 first = fineFirst[b], last = fineLast[b];
         const float fs = float(fineSize), invFs = 1.f / fs;
         const glm::vec3 p = k.o + sa * k.d;
         const int stride[3] = {1, fineCells, fineCells * fineCells};
-        int v[3], step[3];
-        float tNext[3], tDelta[3];
+        // left: steps on the axis before the DDA leaves the block (float rounding).
+        int left[3], step[3];
+        float tNext[3], tDelta[3], invDelta[3];
         int at = 0;
         for (int a = 0; a < 3; ++a) {
-            v[a] = std::clamp(int(std::floor(p[a] * invFs)), first[a], last[a]);
-            at += (v[a] - first[a]) * stride[a];
+            const int v = std::clamp(int(std::floor(p[a] * invFs)), first[a], last[a]);
+            at += (v - first[a]) * stride[a];
             if (k.d[a] > 0.f) {
-                step[a] = 1;
-                tNext[a] = (float(v[a] + 1) * fs - k.o[a]) * k.invD[a];
+                step[a] = stride[a];
+                left[a] = last[a] - v;
+                tNext[a] = (float(v + 1) * fs - k.o[a]) * k.invD[a];
                 tDelta[a] = fs * k.invD[a];
+                invDelta[a] = k.d[a] * invFs;
             } else if (k.d[a] < 0.f) {
-                step[a] = -1;
-                tNext[a] = (float(v[a]) * fs - k.o[a]) * k.invD[a];
+                step[a] = -stride[a];
+                left[a] = v - first[a];
+                tNext[a] = (float(v) * fs - k.o[a]) * k.invD[a];
                 tDelta[a] = -fs * k.invD[a];
+                invDelta[a] = -k.d[a] * invFs;
             } else {
                 step[a] = 0;
+                left[a] = 0;
                 tNext[a] = INFINITY;
                 tDelta[a] = INFINITY;
+                invDelta[a] = 0.f;
             }
         }
+        const std::uint8_t* oct = fineOctant.data() +
+                                  b * std::size_t(fineCells * fineCells * fineCells) * 8 +
+                                  ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
         float s = sa;
         while (true) {
             const int a = tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2)
                                                : (tNext[1] <= tNext[2] ? 1 : 2);
             const float e = std::min(tNext[a], sb);
+            // A piece of majorant 0 has no collision: no call (every caller skips it).
+            const float mj = m[at];
+            if (!(mj > 0.f)) {
+                // An empty fine cell starts an empty cube of side d along the ray's octant: the
+                // ray stays in it until its d-th crossing on some axis (tExit). Past sb: nothing
+                // more in this block; else the cube's last cell along the ray becomes the current
+                // one (at most d − 1 crossings per axis, as CellDda::jump).
+                const int d = oct[std::size_t(at) * 8];
+                if (d >= 2) {
+                    const float r = float(d - 1);
+                    const float tExit =
+                        std::min({tNext[0] + r * tDelta[0], tNext[1] + r * tDelta[1],
+                                  tNext[2] + r * tDelta[2]});
+                    if (!(tExit < sb)) return true;
+                    bool moved = false;
+                    for (int c = 0; c < 3; ++c) {
+                        if (!(tNext[c] < tExit)) continue;
+                        const int j = std::min(
+                            {int(std::ceil((tExit - tNext[c]) * invDelta[c])), d - 1, left[c]});
+                        if (j <= 0) continue;
+                        left[c] -= j;
+                        at += step[c] * j;
+                        tNext[c] += float(j) * tDelta[c];
+                        moved = true;
+                    }
+                    if (moved) continue;  // else (at the block's face) one ordinary step
+                }
+            }
             if (e > s) {
-                if (!f(s, e, m[at])) return false;
+                if (mj > 0.f && !f(s, e, mj, blk)) return false;
                 s = e;
             }
             if (!(tNext[a] < sb)) return true;
-            v[a] += step[a];
             // Float rounding left the cell before sb: the rest under the skip cell's majorant.
-            if (v[a] < first[a] || v[a] > last[a]) return !(sb > s) || f(s, sb, coarse);
-            at += step[a] * stride[a];
+            if (--left[a] < 0) return !(sb > s) || f(s, sb, coarse, blk);
+            at += step[a];
             tNext[a] += tDelta[a];
         }
     }
@@ -331,22 +482,23 @@ struct PathTracer::Impl {
     void tentativeCollisions(const View& v, const Track& k, core::CounterRng& rng, Counters& n,
                              F&& f) const {
         float tau = exponentialStep(rng);
-        traverse(k, [&](float sa, float sb, float m) {
-            if (!(m > 0.f)) return true;
-            float s = sa;
-            while (true) {
-                const float room = (sb - s) * m;
-                if (tau >= room) {
-                    tau -= room;
-                    return true;
+        traverse(
+            k, [&](float sa, float sb, float m, int blk) __attribute__((always_inline)) {
+                if (!(m > 0.f)) return true;
+                float s = sa;
+                while (true) {
+                    const float room = (sb - s) * m;
+                    if (tau >= room) {
+                        tau -= room;
+                        return true;
+                    }
+                    s = std::min(s + tau / m, sb);
+                    const float sig = sigmaAt(v, blk, k.o + s * k.d);
+                    if (sig > m) ++n.violations;
+                    if (!f(s, sig, m)) return false;
+                    tau = exponentialStep(rng);
                 }
-                s = std::min(s + tau / m, sb);
-                const float sig = sigma(v, k.o + s * k.d);
-                if (sig > m) ++n.violations;
-                if (!f(s, sig, m)) return false;
-                tau = exponentialStep(rng);
-            }
-        });
+            });
     }
 
     /// Delta tracking over the tentative collisions: real with probability σt / majorant.
@@ -500,7 +652,10 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
     impl->dims = g.dims;
     impl->fineSize = impl->cellSize % kFineVoxels == 0 ? kFineVoxels : impl->cellSize;
     impl->fineCells = impl->cellSize / impl->fineSize;
-    if (impl->majorantGrid) impl->buildFine();
+    if (impl->majorantGrid) {
+        impl->buildFine();
+        impl->buildOctants();
+    }
     const auto& busy = impl->cells->nonEmptyCellRange();
     if (glm::all(glm::lessThanEqual(busy[0], busy[1]))) {
         constexpr float kPad = 1e-3f;  // voxels
@@ -531,6 +686,83 @@ double PathTracer::transmittance(const Ray& ray, double maxT, core::CounterRng& 
     Counters n;
     return impl_->volume->visit(
         [&](const auto& v) { return impl_->ratioTracking(v, ray, t0, t1, rng, n); });
+}
+
+std::vector<PathTracer::Piece> PathTracer::majorantPieces(const Ray& ray, double t0,
+                                                          double t1) const {
+    std::vector<Piece> out;
+    if (!(t1 > t0)) return out;
+    const Impl& im = *impl_;
+    im.traverse(im.track(ray, t0, t1), [&](float sa, float sb, float m, int) {
+        if (m > 0.f) out.push_back({t0 + double(sa), t0 + double(sb), m});
+        return true;
+    });
+    return out;
+}
+
+std::pair<std::uint64_t, std::uint64_t> PathTracer::checkSkipDistances() const {
+    const Impl& im = *impl_;
+    std::uint64_t checked = 0, bad = 0;
+    // Every entry of an 8-per-cell table over a grid of n cells against nonEmpty(x, y, z): the
+    // non-empty cells in each promised cube (its part inside the grid: cells past it count as
+    // empty) by a summed-volume table.
+    auto check = [&](const glm::ivec3& n, const std::uint8_t* oct, auto&& nonEmpty) {
+        const glm::ivec3 m = n + 1;
+        std::vector<std::uint32_t> sum(std::size_t(m.x) * m.y * m.z, 0);
+        auto at = [&](int x, int y, int z) -> std::uint32_t& {
+            return sum[std::size_t(x) +
+                       std::size_t(m.x) * (std::size_t(y) + std::size_t(m.y) * std::size_t(z))];
+        };
+        for (int z = 0; z < n.z; ++z)
+            for (int y = 0; y < n.y; ++y)
+                for (int x = 0; x < n.x; ++x)
+                    at(x + 1, y + 1, z + 1) = std::uint32_t(nonEmpty(x, y, z)) +
+                                              at(x, y + 1, z + 1) + at(x + 1, y, z + 1) +
+                                              at(x + 1, y + 1, z) - at(x, y, z + 1) -
+                                              at(x, y + 1, z) - at(x + 1, y, z) + at(x, y, z);
+        // Non-empty cells in [lo, hi] (inclusive).
+        auto count = [&](const glm::ivec3& lo, const glm::ivec3& hi) {
+            const glm::ivec3 a = lo, b = hi + 1;
+            return std::int64_t(at(b.x, b.y, b.z)) - at(a.x, b.y, b.z) - at(b.x, a.y, b.z) -
+                   at(b.x, b.y, a.z) + at(a.x, a.y, b.z) + at(a.x, b.y, a.z) + at(b.x, a.y, a.z) -
+                   at(a.x, a.y, a.z);
+        };
+        for (int z = 0; z < n.z; ++z)
+            for (int y = 0; y < n.y; ++y)
+                for (int x = 0; x < n.x; ++x)
+                    for (int o = 0; o < 8; ++o) {
+                        const std::size_t i =
+                            std::size_t(x) +
+                            std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
+                        const int d = oct[i * 8 + std::size_t(o)];
+                        ++checked;
+                        if (d == 0) {
+                            bad += !nonEmpty(x, y, z);
+                            continue;
+                        }
+                        const glm::ivec3 p(x, y, z);
+                        glm::ivec3 lo, hi;
+                        for (int a = 0; a < 3; ++a) {
+                            const bool neg = (o >> a) & 1;
+                            lo[a] = neg ? std::max(0, p[a] - (d - 1)) : p[a];
+                            hi[a] = neg ? p[a] : std::min(n[a] - 1, p[a] + (d - 1));
+                        }
+                        bad += count(lo, hi) != 0;
+                    }
+    };
+    if (!im.majorantGrid) return {0, 0};
+    check(im.counts, im.octant.data(),
+          [&](int x, int y, int z) { return im.cells->majorant(im.cells->index(x, y, z)) > 0.f; });
+    const int fc = im.fineCells;
+    const std::size_t block = std::size_t(fc) * fc * fc;
+    for (std::size_t b = 0; b < im.fineFirst.size(); ++b) {
+        const float* m = im.fine.data() + b * block;
+        check(glm::ivec3(fc), im.fineOctant.data() + b * block * 8, [&](int x, int y, int z) {
+            return m[std::size_t(x) +
+                     std::size_t(fc) * (std::size_t(y) + std::size_t(fc) * std::size_t(z))] > 0.f;
+        });
+    }
+    return {checked, bad};
 }
 
 float PathTracer::extinctionAt(const glm::dvec3& p) const {
@@ -622,7 +854,7 @@ Guides PathTracer::guides(const render::Camera& camera) const {
                 double t0 = 0.0, t1 = INFINITY;
                 if (im.keptInterval(ray, t0, t1)) {
                     const Track k = im.track(ray, t0, t1);
-                    im.traverse(k, [&](float sa, float sb, float m) {
+                    im.traverse(k, [&](float sa, float sb, float m, int) {
                         if (!(m > 0.f)) return true;
                         const int steps = std::max(1, int(std::ceil((sb - sa) / stepMm)));
                         const double dt = double(sb - sa) / steps;

@@ -59,6 +59,7 @@
 // and each pixel sums its samples in order, so the image is the same for any thread count.
 #include <memory>
 #include <optional>
+#include <utility>
 #include <vector>
 
 #include "core/image.h"
@@ -165,6 +166,20 @@ class PathTracer {
     /// Ratio-tracking estimate of the transmittance toward a light along `ray` over [0, maxT]
     /// (clipped to lightInterval: matter removed with shadowsFromRemoved true still occludes).
     double transmittance(const Ray& ray, double maxT, core::CounterRng& rng) const;
+    /// A piece of a ray under one majorant (mm along the ray, σt bound per mm).
+    struct Piece {
+        double t0, t1;
+        float majorant;
+    };
+    /// The pieces of [t0, t1] with a majorant > 0 that delta and ratio tracking walk (the
+    /// majorant grid's traversal with its skip-distance jumps), in order: every point with
+    /// σt > 0 must lie in one whose majorant bounds it.
+    std::vector<Piece> majorantPieces(const Ray& ray, double t0, double t1) const;
+    /// Brute-force check of the skip structures: for every cell (skip cells and the voxel cells
+    /// of each non-empty skip cell) and octant, the cube its octant skip distance promises empty
+    /// is scanned for a non-empty cell. Returns {entries checked, entries whose cube is not
+    /// empty} (the second is 0 when right).
+    std::pair<std::uint64_t, std::uint64_t> checkSkipDistances() const;
     /// σt at a world point (TF table lookup of the trilinear value).
     float extinctionAt(const glm::dvec3& p) const;
     /// σt, albedo and emission at a world point (the same lookup; what a real collision there

@@ -363,3 +363,60 @@ TEST(PathTracer, TrackingIsUnbiasedThroughBoneUnderTheFineMajorants) {
     EXPECT_GT(st.realCollisions, 0u);
     EXPECT_EQ(st.majorantViolations, 0u);
 }
+
+TEST(PathTracer, SkipDistancesNeverJumpOverMatter) {
+    // The octant skip distances (skip cells and the voxel cells inside non-empty ones) against a
+    // brute-force scan of the cube each promises empty; then the traversal that jumps by them,
+    // against dense samples along rays in every octant (and along the axes): every sample with
+    // σt > 0 lies in a piece whose majorant bounds it. The 128³ torso under ct-bone: bone next to
+    // empty tissue everywhere, where the jumps are most of the traversal.
+    const Medium s = makeMedium("torso", optics::makePreset("ct-bone"), 128);
+    const PathTracer t = s.tracer();
+    const auto [checked, bad] = t.checkSkipDistances();
+    EXPECT_GT(checked, 100000u);
+    EXPECT_EQ(bad, 0u);
+
+    const auto b = s.volume->geometry().worldBounds();
+    const glm::dvec3 c = 0.5 * (b[0] + b[1]), size = b[1] - b[0];
+    const double voxel = s.volume->geometry().spacing.x;
+    core::CounterRng rng(core::hashCounters(5, 6, 7), 3);
+    std::vector<glm::dvec3> dirs = {{1, 0, 0},  {0, 1, 0},  {0, 0, 1},
+                                    {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+    for (int i = 0; i < 400; ++i) {
+        const double z = 2.0 * rng.uniformDouble() - 1.0,
+                     phi = 2.0 * std::numbers::pi * rng.uniformDouble();
+        const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+        dirs.push_back({r * std::cos(phi), r * std::sin(phi), z});
+    }
+    std::uint64_t covered = 0, matter = 0;
+    for (std::size_t i = 0; i < dirs.size(); ++i) {
+        // Through a random point of the middle half of the box.
+        const glm::dvec3 p =
+            c +
+            size *
+                (glm::dvec3(rng.uniformDouble(), rng.uniformDouble(), rng.uniformDouble()) - 0.5) *
+                0.5;
+        const pathtrace::Ray ray{p - 400.0 * dirs[i], dirs[i]};
+        double t0 = 0.0, t1 = INFINITY;
+        if (!t.keptInterval(ray, t0, t1)) continue;
+        const auto pieces = t.majorantPieces(ray, t0, t1);
+        std::size_t k = 0;
+        const double step = 0.05 * voxel;
+        for (double u = t0 + 0.5 * step; u < t1; u += step) {
+            const float sig = t.extinctionAt(ray.origin + u * ray.direction);
+            if (!(sig > 0.f)) continue;
+            ++matter;
+            while (k < pieces.size() && pieces[k].t1 < u) ++k;
+            // Within rounding of a piece's ends (1e-4 voxel) either neighbour may hold it.
+            bool ok = false;
+            for (std::size_t q = k > 0 ? k - 1 : 0; q < std::min(pieces.size(), k + 2); ++q)
+                ok = ok || (u >= pieces[q].t0 - 1e-4 * voxel && u <= pieces[q].t1 + 1e-4 * voxel &&
+                            sig <= pieces[q].majorant);
+            ASSERT_TRUE(ok) << "ray " << i << " at " << u << " mm: σt " << sig
+                            << " outside the pieces";
+            ++covered;
+        }
+    }
+    EXPECT_GT(matter, 10000u) << "the rays must cross bone";
+    EXPECT_EQ(covered, matter);
+}
