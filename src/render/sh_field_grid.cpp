@@ -4,10 +4,8 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
-#include <atomic>
 #include <cmath>
 #include <glm/gtc/packing.hpp>
-#include <thread>
 
 #include "core/error.h"
 
@@ -47,40 +45,72 @@ glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients, std::
 
 namespace {
 template <class Field>
+void fill(const Field& field, ShFieldResampling& r, const core::Progress& progress) {
+    ShFieldGrid& g = r.grid;
+    VL_CHECK_EQ(g.coefficients, field.coefficients());
+    // Reports only while not cancelled (Progress::report throws on a cancel): the chunk below is
+    // filled before the flag is looked at, so every attempt gets somewhere.
+    const auto report = [&] {
+        if (!progress.cancelled())
+            progress.report("SH field resampling", double(r.slicesDone) / std::max(g.res.z, 1));
+    };
+    report();
+    while (!r.finished()) {
+        const int end = std::min(r.slicesDone + kShFieldResampleChunk, g.res.z);
+        tbb::parallel_for(r.slicesDone, end, [&](int z) {
+            float v[16];
+            for (int y = 0; y < g.res.y; ++y)
+                for (int x = 0; x < g.res.x; ++x) {
+                    field.sample(g.position({x, y, z}), v);
+                    const std::size_t i =
+                        std::size_t(x) + std::size_t(g.res.x) * (y + std::size_t(g.res.y) * z);
+                    for (int c = 0; c < g.coefficients; ++c)
+                        g.texels[std::size_t(c / 4)][4 * i + std::size_t(c % 4)] =
+                            glm::packHalf1x16(v[c]);
+                }
+        });
+        r.slicesDone = end;
+        if (!r.finished() && progress.cancelled()) throw CancelledError();
+        report();
+    }
+}
+
+template <class Field>
 ShFieldGrid resample(const Field& field, const glm::ivec3& dims, std::size_t budgetBytes,
                      int maxPerAxis, const core::Progress& progress) {
-    ShFieldGrid g;
-    g.coefficients = field.coefficients();
+    ShFieldResampling r =
+        startShFieldResampling(field.coefficients(), dims, budgetBytes, maxPerAxis);
+    fill(field, r, progress);
+    return std::move(r.grid);
+}
+}  // namespace
+
+ShFieldResampling startShFieldResampling(int coefficients, const glm::ivec3& dims,
+                                         std::size_t budgetBytes, int maxPerAxis) {
+    ShFieldResampling r;
+    ShFieldGrid& g = r.grid;
+    g.coefficients = coefficients;
     g.res = shFieldGridResolution(dims, g.coefficients, budgetBytes, maxPerAxis);
     const int textures = (g.coefficients + 3) / 4;
     const std::size_t points = std::size_t(g.res.x) * g.res.y * g.res.z;
     g.texels.assign(std::size_t(textures), std::vector<std::uint16_t>(4 * points, 0));
     for (int a = 0; a < 3; ++a)
         g.step[a] = g.res[a] > 1 ? float(dims[a] - 1) / float(g.res[a] - 1) : 0.f;
-    std::atomic<int> done{0};
-    const std::thread::id caller = std::this_thread::get_id();
-    progress.report("SH field resampling", 0.0);
-    tbb::parallel_for(0, g.res.z, [&](int z) {
-        if (progress.cancelled()) return;  // the other slices are skipped, then it throws
-        float v[16];
-        for (int y = 0; y < g.res.y; ++y)
-            for (int x = 0; x < g.res.x; ++x) {
-                field.sample(g.position({x, y, z}), v);
-                const std::size_t i =
-                    std::size_t(x) + std::size_t(g.res.x) * (y + std::size_t(g.res.y) * z);
-                for (int c = 0; c < g.coefficients; ++c)
-                    g.texels[std::size_t(c / 4)][4 * i + std::size_t(c % 4)] =
-                        glm::packHalf1x16(v[c]);
-            }
-        const int now = ++done;
-        if (std::this_thread::get_id() == caller && !progress.cancelled())
-            progress.report("SH field resampling", double(now) / g.res.z);
-    });
-    if (progress.cancelled()) throw CancelledError();
-    progress.report("SH field resampling", 1.0);
-    return g;
+    return r;
 }
-}  // namespace
+
+void continueShFieldResampling(const visibility::LocalVisibility& field, ShFieldResampling& r,
+                               const core::Progress& progress) {
+    fill(field, r, progress);
+}
+void continueShFieldResampling(const visibility::GlobalVisibility& field, ShFieldResampling& r,
+                               const core::Progress& progress) {
+    fill(field, r, progress);
+}
+void continueShFieldResampling(const visibility::HierarchicalVisibility& field,
+                               ShFieldResampling& r, const core::Progress& progress) {
+    fill(field, r, progress);
+}
 
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
                             std::size_t budgetBytes, int maxPerAxis,

@@ -55,9 +55,35 @@ glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
                                  std::size_t budgetBytes = kShFieldGridBudgetBytes,
                                  int maxPerAxis = 0);
 
+/// A resampling that stops on a cancel and resumes where it stopped: z-slices [0, slicesDone) of
+/// `grid` hold their values.
+struct ShFieldResampling {
+    ShFieldGrid grid;
+    int slicesDone = 0;
+    bool finished() const { return slicesDone >= grid.res.z; }
+};
+/// z-slices filled between two looks at the cancel flag: every attempt gets at least this far, so
+/// a resampling cancelled again and again (a viewer's camera drag) still finishes.
+inline constexpr int kShFieldResampleChunk = 8;
+/// A resampling of a field with `coefficients` for a volume of `dims`, nothing filled yet.
+ShFieldResampling startShFieldResampling(int coefficients, const glm::ivec3& dims,
+                                         std::size_t budgetBytes = kShFieldGridBudgetBytes,
+                                         int maxPerAxis = 0);
+/// Fills the rest of `r` from `field` in chunks of kShFieldResampleChunk slices (parallel within a
+/// chunk), reporting progress ("SH field resampling"); after each chunk a raised cancel throws
+/// CancelledError with `r` holding what is done. The same bytes as one uninterrupted pass, for any
+/// thread count.
+void continueShFieldResampling(const visibility::LocalVisibility& field, ShFieldResampling& r,
+                               const core::Progress& progress = core::Progress::none());
+void continueShFieldResampling(const visibility::GlobalVisibility& field, ShFieldResampling& r,
+                               const core::Progress& progress = core::Progress::none());
+void continueShFieldResampling(const visibility::HierarchicalVisibility& field,
+                               ShFieldResampling& r,
+                               const core::Progress& progress = core::Progress::none());
+
 /// The field sampled at every grid point (parallel over z-slices; the same bytes for any thread
 /// count). `dims`: the volume's voxels per axis; budget and maxPerAxis as above. Reports its
-/// progress ("SH field resampling") and stops within a slice of a cancel (CancelledError).
+/// progress and stops at a chunk's end on a cancel (CancelledError; nothing is returned).
 ShFieldGrid resampleShField(const visibility::LocalVisibility& field, const glm::ivec3& dims,
                             std::size_t budgetBytes = kShFieldGridBudgetBytes, int maxPerAxis = 0,
                             const core::Progress& progress = core::Progress::none());

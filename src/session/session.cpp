@@ -319,7 +319,7 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
     s.baseDir = baseDir;
     if (!doc.is_object())
         fail("", "must be a JSON object, got " + typeName(doc),
-             "a session starts {\"format\": \"voxlight-session\", \"version\": 1, ...}");
+             "a session starts {\"format\": \"voxlight-session\", \"version\": 2, ...}");
     static const std::vector<std::string> keys = {"format", "version", "description", "scene",
                                                   "keyframes"};
     for (auto it = doc.begin(); it != doc.end(); ++it)
@@ -330,13 +330,13 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
              doc.contains("format")
                  ? "must be \"voxlight-session\", got " + shortDump(doc["format"])
                  : "is required",
-             "a session file starts {\"format\": \"voxlight-session\", \"version\": 1, ...}");
+             "a session file starts {\"format\": \"voxlight-session\", \"version\": 2, ...}");
     if (!doc.contains("version") || !doc["version"].is_number_integer())
         fail("version",
              doc.contains("version") ? "must be an integer, got " + typeName(doc["version"]) + " " +
                                            shortDump(doc["version"])
                                      : "is required",
-             "\"version\": 1");
+             "\"version\": 2");
     const long long version = doc["version"].get<long long>();
     if (version > kFormatVersion)
         fail("version",

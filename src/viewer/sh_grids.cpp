@@ -17,8 +17,21 @@ std::shared_ptr<const render::ShFieldGrid> ShGridCache::of(
             entries_.insert(entries_.begin(), e);
             return e.grid;
         }
-    auto grid = std::make_shared<const render::ShFieldGrid>(
-        render::resampleShField(*field, dims, budget_, kMaxTextureSide, progress));
+    // A resampling cancelled before resumes where it stopped.
+    std::shared_ptr<render::ShFieldResampling> r;
+    for (std::size_t i = 0; i < pending_.size() && !r; ++i)
+        if (pending_[i].field.get() == field.get()) {
+            r = pending_[i].resampling;
+            pending_.erase(pending_.begin() + std::ptrdiff_t(i));
+        }
+    if (!r)
+        r = std::make_shared<render::ShFieldResampling>(
+            render::startShFieldResampling(field->coefficients(), dims, budget_, kMaxTextureSide));
+    pending_.insert(pending_.begin(), Pending{field, r});
+    if (pending_.size() > kPendingKept) pending_.resize(kPendingKept);
+    render::continueShFieldResampling(*field, *r, progress);  // CancelledError: stays pending
+    pending_.erase(pending_.begin());
+    auto grid = std::make_shared<const render::ShFieldGrid>(std::move(r->grid));
     ++resampled_;
     entries_.insert(entries_.begin(), Entry{field, grid});
     if (entries_.size() > kKept) entries_.resize(kKept);

@@ -29,13 +29,17 @@ class ShGridCache {
   public:
     /// Fields resampled at most this many at a time are kept (most recently used first).
     static constexpr std::size_t kKept = 4;
+    /// Cancelled resamplings kept to resume (each holds its grid's memory).
+    static constexpr std::size_t kPendingKept = 2;
     /// The smallest GL_MAX_3D_TEXTURE_SIZE OpenGL 4.5 allows: two points per voxel only where
     /// every texture side stays within it (any 4.5 GL then holds the grid of a volume it holds).
     static constexpr int kMaxTextureSide = 2048;
     explicit ShGridCache(std::size_t budgetBytes = render::kShFieldGridBudgetBytes)
         : budget_(budgetBytes) {}
     /// The grids of `setup.sh`'s fields, resampled when not kept already. A cancel (through
-    /// `progress`) throws CancelledError and keeps nothing half-made.
+    /// `progress`) throws CancelledError; the field's partial resampling is kept and the next get
+    /// resumes it (each attempt fills at least render::kShFieldResampleChunk slices), so a camera
+    /// drag that cancels every attempt still gets the grid.
     ShGrids get(const pipeline::CasterSetup& setup,
                 const core::Progress& progress = core::Progress::none());
     /// Fields resampled so far (tests: a second get of the same field resamples nothing).
@@ -50,8 +54,13 @@ class ShGridCache {
     std::shared_ptr<const render::ShFieldGrid> of(const std::shared_ptr<const Field>& field,
                                                   const glm::ivec3& dims,
                                                   const core::Progress& progress);
+    struct Pending {
+        std::shared_ptr<const void> field;
+        std::shared_ptr<render::ShFieldResampling> resampling;
+    };
     std::size_t budget_;
     std::vector<Entry> entries_;
+    std::vector<Pending> pending_;  ///< cancelled resamplings, most recent first
     std::size_t resampled_ = 0;
 };
 

@@ -669,6 +669,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                         const std::vector<glm::ivec3>& steps,
                         const std::vector<std::size_t>& blocks, float* data,
                         const std::vector<std::size_t>& offset, const core::Progress& progress) {
+    if (blocks.empty()) return {};  // an edit that reaches no block: no voxel copy to make
     const int C = options.coefficients, N = int(steps.size());
     const BlockPyramid& pyr = grid.pyramid();
     const core::Geometry& g = pyr.geometry();
@@ -1268,6 +1269,17 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
     out.data_.assign(layoutBlocks(grid, options.coefficients, out.offset_, stored), 0.f);
     std::vector<std::size_t> trace;
     const std::size_t C = std::size_t(options.coefficients);
+    // The sweep integrates a line from up to ⌈reach⌉ + 1 lattice steps before a point's ray to as
+    // far past it (its prefix sums P start there), and a step moves up to max|v_a| voxels per
+    // axis, read trilinearly: its reads reach 2·max|v_a| + 1 voxels past R. A σt change there
+    // shifts P by a constant, which can round a point's P(t+n) − P(t) differently.
+    double sweepExtra = 0.0;
+    if (options.algorithm == VisibilityAlgorithm::Sweep) {
+        int most = 0;
+        for (const glm::ivec3& v : latticeSteps(options.rays))
+            most = std::max({most, std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+        sweepExtra = 2.0 * most + 1.0;
+    }
     for (const std::size_t b : stored) {
         const int l = grid.level(b);
         const std::uint64_t n = std::uint64_t(levelResolution(l));
@@ -1282,7 +1294,7 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
             for (int a = 0; a < 3; ++a)
                 reach[a] =
                     std::max(options.radiusVoxels * h / g.spacing[a], 2.0 * levelSpacing(l) + 1.0) +
-                    kUpdateMarginVoxels;
+                    kUpdateMarginVoxels + sweepExtra;
             for (const glm::ivec3& sc : sources) {
                 bool within = true;
                 for (int a = 0; a < 3 && within; ++a) {

@@ -88,7 +88,8 @@
 // neighbours' ranges, and a pre-integrated step from b ends in b or a neighbour). A stored
 // block is recomputed when its own level changed or a source block lies within its reach — per
 // axis, the gap between the two blocks' voxel extents within max(R / spacing_a, 2·s + 1) +
-// kUpdateMarginVoxels; every other block copies its
+// kUpdateMarginVoxels (under the line sweep + 2·max|v_a| + 1: its lines start and end that far
+// past a ray); every other block copies its
 // previous coefficients (same level, same samples, same σt along every ray). So a TF edit over a
 // narrow value range (moving the soft-tissue ramp) recomputes the blocks near the tissue it touches,
 // and the LOD selection's own reshuffling (the budget is global) is what else it costs; the stats

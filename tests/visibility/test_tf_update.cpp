@@ -78,7 +78,10 @@ Field field(VisibilityAlgorithm algorithm = VisibilityAlgorithm::March) {
     f.options.algorithm = algorithm;
     f.options.coefficients = 4;
     // Rays reach past the next block (20 voxels): blocks two apart see each other, three do not.
-    f.options.radiusVoxels = 20.0;
+    // The sweep's lines read 2·max|v_a| + 1 = 3 voxels further (local_visibility.h), which would
+    // take its reach along x (1.5 mm voxels: 20/1.5 + 2 + 3 > 16) past the next block: 16 keeps
+    // the same block pattern.
+    f.options.radiusVoxels = algorithm == VisibilityAlgorithm::Sweep ? 16.0 : 20.0;
     return f;
 }
 
