@@ -946,10 +946,12 @@ void validateMetaHeader(const MetaHeader& h, const fs::path& path) {
                 if (!(s > 0)) fail(key, "holds " + std::to_string(s) + "; must be positive");
     // MetaIO allocates CompressedDataSize bytes as given (a negative one asks for 2^64 − n).
     if (h.find("CompressedDataSize")) {
+        // ≤ 2^53 as well: larger values are not exact in a double and overflowed the byte
+        // count's conversion (fuzz_metaimage: 1e300, undefined behaviour in UBSan).
         const double c = metaNumbers(h, path, "CompressedDataSize", 1)[0];
-        if (!(c >= 1) || c != std::floor(c))
+        if (!(c >= 1) || c != std::floor(c) || c > 9007199254740992.0)
             fail("CompressedDataSize", "holds " + h.value("CompressedDataSize") +
-                                           "; must be a whole number of bytes ≥ 1");
+                                           "; must be a whole number of bytes in 1..2^53");
     }
     for (const char* key : {"Offset", "Position", "Origin"})
         if (h.find(key)) metaNumbers(h, path, key, ndims);
@@ -1553,6 +1555,30 @@ void checkVtiFile(const fs::path& path) {
                     path.string(), name,
                     "'" + text + "' is not " + std::to_string(count) + " finite numbers",
                     "repair the header");
+        }
+    }
+    // Pieces: VTK copies a piece's data into the whole extent by the piece's own extent; one that
+    // is inverted (7 0) or reaches outside the whole extent made it copy from a null pointer
+    // (fuzzing: SEGV in vtkXMLDataParser::ReadCompressedData).
+    if (const std::size_t tag = xml.find("<ImageData"); tag != std::string::npos) {
+        std::istringstream whole(xmlAttribute(xml, tag, "WholeExtent"));
+        long long w[6];
+        bool haveWhole = true;
+        for (auto& x : w) haveWhole = haveWhole && bool(whole >> x);
+        for (std::size_t piece = xml.find("<Piece", tag); haveWhole && piece != std::string::npos;
+             piece = xml.find("<Piece", piece + 1)) {
+            const std::string text = xmlAttribute(xml, piece, "Extent");
+            std::istringstream words(text);
+            long long e[6];
+            bool ok = true;
+            for (auto& x : e) ok = ok && bool(words >> x);
+            for (int a = 0; a < 3 && ok; ++a)
+                ok = e[2 * a] <= e[2 * a + 1] && e[2 * a] >= w[2 * a] &&
+                     e[2 * a + 1] <= w[2 * a + 1];
+            if (!ok)
+                throw InputError(path.string(), "Piece Extent",
+                                 "'" + text + "' is not 3 ascending ranges inside WholeExtent",
+                                 "the file is damaged; re-export the image");
         }
     }
     if (appended == std::string::npos) return;

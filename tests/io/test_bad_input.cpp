@@ -489,7 +489,7 @@ TEST(BadInput, MetaImageBadNDimsSpacingOrPattern) {
     writeText(tmp / "blank.mhd", mhdText("NDims = 3\n\n  \n" + dims));
     EXPECT_EQ(io::readVolume(tmp / "blank.mhd").dims(), glm::ivec3(10, 10, 2));
     // fuzz_metaimage: a negative CompressedDataSize became a 2^64-byte allocation in MetaIO.
-    for (const char* c : {"-3.5", "0", "2.5"})
+    for (const char* c : {"-3.5", "0", "2.5", "1e300"})
         expectNrrdError(tmp, "csize.mha",
                         mhdText("NDims = 3\n" + dims +
                                     "CompressedData = True\nCompressedDataSize = " + c + "\n",
@@ -743,6 +743,12 @@ TEST(BadInput, FuzzVtiZeroOrNonFiniteSpacingAndOriginAreRefused) {
     expectInputError(tmp / "o.vti", "Origin", {"finite numbers"});
     writeText(tmp / "d.vti", edited("Direction", "1 0 0 0 1 0 0 0"));
     expectInputError(tmp / "d.vti", "Direction", {"9 finite numbers"});
+    // fuzz_vti: an inverted piece extent ("0 7 7 0 0 7") made VTK copy compressed data from a
+    // null pointer (SEGV); one outside the whole extent likewise.
+    for (const char* extent : {"0 7 7 0 0 7", "0 8 0 7 0 7", "-1 7 0 7 0 7", "0 7 0 7"}) {
+        writeText(tmp / "p.vti", edited("<Piece Extent", extent));
+        expectInputError(tmp / "p.vti", "Piece Extent", {"ascending ranges inside WholeExtent"});
+    }
     // A negative spacing is a flipped axis VTK reads as such: still loads.
     writeText(tmp / "n.vti", edited("Spacing", "1 -1 1"));
     EXPECT_EQ(io::readVolume(tmp / "n.vti").voxelCount(), 8u * 8u * 8u);
