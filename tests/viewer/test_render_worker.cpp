@@ -177,6 +177,14 @@ TEST(RenderWorker, TheVolumeTheViewerLoadedIsThePipelinesReadOnce) {
             if (full) return out;
         }
     };
+    // The volume the worker's pipeline holds, from a prepare-only request (null if none came).
+    const auto preparedVolume = [&](viewer::RenderWorker& w) -> const core::Volume* {
+        viewer::RenderRequest prepare{loaded.scene, 2, false};
+        prepare.prepareOnly = true;
+        w.submit(std::move(prepare));
+        const auto p = next(w);
+        return p && p->setup ? p->setup->volume.get() : nullptr;
+    };
     {
         // Without adoptVolume the pipeline reads the file itself: its volume is another object.
         // (Not judged by the passes' stage lists: the coarse pass that read it may have been
@@ -184,12 +192,9 @@ TEST(RenderWorker, TheVolumeTheViewerLoadedIsThePipelinesReadOnce) {
         viewer::RenderWorker control;
         control.submit({loaded.scene, 1, false});
         (void)passes(control);
-        viewer::RenderRequest prepare{loaded.scene, 2, false};
-        prepare.prepareOnly = true;
-        control.submit(std::move(prepare));
-        const auto p = next(control);
-        ASSERT_TRUE(p && p->setup);
-        EXPECT_NE(p->setup->volume.get(), loaded.volume.get());
+        const core::Volume* own = preparedVolume(control);
+        ASSERT_NE(own, nullptr);
+        EXPECT_NE(own, loaded.volume.get());
     }
     viewer::RenderWorker worker;
     worker.adoptVolume(loaded.scene, loaded.volume);
@@ -201,10 +206,5 @@ TEST(RenderWorker, TheVolumeTheViewerLoadedIsThePipelinesReadOnce) {
         EXPECT_FALSE(loadsVolume(r)) << (r.coarse ? "coarse" : "full");
         EXPECT_FALSE(r.computedStages.empty());  // it did compute the others (camera, render)
     }
-    viewer::RenderRequest prepare{loaded.scene, 2, false};
-    prepare.prepareOnly = true;
-    worker.submit(std::move(prepare));
-    const auto p = next(worker);
-    ASSERT_TRUE(p && p->setup);
-    EXPECT_EQ(p->setup->volume.get(), loaded.volume.get());
+    EXPECT_EQ(preparedVolume(worker), loaded.volume.get());
 }
