@@ -17,12 +17,19 @@
 // Errors over kVertices vertices drawn with a fixed seed: NRMS = RMS(E − E_ref) / mean(E_ref), and
 // the mean bias. Not a test; one run prints one table (timings are the machine's of the moment).
 // Run: build/bench/bench_lattice [--quick]  (--quick: 100 and 625 paths, 2,500-path reference)
+//
+// build/bench/bench_lattice --goal [PAIRS]: the goal instead — the lazy on-surface bone
+// lattice of a 256³ CT for its whole bone mesh at 100 paths per texel, 1 bounce (the torso phantom
+// at 256³, bone at 250 HU; the LIDC chest 256×256×133, uint8, bone at 200, when present), with the
+// skip distances and, as the baseline in the same process, with the 8³ bricks alone; PAIRS
+// alternating pairs (default 3), medians and the ratio. `--paths N` runs the same at N paths.
 // bench-deps: iso io core optics lights
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <filesystem>
 #include <memory>
@@ -69,18 +76,33 @@ Errors compare(const std::vector<glm::vec3>& e, const std::vector<glm::vec3>& re
     return {std::sqrt(se / n) / mean, d / n / mean};
 }
 
+/// The bone mesh at `isovalue` (stored units): its vertices (world mm) and the isovalue in
+/// physical units, as the lattice takes it.
+struct BoneSurface {
+    iso::ExtractOptions options;
+    std::vector<glm::dvec3> vertices;
+    double iso = 0.0;
+};
+
+BoneSurface boneSurface(const core::Volume& volume, double isovalue) {
+    BoneSurface b;
+    b.options.isovalue = isovalue;
+    const iso::Extraction ex = iso::extractIsosurface(volume, b.options);
+    b.iso = ex.stats.storedIsovalue * volume.mapping.slope + volume.mapping.intercept;
+    for (const auto v : ex.mesh.vertices()) {
+        const auto& p = ex.mesh.point(v);
+        b.vertices.emplace_back(p[0], p[1], p[2]);
+    }
+    return b;
+}
+
 void run(const char* name, std::shared_ptr<const core::Volume> volume, double isovalue,
          bool quick) {
     const optics::TransferFunction tf = optics::makePreset("ct-bone");
-    iso::ExtractOptions eo;
-    eo.isovalue = isovalue;
-    const iso::Extraction ex = iso::extractIsosurface(*volume, eo);
-    const double iso = ex.stats.storedIsovalue * volume->mapping.slope + volume->mapping.intercept;
-    std::vector<glm::dvec3> all;
-    for (const auto v : ex.mesh.vertices()) {
-        const auto& p = ex.mesh.point(v);
-        all.emplace_back(p[0], p[1], p[2]);
-    }
+    const BoneSurface bone = boneSurface(*volume, isovalue);
+    const iso::ExtractOptions& eo = bone.options;
+    const double iso = bone.iso;
+    const std::vector<glm::dvec3>& all = bone.vertices;
     std::vector<glm::dvec3> pts;
     core::CounterRng rng(7);
     for (int i = 0; i < kVertices; ++i)
@@ -162,11 +184,70 @@ void run(const char* name, std::shared_ptr<const core::Volume> volume, double is
         100.0 * double(s2.texelsReused) / double(std::max<std::uint64_t>(s2.texelsNeeded, 1)));
 }
 
+double median(std::vector<double> v) {
+    std::sort(v.begin(), v.end());
+    const std::size_t n = v.size();
+    return n % 2 ? v[n / 2] : 0.5 * (v[n / 2 - 1] + v[n / 2]);
+}
+
+void goal(const char* name, std::shared_ptr<const core::Volume> volume, double isovalue, int pairs,
+          int paths) {
+    const BoneSurface bone = boneSurface(*volume, isovalue);
+    const double iso = bone.iso;
+    const std::vector<glm::dvec3>& all = bone.vertices;
+    std::printf("\n%s: bone at %g, %zu vertices, on-surface lattice, %d paths, 1 bounce\n", name,
+                isovalue, all.size(), paths);
+    const optics::TransferFunction tf = optics::makePreset("ct-bone");
+    std::vector<double> with, without;
+    for (int pair = 0; pair < pairs; ++pair)
+        for (const bool skip : {pair % 2 == 0, pair % 2 != 0}) {
+            iso::LatticeOptions o;
+            o.samples = paths;
+            o.bounces = 1;
+            o.placement = iso::TexelPlacement::OnSurface;
+            o.surfaceIso = iso;
+            o.skipDistances = skip;
+            core::Stopwatch sw;
+            iso::IlluminationLattice lat(volume, tf, sceneLights(), o);
+            const iso::LatticeStats st = lat.require(all, iso);
+            const double sec = sw.seconds();
+            (skip ? with : without).push_back(sec);
+            std::printf("  pair %d, %-11s %.1f s (%llu texels of %llu, %llu paths)\n", pair + 1,
+                        skip ? "skip:" : "bricks only:", sec, (unsigned long long)st.texelsComputed,
+                        (unsigned long long)st.texelsFull, (unsigned long long)st.pathsTraced);
+            std::fflush(stdout);
+        }
+    std::printf("  median %.1f s with skip distances, %.1f s with the bricks alone: ratio %.2f\n",
+                median(with), median(without), median(with) / median(without));
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
     bool quick = false;
     for (int i = 1; i < argc; ++i) quick = quick || std::strcmp(argv[i], "--quick") == 0;
+    for (int i = 1; i < argc; ++i)
+        if (std::strcmp(argv[i], "--goal") == 0) {
+            const int pairs = i + 1 < argc ? std::max(1, std::atoi(argv[i + 1])) : 3;
+            int paths = 100;  // the goal's; --paths N for a quicker look
+            for (int j = 1; j + 1 < argc; ++j)
+                if (std::strcmp(argv[j], "--paths") == 0)
+                    paths = std::max(1, std::atoi(argv[j + 1]));
+            core::PhantomOptions po;
+            po.size = 256;
+            goal("torso phantom 256³",
+                 std::make_shared<const core::Volume>(core::makePhantom("torso", po)), 250.0, pairs,
+                 paths);
+            const fs::path chest = fs::path(VOXLIGHT_SOURCE_DIR) / ".." / "shared" / "datasets" /
+                                   "ct" / "lidc2-chest.mha";
+            if (fs::exists(chest))
+                goal("LIDC chest CT 256×256×133",
+                     std::make_shared<const core::Volume>(io::readVolume(chest)), 200.0, pairs,
+                     paths);
+            else
+                std::printf("\nLIDC chest skipped: %s is absent\n", chest.c_str());
+            return 0;
+        }
     core::PhantomOptions po;
     po.size = 128;
     run("torso phantom 128³", std::make_shared<const core::Volume>(core::makePhantom("torso", po)),

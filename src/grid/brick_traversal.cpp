@@ -15,25 +15,36 @@ void BrickMajorants::finish() {
         flags_[i] = majorant_[i] > 0.f ? 1 : 0;
         nonEmpty_ += flags_[i];
     }
-    // Chebyshev distance transform by breadth-first search over the 26-neighbourhood from the
-    // non-empty cells (one BFS level = one cell of max-norm distance), capped.
-    distance_.assign(n, std::uint8_t(kMaxSkipDistance));
     nonEmptyRange_ = {glm::ivec3(0), glm::ivec3(-1)};
+    distance_ = chebyshevDistances(counts_, flags_.data(), kMaxSkipDistance);
     if (nonEmpty_ == 0) return;
-    const glm::ivec3 c = counts_;
-    std::vector<std::uint32_t> front, next;
-    nonEmptyRange_ = {c, glm::ivec3(-1)};
+    nonEmptyRange_ = {counts_, glm::ivec3(-1)};
     for (std::size_t i = 0; i < n; ++i)
         if (flags_[i]) {
-            distance_[i] = 0;
-            front.push_back(std::uint32_t(i));
-            const glm::ivec3 p(int(i % std::size_t(c.x)),
-                               int((i / std::size_t(c.x)) % std::size_t(c.y)),
-                               int(i / (std::size_t(c.x) * std::size_t(c.y))));
+            const glm::ivec3 p(int(i % std::size_t(counts_.x)),
+                               int((i / std::size_t(counts_.x)) % std::size_t(counts_.y)),
+                               int(i / (std::size_t(counts_.x) * std::size_t(counts_.y))));
             nonEmptyRange_[0] = glm::min(nonEmptyRange_[0], p);
             nonEmptyRange_[1] = glm::max(nonEmptyRange_[1], p);
         }
-    for (int level = 1; level < kMaxSkipDistance && !front.empty(); ++level) {
+}
+
+std::vector<std::uint8_t> chebyshevDistances(const glm::ivec3& c, const std::uint8_t* flags,
+                                             int cap) {
+    VL_CHECK(cap >= 1 && cap <= 255);
+    const std::size_t n = std::size_t(c.x) * std::size_t(c.y) * std::size_t(c.z);
+    std::vector<std::uint8_t> distance(n, std::uint8_t(cap));
+    std::vector<std::uint32_t> front, next;
+    for (std::size_t i = 0; i < n; ++i)
+        if (flags[i]) {
+            distance[i] = 0;
+            front.push_back(std::uint32_t(i));
+        }
+    const auto index = [&](int u, int v, int w) {
+        return std::size_t(u) +
+               std::size_t(c.x) * (std::size_t(v) + std::size_t(c.y) * std::size_t(w));
+    };
+    for (int level = 1; level < cap && !front.empty(); ++level) {
         next.clear();
         for (const std::uint32_t i : front) {
             const int x = int(i % std::uint32_t(c.x)),
@@ -45,13 +56,14 @@ void BrickMajorants::finish() {
                         const int u = x + dx, v = y + dy, w = z + dz;
                         if (u < 0 || v < 0 || w < 0 || u >= c.x || v >= c.y || w >= c.z) continue;
                         const std::size_t j = index(u, v, w);
-                        if (distance_[j] != kMaxSkipDistance) continue;
-                        distance_[j] = std::uint8_t(level);
+                        if (distance[j] != cap) continue;
+                        distance[j] = std::uint8_t(level);
                         next.push_back(std::uint32_t(j));
                     }
         }
         front.swap(next);
     }
+    return distance;
 }
 
 CellDda::CellDda(const BrickMajorants& majorants, const glm::vec3& originIndex,

@@ -93,6 +93,13 @@ class BrickMajorants {
     std::array<glm::ivec3, 2> nonEmptyRange_{glm::ivec3(0), glm::ivec3(-1)};
 };
 
+/// Per cell of a grid of `counts` cells (x fastest), the Chebyshev (max-norm) distance in cells to
+/// the nearest cell whose flag is non-zero, capped at `cap` (1…255): 0 for a flagged cell; d > 0
+/// means every cell within distance d − 1 of this one (a cube of 2d − 1 cells a side) is unflagged.
+/// Breadth-first over the 26-neighbourhood (one level = one cell of max-norm distance).
+std::vector<std::uint8_t> chebyshevDistances(const glm::ivec3& counts, const std::uint8_t* flags,
+                                             int cap);
+
 struct RayInterval {
     float t0 = 0.f, t1 = 0.f;              ///< parameter range along the ray
     float valueMin = 0.f, valueMax = 0.f;  ///< union of the bricks' value ranges

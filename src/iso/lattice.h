@@ -103,6 +103,10 @@ struct LatticeOptions {
     std::uint64_t seed = 0;
     double memoryBudgetMiB = 4096.0;  ///< texel storage; over it → InputError naming the budget
     int threads = 0;                  ///< 0 = all cores
+    /// Empty-space skip distances for an isovalue many paths share (the on-surface lattice, the
+    /// bake from vertices, the baselines): the same crossings, fewer cells tested. Off only to
+    /// measure what they save (bench_lattice).
+    bool skipDistances = true;
 };
 
 /// What one `require` call did.
@@ -201,6 +205,7 @@ class IlluminationLattice {
 
   private:
     struct Block;
+    struct SkipField;
     struct Tracer;
     std::size_t floatsPerTexel() const;
     Block* blockFor(const glm::ivec3& t) const;
@@ -219,7 +224,10 @@ class IlluminationLattice {
     };
     /// `samples` paths from surface point xt (index) on the isosurface at iso (header: start
     /// point, normal, plateaus, lights); random numbers keyed by (key, sample, seed).
-    void estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
+    /// `sharedIso`: many calls trace against this isovalue (a bake, the on-surface lattice), so
+    /// its skip distances are worth building (Tracer::skipFor); false for Wyman's own-isosurface
+    /// texels, each with its own isovalue.
+    void estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples, bool sharedIso,
                   PathSums& out) const;
     /// The texels irradiance(world, surfaceIso) reads (the preferred group, header) and their
     /// normalised weights; returns how many.
@@ -227,6 +235,9 @@ class IlluminationLattice {
                        double weight[8]) const;
     /// The texels trilinear reads at a world point (weight > 0) and their weights; returns how many.
     int stencil(const glm::dvec3& world, glm::ivec3 texel[8], double weight[8]) const;
+    /// The tracer's skip distances for iso (nullptr when options_.skipDistances is off or the
+    /// tracer keeps other isovalues').
+    const SkipField* skipFor(double iso) const;
     /// ShTransfer: the irradiance slot of texel data d from its transfer and the current lights.
     void dotTexel(float* d) const;
 
