@@ -1667,11 +1667,16 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         StageKind::Precompute,
         {transferStage, "pvrt_cpca", "lights", towardEye ? "camera" : "camera (headlight only)"}};
     radiance.key = [transferStage, compressed, towardEye, g = params.phaseG](const Run& run) {
+        // A TF phase channel sets g per rendered sample: nothing is folded toward the eye then
+        // (compute below), so the camera is no input (a preset never has the channel; explicit
+        // points have it on all or none, TfPoint).
+        const auto& points = run.scene().transferFunction.points;
+        const bool fold = towardEye && (points.empty() || !points.front().phaseG);
         KeyBuilder k(run, "pvrt_radiance");
         k.stage(transferStage).stage("lights");
         if (compressed) k.stage("pvrt_cpca");
-        if (run.scene().lights.empty() || towardEye) k.stage("camera");
-        if (towardEye) k.json({{"toward_eye_phase_g", g}});
+        if (run.scene().lights.empty() || fold) k.stage("camera");
+        if (fold) k.json({{"toward_eye_phase_g", g}});
         return k.value();
     };
     radiance.notOnDisk = "recomputed per light change in milliseconds";

@@ -477,17 +477,39 @@ TEST(PvrtMethod, ATfPhaseChannelActsAsPhaseGPerSample) {
     EXPECT_GT(relativeL2(iso.image, a.image), 0.1);  // and g matters here
 }
 
+namespace {
+/// A small CPCA-compressed PVRT with n = 16 exitance coefficients and HG g 0.6 (folded toward
+/// the eye per grid point by default).
+json hgParams() {
+    return {{"resolution", 16},
+            {"photons", 2},
+            {"clusters", 8},
+            {"exitance_coefficients", 16},
+            {"phase_g", 0.6}};
+}
+}  // namespace
+
+TEST(PvrtMethod, APhaseChannelInTheTfKeepsTheRadianceOffTheCamera) {
+    // With the TF's phase channel g is set per rendered sample, so nothing is folded toward the
+    // eye at the light change (as "sample"): a camera move reruns only the frame, not
+    // pvrt_radiance, even with n = 16 and CPCA (where "grid" folds toward the eye).
+    const json params = hgParams();
+    Session session;
+    json d = cloudScene("pvrt", params, true);
+    for (auto& p : d["transfer_function"]["points"]) p["phase_g"] = 0.6;
+    const RunResult base = session.run(scene(d));
+    EXPECT_FALSE(base.details["pvrt_radiance"]["toward_eye"].get<bool>());
+    d["camera"] = {{"azimuth", 40}};
+    EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
+}
+
 TEST(PvrtMethod, HgTowardTheEyeFollowsTheCameraAndMatchesPerSample) {
     // exitance_evaluation "grid" (the default with CPCA): the n = 16 coefficients are evaluated
     // toward the eye once per grid point at the light change, so a camera move reruns
     // pvrt_radiance; "sample" evaluates per rendered sample and a camera move reruns only the
     // frame. The two differ only in where the direction toward the eye is taken (the grid points
     // instead of the samples): orthographic, nowhere (float rounding); perspective, slightly.
-    const json params = {{"resolution", 16},
-                         {"photons", 2},
-                         {"clusters", 8},
-                         {"exitance_coefficients", 16},
-                         {"phase_g", 0.6}};
+    const json params = hgParams();
     Session session;
     json d = cloudScene("pvrt", params, true);
     const RunResult base = session.run(scene(d));
