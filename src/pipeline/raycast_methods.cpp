@@ -1127,6 +1127,8 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             {"integration", g->integration() == visibility::GlobalIntegration::Recursive
                                 ? "recursive"
                                 : "piecewise"}};
+        if (!g->integrationNote().empty())  // asked for recursive, ran piecewise: why
+            run.details()["global_visibility"]["integration_note"] = g->integrationNote();
         const std::size_t bytes = g->bytes();
         return Artifact::of<visibility::GlobalVisibility>(std::move(g), bytes);
     };
