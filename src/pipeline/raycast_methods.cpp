@@ -821,7 +821,8 @@ std::shared_ptr<const TracedImage> tracePath(
                       {"null_collision_budget_exceeded", st.budgetExceeded},
                       {"max_bounces", pt.maxBounces},
                       {"majorant_grid", pt.majorantGrid},
-                      {"surface_events", st.surfaceEvents}};
+                      {"surface_events", st.surfaceEvents},
+                      {"acceleration_bytes", st.accelerationBytes}};
     if (st.budgetExceeded > 0)
         out->warnings.push_back(
             std::to_string(st.budgetExceeded) +
