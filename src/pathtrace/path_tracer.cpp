@@ -2,6 +2,7 @@
 #include "pathtrace/path_tracer.h"
 
 #include <tbb/blocked_range2d.h>
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 
@@ -10,6 +11,8 @@
 #include <cmath>
 #include <cstdio>
 #include <numbers>
+#include <tuple>
+#include <type_traits>
 
 #include "core/error.h"
 #include "core/timing.h"
@@ -50,6 +53,10 @@ constexpr int kFineVoxels = 1;
 constexpr float kFineValuePad = 1e-4f;
 /// ... and scale the table's maximum by this (rounding of the table's own interpolation).
 constexpr float kFineSigmaPad = 1.f + 1e-5f;
+/// Records of non-uniform blocks per storage chunk (PathTracer::Impl::fineOf): large enough that
+/// a chunk's allocation is rare, small enough that each thread's last, partly used one wastes
+/// little (at cellSize 4: 48 KB a chunk).
+constexpr std::size_t kFineRecordsPerChunk = 64;
 
 struct HalfSpace {
     glm::dvec3 point, normal;
@@ -158,18 +165,28 @@ struct PathTracer::Impl {
     glm::ivec3 dims{1};
     /// Fine majorants: per fine cell (fineSize³ voxel cells) of every non-empty skip cell, the
     /// largest σt the table gives over the value range of its voxels (trilinear values stay
-    /// within the range of the corners). fineSlot: per skip cell its block ((cellSize /
-    /// fineSize)³ entries, x fastest) or −1 when empty.
+    /// within the range of the corners). fineSlot: per skip cell its block or −1 when empty.
+    /// A block whose fine majorants are all equal (uniform: the block's one majorant is as
+    /// tight as its cells') keeps only that value, in blockMajorant, and no per-cell data; the
+    /// others keep theirs at fineOf[block]: (cellSize / fineSize)³ majorants (x fastest), then
+    /// their octant skip distances (8 bytes each; see fineOctants). Records are written into
+    /// chunks of kFineRecordsPerChunk per thread as the blocks are built: nothing is held for
+    /// the uniform ones, even while building.
     int fineSize = 1, fineCells = 1;
     std::vector<std::int32_t> fineSlot;
-    std::vector<glm::ivec3> fineFirst, fineLast;  ///< per block: its fine cells (inclusive)
-    std::vector<std::uint8_t> fineUniform;        ///< per block: all its entries are equal
-    std::vector<float> fine;
+    std::vector<glm::ivec3> fineFirst, fineLast;       ///< per block: its fine cells (inclusive)
+    std::vector<const float*> fineOf;                  ///< per block: its record, null when uniform
+    std::vector<float> blockMajorant;                  ///< per block: its majorant when uniform
+    std::vector<std::unique_ptr<float[]>> fineChunks;  ///< the storage fineOf points into
+    std::size_t fineChunkFloats = 0;
     /// Per block, a copy of the voxels its cells read (cellSize + 1 a side, x fastest; clamped
-    /// at the volume's far faces), as the float the view converts them to: a tracking sample in
-    /// the block reads 4 rows of one small array instead of 4 rows spread over the volume
-    /// (fewer cache lines). blockSampling: on (every axis ≥ 2 voxels).
-    std::vector<float> corners;
+    /// at the volume's far faces), at the volume's own type (the view converts them to float
+    /// as it converts the volume's): a tracking sample in the block reads 4 rows of one small
+    /// array instead of 4 rows spread over the volume (fewer cache lines). One vector per voxel
+    /// type, the volume's filled. blockSampling: on (every axis ≥ 2 voxels).
+    std::tuple<std::vector<std::uint8_t>, std::vector<std::int16_t>, std::vector<std::uint16_t>,
+               std::vector<float>>
+        corners;
     int cornerSide = 1;
     bool blockSampling = false;
     /// Octant skip distances, 8 per skip cell (octant o: bit a set for a negative direction on
@@ -180,9 +197,12 @@ struct PathTracer::Impl {
     /// there: unlike the symmetric skip distances, matter behind the ray does not shorten the
     /// jump (most empty cells next to bone have a symmetric distance of 1 or 2).
     std::vector<std::uint8_t> octant;
-    /// The same per fine cell of each block (block × 8 entries), over the fine majorants, cells
-    /// past the block counting as empty (a piece ends where the ray leaves its block).
-    std::vector<std::uint8_t> fineOctant;
+    /// The same per fine cell of each non-uniform block (in its record, after the majorants), over
+    /// the fine majorants, cells past the block counting as empty (a piece ends where the ray
+    /// leaves its block).
+    static const std::uint8_t* fineOctants(const float* record, std::size_t entries) {
+        return reinterpret_cast<const std::uint8_t*>(record + entries);
+    }
     /// Index-space box of the non-empty skip cells (empty when lo > hi).
     glm::vec3 busyLo{1.f}, busyHi{0.f};
 
@@ -214,11 +234,14 @@ struct PathTracer::Impl {
         if ((li > last) | (lj > last) | (lk > last)) return sigma(v, p);
         const float fx = x - float(i), fy = y - float(j), fz = z - float(kk);
         const std::size_t dj = std::size_t(cornerSide), dk = dj * dj;
-        const float* q = corners.data() + std::size_t(blk) * dk * dj + li + dj * lj + dk * lk;
-        const float c00 = q[0] + fx * (q[1] - q[0]);
-        const float c10 = q[dj] + fx * (q[dj + 1] - q[dj]);
-        const float c01 = q[dk] + fx * (q[dk + 1] - q[dk]);
-        const float c11 = q[dk + dj] + fx * (q[dk + dj + 1] - q[dk + dj]);
+        using T = std::remove_cvref_t<decltype(*v.data)>;
+        const T* q = std::get<std::vector<T>>(corners).data() + std::size_t(blk) * dk * dj + li +
+                     dj * lj + dk * lk;
+        // The view's arithmetic on the same converted values (VolumeView::sample).
+        const float c00 = float(q[0]) + fx * (float(q[1]) - float(q[0]));
+        const float c10 = float(q[dj]) + fx * (float(q[dj + 1]) - float(q[dj]));
+        const float c01 = float(q[dk]) + fx * (float(q[dk + 1]) - float(q[dk]));
+        const float c11 = float(q[dk + dj]) + fx * (float(q[dk + dj + 1]) - float(q[dk + dj]));
         const float c0 = c00 + fy * (c10 - c00);
         const float c1 = c01 + fy * (c11 - c01);
         return table->extinction(v.slope * (c0 + fz * (c1 - c0)) + v.intercept);
@@ -274,31 +297,44 @@ struct PathTracer::Impl {
                     fineFirst.push_back(first);
                     fineLast.push_back(glm::min(first + fc, (dims + fs - 1) / fs) - 1);
                 }
-        fine.assign(fineFirst.size() * block, 0.f);
-        fineUniform.assign(fineFirst.size(), 0);
+        const std::size_t blocks = fineFirst.size();
+        fineOf.assign(blocks, nullptr);
+        blockMajorant.assign(blocks, 0.f);
+        // A record: the majorants, then 8 bytes of octant distances per entry (2 floats' room).
+        const std::size_t record = 3 * block;
+        fineChunkFloats = record * kFineRecordsPerChunk;
+        struct Chunks {
+            std::vector<std::unique_ptr<float[]>> chunks;
+            std::size_t used = 0;
+            std::vector<float> scratch;
+        };
+        tbb::enumerable_thread_specific<Chunks> perThread;
         blockSampling = dims.x >= 2 && dims.y >= 2 && dims.z >= 2;
         cornerSide = cellSize + 1;
         const std::size_t side = std::size_t(cornerSide), cube = side * side * side;
-        if (blockSampling) corners.assign(fineFirst.size() * cube, 0.f);
-        fineOctant.assign(fine.size() * 8, 0);
         const float widen = table->cellWidth();
         volume->visit([&](const auto& v) {
-            tbb::parallel_for(std::size_t(0), fineFirst.size(), [&](std::size_t b) {
+            using T = std::remove_cvref_t<decltype(*v.data)>;
+            auto& corner = std::get<std::vector<T>>(corners);
+            if (blockSampling) corner.assign(blocks * cube, T(0));
+            tbb::parallel_for(std::size_t(0), blocks, [&](std::size_t b) {
                 const glm::ivec3 first = fineFirst[b], last = fineLast[b];
                 const float coarse =
                     cells->majorant(cells->index(first.x / fc, first.y / fc, first.z / fc));
-                float* out = fine.data() + b * block;
+                Chunks& own = perThread.local();
+                own.scratch.resize(block);
+                float* out = own.scratch.data();
                 if (blockSampling) {
                     const glm::ivec3 o = first * fs;
-                    float* c = corners.data() + b * cube;
+                    T* c = corner.data() + b * cube;
                     for (std::size_t z = 0; z < side; ++z)
                         for (std::size_t y = 0; y < side; ++y)
                             for (std::size_t x = 0; x < side; ++x) {
                                 const glm::ivec3 at =
                                     glm::min(o + glm::ivec3(int(x), int(y), int(z)), dims - 1);
                                 c[x + side * (y + side * z)] =
-                                    float(v.data[std::size_t(at.x) + v.sy * std::size_t(at.y) +
-                                                 v.sz * std::size_t(at.z)]);
+                                    v.data[std::size_t(at.x) + v.sy * std::size_t(at.y) +
+                                           v.sz * std::size_t(at.z)];
                             }
                 }
                 for (std::size_t e = 0; e < block; ++e) out[e] = coarse;  // cells past the grid
@@ -331,13 +367,24 @@ struct PathTracer::Impl {
                             m = std::min(coarse,
                                          table->maxExtinction(lo - pad, hi + pad) * kFineSigmaPad);
                         }
-                fineUniform[b] =
-                    std::all_of(out, out + block, [&](float m) { return m == out[0]; });
+                blockMajorant[b] = out[0];
+                if (std::all_of(out, out + block, [&](float m) { return m == out[0]; })) return;
+                // Not uniform: a record in this thread's chunk.
+                if (own.chunks.empty() || own.used + record > fineChunkFloats) {
+                    own.chunks.emplace_back(new float[fineChunkFloats]);
+                    own.used = 0;
+                }
+                float* r = own.chunks.back().get() + own.used;
+                own.used += record;
+                std::copy_n(out, block, r);
                 octantDistances(
-                    glm::ivec3(fc), [&](std::size_t e) { return out[e] > 0.f; },
-                    fineOctant.data() + b * block * 8);
+                    glm::ivec3(fc), [&](std::size_t e) { return r[e] > 0.f; },
+                    reinterpret_cast<std::uint8_t*>(r + block));
+                fineOf[b] = r;
             });
         });
+        for (Chunks& c : perThread)
+            for (auto& chunk : c.chunks) fineChunks.push_back(std::move(chunk));
     }
 
     /// Calls f(sa, sb, majorant, block) for consecutive pieces of the track with a constant
@@ -392,9 +439,10 @@ struct PathTracer::Impl {
         const float coarse = cells->majorant(cell);
         if (slot < 0) return f(sa, sb, coarse, -1);
         const std::size_t b = std::size_t(slot);
-        const float* m = fine.data() + b * std::size_t(fineCells * fineCells * fineCells);
         const int blk = blockSampling ? slot : -1;
-        if (fineUniform[b]) return f(sa, sb, m[0], blk);
+        const float* m = fineOf[b];
+        if (!m) return f(sa, sb, blockMajorant[b], blk);
+        const std::size_t entries = std::size_t(fineCells * fineCells * fineCells);
         const glm::ivec3 first = fineFirst[b], last = fineLast[b];
         const float fs = float(fineSize), invFs = 1.f / fs;
         const glm::vec3 p = k.o + sa * k.d;
@@ -426,9 +474,8 @@ struct PathTracer::Impl {
                 invDelta[a] = 0.f;
             }
         }
-        const std::uint8_t* oct = fineOctant.data() +
-                                  b * std::size_t(fineCells * fineCells * fineCells) * 8 +
-                                  ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
+        const std::uint8_t* oct =
+            fineOctants(m, entries) + ((k.d.x < 0.f) | ((k.d.y < 0.f) << 1) | ((k.d.z < 0.f) << 2));
         float s = sa;
         while (true) {
             const int a = tNext[0] <= tNext[1] ? (tNext[0] <= tNext[2] ? 0 : 2)
@@ -755,9 +802,9 @@ std::pair<std::uint64_t, std::uint64_t> PathTracer::checkSkipDistances() const {
           [&](int x, int y, int z) { return im.cells->majorant(im.cells->index(x, y, z)) > 0.f; });
     const int fc = im.fineCells;
     const std::size_t block = std::size_t(fc) * fc * fc;
-    for (std::size_t b = 0; b < im.fineFirst.size(); ++b) {
-        const float* m = im.fine.data() + b * block;
-        check(glm::ivec3(fc), im.fineOctant.data() + b * block * 8, [&](int x, int y, int z) {
+    for (const float* m : im.fineOf) {
+        if (!m) continue;  // uniform: no entries
+        check(glm::ivec3(fc), Impl::fineOctants(m, block), [&](int x, int y, int z) {
             return m[std::size_t(x) +
                      std::size_t(fc) * (std::size_t(y) + std::size_t(fc) * std::size_t(z))] > 0.f;
         });
@@ -767,6 +814,16 @@ std::pair<std::uint64_t, std::uint64_t> PathTracer::checkSkipDistances() const {
 
 float PathTracer::extinctionAt(const glm::dvec3& p) const {
     return impl_->volume->visit([&](const auto& v) { return impl_->sigma(v, impl_->indexOf(p)); });
+}
+
+std::size_t PathTracer::accelerationBytes() const {
+    const Impl& im = *impl_;
+    auto bytes = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+    return bytes(im.fineSlot) + bytes(im.fineFirst) + bytes(im.fineLast) + bytes(im.fineOf) +
+           bytes(im.blockMajorant) + bytes(im.fineChunks) +
+           im.fineChunks.size() * im.fineChunkFloats * sizeof(float) +
+           bytes(std::get<0>(im.corners)) + bytes(std::get<1>(im.corners)) +
+           bytes(std::get<2>(im.corners)) + bytes(std::get<3>(im.corners)) + bytes(im.octant);
 }
 
 const optics::TfTable& PathTracer::table() const { return *impl_->table; }
@@ -1197,6 +1254,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         stats->budgetExceeded = budget;
         stats->surfaceEvents = surfaceEvents;
         stats->seconds = clock.seconds();
+        stats->accelerationBytes = accelerationBytes();
         stats->relativeStdError = error;
         stats->targetReached = reached;
         stats->focusMm = lens ? focus : 0.0;

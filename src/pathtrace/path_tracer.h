@@ -55,6 +55,11 @@
 // Both estimators of the light a scattered ray reaches (next-event and phase sampling) therefore
 // see the same transmittance, and MIS stays unbiased.
 //
+// Memory (accelerationBytes): per voxel of a non-empty skip cell, a copy of the voxels its cells
+// read at the volume's own type ((1 + 1/cellSize)³ voxels), and — only where the fine majorants
+// of its skip cell differ (a uniform one's single majorant is as tight) — 4 B of fine majorant and
+// 8 B of octant skip distances.
+//
 // Determinism: every sample's random numbers are a pure function of (pixel, sample index, seed),
 // and each pixel sums its samples in order, so the image is the same for any thread count.
 #include <memory>
@@ -122,9 +127,10 @@ struct Stats {
     /// luminance mean) / (mean covered luminance) — the NRMS error against the converged image
     /// that the samples predict (noise only; the estimator has no bias). 0 for a black image.
     double relativeStdError = 0.0;
-    bool targetReached = false;  ///< a target error was given and met
-    double focusMm = 0.0;        ///< the plane in focus (aperture > 0)
-    bool autofocused = false;    ///< focusMm came from autofocus
+    bool targetReached = false;         ///< a target error was given and met
+    double focusMm = 0.0;               ///< the plane in focus (aperture > 0)
+    bool autofocused = false;           ///< focusMm came from autofocus
+    std::size_t accelerationBytes = 0;  ///< PathTracer::accelerationBytes
 };
 
 /// Fewer samples than this do not trust their own variance estimate (a pixel whose first few
@@ -176,7 +182,7 @@ class PathTracer {
     /// σt > 0 must lie in one whose majorant bounds it.
     std::vector<Piece> majorantPieces(const Ray& ray, double t0, double t1) const;
     /// Brute-force check of the skip structures: for every cell (skip cells and the voxel cells
-    /// of each non-empty skip cell) and octant, the cube its octant skip distance promises empty
+    /// of each non-empty skip cell whose fine majorants are not uniform) and octant, the cube its octant skip distance promises empty
     /// is scanned for a non-empty cell. Returns {entries checked, entries whose cube is not
     /// empty} (the second is 0 when right).
     std::pair<std::uint64_t, std::uint64_t> checkSkipDistances() const;
@@ -204,6 +210,10 @@ class PathTracer {
     Guides guides(const render::Camera& camera) const;
 
     const Options& options() const { return options_; }
+    /// Bytes of the majorant grid's acceleration data built with the tracer (fine majorants,
+    /// octant skip distances, the blocks' voxel copies and their per-block tables; the skip cells
+    /// passed in are not counted): what the tracer holds beyond its inputs.
+    std::size_t accelerationBytes() const;
     /// The TF table the tracer reads.
     const optics::TfTable& table() const;
     /// The volume the tracer reads (its geometry places the box keptInterval clips to).

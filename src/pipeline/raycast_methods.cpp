@@ -821,7 +821,8 @@ std::shared_ptr<const TracedImage> tracePath(
                       {"null_collision_budget_exceeded", st.budgetExceeded},
                       {"max_bounces", pt.maxBounces},
                       {"majorant_grid", pt.majorantGrid},
-                      {"surface_events", st.surfaceEvents}};
+                      {"surface_events", st.surfaceEvents},
+                      {"acceleration_bytes", st.accelerationBytes}};
     if (st.budgetExceeded > 0)
         out->warnings.push_back(
             std::to_string(st.budgetExceeded) +
@@ -1127,6 +1128,8 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             {"integration", g->integration() == visibility::GlobalIntegration::Recursive
                                 ? "recursive"
                                 : "piecewise"}};
+        if (!g->integrationNote().empty())  // asked for recursive, ran piecewise: why
+            run.details()["global_visibility"]["integration_note"] = g->integrationNote();
         const std::size_t bytes = g->bytes();
         return Artifact::of<visibility::GlobalVisibility>(std::move(g), bytes);
     };

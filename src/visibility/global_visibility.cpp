@@ -89,6 +89,15 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         dominant[std::size_t(k)] = a;
         if (!(std::abs(sg[a]) >= 1.f + kRecursiveMargin)) recursive = false;
     }
+    if (options.integration == GlobalIntegration::Recursive && !recursive)
+        out.integrationNote_ = "piecewise: r_s is under one grid step along some direction";
+    const std::size_t transient = recursiveTransientBytes(out.res_, C, options.nearFromLocal);
+    if (recursive && transient > options.maxRecursiveBytes) {
+        recursive = false;
+        out.integrationNote_ = "piecewise: the recursive integration would hold " +
+                               std::to_string(transient >> 20) + " MiB besides the field, over " +
+                               std::to_string(options.maxRecursiveBytes >> 20) + " MiB";
+    }
     if (recursive) {
         out.integration_ = GlobalIntegration::Recursive;
         const std::size_t P = std::size_t(out.res_.x) * out.res_.y * out.res_.z;
@@ -108,7 +117,6 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                         }
             });
         });
-        std::vector<double> acc(P * std::size_t(C), 0.0);
         const glm::ivec3 res = out.res_;
         // One direction, sequentially: F_k into F, the far part into far.
         auto direction = [&](int k, float* F, float* far) {
@@ -198,34 +206,42 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                                 }
                             }
                         }
-                        far[i] = t;
+                        if (far) far[i] = t;
                         F[i] = piece(vl.data() + i * std::size_t(C)) * t;
                     }
             }
         };
-        // Directions in fixed groups, each in parallel with its own buffers, summed in k order
-        // after the group: the same sums for any thread count.
-        constexpr int kGroup = 8;
-        std::vector<float> F(std::size_t(kGroup) * P), far(std::size_t(kGroup) * P);
+        // Directions in fixed groups, each in parallel with its own buffers (F_k, and the far part
+        // when it is not F_k itself), then added to the field point by point in k order: the
+        // same sums for any thread count. Each group's terms are summed in double from the
+        // field's float, so the transient memory is the groups' scalar grids, not a double
+        // accumulator the size of the field twice over.
+        constexpr int kGroup = kRecursiveDirectionGroup;
+        std::vector<float> F(std::size_t(kGroup) * P),
+            far(firstPiece ? std::size_t(kGroup) * P : 0);
         for (int k0 = 0; k0 < N; k0 += kGroup) {
             const int n = std::min(kGroup, N - k0);
             arena.execute([&] {
                 tbb::parallel_for(0, n, [&](int j) {
                     direction(k0 + j, F.data() + std::size_t(j) * P,
-                              far.data() + std::size_t(j) * P);
+                              firstPiece ? far.data() + std::size_t(j) * P : nullptr);
                 });
             });
             if (progress.cancelled()) throw CancelledError();
             const float* src = firstPiece ? far.data() : F.data();
             arena.execute([&] {
                 tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), [&](const auto& range) {
-                    for (std::size_t i = range.begin(); i != range.end(); ++i)
+                    double d[sh::kMaxCoeffs];
+                    for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                        float* dst = out.data_.data() + i * std::size_t(C);
+                        for (int e = 0; e < C; ++e) d[e] = dst[e];
                         for (int j = 0; j < n; ++j) {
                             const double T = src[std::size_t(j) * P + i];
                             const double* wk = wy.data() + std::size_t(k0 + j) * C;
-                            double* d = acc.data() + i * std::size_t(C);
                             for (int e = 0; e < C; ++e) d[e] += T * wk[e];
                         }
+                        for (int e = 0; e < C; ++e) dst[e] = float(d[e]);
+                    }
                 });
             });
             progress.report("global visibility", double(k0 + n) / N);
@@ -235,10 +251,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
             float* dst = out.data_.data() + i * std::size_t(C);
             if (!needed[i]) {
                 dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
+                std::fill(dst + 1, dst + C, 0.f);
                 continue;
             }
             ++shaded;
-            for (int e = 0; e < C; ++e) dst[e] = float(acc[i * std::size_t(C) + e]);
             if (options.nearFromLocal)
                 out.open_[i] = std::clamp(vl[i * std::size_t(C)] * kInvSqrt4Pi, 0.f, 1.f);
         }
@@ -300,6 +316,13 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     out.rays_ = raysTotal;
     out.skipped_ = skippedTotal;
     return out;
+}
+
+std::size_t recursiveTransientBytes(const glm::ivec3& resolution, int coefficients,
+                                    bool nearFromLocal) {
+    const std::size_t points = std::size_t(resolution.x) * resolution.y * resolution.z;
+    const std::size_t grids = std::size_t(kRecursiveDirectionGroup) * (nearFromLocal ? 2 : 1);
+    return points * (std::size_t(coefficients) * sizeof(float) + 1 + grids * sizeof(float));
 }
 
 void GlobalVisibility::sample(const glm::vec3& p, float* out) const {

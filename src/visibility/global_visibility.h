@@ -41,6 +41,13 @@
 // against up to (box length / r_s) samples per ray; the price is that the far field is read
 // through the grid's interpolation at every hop, which spreads a shadow's edge by up to a grid
 // step per hop (measured against the piecewise field and the path tracer in the README).
+// Memory: besides the field, the recursive integration holds the local field once per grid point
+// (C floats), a byte per point, and per direction of a group of kRecursiveDirectionGroup processed
+// at once its F_k and far-part grids (one float per point each; F_k alone without the near/far
+// split); each group is added into the field (in double from the field's float, in k order)
+// before the next starts (recursiveTransientBytes). When that exceeds
+// GlobalVisibilityOptions::maxRecursiveBytes the piecewise integration runs instead, which holds
+// nothing besides the field (integration() and integrationNote() say so).
 //
 // Grid: res_a = min(resolution, dims_a) points per axis, point g at voxel coordinate
 // (g + ½)·dims_a/res_a − ½ (cell centred, like the block levels), trilinear between points
@@ -49,6 +56,7 @@
 // Parallel over z-slices with oneTBB; identical results for any thread count.
 #include <algorithm>
 #include <memory>
+#include <string>
 #include <vector>
 
 #include "sh/sh_product.h"
@@ -62,6 +70,15 @@ inline constexpr double kGlobalStopT = 1e-4;
 /// so points inside dense matter barely pull a surface sample's far visibility toward theirs, but
 /// non-zero, so a sample with only buried neighbours still gets their plain trilinear blend.
 inline constexpr float kBuriedWeight = 1e-3f;
+
+/// Directions the recursive integration processes at once, each with its own scalar grids; fixed
+/// (not the thread count), so the field is the same for any thread count.
+inline constexpr int kRecursiveDirectionGroup = 8;
+/// Default bound on the recursive integration's transient memory (recursiveTransientBytes): a
+/// sixth of the 24 GB machines voxlight is sized for, so that with the field and the local field
+/// it reads the stage stays well under half of one (256³ points at 16 coefficients need 2.2 GB;
+/// the largest resolution, 1024³, would need 138 GB). Above it the piecewise integration runs.
+inline constexpr std::size_t kMaxRecursiveTransientBytes = std::size_t(4) << 30;
 
 /// How the far part's rays are integrated (header comment).
 enum class GlobalIntegration {
@@ -77,6 +94,8 @@ struct GlobalVisibilityOptions {
     /// true: the first piece from the local field at the sample (V^L ⊗ V^F, openness-weighted far
     /// grid); false: Kronander's grid-only V^G (chain from the grid point, plain trilinear).
     bool nearFromLocal = true;
+    /// Recursive integration only while recursiveTransientBytes stays within this; else piecewise.
+    std::size_t maxRecursiveBytes = kMaxRecursiveTransientBytes;
     int threads = 0;  ///< 0 = all hardware threads
 };
 
@@ -88,8 +107,11 @@ class GlobalVisibility {
     /// The far grid's storage (the local field it reads at render time is counted with it).
     std::size_t bytes() const { return (data_.size() + open_.size()) * sizeof(float); }
     std::uint64_t raysTraced() const { return rays_; }
-    /// The integration used (Recursive falls back to Piecewise when r_s is under ~1 grid step).
+    /// The integration used (Recursive falls back to Piecewise when r_s is under ~1 grid step,
+    /// or when its transient memory would exceed GlobalVisibilityOptions::maxRecursiveBytes).
     GlobalIntegration integration() const { return integration_; }
+    /// Why integration() is not the one asked for, in words; empty when it is.
+    const std::string& integrationNote() const { return integrationNote_; }
     std::uint64_t pointsSkipped() const { return skipped_; }
     /// Far coefficients V^F of grid point g.
     const float* at(const glm::ivec3& g) const {
@@ -126,7 +148,13 @@ class GlobalVisibility {
     std::vector<float> open_;  ///< per grid point (openness); empty unless nearFromLocal
     std::uint64_t rays_ = 0, skipped_ = 0;
     GlobalIntegration integration_ = GlobalIntegration::Piecewise;
+    std::string integrationNote_;
 };
+
+/// Bytes the recursive integration holds while it runs, besides the field it returns, for a grid
+/// of `resolution` points and `coefficients` SH coefficients (header comment).
+std::size_t recursiveTransientBytes(const glm::ivec3& resolution, int coefficients,
+                                    bool nearFromLocal);
 
 /// V^G from a local visibility field (InputError when resolution < 1).
 GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> local,

@@ -7,6 +7,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdio>
 #include <numbers>
 #include <string>
 
@@ -419,4 +420,49 @@ TEST(PathTracer, SkipDistancesNeverJumpOverMatter) {
     }
     EXPECT_GT(matter, 10000u) << "the rays must cross bone";
     EXPECT_EQ(covered, matter);
+}
+
+TEST(PathTracer, AccelerationMemoryPerVoxelStaysSmallWhereTheMediumIsUniform) {
+    // A 128³ int16 volume holding a homogeneous cube [4, 124)³ under a step TF: the skip cells
+    // (4 voxels a side) that read the cube are the first 31³, and the 30³ of them past the first
+    // layer on each axis have equal fine majorants (a voxel cell that reads 0 and 1 has the
+    // cube's; only the first layer holds cells that read 0 alone). Those keep no per-voxel
+    // majorants or octant skip distances, and every block's voxel copy is int16: 2·(5/4)³ =
+    // 3.9 B per voxel, plus 12 B on the 9 % of blocks in the first layers, plus the per-block
+    // tables (44 B a block: 0.7 B) ≈ 5.7 B; measured 5.85 B. The float copies and per-voxel data
+    // on every block cost 4·(5/4)³ + 12 + 0.5 = 20.3 B before.
+    constexpr double kMaxBytesPerVoxel = 8.0;
+    core::Geometry g;
+    g.dims = glm::ivec3(128);
+    auto v = std::make_shared<core::Volume>(g, core::VoxelType::Int16);
+    auto* d = v->dataAs<std::int16_t>();
+    auto in = [](int i) { return i >= 4 && i < 124; };
+    for (int k = 0; k < 128; ++k)
+        for (int j = 0; j < 128; ++j)
+            for (int i = 0; i < 128; ++i)
+                d[v->linearIndex(i, j, k)] = std::int16_t(in(i) && in(j) && in(k) ? 1 : 0);
+    const Medium s = makeMedium(std::move(v), slabTf());
+    std::size_t busy = 0;
+    for (std::size_t i = 0; i < s.cells->size(); ++i) busy += s.cells->majorant(i) > 0.f;
+    ASSERT_EQ(s.cells->cellSize(), 4);
+    ASSERT_EQ(busy, 31u * 31u * 31u);
+    const double voxels = double(busy) * std::pow(s.cells->cellSize(), 3);
+    pathtrace::Options o;
+    o.samplesPerPixel = 4;
+    const PathTracer t = s.tracer(o);
+    const double perVoxel = double(t.accelerationBytes()) / voxels;
+    RecordProperty("bytes_per_voxel", std::to_string(perVoxel));
+    std::printf("acceleration: %.2f B per voxel of non-empty skip cells\n", perVoxel);
+    EXPECT_LT(perVoxel, kMaxBytesPerVoxel);
+    EXPECT_GT(perVoxel, 2.0 * std::pow(5.0 / 4.0, 3));  // the voxel copies at least
+    // The skip structures stay right, the render reports the same bytes and stays within them.
+    const auto [checked, bad] = t.checkSkipDistances();
+    EXPECT_GT(checked, 0u);
+    EXPECT_EQ(bad, 0u);
+    const auto b = s.volume->geometry().worldBounds();
+    pathtrace::Stats st;
+    t.render(render::Camera(render::CameraSpec{}, b[0], b[1], 16, 16), core::Progress::none(), &st);
+    EXPECT_EQ(st.accelerationBytes, t.accelerationBytes());
+    EXPECT_GT(st.realCollisions, 0u);
+    EXPECT_EQ(st.majorantViolations, 0u);
 }

@@ -2,6 +2,7 @@
 // Global visibility V^G (eq. 11) against the closed form in a homogeneous cube, empty space, and
 // thread-count invariance.
 #include <gtest/gtest.h>
+#include <malloc.h>
 
 #include <cmath>
 #include <cstdio>
@@ -240,4 +241,84 @@ TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenAPieceIsShorterThanAGrid
     go.integration = GlobalIntegration::Piecewise;
     const GlobalVisibility p = computeGlobalVisibility(local, go);
     EXPECT_EQ(std::memcmp(g.at({3, 4, 5}), p.at({3, 4, 5}), 4 * sizeof(float)), 0);
+}
+
+TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenItsMemoryWouldExceedTheBound) {
+    // The bound one byte under the recursive integration's estimate: the piecewise integration
+    // runs (and says why); at the estimate itself the recursive one does.
+    const core::Volume v =
+        test::makeVolume({32, 32, 32}, [](int i, int, int) { return i < 16 ? 1000 : 0; });
+    LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 16;
+    o.radiusVoxels = 8.0;
+    const auto local = localOf(v, test::rampTf(0.05f), o);
+    GlobalVisibilityOptions go;
+    go.resolution = 8;
+    const std::size_t need = recursiveTransientBytes(glm::ivec3(8), 4, go.nearFromLocal);
+    go.maxRecursiveBytes = need;
+    const GlobalVisibility r = computeGlobalVisibility(local, go);
+    EXPECT_EQ(r.integration(), GlobalIntegration::Recursive);
+    EXPECT_EQ(r.integrationNote(), "");
+    go.maxRecursiveBytes = need - 1;
+    const GlobalVisibility g = computeGlobalVisibility(local, go);
+    EXPECT_EQ(g.integration(), GlobalIntegration::Piecewise);
+    EXPECT_NE(g.integrationNote().find("MiB"), std::string::npos) << g.integrationNote();
+    go.integration = GlobalIntegration::Piecewise;
+    const GlobalVisibility p = computeGlobalVisibility(local, go);
+    EXPECT_EQ(p.integrationNote(), "");
+    for (int z = 0; z < 8; ++z)
+        for (int y = 0; y < 8; ++y)
+            for (int x = 0; x < 8; ++x)
+                ASSERT_EQ(std::memcmp(g.at({x, y, z}), p.at({x, y, z}), 4 * sizeof(float)), 0);
+    // The default bound keeps 256³ points at 16 coefficients recursive (2.2 GB; the double
+    // accumulator it replaced made that 4.3 GB) and refuses 1024³.
+    EXPECT_LE(recursiveTransientBytes(glm::ivec3(256), 16, true), kMaxRecursiveTransientBytes);
+    EXPECT_GT(recursiveTransientBytes(glm::ivec3(1024), 4, false), kMaxRecursiveTransientBytes);
+}
+
+TEST(GlobalVisibility, RecursiveIntegrationHoldsLittleMoreThanTheFieldWhileItRuns) {
+    // The heap in use at every progress report (after each group of directions, with every
+    // buffer of the integration alive), over the heap before the call: at most the field, its
+    // openness and the estimate, plus slack for the local field's and TBB's small allocations.
+    // The double accumulator the recursive integration used to keep (2× the field) exceeds it.
+    const core::Volume v = test::makeVolume({40, 40, 40}, [](int i, int j, int k) {
+        return (i - 20) * (i - 20) + (j - 20) * (j - 20) + (k - 20) * (k - 20) < 100 ? 1000 : 0;
+    });
+    LocalVisibilityOptions o;
+    o.coefficients = 16;
+    o.rays = 32;
+    o.radiusVoxels = 3.0;
+    const auto local = localOf(v, test::rampTf(0.05f), o);
+    GlobalVisibilityOptions go;
+    go.resolution = 40;
+    go.threads = 2;
+    const std::size_t points = 40 * 40 * 40;
+    const std::size_t field = points * 16 * sizeof(float) + points * sizeof(float);
+    const std::size_t transient = recursiveTransientBytes(glm::ivec3(40), 16, true);
+    auto inUse = [] {
+        const struct mallinfo2 m = mallinfo2();
+        return std::size_t(m.uordblks) + std::size_t(m.hblkhd);
+    };
+    const std::size_t before = inUse();
+    std::size_t peak = 0;
+    int reports = 0;
+    const core::Progress progress(
+        [&](const std::string&, double) {
+            peak = std::max(peak, inUse());
+            ++reports;
+        },
+        nullptr);
+    const GlobalVisibility g = computeGlobalVisibility(local, go, progress);
+    ASSERT_EQ(g.integration(), GlobalIntegration::Recursive);
+    ASSERT_GT(reports, 2);
+    const std::size_t grown = peak > before ? peak - before : 0;
+    // Slack: a tenth of the field (local samples, TBB's task and arena allocations, the
+    // direction tables: well under 1 MB here, against 4.3 MB of field and 6.2 MB of transient).
+    const std::size_t kSlack = field / 10;
+    RecordProperty("heap_growth", std::to_string(grown));
+    std::printf("heap at reports: %zu bytes over the start; field %zu, estimate %zu\n", grown,
+                field, transient);
+    EXPECT_LE(grown, field + transient + kSlack);
+    EXPECT_GT(grown, transient / 2);  // the measurement sees the buffers (the test can fail)
 }
