@@ -33,6 +33,7 @@ std::vector<std::uint8_t> chebyshevDistances(const glm::ivec3& c, const std::uin
                                              int cap) {
     VL_CHECK(cap >= 1 && cap <= 255);
     const std::size_t n = std::size_t(c.x) * std::size_t(c.y) * std::size_t(c.z);
+    VL_CHECK(n <= std::numeric_limits<std::uint32_t>::max());  // the fronts' indices
     std::vector<std::uint8_t> distance(n, std::uint8_t(cap));
     std::vector<std::uint32_t> front, next;
     for (std::size_t i = 0; i < n; ++i)

@@ -9,6 +9,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <string>
@@ -181,7 +182,9 @@ struct IlluminationLattice::Tracer {
                         for (int j = a.y; j <= e.y; ++j)
                             for (int i = a.x; i <= e.x; ++i) {
                                 const float x = s[idx(i, j, k)];
-                                if (std::isfinite(x)) lo = std::min(lo, x), hi = std::max(hi, x);
+                                // ±inf count (as in the skip flags and the cell test); NaN
+                                // has no order.
+                                if (!std::isnan(x)) lo = std::min(lo, x), hi = std::max(hi, x);
                             }
                     range[brickIndex(b)] = {lo, hi};
                 }
@@ -215,8 +218,11 @@ struct IlluminationLattice::Tracer {
         std::lock_guard<std::mutex> lock(skipMutex);
         for (const auto& f : skipFields)
             if (f->iso == iso) return f.get();
-        if (skipFields.size() >= kMaxSkipFields || !std::isfinite(iso)) return nullptr;
         const glm::ivec3 cells = lastCell + 1;
+        if (skipFields.size() >= kMaxSkipFields || !std::isfinite(iso) ||
+            std::uint64_t(cells.x) * std::uint64_t(cells.y) * std::uint64_t(cells.z) >
+                std::numeric_limits<std::uint32_t>::max())  // chebyshevDistances' indices
+            return nullptr;
         std::vector<std::uint8_t> flags(std::size_t(cells.x) * cells.y * cells.z);
         const std::size_t dx = n.x > 1 ? 1 : 0, dy = n.y > 1 ? std::size_t(n.x) : 0,
                           dz = n.z > 1 ? std::size_t(n.x) * std::size_t(n.y) : 0;
@@ -879,10 +885,10 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     const char* stage = "illumination lattice";
     progress.report(stage, 0.0);
 
-    // Built before the paths rather than by the first of them while the others wait.
-    if (o.placement == TexelPlacement::OnSurface && !todo.empty()) skipFor(o.surfaceIso);
     tbb::task_arena arena(o.threads > 0 ? o.threads : tbb::task_arena::automatic);
     arena.execute([&] {
+        // Built before the paths rather than by the first of them while the others wait.
+        if (o.placement == TexelPlacement::OnSurface && !todo.empty()) skipFor(o.surfaceIso);
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& rg) {
             if (progress.cancelled()) return;
             std::uint64_t nPaths = 0, nShadow = 0, nPlateau = 0, nDone = 0;
@@ -1043,14 +1049,14 @@ glm::vec3 IlluminationLattice::directIrradiance(const glm::dvec3& world, double 
     glm::dvec3 start = x;
     if (shadows && !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
     glm::dvec3 e(0.0);
+    const SkipField* skip = shadows ? skipFor(iso) : nullptr;
     for (const auto& l : lights_) {
         if (!l->isDelta()) continue;
         const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
         if (!(ls.pdf > 0.f)) continue;
         const double cosT = glm::dot(nrm, glm::dvec3(ls.wi));
         if (cosT <= 0.0) continue;
-        if (shadows &&
-            tr.hit(start, glm::dvec3(ls.wi), iso, double(ls.distance), nullptr, skipFor(iso)))
+        if (shadows && tr.hit(start, glm::dvec3(ls.wi), iso, double(ls.distance), nullptr, skip))
             continue;
         e += glm::dvec3(ls.value) * cosT;
     }
