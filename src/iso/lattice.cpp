@@ -1028,6 +1028,11 @@ void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64
     for (auto& t : out.T) t *= inv;
 }
 
+int IlluminationLattice::skipFieldCount() const {
+    std::lock_guard<std::mutex> lock(tracer_->skipMutex);
+    return int(tracer_->skipFields.size());
+}
+
 const IlluminationLattice::SkipField* IlluminationLattice::skipFor(double iso) const {
     return options_.skipDistances ? tracer_->skipFor(iso) : nullptr;
 }

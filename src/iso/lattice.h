@@ -201,6 +201,8 @@ class IlluminationLattice {
     glm::dvec3 texelIndexPosition(const glm::ivec3& t) const { return glm::dvec3(t) / res_; }
     const LatticeOptions& options() const { return options_; }
     std::uint64_t texelsStored() const { return stored_; }
+    /// Isovalues whose skip distances the tracer holds (LatticeOptions::skipDistances; at most 2).
+    int skipFieldCount() const;
     double storedMiB() const;
 
   private:
