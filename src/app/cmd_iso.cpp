@@ -335,6 +335,8 @@ Command addIsoCommand(CLI::App& app) {
                                               {"shadow_rays", ls.shadowRays},
                                               {"seconds", ls.seconds},
                                               {"stored_mib", ls.storedMiB},
+                                              {"tracer_mib", ls.tracerMiB},
+                                              {"skip_fields_built", ls.skipFieldsBuilt},
                                               {"samples", lattice->samples},
                                               {"bounces", lattice->bounces},
                                               {"resolution", lattice->resolution},

@@ -40,7 +40,8 @@ constexpr int kMaxRootSteps = 60;
 /// turns far less than 60° over the one voxel between texels.
 constexpr double kSameFaceCosine = 0.5;
 /// Isovalues whose skip distances (Tracer::skipFor) are kept: the on-surface lattice's and a
-/// bake's or renderer's one; others trace with the bricks alone.
+/// bake's or renderer's one. A further isovalue (an isovalue slider) replaces the least recently
+/// used one, so the memory stays bounded (1 B per cell each) and every isovalue gets its jumps.
 constexpr std::size_t kMaxSkipFields = 2;
 
 std::string number(double v) {
@@ -150,7 +151,10 @@ struct IlluminationLattice::Tracer {
     static constexpr int kSkipTile = 4;
     glm::ivec3 skipTiles;  ///< tiles of kSkipTile³ cells per axis (skipIndex)
     mutable std::mutex skipMutex;
-    mutable std::vector<std::unique_ptr<SkipField>> skipFields;  ///< never erased: pointers stay
+    /// Most recently used last. Shared: a caller keeps the field it traces with alive while
+    /// another isovalue replaces it here.
+    mutable std::vector<std::shared_ptr<const SkipField>> skipFields;
+    mutable std::uint64_t skipFieldsBuilt = 0;
 
     explicit Tracer(const core::Volume& v) : n(v.dims()), geo(v.geometry()) {
         s.resize(std::size_t(v.voxelCount()));
@@ -212,14 +216,18 @@ struct IlluminationLattice::Tracer {
                std::size_t(skipTiles.x) *
                    (std::size_t(t.y) + std::size_t(skipTiles.y) * std::size_t(t.z));
     }
-    /// The skip distances for `iso` (built on first request, thread-safe), or nullptr when
-    /// kMaxSkipFields other isovalues hold theirs.
-    const SkipField* skipFor(double iso) const {
+    /// The skip distances for `iso` (built on first request, thread-safe; when kMaxSkipFields
+    /// isovalues hold theirs, the least recently used is dropped), or nullptr for a non-finite
+    /// isovalue or a grid beyond chebyshevDistances' 32-bit indices (the bricks alone then).
+    std::shared_ptr<const SkipField> skipFor(double iso) const {
         std::lock_guard<std::mutex> lock(skipMutex);
-        for (const auto& f : skipFields)
-            if (f->iso == iso) return f.get();
+        for (auto it = skipFields.begin(); it != skipFields.end(); ++it)
+            if ((*it)->iso == iso) {
+                std::rotate(it, it + 1, skipFields.end());  // now the most recently used
+                return skipFields.back();
+            }
         const glm::ivec3 cells = lastCell + 1;
-        if (skipFields.size() >= kMaxSkipFields || !std::isfinite(iso) ||
+        if (!std::isfinite(iso) ||
             std::uint64_t(cells.x) * std::uint64_t(cells.y) * std::uint64_t(cells.z) >
                 std::numeric_limits<std::uint32_t>::max())  // chebyshevDistances' indices
             return nullptr;
@@ -242,7 +250,7 @@ struct IlluminationLattice::Tracer {
             });
         });
         const std::vector<std::uint8_t> linear = grid::chebyshevDistances(cells, flags.data(), 255);
-        auto f = std::make_unique<SkipField>();
+        auto f = std::make_shared<SkipField>();
         f->iso = iso;
         f->distance.assign(std::size_t(skipTiles.x) * skipTiles.y * skipTiles.z *
                                (kSkipTile * kSkipTile * kSkipTile),
@@ -265,8 +273,17 @@ struct IlluminationLattice::Tracer {
                     break;
                 }
         f->tiles = grid::chebyshevDistances(skipTiles, tileFlags.data(), 255);
+        if (skipFields.size() >= kMaxSkipFields) skipFields.erase(skipFields.begin());
         skipFields.push_back(std::move(f));
-        return skipFields.back().get();
+        ++skipFieldsBuilt;
+        return skipFields.back();
+    }
+    /// Bytes held: the float copy of the volume, the bricks' ranges and the skip fields kept.
+    std::size_t bytes() const {
+        std::size_t b = s.size() * sizeof(float) + range.size() * sizeof(range[0]);
+        std::lock_guard<std::mutex> lock(skipMutex);
+        for (const auto& f : skipFields) b += f->distance.size() + f->tiles.size();
+        return b;
     }
     std::size_t brickIndex(const glm::ivec3& b) const {
         return std::size_t(b.x) +
@@ -888,7 +905,10 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     tbb::task_arena arena(o.threads > 0 ? o.threads : tbb::task_arena::automatic);
     arena.execute([&] {
         // Built before the paths rather than by the first of them while the others wait.
-        if (o.placement == TexelPlacement::OnSurface && !todo.empty()) skipFor(o.surfaceIso);
+        // Held for the whole call: no other isovalue can replace it meanwhile.
+        const std::shared_ptr<const SkipField> prebuilt =
+            o.placement == TexelPlacement::OnSurface && !todo.empty() ? skipFor(o.surfaceIso)
+                                                                      : nullptr;
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, todo.size(), 16), [&](const auto& rg) {
             if (progress.cancelled()) return;
             std::uint64_t nPaths = 0, nShadow = 0, nPlateau = 0, nDone = 0;
@@ -946,13 +966,16 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     st.plateauTexels = plateaus;
     st.seconds = clock.seconds();
     st.storedMiB = storedMiB();
+    st.tracerMiB = tracerMiB();
+    st.skipFieldsBuilt = skipFieldsBuilt();
     return st;
 }
 
 void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
                                    bool sharedIso, PathSums& out) const {
     const Tracer& tr = *tracer_;
-    const SkipField* skip = sharedIso ? skipFor(iso) : nullptr;
+    const std::shared_ptr<const SkipField> held = sharedIso ? skipFor(iso) : nullptr;
+    const SkipField* skip = held.get();
     const LatticeOptions& o = options_;
     const int C = o.shOrder * o.shOrder;
     const bool sh = o.mode == LatticeMode::ShTransfer;
@@ -1033,7 +1056,17 @@ int IlluminationLattice::skipFieldCount() const {
     return int(tracer_->skipFields.size());
 }
 
-const IlluminationLattice::SkipField* IlluminationLattice::skipFor(double iso) const {
+std::uint64_t IlluminationLattice::skipFieldsBuilt() const {
+    std::lock_guard<std::mutex> lock(tracer_->skipMutex);
+    return tracer_->skipFieldsBuilt;
+}
+
+double IlluminationLattice::tracerMiB() const {
+    return double(tracer_->bytes()) / (1024.0 * 1024.0);
+}
+
+std::shared_ptr<const IlluminationLattice::SkipField> IlluminationLattice::skipFor(
+    double iso) const {
     return options_.skipDistances ? tracer_->skipFor(iso) : nullptr;
 }
 
@@ -1054,7 +1087,8 @@ glm::vec3 IlluminationLattice::directIrradiance(const glm::dvec3& world, double 
     glm::dvec3 start = x;
     if (shadows && !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
     glm::dvec3 e(0.0);
-    const SkipField* skip = shadows ? skipFor(iso) : nullptr;
+    const std::shared_ptr<const SkipField> held = shadows ? skipFor(iso) : nullptr;
+    const SkipField* skip = held.get();
     for (const auto& l : lights_) {
         if (!l->isDelta()) continue;
         const lights::LightSample ls = l->sample(world, glm::vec2(0.5f));
@@ -1077,7 +1111,8 @@ glm::vec3 IlluminationLattice::vicinityIrradiance(const glm::dvec3& world, doubl
     const glm::dvec3 nrm = tr.smoothNormal(x);
     glm::dvec3 start;
     if (nrm == glm::dvec3(0.0) || !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
-    const SkipField* skip = skipFor(iso);
+    const std::shared_ptr<const SkipField> held = skipFor(iso);
+    const SkipField* skip = held.get();
     bool sky = true;  // no environment or area light: a white sky of radiance 1
     for (const auto& l : lights_) sky = sky && l->isDelta();
     glm::dvec3 e(0.0);

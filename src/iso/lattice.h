@@ -120,6 +120,9 @@ struct LatticeStats {
     std::uint64_t plateauTexels = 0;  ///< computed with the full sphere (no surface normal)
     double seconds = 0.0;
     double storedMiB = 0.0;  ///< texel storage after the call
+    /// What the tracer holds beside the texels (IlluminationLattice::tracerMiB), after the call.
+    double tracerMiB = 0.0;
+    std::uint64_t skipFieldsBuilt = 0;  ///< skip fields built so far (skipFieldsBuilt())
 };
 
 class IlluminationLattice {
@@ -201,9 +204,16 @@ class IlluminationLattice {
     glm::dvec3 texelIndexPosition(const glm::ivec3& t) const { return glm::dvec3(t) / res_; }
     const LatticeOptions& options() const { return options_; }
     std::uint64_t texelsStored() const { return stored_; }
-    /// Isovalues whose skip distances the tracer holds (LatticeOptions::skipDistances; at most 2).
+    /// Isovalues whose skip distances the tracer holds (LatticeOptions::skipDistances; at most 2:
+    /// a third replaces the least recently used).
     int skipFieldCount() const;
+    /// Skip fields built since construction (one per isovalue, again after a replacement).
+    std::uint64_t skipFieldsBuilt() const;
     double storedMiB() const;
+    /// The tracer's memory beside the texels: the volume as floats (4 B per voxel), the bricks'
+    /// ranges and the skip fields held (1 B per cell each; building one needs ≈ 11 B per cell
+    /// more for the time it takes).
+    double tracerMiB() const;
 
   private:
     struct Block;
@@ -238,8 +248,8 @@ class IlluminationLattice {
     /// The texels trilinear reads at a world point (weight > 0) and their weights; returns how many.
     int stencil(const glm::dvec3& world, glm::ivec3 texel[8], double weight[8]) const;
     /// The tracer's skip distances for iso (nullptr when options_.skipDistances is off or the
-    /// tracer keeps other isovalues').
-    const SkipField* skipFor(double iso) const;
+    /// isovalue is not finite); the caller holds it while it traces.
+    std::shared_ptr<const SkipField> skipFor(double iso) const;
     /// ShTransfer: the irradiance slot of texel data d from its transfer and the current lights.
     void dotTexel(float* d) const;
 

@@ -1861,6 +1861,8 @@ core::ImageRGBA renderIsoLatticeFrame(Run& run, const render::RayCaster& caster,
                         {"plateau_texels", ls.plateauTexels},
                         {"seconds", ls.seconds},
                         {"stored_mib", ls.storedMiB},
+                        {"tracer_mib", ls.tracerMiB},
+                        {"skip_fields_built", ls.skipFieldsBuilt},
                         {"dims", {lattice->dims().x, lattice->dims().y, lattice->dims().z}}};
     }
     return film;

@@ -263,18 +263,24 @@ TEST(Lattice, OnSurfaceTexelsFollowPerPointTracingOnSharpEdgedData) {
 // random numbers; crossings agree to float rounding of where a cell is entered). The scene hides
 // thin rods (radius 0.7 voxel) among two balls over a floor, so a distance one cell too large
 // would let paths and shadow rays through them and change the sums.
-TEST(Lattice, SkipDistancesChangeNoCrossing) {
+namespace {
+/// Thin rods, two balls and a floor: values 0…1 over a one-voxel ramp at each surface.
+std::shared_ptr<const core::Volume> rodsAndBalls() {
     core::Geometry g;
     g.dims = {44, 40, 30};
     g.origin = {-22.0, -20.0, -4.0};
-    core::Volume v = test::fieldVolume(g, [](const glm::dvec3& p) {
+    return share(test::fieldVolume(g, [](const glm::dvec3& p) {
         double d = std::min({p.z, glm::length(p - glm::dvec3(-6, 0, 10)) - 6.0,
                              glm::length(p - glm::dvec3(8, 3, 7)) - 3.5});
         for (int r = 0; r < 5; ++r)  // rods along y at several heights and x
             d = std::min(d, std::hypot(p.x - (-15.0 + 7.3 * r), p.z - (3.0 + 4.1 * r)) - 0.7);
         return std::clamp(0.5 - d, 0.0, 1.0);
-    });
-    auto vol = share(std::move(v));
+    }));
+}
+}  // namespace
+
+TEST(Lattice, SkipDistancesChangeNoCrossing) {
+    auto vol = rodsAndBalls();
     auto light =
         std::make_shared<lights::DirectionalLight>(glm::vec3(2.f), glm::vec3(0.5f, -0.2f, 1.f));
     const std::vector<std::shared_ptr<const lights::Light>> ls = {sky(0.3f), light};
@@ -305,6 +311,47 @@ TEST(Lattice, SkipDistancesChangeNoCrossing) {
     // The comparison means something only if one side did skip: one field, for this isovalue.
     EXPECT_EQ(a.skipFieldCount(), 1);
     EXPECT_EQ(b.skipFieldCount(), 0);
+}
+
+// An isovalue slider: every isovalue gets its skip distances (a third replaces the least recently
+// used of the two kept, it does not fall back to the bricks alone), shadows stay those of the
+// bricks, and the tracer's reported memory counts the fields it holds.
+TEST(Lattice, AThirdIsovalueReplacesTheLeastRecentlyUsedSkipField) {
+    auto vol = rodsAndBalls();
+    auto light =
+        std::make_shared<lights::DirectionalLight>(glm::vec3(2.f), glm::vec3(0.5f, -0.2f, 1.f));
+    const auto tf = albedoTf(0.6f, 0.f, 1.f);
+    LatticeOptions bricksOnly = opts(64, 0);
+    bricksOnly.skipDistances = false;
+    IlluminationLattice a(vol, tf, {light}, opts(64, 0)), b(vol, tf, {light}, bricksOnly);
+    const double bricksMiB = b.tracerMiB();
+    EXPECT_GE(bricksMiB, 4.0 * double(vol->voxelCount()) / (1024.0 * 1024.0));  // the float copy
+    // Each step: the isovalue and how many fields have been built after it (0.3, 0.5, 0.7 fill
+    // and replace; 0.5 is then the most recent but one, so 0.3 replaces 0.7, not 0.5).
+    const std::pair<double, int> steps[] = {{0.3, 1}, {0.5, 2}, {0.7, 3},
+                                            {0.5, 3}, {0.3, 4}, {0.5, 4}};
+    for (const auto& [iso, built] : steps) {
+        const Extraction ex = extractIsosurface(*vol, test::at(iso));
+        const std::size_t nv = ex.mesh.n_vertices();
+        double maxDiff = 0.0, maxE = 0.0;
+        for (std::size_t i = 0; i < 100; ++i) {
+            const glm::dvec3 p = test::toGlm(ex.mesh.point(Mesh::VertexHandle(int(i * 7919 % nv))));
+            const glm::vec3 da = a.directIrradiance(p, iso, true),
+                            db = b.directIrradiance(p, iso, true);
+            maxDiff = std::max(maxDiff, double(glm::length(da - db)));
+            maxE = std::max(maxE, double(glm::length(db)));
+        }
+        constexpr double kRounding = 1e-6;  // as in SkipDistancesChangeNoCrossing
+        EXPECT_LE(maxDiff, kRounding * maxE) << "isovalue " << iso;
+        EXPECT_GT(maxE, 0.5);
+        EXPECT_EQ(a.skipFieldsBuilt(), std::uint64_t(built)) << "after isovalue " << iso;
+        EXPECT_LE(a.skipFieldCount(), 2);
+    }
+    EXPECT_EQ(b.skipFieldsBuilt(), 0u);
+    // Two fields of one byte per cell (the 4³ tiles pad 43×39×29 cells to 44×40×32) and their
+    // tile distances.
+    const double fieldsMiB = 2.0 * (44 * 40 * 32 + 11 * 10 * 8) / (1024.0 * 1024.0);
+    EXPECT_NEAR(a.tracerMiB() - bricksMiB, fieldsMiB, 1e-9);
 }
 
 // Shadows: a ball between a directional light and a floor darkens the floor below it (E = 0 in
