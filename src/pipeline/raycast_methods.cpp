@@ -1520,7 +1520,7 @@ const Codec& pvrtCpcaCodec() {
 /// components (skipped for clusters 0). A light or camera change reruns none of them: only the
 /// Frame stage pvrt_radiance. Returns the name of the stage whose transfer the render reads.
 std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::RenderOptions& o,
-                          const LightCuts& cuts) {
+                          const LightCuts& cuts, bool tfPhaseChannel) {
     const json directKey = {{"params", params.directKey()}, {"cuts", cuts.key}};
     Stage direct{"pvrt_direct",
                  StageKind::Precompute,
@@ -1663,12 +1663,13 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
     // Per light change: the lights (or the camera's headlight, when the scene has none) projected
     // into the basis and combined. Kept in memory, so a camera move under fixed lights reuses it.
     const bool compressed = params.clusters > 0;
-    // n > 1 evaluated toward the eye per grid point: the camera and phase_g are inputs too.
+    // n > 1 evaluated toward the eye per grid point: the camera and phase_g are inputs too —
+    // unless the TF's phase channel sets g per rendered sample (the key below; its label here).
     const bool towardEye = compressed && params.exitance > 1 && params.evaluateAtGrid;
-    Stage radiance{
-        "pvrt_radiance",
-        StageKind::Precompute,
-        {transferStage, "pvrt_cpca", "lights", towardEye ? "camera" : "camera (headlight only)"}};
+    Stage radiance{"pvrt_radiance",
+                   StageKind::Precompute,
+                   {transferStage, "pvrt_cpca", "lights",
+                    towardEye && !tfPhaseChannel ? "camera" : "camera (headlight only)"}};
     radiance.key = [transferStage, compressed, towardEye, g = params.phaseG](const Run& run) {
         // A TF phase channel sets g per rendered sample: nothing is folded toward the eye then
         // (compute below), so the camera is no input (a preset never has the channel; explicit
@@ -2289,7 +2290,10 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         }
     };
     plan.stages.push_back(camera);
-    if (kind == Kind::Pvrt) addPvrtStages(plan, pvrtParams, options, cuts);
+    if (kind == Kind::Pvrt)
+        addPvrtStages(plan, pvrtParams, options, cuts,
+                      !scene.transferFunction.points.empty() &&
+                          scene.transferFunction.points.front().phaseG.has_value());
 
     Stage frame{"render",
                 StageKind::Frame,

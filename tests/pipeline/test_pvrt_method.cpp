@@ -489,6 +489,16 @@ json hgParams() {
 }
 }  // namespace
 
+namespace {
+/// The inputs pvrt_radiance lists in a run's stage records.
+std::vector<std::string> radianceInputs(const RunResult& r) {
+    for (const auto& st : r.stages)
+        if (st.name == "pvrt_radiance") return st.inputs;
+    ADD_FAILURE() << "no pvrt_radiance stage";
+    return {""};
+}
+}  // namespace
+
 TEST(PvrtMethod, APhaseChannelInTheTfKeepsTheRadianceOffTheCamera) {
     // With the TF's phase channel g is set per rendered sample, so nothing is folded toward the
     // eye at the light change (as "sample"): a camera move reruns only the frame, not
@@ -499,6 +509,7 @@ TEST(PvrtMethod, APhaseChannelInTheTfKeepsTheRadianceOffTheCamera) {
     for (auto& p : d["transfer_function"]["points"]) p["phase_g"] = 0.6;
     const RunResult base = session.run(scene(d));
     EXPECT_FALSE(base.details["pvrt_radiance"]["toward_eye"].get<bool>());
+    EXPECT_EQ(radianceInputs(base).back(), "camera (headlight only)");  // the stage list says so
     d["camera"] = {{"azimuth", 40}};
     EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
 }
@@ -514,6 +525,7 @@ TEST(PvrtMethod, HgTowardTheEyeFollowsTheCameraAndMatchesPerSample) {
     json d = cloudScene("pvrt", params, true);
     const RunResult base = session.run(scene(d));
     EXPECT_TRUE(base.details["pvrt_radiance"]["toward_eye"].get<bool>());
+    EXPECT_EQ(radianceInputs(base).back(), "camera");
     d["lights"][0]["direction"] = {-0.4, 0.7, -0.5};
     EXPECT_EQ(ranStages(session.run(scene(d))),
               (std::set<std::string>{"lights", "pvrt_radiance", "camera", "render"}));
