@@ -1587,13 +1587,28 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
     };
     plan.stages.push_back(direct);
 
+    // Photons never scatter in removed matter, and section-view matter absorbs them on their way
+    // in (photons.h): every plane and the crop box shape the indirect part, not only the cuts.
+    json section = json::array();
+    for (const render::ClipPlane& p : o.clipPlanes)
+        if (p.shadowsFromRemoved)
+            section.push_back({{"point", {p.point.x, p.point.y, p.point.z}},
+                               {"normal", {p.normal.x, p.normal.y, p.normal.z}}});
+    if (o.cropBox && o.cropBox->shadowsFromRemoved) {
+        const glm::dvec3 &lo = o.cropBox->min, &hi = o.cropBox->max;
+        section.push_back({{"crop_min", {lo.x, lo.y, lo.z}}, {"crop_max", {hi.x, hi.y, hi.z}}});
+    }
     const json photonKey = {{"params", params.photonKey()}, {"cuts", cuts.key}};
-    Stage indirect{"pvrt_transfer", StageKind::Precompute, {"pvrt_direct", "method"}};
+    const json photonKeyed =
+        section.empty() ? photonKey : json{{"photons", photonKey}, {"section_view", section}};
+    Stage indirect{"pvrt_transfer",
+                   StageKind::Precompute,
+                   {"pvrt_direct", "method", "clip_planes", "crop_box"}};
     if (!params.multiple)
         indirect.skip =
             "not needed: single scattering (no 'multiple_scattering' effect or max_bounces 1)";
-    indirect.key = [photonKey](const Run& run) {
-        return KeyBuilder(run, "pvrt_transfer").stage("pvrt_direct").json(photonKey).value();
+    indirect.key = [photonKeyed](const Run& run) {
+        return KeyBuilder(run, "pvrt_transfer").stage("pvrt_direct").json(photonKeyed).value();
     };
     indirect.compute = [params, o](Run& run) {
         const auto loaded = run.get<LoadedVolume>("load_volume");

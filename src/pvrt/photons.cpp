@@ -131,6 +131,11 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
     // Scattering: HG with the TF's phase g channel where it has one, else options.phaseG; g = 0
     // keeps the isotropic draw (and so the photons of n = 1, g = 0 bit for bit).
     const bool phaseChannel = medium.table().hasPhaseG();
+    // Section views: planes (or a crop box) that remove matter for the camera but not the light.
+    const pathtrace::Options& mo = medium.options();
+    bool sectionView = mo.cropBox && mo.cropBox->shadowsFromRemoved;
+    for (const render::ClipPlane& p : mo.clipPlanes)
+        sectionView = sectionView || p.shadowsFromRemoved;
     PhotonStats stats;
     if (options.maxScatterings == 0 || layout.points == 0) {
         stats.seconds = clock.seconds();
@@ -274,6 +279,16 @@ PhotonStats addIndirectTransfer(const pathtrace::PathTracer& medium, const Basis
                         const pathtrace::Ray ray{x, d};
                         double t0 = 0.0, t1 = INFINITY;
                         if (!medium.keptInterval(ray, t0, t1)) break;
+                        // On the way in, matter removed by a section-view plane (shadows from
+                        // removed matter on) occludes but never scatters: a collision there
+                        // absorbs the photon. (The kept region is convex, so a photon that has
+                        // scattered in it never meets that matter again on its way out.)
+                        if (scatterings == 0 && sectionView) {
+                            double l0 = 0.0, l1 = INFINITY;
+                            if (medium.lightInterval(ray, l0, l1) && t0 > l0 &&
+                                medium.freeFlight(ray, l0, std::min(t0, l1), rng))
+                                break;
+                        }
                         const std::optional<double> t = medium.freeFlight(ray, t0, t1, rng);
                         // Track-length estimator: the flight from here to the next collision
                         // (or out of the kept region), if the light has scattered before.

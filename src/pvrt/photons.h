@@ -30,8 +30,12 @@
 //           allows it): the estimator stays linear and unbiased.
 //   Paths   the trajectory does not depend on k: each photon is traced once and carries all m
 //           fluxes. Free flights by the path tracer's delta tracking (PathTracer::freeFlight)
-//           inside keptInterval — matter removed by clip planes or the crop box neither
-//           scatters nor attenuates photons. At a real collision x_c the throughput β (RGB, the
+//           inside keptInterval — matter removed by clip planes or the crop box never
+//           scatters photons; it attenuates them only where it still occludes the light (a
+//           section view, shadowsFromRemoved true): a photon entering the kept region through
+//           such matter is absorbed at its first real collision there (delta tracking over the
+//           part of lightInterval before keptInterval), as the path tracer's light is
+//           attenuated by it. Elsewhere removed matter is gone for the light too. At a real collision x_c the throughput β (RGB, the
 //           product of the albedos of the earlier collisions, divided by roulette survival) is
 //           that of light scattered `s` times so far; then β ×= a(x_c), s += 1, a new (HG, see Phase)
 //           direction, Russian roulette once s ≥ rouletteAfter (survival q = max channel of β,
