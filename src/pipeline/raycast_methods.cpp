@@ -1680,7 +1680,7 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
     const bool compressed = params.clusters > 0;
     // n > 1 evaluated toward the eye per grid point: the camera and phase_g are inputs too —
     // unless the TF's phase channel sets g per rendered sample (the key below; its label here).
-    const bool towardEye = compressed && params.exitance > 1 && params.evaluateAtGrid;
+    const bool towardEye = params.exitance > 1 && params.evaluateAtGrid;
     Stage radiance{"pvrt_radiance",
                    StageKind::Precompute,
                    {transferStage, "pvrt_cpca", "lights",
@@ -1713,26 +1713,26 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         } catch (const InputError& e) {
             rethrowAsScene(run.scene(), e);
         }
+        // Toward the eye unless the TF's phase g channel sets g per rendered sample.
+        std::optional<pvrt::EyeFold> eye;
+        if (towardEye && !run.get<TfArtifact>("transfer_function")->table->hasPhaseG()) {
+            const auto cam = run.get<render::Camera>("camera");
+            eye =
+                pvrt::EyeFold{.g = params.phaseG,
+                              .geometry = run.get<LoadedVolume>("load_volume")->volume.geometry(),
+                              .orthographic = cam->projection() == render::Projection::Orthographic,
+                              .eye = cam->eye(),
+                              .forward = cam->forward()};
+        }
         std::shared_ptr<pvrt::RadianceVolume> r;
         if (compressed) {
             // Straight into the grid in the CPCA domain: no per-point buffer, empty points untouched.
-            // Toward the eye unless the TF's phase g channel sets g per rendered sample.
-            std::optional<pvrt::EyeFold> eye;
-            if (towardEye && !run.get<TfArtifact>("transfer_function")->table->hasPhaseG()) {
-                const auto cam = run.get<render::Camera>("camera");
-                eye = pvrt::EyeFold{
-                    .g = params.phaseG,
-                    .geometry = run.get<LoadedVolume>("load_volume")->volume.geometry(),
-                    .orthographic = cam->projection() == render::Projection::Orthographic,
-                    .eye = cam->eye(),
-                    .forward = cam->forward()};
-            }
             r = std::make_shared<pvrt::RadianceVolume>(
                 pvrt::combineCpca(t->layout, *run.get<pvrt::Cpca>("pvrt_cpca"), c, t->exitance,
                                   params.threads, eye ? &*eye : nullptr));
         } else {
             r = std::make_shared<pvrt::RadianceVolume>(
-                pvrt::combineTransfer(*t, c, params.threads));
+                pvrt::combineTransfer(*t, c, params.threads, eye ? &*eye : nullptr));
         }
         run.details()["pvrt_radiance"] = {{"seconds", sw.seconds()},
                                           {"toward_eye", r->towardEye},

@@ -100,15 +100,86 @@ RadianceVolume emptyLike(const TransferLayout& layout, int exitance) {
     return r;
 }
 bool negative(const glm::vec3& v) { return !(v.x >= 0.f && v.y >= 0.f && v.z >= 0.f); }
+
+/// exitanceWeights (transfer.h) in float through the fixed-band SH polynomials (sh::evalSh) — per
+/// grid point of EyeFold, where the double recurrence cost more than the combination; equal to it
+/// within float rounding (tests).
+template <int n>
+void eyeWeights(float g, const glm::vec3& toEye, float* w) {
+    constexpr int band = n == 4 ? 1 : n == 9 ? 2 : 3;
+    float y[n];
+    sh::evalSh(band, -toEye, std::span<float>(y, n));
+    const float s = std::sqrt(4.f * std::numbers::pi_v<float>);
+    w[0] = 1.f;
+    float gl = 1.f;
+    for (int l = 1, j = 1; j < n; ++l) {
+        gl *= g;
+        for (int m = -l; m <= l; ++m, ++j) w[j] = gl * s * y[j];
+    }
+}
+
+/// EyeFold's ω_eye at the grid points: −forward (orthographic), or the unit world direction from
+/// the point to the eye (perspective).
+class EyeDirections {
+  public:
+    EyeDirections(const TransferLayout& layout, const EyeFold* eye) : layout_(layout), eye_(eye) {
+        if (!eye) return;
+        ortho_ = glm::vec3(-glm::normalize(eye->forward));
+        // Perspective: eye − x in voxel coordinates, then to world directions (index → world is
+        // direction · diag(spacing); rows of its transpose applied as v · M).
+        eyeIndex_ = glm::vec3(eye->geometry.worldToIndex(eye->eye));
+        indexToWorld_ = glm::mat3(glm::transpose(
+            eye->geometry.direction * glm::dmat3(glm::dvec3(eye->geometry.spacing.x, 0, 0),
+                                                 glm::dvec3(0, eye->geometry.spacing.y, 0),
+                                                 glm::dvec3(0, 0, eye->geometry.spacing.z))));
+    }
+    /// At grid point i (x fastest) of slice z.
+    glm::vec3 at(std::size_t i, int z) const {
+        if (eye_->orthographic) return ortho_;
+        const std::size_t perSlice = std::size_t(layout_.res.x) * std::size_t(layout_.res.y);
+        const std::size_t xy = i - perSlice * std::size_t(z);
+        const glm::ivec3 g(int(xy % std::size_t(layout_.res.x)),
+                           int(xy / std::size_t(layout_.res.x)), z);
+        return glm::normalize((eyeIndex_ - layout_.position(g)) * indexToWorld_);
+    }
+
+  private:
+    const TransferLayout& layout_;
+    const EyeFold* eye_;
+    glm::vec3 ortho_{0.f}, eyeIndex_{0.f};
+    glm::mat3 indexToWorld_{1.f};
+};
+
+/// Σ_j w_j t_j per channel, with w = eyeWeights<n> toward ω_eye.
+glm::vec3 evaluateTowardEye(int n, float g, const glm::vec3& toEye, const glm::vec3* t) {
+    float w[16];
+    switch (n) {
+        case 4:
+            eyeWeights<4>(g, toEye, w);
+            break;
+        case 9:
+            eyeWeights<9>(g, toEye, w);
+            break;
+        default:
+            eyeWeights<16>(g, toEye, w);
+            break;
+    }
+    glm::vec3 sum(0.f);
+    for (int j = 0; j < n; ++j) sum += w[j] * t[j];
+    return sum;
+}
 }  // namespace
 
 RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::vec3> light,
-                               int threads) {
+                               int threads, const EyeFold* eye) {
     VL_CHECK_EQ(int(light.size()), transfer.basis);
     const TransferLayout& layout = transfer.layout;
-    RadianceVolume r = emptyLike(layout, transfer.exitance);
     const int m = transfer.basis;
     const int n = transfer.exitance;
+    if (n == 1) eye = nullptr;  // isotropic: nothing to evaluate toward the eye
+    RadianceVolume r = emptyLike(layout, eye ? 1 : n);
+    r.towardEye = eye != nullptr;
+    const EyeDirections toward(layout, eye);
     const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
     std::vector<std::uint64_t> clampedPerSlice(std::size_t(std::max(layout.res.z, 0)), 0);
     auto body = [&](const tbb::blocked_range<int>& zs) {
@@ -120,13 +191,22 @@ RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::ve
                 if (s < 0) continue;
                 const float* t = transfer.row(s);
                 if (n > 1) {
+                    glm::vec3 coeff[16];
                     for (int j = 0; j < n; ++j) {
                         glm::vec3 sum(0.f);
                         for (int k = 0; k < m; ++k, t += 3)
                             sum += glm::vec3(t[0], t[1], t[2]) * light[std::size_t(k)];
-                        if (j == 0) clamped += negative(sum) ? 1 : 0;
-                        r.values[i * std::size_t(n) + std::size_t(j)] = sum;
+                        coeff[j] = sum;
                     }
+                    if (eye) {
+                        const glm::vec3 ls = evaluateTowardEye(n, eye->g, toward.at(i, z), coeff);
+                        clamped += negative(ls) ? 1 : 0;
+                        r.values[i] = ls;
+                        continue;
+                    }
+                    clamped += negative(coeff[0]) ? 1 : 0;
+                    for (int j = 0; j < n; ++j)
+                        r.values[i * std::size_t(n) + std::size_t(j)] = coeff[j];
                     continue;
                 }
                 glm::vec3 sum(0.f);
@@ -213,23 +293,6 @@ void combinePoint(const float* p, const float* w, int components, float* out) {
     for (int e = 0; e < L; ++e) out[e] = acc[e];
 }
 
-/// exitanceWeights (transfer.h) in float through the fixed-band SH polynomials (sh::evalSh) — per
-/// grid point of EyeFold, where the double recurrence cost more than the combination; equal to it
-/// within float rounding (tests).
-template <int n>
-void eyeWeights(float g, const glm::vec3& toEye, float* w) {
-    constexpr int band = n == 4 ? 1 : n == 9 ? 2 : 3;
-    float y[n];
-    sh::evalSh(band, -toEye, std::span<float>(y, n));
-    const float s = std::sqrt(4.f * std::numbers::pi_v<float>);
-    w[0] = 1.f;
-    float gl = 1.f;
-    for (int l = 1, j = 1; j < n; ++l) {
-        gl *= g;
-        for (int m = -l; m <= l; ++m, ++j) w[j] = gl * s * y[j];
-    }
-}
-
 template <int L>
 void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* projected,
                    const EyeFold* eye, RadianceVolume& r,
@@ -240,17 +303,7 @@ void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* 
     const std::size_t perSlice = std::size_t(layout.res.x) * std::size_t(layout.res.y);
     const std::size_t stride = eye ? 3 : L;  // floats per grid point written
     float* values = &r.values.data()->x;
-    const glm::vec3 orthoToEye = eye ? glm::vec3(-glm::normalize(eye->forward)) : glm::vec3(0.f);
-    // Perspective: eye − x in voxel coordinates, then to world directions (index → world is
-    // direction · diag(spacing); rows of its transpose applied as v · M).
-    const glm::vec3 eyeIndex =
-        eye ? glm::vec3(eye->geometry.worldToIndex(eye->eye)) : glm::vec3(0.f);
-    const glm::mat3 indexToWorld =
-        eye ? glm::mat3(glm::transpose(eye->geometry.direction *
-                                       glm::dmat3(glm::dvec3(eye->geometry.spacing.x, 0, 0),
-                                                  glm::dvec3(0, eye->geometry.spacing.y, 0),
-                                                  glm::dvec3(0, 0, eye->geometry.spacing.z))))
-            : glm::mat3(1.f);
+    const EyeDirections toward(layout, eye);
     for (int z = zs.begin(); z < zs.end(); ++z) {
         std::uint64_t clamped = 0;
         for (std::size_t i = perSlice * std::size_t(z); i < perSlice * std::size_t(z + 1); ++i) {
@@ -262,15 +315,8 @@ void combineSlices(const TransferLayout& layout, const Cpca& cpca, const float* 
                             cpca.weights.data() + std::size_t(s) * std::size_t(N), N,
                             eye ? t : out);
             if (eye) {
-                glm::vec3 toEye = orthoToEye;
-                if (!eye->orthographic) {
-                    const std::size_t xy = i - perSlice * std::size_t(z);
-                    const glm::ivec3 g(int(xy % std::size_t(layout.res.x)),
-                                       int(xy / std::size_t(layout.res.x)), z);
-                    toEye = glm::normalize((eyeIndex - layout.position(g)) * indexToWorld);
-                }
                 float w[n];
-                if constexpr (n > 1) eyeWeights<n>(eye->g, toEye, w);
+                if constexpr (n > 1) eyeWeights<n>(eye->g, toward.at(i, z), w);
                 // Σ_j w_j t_j per channel: the weights spread over the n·3 entries, one vector
                 // product, then the three channels' sums.
                 float w3[L];

@@ -85,17 +85,19 @@ struct RadianceVolume {
     std::size_t bytes() const { return values.size() * sizeof(glm::vec3); }
 };
 
+struct EyeFold;
 /// S = Σ_k c_k ⊙ t_k at every stored point of `transfer` (c: basis-size RGB coefficients).
 /// Parallel over z-slices of the grid, deterministic.
-/// With n = transfer.exitance > 1: t_j = Σ_k c_k ⊙ t_{k,j} per coefficient (not clamped).
+/// With n = transfer.exitance > 1: t_j = Σ_k c_k ⊙ t_{k,j} per coefficient (not clamped); with
+/// `eye` as well, those evaluated toward it per grid point as combineCpca does (EyeFold).
 RadianceVolume combineTransfer(const Transfer& transfer, std::span<const glm::vec3> light,
-                               int threads = 0);
+                               int threads = 0, const EyeFold* eye = nullptr);
 /// The same from per-stored-point radiance already evaluated (e.g. by CPCA; n entries per point,
 /// [point][j]): scattered into the grid, clamped at 0 when n = 1.
 RadianceVolume scatterRadiance(const TransferLayout& layout, std::span<const glm::vec3> perPoint,
                                int exitance = 1);
 
-/// An eye toward which combineCpca evaluates n > 1 coefficients per grid point (Zhang et al. fold
+/// An eye toward which combineCpca and combineTransfer evaluate n > 1 coefficients per grid point (Zhang et al. fold
 /// the view in the same way): L_s(x) = Σ_j g^{l(j)} Ŷ_j(−ω_eye(x)) t_j(x) with ω_eye(x) the unit
 /// direction from the grid point's world position to the eye (perspective) or −forward
 /// (orthographic) — the per-sample shader's −ray direction, taken at the grid points instead of at

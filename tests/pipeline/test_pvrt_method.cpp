@@ -551,8 +551,36 @@ TEST(PvrtMethod, APhaseChannelInTheTfKeepsTheRadianceOffTheCamera) {
     EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
 }
 
+TEST(PvrtMethod, HgTowardTheEyeAlsoWithoutCpca) {
+    // clusters 0 (the uncompressed transfer) folds toward the eye per grid point as CPCA does:
+    // one RGB per point, a camera move reruns pvrt_radiance, and orthographically the image is
+    // the per-sample evaluation's up to float rounding.
+    json params = hgParams();
+    params["clusters"] = 0;
+    Session session;
+    const json ortho = againstTheLight(cloudScene("pvrt", params, true), 0.6);
+    const RunResult grid = session.run(scene(ortho));
+    EXPECT_TRUE(grid.details["pvrt_radiance"]["toward_eye"].get<bool>());
+    EXPECT_EQ(radianceInputs(grid).back(), "camera");
+    json orthoSample = ortho;
+    orthoSample["method"]["params"]["exitance_evaluation"] = "sample";
+    const RunResult sample = session.run(scene(orthoSample));
+    EXPECT_FALSE(sample.details["pvrt_radiance"]["toward_eye"].get<bool>());
+    // 16 RGB coefficients per point against one.
+    EXPECT_NEAR(sample.details["pvrt_radiance"]["radiance_mb"].get<double>(),
+                16.0 * grid.details["pvrt_radiance"]["radiance_mb"].get<double>(), 1e-9);
+    const double e = relativeL2(grid.image, sample.image);
+    std::printf("uncompressed, toward the eye per grid point against per sample: %.2e\n", e);
+    constexpr double kSameDirectionTol = 1e-4;  // as in the CPCA case below
+    EXPECT_LT(e, kSameDirectionTol);
+    EXPECT_TRUE(allFiniteNonNegative(grid.image));
+    json moved = ortho;
+    moved["camera"] = {{"azimuth", 30}, {"projection", "orthographic"}};
+    EXPECT_TRUE(session.run(scene(moved)).stage("pvrt_radiance").ran);
+}
+
 TEST(PvrtMethod, HgTowardTheEyeFollowsTheCameraAndMatchesPerSample) {
-    // exitance_evaluation "grid" (the default with CPCA): the n = 16 coefficients are evaluated
+    // exitance_evaluation "grid" (the default): the n = 16 coefficients are evaluated
     // toward the eye once per grid point at the light change, so a camera move reruns
     // pvrt_radiance; "sample" evaluates per rendered sample and a camera move reruns only the
     // frame. The two differ only in where the direction toward the eye is taken (the grid points
