@@ -67,7 +67,7 @@ std::string glUnsupportedReason(const std::string& method, const pipeline::Caste
                std::to_string(kMaxGlClipPlanes);
     // The CPU marcher splits pre-integrated segments longer than a voxel where the value profile
     // is not linear (dvr_march.h kLinearityFraction); the shader does not.
-    if (o.preintegrated && o.stepVoxels * 1.001f > 1.f)
+    if (o.preintegrated && double(o.stepVoxels) > kGlMaxStepVoxels)
         return "a step over one voxel: the CPU ray caster refines such segments, the GLSL ray "
                "caster does not";
     return {};

@@ -19,6 +19,10 @@ inline constexpr int kMaxGlClipPlanes = 8;
 /// environment lights are summed into constants on the CPU, any number of them).
 inline constexpr int kMaxGlShFaces = kMaxGlClipPlanes + 6;
 inline constexpr int kMaxGlShPointLights = kMaxGlLights;
+/// The longest pre-integrated step (voxels) the shader takes as the CPU does: the CPU marcher
+/// refines longer segments (render/dvr_march.h), the shader does not (the 1.001 is the CPU's
+/// rounding margin).
+inline constexpr double kGlMaxStepVoxels = 1.0 / 1.001;
 
 /// Which renderer draws the viewer's image: the measurement at start-up picks (Auto), or the user
 /// forces one (`voxlight view --renderer gpu|cpu|auto`).

@@ -15,6 +15,7 @@
 #include "core/timing.h"
 #include "pipeline/pipeline.h"
 #include "render/tonemap.h"
+#include "viewer/gl_support.h"
 #include "viewer/view_state.h"
 
 namespace voxlight::viewer {
@@ -256,6 +257,9 @@ void RenderWorker::adoptVolume(const io::Scene& scene, std::shared_ptr<const cor
 bool RenderWorker::preparePass(const RenderRequest& request, std::string* staleFields) {
     RenderedImage out;
     out.generation = request.generation;
+    // While the user drags, the coarse scene (as the CPU path's coarse pass): the GLSL ray caster
+    // renders the setup at its camera's size, step and termination.
+    out.coarse = request.interacting;
     out.method = request.scene.method.name;
     out.prepared = true;
     out.exposureStops = request.scene.image.exposureStops;
@@ -268,8 +272,16 @@ bool RenderWorker::preparePass(const RenderRequest& request, std::string* staleF
         pipeline::RunOptions runOptions;
         runOptions.staleFields = true;  // old shading at once after a TF change or a cut
         std::vector<pipeline::StageRecord> records;
+        // The coarse step stays within what the shader takes, 1 % inside for the float rounding
+        // of the scene's step (the pixels are the larger saving anyway).
+        const double stepScale =
+            std::clamp(0.99 * kGlMaxStepVoxels / request.scene.render.stepVoxels, 1.0,
+                       options_.coarseStepScale);
+        const io::Scene scene = out.coarse ? coarseScene(request.scene, options_.coarseFactor,
+                                                         stepScale, options_.coarseTermination)
+                                           : request.scene;
         std::optional<pipeline::CasterSetup> setup =
-            session_->prepare(request.scene, progress, &out.warnings, runOptions, &records);
+            session_->prepare(scene, progress, &out.warnings, runOptions, &records);
         for (const auto& st : records) {
             if (st.ran) out.computedStages.push_back(st.name);
             if (st.stale) {

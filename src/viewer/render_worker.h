@@ -44,7 +44,8 @@ struct RenderRequest {
     std::uint64_t generation = 0;  ///< the state's number: equal numbers are equal scenes
     bool interacting = false;      ///< the user is dragging: coarse only
     /// Only prepare what the image stage reads (pipeline::Session::prepare), no pixels: for the
-    /// GLSL ray caster, which renders on the UI thread. No coarse pass. After a TF change or a cut
+    /// GLSL ray caster, which renders on the UI thread. No separate coarse pass: an interacting
+    /// request prepares the coarse scene instead (RenderedImage::coarse). After a TF change or a cut
     /// the setup holds the last fields (staleShading) while the field thread computes the new
     /// ones; then the same state is prepared again — the interleaved update, as for images.
     bool prepareOnly = false;

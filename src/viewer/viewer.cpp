@@ -365,7 +365,7 @@ class Viewer {
     std::uint64_t measureGen_ = 0;  ///< the state being measured
     int cpuFrames_ = 0;             ///< frames behind cpuMeasured_
     double cpuMeasured_ = 0.0;      ///< the CPU's median frame of the measurement
-    Timings glTimes_;
+    Timings glTimes_, glCoarseTimes_;
 
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
@@ -450,7 +450,9 @@ void Viewer::receive() {
                          r->shResampleSeconds);
         // For the GLSL path (or its measurement): render it here when it draws the image.
         prepared_ = std::move(*r);
-        if (gpu_ && prepared_->generation >= shownGen_) renderGl(*prepared_);
+        // A coarse frame never replaces the full image of the same state (a late drag frame).
+        const bool late = prepared_->coarse && shownFull_ && prepared_->generation == shownGen_;
+        if (gpu_ && prepared_->generation >= shownGen_ && !late) renderGl(*prepared_);
         return;
     }
     if (measure_ == Measure::CpuFrames && !r->coarse && r->frameSeconds > 0.0 &&
@@ -526,16 +528,22 @@ bool Viewer::renderGl(const RenderedImage& p) {
                                         render::displayFromString(p.display), why);
             glFinish();  // the frame's real cost (the GL queues its work)
             if (ok) {
-                glTimes_.add(sw.seconds());
+                (p.coarse ? glCoarseTimes_ : glTimes_).add(sw.seconds());
                 if (options_.log)
                     std::fprintf(stderr,
-                                 "view: GLSL frame %dx%d in %.3f s (state %llu, SH fields "
+                                 "view: GLSL frame %s%dx%d in %.3f s (state %llu, SH fields "
                                  "uploaded so far: %zu)%s\n",
-                                 gl_->width(), gl_->height(), glTimes_.last(),
-                                 (unsigned long long)p.generation, gl_->shUploads(),
+                                 p.coarse ? "coarse " : "", gl_->width(), gl_->height(),
+                                 sw.seconds(), (unsigned long long)p.generation, gl_->shUploads(),
                                  p.staleShading ? " shaded from earlier fields" : "");
+                // Full resolution is shown pixel for pixel; the coarse image is magnified
+                // smoothly (as the CPU path's).
+                const GLint filter = p.coarse ? GL_LINEAR : GL_NEAREST;
+                glBindTexture(GL_TEXTURE_2D, GLuint(gl_->texture()));
+                glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
+                glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
                 texW_ = gl_->width(), texH_ = gl_->height();
-                shownFull_ = true;
+                shownFull_ = !p.coarse;
                 shownGl_ = true;
                 shownStale_ = p.staleShading;
                 shownGen_ = p.generation;
@@ -1514,6 +1522,9 @@ void Viewer::drawPanel() {
         }
         if (glTimes_.count > 0)
             ImGui::Text("GLSL frame    %.3f s (%zu)", glTimes_.last(), std::size_t(glTimes_.count));
+        if (glCoarseTimes_.count > 0)
+            ImGui::Text("GLSL coarse   %.3f s (%zu)", glCoarseTimes_.last(),
+                        std::size_t(glCoarseTimes_.count));
     }
     if (ImGui::CollapsingHeader("Stats", ImGuiTreeNodeFlags_DefaultOpen)) {
         const RenderWorker::Status st = worker_.status();

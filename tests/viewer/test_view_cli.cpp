@@ -847,6 +847,43 @@ TEST(ViewCli, AScriptedExplorationOnTheGlslPathReplaysToTheScreenshot) {
     EXPECT_NE(first.pixels, last.pixels) << "the steps changed nothing";
 }
 
+// Progressive refinement on the GLSL path: while a clip plane is dragged the GL renders the
+// coarse scene (a quarter of the size per side, twice the step, as the CPU path's coarse pass),
+// magnified; when the drag ends, the full image of the same state, which agrees with the CPU
+// path's screenshot of the same script.
+TEST(ViewCli, TheGlslPathRendersCoarseWhileDraggingAndFullWhenReleased) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json") << R"([{"clip_add": {"normal": [0, 1, 0], "offset": -20}},
+              {"clip_drag": {"index": 0, "by": [-20, 30], "frames": 8}}])";
+    const auto view = [&](const char* renderer, const char* shot) {
+        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --renderer " + renderer + " " +
+                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+                            " --screenshot " + quoted(tmp / shot),
+                        tmp.path());
+    };
+    const Result gl = view("gpu", "gl.png");
+    if (gl.code != 0 && gl.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << gl.err;
+    ASSERT_EQ(gl.code, 0) << gl.err;
+    const std::size_t coarse = gl.err.rfind("view: GLSL frame coarse 40x32");
+    ASSERT_NE(coarse, std::string::npos) << "no coarse GLSL frame during the drag\n" << gl.err;
+    EXPECT_NE(gl.err.find("view: GLSL frame 160x128", coarse), std::string::npos)
+        << "no full GLSL frame after the drag\n"
+        << gl.err;
+    const Result cpu = view("cpu", "cpu.png");
+    ASSERT_EQ(cpu.code, 0) << cpu.err;
+    const Agreement a =
+        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "gl.png"));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+}
+
 // A scene the GLSL path cannot do (here: nine lights, one more than the shader holds) is drawn by
 // the CPU ray caster even with --renderer gpu, and the viewer says why on stderr (and in the
 // Renderer panel); the image is the CPU's.
