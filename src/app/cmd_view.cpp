@@ -32,6 +32,7 @@ Command addViewCommand(CLI::App& app) {
     auto record = std::make_shared<std::string>();
     auto quiet = std::make_shared<bool>(false);
     auto renderer = std::make_shared<std::string>("auto");
+    auto glSliceMs = std::make_shared<double>(viewer::kDefaultGlSliceSeconds * 1e3);
     c.sub->add_option("INPUT", *input,
                       "Scene JSON, or a volume file / DICOM folder to view with defaults");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
@@ -56,6 +57,11 @@ Command addViewCommand(CLI::App& app) {
                      "Which path draws the image: auto (measure both when a volume is loaded, "
                      "keep the faster), gpu (the GLSL ray caster where it can), cpu")
         ->check(CLI::IsMember({"auto", "gpu", "cpu"}));
+    c.sub
+        ->add_option("--gl-slice-ms", *glSliceMs,
+                     "GLSL path: GL time per UI frame; a longer frame is rendered in slices of "
+                     "rows over several UI frames (0: whole frames, the UI waits for each)")
+        ->check(CLI::Range(0.0, 10000.0));
     c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
     c.run = [=] {
@@ -81,6 +87,7 @@ Command addViewCommand(CLI::App& app) {
         options.frames = *frames;
         options.log = *log;
         options.renderer = viewer::rendererChoiceFromString(*renderer);
+        options.glSliceSeconds = *glSliceMs * 1e-3;
         options.script = std::move(steps);
         options.record = *record;
         options.quit = &cancelFlag();

@@ -324,42 +324,69 @@ bool GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& g
     return true;
 }
 
-bool GlRayCaster::ensureTargets(int width, int height, std::string& why) {
-    if (filmFbo_ && width == width_ && height == height_) return true;
-    for (GLuint* t : {&filmTex_, &displayTex_})
-        if (*t) glDeleteTextures(1, t), *t = 0;
-    for (GLuint* f : {&filmFbo_, &displayFbo_})
-        if (*f) glDeleteFramebuffers(1, f), *f = 0;
-    glCreateTextures(GL_TEXTURE_2D, 1, &filmTex_);
-    glTextureStorage2D(filmTex_, 1, GL_RGBA32F, width, height);
-    glCreateTextures(GL_TEXTURE_2D, 1, &displayTex_);
-    glTextureStorage2D(displayTex_, 1, GL_RGBA8, width, height);
-    for (GLuint t : {filmTex_, displayTex_}) {
-        glTextureParameteri(t, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-        glTextureParameteri(t, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-        glTextureParameteri(t, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
-        glTextureParameteri(t, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
-    }
-    glCreateFramebuffers(1, &filmFbo_);
-    glNamedFramebufferTexture(filmFbo_, GL_COLOR_ATTACHMENT0, filmTex_, 0);
-    glCreateFramebuffers(1, &displayFbo_);
-    glNamedFramebufferTexture(displayFbo_, GL_COLOR_ATTACHMENT0, displayTex_, 0);
+bool GlRayCaster::ensureTarget(unsigned& tex, unsigned& fbo, unsigned format, int width, int height,
+                               std::string& why) {
+    glCreateTextures(GL_TEXTURE_2D, 1, &tex);
+    glTextureStorage2D(tex, 1, format, width, height);
+    glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    glTextureParameteri(tex, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+    glTextureParameteri(tex, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    glCreateFramebuffers(1, &fbo);
+    glNamedFramebufferTexture(fbo, GL_COLOR_ATTACHMENT0, tex, 0);
     const bool complete =
-        glCheckNamedFramebufferStatus(filmFbo_, GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE &&
-        glCheckNamedFramebufferStatus(displayFbo_, GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
+        glCheckNamedFramebufferStatus(fbo, GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
     const std::string e = glErrorText();
     if (!complete || !e.empty()) {
         why = "the GL render targets (" + std::to_string(width) + "x" + std::to_string(height) +
               ") are not usable" + (e.empty() ? "" : ": " + e);
-        width_ = height_ = 0;
         return false;
     }
+    return true;
+}
+
+bool GlRayCaster::ensureFilm(int width, int height, std::string& why) {
+    if (filmFbo_ && width == filmW_ && height == filmH_) return true;
+    if (filmTex_) glDeleteTextures(1, &filmTex_), filmTex_ = 0;
+    if (filmFbo_) glDeleteFramebuffers(1, &filmFbo_), filmFbo_ = 0;
+    filmW_ = filmH_ = 0;
+    if (!ensureTarget(filmTex_, filmFbo_, GL_RGBA32F, width, height, why)) return false;
+    filmW_ = width, filmH_ = height;
+    return true;
+}
+
+bool GlRayCaster::ensureDisplay(int width, int height, std::string& why) {
+    if (displayFbo_ && width == width_ && height == height_) return true;
+    if (displayTex_) glDeleteTextures(1, &displayTex_), displayTex_ = 0;
+    if (displayFbo_) glDeleteFramebuffers(1, &displayFbo_), displayFbo_ = 0;
+    width_ = height_ = 0;
+    if (!ensureTarget(displayTex_, displayFbo_, GL_RGBA8, width, height, why)) return false;
     width_ = width, height_ = height;
     return true;
 }
 
 bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
                          render::Display display, std::string& why, Scope scope) {
+    const int w = setup.camera->width(), h = setup.camera->height();
+    Rect r{0, 0, w, h};
+    if (scope == Scope::WarmUp)
+        r = {0, 0, std::min(w, kWarmUpPixels), std::min(h, kWarmUpPixels)};
+    else if (scope == Scope::CentreQuarter)
+        r = {w / 4, h / 4, std::max(w / 2, 1), std::max(h / 2, 1)};
+    return draw(setup, sh, exposureStops, display, why, r, true);
+}
+
+bool GlRayCaster::renderRows(const pipeline::CasterSetup& setup, const ShGrids& sh,
+                             float exposureStops, render::Display display, std::string& why,
+                             int rowBegin, int rowEnd, bool finish) {
+    const int w = setup.camera->width(), h = setup.camera->height();
+    rowBegin = std::clamp(rowBegin, 0, h), rowEnd = std::clamp(rowEnd, rowBegin, h);
+    return draw(setup, sh, exposureStops, display, why, {0, rowBegin, w, rowEnd - rowBegin},
+                finish);
+}
+
+bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
+                       render::Display display, std::string& why, const Rect& rect, bool finish) {
     if (!ready()) {
         why = "the GLSL ray caster is not initialised";
         return false;
@@ -408,7 +435,7 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, 
         if (shBlend && !shTextures(sh.local, shLocal, why)) return false;
     }
     const int w = camera.width(), h = camera.height();
-    if (!ensureTargets(w, h, why)) return false;
+    if (!ensureFilm(w, h, why) || (finish && !ensureDisplay(w, h, why))) return false;
     if (!jitterTex_ || jitterW_ != w || jitterH_ != h || jitterOn_ != o.jitter ||
         jitterSeed_ != o.seed)
         uploadJitter(w, h, o.jitter, o.seed);
@@ -559,15 +586,8 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, 
     const GLboolean blend = glIsEnabled(GL_BLEND), scissor = glIsEnabled(GL_SCISSOR_TEST);
     const GLboolean depth = glIsEnabled(GL_DEPTH_TEST), cull = glIsEnabled(GL_CULL_FACE);
     glDisable(GL_BLEND);
-    if (scope == Scope::WarmUp) {
-        glEnable(GL_SCISSOR_TEST);
-        glScissor(0, 0, std::min(w, kWarmUpPixels), std::min(h, kWarmUpPixels));
-    } else if (scope == Scope::CentreQuarter) {
-        glEnable(GL_SCISSOR_TEST);
-        glScissor(w / 4, h / 4, std::max(w / 2, 1), std::max(h / 2, 1));
-    } else {
-        glDisable(GL_SCISSOR_TEST);
-    }
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(rect.x, rect.y, rect.w, rect.h);
     glDisable(GL_DEPTH_TEST);
     glDisable(GL_CULL_FACE);
     glViewport(0, 0, w, h);
@@ -588,19 +608,22 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, 
         glBindTextureUnit(GLuint(kShFieldUnit + t), f);
         glBindTextureUnit(GLuint(kShLocalUnit + t), l);
     }
-    glDrawArrays(GL_TRIANGLES, 0, 3);
+    if (rect.w > 0 && rect.h > 0) glDrawArrays(GL_TRIANGLES, 0, 3);
 
-    // Pass 2: film → display bytes.
-    const Uniforms d{display_};
-    d.i("uFilm", 0);
-    d.f("uExposureScale", std::exp2(exposureStops));
-    d.i("uDisplay", display == render::Display::Clinical ? 0
-                    : display == render::Display::Filmic ? 2
-                                                         : 1);
-    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, displayFbo_);
-    glUseProgram(display_);
-    glBindTextureUnit(0, filmTex_);
-    glDrawArrays(GL_TRIANGLES, 0, 3);
+    // Pass 2: film → display bytes (the whole film).
+    if (finish) {
+        glDisable(GL_SCISSOR_TEST);
+        const Uniforms d{display_};
+        d.i("uFilm", 0);
+        d.f("uExposureScale", std::exp2(exposureStops));
+        d.i("uDisplay", display == render::Display::Clinical ? 0
+                        : display == render::Display::Filmic ? 2
+                                                             : 1);
+        glBindFramebuffer(GL_DRAW_FRAMEBUFFER, displayFbo_);
+        glUseProgram(display_);
+        glBindTextureUnit(0, filmTex_);
+        glDrawArrays(GL_TRIANGLES, 0, 3);
+    }
 
     glBindTextureUnit(0, 0);
     glBindTextureUnit(1, 0);
@@ -638,7 +661,7 @@ std::vector<std::uint8_t> GlRayCaster::readDisplay() const {
 }
 
 core::ImageRGBA GlRayCaster::readFilm() const {
-    core::ImageRGBA img(std::max(width_, 1), std::max(height_, 1));
+    core::ImageRGBA img(std::max(filmW_, 1), std::max(filmH_, 1));
     if (!filmTex_) return img;
     glPixelStorei(GL_PACK_ALIGNMENT, 4);
     glGetTextureImage(filmTex_, 0, GL_RGBA, GL_FLOAT, GLsizei(img.pixels.size() * sizeof(float)),

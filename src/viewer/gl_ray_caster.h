@@ -55,6 +55,13 @@ class GlRayCaster {
     /// `sh`: the SH methods' resampled fields (RenderedImage::shGrids); ignored by the others.
     bool render(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
                 render::Display display, std::string& why, Scope scope = Scope::Full);
+    /// A slice of a frame, for a GL too slow to render one between two UI frames: texel rows
+    /// [rowBegin, rowEnd) of the film only (every pixel as render() computes it: the same image
+    /// in any number of slices); with `finish`, then the whole film into texture(). Until then
+    /// texture() keeps the last finished image (and its size).
+    bool renderRows(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
+                    render::Display display, std::string& why, int rowBegin, int rowEnd,
+                    bool finish);
     /// SH field grids uploaded as textures so far (tests: once per field, not per frame).
     std::size_t shUploads() const { return shUploads_; }
     static constexpr std::size_t kKeptShFields = 4;
@@ -73,7 +80,15 @@ class GlRayCaster {
     void uploadTable(const optics::TfTable& table);
     void uploadSkipCells(const grid::BrickMajorants& cells);
     void uploadJitter(int width, int height, bool jitter, std::uint64_t seed);
-    bool ensureTargets(int width, int height, std::string& why);
+    struct Rect {
+        int x, y, w, h;  ///< texels (GL's scissor box)
+    };
+    bool draw(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
+              render::Display display, std::string& why, const Rect& rect, bool finish);
+    bool ensureTarget(unsigned& tex, unsigned& fbo, unsigned format, int width, int height,
+                      std::string& why);
+    bool ensureFilm(int width, int height, std::string& why);
+    bool ensureDisplay(int width, int height, std::string& why);
     /// The textures of `grid` into out[0..4) (uploaded on first use, 0 past its own); false
     /// with `why` on a GL error.
     bool shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid, unsigned out[4],
@@ -84,7 +99,8 @@ class GlRayCaster {
     unsigned raycast_ = 0, display_ = 0, vao_ = 0;
     unsigned volumeTex_ = 0, tfTex_ = 0, jitterTex_ = 0, skipTex_ = 0;
     unsigned filmTex_ = 0, displayTex_ = 0, filmFbo_ = 0, displayFbo_ = 0;
-    int width_ = 0, height_ = 0;
+    int width_ = 0, height_ = 0;  ///< the display texture's
+    int filmW_ = 0, filmH_ = 0;
     // What is uploaded (held, so that a pointer is never that of a newer object).
     std::shared_ptr<const core::Volume> volume_;
     std::shared_ptr<const optics::TfTable> table_;

@@ -56,6 +56,8 @@ constexpr int kMeasureFrames = 3;
 /// already this many times the CPU's median: on a software rasteriser a GL frame can take
 /// seconds, and the UI waits for each.
 constexpr double kClearlySlower = 3.0;
+/// Rows of a frame's first slice while the GL's time per pixel is still unknown.
+constexpr int kGlFirstSliceRows = 16;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -258,9 +260,13 @@ class Viewer {
     void restartMeasurement();
     void updateRenderer();
     void choose(bool gpu, const std::string& reason);
-    /// Renders the prepared state with the GLSL ray caster and shows it; false (and back to the
-    /// CPU path, with the reason) when the GL fails.
+    /// Starts rendering the prepared state with the GLSL ray caster (replacing a frame in
+    /// progress) and runs its first slice; shown when its last slice is done (stepGl). False (and
+    /// back to the CPU path, with the reason) when the GL fails.
     bool renderGl(const RenderedImage& prepared);
+    /// One slice of the GLSL frame in progress, about kGlSliceSeconds of GL work; shows the frame
+    /// after its last.
+    bool stepGl();
     /// Opens `path` as the file field's Open button does; a drop on the window comes here too.
     void openPath(const std::string& path);
     void startLoad(const std::string& path);
@@ -366,6 +372,19 @@ class Viewer {
     int cpuFrames_ = 0;             ///< frames behind cpuMeasured_
     double cpuMeasured_ = 0.0;      ///< the CPU's median frame of the measurement
     Timings glTimes_, glCoarseTimes_;
+    /// The GLSL frame in progress (renderGl, stepGl).
+    struct GlJob {
+        RenderedImage state;
+        int nextRow = 0, slices = 0;
+        double seconds = 0.0;  ///< GL time of its slices so far (each waited for)
+        /// The UI frame of its last slice (one slice per UI frame); none yet: ~0.
+        std::uint64_t uiFrame = ~std::uint64_t(0);
+    };
+    std::optional<GlJob> glJob_;
+    /// A state prepared while a coarse frame was in progress: that one finishes first (it is
+    /// short; replacing it at every drag motion could leave the drag without pictures).
+    std::optional<RenderedImage> glNext_;
+    double glPixelSeconds_ = 0.0;  ///< GL seconds per pixel of the last slice (0: not measured)
 
     TfEditorState tfEditor_;
     bool showHelp_ = false, helpToggled_ = false;
@@ -492,6 +511,8 @@ void Viewer::receive() {
 }
 
 void Viewer::restartMeasurement() {
+    glJob_.reset();
+    glNext_.reset();
     measure_ = Measure::Waiting;
     glMeasured_.clear();
     glFramesRun_ = 0;
@@ -508,6 +529,7 @@ void Viewer::choose(bool gpu, const std::string& reason) {
         std::fprintf(stderr, "view: renderer %s: %s\n", gpu ? "gpu (GLSL)" : "cpu", reason.c_str());
     if (gpu == gpu_) return;
     gpu_ = gpu;
+    if (!gpu_) glJob_.reset(), glNext_.reset();
     // The new path renders the current state (the GLSL path from a prepared state).
     if (gpu_ && prepared_ && prepared_->generation == generation_ && prepared_->setup)
         renderGl(*prepared_);
@@ -516,46 +538,87 @@ void Viewer::choose(bool gpu, const std::string& reason) {
 }
 
 bool Viewer::renderGl(const RenderedImage& p) {
+    if (glJob_ && glJob_->state.coarse && glJob_->slices > 0) {
+        glNext_ = p;
+        return true;
+    }
+    glJob_.reset();
+    glNext_.reset();
     std::string why;
     if (!gl_) {
         why = glError_;
     } else if (!p.setup) {
         why = glUnsupportedReason(p.method, nullptr);
     } else {
-        try {
-            core::Stopwatch sw;
-            const bool ok = gl_->render(*p.setup, p.shGrids, float(p.exposureStops),
-                                        render::displayFromString(p.display), why);
-            glFinish();  // the frame's real cost (the GL queues its work)
-            if (ok) {
-                (p.coarse ? glCoarseTimes_ : glTimes_).add(sw.seconds());
-                if (options_.log)
-                    std::fprintf(stderr,
-                                 "view: GLSL frame %s%dx%d in %.3f s (state %llu, SH fields "
-                                 "uploaded so far: %zu)%s\n",
-                                 p.coarse ? "coarse " : "", gl_->width(), gl_->height(),
-                                 sw.seconds(), (unsigned long long)p.generation, gl_->shUploads(),
-                                 p.staleShading ? " shaded from earlier fields" : "");
-                // Full resolution is shown pixel for pixel; the coarse image is magnified
-                // smoothly (as the CPU path's).
-                const GLint filter = p.coarse ? GL_LINEAR : GL_NEAREST;
-                glBindTexture(GL_TEXTURE_2D, GLuint(gl_->texture()));
-                glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
-                glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
-                texW_ = gl_->width(), texH_ = gl_->height();
-                shownFull_ = !p.coarse;
-                shownGl_ = true;
-                shownStale_ = p.staleShading;
-                shownGen_ = p.generation;
-                renderWarnings_ = p.warnings;
-                if (!p.camera.is_null())
-                    renderedCamera_ = p.camera, renderedCameraGen_ = p.generation;
-                return true;
-            }
-        } catch (const std::exception& e) {
-            why = e.what();
-        }
+        glJob_ = GlJob{p};
+        return stepGl();
     }
+    choose(false, "the GLSL path failed, the CPU draws: " + why);
+    return false;
+}
+
+bool Viewer::stepGl() {
+    if (!glJob_ || !gl_) return true;
+    GlJob& job = *glJob_;
+    const RenderedImage& p = job.state;
+    const int w = p.setup->camera->width(), h = p.setup->camera->height();
+    const int left = h - job.nextRow;
+    const int rows = !(options_.glSliceSeconds > 0.0) ? left
+                     : glPixelSeconds_ > 0.0
+                         ? std::clamp(int(options_.glSliceSeconds / (glPixelSeconds_ * double(w))),
+                                      1, std::max(left, 1))
+                         : std::min(kGlFirstSliceRows, std::max(left, 1));
+    const bool last = rows >= left;
+    std::string why;
+    try {
+        core::Stopwatch sw;
+        const bool ok = gl_->renderRows(*p.setup, p.shGrids, float(p.exposureStops),
+                                        render::displayFromString(p.display), why, job.nextRow,
+                                        job.nextRow + rows, last);
+        glFinish();  // the slice's real cost (the GL queues its work), and its bound
+        if (ok) {
+            const double t = sw.seconds();
+            glPixelSeconds_ = t / (double(std::max(rows, 1)) * double(std::max(w, 1)));
+            job.seconds += t;
+            ++job.slices;
+            job.nextRow += rows;
+            job.uiFrame = frames_;
+            if (!last) return true;
+            (p.coarse ? glCoarseTimes_ : glTimes_).add(job.seconds);
+            if (options_.log)
+                std::fprintf(stderr,
+                             "view: GLSL frame %s%dx%d in %.3f s, %d slice%s (state %llu, SH "
+                             "fields uploaded so far: %zu)%s\n",
+                             p.coarse ? "coarse " : "", gl_->width(), gl_->height(), job.seconds,
+                             job.slices, job.slices == 1 ? "" : "s",
+                             (unsigned long long)p.generation, gl_->shUploads(),
+                             p.staleShading ? " shaded from earlier fields" : "");
+            // Full resolution is shown pixel for pixel; the coarse image is magnified smoothly
+            // (as the CPU path's).
+            const GLint filter = p.coarse ? GL_LINEAR : GL_NEAREST;
+            glBindTexture(GL_TEXTURE_2D, GLuint(gl_->texture()));
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, filter);
+            glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, filter);
+            texW_ = gl_->width(), texH_ = gl_->height();
+            shownFull_ = !p.coarse;
+            shownGl_ = true;
+            shownStale_ = p.staleShading;
+            shownGen_ = p.generation;
+            renderWarnings_ = p.warnings;
+            if (!p.camera.is_null()) renderedCamera_ = p.camera, renderedCameraGen_ = p.generation;
+            glJob_.reset();
+            // A state that came meanwhile: its first slice in the next UI frame.
+            if (glNext_) {
+                if (glNext_->generation >= shownGen_ && glNext_->setup) glJob_ = GlJob{*glNext_};
+                glNext_.reset();
+            }
+            return true;
+        }
+    } catch (const std::exception& e) {
+        why = e.what();
+    }
+    glJob_.reset();
+    glNext_.reset();
     choose(false, "the GLSL path failed, the CPU draws: " + why);
     return false;
 }
@@ -1605,6 +1668,8 @@ std::optional<core::ImageRGBA> Viewer::run() {
         const double tEvents = work.seconds();
         pollLoad();
         receive();
+        // The next slice of a GLSL frame begun in an earlier UI frame.
+        if (gpu_ && glJob_ && glJob_->uiFrame != frames_) stepGl();
         receivePathTrace();
         const double tReceive = work.seconds();
         int fbW = 0, fbH = 0;

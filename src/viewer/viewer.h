@@ -35,6 +35,9 @@ namespace voxlight::viewer {
 /// Width of the side panel in window pixels (the image area is the rest of the window).
 inline constexpr int kPanelWidth = 380;
 
+/// ViewerOptions::glSliceSeconds by default: half the UI frame's 50 ms budget.
+inline constexpr double kDefaultGlSliceSeconds = 0.025;
+
 struct ViewerOptions {
     /// Non-empty: scripted run that returns a screenshot (the caller writes the file; .exr: the
     /// image's linear radiance, see above).
@@ -63,6 +66,11 @@ struct ViewerOptions {
     /// without OpenGL 4.5 or a shader that does not compile fall back to the CPU path, and the
     /// stats panel (and --log) says why. Scripted screenshots wait for the choice.
     RendererChoice renderer = RendererChoice::Auto;
+    /// GLSL path: GL time one UI frame spends on the image at most (about; measured per pixel of
+    /// the last slice). A frame that takes longer (a software rasteriser, a slow GPU, a large
+    /// window) is rendered in slices of rows over several UI frames, the last image shown
+    /// meanwhile — the same pixels as in one pass. 0: whole frames (the UI waits for each).
+    double glSliceSeconds = kDefaultGlSliceSeconds;
     /// Raised (e.g. by SIGINT): close the window and return.
     const std::atomic<bool>* quit = nullptr;
 };

@@ -550,8 +550,10 @@ TEST(ViewCli, GlslShFieldsAreUploadedOncePerField) {
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [60, 10]}, {"zoom": 2},
         {"clip_add": {"normal": [0, 1, 0], "offset": 5, "shadows_from_removed": false}}])";
     const Result view = runShell(
-        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
-            " --script " + quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / "shot.png"),
+        // Whole GLSL frames: one per state, none replaced by the next before it shows.
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu --gl-slice-ms 0 " +
+            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+            " --screenshot " + quoted(tmp / "shot.png"),
         tmp.path());
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
@@ -645,9 +647,10 @@ TEST(ViewCli, AfterATfChangeTheGlslPathShowsTheOldShadingThenTheNew) {
         "image": {"width": 160, "height": 128}})";
     std::ofstream(tmp / "steps.json") << R"([{"window": [60, -40]}])";
     const auto view = [&](const char* renderer, const char* shot) {
-        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --renderer " + renderer + " " +
-                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
-                            " --screenshot " + quoted(tmp / shot),
+        // Whole GLSL frames: the stale one shows before the fresh one replaces it.
+        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --gl-slice-ms 0 --renderer " +
+                            renderer + " " + quoted(tmp / "scene.json") + " --script " +
+                            quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / shot),
                         tmp.path());
     };
     const Result gl = view("gpu", "gl.png");
@@ -695,8 +698,10 @@ TEST(ViewCli, GlslLocalGlobalSwitchRecomputesNothing) {
     std::ofstream(tmp / "steps.json")
         << R"([{"shading": "local"}, {"shading": "global"}, {"shading": "local"}])";
     const Result view = runShell(
-        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
-            " --script " + quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / "shot.png"),
+        // Whole GLSL frames: one per state, none replaced by the next before it shows.
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu --gl-slice-ms 0 " +
+            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+            " --screenshot " + quoted(tmp / "shot.png"),
         tmp.path());
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
@@ -819,9 +824,10 @@ TEST(ViewCli, AScriptedExplorationOnTheGlslPathReplaysToTheScreenshot) {
     std::ofstream(tmp / "steps.json")
         << R"([{"orbit": [60, 10]}, {"window": [40, -30]}, {"zoom": 2}])";
     const Result view = runShell(
-        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
-            " --script " + quoted(tmp / "steps.json") + " --record " + quoted(tmp / "rec.json") +
-            " --screenshot " + quoted(tmp / "shot.png"),
+        // Whole GLSL frames: one per state, none replaced by the next before it shows.
+        *display + VOXLIGHT_BINARY + " view -q --log --renderer gpu --gl-slice-ms 0 " +
+            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") + " --record " +
+            quoted(tmp / "rec.json") + " --screenshot " + quoted(tmp / "shot.png"),
         tmp.path());
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
         GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
@@ -882,6 +888,58 @@ TEST(ViewCli, TheGlslPathRendersCoarseWhileDraggingAndFullWhenReleased) {
         compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "gl.png"));
     EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
     EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+}
+
+// A GLSL frame slower than the slice budget is rendered in slices of rows over several UI frames
+// (the UI draws between them, the last image shown meanwhile), and its pixels are those of the
+// same frame in one pass, bit for bit.
+TEST(ViewCli, TheGlslPathSlicesASlowFrameAndDrawsTheSamePixels) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "camera": {"azimuth": 30, "elevation": 15},
+        "image": {"width": 160, "height": 128}})";
+    std::ofstream(tmp / "steps.json") << R"([{"orbit": [40, 10]}])";
+    const auto view = [&](const char* sliceMs, const char* shot) {
+        return runShell(*display + VOXLIGHT_BINARY +
+                            " view -q --log --renderer gpu --gl-slice-ms " + sliceMs + " " +
+                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+                            " --screenshot " + quoted(tmp / shot),
+                        tmp.path());
+    };
+    constexpr double kSliceMs = 0.5;
+    const Result sliced = view("0.5", "sliced.png");
+    if (sliced.code != 0 && sliced.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << sliced.err;
+    ASSERT_EQ(sliced.code, 0) << sliced.err;
+    const Result whole = view("0", "whole.png");
+    ASSERT_EQ(whole.code, 0) << whole.err;
+    // The orbit's frame: "view: GLSL frame 160x128 in S s, N slices (state …".
+    const std::string key = "view: GLSL frame 160x128 in ";
+    for (const Result* r : {&sliced, &whole}) {
+        const std::size_t at = r->err.rfind(key);
+        ASSERT_NE(at, std::string::npos) << r->err;
+        double seconds = 0;
+        int slices = 0;
+        ASSERT_EQ(
+            std::sscanf(r->err.c_str() + at + key.size(), "%lf s, %d slice", &seconds, &slices), 2)
+            << r->err.substr(at);
+        if (r == &whole)
+            EXPECT_EQ(slices, 1) << r->err;
+        else if (seconds > 4 * kSliceMs * 1e-3)  // a GL this fast draws the frame in one
+            EXPECT_GT(slices, 1) << r->err;
+    }
+    // The image area (left of the panel, whose stats differ) bit for bit.
+    const io::ImageRGBA a = io::readImage(tmp / "sliced.png"), b = io::readImage(tmp / "whole.png");
+    ASSERT_EQ(a.width, b.width);
+    ASSERT_EQ(a.height, b.height);
+    std::size_t differ = 0;
+    for (int y = 0; y < a.height; ++y)
+        for (int x = 0; x < a.width - kPanelWidth; ++x)
+            for (int c = 0; c < 4; ++c) differ += a.at(x, y)[c] != b.at(x, y)[c];
+    EXPECT_EQ(differ, 0u);
 }
 
 // A scene the GLSL path cannot do (here: nine lights, one more than the shader holds) is drawn by
