@@ -1576,6 +1576,15 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         const std::size_t bytes = t->bytes();
         return Artifact::of<pvrt::Transfer>(std::move(t), bytes);
     };
+    // Kronander's interleaved update for PVRT too (RunOptions::staleFields): after a TF change or
+    // a cut, the last transfer of the same volume and settings stands in (its radiance grid read
+    // with the new classification) while the new one is computed.
+    direct.lineage = [params](const Run& run) -> std::optional<std::uint64_t> {
+        return KeyBuilder(run, "pvrt_direct_lineage")
+            .stage("load_volume")
+            .json(params.directKey())
+            .value();
+    };
     direct.codec = &pvrtTransferCodec();
     direct.describe = [](const Run&, const Artifact& a) {
         const auto& t = *a.as<pvrt::Transfer>();
@@ -1631,6 +1640,12 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
                                          {"seconds", st.seconds}};
         const std::size_t bytes = t->bytes();
         return Artifact::of<pvrt::Transfer>(std::move(t), bytes);
+    };
+    indirect.lineage = [params](const Run& run) -> std::optional<std::uint64_t> {
+        return KeyBuilder(run, "pvrt_transfer_lineage")
+            .stage("load_volume")
+            .json({{"direct", params.directKey()}, {"photons", params.photonKey()}})
+            .value();
     };
     indirect.codec = &pvrtTransferCodec();
     indirect.describe = [](const Run& run, const Artifact& a) {

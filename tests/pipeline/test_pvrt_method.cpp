@@ -173,6 +173,41 @@ TEST(PvrtMethod, ASectionViewShadowsThePhotonsAsThePathTracerDoes) {
     EXPECT_TRUE(moved.stage("pvrt_transfer").ran);
 }
 
+// Kronander's interleaved update for PVRT (RunOptions::staleFields, what the viewer's first image
+// after a TF change or a cut uses): the last transfer of the same volume and settings stands in —
+// the new classification shaded from the old radiance grid — no precompute runs, and a run without
+// the option then computes what a fresh session computes, bit for bit.
+TEST(PvrtMethod, AfterATfChangeOrACutTheLastTransferStandsIn) {
+    const json params = {{"resolution", 16}, {"photons", 4}, {"clusters", 8}};
+    Session session;
+    json d = cloudScene("pvrt", params, true);
+    (void)session.run(scene(d));
+    RunOptions stale;
+    stale.staleFields = true;
+    for (auto& p : d["transfer_function"]["points"])
+        if (p["extinction"].get<double>() > 0) p["extinction"] = 0.3;
+    const RunResult standIn = session.run(scene(d), stale);
+    for (const char* st : {"pvrt_direct", "pvrt_transfer", "pvrt_cpca"})
+        EXPECT_FALSE(standIn.stage(st).ran) << st;
+    EXPECT_TRUE(standIn.stage("pvrt_direct").stale);
+    EXPECT_TRUE(allFiniteNonNegative(standIn.image));
+    const RunResult fresh = session.run(scene(d));
+    EXPECT_TRUE(fresh.stage("pvrt_direct").ran);
+    EXPECT_TRUE(fresh.stage("pvrt_transfer").ran);
+    Session other;
+    const RunResult reference = other.run(scene(d));
+    EXPECT_EQ(fresh.image.pixels, reference.image.pixels);
+    EXPECT_NE(standIn.image.pixels, reference.image.pixels);  // the old transfer differed
+    // A plane that removes matter for the light: the photons of the last transfer stand in too
+    // (no photon run with the stale direct part).
+    d["clip_planes"] = {{{"point", {0, 0, 2}}, {"normal", {0, 0, -1}}}};
+    const RunResult cut = session.run(scene(d), stale);
+    for (const char* st : {"pvrt_direct", "pvrt_transfer", "pvrt_cpca"})
+        EXPECT_FALSE(cut.stage(st).ran) << st;
+    EXPECT_TRUE(cut.stage("pvrt_direct").stale);
+    EXPECT_TRUE(allFiniteNonNegative(cut.image));
+}
+
 TEST(PvrtMethod, CpcaStaysCloseToTheUncompressedTransfer) {
     Session session;
     // Single scattering: the smooth direct transfer (photon noise does not compress: CPCA's
