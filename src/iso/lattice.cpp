@@ -905,7 +905,8 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
     tbb::task_arena arena(o.threads > 0 ? o.threads : tbb::task_arena::automatic);
     arena.execute([&] {
         // Built before the paths rather than by the first of them while the others wait.
-        // Held for the whole call: no other isovalue can replace it meanwhile.
+        // Built once before the paths and handed to each: held here, it stays alive for the
+        // whole call even if other isovalues' requests evict it from the tracer meanwhile.
         const std::shared_ptr<const SkipField> prebuilt =
             o.placement == TexelPlacement::OnSurface && !todo.empty() ? skipFor(o.surfaceIso)
                                                                       : nullptr;
@@ -921,7 +922,8 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
                 } else {
                     glm::dvec3 xs;
                     if (tracer_->project(xt, o.surfaceIso, kMaxProjectionVoxels, xs)) {
-                        estimate(xs, o.surfaceIso, linear(t), o.samples, true, sums);
+                        estimate(xs, o.surfaceIso, linear(t), o.samples, true, sums,
+                                 prebuilt.get());
                         // The normal where the texel sits on the surface, last in its data.
                         const glm::dvec3 nrm = tracer_->smoothNormal(xs);
                         float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
@@ -972,10 +974,10 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
 }
 
 void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
-                                   bool sharedIso, PathSums& out) const {
+                                   bool sharedIso, PathSums& out, const SkipField* given) const {
     const Tracer& tr = *tracer_;
-    const std::shared_ptr<const SkipField> held = sharedIso ? skipFor(iso) : nullptr;
-    const SkipField* skip = held.get();
+    const std::shared_ptr<const SkipField> held = sharedIso && !given ? skipFor(iso) : nullptr;
+    const SkipField* skip = given ? given : held.get();
     const LatticeOptions& o = options_;
     const int C = o.shOrder * o.shOrder;
     const bool sh = o.mode == LatticeMode::ShTransfer;

@@ -239,8 +239,9 @@ class IlluminationLattice {
     /// `sharedIso`: many calls trace against this isovalue (a bake, the on-surface lattice), so
     /// its skip distances are worth building (Tracer::skipFor); false for Wyman's own-isosurface
     /// texels, each with its own isovalue.
+    /// `given`: the skip distances for iso the caller holds (then none is looked up).
     void estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples, bool sharedIso,
-                  PathSums& out) const;
+                  PathSums& out, const SkipField* given = nullptr) const;
     /// The texels irradiance(world, surfaceIso) reads (the preferred group, header) and their
     /// normalised weights; returns how many.
     int surfaceStencil(const glm::dvec3& world, double surfaceIso, glm::ivec3 texel[8],

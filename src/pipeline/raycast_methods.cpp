@@ -1617,7 +1617,16 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
         indirect.skip =
             "not needed: single scattering (no 'multiple_scattering' effect or max_bounces 1)";
     indirect.key = [photonKeyed](const Run& run) {
-        return KeyBuilder(run, "pvrt_transfer").stage("pvrt_direct").json(photonKeyed).value();
+        // The photons read the TF and the skip cells themselves: keyed on them as well as on the
+        // direct part, which may be a stand-in of an earlier TF (RunOptions::staleFields) — then
+        // this key is new and the lineage's last transfer stands in too, instead of photons
+        // through the new TF being stored under the old direct part's key.
+        return KeyBuilder(run, "pvrt_transfer")
+            .stage("pvrt_direct")
+            .stage("transfer_function")
+            .stage("skip_cells")
+            .json(photonKeyed)
+            .value();
     };
     indirect.compute = [params, o](Run& run) {
         const auto loaded = run.get<LoadedVolume>("load_volume");

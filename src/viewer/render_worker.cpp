@@ -113,7 +113,7 @@ void RenderWorker::loop() {
         cancel_ = false;
         runningGeneration_ = request.generation;
         if (request.prepareOnly) {
-            runningFull_ = true;
+            runningFull_ = !request.interacting;  // a coarse prepare finishes, as a coarse pass
             busy_ = true;
             lock.unlock();
             std::string stale;
@@ -153,7 +153,10 @@ void RenderWorker::loop() {
 }
 
 void RenderWorker::scheduleFields(const RenderRequest& request, const std::string& stale) {
+    // What is rendered again when the fields are ready: the state at full resolution (a coarse
+    // prepare of a drag would otherwise come back after the released state's full one).
     lastFull_ = request;
+    lastFull_->interacting = false;
     // Shaded from earlier fields: have the field thread compute this state's, unless it is
     // computing them already (a camera or light move needs the same fields: let it go on).
     if (!stale.empty() && stale != fieldSignature_) {

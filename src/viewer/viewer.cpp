@@ -469,8 +469,13 @@ void Viewer::receive() {
                          r->shResampleSeconds);
         // For the GLSL path (or its measurement): render it here when it draws the image.
         prepared_ = std::move(*r);
-        // A coarse frame never replaces the full image of the same state (a late drag frame).
-        const bool late = prepared_->coarse && shownFull_ && prepared_->generation == shownGen_;
+        // A coarse frame never replaces the full image of the same state (a late drag frame),
+        // shown or on its way.
+        const std::uint64_t g = prepared_->generation;
+        const bool fullComing =
+            (glJob_ && !glJob_->state.coarse && glJob_->state.generation == g) ||
+            (glNext_ && !glNext_->coarse && glNext_->generation == g);
+        const bool late = prepared_->coarse && ((shownFull_ && g == shownGen_) || fullComing);
         if (gpu_ && prepared_->generation >= shownGen_ && !late) renderGl(*prepared_);
         return;
     }
@@ -563,11 +568,14 @@ bool Viewer::stepGl() {
     const RenderedImage& p = job.state;
     const int w = p.setup->camera->width(), h = p.setup->camera->height();
     const int left = h - job.nextRow;
-    const int rows = !(options_.glSliceSeconds > 0.0) ? left
-                     : glPixelSeconds_ > 0.0
-                         ? std::clamp(int(options_.glSliceSeconds / (glPixelSeconds_ * double(w))),
-                                      1, std::max(left, 1))
-                         : std::min(kGlFirstSliceRows, std::max(left, 1));
+    // Rows for about the budget at the last slice's time per pixel (clamped in double: a tiny
+    // time per pixel must not overflow the int).
+    int rows = std::min(kGlFirstSliceRows, std::max(left, 1));
+    if (!(options_.glSliceSeconds > 0.0))
+        rows = left;
+    else if (glPixelSeconds_ > 0.0)
+        rows = int(std::clamp(options_.glSliceSeconds / (glPixelSeconds_ * double(w)), 1.0,
+                              double(std::max(left, 1))));
     const bool last = rows >= left;
     std::string why;
     try {
@@ -607,10 +615,17 @@ bool Viewer::stepGl() {
             renderWarnings_ = p.warnings;
             if (!p.camera.is_null()) renderedCamera_ = p.camera, renderedCameraGen_ = p.generation;
             glJob_.reset();
-            // A state that came meanwhile: its first slice in the next UI frame.
+            // A state that came meanwhile: its first slice in the next UI frame (one the GL
+            // cannot draw goes through renderGl's fallback to the CPU path).
             if (glNext_) {
-                if (glNext_->generation >= shownGen_ && glNext_->setup) glJob_ = GlJob{*glNext_};
+                RenderedImage next = std::move(*glNext_);
                 glNext_.reset();
+                if (next.generation >= shownGen_) {
+                    if (next.setup)
+                        glJob_ = GlJob{std::move(next)};
+                    else
+                        renderGl(next);
+                }
             }
             return true;
         }
@@ -1632,7 +1647,8 @@ core::ImageRGBA Viewer::readWindow() const {
 
 core::ImageRGBA Viewer::shownRadiance() const {
     if (pathTraceShown() && ptFilm_ && ptW_ == texW_ && ptH_ == texH_) return *ptFilm_;
-    if (shownGl_ && gl_) return gl_->readFilm();
+    // The GL film is the frame in progress's target: only when none is (and the image is full).
+    if (shownGl_ && gl_) return !glJob_ && shownFull_ ? gl_->readFilm() : core::ImageRGBA();
     if (shownFilm_ && shownFull_) return *shownFilm_;
     return core::ImageRGBA();
 }
