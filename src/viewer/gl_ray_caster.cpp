@@ -379,10 +379,18 @@ bool GlRayCaster::render(const pipeline::CasterSetup& setup, const ShGrids& sh, 
 bool GlRayCaster::renderRows(const pipeline::CasterSetup& setup, const ShGrids& sh,
                              float exposureStops, render::Display display, std::string& why,
                              int rowBegin, int rowEnd, bool finish) {
-    const int w = setup.camera->width(), h = setup.camera->height();
-    rowBegin = std::clamp(rowBegin, 0, h), rowEnd = std::clamp(rowEnd, rowBegin, h);
-    return draw(setup, sh, exposureStops, display, why, {0, rowBegin, w, rowEnd - rowBegin},
-                finish);
+    return renderRect(setup, sh, exposureStops, display, why, 0, rowBegin, setup.camera->width(),
+                      rowEnd - rowBegin, finish);
+}
+
+bool GlRayCaster::renderRect(const pipeline::CasterSetup& setup, const ShGrids& sh,
+                             float exposureStops, render::Display display, std::string& why, int x0,
+                             int y0, int w, int h, bool finish) {
+    const int fw = setup.camera->width(), fh = setup.camera->height();
+    const int xa = std::clamp(x0, 0, fw), ya = std::clamp(y0, 0, fh);
+    const int xb = std::clamp(x0 + std::max(w, 0), xa, fw),
+              yb = std::clamp(y0 + std::max(h, 0), ya, fh);
+    return draw(setup, sh, exposureStops, display, why, {xa, ya, xb - xa, yb - ya}, finish);
 }
 
 bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,

@@ -62,6 +62,10 @@ class GlRayCaster {
     bool renderRows(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
                     render::Display display, std::string& why, int rowBegin, int rowEnd,
                     bool finish);
+    /// The same for texels [x0, x0 + w) × [y0, y0 + h) of the film (clamped to it).
+    bool renderRect(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
+                    render::Display display, std::string& why, int x0, int y0, int w, int h,
+                    bool finish);
     /// SH field grids uploaded as textures so far (tests: once per field, not per frame).
     std::size_t shUploads() const { return shUploads_; }
     static constexpr std::size_t kKeptShFields = 4;

@@ -52,12 +52,12 @@ constexpr float kHandleGrabPixels = 12.f, kArrowPixels = 36.f;
 /// Start-up measurement: timed frames of each path (the GL path's first frame, which uploads the
 /// volume and compiles the shader's machine code, is not counted).
 constexpr int kMeasureFrames = 3;
-/// The GL path's timing stops when its probe (the central quarter of the image, ×4) or a frame is
-/// already this many times the CPU's median: on a software rasteriser a GL frame can take
-/// seconds, and the UI waits for each.
+/// The GL path's timing stops when the GL time spent on its probe (the central quarter of the
+/// image, ×4) or on a frame is already this many times the CPU's median: on a software
+/// rasteriser a GL frame can take seconds, and there is no need to finish one.
 constexpr double kClearlySlower = 3.0;
 /// Rows of a frame's first slice while the GL's time per pixel is still unknown.
-constexpr int kGlFirstSliceRows = 16;
+constexpr int kGlFirstSliceRows = 4;
 /// Window size when started without a scene.
 constexpr int kDefaultImageWidth = 720, kDefaultImageHeight = 720;
 
@@ -368,9 +368,11 @@ class Viewer {
     std::optional<RenderedImage> prepared_;  ///< newest prepared state (GLSL path)
     std::vector<double> glMeasured_;         ///< timed GL frames of the measurement
     int glFramesRun_ = 0;
-    std::uint64_t measureGen_ = 0;  ///< the state being measured
-    int cpuFrames_ = 0;             ///< frames behind cpuMeasured_
-    double cpuMeasured_ = 0.0;      ///< the CPU's median frame of the measurement
+    int glMeasureRow_ = 0;           ///< rows of the measurement's current probe or frame done
+    double glMeasureSeconds_ = 0.0;  ///< their GL time
+    std::uint64_t measureGen_ = 0;   ///< the state being measured
+    int cpuFrames_ = 0;              ///< frames behind cpuMeasured_
+    double cpuMeasured_ = 0.0;       ///< the CPU's median frame of the measurement
     Timings glTimes_, glCoarseTimes_;
     /// The GLSL frame in progress (renderGl, stepGl).
     struct GlJob {
@@ -521,6 +523,7 @@ void Viewer::restartMeasurement() {
     measure_ = Measure::Waiting;
     glMeasured_.clear();
     glFramesRun_ = 0;
+    glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
     cpuMeasured_ = 0.0;
     gpu_ = false;
     rendererReason_ = "measuring both paths ...";
@@ -647,6 +650,7 @@ void Viewer::updateRenderer() {
         measure_ = Measure::Waiting;
         glMeasured_.clear();
         glFramesRun_ = 0;
+        glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
         return;
     }
     switch (measure_) {
@@ -679,52 +683,85 @@ void Viewer::updateRenderer() {
         case Measure::CpuFrames:
             return;  // receive() moves on when the timed frames arrive
         case Measure::GlFrames: {
-            // One GL frame per UI frame (the UI keeps its events between them).
             // First a warm-up on a corner (uploads, the shader's machine code), untimed; then the
-            // central quarter of the image as a probe: on a software rasteriser a full GL frame
-            // takes seconds and the UI waits for it, so a probe that is already clearly slower
-            // than the CPU's frame ends the measurement; else full frames, median.
-            const int run = glFramesRun_++;
-            const GlRayCaster::Scope scope = run == 0   ? GlRayCaster::Scope::WarmUp
-                                             : run == 1 ? GlRayCaster::Scope::CentreQuarter
-                                                        : GlRayCaster::Scope::Full;
+            // central quarter of the image as a probe; then full frames, median. Probe and frames
+            // in slices of about glSliceSeconds of GL work per UI frame, as the GLSL path draws
+            // (on a software rasteriser a GL frame takes seconds: the UI keeps its events), and
+            // the measurement ends as soon as the GL time spent shows the GL clearly slower than
+            // the CPU's frame.
+            const int run = glFramesRun_;
+            const pipeline::CasterSetup& setup = *prepared_->setup;
+            const float exposure = float(prepared_->exposureStops);
+            const render::Display display = render::displayFromString(prepared_->display);
             std::string why;
             core::Stopwatch sw;
             bool ok = false;
+            if (run == 0) {
+                try {
+                    ok = gl_->render(setup, prepared_->shGrids, exposure, display, why,
+                                     GlRayCaster::Scope::WarmUp);
+                } catch (const std::exception& e) {
+                    why = e.what();
+                }
+                glFinish();
+                if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
+                if (options_.log)
+                    std::fprintf(stderr,
+                                 "view: measuring: GLSL warm-up (uploads, shader compile; 8x8 "
+                                 "pixels) %.3f s\n",
+                                 sw.seconds());
+                glFramesRun_ = 1;
+                return;
+            }
+            const bool probe = run == 1;
+            const int fw = setup.camera->width(), fh = setup.camera->height();
+            const int x0 = probe ? fw / 4 : 0, rw = probe ? std::max(fw / 2, 1) : fw;
+            const int y0 = probe ? fh / 4 : 0, rh = probe ? std::max(fh / 2, 1) : fh;
+            const int left = std::max(rh - glMeasureRow_, 1);
+            int rows = std::min(kGlFirstSliceRows, left);
+            if (!(options_.glSliceSeconds > 0.0))
+                rows = left;
+            else if (glPixelSeconds_ > 0.0)
+                rows = int(std::clamp(options_.glSliceSeconds / (glPixelSeconds_ * double(rw)), 1.0,
+                                      double(left)));
+            const bool last = rows >= left;
             try {
-                ok = gl_->render(*prepared_->setup, prepared_->shGrids,
-                                 float(prepared_->exposureStops),
-                                 render::displayFromString(prepared_->display), why, scope);
+                ok = gl_->renderRect(setup, prepared_->shGrids, exposure, display, why, x0,
+                                     y0 + glMeasureRow_, rw, rows, last);
             } catch (const std::exception& e) {
                 why = e.what();
             }
             glFinish();
-            const double seconds = sw.seconds();
+            const double t = sw.seconds();
             if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
+            glPixelSeconds_ = t / (double(rows) * double(rw));
+            glMeasureSeconds_ += t;
+            glMeasureRow_ += rows;
+            // The GL time already spent, as a full frame's lower bound (a quarter of the pixels
+            // for the probe): clearly slower than the CPU → the CPU path, without finishing.
+            const double atLeast = probe ? 4.0 * glMeasureSeconds_ : glMeasureSeconds_;
+            if (atLeast > kClearlySlower * cpuMeasured_) {
+                char reason[400];
+                std::snprintf(reason, sizeof reason,
+                              "measured at %dx%d: GLSL already %.3f s for %d of %d rows of the %s "
+                              "(%s; a full frame over %.1f s), CPU ray caster %.3f s per frame "
+                              "(median of %d) -> the CPU path is faster",
+                              fw, fh, glMeasureSeconds_, glMeasureRow_, rh,
+                              probe ? "image's central quarter" : "frame",
+                              gl_->glRenderer().c_str(), atLeast, cpuMeasured_, cpuFrames_);
+                glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
+                return choose(false, reason);
+            }
+            if (!last) return;
+            const double seconds = glMeasureSeconds_;
+            glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
+            ++glFramesRun_;
             if (options_.log)
                 std::fprintf(stderr, "view: measuring: GLSL %s %.3f s\n",
-                             run == 0   ? "warm-up (uploads, shader compile; 8x8 pixels)"
-                             : run == 1 ? "central quarter of the image"
-                                        : "frame",
-                             seconds);
-            if (run == 0) return;
-            if (run == 1) {
-                if (4.0 * seconds > kClearlySlower * cpuMeasured_) {
-                    char reason[320];
-                    std::snprintf(reason, sizeof reason,
-                                  "measured at %dx%d: GLSL %.3f s for the central quarter of the "
-                                  "image (%s; a full frame about %.1f s), CPU ray caster %.3f s "
-                                  "per frame (median of %d) -> the CPU path is faster",
-                                  w, h, seconds, gl_->glRenderer().c_str(), 4.0 * seconds,
-                                  cpuMeasured_, cpuFrames_);
-                    return choose(false, reason);
-                }
-                return;
-            }
+                             probe ? "central quarter of the image" : "frame", seconds);
+            if (probe) return;
             glMeasured_.push_back(seconds);
-            const bool enough = int(glMeasured_.size()) >= kMeasureFrames ||
-                                seconds > kClearlySlower * cpuMeasured_;
-            if (!enough) return;
+            if (int(glMeasured_.size()) < kMeasureFrames) return;
             std::vector<double> g = glMeasured_;
             std::sort(g.begin(), g.end());
             const double gl = g[g.size() / 2];
@@ -733,7 +770,7 @@ void Viewer::updateRenderer() {
             std::snprintf(reason, sizeof reason,
                           "measured at %dx%d: GLSL %.3f s per frame (median of %zu, %s), CPU "
                           "ray caster %.3f s (median of %d) -> the %s is faster",
-                          w, h, gl, g.size(), gl_->glRenderer().c_str(), cpuMeasured_, cpuFrames_,
+                          fw, fh, gl, g.size(), gl_->glRenderer().c_str(), cpuMeasured_, cpuFrames_,
                           gpu ? "GLSL path" : "CPU path");
             return choose(gpu, reason);
         }
