@@ -866,26 +866,31 @@ Artifact publishTraced(Run& run, const TracedImage& t) {
 // ---- SH visibility stages ----------------------------------------------------------------------
 
 /// What removes matter for the light too (shadows_from_removed false): the kept half-spaces of
-/// those clip planes and of the crop box, and the scene's description of them (the cache key).
+/// those clip planes and of the crop box, and the scene's description of them (the cache key);
+/// and the description of the section-view ones (true), which remove matter for the camera only
+/// (`sectionKey`: for what depends on them, PVRT's photons).
 struct LightCuts {
     std::vector<core::HalfSpace> kept;
     json key = json::array();
+    json sectionKey = json::array();
     bool any() const { return !kept.empty(); }
 };
 
 LightCuts lightCuts(const render::RenderOptions& o) {
     LightCuts c;
     for (const render::ClipPlane& p : o.clipPlanes) {
-        if (p.shadowsFromRemoved) continue;
-        c.kept.push_back({p.point, p.normal});
-        c.key.push_back({{"point", {p.point.x, p.point.y, p.point.z}},
-                         {"normal", {p.normal.x, p.normal.y, p.normal.z}}});
+        if (!p.shadowsFromRemoved) c.kept.push_back({p.point, p.normal});
+        (p.shadowsFromRemoved ? c.sectionKey : c.key)
+            .push_back({{"point", {p.point.x, p.point.y, p.point.z}},
+                        {"normal", {p.normal.x, p.normal.y, p.normal.z}}});
     }
-    if (o.cropBox && !o.cropBox->shadowsFromRemoved) {
-        for (const core::HalfSpace& f : core::boxHalfSpaces(o.cropBox->min, o.cropBox->max))
-            c.kept.push_back(f);
+    if (o.cropBox) {
+        if (!o.cropBox->shadowsFromRemoved)
+            for (const core::HalfSpace& f : core::boxHalfSpaces(o.cropBox->min, o.cropBox->max))
+                c.kept.push_back(f);
         const glm::dvec3 &lo = o.cropBox->min, &hi = o.cropBox->max;
-        c.key.push_back({{"crop_min", {lo.x, lo.y, lo.z}}, {"crop_max", {hi.x, hi.y, hi.z}}});
+        (o.cropBox->shadowsFromRemoved ? c.sectionKey : c.key)
+            .push_back({{"crop_min", {lo.x, lo.y, lo.z}}, {"crop_max", {hi.x, hi.y, hi.z}}});
     }
     return c;
 }
@@ -1598,18 +1603,11 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
 
     // Photons never scatter in removed matter, and section-view matter absorbs them on their way
     // in (photons.h): every plane and the crop box shape the indirect part, not only the cuts.
-    json section = json::array();
-    for (const render::ClipPlane& p : o.clipPlanes)
-        if (p.shadowsFromRemoved)
-            section.push_back({{"point", {p.point.x, p.point.y, p.point.z}},
-                               {"normal", {p.normal.x, p.normal.y, p.normal.z}}});
-    if (o.cropBox && o.cropBox->shadowsFromRemoved) {
-        const glm::dvec3 &lo = o.cropBox->min, &hi = o.cropBox->max;
-        section.push_back({{"crop_min", {lo.x, lo.y, lo.z}}, {"crop_max", {hi.x, hi.y, hi.z}}});
-    }
+    // (Without section views the key is what it was, so earlier cached transfers still serve.)
     const json photonKey = {{"params", params.photonKey()}, {"cuts", cuts.key}};
-    const json photonKeyed =
-        section.empty() ? photonKey : json{{"photons", photonKey}, {"section_view", section}};
+    const json photonKeyed = cuts.sectionKey.empty()
+                                 ? photonKey
+                                 : json{{"photons", photonKey}, {"section_view", cuts.sectionKey}};
     Stage indirect{"pvrt_transfer",
                    StageKind::Precompute,
                    {"pvrt_direct", "method", "clip_planes", "crop_box"}};

@@ -264,9 +264,12 @@ class Viewer {
     /// progress) and runs its first slice; shown when its last slice is done (stepGl). False (and
     /// back to the CPU path, with the reason) when the GL fails.
     bool renderGl(const RenderedImage& prepared);
-    /// One slice of the GLSL frame in progress, about kGlSliceSeconds of GL work; shows the frame
-    /// after its last.
+    /// One slice of the GLSL frame in progress, about ViewerOptions::glSliceSeconds of GL work;
+    /// shows the frame after its last.
     bool stepGl();
+    /// Rows of `width` texels for one slice of that budget at the last slice's GL time per pixel
+    /// (kGlFirstSliceRows before any; all `left` with no budget), at least 1, at most `left`.
+    int sliceRows(int width, int left) const;
     /// Opens `path` as the file field's Open button does; a drop on the window comes here too.
     void openPath(const std::string& path);
     void startLoad(const std::string& path);
@@ -565,20 +568,22 @@ bool Viewer::renderGl(const RenderedImage& p) {
     return false;
 }
 
+int Viewer::sliceRows(int width, int left) const {
+    left = std::max(left, 1);
+    if (!(options_.glSliceSeconds > 0.0)) return left;
+    if (!(glPixelSeconds_ > 0.0)) return std::min(kGlFirstSliceRows, left);
+    // Clamped in double: a tiny time per pixel must not overflow the int.
+    return int(std::clamp(options_.glSliceSeconds / (glPixelSeconds_ * double(std::max(width, 1))),
+                          1.0, double(left)));
+}
+
 bool Viewer::stepGl() {
     if (!glJob_ || !gl_) return true;
     GlJob& job = *glJob_;
     const RenderedImage& p = job.state;
     const int w = p.setup->camera->width(), h = p.setup->camera->height();
     const int left = h - job.nextRow;
-    // Rows for about the budget at the last slice's time per pixel (clamped in double: a tiny
-    // time per pixel must not overflow the int).
-    int rows = std::min(kGlFirstSliceRows, std::max(left, 1));
-    if (!(options_.glSliceSeconds > 0.0))
-        rows = left;
-    else if (glPixelSeconds_ > 0.0)
-        rows = int(std::clamp(options_.glSliceSeconds / (glPixelSeconds_ * double(w)), 1.0,
-                              double(std::max(left, 1))));
+    const int rows = sliceRows(w, left);
     const bool last = rows >= left;
     std::string why;
     try {
@@ -718,12 +723,7 @@ void Viewer::updateRenderer() {
             const int x0 = probe ? fw / 4 : 0, rw = probe ? std::max(fw / 2, 1) : fw;
             const int y0 = probe ? fh / 4 : 0, rh = probe ? std::max(fh / 2, 1) : fh;
             const int left = std::max(rh - glMeasureRow_, 1);
-            int rows = std::min(kGlFirstSliceRows, left);
-            if (!(options_.glSliceSeconds > 0.0))
-                rows = left;
-            else if (glPixelSeconds_ > 0.0)
-                rows = int(std::clamp(options_.glSliceSeconds / (glPixelSeconds_ * double(rw)), 1.0,
-                                      double(left)));
+            const int rows = sliceRows(rw, left);
             const bool last = rows >= left;
             try {
                 ok = gl_->renderRect(setup, prepared_->shGrids, exposure, display, why, x0,

@@ -419,6 +419,22 @@ constexpr double kGlMeanAbsLevels = 0.05;
 constexpr double kGlFractionOver2 = 0.001;
 constexpr double kGlMinPsnrDb = 35.0;
 
+/// `voxlight view -q --log FLAGS` of dir/scene.json running dir/steps.json, screenshot dir/shot.
+Result viewScript(const std::string& display, const test::TempDir& dir, const std::string& flags,
+                  const char* shot) {
+    return runShell(display + VOXLIGHT_BINARY + " view -q --log " + flags + " " +
+                        quoted(dir / "scene.json") + " --script " + quoted(dir / "steps.json") +
+                        " --screenshot " + quoted(dir / shot),
+                    dir.path());
+}
+
+/// The two screenshots' image areas agree within the GLSL tolerances above.
+void expectGlAgreesWithCpu(const test::TempDir& dir, const char* cpuShot, const char* glShot) {
+    const Agreement a = compareImageArea(io::readImage(dir / cpuShot), io::readImage(dir / glShot));
+    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
+    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+}
+
 /// `voxlight view --renderer gpu` of dir/scene.json against `voxlight render` of it.
 struct GlRun {
     bool skipped = false;
@@ -648,10 +664,8 @@ TEST(ViewCli, AfterATfChangeTheGlslPathShowsTheOldShadingThenTheNew) {
     std::ofstream(tmp / "steps.json") << R"([{"window": [60, -40]}])";
     const auto view = [&](const char* renderer, const char* shot) {
         // Whole GLSL frames: the stale one shows before the fresh one replaces it.
-        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --gl-slice-ms 0 --renderer " +
-                            renderer + " " + quoted(tmp / "scene.json") + " --script " +
-                            quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / shot),
-                        tmp.path());
+        return viewScript(*display, tmp, std::string("--gl-slice-ms 0 --renderer ") + renderer,
+                          shot);
     };
     const Result gl = view("gpu", "gl.png");
     if (gl.code != 0 && gl.err.find("OpenGL 4.5 window") != std::string::npos)
@@ -672,10 +686,7 @@ TEST(ViewCli, AfterATfChangeTheGlslPathShowsTheOldShadingThenTheNew) {
         << gl.err;
     const Result cpu = view("cpu", "cpu.png");
     ASSERT_EQ(cpu.code, 0) << cpu.err;
-    const Agreement a =
-        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "gl.png"));
-    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
-    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+    expectGlAgreesWithCpu(tmp, "cpu.png", "gl.png");
 }
 
 // Item 3 of the issue, "local/global switch without recomputation": switching an sh-global scene
@@ -868,10 +879,7 @@ TEST(ViewCli, TheGlslPathRendersCoarseWhileDraggingAndFullWhenReleased) {
     std::ofstream(tmp / "steps.json") << R"([{"clip_add": {"normal": [0, 1, 0], "offset": -20}},
               {"clip_drag": {"index": 0, "by": [-20, 30], "frames": 8}}])";
     const auto view = [&](const char* renderer, const char* shot) {
-        return runShell(*display + VOXLIGHT_BINARY + " view -q --log --renderer " + renderer + " " +
-                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
-                            " --screenshot " + quoted(tmp / shot),
-                        tmp.path());
+        return viewScript(*display, tmp, std::string("--renderer ") + renderer, shot);
     };
     const Result gl = view("gpu", "gl.png");
     if (gl.code != 0 && gl.err.find("OpenGL 4.5 window") != std::string::npos)
@@ -884,10 +892,7 @@ TEST(ViewCli, TheGlslPathRendersCoarseWhileDraggingAndFullWhenReleased) {
         << gl.err;
     const Result cpu = view("cpu", "cpu.png");
     ASSERT_EQ(cpu.code, 0) << cpu.err;
-    const Agreement a =
-        compareImageArea(io::readImage(tmp / "cpu.png"), io::readImage(tmp / "gl.png"));
-    EXPECT_LE(a.meanAbs, kGlMeanAbsLevels);
-    EXPECT_LE(a.fractionOver2, kGlFractionOver2);
+    expectGlAgreesWithCpu(tmp, "cpu.png", "gl.png");
 }
 
 // A GLSL frame slower than the slice budget is rendered in slices of rows over several UI frames
@@ -903,11 +908,8 @@ TEST(ViewCli, TheGlslPathSlicesASlowFrameAndDrawsTheSamePixels) {
         "image": {"width": 160, "height": 128}})";
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [40, 10]}])";
     const auto view = [&](const char* sliceMs, const char* shot) {
-        return runShell(*display + VOXLIGHT_BINARY +
-                            " view -q --log --renderer gpu --gl-slice-ms " + sliceMs + " " +
-                            quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
-                            " --screenshot " + quoted(tmp / shot),
-                        tmp.path());
+        return viewScript(*display, tmp, std::string("--renderer gpu --gl-slice-ms ") + sliceMs,
+                          shot);
     };
     constexpr double kSliceMs = 0.5;
     const Result sliced = view("0.5", "sliced.png");
