@@ -120,6 +120,30 @@ TEST(Pipeline, TransferFunctionChangeRerunsTfStagesButNotTheVolumes) {
               (std::set<std::string>{"transfer_function", "camera", "render"}));
 }
 
+TEST(Pipeline, APlacedCameraIsNotRefittedWhenACutOrTheTfChanges) {
+    // Eye and target given (the viewer's camera, a session's keyframes): nothing is fitted, so
+    // moving a clip plane or editing the TF must not recompute the hull of the visible matter.
+    Session session;
+    json d = gradientScene();
+    d["camera"] = {{"eye", {40, -400, 60}}, {"target", {0, 0, 10}}};
+    session.run(scene(d));
+    d["clip_planes"] = json::array({{{"point", {0, 0, 0}}, {"normal", {0, 1, 0}}}});
+    const RunResult cut = session.run(scene(d));
+    EXPECT_EQ(ranStages(cut), kFrameStages);
+    EXPECT_EQ(cut.stage("framing").reason.rfind("cached", 0), 0u) << cut.stage("framing").reason;
+    d["transfer_function"] = "ct-angio";
+    const RunResult angio = session.run(scene(d));
+    EXPECT_EQ(ranStages(angio),
+              (std::set<std::string>{"transfer_function", "skip_cells", "camera", "render"}));
+    // The same picture as a session that fitted nothing before.
+    EXPECT_EQ(Session().run(scene(d)).image.pixels, angio.image.pixels);
+    // Without a target the eye looks at the visible matter's centre: that is fitted again.
+    d["camera"].erase("target");
+    session.run(scene(d));
+    d["clip_planes"][0]["point"] = {0, 5, 0};
+    EXPECT_TRUE(ranStages(session.run(scene(d))).count("framing"));
+}
+
 TEST(Pipeline, UnneededStagesSayWhy) {
     Session session;
     json d = gradientScene();
