@@ -11,6 +11,7 @@
 #include <cstring>
 
 #include "core/rng.h"
+#include "core/timing.h"
 #include "render/ray_caster.h"
 #include "render/sh_shading.h"
 #include "render/shading.h"
@@ -25,6 +26,17 @@ namespace {
 constexpr int kTfRows = 8;
 /// First texture units of the SH field's and sh-global's local field's textures (4 each).
 constexpr int kShFieldUnit = 4, kShLocalUnit = 8;
+/// Texels per glTextureSubImage3D call of a sliced upload (GlRayCaster::upload), whole z-slices at
+/// least: 128 kB of a 16-bit volume, 512 kB of an RGBA16F field — well under a millisecond to
+/// copy, so a UI frame's budget is overrun by less than one slab.
+constexpr std::size_t kUploadSlabTexels = std::size_t(1) << 16;
+
+/// Whether sh-global's draw also reads the local field (within the band of a face that removes
+/// matter for the light).
+bool blendsLocalField(const pipeline::CasterSetup& setup) {
+    return setup.sh.global && setup.sh.cutBandMm > 0.f &&
+           !render::lightCutFaces(setup.options).empty();
+}
 
 /// The first line of a shader or program info log.
 std::string firstLine(const std::string& log) {
@@ -158,61 +170,106 @@ bool GlRayCaster::init(std::string& why) {
     return true;
 }
 
-bool GlRayCaster::uploadVolume(const core::Volume& volume, std::string& why) {
-    const glm::ivec3 n = volume.dims();
-    GLint max3d = 0;
-    glGetIntegerv(GL_MAX_3D_TEXTURE_SIZE, &max3d);
-    if (n.x > max3d || n.y > max3d || n.z > max3d) {
-        why = "the volume (" + std::to_string(n.x) + "x" + std::to_string(n.y) + "x" +
-              std::to_string(n.z) + ") exceeds this GL's 3D textures (" + std::to_string(max3d) +
-              " per side)";
-        return false;
+GlRayCaster::Upload GlRayCaster::upload(const pipeline::CasterSetup& setup, const ShGrids& sh,
+                                        double seconds, std::string& why) {
+    if (!ready()) {
+        why = "the GLSL ray caster is not initialised";
+        return Upload::Failed;
     }
-    if (volumeTex_) glDeleteTextures(1, &volumeTex_);
-    volumeTex_ = 0;
-    glCreateTextures(GL_TEXTURE_3D, 1, &volumeTex_);
-    const std::size_t count = std::size_t(volume.voxelCount());
-    const double slope = volume.mapping.slope, intercept = volume.mapping.intercept;
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
-    if (volume.type() == core::VoxelType::Float32) {
-        glTextureStorage3D(volumeTex_, 1, GL_R32F, n.x, n.y, n.z);
-        glTextureSubImage3D(volumeTex_, 0, 0, 0, 0, n.x, n.y, n.z, GL_RED, GL_FLOAT, volume.data());
-        valueScale_ = float(slope);
-        valueOffset_ = float(intercept);
-    } else {
+    glErrorText();  // errors of others (ImGui's frame) are not ours
+    core::Stopwatch sw;
+    if (const Upload u = uploadVolume(setup.volume, seconds, why); u != Upload::Ready) return u;
+    if (!(setup.sh.local || setup.sh.global || setup.sh.hierarchical) || !sh.field)
+        return Upload::Ready;
+    unsigned textures[4];
+    if (const Upload u = shTextures(sh.field, textures, seconds - sw.seconds(), why);
+        u != Upload::Ready)
+        return u;
+    if (sh.local && blendsLocalField(setup))
+        return shTextures(sh.local, textures, seconds - sw.seconds(), why);
+    return Upload::Ready;
+}
+
+GlRayCaster::Upload GlRayCaster::uploadVolume(const std::shared_ptr<const core::Volume>& volume,
+                                              double seconds, std::string& why) {
+    if (volume_ == volume && volumeTex_) return Upload::Ready;
+    const glm::ivec3 n = volume->dims();
+    const double slope = volume->mapping.slope, intercept = volume->mapping.intercept;
+    const bool isFloat = volume->type() == core::VoxelType::Float32;
+    if (volumePending_ != volume || !volumeTex_) {
+        volume_.reset();
+        volumePending_.reset();
+        GLint max3d = 0;
+        glGetIntegerv(GL_MAX_3D_TEXTURE_SIZE, &max3d);
+        if (n.x > max3d || n.y > max3d || n.z > max3d) {
+            why = "the volume (" + std::to_string(n.x) + "x" + std::to_string(n.y) + "x" +
+                  std::to_string(n.z) + ") exceeds this GL's 3D textures (" +
+                  std::to_string(max3d) + " per side)";
+            return Upload::Failed;
+        }
+        if (volumeTex_) glDeleteTextures(1, &volumeTex_);
+        volumeTex_ = 0;
+        glCreateTextures(GL_TEXTURE_3D, 1, &volumeTex_);
         // Integer voxels as 16-bit unsigned normalised texels u (exact): stored = u + bias, so
         // physical = slope·(65535·texel + bias) + intercept. (8-bit texels would be filtered at
         // 8-bit precision by some GLs, llvmpipe among them.)
-        std::vector<std::uint16_t> u;
-        const void* data = volume.data();
-        double bias = 0.0;
-        if (volume.type() == core::VoxelType::Int16) {
-            bias = -32768.0;
-            const auto* s = static_cast<const std::int16_t*>(volume.data());
-            u.resize(count);
-            for (std::size_t i = 0; i < count; ++i) u[i] = std::uint16_t(int(s[i]) + 32768);
-            data = u.data();
-        } else if (volume.type() == core::VoxelType::UInt8) {
-            const auto* s = static_cast<const std::uint8_t*>(volume.data());
-            u.assign(s, s + count);
-            data = u.data();
-        }
-        glTextureStorage3D(volumeTex_, 1, GL_R16, n.x, n.y, n.z);
-        glTextureSubImage3D(volumeTex_, 0, 0, 0, 0, n.x, n.y, n.z, GL_RED, GL_UNSIGNED_SHORT, data);
-        valueScale_ = float(slope * 65535.0);
-        valueOffset_ = float(slope * bias + intercept);
+        const double bias = volume->type() == core::VoxelType::Int16 ? -32768.0 : 0.0;
+        glTextureStorage3D(volumeTex_, 1, isFloat ? GL_R32F : GL_R16, n.x, n.y, n.z);
+        valueScale_ = float(isFloat ? slope : slope * 65535.0);
+        valueOffset_ = float(isFloat ? intercept : slope * bias + intercept);
+        glTextureParameteri(volumeTex_, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+        glTextureParameteri(volumeTex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+        for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+            glTextureParameteri(volumeTex_, w, GL_CLAMP_TO_EDGE);
+        volumePending_ = volume;
+        volumeZ_ = 0;
     }
-    glTextureParameteri(volumeTex_, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-    glTextureParameteri(volumeTex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-    for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
-        glTextureParameteri(volumeTex_, w, GL_CLAMP_TO_EDGE);
+    // Slabs of whole z-slices, each converted and copied in one call, until `seconds` are spent.
+    core::Stopwatch sw;
+    const std::size_t slice = std::size_t(n.x) * std::size_t(n.y);
+    const int slab = int(std::clamp(kUploadSlabTexels / slice, std::size_t(1), std::size_t(n.z)));
+    std::vector<std::uint16_t> u;
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    while (volumeZ_ < n.z) {
+        const int z0 = volumeZ_, z1 = std::min(n.z, z0 + slab);
+        const std::size_t first = slice * std::size_t(z0), count = slice * std::size_t(z1 - z0);
+        const void* data = nullptr;
+        switch (volume->type()) {
+            case core::VoxelType::Float32:
+                data = static_cast<const float*>(volume->data()) + first;
+                break;
+            case core::VoxelType::Int16: {
+                const auto* s = static_cast<const std::int16_t*>(volume->data()) + first;
+                u.resize(count);
+                for (std::size_t i = 0; i < count; ++i) u[i] = std::uint16_t(int(s[i]) + 32768);
+                data = u.data();
+                break;
+            }
+            case core::VoxelType::UInt8: {
+                const auto* s = static_cast<const std::uint8_t*>(volume->data()) + first;
+                u.assign(s, s + count);
+                data = u.data();
+                break;
+            }
+            case core::VoxelType::UInt16:
+                data = static_cast<const std::uint16_t*>(volume->data()) + first;
+                break;
+        }
+        glTextureSubImage3D(volumeTex_, 0, 0, 0, z0, n.x, n.y, z1 - z0, GL_RED,
+                            isFloat ? GL_FLOAT : GL_UNSIGNED_SHORT, data);
+        volumeZ_ = z1;
+        if (std::isfinite(seconds)) glFinish();  // a GL may queue the copy: its real cost
+        if (sw.seconds() >= seconds) break;
+    }
     if (const std::string e = glErrorText(); !e.empty()) {
         why = "uploading the volume as a 3D texture: " + e;
         glDeleteTextures(1, &volumeTex_);
         volumeTex_ = 0;
-        return false;
+        volumePending_.reset();
+        return Upload::Failed;
     }
-    return true;
+    if (volumeZ_ >= n.z) volume_ = volume, volumePending_.reset();
+    return Upload::Progress;
 }
 
 void GlRayCaster::uploadTable(const optics::TfTable& table) {
@@ -280,30 +337,54 @@ void GlRayCaster::uploadJitter(int width, int height, bool jitter, std::uint64_t
     jitterW_ = width, jitterH_ = height, jitterOn_ = jitter, jitterSeed_ = seed;
 }
 
-bool GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid,
-                             unsigned out[4], std::string& why) {
+GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid,
+                                            unsigned out[4], double seconds, std::string& why) {
+    std::size_t at = shUploaded_.size();
     for (std::size_t i = 0; i < shUploaded_.size(); ++i)
-        if (shUploaded_[i].grid == grid) {
-            std::rotate(shUploaded_.begin(), shUploaded_.begin() + std::ptrdiff_t(i),
-                        shUploaded_.begin() + std::ptrdiff_t(i) + 1);
-            std::copy_n(shUploaded_.front().textures, 4, out);
-            return true;
+        if (shUploaded_[i].grid == grid) at = i;
+    if (at < shUploaded_.size()) {
+        std::rotate(shUploaded_.begin(), shUploaded_.begin() + std::ptrdiff_t(at),
+                    shUploaded_.begin() + std::ptrdiff_t(at) + 1);
+    } else {
+        ShUpload up;
+        up.grid = grid;
+        const glm::ivec3 n = grid->res;
+        for (int t = 0; t < grid->textures(); ++t) {
+            GLuint tex = 0;
+            glCreateTextures(GL_TEXTURE_3D, 1, &tex);
+            up.textures[t] = tex;
+            glTextureStorage3D(tex, 1, GL_RGBA16F, n.x, n.y, n.z);
+            glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
+            glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
+            for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+                glTextureParameteri(tex, w, GL_CLAMP_TO_EDGE);
         }
-    ShUpload up;
-    up.grid = grid;
+        shUploaded_.insert(shUploaded_.begin(), up);
+        if (shUploaded_.size() > kKeptShFields) {
+            for (GLuint t : shUploaded_.back().textures)
+                if (t) glDeleteTextures(1, &t);
+            shUploaded_.pop_back();
+        }
+    }
+    ShUpload& up = shUploaded_.front();
+    std::copy_n(up.textures, 4, out);
+    const int textures = grid->textures();
+    if (up.texture >= textures) return Upload::Ready;
+    // Slabs of z-slices of one texture at a time, until `seconds` are spent.
+    core::Stopwatch sw;
     const glm::ivec3 n = grid->res;
+    const std::size_t slice = std::size_t(n.x) * std::size_t(n.y);
+    const int slab = int(std::clamp(kUploadSlabTexels / slice, std::size_t(1), std::size_t(n.z)));
     glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-    for (int t = 0; t < grid->textures(); ++t) {
-        GLuint tex = 0;
-        glCreateTextures(GL_TEXTURE_3D, 1, &tex);
-        up.textures[t] = tex;
-        glTextureStorage3D(tex, 1, GL_RGBA16F, n.x, n.y, n.z);
-        glTextureSubImage3D(tex, 0, 0, 0, 0, n.x, n.y, n.z, GL_RGBA, GL_HALF_FLOAT,
-                            grid->texels[std::size_t(t)].data());
-        glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
-        glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
-        for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
-            glTextureParameteri(tex, w, GL_CLAMP_TO_EDGE);
+    while (up.texture < textures) {
+        const int z1 = std::min(n.z, up.z + slab);
+        glTextureSubImage3D(
+            up.textures[up.texture], 0, 0, 0, up.z, n.x, n.y, z1 - up.z, GL_RGBA, GL_HALF_FLOAT,
+            grid->texels[std::size_t(up.texture)].data() + 4 * slice * std::size_t(up.z));
+        up.z = z1;
+        if (std::isfinite(seconds)) glFinish();
+        if (up.z >= n.z) ++up.texture, up.z = 0;
+        if (up.texture < textures && sw.seconds() >= seconds) break;
     }
     if (const std::string e = glErrorText(); !e.empty()) {
         why = "uploading the SH visibility field (" + std::to_string(n.x) + "x" +
@@ -311,17 +392,12 @@ bool GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& g
               std::to_string(grid->coefficients) + " coefficients) as 3D textures: " + e;
         for (GLuint t : up.textures)
             if (t) glDeleteTextures(1, &t);
-        return false;
+        shUploaded_.erase(shUploaded_.begin());
+        std::fill_n(out, 4, 0u);
+        return Upload::Failed;
     }
-    ++shUploads_;
-    shUploaded_.insert(shUploaded_.begin(), up);
-    if (shUploaded_.size() > kKeptShFields) {
-        for (GLuint t : shUploaded_.back().textures)
-            if (t) glDeleteTextures(1, &t);
-        shUploaded_.pop_back();
-    }
-    std::copy_n(up.textures, 4, out);
-    return true;
+    if (up.texture >= textures) ++shUploads_;
+    return Upload::Progress;
 }
 
 bool GlRayCaster::ensureTarget(unsigned& tex, unsigned& fbo, unsigned format, int width, int height,
@@ -409,11 +485,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
     const render::Camera& camera = *setup.camera;
     // The caster's own derived constants (step, gradient matrix, boxes): no tables are built.
     render::RayCaster caster(setup.volume, setup.tf, o, setup.tables);
-    if (volume_ != setup.volume || !volumeTex_) {
-        volume_.reset();
-        if (!uploadVolume(volume, why)) return false;
-        volume_ = setup.volume;
-    }
+    if (uploadVolume(setup.volume, kUploadAll, why) == Upload::Failed) return false;
     if (table_ != setup.tables.table || !tfTex_) {
         uploadTable(*setup.tables.table);
         table_ = setup.tables.table;
@@ -428,7 +500,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
                                                    ? render::lightCutFaces(o)
                                                    : std::vector<core::HalfSpace>{};
     unsigned shField[4] = {0, 0, 0, 0}, shLocal[4] = {0, 0, 0, 0};
-    const bool shBlend = shMode && !faces.empty();
+    const bool shBlend = shMode && blendsLocalField(setup);
     if (shMode) {
         if (!sh.field || (shBlend && !sh.local)) {
             why = "the SH visibility field was not resampled for the GLSL ray caster";
@@ -439,8 +511,9 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
             why = "sh-global's local and global fields were resampled on different grids";
             return false;
         }
-        if (!shTextures(sh.field, shField, why)) return false;
-        if (shBlend && !shTextures(sh.local, shLocal, why)) return false;
+        if (shTextures(sh.field, shField, kUploadAll, why) == Upload::Failed) return false;
+        if (shBlend && shTextures(sh.local, shLocal, kUploadAll, why) == Upload::Failed)
+            return false;
     }
     const int w = camera.width(), h = camera.height();
     if (!ensureFilm(w, h, why) || (finish && !ensureDisplay(w, h, why))) return false;

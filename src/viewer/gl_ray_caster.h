@@ -18,6 +18,7 @@
 // or abort: init() and render() return false with one line saying why, and the viewer shows the
 // CPU image instead. Which scenes it can do at all: viewer/gl_support.h.
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
@@ -55,6 +56,16 @@ class GlRayCaster {
     /// `sh`: the SH methods' resampled fields (RenderedImage::shGrids); ignored by the others.
     bool render(const pipeline::CasterSetup& setup, const ShGrids& sh, float exposureStops,
                 render::Display display, std::string& why, Scope scope = Scope::Full);
+    /// What upload() did: nothing was left to upload (Ready), some was (Progress: call again
+    /// until Ready), or the GL failed (Failed, with the reason as render() would give it).
+    enum class Upload { Ready, Progress, Failed };
+    /// Uploads, for about `seconds` of work, part of what render() of `setup` needs and the GL
+    /// does not hold yet — the volume, then the SH fields (the large textures), a slab of
+    /// z-slices at a time — so that a UI can spread a new volume's upload over its frames (a
+    /// 256³ volume and its fields take a few hundred ms on llvmpipe). render() uploads whatever
+    /// is left itself, and the small tables (TF, skip cells, jitter) always.
+    Upload upload(const pipeline::CasterSetup& setup, const ShGrids& sh, double seconds,
+                  std::string& why);
     /// A slice of a frame, for a GL too slow to render one between two UI frames: texel rows
     /// [rowBegin, rowEnd) of the film only (every pixel as render() computes it: the same image
     /// in any number of slices); with `finish`, then the whole film into texture(). Until then
@@ -80,7 +91,10 @@ class GlRayCaster {
     core::ImageRGBA readFilm() const;
 
   private:
-    bool uploadVolume(const core::Volume& volume, std::string& why);
+    static constexpr double kUploadAll = std::numeric_limits<double>::infinity();
+    /// The volume's texture from z-slice volumeZ_ on, for about `seconds`.
+    Upload uploadVolume(const std::shared_ptr<const core::Volume>& volume, double seconds,
+                        std::string& why);
     void uploadTable(const optics::TfTable& table);
     void uploadSkipCells(const grid::BrickMajorants& cells);
     void uploadJitter(int width, int height, bool jitter, std::uint64_t seed);
@@ -93,10 +107,10 @@ class GlRayCaster {
                       std::string& why);
     bool ensureFilm(int width, int height, std::string& why);
     bool ensureDisplay(int width, int height, std::string& why);
-    /// The textures of `grid` into out[0..4) (uploaded on first use, 0 past its own); false
-    /// with `why` on a GL error.
-    bool shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid, unsigned out[4],
-                    std::string& why);
+    /// The textures of `grid` into out[0..4) (0 past its own), made the most recently used;
+    /// uploads what is left of them for about `seconds`.
+    Upload shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid, unsigned out[4],
+                      double seconds, std::string& why);
     void release();
 
     std::string renderer_;
@@ -107,12 +121,15 @@ class GlRayCaster {
     int filmW_ = 0, filmH_ = 0;
     // What is uploaded (held, so that a pointer is never that of a newer object).
     std::shared_ptr<const core::Volume> volume_;
+    std::shared_ptr<const core::Volume> volumePending_;  ///< being uploaded: slices [0, volumeZ_)
+    int volumeZ_ = 0;
     std::shared_ptr<const optics::TfTable> table_;
     std::shared_ptr<const grid::BrickMajorants> skipCells_;
     float valueScale_ = 1.f, valueOffset_ = 0.f;
     struct ShUpload {
         std::shared_ptr<const render::ShFieldGrid> grid;
         unsigned textures[4] = {0, 0, 0, 0};
+        int texture = 0, z = 0;  ///< the upload's progress: textures before `texture` are full
     };
     std::vector<ShUpload> shUploaded_;  ///< most recently used first
     std::size_t shUploads_ = 0;

@@ -373,9 +373,13 @@ class Viewer {
     int glFramesRun_ = 0;
     int glMeasureRow_ = 0;           ///< rows of the measurement's current probe or frame done
     double glMeasureSeconds_ = 0.0;  ///< their GL time
-    std::uint64_t measureGen_ = 0;   ///< the state being measured
-    int cpuFrames_ = 0;              ///< frames behind cpuMeasured_
-    double cpuMeasured_ = 0.0;       ///< the CPU's median frame of the measurement
+    /// UI frames and seconds spent uploading textures (a new volume's, new SH fields) since the
+    /// last GLSL frame or measurement step that reported them (--log).
+    int glUploadFrames_ = 0;
+    double glUploadSeconds_ = 0.0;
+    std::uint64_t measureGen_ = 0;  ///< the state being measured
+    int cpuFrames_ = 0;             ///< frames behind cpuMeasured_
+    double cpuMeasured_ = 0.0;      ///< the CPU's median frame of the measurement
     Timings glTimes_, glCoarseTimes_;
     /// The GLSL frame in progress (renderGl, stepGl).
     struct GlJob {
@@ -527,6 +531,7 @@ void Viewer::restartMeasurement() {
     glMeasured_.clear();
     glFramesRun_ = 0;
     glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
+    glUploadFrames_ = 0, glUploadSeconds_ = 0.0;
     cpuMeasured_ = 0.0;
     gpu_ = false;
     rendererReason_ = "measuring both paths ...";
@@ -577,6 +582,17 @@ int Viewer::sliceRows(int width, int left) const {
                           1.0, double(left)));
 }
 
+namespace {
+/// ", after uploads of 0.210 s in 9 UI frames" for a --log line; empty without uploads.
+std::string uploadNote(int frames, double seconds) {
+    if (frames == 0) return {};
+    char text[96];
+    std::snprintf(text, sizeof text, ", after uploads of %.3f s in %d UI frame%s", seconds, frames,
+                  frames == 1 ? "" : "s");
+    return text;
+}
+}  // namespace
+
 bool Viewer::stepGl() {
     if (!glJob_ || !gl_) return true;
     GlJob& job = *glJob_;
@@ -588,7 +604,21 @@ bool Viewer::stepGl() {
     std::string why;
     try {
         core::Stopwatch sw;
-        const bool ok = gl_->renderRows(*p.setup, p.shGrids, float(p.exposureStops),
+        // A new volume's or new SH fields' textures first, a slice's budget per UI frame (without
+        // slices render() uploads them with the frame).
+        const GlRayCaster::Upload u =
+            job.nextRow == 0 && options_.glSliceSeconds > 0.0
+                ? gl_->upload(*p.setup, p.shGrids, options_.glSliceSeconds, why)
+                : GlRayCaster::Upload::Ready;
+        if (u == GlRayCaster::Upload::Progress) {
+            glFinish();
+            glUploadSeconds_ += sw.seconds();
+            ++glUploadFrames_;
+            job.uiFrame = frames_;
+            return true;
+        }
+        const bool ok = u == GlRayCaster::Upload::Ready &&
+                        gl_->renderRows(*p.setup, p.shGrids, float(p.exposureStops),
                                         render::displayFromString(p.display), why, job.nextRow,
                                         job.nextRow + rows, last);
         glFinish();  // the slice's real cost (the GL queues its work), and its bound
@@ -604,11 +634,13 @@ bool Viewer::stepGl() {
             if (options_.log)
                 std::fprintf(stderr,
                              "view: GLSL frame %s%dx%d in %.3f s, %d slice%s (state %llu, SH "
-                             "fields uploaded so far: %zu)%s\n",
+                             "fields uploaded so far: %zu)%s%s\n",
                              p.coarse ? "coarse " : "", gl_->width(), gl_->height(), job.seconds,
                              job.slices, job.slices == 1 ? "" : "s",
                              (unsigned long long)p.generation, gl_->shUploads(),
-                             p.staleShading ? " shaded from earlier fields" : "");
+                             p.staleShading ? " shaded from earlier fields" : "",
+                             uploadNote(glUploadFrames_, glUploadSeconds_).c_str());
+            glUploadFrames_ = 0, glUploadSeconds_ = 0.0;
             // Full resolution is shown pixel for pixel; the coarse image is magnified smoothly
             // (as the CPU path's).
             const GLint filter = p.coarse ? GL_LINEAR : GL_NEAREST;
@@ -656,6 +688,7 @@ void Viewer::updateRenderer() {
         glMeasured_.clear();
         glFramesRun_ = 0;
         glMeasureRow_ = 0, glMeasureSeconds_ = 0.0;
+        glUploadFrames_ = 0, glUploadSeconds_ = 0.0;
         return;
     }
     switch (measure_) {
@@ -702,8 +735,21 @@ void Viewer::updateRenderer() {
             core::Stopwatch sw;
             bool ok = false;
             if (run == 0) {
+                // The volume's (and SH fields') uploads spread over UI frames, then a draw of
+                // 8x8 pixels that makes the GL compile the shader's machine code.
+                GlRayCaster::Upload u = GlRayCaster::Upload::Failed;
                 try {
-                    ok = gl_->render(setup, prepared_->shGrids, exposure, display, why,
+                    u = options_.glSliceSeconds > 0.0
+                            ? gl_->upload(setup, prepared_->shGrids, options_.glSliceSeconds, why)
+                            : GlRayCaster::Upload::Ready;
+                    if (u == GlRayCaster::Upload::Progress) {
+                        glFinish();
+                        glUploadSeconds_ += sw.seconds();
+                        ++glUploadFrames_;
+                        return;
+                    }
+                    ok = u == GlRayCaster::Upload::Ready &&
+                         gl_->render(setup, prepared_->shGrids, exposure, display, why,
                                      GlRayCaster::Scope::WarmUp);
                 } catch (const std::exception& e) {
                     why = e.what();
@@ -712,9 +758,11 @@ void Viewer::updateRenderer() {
                 if (!ok) return choose(false, "the GLSL path failed, the CPU draws: " + why);
                 if (options_.log)
                     std::fprintf(stderr,
-                                 "view: measuring: GLSL warm-up (uploads, shader compile; 8x8 "
-                                 "pixels) %.3f s\n",
-                                 sw.seconds());
+                                 "view: measuring: GLSL warm-up (shader compile, small tables; "
+                                 "8x8 pixels) %.3f s%s\n",
+                                 sw.seconds(),
+                                 uploadNote(glUploadFrames_, glUploadSeconds_).c_str());
+                glUploadFrames_ = 0, glUploadSeconds_ = 0.0;
                 glFramesRun_ = 1;
                 return;
             }

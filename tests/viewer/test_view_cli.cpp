@@ -934,6 +934,16 @@ TEST(ViewCli, TheGlslPathSlicesASlowFrameAndDrawsTheSamePixels) {
         else if (seconds > 20 * kSliceMs * 1e-3)
             EXPECT_GT(slices, 1) << r->err;
     }
+    // The first frame's uploads (the volume in two slabs of z-slices): in UI frames of their own
+    // when slicing, with the frame's draw otherwise.
+    const std::string uploads = ", after uploads of ";
+    const auto firstFrame = [&](const Result& r) {
+        const std::size_t at = r.err.find("view: GLSL frame ");
+        return at == std::string::npos ? std::string()
+                                       : r.err.substr(at, r.err.find('\n', at) - at);
+    };
+    EXPECT_NE(firstFrame(sliced).find(uploads), std::string::npos) << sliced.err;
+    EXPECT_EQ(firstFrame(whole).find(uploads), std::string::npos) << whole.err;
     // The image area (left of the panel, whose stats differ) bit for bit.
     const io::ImageRGBA a = io::readImage(tmp / "sliced.png"), b = io::readImage(tmp / "whole.png");
     ASSERT_EQ(a.width, b.width);
