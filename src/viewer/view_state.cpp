@@ -357,7 +357,8 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
         throw InputError(source, "script", "must be a JSON array of steps",
                          R"(write e.g. [{"orbit": [40, 0]}, {"view": "L"}])");
     static const char* const kSteps =
-        "orbit, pan, zoom, window, view, pathtrace, clip_add, clip_move, clip_drag, clip_edit, "
+        "orbit, pan, zoom, window, drag, view, pathtrace, clip_add, clip_move, clip_drag, "
+        "clip_edit, "
         "clip_remove, light_add, light_edit, light_turn, light_remove, gizmo, drop or shading";
     std::vector<ScriptStep> steps;
     for (std::size_t i = 0; i < doc.size(); ++i) {
@@ -467,6 +468,21 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
             st.kind = ScriptStep::Kind::ClipDrag;
             object({"index", "by", "frames"}, {"index", "by"});
             st.index = whole(v["index"], field + ".index", 0, kMaxIndex);
+            const json& by = v["by"];
+            if (!by.is_array() || by.size() != 2)
+                throw InputError(source, field + ".by", "must be [dx, dy] in pixels");
+            st.a = number(by[0], field + ".by"), st.b = number(by[1], field + ".by");
+            if (v.contains("frames")) st.frames = whole(v["frames"], field + ".frames", 1, 10000);
+        } else if (key == "drag") {
+            st.kind = ScriptStep::Kind::Drag;
+            object({"kind", "by", "frames"}, {"kind", "by"});
+            const json& kind = v["kind"];
+            if (!kind.is_string() || (kind != "orbit" && kind != "pan" && kind != "window"))
+                throw InputError(source, field + ".kind",
+                                 "must be \"orbit\", \"pan\" or \"window\"");
+            st.dragMotion = kind == "orbit" ? ScriptStep::Kind::Orbit
+                            : kind == "pan" ? ScriptStep::Kind::Pan
+                                            : ScriptStep::Kind::Window;
             const json& by = v["by"];
             if (!by.is_array() || by.size() != 2)
                 throw InputError(source, field + ".by", "must be [dx, dy] in pixels");

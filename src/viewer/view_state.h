@@ -153,6 +153,7 @@ struct ScriptStep {
         Gizmo,        ///< the G key's state: the clip-plane gizmo shown (a = 1) or hidden (0)
         Drop,         ///< `paths` dropped on the window (GLFW's drop callback is called)
         Shading,      ///< the panel's local/global visibility switch: `view` is local or global
+        Drag,  ///< a `dragMotion` (Orbit, Pan, Window) drag by (a, b) pixels over `frames` frames
     };
     Kind kind = Kind::Orbit;
     double a = 0.0, b = 0.0;
@@ -162,8 +163,9 @@ struct ScriptStep {
     // Clip-plane and light steps.
     int index = 0;
     int frames = 1;
-    bool facingCamera = false;  ///< ClipAdd: the normal is the camera's view direction
-    glm::dvec3 vec{0.0};        ///< ClipAdd: the normal
+    Kind dragMotion = Kind::Orbit;  ///< Drag: which mouse drag
+    bool facingCamera = false;      ///< ClipAdd: the normal is the camera's view direction
+    glm::dvec3 vec{0.0};            ///< ClipAdd: the normal
     bool flip = false;
     std::optional<bool> enabled, shadowsFromRemoved;
     std::string lightType, path;

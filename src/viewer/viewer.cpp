@@ -310,15 +310,19 @@ class Viewer {
     std::string envPath_, editMessage_;
     bool showGizmo_ = true, panelDragging_ = false;
     int clipDragIndex_ = -1;
-    // A scripted gizmo drag in progress: the per-frame motion and the frames left.
-    int scriptDragFrames_ = 0, scriptDragIndex_ = 0;
-    double scriptDragDx_ = 0.0, scriptDragDy_ = 0.0;
-    bool scriptDragMoved_ = false;  ///< this frame made a scripted drag's motion
-    /// UI frame work during the current clip-plane drag (all its frames).
-    Timings clipDragWork_{{}, std::size_t(-1)};
 
     // Mouse drags on the image.
     enum class Drag { None, Orbit, Pan, Window, Clip, Light } drag_ = Drag::None;
+    static const char* dragName(Drag d);
+    // A scripted drag in progress (a gizmo's, or an orbit, pan or window/level drag): the
+    // per-frame motion, the frames left and those done.
+    Drag scriptDrag_ = Drag::None;
+    int scriptDragFrames_ = 0, scriptDragDone_ = 0, scriptDragIndex_ = 0;
+    double scriptDragDx_ = 0.0, scriptDragDy_ = 0.0;
+    bool scriptDragMoved_ = false;  ///< this frame made a scripted drag's motion
+    /// UI frame work during the current drag (all its frames; --log says it when it ends).
+    Timings dragWork_{{}, std::size_t(-1)};
+    const char* dragWorkName_ = nullptr;
     ImVec2 dragStart_{0, 0};
     optics::TransferFunction tfAtDrag_;
     bool tfEditing_ = false;
@@ -415,7 +419,7 @@ void Viewer::adopt(LoadedScene scene) {
     clips_.clear();
     for (const io::ClipPlaneDesc& p : loaded_->scene.clipPlanes) clips_.push_back({p, true});
     selectedLight_ = selectedClip_ = 0;
-    clipDragIndex_ = -1, scriptDragFrames_ = 0;
+    clipDragIndex_ = -1, scriptDragFrames_ = 0, scriptDrag_ = Drag::None;
     lookAt_.reset();
     cameraResetGen_ = generation_ + 1;
     path_ = loaded_->scene.source;
@@ -933,6 +937,24 @@ void Viewer::handleImageMouse() {
     }
 }
 
+const char* Viewer::dragName(Drag d) {
+    switch (d) {
+        case Drag::Orbit:
+            return "orbit";
+        case Drag::Pan:
+            return "pan";
+        case Drag::Window:
+            return "window/level";
+        case Drag::Clip:
+            return "clip-plane";
+        case Drag::Light:
+            return "light";
+        case Drag::None:
+            break;
+    }
+    return nullptr;
+}
+
 void Viewer::orbitBy(double dx, double dy) {
     if (!ensureLookAt()) return;
     orbit(*lookAt_, -dx * kOrbitDegPerPixel, dy * kOrbitDegPerPixel);
@@ -968,9 +990,24 @@ void Viewer::checkIndex(const ScriptStep& st, std::size_t count, const char* wha
 
 void Viewer::runScript() {
     if (scriptDragFrames_ > 0) {
-        // A scripted gizmo drag: one motion per frame, as the mouse makes it, not waiting for
-        // images (the worker renders coarse while it lasts).
-        dragClipPlane(scriptDragIndex_, scriptDragDx_, scriptDragDy_);
+        // A scripted drag: one motion per frame through the mouse drag's function, not waiting
+        // for images (the worker renders coarse while it lasts).
+        ++scriptDragDone_;
+        switch (scriptDrag_) {
+            case Drag::Orbit:
+                orbitBy(scriptDragDx_, scriptDragDy_);
+                break;
+            case Drag::Pan:
+                panBy(scriptDragDx_, scriptDragDy_);
+                break;
+            case Drag::Window:  // as the mouse's: from the TF at the press, by the total motion
+                windowDrag(tfAtDrag_, scriptDragDone_ * scriptDragDx_,
+                           scriptDragDone_ * scriptDragDy_);
+                break;
+            default:
+                dragClipPlane(scriptDragIndex_, scriptDragDx_, scriptDragDy_);
+                break;
+        }
         --scriptDragFrames_;
         scriptDragMoved_ = true;
         return;
@@ -1013,10 +1050,20 @@ void Viewer::runScript() {
             break;
         case ScriptStep::Kind::ClipDrag:
             checkIndex(st, clips_.size(), "clip plane");
+            scriptDrag_ = Drag::Clip;
             scriptDragIndex_ = st.index;
-            scriptDragFrames_ = st.frames;
+            scriptDragFrames_ = st.frames, scriptDragDone_ = 0;
             scriptDragDx_ = st.a / st.frames, scriptDragDy_ = st.b / st.frames;
             selectedClip_ = st.index;
+            runScript();  // the first motion now
+            break;
+        case ScriptStep::Kind::Drag:
+            scriptDrag_ = st.dragMotion == ScriptStep::Kind::Orbit ? Drag::Orbit
+                          : st.dragMotion == ScriptStep::Kind::Pan ? Drag::Pan
+                                                                   : Drag::Window;
+            tfAtDrag_ = tf_;
+            scriptDragFrames_ = st.frames, scriptDragDone_ = 0;
+            scriptDragDx_ = st.a / st.frames, scriptDragDy_ = st.b / st.frames;
             runScript();  // the first motion now
             break;
         case ScriptStep::Kind::ClipEdit: {
@@ -1799,7 +1846,11 @@ std::optional<core::ImageRGBA> Viewer::run() {
         ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
 
         // Ask for a picture of the newest state; coarse while the user drags.
-        const bool clipDragging = drag_ == Drag::Clip || scriptDragMoved_;
+        // Which drag this frame belongs to (a mouse drag, a scripted one, a TF point's).
+        const char* dragging = drag_ != Drag::None ? dragName(drag_)
+                               : scriptDragMoved_  ? dragName(scriptDrag_)
+                               : tfEditing_        ? "TF point"
+                                                   : nullptr;
         const bool interacting =
             drag_ != Drag::None || tfEditing_ || panelDragging_ || scriptDragFrames_ > 0;
         if (dirty_) {
@@ -1842,19 +1893,20 @@ std::optional<core::ImageRGBA> Viewer::run() {
         glfwSwapBuffers(window_);
         // The first frames compile the GL shaders and build the font atlas: not the UI's pace.
         if (frames_ > kWarmUpFrames) frameWork_.add(work.seconds());
-        // The "UI frame during a clip-plane drag": the drag's frames on their own.
-        if (clipDragging && frames_ > kWarmUpFrames) {
-            clipDragWork_.add(work.seconds());
-        } else if (clipDragWork_.count > 0) {
+        // The "UI frame during a TF change / a clip-plane drag": each drag's frames on
+        // their own, said when it ends.
+        if (dragWork_.count > 0 && dragging != dragWorkName_) {
             if (options_.log)
                 std::fprintf(stderr,
-                             "view: clip-plane drag: %llu frames, ui frame work mean %.1f ms, max "
-                             "%.1f ms, %llu over %.0f ms\n",
-                             (unsigned long long)clipDragWork_.count, clipDragWork_.mean() * 1e3,
-                             clipDragWork_.allMax * 1e3, (unsigned long long)clipDragWork_.overSlow,
-                             kSlowFrameSeconds * 1e3);
-            clipDragWork_ = {{}, std::size_t(-1)};
+                             "view: %s drag: %llu frames, ui frame work mean %.1f ms, max %.1f ms, "
+                             "%llu over %.0f ms\n",
+                             dragWorkName_, (unsigned long long)dragWork_.count,
+                             dragWork_.mean() * 1e3, dragWork_.allMax * 1e3,
+                             (unsigned long long)dragWork_.overSlow, kSlowFrameSeconds * 1e3);
+            dragWork_ = {{}, std::size_t(-1)};
         }
+        if (dragging && frames_ > kWarmUpFrames) dragWork_.add(work.seconds());
+        dragWorkName_ = dragging;
         // A slow frame says where its time went.
         if (options_.log && frames_ > kWarmUpFrames && work.seconds() > kSlowFrameSeconds)
             std::fprintf(stderr,

@@ -955,6 +955,51 @@ TEST(ViewCli, TheGlslPathSlicesASlowFrameAndDrawsTheSamePixels) {
     EXPECT_EQ(differ, 0u);
 }
 
+// A scripted window/level drag ({"drag": {"kind": "window", …, "frames": n}}: the TF change of the
+// issue's "UI frame during a TF change") makes n motions through the mouse drag's function, coarse
+// images meanwhile; --log says the drag's own UI frames, and it ends where one motion of the
+// same total ends: the same picture, the same recorded window.
+TEST(ViewCli, AScriptedWindowDragEndsWhereOneMotionDoes) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 48}, "transfer_function": "ct-bone",
+        "method": "gradient", "image": {"width": 160, "height": 128}})";
+    constexpr int kDragFrames = 30;
+    // (After a zoom: the first UI frames, which build the GL's fonts and shaders, are not timed.)
+    std::ofstream(tmp / "steps.json")
+        << R"([{"zoom": 1}, {"drag": {"kind": "window", "by": [45, -30], "frames": )" << kDragFrames
+        << "}}]";
+    const Result dragged = runScriptedView(*display, tmp, "--log ");
+    if (dragged.code != 0 && dragged.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << dragged.err;
+    ASSERT_EQ(dragged.code, 0) << dragged.err;
+    const std::string key = "view: window/level drag: ";
+    const std::size_t at = dragged.err.rfind(key);
+    ASSERT_NE(at, std::string::npos) << dragged.err;
+    EXPECT_EQ(std::atoi(dragged.err.c_str() + at + key.size()), kDragFrames) << dragged.err;
+    EXPECT_NE(dragged.err.find("render coarse"), std::string::npos) << dragged.err;
+    const io::ImageRGBA drag = io::readImage(tmp / "shot.png");
+    const nlohmann::json dragRec = nlohmann::json::parse(std::ifstream(tmp / "rec.json"));
+
+    std::ofstream(tmp / "steps.json") << R"([{"zoom": 1}, {"window": [45, -30]}])";
+    const Result once = runScriptedView(*display, tmp);
+    ASSERT_EQ(once.code, 0) << once.err;
+    const io::ImageRGBA one = io::readImage(tmp / "shot.png");
+    const nlohmann::json oneRec = nlohmann::json::parse(std::ifstream(tmp / "rec.json"));
+    ASSERT_EQ(drag.width, one.width);
+    ASSERT_EQ(drag.height, one.height);
+    std::size_t differ = 0;
+    for (int y = 0; y < drag.height; ++y)
+        for (int x = 0; x < drag.width - kPanelWidth; ++x)
+            for (int c = 0; c < 4; ++c) differ += drag.at(x, y)[c] != one.at(x, y)[c];
+    EXPECT_EQ(differ, 0u);
+    ASSERT_TRUE(dragRec.contains("keyframes") && oneRec.contains("keyframes")) << dragRec.dump();
+    EXPECT_EQ(dragRec["keyframes"].back()["transfer_function"],
+              oneRec["keyframes"].back()["transfer_function"]);
+}
+
 // A scene the GLSL path cannot do (here: nine lights, one more than the shader holds) is drawn by
 // the CPU ray caster even with --renderer gpu, and the viewer says why on stderr (and in the
 // Renderer panel); the image is the CPU's.

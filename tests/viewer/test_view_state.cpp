@@ -258,6 +258,34 @@ TEST(ViewScript, ClipPlaneAndLightStepsParse) {
     EXPECT_EQ(steps[3].field, "[3].clip_drag");
 }
 
+TEST(ViewScript, DragStepsParse) {
+    const auto steps = viewer::parseScript(json::parse(R"([
+        {"drag": {"kind": "window", "by": [30, -20], "frames": 40}},
+        {"drag": {"kind": "orbit", "by": [5, 0]}}])"),
+                                           "steps.json");
+    using Kind = viewer::ScriptStep::Kind;
+    ASSERT_EQ(steps.size(), 2u);
+    EXPECT_EQ(steps[0].kind, Kind::Drag);
+    EXPECT_EQ(steps[0].dragMotion, Kind::Window);
+    EXPECT_EQ(steps[0].a, 30.0);
+    EXPECT_EQ(steps[0].b, -20.0);
+    EXPECT_EQ(steps[0].frames, 40);
+    EXPECT_EQ(steps[1].dragMotion, Kind::Orbit);
+    EXPECT_EQ(steps[1].frames, 1);
+    for (const auto& [text, field] : std::vector<std::pair<const char*, const char*>>{
+             {R"([{"drag": {"by": [1, 2]}}])", "[0].drag"},
+             {R"([{"drag": {"kind": "zoom", "by": [1, 2]}}])", "[0].drag.kind"},
+             {R"([{"drag": {"kind": "pan", "by": [1]}}])", "[0].drag.by"},
+             {R"([{"drag": {"kind": "pan", "by": [1, 2], "frames": 0}}])", "[0].drag.frames"}}) {
+        try {
+            viewer::parseScript(json::parse(text), "steps.json");
+            ADD_FAILURE() << text;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), field) << text << ": " << e.what();
+        }
+    }
+}
+
 TEST(ViewScript, BadClipPlaneAndLightStepsNameTheField) {
     const std::vector<std::pair<const char*, const char*>> bad = {
         {R"([{"clip_add": {}}])", "[0].clip_add"},
