@@ -44,6 +44,9 @@ constexpr double kFrameBudgetSeconds = 1.0 / 60.0;
 constexpr double kOrbitDegPerPixel = 0.4, kZoomPerNotch = 1.1;
 /// Frames left out of the frame-time statistics (GL shader compilation, ImGui's font atlas).
 constexpr std::uint64_t kWarmUpFrames = 3;
+/// Share of the GL slice budget a slice's rows are planned to take (the rest is for the slice's
+/// fixed costs: a new TF table's upload, the uniforms, the wait).
+constexpr double kGlSliceRowShare = 0.8;
 /// A UI frame slower than this is logged with its phases (the bound for the UI frame).
 constexpr double kSlowFrameSeconds = 0.050;
 /// Clip-plane gizmo: a left click this close (window pixels) to a plane's handle grabs it; the
@@ -270,6 +273,14 @@ class Viewer {
     /// Rows of `width` texels for one slice of that budget at the last slice's GL time per pixel
     /// (kGlFirstSliceRows before any; all `left` with no budget), at least 1, at most `left`.
     int sliceRows(int width, int left) const;
+    /// Rows of the GLSL frame from `firstRow` on for one slice: by the last frame's cost per row
+    /// of this kind (coarse or full) and size, sliceRows() without one.
+    int glSliceRows(bool coarse, int width, int height, int firstRow) const;
+    struct RowCosts {
+        int width = 0;
+        std::vector<double> seconds;  ///< per row of the last frame; < 0: not measured
+    };
+    RowCosts glRowCosts_[2];  ///< full, coarse
     /// Opens `path` as the file field's Open button does; a drop on the window comes here too.
     void openPath(const std::string& path);
     void startLoad(const std::string& path);
@@ -586,6 +597,28 @@ int Viewer::sliceRows(int width, int left) const {
                           1.0, double(left)));
 }
 
+int Viewer::glSliceRows(bool coarse, int width, int height, int firstRow) const {
+    const int left = std::max(height - firstRow, 1);
+    const RowCosts& costs = glRowCosts_[coarse ? 1 : 0];
+    if (!(options_.glSliceSeconds > 0.0) || costs.width != width ||
+        int(costs.seconds.size()) != height)
+        return sliceRows(width, left);
+    // The rows the budget holds at the last frame's cost per row (rows through empty space
+    // are cheap, those through the body dear: an average per pixel misjudges a slice by 2×);
+    // a row not measured yet at the last slice's cost per pixel. Some of the budget is kept for
+    // what a slice costs besides its rows (a new TF table, the uniforms).
+    const double budget = kGlSliceRowShare * options_.glSliceSeconds;
+    double sum = 0.0;
+    int rows = 0;
+    for (int y = firstRow; y < height; ++y) {
+        const double c = costs.seconds[std::size_t(y)];
+        sum += c >= 0.0 ? c : glPixelSeconds_ * double(width);
+        if (rows > 0 && sum > budget) break;
+        ++rows;
+    }
+    return std::clamp(rows, 1, left);
+}
+
 namespace {
 /// ", after uploads of 0.210 s in 9 UI frames" for a --log line; empty without uploads.
 std::string uploadNote(int frames, double seconds) {
@@ -603,7 +636,7 @@ bool Viewer::stepGl() {
     const RenderedImage& p = job.state;
     const int w = p.setup->camera->width(), h = p.setup->camera->height();
     const int left = h - job.nextRow;
-    const int rows = sliceRows(w, left);
+    const int rows = glSliceRows(p.coarse, w, h, job.nextRow);
     const bool last = rows >= left;
     std::string why;
     try {
@@ -629,6 +662,12 @@ bool Viewer::stepGl() {
         if (ok) {
             const double t = sw.seconds();
             glPixelSeconds_ = t / (double(std::max(rows, 1)) * double(std::max(w, 1)));
+            // The slice's rows' cost, for the next frame of this kind and size.
+            RowCosts& costs = glRowCosts_[p.coarse ? 1 : 0];
+            if (costs.width != w || int(costs.seconds.size()) != h)
+                costs.width = w, costs.seconds.assign(std::size_t(h), -1.0);
+            for (int y = job.nextRow; y < job.nextRow + rows; ++y)
+                costs.seconds[std::size_t(y)] = t / double(std::max(rows, 1));
             job.seconds += t;
             ++job.slices;
             job.nextRow += rows;
