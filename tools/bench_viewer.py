@@ -18,6 +18,7 @@ the machine's load average beside them.
     xvfb-run is used when DISPLAY is unset.
     /usr/bin/python3 tools/bench_viewer.py [--runs 4] [--frames 120] [--renderer auto|cpu|gpu]
                                           [--scene datasets/scenes/demo-torso.json ...]
+                                          [--logs DIR]
 """
 import argparse
 import json
@@ -81,6 +82,7 @@ def main():
     ap.add_argument("--runs", type=int, default=4)
     ap.add_argument("--frames", type=int, default=120, help="UI frames per drag")
     ap.add_argument("--renderer", default="auto", choices=["auto", "cpu", "gpu"])
+    ap.add_argument("--logs", help="keep each session's --log output in this directory")
     ap.add_argument("--scene", action="append", help="scene files (default: the torso and the "
                     "abdominal CT)")
     args = ap.parse_args()
@@ -99,6 +101,11 @@ def main():
             medians = {"coarse": [], "full": []}
             for run in range(args.runs):
                 err, ld = session(binary, scene, script, args.renderer, tmp)
+                if args.logs:
+                    os.makedirs(args.logs, exist_ok=True)
+                    name = os.path.splitext(os.path.basename(scene))[0]
+                    with open(os.path.join(args.logs, f"{name}-{run + 1}.log"), "w") as f:
+                        f.write(err)
                 loads.append(ld)
                 for m in DRAG.finditer(err):
                     d = drags.setdefault(m.group(1), {"mean": [], "max": [], "over": [], "n": 0})
