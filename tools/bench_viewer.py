@@ -142,7 +142,7 @@ def main():
                       f"{rng([w[2] for w in warm], '{:.0f}')} UI frames")
             for kind, m in medians.items():
                 if m:
-                    print(f"{kind} renders (CPU path), median per session: "
+                    print(f"{kind} renders (the worker's), median per session: "
                           f"{rng(m, '{:.3f}')} s")
             if coarse:
                 print(f"coarse renders {rng([c[0] for c in coarse], '{:.3f}')} (fastest per "

@@ -42,13 +42,15 @@ Command addViewCommand(CLI::App& app) {
                       "(.exr) once the full-resolution image shows, then exit");
     c.sub->add_option("--frames", *frames, "Scripted run: draw at least N UI frames first")
         ->check(CLI::Range(1, 100000));
-    c.sub->add_option("--script", *script,
-                      "Run UI steps from a JSON file ([{\"orbit\": [40, 0]}, {\"view\": \"L\"}, "
-                      "{\"window\": [30, -20]}, {\"zoom\": 2}, {\"pan\": [10, 0]}, "
-                      "{\"clip_add\": {\"normal\": \"camera\"}}, {\"clip_drag\": {\"index\": 0, "
-                      "\"by\": [0, -40], \"frames\": 30}}, {\"light_add\": {\"type\": "
-                      "\"directional\"}}, {\"light_turn\": {\"index\": 0, \"azimuth\": 30}}]) as "
-                      "the mouse, keys and panels would; every step: README, Viewer");
+    c.sub->add_option(
+        "--script", *script,
+        "Run UI steps from a JSON file ([{\"orbit\": [40, 0]}, {\"view\": \"L\"}, "
+        "{\"window\": [30, -20]}, {\"drag\": {\"kind\": \"window\", \"by\": [30, -20], "
+        "\"frames\": 60}}, {\"zoom\": 2}, {\"pan\": [10, 0]}, "
+        "{\"clip_add\": {\"normal\": \"camera\"}}, {\"clip_drag\": {\"index\": 0, "
+        "\"by\": [0, -40], \"frames\": 30}}, {\"light_add\": {\"type\": "
+        "\"directional\"}}, {\"light_turn\": {\"index\": 0, \"azimuth\": 30}}]) as "
+        "the mouse, keys and panels would; every step: README, Viewer");
     c.sub->add_option("--record", *record,
                       "Record the exploration as a session (JSON) for voxlight replay; written "
                       "when the viewer closes");

@@ -26,9 +26,10 @@ namespace {
 constexpr int kTfRows = 8;
 /// First texture units of the SH field's and sh-global's local field's textures (4 each).
 constexpr int kShFieldUnit = 4, kShLocalUnit = 8;
-/// Texels per glTextureSubImage3D call of a sliced upload (GlRayCaster::upload), whole z-slices at
-/// least: 128 kB of a 16-bit volume, 512 kB of an RGBA16F field — well under a millisecond to
-/// copy, so a UI frame's budget is overrun by less than one slab.
+/// Texels per glTextureSubImage3D call of a sliced upload (GlRayCaster::upload), or one whole
+/// z-slice where a slice holds more: 128 kB of a 16-bit volume, 512 kB of an RGBA16F field (a 512²
+/// CT slice: 512 kB) — well under a millisecond to copy, so a UI frame's budget is overrun by
+/// less than one slab.
 constexpr std::size_t kUploadSlabTexels = std::size_t(1) << 16;
 
 /// Whether sh-global's draw also reads the local field (within the band of a face that removes
@@ -221,8 +222,16 @@ GlRayCaster::Upload GlRayCaster::uploadVolume(const std::shared_ptr<const core::
         glTextureParameteri(volumeTex_, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
         for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
             glTextureParameteri(volumeTex_, w, GL_CLAMP_TO_EDGE);
+        if (const std::string e = glErrorText(); !e.empty()) {
+            why = "allocating the volume's 3D texture: " + e;
+            glDeleteTextures(1, &volumeTex_);
+            volumeTex_ = 0;
+            return Upload::Failed;
+        }
         volumePending_ = volume;
         volumeZ_ = 0;
+        // The storage can be the dear part (llvmpipe zero-fills it): a budgeted call stops here.
+        if (std::isfinite(seconds)) return Upload::Progress;
     }
     // Slabs of whole z-slices, each converted and copied in one call, until `seconds` are spent.
     core::Stopwatch sw;
@@ -364,6 +373,20 @@ GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::
             for (GLuint t : shUploaded_.back().textures)
                 if (t) glDeleteTextures(1, &t);
             shUploaded_.pop_back();
+        }
+        if (const std::string e = glErrorText(); !e.empty()) {
+            why = "allocating the SH visibility field's 3D textures (" + std::to_string(n.x) + "x" +
+                  std::to_string(n.y) + "x" + std::to_string(n.z) + "): " + e;
+            for (GLuint t : shUploaded_.front().textures)
+                if (t) glDeleteTextures(1, &t);
+            shUploaded_.erase(shUploaded_.begin());
+            std::fill_n(out, 4, 0u);
+            return Upload::Failed;
+        }
+        // As for the volume: a budgeted call allocates the storage only.
+        if (std::isfinite(seconds)) {
+            std::copy_n(up.textures, 4, out);
+            return Upload::Progress;
         }
     }
     ShUpload& up = shUploaded_.front();

@@ -175,6 +175,8 @@ struct ScriptStep {
 };
 /// A script file's steps: a JSON array of one-key objects —
 ///   {"orbit": [dx, dy]}, {"pan": [dx, dy]}, {"zoom": notches}, {"window": [dx, dy]},
+///   {"drag": {"kind": "orbit" | "pan" | "window", "by": [dx, dy], "frames": n}} (that mouse
+///   drag in n motions, one per UI frame; n 1…10000, default 1),
 ///   {"view": "L"}, {"pathtrace": spp} (1…65536),
 ///   {"clip_add": {"normal": [x, y, z] | "camera", "offset": mm, "shadows_from_removed": b}},
 ///   {"clip_move": {"index": i, "by": mm}},

@@ -47,6 +47,9 @@ constexpr std::uint64_t kWarmUpFrames = 3;
 /// Share of the GL slice budget a slice's rows are planned to take (the rest is for the slice's
 /// fixed costs: a new TF table's upload, the uniforms, the wait).
 constexpr double kGlSliceRowShare = 0.8;
+/// Bounds of a frame's cost against the last one's, as its slices measure it (one slice's noise
+/// must not make the next a single row or the whole frame).
+constexpr double kGlCostScaleMin = 0.25, kGlCostScaleMax = 8.0;
 /// A UI frame slower than this is logged with its phases (the bound for the UI frame).
 constexpr double kSlowFrameSeconds = 0.050;
 /// Clip-plane gizmo: a left click this close (window pixels) to a plane's handle grabs it; the
@@ -275,7 +278,12 @@ class Viewer {
     int sliceRows(int width, int left) const;
     /// Rows of the GLSL frame from `firstRow` on for one slice: by the last frame's cost per row
     /// of this kind (coarse or full) and size, sliceRows() without one.
-    int glSliceRows(bool coarse, int width, int height, int firstRow) const;
+    /// `scale`: this frame's measured / predicted cost so far (a frame dearer than the last one,
+    /// e.g. after a window change that shows more matter, is planned dearer from its 2nd slice);
+    /// `predicted`: the rows' cost by the last frame (0 without one).
+    /// `lastRows`: the job's last slice's rows (0 before its first).
+    int glSliceRows(bool coarse, int width, int height, int firstRow, int lastRows, double scale,
+                    double& predicted) const;
     struct RowCosts {
         int width = 0;
         std::vector<double> seconds;  ///< per row of the last frame; < 0: not measured
@@ -400,7 +408,9 @@ class Viewer {
     struct GlJob {
         RenderedImage state;
         int nextRow = 0, slices = 0;
-        double seconds = 0.0;  ///< GL time of its slices so far (each waited for)
+        double seconds = 0.0;    ///< GL time of its slices so far (each waited for)
+        double costScale = 1.0;  ///< its last slice's time / the last frame's for those rows
+        int lastRows = 0;
         /// The UI frame of its last slice (one slice per UI frame); none yet: ~0.
         std::uint64_t uiFrame = ~std::uint64_t(0);
     };
@@ -541,6 +551,7 @@ void Viewer::receive() {
 
 void Viewer::restartMeasurement() {
     glJob_.reset();
+    glRowCosts_[0] = glRowCosts_[1] = {};  // a new volume: nothing known of its rows
     glNext_.reset();
     measure_ = Measure::Waiting;
     glMeasured_.clear();
@@ -597,7 +608,9 @@ int Viewer::sliceRows(int width, int left) const {
                           1.0, double(left)));
 }
 
-int Viewer::glSliceRows(bool coarse, int width, int height, int firstRow) const {
+int Viewer::glSliceRows(bool coarse, int width, int height, int firstRow, int lastRows,
+                        double scale, double& predicted) const {
+    predicted = 0.0;
     const int left = std::max(height - firstRow, 1);
     const RowCosts& costs = glRowCosts_[coarse ? 1 : 0];
     if (!(options_.glSliceSeconds > 0.0) || costs.width != width ||
@@ -608,14 +621,25 @@ int Viewer::glSliceRows(bool coarse, int width, int height, int firstRow) const 
     // a row not measured yet at the last slice's cost per pixel. Some of the budget is kept for
     // what a slice costs besides its rows (a new TF table, the uniforms).
     const double budget = kGlSliceRowShare * options_.glSliceSeconds;
-    double sum = 0.0;
+    double plan = 0.0, fromLast = 0.0;
     int rows = 0;
+    bool guessed = false;
     for (int y = firstRow; y < height; ++y) {
-        const double c = costs.seconds[std::size_t(y)];
-        sum += c >= 0.0 ? c : glPixelSeconds_ * double(width);
-        if (rows > 0 && sum > budget) break;
+        const double measured = costs.seconds[std::size_t(y)];
+        const double c = measured >= 0.0 ? measured * scale : glPixelSeconds_ * double(width);
+        if (rows > 0 && plan + c > budget) break;
+        plan += c;
+        if (measured >= 0.0)
+            fromLast += measured;
+        else
+            guessed = true;
         ++rows;
     }
+    // Only rows the last frame measured say how this frame compares with it; rows guessed from
+    // the cost per pixel (cheap empty rows at the top make a dear middle look cheap) grow at most
+    // twofold from slice to slice.
+    predicted = guessed ? 0.0 : fromLast;
+    if (guessed && lastRows > 0) rows = std::min(rows, 2 * lastRows);
     return std::clamp(rows, 1, left);
 }
 
@@ -636,7 +660,9 @@ bool Viewer::stepGl() {
     const RenderedImage& p = job.state;
     const int w = p.setup->camera->width(), h = p.setup->camera->height();
     const int left = h - job.nextRow;
-    const int rows = glSliceRows(p.coarse, w, h, job.nextRow);
+    double predicted = 0.0;
+    const int rows =
+        glSliceRows(p.coarse, w, h, job.nextRow, job.lastRows, job.costScale, predicted);
     const bool last = rows >= left;
     std::string why;
     try {
@@ -668,9 +694,12 @@ bool Viewer::stepGl() {
                 costs.width = w, costs.seconds.assign(std::size_t(h), -1.0);
             for (int y = job.nextRow; y < job.nextRow + rows; ++y)
                 costs.seconds[std::size_t(y)] = t / double(std::max(rows, 1));
+            if (predicted > 0.0)
+                job.costScale = std::clamp(t / predicted, kGlCostScaleMin, kGlCostScaleMax);
             job.seconds += t;
             ++job.slices;
             job.nextRow += rows;
+            job.lastRows = rows;
             job.uiFrame = frames_;
             if (!last) return true;
             (p.coarse ? glCoarseTimes_ : glTimes_).add(job.seconds);
