@@ -241,3 +241,36 @@ TEST(PixelFootprint, ModelRenderedWithAnotherCameraIgnoresIt) {
 
 }  // namespace
 }  // namespace voxlight
+
+namespace voxlight {
+namespace {
+
+// pipeline's framing stage gives a placed camera (eye and target, and a perspective or an
+// orthographic height) the volume's box instead of the visible hull: that is only right if such a
+// camera does not depend on the points at all — also with a roll and with `up` along the view.
+TEST(Camera, APlacedCameraDoesNotDependOnThePoints) {
+    const std::vector<glm::dvec3> hull = {{-20, -5, 3}, {40, 12, 9}, {7, 30, -11}};
+    const std::vector<glm::dvec3> box = {{-200, -200, -200}, {200, 200, 200}};
+    for (const auto projection :
+         {render::Projection::Perspective, render::Projection::Orthographic})
+        for (const glm::dvec3 up : {glm::dvec3(0, 0, 1), glm::dvec3(0, 1, 0)})
+            for (const double roll : {0.0, 25.0}) {
+                render::CameraSpec spec;
+                spec.projection = projection;
+                spec.eye = glm::dvec3(10, -300, 40);
+                spec.target = glm::dvec3(0, 0, 10);
+                spec.up = up;  // (0, 1, 0) is nearly the view direction: replaced
+                spec.rollDeg = roll;
+                spec.orthoHeight = 120.0;
+                const render::Camera a(spec, hull, 64, 48), b(spec, box, 64, 48);
+                EXPECT_EQ(a.eye(), b.eye());
+                EXPECT_EQ(a.forward(), b.forward());
+                EXPECT_EQ(a.up(), b.up());
+                EXPECT_EQ(a.orthoHeight(), b.orthoHeight());
+                EXPECT_EQ(a.pixelMap().rightStep, b.pixelMap().rightStep);
+                EXPECT_EQ(a.pixelMap().upStep, b.pixelMap().upStep);
+            }
+}
+
+}  // namespace
+}  // namespace voxlight
