@@ -830,7 +830,13 @@ struct MetaHeader {
 
 MetaHeader readMetaHeader(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
-    std::string buf(kMaxMetaHeaderBytes, '\0');
+    // The header is read whole, up to its cap: a buffer of the file's size when smaller (a 1 MB
+    // zero-filled buffer per read was most of the MetaImage fuzz target's time).
+    std::error_code sizeEc;
+    const std::uintmax_t fileBytes = fs::file_size(path, sizeEc);
+    std::string buf(sizeEc ? kMaxMetaHeaderBytes
+                           : std::size_t(std::min<std::uintmax_t>(fileBytes, kMaxMetaHeaderBytes)),
+                    '\0');
     in.read(buf.data(), std::streamsize(buf.size()));
     buf.resize(std::size_t(in.gcount()));
     MetaHeader h;
@@ -1034,7 +1040,10 @@ void checkMetaDeflate(const fs::path& file, std::uint64_t offset, std::uint64_t 
         ~End() { inflateEnd(z); }
     } end{&z};
     constexpr std::size_t kChunk = std::size_t(1) << 20;
-    std::vector<unsigned char> input(kChunk), output(kChunk);
+    // Buffers no larger than the data (two zero-filled 1 MB buffers per small file: 3 % of the
+    // MetaImage fuzz target's time).
+    std::vector<unsigned char> input(std::size_t(std::min<std::uint64_t>(bytes, kChunk))),
+        output(std::size_t(std::min<std::uint64_t>(need, kChunk)));
     std::uint64_t left = bytes, produced = 0;
     auto fail = [&](const std::string& why) {
         throw InputError(file.string(), "data",
@@ -1046,7 +1055,7 @@ void checkMetaDeflate(const fs::path& file, std::uint64_t offset, std::uint64_t 
         if (z.avail_in == 0) {
             if (left == 0) fail("ends after " + std::to_string(produced) + " bytes");
             in.read(reinterpret_cast<char*>(input.data()),
-                    std::streamsize(std::min<std::uint64_t>(left, kChunk)));
+                    std::streamsize(std::min<std::uint64_t>(left, input.size())));
             const std::size_t got = std::size_t(in.gcount());
             if (got == 0) fail("ends after " + std::to_string(produced) + " bytes");
             left -= got;
@@ -1055,10 +1064,11 @@ void checkMetaDeflate(const fs::path& file, std::uint64_t offset, std::uint64_t 
             progress.checkCancel();
         }
         z.next_out = output.data();
-        z.avail_out = uInt(std::min<std::uint64_t>(kChunk, need - produced));
+        const std::uint64_t ask = std::min<std::uint64_t>(output.size(), need - produced);
+        z.avail_out = uInt(ask);
         const uInt inBefore = z.avail_in, outBefore = z.avail_out;
         const int rc = inflate(&z, Z_NO_FLUSH);
-        produced += std::min<std::uint64_t>(kChunk, need - produced) - z.avail_out;
+        produced += ask - z.avail_out;
         if (rc == Z_BUF_ERROR && z.avail_in == inBefore && z.avail_out == outBefore &&
             z.avail_in > 0)
             fail("makes no progress after " + std::to_string(produced) + " bytes");

@@ -398,8 +398,8 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
             std::string list;
             for (const char* k : allowed) list += std::string(list.empty() ? "" : ", ") + k;
             if (!v.is_object()) throw InputError(source, field, "must be an object", list);
-            for (const auto& [k, x] : v.items()) {
-                (void)x;
+            for (const auto& item : v.items()) {
+                const std::string& k = item.key();
                 if (std::find_if(allowed.begin(), allowed.end(),
                                  [&](const char* a) { return k == a; }) == allowed.end())
                     throw InputError(source, field + "." + k, "is not a key of " + key,
