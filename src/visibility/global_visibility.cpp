@@ -261,6 +261,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         progress.report("global visibility", 1.0);
         out.rays_ = shaded * std::uint64_t(N);
         out.skipped_ = P - shaded;
+        out.pack();
         return out;
     }
 
@@ -315,6 +316,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     progress.report("global visibility", 1.0);
     out.rays_ = raysTotal;
     out.skipped_ = skippedTotal;
+    out.pack();
     return out;
 }
 
@@ -333,28 +335,65 @@ void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
     product_->apply(nearV, farV, out);
 }
 
+void GlobalVisibility::pack() {
+    const std::size_t C = std::size_t(coefficients_), S = C + 1;
+    const std::size_t P = std::size_t(res_.x) * res_.y * res_.z;
+    packed_.assign(P * S, 0.f);
+    for (std::size_t i = 0; i < P; ++i) {
+        const float q = product_ ? open_[i] + kBuriedWeight : 1.f;
+        float* d = packed_.data() + i * S;
+        d[0] = q;
+        for (std::size_t e = 0; e < C; ++e) d[1 + e] = q * data_[i * C + e];
+    }
+}
+
+namespace {
+
+/// Σ_c w_c·d_c over the 8 corners, d_c = packed + off[c] (S floats each), then out = acc[1..S) /
+/// acc[0]. S a compile-time constant: the inner loop unrolls and vectorises.
+template <int S>
+void interpolatePacked(const float* packed, const std::size_t* off, const float* w, float* out) {
+    float acc[S] = {};
+    for (int c = 0; c < 8; ++c) {
+        const float* d = packed + off[c];
+        for (int e = 0; e < S; ++e) acc[e] += w[c] * d[e];
+    }
+    const float inv = 1.f / acc[0];
+    for (int e = 1; e < S; ++e) out[e - 1] = acc[e] * inv;
+}
+
+}  // namespace
+
 void GlobalVisibility::sampleFar(const glm::vec3& p, float* out) const {
     const int C = coefficients_;
-    float total = 0.f;
+    const std::size_t S = std::size_t(C) + 1;
     glm::vec3 u = (p + 0.5f) / scale_ - 0.5f;
     u = glm::clamp(u, glm::vec3(0.f), glm::vec3(res_ - 1));
     const glm::ivec3 i0 = glm::min(glm::ivec3(u), glm::max(res_ - 2, glm::ivec3(0)));
     const glm::vec3 f = u - glm::vec3(i0);
-    std::fill(out, out + C, 0.f);
-    for (int c = 0; c < 8; ++c) {
-        const glm::ivec3 o((c & 1), (c >> 1) & 1, c >> 2);
-        const glm::ivec3 g = glm::min(i0 + o, res_ - 1);
-        const float w = (o.x ? f.x : 1.f - f.x) * (o.y ? f.y : 1.f - f.y) *
-                        (o.z ? f.z : 1.f - f.z) *
-                        (product_ ? open_[index(g)] + kBuriedWeight : 1.f);
-        if (w == 0.f) continue;
-        total += w;
-        const float* d = at(g);
-        for (int i = 0; i < C; ++i) out[i] += w * d[i];
+    // Corner offsets in floats; an axis of one point reads its only point twice (weight f = 0).
+    const std::size_t dx = res_.x > 1 ? S : 0, dy = res_.y > 1 ? S * res_.x : 0,
+                      dz = res_.z > 1 ? S * res_.x * std::size_t(res_.y) : 0;
+    const std::size_t base = index(i0) * S;
+    const std::size_t off[8] = {base,      base + dx,      base + dy,      base + dx + dy,
+                                base + dz, base + dx + dz, base + dy + dz, base + dx + dy + dz};
+    const float wx[2] = {1.f - f.x, f.x}, wy[2] = {1.f - f.y, f.y}, wz[2] = {1.f - f.z, f.z};
+    float w[8];
+    for (int c = 0; c < 8; ++c) w[c] = wx[c & 1] * wy[(c >> 1) & 1] * wz[c >> 2];
+    const float* d = packed_.data();
+    switch (C) {
+        case 1: return interpolatePacked<2>(d, off, w, out);
+        case 4: return interpolatePacked<5>(d, off, w, out);
+        case 9: return interpolatePacked<10>(d, off, w, out);
+        case 16: return interpolatePacked<17>(d, off, w, out);
+        default: {
+            float acc[sh::kMaxCoeffs + 1] = {};
+            for (int c = 0; c < 8; ++c)
+                for (std::size_t e = 0; e < S; ++e) acc[e] += w[c] * d[off[c] + e];
+            const float inv = 1.f / acc[0];
+            for (std::size_t e = 1; e < S; ++e) out[e - 1] = acc[e] * inv;
+        }
     }
-    if (!product_) return;  // plain trilinear: the weights sum to 1
-    const float inv = 1.f / total;
-    for (int i = 0; i < C; ++i) out[i] *= inv;
 }
 
 }  // namespace voxlight::visibility

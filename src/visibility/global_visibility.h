@@ -105,7 +105,9 @@ class GlobalVisibility {
     bool nearFromLocal() const { return product_ != nullptr; }
     const glm::ivec3& resolution() const { return res_; }
     /// The far grid's storage (the local field it reads at render time is counted with it).
-    std::size_t bytes() const { return (data_.size() + open_.size()) * sizeof(float); }
+    std::size_t bytes() const {
+        return (data_.size() + open_.size() + packed_.size()) * sizeof(float);
+    }
     std::uint64_t raysTraced() const { return rays_; }
     /// The integration used (Recursive falls back to Piecewise when r_s is under ~1 grid step,
     /// or when its transient memory would exceed GlobalVisibilityOptions::maxRecursiveBytes).
@@ -146,6 +148,11 @@ class GlobalVisibility {
     glm::vec3 scale_{1.f};  ///< voxels per grid step
     std::vector<float> data_;
     std::vector<float> open_;  ///< per grid point (openness); empty unless nearFromLocal
+    /// What sampleFar interpolates, C + 1 floats per grid point: the weight q (openness +
+    /// kBuriedWeight with the near/far split, else 1) and q·V^F_i, so the openness-weighted mean
+    /// is one plain trilinear interpolation and a division (built by pack()).
+    std::vector<float> packed_;
+    void pack();
     std::uint64_t rays_ = 0, skipped_ = 0;
     GlobalIntegration integration_ = GlobalIntegration::Piecewise;
     std::string integrationNote_;
