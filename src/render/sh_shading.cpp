@@ -66,8 +66,14 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
         const glm::vec3 e = p.intensity / (r * r);
         const float directional = std::min(1.f, dist / p.minDistance);
         if (directional > 0.f) {
-            float y[16];
-            sh::evalShFixed<3>(d / dist, y);
+            float y[16];  // only the bands the field has (once per shaded sample and light)
+            const glm::vec3 u = d / dist;
+            if (C <= 4)
+                sh::evalShFixed<1>(u, y);
+            else if (C <= 9)
+                sh::evalShFixed<2>(u, y);
+            else
+                sh::evalShFixed<3>(u, y);
             float dot = 0.f;
             for (int i = 0; i < C; ++i) dot += window_[i] * y[i] * v[i];
             sum += (directional * dot) * e;
