@@ -2,6 +2,7 @@
 // SH visibility shading (render/sh_shading.h) against closed forms and the lights' own SH.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <glm/gtc/matrix_transform.hpp>
 #include <numbers>
@@ -110,6 +111,29 @@ TEST(ShShading, PointLightsMatchTheLightsOwnShProjectionInsideAndOutsideTheClamp
     }
     // At the light: isotropic, E = I / minDistance², scattered E/(4π).
     EXPECT_NEAR(shader.inScattered({1.f, 2.f, 3.f}).x, 100.0 / 16.0 * kInv4Pi, 1e-5);
+}
+
+TEST(ShShading, APointLightIsShadedInEveryBandOfTheField) {
+    // Any visibility coefficients, not only empty space's: the light's own double-precision SH
+    // projection dotted with them, for 4, 9 and 16 coefficients (each evaluates its own bands).
+    const auto light = std::make_shared<lights::PointLight>(glm::vec3(100.f), glm::dvec3(1, 2, 3),
+                                                            /*minDistance*/ 4.0);
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {light};
+    constexpr float kRelTol = 1e-5f;  // float shader against the double projection
+    for (const int C : {4, 9, 16}) {
+        const render::ShLights lights(C, ls);
+        float v[16];
+        for (int i = 0; i < C; ++i) v[i] = (i == 0 ? 3.f : 0.f) + 0.4f * float((i * 7) % 5) - 0.6f;
+        for (glm::dvec3 x : {glm::dvec3(2, 2, 3), glm::dvec3(1, 2, 6.5), glm::dvec3(-20, 11, -9),
+                             glm::dvec3(9, -4, 1)}) {
+            const std::vector<glm::vec3> l = light->shCoefficients(x, sh::shBandForCount(C));
+            double expected = 0.0;
+            for (int i = 0; i < C; ++i) expected += double(l[std::size_t(i)].x) * double(v[i]);
+            expected = std::max(expected * kInv4Pi, 0.0);
+            const float got = lights.shade(glm::vec3(x), v).x;
+            EXPECT_NEAR(got, expected, kRelTol * std::abs(expected) + 1e-7) << C << " " << x.x;
+        }
+    }
 }
 
 TEST(ShShading, AreaLightsAreRefusedByName) {
