@@ -127,7 +127,7 @@ void BM_TfUpdateTotal(benchmark::State& state) {
             visibility::computeLocalVisibility(grid, table, o));
         const auto t1 = Clock::now();
         const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
-        benchmark::DoNotOptimize(g.at({0, 0, 0}));
+        benchmark::DoNotOptimize(g.at({0, 0, 0}, 0));
         const auto t2 = Clock::now();
         localSeconds += std::chrono::duration<double>(t1 - t0).count();
         globalSeconds += std::chrono::duration<double>(t2 - t1).count();
@@ -173,7 +173,7 @@ void BM_GlobalVisibility(benchmark::State& state) {
     for (auto _ : state) {
         const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
         rays += g.raysTraced();
-        benchmark::DoNotOptimize(g.at({0, 0, 0}));
+        benchmark::DoNotOptimize(g.at({0, 0, 0}, 0));
     }
     state.counters["rays/s"] = benchmark::Counter(double(rays), benchmark::Counter::kIsRate);
 }

@@ -258,10 +258,16 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
             if (options.nearFromLocal)
                 out.open_[i] = std::clamp(vl[i * std::size_t(C)] * kInvSqrt4Pi, 0.f, 1.f);
         }
-        progress.report("global visibility", 1.0);
         out.rays_ = shaded * std::uint64_t(N);
         out.skipped_ = P - shaded;
+        // The integration's buffers go before the packed field is made (the peak stays the
+        // field, its packed form and nothing else).
+        std::vector<float>().swap(vl);  // (`v = {}` would keep the capacity)
+        std::vector<std::uint8_t>().swap(needed);
+        std::vector<float>().swap(F);
+        std::vector<float>().swap(far);
         out.pack();
+        progress.report("global visibility", 1.0);
         return out;
     }
 
@@ -275,7 +281,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                 for (int gy = 0; gy < out.res_.y; ++gy)
                     for (int gx = 0; gx < out.res_.x; ++gx) {
                         const glm::ivec3 g(gx, gy, gz);
-                        float* dst = const_cast<float*>(out.at(g));
+                        float* dst = out.data_.data() + out.index(g) * std::size_t(C);
                         const glm::vec3 x = glm::min(out.position(g), hi);
                         if (!visibilityNeeded(grid, x, spacing)) {
                             dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
@@ -313,10 +319,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         });
     });
     if (progress.cancelled()) throw CancelledError();
-    progress.report("global visibility", 1.0);
     out.rays_ = raysTotal;
     out.skipped_ = skippedTotal;
     out.pack();
+    progress.report("global visibility", 1.0);
     return out;
 }
 
@@ -345,6 +351,9 @@ void GlobalVisibility::pack() {
         d[0] = q;
         for (std::size_t e = 0; e < C; ++e) d[1 + e] = q * data_[i * C + e];
     }
+    // Rendering reads only the packed form; at() and openness() recover the rest from it.
+    std::vector<float>().swap(data_);
+    std::vector<float>().swap(open_);
 }
 
 namespace {
@@ -382,10 +391,14 @@ void GlobalVisibility::sampleFar(const glm::vec3& p, float* out) const {
     for (int c = 0; c < 8; ++c) w[c] = wx[c & 1] * wy[(c >> 1) & 1] * wz[c >> 2];
     const float* d = packed_.data();
     switch (C) {
-        case 1: return interpolatePacked<2>(d, off, w, out);
-        case 4: return interpolatePacked<5>(d, off, w, out);
-        case 9: return interpolatePacked<10>(d, off, w, out);
-        case 16: return interpolatePacked<17>(d, off, w, out);
+        case 1:
+            return interpolatePacked<2>(d, off, w, out);
+        case 4:
+            return interpolatePacked<5>(d, off, w, out);
+        case 9:
+            return interpolatePacked<10>(d, off, w, out);
+        case 16:
+            return interpolatePacked<17>(d, off, w, out);
         default: {
             float acc[sh::kMaxCoeffs + 1] = {};
             for (int c = 0; c < 8; ++c)

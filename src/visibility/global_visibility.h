@@ -105,9 +105,7 @@ class GlobalVisibility {
     bool nearFromLocal() const { return product_ != nullptr; }
     const glm::ivec3& resolution() const { return res_; }
     /// The far grid's storage (the local field it reads at render time is counted with it).
-    std::size_t bytes() const {
-        return (data_.size() + open_.size() + packed_.size()) * sizeof(float);
-    }
+    std::size_t bytes() const { return packed_.size() * sizeof(float); }
     std::uint64_t raysTraced() const { return rays_; }
     /// The integration used (Recursive falls back to Piecewise when r_s is under ~1 grid step,
     /// or when its transient memory would exceed GlobalVisibilityOptions::maxRecursiveBytes).
@@ -115,13 +113,21 @@ class GlobalVisibility {
     /// Why integration() is not the one asked for, in words; empty when it is.
     const std::string& integrationNote() const { return integrationNote_; }
     std::uint64_t pointsSkipped() const { return skipped_; }
-    /// Far coefficients V^F of grid point g.
-    const float* at(const glm::ivec3& g) const {
-        return data_.data() + index(g) * std::size_t(coefficients_);
+    /// Far coefficient V^F_i of grid point g (from the packed form: rounding of one float
+    /// multiplication and division).
+    float at(const glm::ivec3& g, int i) const {
+        const float* d = packed_.data() + index(g) * std::size_t(coefficients_ + 1);
+        return d[1 + i] / d[0];
+    }
+    /// Grid point g as stored: C + 1 floats, the weight q and q·V^F_i (packed_ below).
+    const float* packedAt(const glm::ivec3& g) const {
+        return packed_.data() + index(g) * std::size_t(coefficients_ + 1);
     }
     /// Openness of grid point g: its local V_0/√(4π) in [0, 1] (1 where skipped as empty, and
     /// everywhere without the near/far split).
-    float openness(const glm::ivec3& g) const { return open_.empty() ? 1.f : open_[index(g)]; }
+    float openness(const glm::ivec3& g) const {
+        return product_ ? packed_[index(g) * std::size_t(coefficients_ + 1)] - kBuriedWeight : 1.f;
+    }
     /// Voxels between neighbouring grid points (the largest over the axes).
     float spacingVoxels() const { return std::max({scale_.x, scale_.y, scale_.z}); }
     /// Voxel coordinate of grid point g.
@@ -145,12 +151,13 @@ class GlobalVisibility {
     std::shared_ptr<const sh::ShProduct> product_;
     int coefficients_ = 0;
     glm::ivec3 res_{0};
-    glm::vec3 scale_{1.f};  ///< voxels per grid step
-    std::vector<float> data_;
-    std::vector<float> open_;  ///< per grid point (openness); empty unless nearFromLocal
-    /// What sampleFar interpolates, C + 1 floats per grid point: the weight q (openness +
-    /// kBuriedWeight with the near/far split, else 1) and q·V^F_i, so the openness-weighted mean
-    /// is one plain trilinear interpolation and a division (built by pack()).
+    glm::vec3 scale_{1.f};     ///< voxels per grid step
+    std::vector<float> data_;  ///< V^F while the field is computed; empty after pack()
+    std::vector<float> open_;  ///< openness while computed (near/far split only); empty after
+    /// The field as sampleFar interpolates it, C + 1 floats per grid point: the weight q
+    /// (openness + kBuriedWeight with the near/far split, else 1) and q·V^F_i, so the
+    /// openness-weighted mean is one plain trilinear interpolation and a division (pack(), at
+    /// the end of computeGlobalVisibility, which then frees data_ and open_).
     std::vector<float> packed_;
     void pack();
     std::uint64_t rays_ = 0, skipped_ = 0;

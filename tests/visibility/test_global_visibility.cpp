@@ -113,7 +113,9 @@ TEST(GlobalVisibility, EmptySpaceSeesEverythingAndThreadsDoNotMatter) {
         for (int z = 0; z < 16; ++z)
             for (int y = 0; y < 16; ++y)
                 for (int x = 0; x < 16; ++x)
-                    ASSERT_EQ(std::memcmp(a.at({x, y, z}), b.at({x, y, z}), 4 * sizeof(float)), 0);
+                    ASSERT_EQ(std::memcmp(a.packedAt({x, y, z}), b.packedAt({x, y, z}),
+                                          std::size_t(a.coefficients() + 1) * sizeof(float)),
+                              0);
     }
     const GlobalVisibility a = computeGlobalVisibility(local, go);
     // A corner point looking away from the ball sees almost everything; values stay in range.
@@ -199,8 +201,8 @@ TEST(GlobalVisibility, RecursiveIntegrationFollowsThePiecewiseFieldOnTheTorso) {
     for (int z = 0; z < 32; ++z)
         for (int y = 0; y < 32; ++y)
             for (int x = 0; x < 32; ++x) {
-                const double a = piecewise.at({x, y, z})[0] / kSqrt4Pi;  // far visibility, 0…1
-                const double b = recursive.at({x, y, z})[0] / kSqrt4Pi;
+                const double a = piecewise.at({x, y, z}, 0) / kSqrt4Pi;  // far visibility, 0…1
+                const double b = recursive.at({x, y, z}, 0) / kSqrt4Pi;
                 ASSERT_TRUE(std::isfinite(b));
                 if (a > 1.0 - 1e-6 && b > 1.0 - 1e-6) continue;  // open (or skipped) in both
                 sumDiff += std::abs(a - b);
@@ -240,7 +242,9 @@ TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenAPieceIsShorterThanAGrid
     EXPECT_EQ(g.integration(), GlobalIntegration::Piecewise);
     go.integration = GlobalIntegration::Piecewise;
     const GlobalVisibility p = computeGlobalVisibility(local, go);
-    EXPECT_EQ(std::memcmp(g.at({3, 4, 5}), p.at({3, 4, 5}), 4 * sizeof(float)), 0);
+    EXPECT_EQ(std::memcmp(g.packedAt({3, 4, 5}), p.packedAt({3, 4, 5}),
+                          std::size_t(g.coefficients() + 1) * sizeof(float)),
+              0);
 }
 
 TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenItsMemoryWouldExceedTheBound) {
@@ -270,7 +274,9 @@ TEST(GlobalVisibility, RecursiveIntegrationFallsBackWhenItsMemoryWouldExceedTheB
     for (int z = 0; z < 8; ++z)
         for (int y = 0; y < 8; ++y)
             for (int x = 0; x < 8; ++x)
-                ASSERT_EQ(std::memcmp(g.at({x, y, z}), p.at({x, y, z}), 4 * sizeof(float)), 0);
+                ASSERT_EQ(std::memcmp(g.packedAt({x, y, z}), p.packedAt({x, y, z}),
+                                      std::size_t(g.coefficients() + 1) * sizeof(float)),
+                          0);
     // The default bound keeps 256³ points at 16 coefficients recursive (2.2 GB; the double
     // accumulator it replaced made that 4.3 GB) and refuses 1024³.
     EXPECT_LE(recursiveTransientBytes(glm::ivec3(256), 16, true), kMaxRecursiveTransientBytes);
