@@ -38,9 +38,9 @@ ShProduct::ShProduct(int coefficients) : coefficients_(coefficients) {
 
 void ShProduct::apply(const float* a, const float* b, float* out) const {
     if (coefficients_ == 4) {
-        // Band ≤ 1 (sh-global's default, once per shaded sample): the 10 entries are
-        // Γ_iik = Γ_0kk = Γ_k0k = 1/√(4π) for k = 0 and i, k ∈ 1..3 — the closed form, unrolled
-        // (terms_[0].gamma is Γ_000).
+        // Band ≤ 1 (sh-global's default, once per shaded sample) in closed form: the 10
+        // non-zero entries are Γ_ii0 (i = 0..3), Γ_0kk and Γ_k0k (k = 1..3), all 1/√(4π)
+        // (orthonormality; three band-1 functions have an odd band sum). terms_[0] is Γ_000.
         const float g = terms_[0].gamma;
         out[0] = g * (a[0] * b[0] + a[1] * b[1] + a[2] * b[2] + a[3] * b[3]);
         for (int k = 1; k < 4; ++k) out[k] = g * (a[0] * b[k] + a[k] * b[0]);

@@ -44,9 +44,12 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     out.coefficients_ = C;
     out.res_ = glm::min(glm::ivec3(options.resolution), dims);
     out.scale_ = glm::vec3(dims) / glm::vec3(out.res_);
-    out.data_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z * C, 0.f);
-    if (options.nearFromLocal)  // openness weights only the split's far interpolation
-        out.open_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z, 1.f);
+    // Per point [openness, V^F_0 … V^F_{C−1}] while computed (openness 1 where skipped, and
+    // everywhere without the split: it weights only the split's far interpolation); pack() turns
+    // it into the weighted form in place.
+    const std::size_t S = std::size_t(C) + 1;
+    out.packed_.assign(std::size_t(out.res_.x) * out.res_.y * out.res_.z * S, 0.f);
+    for (std::size_t i = 0; i < out.packed_.size(); i += S) out.packed_[i] = 1.f;
     const float spacing = std::max({out.scale_.x, out.scale_.y, out.scale_.z});
 
     // Per direction: the step of r_s in index space, and Y_i(ω_k) (unweighted, for eq. 11) and
@@ -233,7 +236,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                 tbb::parallel_for(tbb::blocked_range<std::size_t>(0, P), [&](const auto& range) {
                     double d[sh::kMaxCoeffs];
                     for (std::size_t i = range.begin(); i != range.end(); ++i) {
-                        float* dst = out.data_.data() + i * std::size_t(C);
+                        float* dst = out.packed_.data() + i * S + 1;
                         for (int e = 0; e < C; ++e) d[e] = dst[e];
                         for (int j = 0; j < n; ++j) {
                             const double T = src[std::size_t(j) * P + i];
@@ -248,7 +251,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         }
         std::uint64_t shaded = 0;
         for (std::size_t i = 0; i < P; ++i) {
-            float* dst = out.data_.data() + i * std::size_t(C);
+            float* dst = out.packed_.data() + i * S + 1;
             if (!needed[i]) {
                 dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
                 std::fill(dst + 1, dst + C, 0.f);
@@ -256,17 +259,11 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
             }
             ++shaded;
             if (options.nearFromLocal)
-                out.open_[i] = std::clamp(vl[i * std::size_t(C)] * kInvSqrt4Pi, 0.f, 1.f);
+                dst[-1] = std::clamp(vl[i * std::size_t(C)] * kInvSqrt4Pi, 0.f, 1.f);
         }
         out.rays_ = shaded * std::uint64_t(N);
         out.skipped_ = P - shaded;
-        // The integration's buffers go before the packed field is made (the peak stays the
-        // field, its packed form and nothing else).
-        std::vector<float>().swap(vl);  // (`v = {}` would keep the capacity)
-        std::vector<std::uint8_t>().swap(needed);
-        std::vector<float>().swap(F);
-        std::vector<float>().swap(far);
-        out.pack();
+        arena.execute([&] { out.pack(); });
         progress.report("global visibility", 1.0);
         return out;
     }
@@ -281,7 +278,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                 for (int gy = 0; gy < out.res_.y; ++gy)
                     for (int gx = 0; gx < out.res_.x; ++gx) {
                         const glm::ivec3 g(gx, gy, gz);
-                        float* dst = out.data_.data() + out.index(g) * std::size_t(C);
+                        float* dst = out.packed_.data() + out.index(g) * S + 1;
                         const glm::vec3 x = glm::min(out.position(g), hi);
                         if (!visibilityNeeded(grid, x, spacing)) {
                             dst[0] = float(std::sqrt(4.0 * std::numbers::pi));
@@ -290,7 +287,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                         }
                         if (options.nearFromLocal) {
                             local.sample(x, vl);
-                            out.open_[out.index(g)] = std::clamp(vl[0] * kInvSqrt4Pi, 0.f, 1.f);
+                            dst[-1] = std::clamp(vl[0] * kInvSqrt4Pi, 0.f, 1.f);
                         }
                         std::fill(v, v + C, 0.0);
                         for (int k = 0; k < N; ++k) {
@@ -321,7 +318,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     if (progress.cancelled()) throw CancelledError();
     out.rays_ = raysTotal;
     out.skipped_ = skippedTotal;
-    out.pack();
+    arena.execute([&] { out.pack(); });
     progress.report("global visibility", 1.0);
     return out;
 }
@@ -342,27 +339,29 @@ void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
 }
 
 void GlobalVisibility::pack() {
-    const std::size_t C = std::size_t(coefficients_), S = C + 1;
-    const std::size_t P = std::size_t(res_.x) * res_.y * res_.z;
-    packed_.assign(P * S, 0.f);
-    for (std::size_t i = 0; i < P; ++i) {
-        const float q = product_ ? open_[i] + kBuriedWeight : 1.f;
-        float* d = packed_.data() + i * S;
-        d[0] = q;
-        for (std::size_t e = 0; e < C; ++e) d[1 + e] = q * data_[i * C + e];
-    }
-    // Rendering reads only the packed form; at() and openness() recover the rest from it.
-    std::vector<float>().swap(data_);
-    std::vector<float>().swap(open_);
+    // In place, point by point: [openness, V^F_i] → [q, q·V^F_i].
+    const std::size_t S = std::size_t(coefficients_) + 1;
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, packed_.size() / S),
+                      [&](const auto& range) {
+                          for (std::size_t i = range.begin(); i != range.end(); ++i) {
+                              float* d = packed_.data() + i * S;
+                              const float q = product_ ? d[0] + kBuriedWeight : 1.f;
+                              d[0] = q;
+                              for (std::size_t e = 1; e < S; ++e) d[e] *= q;
+                          }
+                      });
 }
 
 namespace {
 
 /// Σ_c w_c·d_c over the 8 corners, d_c = packed + off[c] (S floats each), then out = acc[1..S) /
-/// acc[0]. S a compile-time constant: the inner loop unrolls and vectorises.
-template <int S>
-void interpolatePacked(const float* packed, const std::size_t* off, const float* w, float* out) {
-    float acc[S] = {};
+/// acc[0]. kS > 0: S is that compile-time constant (the inner loop unrolls and vectorises);
+/// kS = 0: S = runtimeS.
+template <int kS>
+void interpolatePacked(const float* packed, const std::size_t* off, const float* w, float* out,
+                       int runtimeS = 0) {
+    const int S = kS > 0 ? kS : runtimeS;
+    float acc[kS > 0 ? kS : sh::kMaxCoeffs + 1] = {};
     for (int c = 0; c < 8; ++c) {
         const float* d = packed + off[c];
         for (int e = 0; e < S; ++e) acc[e] += w[c] * d[e];
@@ -399,13 +398,8 @@ void GlobalVisibility::sampleFar(const glm::vec3& p, float* out) const {
             return interpolatePacked<10>(d, off, w, out);
         case 16:
             return interpolatePacked<17>(d, off, w, out);
-        default: {
-            float acc[sh::kMaxCoeffs + 1] = {};
-            for (int c = 0; c < 8; ++c)
-                for (std::size_t e = 0; e < S; ++e) acc[e] += w[c] * d[off[c] + e];
-            const float inv = 1.f / acc[0];
-            for (std::size_t e = 1; e < S; ++e) out[e - 1] = acc[e] * inv;
-        }
+        default:
+            return interpolatePacked<0>(d, off, w, out, int(S));
     }
 }
 

@@ -151,13 +151,11 @@ class GlobalVisibility {
     std::shared_ptr<const sh::ShProduct> product_;
     int coefficients_ = 0;
     glm::ivec3 res_{0};
-    glm::vec3 scale_{1.f};     ///< voxels per grid step
-    std::vector<float> data_;  ///< V^F while the field is computed; empty after pack()
-    std::vector<float> open_;  ///< openness while computed (near/far split only); empty after
+    glm::vec3 scale_{1.f};  ///< voxels per grid step
     /// The field as sampleFar interpolates it, C + 1 floats per grid point: the weight q
     /// (openness + kBuriedWeight with the near/far split, else 1) and q·V^F_i, so the
-    /// openness-weighted mean is one plain trilinear interpolation and a division (pack(), at
-    /// the end of computeGlobalVisibility, which then frees data_ and open_).
+    /// openness-weighted mean is one plain trilinear interpolation and a division. While
+    /// computed it holds [openness, V^F_i]; pack() weights it in place at the end.
     std::vector<float> packed_;
     void pack();
     std::uint64_t rays_ = 0, skipped_ = 0;
