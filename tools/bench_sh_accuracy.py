@@ -54,6 +54,7 @@ SWEEPS = [  # (method, param, values) — one at a time from DEFAULTS
     ("sh-global", "data_reduction", [64, 8, 1]),
     ("sh-global", "radius", [4, 8, 16, 32]),
     ("sh-global", "global_resolution", [16, 32, 64, 128]),
+    ("sh-global", "global_near", ["grid", "local"]),
     ("ritschel", "subsample", [4, 2, 1]),
     ("ritschel", "coefficients", [4, 16]),
 ]
@@ -122,7 +123,8 @@ def errors(ref_png, ref_lin, png, lin):
     lr, ls = ref_lin[..., :3] @ lum, lin[..., :3] @ lum
     mean = float(lr[covered].mean()) if covered.any() else 1.0
     nrmse = float(np.sqrt(np.mean((lr - ls)[covered] ** 2)) / mean) if covered.any() else 0.0
-    return rmse, off, nrmse, d.max(axis=2)
+    bias = float(ls[covered].mean() / mean - 1.0) if covered.any() else 0.0
+    return rmse, off, nrmse, bias, d.max(axis=2)
 
 
 def main():
@@ -142,6 +144,7 @@ def main():
     if args.quick:
         global SWEEPS
         SWEEPS = [(m, "coefficients", [4, 16]) for m in ("sh-local", "sh-global", "ritschel")]
+        SWEEPS.append(("sh-global", "global_near", ["grid", "local"]))
     if args.report_only:
         args.scenes = "-"  # run no scene; keep every earlier one
     voxlight = os.path.abspath(args.voxlight)
@@ -181,15 +184,18 @@ def main():
                     effects = ["local_shadows"] if method == "sh-local" else ["global_shadows"]
                     png, exr, st, pre, wall = render(voxlight, scene, tag, args.work, method,
                                                      params, effects)
-                    rmse, off, nrmse, _ = errors(ref_png, ref_lin, png, read_exr(exr, args.work))
-                    done[key] = (rmse, off, nrmse, pre)
-                rmse, off, nrmse, pre = done[key]
+                    rmse, off, nrmse, bias, _ = errors(ref_png, ref_lin, png,
+                                                       read_exr(exr, args.work))
+                    done[key] = (rmse, off, nrmse, bias, pre)
+                rmse, off, nrmse, bias, pre = done[key]
                 rows.append({"scene": name, "method": method, "param": param, "value": v,
                              "rmse_255": round(rmse, 3), "pixels_off_pct": round(off, 2),
-                             "nrmse_linear": round(nrmse, 4), "precompute_s": round(pre, 2),
+                             "nrmse_linear": round(nrmse, 4), "mean_bias": round(bias, 4),
+                             "precompute_s": round(pre, 2),
                              "reference_nrms": round(floor, 4)})
-                print("  %-9s %-17s %4s  RMSE %6.2f/255  off>2/255 %5.1f %%  NRMSE %.3f  "
-                      "precompute %6.2f s" % (method, param, v, rmse, off, nrmse, pre), flush=True)
+                print("  %-9s %-17s %5s  RMSE %6.2f/255  off>2/255 %5.1f %%  NRMSE %.3f  "
+                      "mean %+6.1f %%  precompute %6.2f s"
+                      % (method, param, v, rmse, off, nrmse, 100 * bias, pre), flush=True)
         if args.methods or args.quick:  # partial: the picture and best row need the full sweep
             continue
         # The picture: reference | sh-local | sh-global (defaults) | sh-global (best) | error map.
@@ -198,7 +204,7 @@ def main():
         png_g = os.path.join(args.work, "%s-sh-global-rays-32.png" % name)
         png_b, exr_b, _, pre_b, _ = render(voxlight, scene, name + "-best", args.work, "sh-global",
                                            best, ["global_shadows"])
-        rmse, off, nrmse, diff = errors(ref_png, ref_lin, png_b, read_exr(exr_b, args.work))
+        rmse, off, nrmse, _, diff = errors(ref_png, ref_lin, png_b, read_exr(exr_b, args.work))
         rows.append({"scene": name, "method": "sh-global", "param": "best", "value": "all",
                      "rmse_255": round(rmse, 3), "pixels_off_pct": round(off, 2),
                      "nrmse_linear": round(nrmse, 4), "precompute_s": round(pre_b, 2),
@@ -224,8 +230,9 @@ def main():
                    if (r["scene"], r["method"]) not in ran and r["scene"] in known]
         for r in old:
             for k in ("rmse_255", "pixels_off_pct", "nrmse_linear", "precompute_s",
-                      "reference_nrms"):
-                r[k] = float(r[k])
+                      "reference_nrms", "mean_bias"):
+                if r.get(k) not in (None, ""):
+                    r[k] = float(r[k])
         rows = old + rows
     # The pictures in the order of the scene list, one saved row per scene.
     pictures = []
@@ -236,7 +243,8 @@ def main():
             w = im.size[0] // 5
             pictures.append([im.crop((i * w, 0, (i + 1) * w, im.size[1])) for i in range(5)])
     with open(csv_path, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=list(rows[0].keys()))
+        fields = list(dict.fromkeys(k for r in rows for k in r))  # rows of older runs lack some
+        w = csv.DictWriter(f, fieldnames=fields)
         w.writeheader()
         w.writerows(rows)
     report(rows, pictures, args.docs)
@@ -267,7 +275,7 @@ def report(rows, pictures, docs):
         for method, param, _ in SWEEPS:
             s = [r for r in rows if r["scene"] == scene and r["method"] == method and
                  r["param"] == param]
-            if not s:
+            if not s or param == "global_near":  # alternatives, not a growing setting
                 continue
             rise = monotone(s)
             verdicts.append("%s %s %s: %s" % (scene, method, param,
