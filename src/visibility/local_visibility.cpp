@@ -1078,6 +1078,14 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         const float f = d.endFrac[lat];
                                         if (double(e0) + double(f) >= exitSub) {
                                             pEnd = pExit;
+                                        } else if (e0 > lastSub) {
+                                            // In the partial step before the box face (a
+                                            // step component of 2, or the shifted lattice):
+                                            // past the last computed sub-step, integrated from
+                                            // there as the exit is.
+                                            pEnd = P[lastSub] +
+                                                   partial(lastSub, float(e0 - lastSub) + f,
+                                                           read(baseU, d.end[lat]), 1.f);
                                         } else {
                                             pEnd = P[e0];
                                             if (f > 0.f)
