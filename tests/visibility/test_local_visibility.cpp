@@ -10,6 +10,7 @@
 
 #include "sh/sh_basis.h"
 #include "sh/sh_projection.h"
+#include "sh/sphere_samples.h"
 #include "visibility/hierarchical_visibility.h"
 #include "visibility/local_visibility.h"
 #include "visibility/vis_test_util.h"
@@ -322,4 +323,43 @@ TEST(LocalVisibility, TheFastMarchReproducesTheReferenceMarchAtEveryPointAndDire
     }
     EXPECT_GT(compared, 1000);
     EXPECT_GT(occluded, 1000);  // the volume is not nearly empty for the rays
+}
+
+TEST(LocalVisibility, MarchedRaysInAHomogeneousBoxStopExactlyAtItsFaces) {
+    // Matter up to every face of an odd-sized box: from points near faces, edges and corners, in
+    // axis, diagonal and Fibonacci directions, a ray of radius R has transmittance
+    // exp(−σ0·min(R, d)), d the distance to the face along it — with level-0 steps and with the
+    // coarse steps of a reduced LOD (the march's last step is shortened to the box exit).
+    constexpr float kSigma = 0.05f;
+    const core::Volume v = test::makeVolume({37, 29, 23}, [](int, int, int) { return 1000; });
+    const optics::TransferFunction tf = test::rampTf(kSigma);
+    const optics::TfTable table(tf);
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const glm::dvec3 hi(36.0, 28.0, 22.0);
+    std::vector<glm::dvec3> dirs = sh::fibonacciSamples(48).directions;
+    for (int x = -1; x <= 1; ++x)
+        for (int y = -1; y <= 1; ++y)
+            for (int z = -1; z <= 1; ++z)
+                if (x || y || z) dirs.push_back(glm::normalize(glm::dvec3(x, y, z)));
+    constexpr double kBoxTol = 1e-4;  // σt is constant: float rounding only
+    for (const double reduction : {1.0, 8.0})
+        for (const double radius : {6.0, 100.0}) {
+            const auto grid = std::make_shared<const MultiresGrid>(
+                pyr,
+                selectLod(*pyr, tf, table, LodBudget::fromReduction(reduction, v.voxelCount())));
+            for (const glm::dvec3 o : {glm::dvec3(0.0), glm::dvec3(36.0, 28.0, 22.0),
+                                       glm::dvec3(35.5, 0.25, 11.0), glm::dvec3(1.0, 27.0, 21.5),
+                                       glm::dvec3(18.0, 14.0, 0.5), glm::dvec3(33.7, 26.1, 19.9)})
+                for (const glm::dvec3& w : dirs) {
+                    double d = radius;
+                    for (int a = 0; a < 3; ++a) {
+                        if (w[a] > 1e-12) d = std::min(d, (hi[a] - o[a]) / w[a]);
+                        if (w[a] < -1e-12) d = std::min(d, -o[a] / w[a]);
+                    }
+                    EXPECT_NEAR(rayTransmittance(*grid, table, glm::vec3(o), w, radius),
+                                std::exp(-double(kSigma) * d), kBoxTol)
+                        << "1:" << reduction << " R " << radius << " from " << o.x << "," << o.y
+                        << "," << o.z << " along " << w.x << "," << w.y << "," << w.z;
+                }
+        }
 }
