@@ -201,11 +201,25 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                             const glm::vec3 q = glm::min(out.position(g), hi) + sk;
                             if (inside(q)) {
                                 const glm::vec3 u = glm::vec3(g) + d;
-                                if (u[a] >= 0.f && u[a] <= float(res[a] - 1)) {
+                                bool inGrid = true;
+                                for (int e = 0; e < 3; ++e)
+                                    inGrid = inGrid && u[e] >= 0.f && u[e] <= float(res[e] - 1);
+                                if (inGrid) {
                                     t = readF(u);
-                                } else {  // past the last plane: its piece, then the box
-                                    local.sample(q, vq);
-                                    t = piece(vq);
+                                } else {
+                                    // Inside the box but beyond its outermost grid points on
+                                    // some axis (within half a grid step of a face): a clamped
+                                    // read would take F of points up to a step farther from
+                                    // that face, where rays leaving through it have farther
+                                    // to go. The rest of the chain piece by piece instead, as
+                                    // eq. 11 (past the last plane along the dominant axis
+                                    // that is one piece, then the box).
+                                    double T = 1.0;
+                                    for (glm::vec3 r = q; inside(r) && T >= kGlobalStopT; r += sk) {
+                                        local.sample(r, vq);
+                                        T *= double(piece(vq));
+                                    }
+                                    t = float(T);
                                 }
                             }
                         }

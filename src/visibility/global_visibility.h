@@ -35,9 +35,12 @@
 // each takes its first piece from the local field sampled once at the point (one SH dot per
 // direction) and the rest by trilinear interpolation of F_k at x + r_s·ω_k, in planes already
 // done (r_s·|ω_a| ≥ 1 grid step along the dominant axis a; otherwise the piecewise integration
-// runs). Where x + r_s·ω_k is inside the box but past the last grid plane, its piece is read from
-// the local field (the next one is outside the box). The far part is F_k(x + r_s·ω_k). Cost: one
-// local-field sample per grid point and one 1-float trilinear read per point and direction,
+// runs). Where x + r_s·ω_k is inside the box but beyond the outermost grid points on some axis
+// (within half a grid step of a face; past the last plane along a, one piece before the box) the
+// rest of that ray is integrated piece by piece from the local field as eq. 11 does — a read
+// clamped onto the outermost points would take F from up to a step farther from the face (0.16
+// off per coefficient at a homogeneous cube's edges, tested). The far part is F_k(x + r_s·ω_k).
+// Cost: one local-field sample per grid point and one 1-float trilinear read per point and direction,
 // against up to (box length / r_s) samples per ray; the price is that the far field is read
 // through the grid's interpolation at every hop, which spreads a shadow's edge by up to a grid
 // step per hop (measured against the piecewise field and the path tracer in the README).

@@ -88,6 +88,30 @@ TEST(GlobalVisibility, InAHomogeneousCubeMatchesTheProjectedClosedForm) {
         float lv[9];
         local->sample(x, lv);
         EXPECT_LT(got[0], lv[0] - 0.5f);
+        // Every grid point, the faces, edges and corners included (where rays leave within a
+        // piece and the recursion's far end can lie beyond the outermost grid points): the same
+        // bound. Measured: piecewise 0.043, recursive 0.052 (0.158 when the recursion read F
+        // clamped onto the outermost points there).
+        double worst = 0.0;
+        for (int k = 0; k < 12; ++k)
+            for (int j = 0; j < 12; ++j)
+                for (int i = 0; i < 12; ++i) {
+                    const glm::vec3 p = g.position({i, j, k});
+                    const auto e = sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
+                        double d = INFINITY;
+                        for (int a = 0; a < 3; ++a) {
+                            if (w[a] > 0) d = std::min(d, (47.0 - p[a]) / w[a]);
+                            if (w[a] < 0) d = std::min(d, -double(p[a]) / w[a]);
+                        }
+                        return std::exp(-double(kSigma) * d);
+                    });
+                    float at[9];
+                    g.sample(p, at);
+                    for (int c = 0; c < 9; ++c)
+                        worst = std::max(worst, std::abs(double(at[c]) - e[std::size_t(c)]));
+                }
+        std::printf("cube, every grid point: largest |V_i - closed form| %.4f\n", worst);
+        EXPECT_LT(worst, kGlobalTol);
     }
 }
 
