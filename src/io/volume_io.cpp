@@ -1679,6 +1679,12 @@ void checkVtiFile(const fs::path& path) {
                                 last = readWord(w3, 2);
             if (blocks == 0 || blockSize == 0 || blocks > remaining / word)
                 fail("compressed array header claims " + std::to_string(blocks) + " blocks");
+            // VTK finds a byte's block by dividing by the block size: a last block larger than
+            // the others sends it past the header's block list (it read sizes from the heap and
+            // allocated terabytes).
+            if (last > blockSize)
+                fail("compressed array's last block of " + std::to_string(last) +
+                     " bytes is larger than its block size " + std::to_string(blockSize));
             const std::uint64_t total = (blocks - 1) * blockSize + (last ? last : blockSize);
             if (total != expected)
                 fail("compressed array holds " + std::to_string(total) +

@@ -719,6 +719,24 @@ TEST(BadInput, FuzzVtiAppendedDataWithoutMarkerIsRefusedQuickly) {
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
 }
 
+TEST(BadInput, FuzzVtiCompressedLastBlockLargerThanItsBlockSizeIsRefusedBeforeVtk) {
+    // fuzz_vti: a zlib header of 1 block of 32 bytes whose last (only) block holds 512 — the
+    // extent's size, so the totals agreed — made VTK look up blocks 1…15 past its list and
+    // allocate a size read from the heap (ASan: 106 TB); the release build happened to fail.
+    test::TempDir tmp;
+    writeText(tmp / "b.vti",
+              "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"0.1\" "
+              "byte_order=\"LittleEndian\" header_type=\"UInt32\" "
+              "compressor=\"vtkZLibDataCompressor\">\n<ImageData WholeExtent=\"0 7 0 7 0 7\" "
+              "Origin=\"0 0 0\" Spacing=\"1 1 1\">\n<Piece Extent=\"0 7 0 7 0 7\">\n"
+              "<PointData Scalars=\"s\"><DataArray type=\"UInt8\" Name=\"s\" format=\"appended\" "
+              "offset=\"0\"/></PointData>\n<CellData></CellData>\n</Piece>\n</ImageData>\n"
+              "<AppendedData encoding=\"base64\">\n_AQAAACAAAAAAAgAAQwAAAA==eF5jYKAMNFAIHLCBOT0O"
+              "DvnzHFYH19TAaZg4GsBwkGEkEGsy8H7732rBpqAAo2HihIE8hJp31RWFhokPMwAAK8g/1w==\n"
+              "</AppendedData>\n</VTKFile>\n");
+    expectInputError(tmp / "b.vti", "AppendedData", {"last block of 512 bytes", "block size 32"});
+}
+
 TEST(BadInput, FuzzVtiZeroOrNonFiniteSpacingAndOriginAreRefused) {
     // fuzz_vti: Spacing="1 0 1" reached an internal check (exit 1) instead of an input error; and
     // VTK replaced an attribute it could not parse ("1 nan 1") by its default without a word.
