@@ -770,7 +770,9 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                                       glm::dvec3(v) * (double(j) / d.q[half])));
         dirs.push_back(d);
     }
-    std::vector<float> flat(std::size_t(dims.x) * dims.y * dims.z);
+    // Not zero-filled: every element is written below, in parallel (a value-initialised vector
+    // zeroed the volume's 4 bytes per voxel on one thread first, page faults included).
+    const std::unique_ptr<float[]> flat(new float[std::size_t(dims.x) * dims.y * dims.z]);
     {
         tbb::task_arena copyArena(options.threads > 0 ? options.threads
                                                       : tbb::task_arena::automatic);
@@ -945,8 +947,14 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 const bool entered = tStart > first - reachSteps;
                                 const std::size_t subs =
                                     std::size_t(want - tStart) * std::size_t(q) + 1;
-                                P.assign(subs, 0.0);
-                                S.assign(subs, 0.f);
+                                // Grown, never cleared: the walk below writes P and S at every
+                                // sub-step it reads (P[0] is the line's origin; S only where a
+                                // step is read, and `unread` below marks the rest).
+                                if (P.size() < subs) {
+                                    P.resize(subs);
+                                    S.resize(subs);
+                                }
+                                P[0] = 0.0;
                                 stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
                                 const std::vector<Stencil>& sten = d.stencil[lat];
                                 // The voxel index of lattice point t's floor: base0 + t·delta.
