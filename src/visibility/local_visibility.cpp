@@ -784,6 +784,24 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             });
         });
     }
+    // ValueField::value's trilinear read (the same arithmetic, so the same value) from the flat
+    // copy: no block lookup per read (a dense step's sub-steps read at arbitrary positions).
+    const glm::vec3 topF(dims - 1);
+    const glm::ivec3 lastCornerF = glm::max(dims - 2, glm::ivec3(0));
+    auto flatValue = [&](const glm::vec3& pIn) {
+        const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), topF);
+        const glm::ivec3 c = glm::min(glm::ivec3(p), lastCornerF);
+        const glm::vec3 f = p - glm::vec3(c);
+        const std::ptrdiff_t di = c.x < int(topF.x) ? 1 : 0, dj = c.y < int(topF.y) ? sy : 0,
+                             dk = c.z < int(topF.z) ? sz : 0;
+        const float* d = flat.get() + (c.x + sy * c.y + sz * std::ptrdiff_t(c.z));
+        const float v000 = d[0], v100 = d[di], v010 = d[dj], v110 = d[dj + di], v001 = d[dk],
+                    v101 = d[dk + di], v011 = d[dk + dj], v111 = d[dk + dj + di];
+        const float a0 = v000 + f.x * (v100 - v000), a1 = v010 + f.x * (v110 - v010);
+        const float a2 = v001 + f.x * (v101 - v001), a3 = v011 + f.x * (v111 - v011);
+        const float b0 = a0 + f.y * (a1 - a0), b1 = a2 + f.y * (a3 - a2);
+        return b0 + f.z * (b1 - b0);
+    };
     auto read = [&](std::ptrdiff_t base, const Stencil& st) {
         float value = 0.f;
         for (int c = 0; c < st.n; ++c)
@@ -970,7 +988,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 };
                                 auto along = [&](const glm::vec3& from, float sign) {
                                     return [&, from, sign](float mm) {
-                                        return field.value(from + (sign * mm / d.stepMm) * d.dv);
+                                        return flatValue(from + (sign * mm / d.stepMm) * d.dv);
                                     };
                                 };
                                 glm::vec3 at = position(tStart);
@@ -1035,7 +1053,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         unread ? latticeValue(tStart + int(e0 / std::size_t(q)))
                                                : S[e0];
                                     if (std::isnan(sEnd))
-                                        sEnd = field.value(from + (sign * f / float(q)) * d.dv);
+                                        sEnd = flatValue(from + (sign * f / float(q)) * d.dv);
                                     ++samples;
                                     if (transparent(s0, sEnd)) return 0.0;
                                     return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
