@@ -63,14 +63,13 @@ TEST(GlobalVisibility, InAHomogeneousCubeMatchesTheProjectedClosedForm) {
         const glm::vec3 x = g.position(gp);
         EXPECT_EQ(x, glm::vec3(25.5f, 21.5f, 29.5f));
         const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
-        const auto expected = sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
-            double d = INFINITY;
-            for (int a = 0; a < 3; ++a) {
-                if (w[a] > 0) d = std::min(d, (47.0 - x[a]) / w[a]);
-                if (w[a] < 0) d = std::min(d, -double(x[a]) / w[a]);
-            }
-            return std::exp(-double(kSigma) * d);
-        });
+        auto closedForm = [&](const glm::vec3& at) {
+            return sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
+                return std::exp(-double(kSigma) *
+                                test::boxExitDistance(glm::dvec3(at), w, glm::dvec3(47.0)));
+            });
+        };
+        const auto expected = closedForm(x);
         // The last piece's band-2 truncation: it spans [e^(−σ0·r_s), 1] = [0.85, 1], and the ringing of
         // a 9-coefficient expansion of such a step in ω stays within ≈ 0.15·0.2 = 0.03 per direction;
         // through the projection (Cauchy–Schwarz, Σ w = 4π) ≤ 0.03·√(4π) ≈ 0.11 per coefficient.
@@ -97,14 +96,7 @@ TEST(GlobalVisibility, InAHomogeneousCubeMatchesTheProjectedClosedForm) {
             for (int j = 0; j < 12; ++j)
                 for (int i = 0; i < 12; ++i) {
                     const glm::vec3 p = g.position({i, j, k});
-                    const auto e = sh::projectFunction(2, dirs, [&](const glm::dvec3& w) {
-                        double d = INFINITY;
-                        for (int a = 0; a < 3; ++a) {
-                            if (w[a] > 0) d = std::min(d, (47.0 - p[a]) / w[a]);
-                            if (w[a] < 0) d = std::min(d, -double(p[a]) / w[a]);
-                        }
-                        return std::exp(-double(kSigma) * d);
-                    });
+                    const auto e = closedForm(p);
                     float at[9];
                     g.sample(p, at);
                     for (int c = 0; c < 9; ++c)

@@ -344,12 +344,7 @@ TEST(HierarchicalVisibility, RaysInAHomogeneousBoxLeaveItExactlyAtItsFaces) {
          {glm::dvec3(0.0), glm::dvec3(36.0, 28.0, 22.0), glm::dvec3(35.5, 0.25, 11.0),
           glm::dvec3(1.0, 27.0, 21.5), glm::dvec3(18.0, 14.0, 0.5), glm::dvec3(33.7, 26.1, 19.9)})
         for (const glm::dvec3& w : dirs) {
-            double d = INFINITY;
-            for (int a = 0; a < 3; ++a) {
-                if (w[a] > 1e-12) d = std::min(d, (hi[a] - o[a]) / w[a]);
-                if (w[a] < -1e-12) d = std::min(d, -o[a] / w[a]);
-            }
-            const double expected = std::exp(-double(kSigma) * d);
+            const double expected = std::exp(-double(kSigma) * test::boxExitDistance(o, w, hi));
             for (const bool hierarchical : {false, true}) {
                 const double got =
                     hierarchicalTransmittance(*pyr, glm::vec3(o), w, INFINITY, hierarchical);

@@ -233,12 +233,9 @@ TEST(LineSweep, RaysEndingJustBeforeTheBoxFaceKeepTheirDepth) {
                             if (x != glm::min(x, top)) continue;  // clamped onto the volume
                             const auto expected =
                                 sh::projectFunction(1, vis.directions(), [&](const glm::dvec3& w) {
-                                    double d = 8.0;
-                                    for (int a = 0; a < 3; ++a) {
-                                        if (w[a] > 0) d = std::min(d, (23.0 - x[a]) / w[a]);
-                                        if (w[a] < 0) d = std::min(d, -double(x[a]) / w[a]);
-                                    }
-                                    return std::exp(-double(kSigma) * d);
+                                    return std::exp(-double(kSigma) *
+                                                    test::boxExitDistance(glm::dvec3(x), w,
+                                                                          glm::dvec3(23.0), 8.0));
                                 });
                             for (int c = 0; c < 4; ++c)
                                 worst = std::max(

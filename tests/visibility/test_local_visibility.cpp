@@ -351,13 +351,9 @@ TEST(LocalVisibility, MarchedRaysInAHomogeneousBoxStopExactlyAtItsFaces) {
                                        glm::dvec3(35.5, 0.25, 11.0), glm::dvec3(1.0, 27.0, 21.5),
                                        glm::dvec3(18.0, 14.0, 0.5), glm::dvec3(33.7, 26.1, 19.9)})
                 for (const glm::dvec3& w : dirs) {
-                    double d = radius;
-                    for (int a = 0; a < 3; ++a) {
-                        if (w[a] > 1e-12) d = std::min(d, (hi[a] - o[a]) / w[a]);
-                        if (w[a] < -1e-12) d = std::min(d, -o[a] / w[a]);
-                    }
                     EXPECT_NEAR(rayTransmittance(*grid, table, glm::vec3(o), w, radius),
-                                std::exp(-double(kSigma) * d), kBoxTol)
+                                std::exp(-double(kSigma) * test::boxExitDistance(o, w, hi, radius)),
+                                kBoxTol)
                         << "1:" << reduction << " R " << radius << " from " << o.x << "," << o.y
                         << "," << o.z << " along " << w.x << "," << w.y << "," << w.z;
                 }

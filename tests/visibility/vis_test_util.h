@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #pragma once
 // Small volumes and TFs for the visibility tests.
+#include <algorithm>
+#include <cmath>
 #include <functional>
 #include <memory>
 
@@ -10,6 +12,18 @@
 #include "visibility/multires_grid.h"
 
 namespace voxlight::test {
+
+/// Distance from index point o along w (1 mm voxels: index units) to the face of the box [0, hi]
+/// it leaves through, at most `cap`: a homogeneous box's closed forms.
+inline double boxExitDistance(const glm::dvec3& o, const glm::dvec3& w, const glm::dvec3& hi,
+                              double cap = INFINITY) {
+    double d = cap;
+    for (int a = 0; a < 3; ++a) {
+        if (w[a] > 1e-12) d = std::min(d, (hi[a] - o[a]) / w[a]);
+        if (w[a] < -1e-12) d = std::min(d, -o[a] / w[a]);
+    }
+    return d;
+}
 
 /// An int16 volume of `dims` (1 mm voxels) with value f(i, j, k).
 inline core::Volume makeVolume(const glm::ivec3& dims, const std::function<int(int, int, int)>& f) {
