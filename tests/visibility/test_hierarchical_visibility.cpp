@@ -330,11 +330,7 @@ TEST(HierarchicalVisibility, RaysInAHomogeneousBoxLeaveItExactlyAtItsFaces) {
     const core::Volume v = test::makeVolume({37, 29, 23}, [](int, int, int) { return 1000; });
     const auto pyr = opacity(v, test::rampTf(kSigma));
     const glm::dvec3 hi(36.0, 28.0, 22.0);
-    std::vector<glm::dvec3> dirs = sh::fibonacciSamples(48).directions;
-    for (int x = -1; x <= 1; ++x)
-        for (int y = -1; y <= 1; ++y)
-            for (int z = -1; z <= 1; ++z)
-                if (x || y || z) dirs.push_back(glm::normalize(glm::dvec3(x, y, z)));
+    const std::vector<glm::dvec3> dirs = test::boxTestDirections();
     // σt is constant: only float rounding and the exit's position remain (the slab test's kinks
     // are absent).
     constexpr double kBoxTol = 1e-4;

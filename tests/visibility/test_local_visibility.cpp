@@ -336,11 +336,7 @@ TEST(LocalVisibility, MarchedRaysInAHomogeneousBoxStopExactlyAtItsFaces) {
     const optics::TfTable table(tf);
     auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
     const glm::dvec3 hi(36.0, 28.0, 22.0);
-    std::vector<glm::dvec3> dirs = sh::fibonacciSamples(48).directions;
-    for (int x = -1; x <= 1; ++x)
-        for (int y = -1; y <= 1; ++y)
-            for (int z = -1; z <= 1; ++z)
-                if (x || y || z) dirs.push_back(glm::normalize(glm::dvec3(x, y, z)));
+    const std::vector<glm::dvec3> dirs = test::boxTestDirections();
     constexpr double kBoxTol = 1e-4;  // σt is constant: float rounding only
     for (const double reduction : {1.0, 8.0})
         for (const double radius : {6.0, 100.0}) {

@@ -5,10 +5,12 @@
 #include <cmath>
 #include <functional>
 #include <memory>
+#include <vector>
 
 #include "core/hash.h"
 #include "core/volume.h"
 #include "optics/transfer_function.h"
+#include "sh/sphere_samples.h"
 #include "visibility/multires_grid.h"
 
 namespace voxlight::test {
@@ -23,6 +25,16 @@ inline double boxExitDistance(const glm::dvec3& o, const glm::dvec3& w, const gl
         if (w[a] < -1e-12) d = std::min(d, -o[a] / w[a]);
     }
     return d;
+}
+
+/// Directions for box-face tests: 48 Fibonacci directions and the 26 axis and diagonal ones.
+inline std::vector<glm::dvec3> boxTestDirections() {
+    std::vector<glm::dvec3> dirs = sh::fibonacciSamples(48).directions;
+    for (int x = -1; x <= 1; ++x)
+        for (int y = -1; y <= 1; ++y)
+            for (int z = -1; z <= 1; ++z)
+                if (x || y || z) dirs.push_back(glm::normalize(glm::dvec3(x, y, z)));
+    return dirs;
 }
 
 /// An int16 volume of `dims` (1 mm voxels) with value f(i, j, k).
