@@ -581,6 +581,17 @@ void checkNiftiHeader(const fs::path& path) {
                          "is " + std::to_string(i32(0, false)) +
                              ", not 348 (NIfTI-1/Analyze) or 540 (NIfTI-2): not a NIfTI header",
                          "the file is damaged or not NIfTI");
+    // VTK takes the layout from the magic, not from sizeof_hdr: "n+2"/"ni2" (…"9") and
+    // "\r\n\032\n" at byte 4 is NIfTI-2 whatever sizeof_hdr says (fuzz_nifti_gz: sizeof_hdr 348
+    // with that magic was read as a NIfTI-2 header and crashed VTK).
+    const bool magic2 = got >= 12 && h[4] == 'n' && (h[5] == '+' || h[5] == 'i') && h[6] >= '2' &&
+                        h[6] <= '9' && h[7] == 0 && std::memcmp(h + 8, "\r\n\032\n", 4) == 0;
+    if (magic2 != v2)
+        throw InputError(path.string(), "sizeof_hdr",
+                         "is " + std::to_string(v1 ? kNifti1HeaderSize : kNifti2HeaderSize) +
+                             (magic2 ? " but the magic at byte 4 says NIfTI-2 (540)"
+                                     : " but the NIfTI-2 magic is missing at byte 4"),
+                         "the header is damaged; repair it (e.g. with nibabel)");
     const bool swap = i32(0, false) != (v1 ? kNifti1HeaderSize : kNifti2HeaderSize);
     if (got < (v1 ? kNifti1HeaderSize : kNifti2HeaderSize))
         throw InputError(path.string(), "header",

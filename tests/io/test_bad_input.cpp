@@ -692,6 +692,22 @@ TEST(BadInput, FuzzNiftiHeaderSizeRankAndDataLengthCheckedBeforeVtk) {
     expectInputError(tmp / "dims.nii", "data", {"header claims"});
 }
 
+TEST(BadInput, FuzzNiftiTwoMagicInAOneHeaderIsRefusedBeforeVtk) {
+    // fuzz_nifti_gz: a NIfTI-1 header (sizeof_hdr 348) whose unused data_type bytes held the
+    // NIfTI-2 magic: VTK takes the layout from the magic, read a 540-byte header out of it and
+    // crashed (SEGV in RequestInformation, the release build too). The same bytes in a file named
+    // .nii.gz (gzopen reads plain data too) as the fuzzer gave them.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    for (const char* name : {"m.nii", "m.nii.gz"}) {
+        io::writeVolume(core::makePhantom("torso", o), tmp / "plain.nii");
+        fs::rename(tmp / "plain.nii", tmp / name);
+        patchBytes(tmp / name, 4, "ni2\0\r\n\032\n", 8);
+        expectInputError(tmp / name, "sizeof_hdr", {"348", "magic at byte 4 says NIfTI-2"});
+    }
+}
+
 TEST(BadInput, FuzzRawWithNegativeDims) {
     // fuzz_raw: dims of -2^31 overflowed computing the extent (UBSan).
     test::TempDir tmp;
