@@ -73,6 +73,19 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     auto inside = [&](const glm::vec3& p) {
         return p.x >= 0.f && p.y >= 0.f && p.z >= 0.f && p.x <= hi.x && p.y <= hi.y && p.z <= hi.z;
     };
+    // Eq. 11 from p along direction k: pieces of r_s read from the local field, front to back,
+    // until the box or kGlobalStopT (vl: C floats of scratch).
+    auto chain = [&](glm::vec3 p, int k, float* vl) {
+        const float* yk = y.data() + std::size_t(k) * C;
+        double T = 1.0;
+        for (; inside(p) && T >= kGlobalStopT; p += step[std::size_t(k)]) {
+            local.sample(p, vl);
+            float t = 0.f;
+            for (int i = 0; i < C; ++i) t += vl[i] * yk[i];
+            T *= std::min(std::max(double(t), 0.0), 1.0);
+        }
+        return T;
+    };
 
     std::atomic<std::uint64_t> raysTotal{0}, skippedTotal{0};
     std::atomic<int> done{0};
@@ -214,12 +227,7 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                                     // to go. The rest of the chain piece by piece instead, as
                                     // eq. 11 (past the last plane along the dominant axis
                                     // that is one piece, then the box).
-                                    double T = 1.0;
-                                    for (glm::vec3 r = q; inside(r) && T >= kGlobalStopT; r += sk) {
-                                        local.sample(r, vq);
-                                        T *= double(piece(vq));
-                                    }
-                                    t = float(T);
+                                    t = float(chain(q, k, vq));
                                 }
                             }
                         }
@@ -305,17 +313,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                         }
                         std::fill(v, v + C, 0.0);
                         for (int k = 0; k < N; ++k) {
-                            // Piecewise integration in steps of r_s (eq. 11), front to back,
-                            // from the second piece on when the first is the local field's.
-                            const float* yk = y.data() + std::size_t(k) * C;
-                            double T = 1.0;
-                            for (glm::vec3 p = x + float(firstPiece) * step[std::size_t(k)];
-                                 inside(p) && T >= kGlobalStopT; p += step[std::size_t(k)]) {
-                                local.sample(p, vl);
-                                float t = 0.f;
-                                for (int i = 0; i < C; ++i) t += vl[i] * yk[i];
-                                T *= std::min(std::max(double(t), 0.0), 1.0);
-                            }
+                            // Piecewise integration in steps of r_s (eq. 11), from the second
+                            // piece on when the first is the local field's.
+                            const double T =
+                                chain(x + float(firstPiece) * step[std::size_t(k)], k, vl);
                             const double* w = wy.data() + std::size_t(k) * C;
                             for (int i = 0; i < C; ++i) v[i] += T * w[i];
                         }

@@ -47,6 +47,31 @@ void checkOptions(const LocalVisibilityOptions& o) {
 /// The value a visibility ray reads at a point: trilinear in the volume's voxels (the block
 /// pyramid's level 0), i.e. the continuous model itself, whatever the blocks' levels — the LOD
 /// sets where visibility is stored and how long the steps are, not what matter the rays see.
+/// The trilinear cell of continuous voxel index p in a volume whose largest index is `top` and
+/// largest lower cell corner `lastCorner`: p clamped onto the volume, its lower corner c, the
+/// fraction f, and per axis 1 where the upper corner exists (0 on an axis of one voxel).
+struct TrilinearCell {
+    glm::ivec3 c, step;
+    glm::vec3 f;
+    [[gnu::always_inline]] TrilinearCell(const glm::vec3& pIn, const glm::vec3& top,
+                                         const glm::ivec3& lastCorner) {
+        const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), top);
+        c = glm::min(glm::ivec3(p), lastCorner);
+        f = p - glm::vec3(c);
+        step = glm::ivec3(c.x < int(top.x) ? 1 : 0, c.y < int(top.y) ? 1 : 0,
+                          c.z < int(top.z) ? 1 : 0);
+    }
+    /// The blend of the corner values (v000 … v111, x fastest): one arithmetic for every reader
+    /// of the continuous model, so the same value wherever it is read from.
+    [[gnu::always_inline]] float blend(float v000, float v100, float v010, float v110, float v001,
+                                       float v101, float v011, float v111) const {
+        const float a0 = v000 + f.x * (v100 - v000), a1 = v010 + f.x * (v110 - v010);
+        const float a2 = v001 + f.x * (v101 - v001), a3 = v011 + f.x * (v111 - v011);
+        const float b0 = a0 + f.y * (a1 - a0), b1 = a2 + f.y * (a3 - a2);
+        return b0 + f.z * (b1 - b0);
+    }
+};
+
 /// `stored` says whether the point's owner block is stored (a step between two points in blocks
 /// at kNone integrates nothing: every value read there is transparent). With the TF table for
 /// the steps' pre-integrated σt.
@@ -76,11 +101,9 @@ struct ValueField {
 
     /// The trilinear value alone (the line sweep needs no owner block).
     [[gnu::always_inline]] float value(const glm::vec3& pIn) const {
-        const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), top);
-        const glm::ivec3 c = glm::min(glm::ivec3(p), lastCorner);
-        const glm::vec3 f = p - glm::vec3(c);
-        const int di = c.x < int(top.x) ? 1 : 0, dj = c.y < int(top.y) ? 1 : 0,
-                  dk = c.z < int(top.z) ? 1 : 0;
+        const TrilinearCell cell(pIn, top, lastCorner);
+        const glm::ivec3& c = cell.c;
+        const int di = cell.step.x, dj = cell.step.y, dk = cell.step.z;
         float v000, v100, v010, v110, v001, v101, v011, v111;
         if ((c.x & 15) != 15 && (c.y & 15) != 15 && (c.z & 15) != 15) {
             // All eight corners in one block (the common case).
@@ -106,10 +129,7 @@ struct ValueField {
             v011 = voxel(c.x, c.y + dj, c.z + dk);
             v111 = voxel(c.x + di, c.y + dj, c.z + dk);
         }
-        const float a0 = v000 + f.x * (v100 - v000), a1 = v010 + f.x * (v110 - v010);
-        const float a2 = v001 + f.x * (v101 - v001), a3 = v011 + f.x * (v111 - v011);
-        const float b0 = a0 + f.y * (a1 - a0), b1 = a2 + f.y * (a3 - a2);
-        return b0 + f.z * (b1 - b0);
+        return cell.blend(v000, v100, v010, v110, v001, v101, v011, v111);
     }
 };
 
@@ -784,23 +804,15 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             });
         });
     }
-    // ValueField::value's trilinear read (the same arithmetic, so the same value) from the flat
+    // ValueField::value's trilinear read (its cell and blend, so the same value) from the flat
     // copy: no block lookup per read (a dense step's sub-steps read at arbitrary positions).
-    const glm::vec3 topF(dims - 1);
-    const glm::ivec3 lastCornerF = glm::max(dims - 2, glm::ivec3(0));
-    auto flatValue = [&](const glm::vec3& pIn) {
-        const glm::vec3 p = glm::clamp(pIn, glm::vec3(0.f), topF);
-        const glm::ivec3 c = glm::min(glm::ivec3(p), lastCornerF);
-        const glm::vec3 f = p - glm::vec3(c);
-        const std::ptrdiff_t di = c.x < int(topF.x) ? 1 : 0, dj = c.y < int(topF.y) ? sy : 0,
-                             dk = c.z < int(topF.z) ? sz : 0;
+    auto flatValue = [&](const glm::vec3& p) {
+        const TrilinearCell cell(p, field.top, field.lastCorner);
+        const glm::ivec3& c = cell.c;
+        const std::ptrdiff_t di = cell.step.x, dj = cell.step.y * sy, dk = cell.step.z * sz;
         const float* d = flat.get() + (c.x + sy * c.y + sz * std::ptrdiff_t(c.z));
-        const float v000 = d[0], v100 = d[di], v010 = d[dj], v110 = d[dj + di], v001 = d[dk],
-                    v101 = d[dk + di], v011 = d[dk + dj], v111 = d[dk + dj + di];
-        const float a0 = v000 + f.x * (v100 - v000), a1 = v010 + f.x * (v110 - v010);
-        const float a2 = v001 + f.x * (v101 - v001), a3 = v011 + f.x * (v111 - v011);
-        const float b0 = a0 + f.y * (a1 - a0), b1 = a2 + f.y * (a3 - a2);
-        return b0 + f.z * (b1 - b0);
+        return cell.blend(d[0], d[di], d[dj], d[dj + di], d[dk], d[dk + di], d[dk + dj],
+                          d[dk + dj + di]);
     };
     auto read = [&](std::ptrdiff_t base, const Stencil& st) {
         float value = 0.f;
