@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "visibility/local_visibility.h"
 
+#include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
@@ -42,6 +43,12 @@ void checkOptions(const LocalVisibilityOptions& o) {
     if (!(o.radiusVoxels > 0.0) || !std::isfinite(o.radiusVoxels))
         throw InputError("local visibility", "radius", "must be a finite number of voxels > 0",
                          "give e.g. 16");
+    if (o.sweepGroupBlocks != 0 && o.sweepGroupBlocks != 1 && o.sweepGroupBlocks != 2 &&
+        o.sweepGroupBlocks != 4 && o.sweepGroupBlocks != 8)
+        throw InputError(
+            "local visibility", "sweepGroupBlocks",
+            "must be 0 (automatic), 1, 2, 4 or 8, got " + std::to_string(o.sweepGroupBlocks),
+            "leave it at 0");
 }
 
 /// The value a visibility ray reads at a point: trilinear in the volume's voxels (the block
@@ -790,19 +797,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                                       glm::dvec3(v) * (double(j) / d.q[half])));
         dirs.push_back(d);
     }
-    // Not zero-filled: every element is written below, in parallel (a value-initialised vector
-    // zeroed the volume's 4 bytes per voxel on one thread first, page faults included).
-    const std::unique_ptr<float[]> flat(new float[std::size_t(dims.x) * dims.y * dims.z]);
+    // The pyramid's flat copy of the voxels (made once per pyramid, in this arena's threads).
+    const float* flat = nullptr;
     {
         tbb::task_arena copyArena(options.threads > 0 ? options.threads
                                                       : tbb::task_arena::automatic);
-        copyArena.execute([&] {
-            tbb::parallel_for(0, dims.z, [&](int z) {
-                for (int y = 0; y < dims.y; ++y)
-                    for (int x = 0; x < dims.x; ++x)
-                        flat[std::size_t(x + sy * y + sz * z)] = field.voxel(x, y, z);
-            });
-        });
+        copyArena.execute([&] { flat = pyr.flatVoxels(); });
     }
     // ValueField::value's trilinear read (its cell and blend, so the same value) from the flat
     // copy: no block lookup per read (a dense step's sub-steps read at arbitrary positions).
@@ -810,7 +810,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         const TrilinearCell cell(p, field.top, field.lastCorner);
         const glm::ivec3& c = cell.c;
         const std::ptrdiff_t di = cell.step.x, dj = cell.step.y * sy, dk = cell.step.z * sz;
-        const float* d = flat.get() + (c.x + sy * c.y + sz * std::ptrdiff_t(c.z));
+        const float* d = flat + (c.x + sy * c.y + sz * std::ptrdiff_t(c.z));
         return cell.blend(d[0], d[di], d[dj], d[dj + di], d[dk], d[dk + di], d[dk + dj],
                           d[dk + dj + di]);
     };
@@ -831,144 +831,277 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     auto cellIndex = [&](int x, int y, int z) {
         return std::size_t(x) + std::size_t(cells.x) * (std::size_t(y) + std::size_t(cells.y) * z);
     };
-    for (int z = 0; z < cells.z; ++z)
-        for (int y = 0; y < cells.y; ++y)
-            for (int x = 0; x < cells.x; ++x) {
-                bool all = true;
-                for (int dz = -1; dz <= 1 && all; ++dz)
-                    for (int dy = -1; dy <= 1 && all; ++dy)
-                        for (int dx = -1; dx <= 1 && all; ++dx) {
-                            const int cx = x + dx, cy = y + dy, cz = z + dz;
-                            if (cx < 0 || cy < 0 || cz < 0 || cx >= cells.x || cy >= cells.y ||
-                                cz >= cells.z)
-                                continue;  // outside the volume: nothing there
-                            all = !grid.cellVisible(cellIndex(cx, cy, cz));
-                        }
-                quiet[cellIndex(x, y, z)] = all;
-            }
+    // Separably: transparent along x over the cell and its neighbours, then that along y, then
+    // along z (a neighbour outside the volume counts as transparent: nothing there).
+    for (std::size_t c = 0; c < quiet.size(); ++c) quiet[c] = !grid.cellVisible(c);
+    {
+        std::vector<std::uint8_t> pass(quiet.size());
+        const std::ptrdiff_t stride[3] = {1, cells.x, std::ptrdiff_t(cells.x) * cells.y};
+        for (int a = 0; a < 3; ++a) {
+            pass.swap(quiet);
+            for (int z = 0; z < cells.z; ++z)
+                for (int y = 0; y < cells.y; ++y)
+                    for (int x = 0; x < cells.x; ++x) {
+                        const glm::ivec3 c(x, y, z);
+                        const std::size_t i = cellIndex(x, y, z);
+                        std::uint8_t all = pass[i];
+                        if (c[a] > 0) all &= pass[std::size_t(std::ptrdiff_t(i) - stride[a])];
+                        if (c[a] + 1 < cells[a])
+                            all &= pass[std::size_t(std::ptrdiff_t(i) + stride[a])];
+                        quiet[i] = all;
+                    }
+        }
+    }
     auto quietAt = [&](const glm::vec3& p) {
         const glm::ivec3 c =
             glm::clamp(glm::ivec3(p * (1.f / float(kCell))), glm::ivec3(0), cells - 1);
         return quiet[cellIndex(c.x, c.y, c.z)] != 0;
     };
 
+    // Optical depth along a line in fixed point (kDepthUnit per unit depth): each sub-step's depth
+    // is rounded once, so the depth between two sub-steps is an exact integer difference, whatever
+    // sub-step the walk started from. A point's V therefore depends on the voxels along its own
+    // rays alone, not on which other points share its line: lines run on through every stored
+    // block of a group, and the TF update's subset of blocks gets the full computation's bits.
+    // (The walk's carried state is start-independent too: a lattice point's value read as the
+    // previous step's end and as a step's start is the same voxel sum in the same order.)
+    static constexpr double kDepthUnit = 4294967296.0;  // 2^32: 2.3e-10 per sub-step
+    // e^−10⁴ = 0: the clamp keeps a line's sum far inside int64 (≤ 10⁴ · sub-steps · 2³²).
+    static constexpr double kMaxSubStepDepth = 1e4;
+    auto fixedDepth = [](double tau) {  // NaN counts as 0, as a non-positive depth does
+        return tau > 0.0 ? std::int64_t(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5)
+                         : std::int64_t(0);
+    };
+    auto depthBetween = [](std::int64_t from, std::int64_t to) {
+        return double(to - from) / kDepthUnit;
+    };
+
+    // Groups of G³ blocks are the unit of work: a line is walked once through all of a group's
+    // traced points, from R before a run of them to R past it (runs split where two consecutive
+    // points lie more than 2R apart), instead of R before and past each block's part of it — on
+    // the torso's 16³ blocks about three quarters of the walked steps were that padding. G = 4
+    // unless that leaves too few groups to share among the threads (the result does not depend
+    // on G).
+    const glm::ivec3 nb = pyr.blocks();
+    const int workers =
+        options.threads > 0 ? options.threads : tbb::this_task_arena::max_concurrency();
+    auto groupsOf = [&](int g) {
+        const glm::ivec3 n = (nb + g - 1) / g;
+        return std::size_t(n.x) * std::size_t(n.y) * std::size_t(n.z);
+    };
+    int G = options.sweepGroupBlocks;
+    if (G <= 0) {
+        G = 4;
+        while (G > 1 && groupsOf(G) < std::size_t(std::max(32, 8 * workers))) G /= 2;
+    }
+    const glm::ivec3 ng = (nb + G - 1) / G;
+    const int box = kBlockSize * G;  // lattice points per axis of a group
+    std::vector<std::vector<std::size_t>> members(groupsOf(G));
+    for (const std::size_t b : blocks) {
+        const glm::ivec3 gc = pyr.blockCoord(b) / G;
+        members[std::size_t(gc.x) +
+                std::size_t(ng.x) * (std::size_t(gc.y) + std::size_t(ng.y) * gc.z)]
+            .push_back(b);
+    }
+    std::vector<std::size_t> groups;
+    std::vector<std::size_t> work(members.size(), 0);  // sample points: about a group's cost
+    for (std::size_t gi = 0; gi < members.size(); ++gi) {
+        if (members[gi].empty()) continue;
+        groups.push_back(gi);
+        for (const std::size_t b : members[gi]) {
+            const std::size_t n = std::size_t(levelResolution(grid.level(b)));
+            work[gi] += n * n * n;
+        }
+    }
+    // Costliest first, so no thread is left with a large group at the end.
+    std::stable_sort(groups.begin(), groups.end(),
+                     [&](std::size_t a, std::size_t b) { return work[a] > work[b]; });
+
+    const glm::vec3 top(dims - 1);
+    auto inVolume = [&](const glm::vec3& x) {
+        return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
+               glm::all(glm::lessThanEqual(x, top));
+    };
+    const std::size_t boxPoints = std::size_t(box) * box * box;
+    auto boxIndex = [&](const glm::ivec3& k) {
+        return std::size_t(k.x) + std::size_t(box) * (std::size_t(k.y) + std::size_t(box) * k.z);
+    };
+    // Per thread: the group's lattice maps (point index per lattice position of each lattice,
+    // −1 = none; reset after each group) and which lines a direction has walked.
+    struct Scratch {
+        std::vector<std::int32_t> map[2];
+        std::vector<std::uint64_t> walked;
+        std::vector<std::uint8_t> occupied[2];  // per block of the group: points on the lattice
+        std::vector<std::uint8_t> stepQuiet;    // per lattice step of a line
+        std::vector<std::uint8_t> swept;        // per point of a block
+        std::vector<std::int64_t> P;            // fixed-point optical depth from a run's start
+        std::vector<float> S;                   // the value at each sub-step
+        std::vector<double> I;            // σt's integral to it where the walk took it, or NaN
+        std::vector<int> lineT, lineIdx;  // a line's points: lattice step, point index
+        std::vector<float*> dstOf;        // the group's swept points' coefficients
+        std::vector<glm::ivec3> at[2];    // their lattice positions in the group's box
+        std::vector<std::pair<float*, const float*>> copies;  // clamped ← source
+    };
+    tbb::enumerable_thread_specific<Scratch> scratch([&] {
+        Scratch s;
+        s.map[0].assign(boxPoints, -1);
+        s.map[1].assign(boxPoints, -1);
+        s.walked.assign((boxPoints + 63) / 64, 0);
+        s.swept.resize(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
+        return s;
+    });
+
     return overBlocks(
-        blocks.size(), options.threads, progress, [&](const auto& range, TraceCounts& counts) {
+        groups.size(), options.threads, progress, [&](const auto& range, TraceCounts& counts) {
             std::uint64_t &samples = counts.samples, &traced = counts.rays,
                           &skipped = counts.skipped;
+            Scratch& sc = scratch.local();
             double v[16];
-            std::vector<std::uint8_t> stepQuiet;                      // per lattice step of a line
-            std::vector<std::pair<std::size_t, std::size_t>> copies;  // clamped ← source
-            std::vector<std::uint8_t> swept(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
-            std::vector<double> P;    // optical depth from a line's first traced point
-            std::vector<float> S;     // the value at each sub-step
-            std::vector<int> onLine;  // in-block point indices along a line, −1 = not traced
             for (std::size_t r = range.begin(); r != range.end(); ++r) {
-                const std::size_t b = blocks[r];
-                const int level = grid.level(b), n = levelResolution(level);
-                const int spacing = levelSpacing(level);
-                const bool half = level > 0;  // on the lattice shifted by (½, ½, ½)
-                const glm::vec3 p0 = grid.samplePosition(b, level, 0, 0, 0);
-                float* blockData = data + offset[b];
-                std::size_t index = 0;
-                bool any = false;
-                copies.clear();
-                forEachSamplePoint(
-                    grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
-                        const std::size_t me = index++;
-                        swept[me] = 0;
-                        if (!visibilityNeeded(grid, origin, s)) {
-                            setEmpty(dst, C);
-                            ++skipped;
-                            return;
-                        }
-                        traced += std::uint64_t(N);
-                        const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
-                        if (origin == p0 + float(spacing) * glm::vec3(j)) {
-                            swept[me] = 1;
-                            any = true;
-                            std::fill(dst, dst + C, 0.f);
-                            return;
-                        }
-                        // A partial edge block's point past the volume, clamped onto it
-                        // (off the lattice). No shaded sample inside the volume reads it
-                        // (forEachSamplePoint), so it takes the value of the block's last
-                        // point inside the volume along each axis it passes (for level 0
-                        // the point at its clamped position itself) once the block is swept;
-                        // marched only when the block has no such point.
-                        glm::ivec3 src = j;
-                        for (int a = 0; a < 3; ++a) {
-                            const int last =
-                                int(std::floor((float(dims[a] - 1) - p0[a]) / float(spacing)));
-                            src[a] = std::min(j[a], last);
-                        }
-                        if (glm::all(glm::greaterThanEqual(src, glm::ivec3(0)))) {
-                            copies.emplace_back(me, std::size_t(src.x + n * (src.y + n * src.z)));
-                            return;
-                        }
-                        pointVisibility(
-                            field, set, origin, dims, radius, hf,
-                            [](int, float&, float&) { return true; }, v, samples);
-                        for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                    });
-                // Copies (clamped points) after the block's lines are done.
-                const auto copyClamped = [&] {
-                    for (const auto& [to, from] : copies)
-                        std::copy_n(blockData + from * std::size_t(C), C,
-                                    blockData + to * std::size_t(C));
-                };
-                if (!any) {
-                    copyClamped();
-                    continue;
+                const std::size_t gi = groups[r];
+                const glm::ivec3 gc(int(gi % std::size_t(ng.x)),
+                                    int(gi / std::size_t(ng.x) % std::size_t(ng.y)),
+                                    int(gi / (std::size_t(ng.x) * std::size_t(ng.y))));
+                const glm::ivec3 lo = gc * box;
+                sc.dstOf.clear();
+                sc.at[0].clear();
+                sc.at[1].clear();
+                sc.copies.clear();
+                sc.occupied[0].assign(std::size_t(G) * G * G, 0);
+                sc.occupied[1].assign(std::size_t(G) * G * G, 0);
+                for (const std::size_t b : members[gi]) {
+                    const int level = grid.level(b), n = levelResolution(level);
+                    const int spacing = levelSpacing(level);
+                    const int lat = level > 0 ? 1 : 0;  // 1: on the lattice shifted by (½, ½, ½)
+                    const glm::vec3 p0 = grid.samplePosition(b, level, 0, 0, 0);
+                    float* blockData = data + offset[b];
+                    std::size_t index = 0;
+                    forEachSamplePoint(
+                        grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
+                            const std::size_t me = index++;
+                            sc.swept[me] = 0;
+                            if (!visibilityNeeded(grid, origin, s)) {
+                                setEmpty(dst, C);
+                                ++skipped;
+                                return;
+                            }
+                            traced += std::uint64_t(N);
+                            const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
+                            if (origin == p0 + float(spacing) * glm::vec3(j)) {
+                                // On its lattice (exact: integer or half-integer coordinates).
+                                sc.swept[me] = 1;
+                                std::fill(dst, dst + C, 0.f);
+                                const glm::ivec3 k = glm::ivec3(origin - (lat ? 0.5f : 0.f)) - lo;
+                                sc.map[lat][boxIndex(k)] = std::int32_t(sc.dstOf.size());
+                                sc.dstOf.push_back(dst);
+                                sc.at[lat].push_back(k);
+                                const glm::ivec3 bk = k / kBlockSize;
+                                sc.occupied[lat][std::size_t(bk.x + G * (bk.y + G * bk.z))] = 1;
+                                return;
+                            }
+                            // A partial edge block's point past the volume, clamped onto it
+                            // (off the lattice). No shaded sample inside the volume reads it
+                            // (forEachSamplePoint), so it takes the value of the block's last
+                            // point inside the volume along each axis it passes (for level 0
+                            // the point at its clamped position itself) once the group is swept;
+                            // marched only when the block has no such point.
+                            glm::ivec3 src = j;
+                            for (int a = 0; a < 3; ++a) {
+                                const int last =
+                                    int(std::floor((float(dims[a] - 1) - p0[a]) / float(spacing)));
+                                src[a] = std::min(j[a], last);
+                            }
+                            if (glm::all(glm::greaterThanEqual(src, glm::ivec3(0)))) {
+                                sc.copies.emplace_back(
+                                    dst, blockData + std::size_t(src.x + n * (src.y + n * src.z)) *
+                                                         std::size_t(C));
+                                return;
+                            }
+                            pointVisibility(
+                                field, set, origin, dims, radius, hf,
+                                [](int, float&, float&) { return true; }, v, samples);
+                            for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                        });
                 }
-                auto inBlock = [&](const glm::ivec3& j) {
-                    return glm::all(glm::greaterThanEqual(j, glm::ivec3(0))) &&
-                           glm::all(glm::lessThan(j, glm::ivec3(n)));
-                };
-                const glm::vec3 top(dims - 1);
-                auto inVolume = [&](const glm::vec3& x) {
-                    return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
-                           glm::all(glm::lessThanEqual(x, top));
-                };
+
                 // Per pair ±v, one walk along each line serves both rays of every point on it.
                 for (int k = 0; k < N; ++k) {
                     const Dir& d = dirs[std::size_t(k)];
                     if (d.reverse < k) continue;  // walked with its twin
                     const double* wy = set.wy.data() + std::size_t(k) * C;
                     const double* wyBack = set.wy.data() + std::size_t(d.reverse) * C;
-                    const int lat = half ? 1 : 0;
-                    // The block's points on one lattice line lie `spacing` lattice steps
-                    // apart (v is primitive and the spacing a power of two), i.e. at sample
-                    // indices j + m·v.
-                    for (int z = 0; z < n; ++z)
-                        for (int y = 0; y < n; ++y)
-                            for (int x = 0; x < n; ++x) {
-                                const glm::ivec3 head(x, y, z);
-                                if (inBlock(head - d.v)) continue;  // not a line's first
-                                onLine.clear();
-                                int mFirst = -1, mLast = -1;
-                                for (glm::ivec3 j = head; inBlock(j); j += d.v) {
-                                    const int i = j.x + n * (j.y + n * j.z);
-                                    const bool mine = swept[std::size_t(i)] != 0;
-                                    if (mine) {
-                                        if (mFirst < 0) mFirst = int(onLine.size());
-                                        mLast = int(onLine.size());
+                    const int reachSteps = int(std::ceil(d.reach)) + 1;
+                    for (int lat = 0; lat < 2; ++lat) {
+                        if (sc.at[lat].empty()) continue;
+                        std::fill(sc.walked.begin(), sc.walked.end(), 0);
+                        const std::vector<Stencil>& sten = d.stencil[lat];
+                        const int q = d.q[lat];
+                        const float subMm = d.stepMm / float(q);
+                        for (const glm::ivec3& p : sc.at[lat]) {
+                            // The line's first lattice position in the group's box.
+                            int back = box;
+                            for (int a = 0; a < 3; ++a) {
+                                if (d.v[a] > 0) back = std::min(back, p[a] / d.v[a]);
+                                if (d.v[a] < 0) back = std::min(back, (box - 1 - p[a]) / -d.v[a]);
+                            }
+                            const glm::ivec3 head = p - back * d.v;
+                            const std::size_t hi = boxIndex(head);
+                            if (sc.walked[hi / 64] >> (hi % 64) & 1u) continue;
+                            sc.walked[hi / 64] |= std::uint64_t(1) << (hi % 64);
+                            sc.lineT.clear();
+                            sc.lineIdx.clear();
+                            {
+                                // Block by block: a block of the group without points on this
+                                // lattice is crossed in one jump.
+                                glm::ivec3 j = head;
+                                int t = 0;
+                                while (glm::all(glm::greaterThanEqual(j, glm::ivec3(0))) &&
+                                       glm::all(glm::lessThan(j, glm::ivec3(box)))) {
+                                    const glm::ivec3 bj = j / kBlockSize;
+                                    int stay = box;
+                                    for (int a = 0; a < 3; ++a) {
+                                        if (d.v[a] > 0)
+                                            stay = std::min(stay, (kBlockSize * (bj[a] + 1) - j[a] +
+                                                                   d.v[a] - 1) /
+                                                                      d.v[a]);
+                                        if (d.v[a] < 0)
+                                            stay = std::min(
+                                                stay, (j[a] - kBlockSize * bj[a]) / -d.v[a] + 1);
                                     }
-                                    onLine.push_back(mine ? i : -1);
+                                    if (!sc.occupied[lat]
+                                                    [std::size_t(bj.x + G * (bj.y + G * bj.z))]) {
+                                        t += stay;
+                                        j += stay * d.v;
+                                        continue;
+                                    }
+                                    for (int i = 0; i < stay; ++i, ++t, j += d.v) {
+                                        const std::int32_t m = sc.map[lat][boxIndex(j)];
+                                        if (m < 0) continue;
+                                        sc.lineT.push_back(t);
+                                        sc.lineIdx.push_back(m);
+                                    }
                                 }
-                                if (mFirst < 0) continue;
-                                const int first = mFirst * spacing, last = mLast * spacing;
-                                // Lattice t lies at lineStart + t·v. P at every sub-step from
-                                // tStart (R before the first traced point, or where the line
-                                // enters the volume) to `want` (R past the last, or where it
-                                // leaves; outside the volume is empty); S the values there.
-                                const glm::vec3 lineStart = p0 + float(spacing) * glm::vec3(head);
-                                auto position = [&](int tt) {
-                                    return lineStart + float(tt) * d.dv;
-                                };
-                                const int q = d.q[lat];
-                                const float subMm = d.stepMm / float(q);
-                                const int reachSteps = int(std::ceil(d.reach)) + 1;
+                            }
+                            // Lattice t lies at lineStart + t·v (exact in float: integer or
+                            // half-integer coordinates).
+                            const glm::vec3 lineStart = glm::vec3(lo + head) + (lat ? 0.5f : 0.f);
+                            auto position = [&](int tt) { return lineStart + float(tt) * d.dv; };
+                            // The voxel index of lattice point t's floor: base0 + t·delta.
+                            const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
+                            const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
+                            auto latticeValue = [&](int tt) {
+                                return read(base0 + tt * d.delta, sten[0]);
+                            };
+                            const std::size_t count = sc.lineT.size();
+                            std::size_t runBegin = 0;
+                            for (std::size_t ri = 1; ri <= count; ++ri) {
+                                if (ri < count && sc.lineT[ri] - sc.lineT[ri - 1] <= 2 * reachSteps)
+                                    continue;
+                                // One run: points runBegin … ri − 1.
+                                const int first = sc.lineT[runBegin], last = sc.lineT[ri - 1];
+                                // P at every sub-step from tStart (R before the first point, or
+                                // where the line enters the volume) to `want` (R past the last, or
+                                // where it leaves; outside the volume is empty); S the values there.
                                 const int want = last + reachSteps;
                                 int tStart = first;
                                 while (tStart > first - reachSteps &&
@@ -978,25 +1111,24 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 const std::size_t subs =
                                     std::size_t(want - tStart) * std::size_t(q) + 1;
                                 // Grown, never cleared: the walk below writes P and S at every
-                                // sub-step it reads (P[0] is the line's origin; S only where a
-                                // step is read, and `unread` below marks the rest).
+                                // sub-step it reads (P[0] is the run's origin; S only where a step
+                                // is read, and `unread` below marks the rest).
+                                std::vector<std::int64_t>& P = sc.P;
+                                std::vector<float>& S = sc.S;
+                                std::vector<double>& I = sc.I;
                                 if (P.size() < subs) {
                                     P.resize(subs);
                                     S.resize(subs);
+                                    I.resize(subs);
                                 }
-                                P[0] = 0.0;
-                                stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
-                                const std::vector<Stencil>& sten = d.stencil[lat];
-                                // The voxel index of lattice point t's floor: base0 + t·delta.
-                                const glm::ivec3 v0 = glm::ivec3(glm::floor(lineStart));
-                                const std::ptrdiff_t base0 = v0.x + sy * v0.y + sz * v0.z;
-                                auto latticeValue = [&](int tt) {
-                                    return read(base0 + tt * d.delta, sten[0]);
-                                };
-                                // The position of sub-step index e (relative to tStart).
-                                auto subPosition = [&](double e) {
-                                    return lineStart +
-                                           (float(tStart) + float(e / double(q))) * d.dv;
+                                P[0] = 0;
+                                sc.stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
+                                const std::vector<std::uint8_t>& stepQuiet = sc.stepQuiet;
+                                // The position of sub-step index e (relative to tStart): its lattice
+                                // point, exact, plus the fraction of a step (the same for any start).
+                                auto subPosition = [&](std::size_t e) {
+                                    return position(tStart + int(e / std::size_t(q))) +
+                                           (float(e % std::size_t(q)) / float(q)) * d.dv;
                                 };
                                 auto along = [&](const glm::vec3& from, float sign) {
                                     return [&, from, sign](float mm) {
@@ -1012,15 +1144,18 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     if (!inVolume(next)) break;
                                     const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
                                     if (quietAt(at)) {
-                                        // Transparent throughout: nothing to integrate or
-                                        // read (S stays unread there).
-                                        stepQuiet[std::size_t(t - tStart)] = 1;
+                                        // Transparent throughout: nothing to integrate or read (S
+                                        // stays unread there).
+                                        sc.stepQuiet[std::size_t(t - tStart)] = 1;
                                         for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = P[m];
                                         haveStart = haveIFront = false;
                                         at = next;
                                         continue;
                                     }
-                                    if (!haveStart) S[m] = latticeValue(t);
+                                    if (!haveStart) {
+                                        S[m] = latticeValue(t);
+                                        I[m] = NAN;
+                                    }
                                     const std::ptrdiff_t base = base0 + t * d.delta;
                                     haveStart = true;
                                     for (int j = 1; j <= q; ++j) {
@@ -1029,17 +1164,22 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         S[m + std::size_t(j)] = sBack;
                                         ++samples;
                                         bool haveIBack = false;
-                                        double iBack = 0.0, tau = 0.0;
+                                        double iBack = 0.0;
+                                        std::int64_t tau = 0;
                                         if (!transparent(sFront, sBack)) {
-                                            if (!haveIFront) iFront = table.sigmaIntegral(sFront);
+                                            if (!haveIFront) {
+                                                iFront = table.sigmaIntegral(sFront);
+                                                I[m + std::size_t(j) - 1] = iFront;
+                                            }
                                             iBack = table.sigmaIntegral(sBack);
                                             haveIBack = true;
-                                            tau = preIntegratedStep(
+                                            tau = fixedDepth(preIntegratedStep(
                                                 table, sFront, iFront, sBack, iBack, subMm, 0.0,
                                                 along(at + (float(j - 1) / float(q)) * d.dv, 1.f),
-                                                samples);
+                                                samples));
                                         }
                                         P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
+                                        I[m + std::size_t(j)] = haveIBack ? iBack : NAN;
                                         iFront = iBack;
                                         haveIFront = haveIBack;
                                     }
@@ -1048,12 +1188,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // P and S valid on sub-steps [0, lastSub].
                                 const std::size_t lastSub =
                                     std::size_t(t - tStart) * std::size_t(q);
-                                // Optical depth from sub-step e0 over `f` sub-steps (forward:
-                                // f ≤ 1, or the exit's fraction; sign −1: backward from e0 = 0,
-                                // the entry's fraction), pre-integrated to the value there.
+                                // Optical depth from sub-step e0 over `f` sub-steps (forward: f ≤ 1,
+                                // or the exit's fraction; sign −1: backward from e0 = 0, the entry's
+                                // fraction), pre-integrated to the value there.
                                 auto partial = [&](std::size_t e0, float f, float sEnd,
                                                    float sign) {
-                                    const glm::vec3 from = subPosition(double(e0));
+                                    const glm::vec3 from = subPosition(e0);
                                     if (sign > 0.f && stepQuiet[e0 / std::size_t(q)])
                                         return 0.0;  // inside quiet cells' neighbourhood
                                     if ((e0 == lastSub || sign < 0.f) && quietAt(from)) return 0.0;
@@ -1068,98 +1208,105 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         sEnd = flatValue(from + (sign * f / float(q)) * d.dv);
                                     ++samples;
                                     if (transparent(s0, sEnd)) return 0.0;
-                                    return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
-                                                             sEnd, table.sigmaIntegral(sEnd),
-                                                             f * subMm, 0.0, along(from, sign),
-                                                             samples);
+                                    // The walk's integral at s0 where it took one (the same value).
+                                    const double i0 = unread || std::isnan(I[e0])
+                                                          ? table.sigmaIntegral(s0)
+                                                          : I[e0];
+                                    return preIntegratedStep(table, s0, i0, sEnd,
+                                                             table.sigmaIntegral(sEnd), f * subMm,
+                                                             0.0, along(from, sign), samples);
                                 };
-                                // A line that leaves (enters) the volume ends at the box face
-                                // (the march's box exit), a fraction φ of a lattice step past
-                                // its last (before its first) point.
-                                auto faceFraction = [&](const glm::vec3& p, float sign) {
+                                // A line that leaves (enters) the volume ends at the box face (the
+                                // march's box exit), a fraction φ of a lattice step past its last
+                                // (before its first) point.
+                                auto faceFraction = [&](const glm::vec3& x, float sign) {
                                     float phi = 1.f;
                                     for (int ax = 0; ax < 3; ++ax) {
                                         const float va = sign * float(d.v[ax]);
-                                        if (va > 0.f) phi = std::min(phi, (top[ax] - p[ax]) / va);
-                                        if (va < 0.f) phi = std::min(phi, p[ax] / -va);
+                                        if (va > 0.f) phi = std::min(phi, (top[ax] - x[ax]) / va);
+                                        if (va < 0.f) phi = std::min(phi, x[ax] / -va);
                                     }
                                     return std::max(phi, 0.f);
                                 };
-                                double exitSub = double(lastSub), pExit = P[lastSub];
+                                // The exit's piece past lastSub and the entry's before sub-step 0.
+                                double exitSub = double(lastSub), exitDepth = 0.0;
                                 if (t < want) {
                                     const float phi = faceFraction(at, 1.f);
                                     if (phi > 0.f) {
                                         exitSub += double(phi) * double(q);
-                                        pExit += partial(lastSub, phi * float(q), NAN, 1.f);
+                                        exitDepth = partial(lastSub, phi * float(q), NAN, 1.f);
                                     }
                                 }
-                                double entrySub = -1e300, pEntry = 0.0;
+                                double entrySub = -1e300, entryDepth = 0.0;
                                 if (entered) {
                                     const float phi = faceFraction(position(tStart), -1.f);
                                     entrySub = -double(phi) * double(q);
-                                    pEntry =
-                                        phi > 0.f ? -partial(0, phi * float(q), NAN, -1.f) : 0.0;
+                                    entryDepth =
+                                        phi > 0.f ? partial(0, phi * float(q), NAN, -1.f) : 0.0;
                                 }
-                                for (int mi = mFirst; mi <= mLast; ++mi) {
-                                    const int i = onLine[std::size_t(mi)];
-                                    if (i < 0) continue;
-                                    const int tu = mi * spacing;
+                                for (std::size_t pi = runBegin; pi < ri; ++pi) {
+                                    const int tu = sc.lineT[pi];
                                     const std::size_t mu =
                                         std::size_t(tu - tStart) * std::size_t(q);
                                     const std::ptrdiff_t baseU = base0 + tu * d.delta;
                                     // Each ray's end R from the point, in sub-steps: the whole
-                                    // sub-steps up to it, then the partial one pre-integrated
-                                    // to the end's value (as the march's shortened last step).
-                                    double pEnd, pBack;
+                                    // sub-steps up to it, then the partial one pre-integrated to
+                                    // the end's value (as the march's shortened last step).
+                                    double tau, tauBack;
                                     {
                                         const std::size_t e0 = mu + d.endSub[lat];
                                         const float f = d.endFrac[lat];
                                         if (double(e0) + double(f) >= exitSub) {
-                                            pEnd = pExit;
+                                            tau = depthBetween(P[mu], P[lastSub]) + exitDepth;
                                         } else if (e0 > lastSub) {
-                                            // In the partial step before the box face (a
-                                            // step component of 2, or the shifted lattice):
-                                            // past the last computed sub-step, integrated from
-                                            // there as the exit is.
-                                            pEnd = P[lastSub] +
-                                                   partial(lastSub, float(e0 - lastSub) + f,
-                                                           read(baseU, d.end[lat]), 1.f);
+                                            // In the partial step before the box face (a step
+                                            // component of 2, or the shifted lattice): past the
+                                            // last computed sub-step, integrated from there as
+                                            // the exit is.
+                                            tau = depthBetween(P[mu], P[lastSub]) +
+                                                  partial(lastSub, float(e0 - lastSub) + f,
+                                                          read(baseU, d.end[lat]), 1.f);
                                         } else {
-                                            pEnd = P[e0];
+                                            tau = depthBetween(P[mu], P[e0]);
                                             if (f > 0.f)
-                                                pEnd +=
-                                                    partial(e0, f, read(baseU, d.end[lat]), 1.f);
+                                                tau += partial(e0, f, read(baseU, d.end[lat]), 1.f);
                                         }
                                     }
                                     {
                                         const float f = d.backFrac[lat];
                                         const double e = double(mu) - double(d.backSub[lat]) + f;
                                         if (e <= entrySub) {
-                                            pBack = pEntry;
+                                            tauBack = depthBetween(P[0], P[mu]) + entryDepth;
                                         } else if (e < 0.0) {
                                             // Within the piece before the first lattice point
                                             // inside the volume.
-                                            pBack = -partial(0, float(-e), NAN, -1.f);
+                                            tauBack = depthBetween(P[0], P[mu]) +
+                                                      partial(0, float(-e), NAN, -1.f);
                                         } else {
                                             const std::size_t e0 = mu - d.backSub[lat];
-                                            pBack = P[e0];
+                                            tauBack = depthBetween(P[e0], P[mu]);
                                             if (f > 0.f)
-                                                pBack +=
+                                                tauBack -=
                                                     partial(e0, f, read(baseU, d.back[lat]), 1.f);
                                         }
                                     }
-                                    const double tau = pEnd - P[mu], tauBack = P[mu] - pBack;
                                     const double T =
                                         tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;
                                     const double TBack =
                                         tauBack > 0.0 ? double(std::exp(-float(tauBack))) : 1.0;
-                                    float* dst = blockData + std::size_t(i) * std::size_t(C);
+                                    float* dst = sc.dstOf[std::size_t(sc.lineIdx[pi])];
                                     for (int c = 0; c < C; ++c)
                                         dst[c] += float(T * wy[c] + TBack * wyBack[c]);
                                 }
+                                runBegin = ri;
                             }
+                        }
+                    }
                 }
-                copyClamped();
+                // Copies (clamped points) once their sources are done; reset the maps.
+                for (const auto& [to, from] : sc.copies) std::copy_n(from, C, to);
+                for (int lat = 0; lat < 2; ++lat)
+                    for (const glm::ivec3& k : sc.at[lat]) sc.map[lat][boxIndex(k)] = -1;
             }
         });
 }

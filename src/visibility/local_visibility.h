@@ -179,6 +179,9 @@ struct LocalVisibilityOptions {
     double radiusVoxels = 16.0;  ///< r_s in units of the smallest spacing, > 0
     int threads = 0;             ///< 0 = all hardware threads
     VisibilityAlgorithm algorithm = VisibilityAlgorithm::March;
+    /// The line sweep's unit of work: groups of this many blocks per axis (1, 2, 4 or 8; 0 =
+    /// automatic). Every value gives the same bits (tested); larger groups share more of each line.
+    int sweepGroupBlocks = 0;
 };
 
 /// The primitive lattice steps of the sweep: 26 (|v_a| ≤ 1) or 98 (|v_a| ≤ 2), in a fixed order;

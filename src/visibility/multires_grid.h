@@ -57,10 +57,12 @@
 // empty-space value; such points are never shaded (the TF is transparent over the whole block).
 #include <algorithm>
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <glm/glm.hpp>
 #include <iosfwd>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include "core/progress.h"
@@ -124,8 +126,13 @@ class BlockPyramid {
     }
     std::size_t bytes() const {
         return data_.size() * sizeof(float) + stats_.size() * sizeof(BlockStats) +
-               cellRange_.size() * sizeof(cellRange_[0]);
+               cellRange_.size() * sizeof(cellRange_[0]) + flat_->bytes.load();
     }
+    /// The level-0 voxels as one x-fastest array (dims().x · dims().y · dims().z floats: the
+    /// line sweep's reads), made on first use in parallel in the calling task arena and kept with
+    /// the pyramid — it does not depend on the TF, so a TF update reads it without copying the
+    /// volume again (4 bytes per voxel more, counted in bytes() once made). Thread-safe.
+    const float* flatVoxels() const;
 
     /// Value ranges of kCellVoxels³ cells (cell c spans voxels [4c, 4c + 4] per axis: the voxels
     /// every trilinear sample inside it reads), for empty-space skipping of visibility rays.
@@ -140,6 +147,13 @@ class BlockPyramid {
     std::vector<BlockStats> stats_;
     std::vector<float> data_;  ///< kPyramidFloats per block
     std::vector<std::array<float, 2>> cellRange_;
+    struct FlatVoxels {
+        std::once_flag once;
+        std::unique_ptr<float[]> voxels;
+        std::atomic<std::size_t> bytes{0};
+    };
+    /// Shared by copies of the pyramid (same voxels); made by flatVoxels().
+    std::shared_ptr<FlatVoxels> flat_ = std::make_shared<FlatVoxels>();
 };
 
 /// How many samples the selection may hold.

@@ -77,6 +77,9 @@ Field field(VisibilityAlgorithm algorithm = VisibilityAlgorithm::March) {
     f.options.rays = algorithm == VisibilityAlgorithm::Sweep ? kSweepRaysCoarse : 8;
     f.options.algorithm = algorithm;
     f.options.coefficients = 4;
+    // The sweep's lines run through groups of 4³ blocks (as on a 256³ volume), so an update's
+    // subset of blocks walks different stretches of them than the full computation does.
+    f.options.sweepGroupBlocks = algorithm == VisibilityAlgorithm::Sweep ? 4 : 0;
     // Rays reach past the next block (20 voxels): blocks two apart see each other, three do not.
     // The sweep's lines read 2·max|v_a| + 1 = 3 voxels further (local_visibility.h), which would
     // take its reach along x (1.5 mm voxels: 20/1.5 + 2 + 3 > 16) past the next block: 16 keeps
