@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <mutex>
 #include <numbers>
 #include <numeric>
 #include <thread>
@@ -542,12 +543,30 @@ std::vector<glm::ivec3> latticeSteps(int rays) {
 }
 
 sh::SphereSamples latticeDirections(const core::Geometry& g, int rays, int coefficients) {
+    // Remembered per frame (spacing and direction matrix), ray and coefficient count: counting
+    // 2¹⁸ points' nearest directions costs tens of ms on one thread, in every TF update.
+    struct Entry {
+        glm::dvec3 spacing;
+        glm::dmat3 direction;
+        int rays, coefficients;
+        sh::SphereSamples samples;
+    };
+    static std::mutex mutex;
+    static std::vector<Entry> remembered;  // the last kRemembered, newest last
+    constexpr std::size_t kRemembered = 8;
+    {
+        const std::lock_guard<std::mutex> lock(mutex);
+        for (const Entry& e : remembered)
+            if (e.spacing == g.spacing && e.direction == g.direction && e.rays == rays &&
+                e.coefficients == coefficients)
+                return e.samples;
+    }
     const std::vector<glm::ivec3> steps = latticeSteps(rays);
     sh::SphereSamples s;
     for (const glm::ivec3& v : steps)
         s.directions.push_back(glm::normalize(g.direction * (glm::dvec3(v) * g.spacing)));
     // Voronoi cells: the share of nearly uniform points nearest to each direction.
-    const sh::SphereSamples probe = sh::fibonacciSamples(kSweepWeightPoints);
+    static const sh::SphereSamples probe = sh::fibonacciSamples(kSweepWeightPoints);
     std::vector<std::uint32_t> count(s.size(), 0);
     for (const glm::dvec3& p : probe.directions) {
         std::size_t best = 0;
@@ -561,6 +580,9 @@ sh::SphereSamples latticeDirections(const core::Geometry& g, int rays, int coeff
     for (std::size_t k = 0; k < s.size(); ++k)
         s.weights.push_back(4.0 * std::numbers::pi * double(count[k]) / double(probe.size()));
     correctVisibilityWeights(s, coefficients);
+    const std::lock_guard<std::mutex> lock(mutex);
+    if (remembered.size() == kRemembered) remembered.erase(remembered.begin());
+    remembered.push_back({g.spacing, g.direction, rays, coefficients, s});
     return s;
 }
 
@@ -1191,21 +1213,26 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // Optical depth from sub-step e0 over `f` sub-steps (forward: f ≤ 1,
                                 // or the exit's fraction; sign −1: backward from e0 = 0, the entry's
                                 // fraction), pre-integrated to the value there.
-                                auto partial = [&](std::size_t e0, float f, float sEnd,
-                                                   float sign) {
-                                    const glm::vec3 from = subPosition(e0);
+                                // The end's value: read by the stencil `endAt` from the voxel
+                                // index `endBase` (a ray's end: the same stencil for every point
+                                // of the lattice) or, without one, trilinearly at its position —
+                                // only once the cheap tests have not already given 0.
+                                auto partial = [&](std::size_t e0, float f, const Stencil* endAt,
+                                                   std::ptrdiff_t endBase, float sign) {
                                     if (sign > 0.f && stepQuiet[e0 / std::size_t(q)])
                                         return 0.0;  // inside quiet cells' neighbourhood
-                                    if ((e0 == lastSub || sign < 0.f) && quietAt(from)) return 0.0;
                                     if (sign > 0.f && e0 < lastSub && transparent(S[e0], S[e0 + 1]))
                                         return 0.0;  // the whole sub-step is
+                                    const glm::vec3 from = subPosition(e0);
+                                    if ((e0 == lastSub || sign < 0.f) && quietAt(from)) return 0.0;
                                     const bool unread =
                                         (e0 == lastSub && !haveStart) || (e0 == 0 && stepQuiet[0]);
                                     const float s0 =
                                         unread ? latticeValue(tStart + int(e0 / std::size_t(q)))
                                                : S[e0];
-                                    if (std::isnan(sEnd))
-                                        sEnd = flatValue(from + (sign * f / float(q)) * d.dv);
+                                    const float sEnd =
+                                        endAt ? read(endBase, *endAt)
+                                              : flatValue(from + (sign * f / float(q)) * d.dv);
                                     ++samples;
                                     if (transparent(s0, sEnd)) return 0.0;
                                     // The walk's integral at s0 where it took one (the same value).
@@ -1234,15 +1261,17 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     const float phi = faceFraction(at, 1.f);
                                     if (phi > 0.f) {
                                         exitSub += double(phi) * double(q);
-                                        exitDepth = partial(lastSub, phi * float(q), NAN, 1.f);
+                                        exitDepth =
+                                            partial(lastSub, phi * float(q), nullptr, 0, 1.f);
                                     }
                                 }
                                 double entrySub = -1e300, entryDepth = 0.0;
                                 if (entered) {
                                     const float phi = faceFraction(position(tStart), -1.f);
                                     entrySub = -double(phi) * double(q);
-                                    entryDepth =
-                                        phi > 0.f ? partial(0, phi * float(q), NAN, -1.f) : 0.0;
+                                    entryDepth = phi > 0.f
+                                                     ? partial(0, phi * float(q), nullptr, 0, -1.f)
+                                                     : 0.0;
                                 }
                                 for (std::size_t pi = runBegin; pi < ri; ++pi) {
                                     const int tu = sc.lineT[pi];
@@ -1265,11 +1294,11 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             // the exit is.
                                             tau = depthBetween(P[mu], P[lastSub]) +
                                                   partial(lastSub, float(e0 - lastSub) + f,
-                                                          read(baseU, d.end[lat]), 1.f);
+                                                          &d.end[lat], baseU, 1.f);
                                         } else {
                                             tau = depthBetween(P[mu], P[e0]);
                                             if (f > 0.f)
-                                                tau += partial(e0, f, read(baseU, d.end[lat]), 1.f);
+                                                tau += partial(e0, f, &d.end[lat], baseU, 1.f);
                                         }
                                     }
                                     {
@@ -1281,13 +1310,12 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             // Within the piece before the first lattice point
                                             // inside the volume.
                                             tauBack = depthBetween(P[0], P[mu]) +
-                                                      partial(0, float(-e), NAN, -1.f);
+                                                      partial(0, float(-e), nullptr, 0, -1.f);
                                         } else {
                                             const std::size_t e0 = mu - d.backSub[lat];
                                             tauBack = depthBetween(P[e0], P[mu]);
                                             if (f > 0.f)
-                                                tauBack -=
-                                                    partial(e0, f, read(baseU, d.back[lat]), 1.f);
+                                                tauBack -= partial(e0, f, &d.back[lat], baseU, 1.f);
                                         }
                                     }
                                     const double T =
