@@ -7,7 +7,9 @@
 #include <algorithm>
 #include <cmath>
 #include <cstring>
+#include <memory>
 #include <numbers>
+#include <string>
 
 #include "core/half_space.h"
 #include "sh/sh_basis.h"
@@ -380,61 +382,68 @@ TEST(LineSweep, AClipAwareUpdateOfASweptFieldMarchesItsLatticeDirections) {
     EXPECT_TRUE(differs);
 }
 
-TEST(LineSweep, IdenticalForAnyThreadCount) {
-    const core::Volume v = test::makeVolume({48, 40, 36}, [](int i, int j, int k) {
+/// A smooth wavy volume under a ramp TF at 1:3, which selects blocks at level 0 and coarser.
+struct WavyField {
+    std::shared_ptr<const BlockPyramid> pyramid;
+    optics::TfTable table{test::rampTf(0.2f)};
+    std::shared_ptr<const MultiresGrid> grid;
+};
+WavyField wavyField(const glm::ivec3& dims) {
+    const core::Volume v = test::makeVolume(dims, [](int i, int j, int k) {
         return int(500 + 400 * std::sin(0.3 * i + 0.2 * j) * std::cos(0.25 * k));
     });
     const optics::TransferFunction tf = test::rampTf(0.2f);
-    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
-    const optics::TfTable table(tf);
-    const auto grid = std::make_shared<const MultiresGrid>(
-        pyr, selectLod(*pyr, tf, table, LodBudget::fromReduction(3.0, v.voxelCount())));
+    WavyField f;
+    f.pyramid = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    f.grid = std::make_shared<const MultiresGrid>(
+        f.pyramid,
+        selectLod(*f.pyramid, tf, f.table, LodBudget::fromReduction(3.0, v.voxelCount())));
+    return f;
+}
+
+/// Every stored block of `a` and `b` (on `grid`, C coefficients) holds the same bits.
+void expectSameBits(const MultiresGrid& grid, const LocalVisibility& a, const LocalVisibility& b,
+                    int C, const std::string& what) {
+    ASSERT_EQ(a.bytes(), b.bytes());
+    for (std::size_t blk = 0; blk < grid.pyramid().blockCount(); ++blk) {
+        if (grid.level(blk) == kNone) continue;
+        const std::size_t n = std::size_t(std::pow(levelResolution(grid.level(blk)), 3)) * C;
+        EXPECT_EQ(std::memcmp(a.blockData(blk), b.blockData(blk), n * sizeof(float)), 0)
+            << what << ", block " << blk;
+    }
+}
+
+TEST(LineSweep, IdenticalForAnyThreadCount) {
+    const WavyField f = wavyField({48, 40, 36});
     LocalVisibilityOptions o = sweepOptions(26, 9);
     o.threads = 1;
-    const LocalVisibility a = computeLocalVisibility(grid, table, o);
+    const LocalVisibility a = computeLocalVisibility(f.grid, f.table, o);
     o.threads = 2;
-    const LocalVisibility b = computeLocalVisibility(grid, table, o);
-    ASSERT_EQ(a.bytes(), b.bytes());
-    for (std::size_t blk = 0; blk < pyr->blockCount(); ++blk) {
-        if (grid->level(blk) == kNone) continue;
-        const std::size_t n = std::size_t(std::pow(levelResolution(grid->level(blk)), 3)) * 9;
-        EXPECT_EQ(std::memcmp(a.blockData(blk), b.blockData(blk), n * sizeof(float)), 0) << blk;
-    }
+    const LocalVisibility b = computeLocalVisibility(f.grid, f.table, o);
+    expectSameBits(*f.grid, a, b, 9, "1 against 2 threads");
 }
 
 // A point's optical depths are fixed-point differences along its line, so which points share a
 // line (the group of blocks a walk runs through, the blocks a TF update recomputes) changes no
 // bit by construction; here checked for every stored point, lines through 1 to 8³ blocks.
 TEST(LineSweep, TheWorkUnitChangesNoBit) {
-    const core::Volume v = test::makeVolume({70, 52, 44}, [](int i, int j, int k) {
-        return int(500 + 400 * std::sin(0.3 * i + 0.2 * j) * std::cos(0.25 * k));
-    });
-    const optics::TransferFunction tf = test::rampTf(0.2f);
-    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
-    const optics::TfTable table(tf);
-    const auto grid = std::make_shared<const MultiresGrid>(
-        pyr, selectLod(*pyr, tf, table, LodBudget::fromReduction(3.0, v.voxelCount())));
+    const WavyField f = wavyField({70, 52, 44});
     int levels = 0;  // the case needs blocks on both lattices and lines through several blocks
-    for (std::size_t blk = 0; blk < pyr->blockCount(); ++blk)
-        levels |= grid->level(blk) == 0 ? 1 : grid->level(blk) != kNone ? 2 : 0;
+    for (std::size_t blk = 0; blk < f.pyramid->blockCount(); ++blk)
+        levels |= f.grid->level(blk) == 0 ? 1 : f.grid->level(blk) != kNone ? 2 : 0;
     ASSERT_EQ(levels, 3);
     for (const int rays : {26, 98}) {
         LocalVisibilityOptions o = sweepOptions(rays, 4);
         o.sweepGroupBlocks = 1;
-        const LocalVisibility a = computeLocalVisibility(grid, table, o);
+        const LocalVisibility a = computeLocalVisibility(f.grid, f.table, o);
         for (const int g : {2, 4, 8}) {
             o.sweepGroupBlocks = g;
-            const LocalVisibility b = computeLocalVisibility(grid, table, o);
-            for (std::size_t blk = 0; blk < pyr->blockCount(); ++blk) {
-                if (grid->level(blk) == kNone) continue;
-                const std::size_t n =
-                    std::size_t(std::pow(levelResolution(grid->level(blk)), 3)) * 4;
-                EXPECT_EQ(std::memcmp(a.blockData(blk), b.blockData(blk), n * sizeof(float)), 0)
-                    << "rays " << rays << ", groups of " << g << "³ blocks, block " << blk;
-            }
+            expectSameBits(*f.grid, a, computeLocalVisibility(f.grid, f.table, o), 4,
+                           std::to_string(rays) + " rays, groups of " + std::to_string(g) +
+                               "³ blocks against 1");
         }
     }
     LocalVisibilityOptions bad = sweepOptions(26, 4);
     bad.sweepGroupBlocks = 3;
-    EXPECT_THROW(computeLocalVisibility(grid, table, bad), InputError);
+    EXPECT_THROW(computeLocalVisibility(f.grid, f.table, bad), InputError);
 }
