@@ -343,14 +343,24 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
     if (c != 1 && c != 4 && c != 9 && c != 16)
         p.fail("coefficients", "must be 1, 4, 9 or 16, got " + std::to_string(c),
                "1 is ambient occlusion; 4, 9, 16 are SH bands 1, 2, 3");
-    const bool sweep = p.choice("algorithm", "march", {"march", "sweep"}) == "sweep";
+    // The line sweep by default (more accurate than the march at every LOD level and several
+    // times faster); the march when `rays` asks for a count the sweep's lattice cannot give.
+    const int minRays = visibility::kMinRaysPerCoefficient * c;
+    const bool raysGiven = p.has("rays");
+    const int rays = raysGiven ? p.integer("rays", 0, minRays, 4096) : 0;
+    const bool latticeRays =
+        !raysGiven || rays == visibility::kSweepRaysCoarse || rays == visibility::kSweepRaysFine;
+    const bool sweep =
+        p.choice("algorithm", latticeRays ? "sweep" : "march", {"march", "sweep"}) == "sweep";
     s.visibility.algorithm =
         sweep ? visibility::VisibilityAlgorithm::Sweep : visibility::VisibilityAlgorithm::March;
     s.visibility.rays =
-        p.integer("rays",
-                  sweep ? (c > 9 ? visibility::kSweepRaysFine : visibility::kSweepRaysCoarse)
-                        : std::max(32, visibility::kMinRaysPerCoefficient * c),
-                  visibility::kMinRaysPerCoefficient * c, 4096);
+        raysGiven
+            ? rays
+            : p.integer("rays",
+                        sweep ? (c > 9 ? visibility::kSweepRaysFine : visibility::kSweepRaysCoarse)
+                              : std::max(32, minRays),
+                        minRays, 4096);
     if (sweep && s.visibility.rays != visibility::kSweepRaysCoarse &&
         s.visibility.rays != visibility::kSweepRaysFine)
         p.fail("rays",

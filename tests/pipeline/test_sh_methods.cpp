@@ -241,10 +241,22 @@ TEST(ShLocal, ParamsAreReadStrictly) {
 TEST(ShLocal, TheLineSweepIsAParamOfItsOwnStageAndServesShGlobal) {
     Session session;
     json d = shScene();
-    d["method"]["params"] = {{"data_reduction", 2}};
+    d["method"]["params"] = {{"data_reduction", 2}, {"algorithm", "march"}};
     const RunResult march = session.run(scene(d));
     d["method"]["params"]["algorithm"] = "sweep";  // 26 lattice rays by default
     const RunResult sweep = session.run(scene(d));
+    // The default: the sweep (the same field: nothing reruns), and the march where the rays
+    // asked for are not the lattice's.
+    d["method"]["params"].erase("algorithm");
+    EXPECT_EQ(ranStages(session.run(scene(d))), (std::set<std::string>{"camera", "render"}));
+    {
+        json m = d;
+        m["method"]["params"]["rays"] = 32;
+        const RunResult r = session.run(scene(m));
+        EXPECT_EQ(r.params["algorithm"], "march");
+        EXPECT_EQ(r.params["rays"], 32);
+    }
+    d["method"]["params"]["algorithm"] = "sweep";
     // Another field (its own key): local visibility reruns, nothing before it.
     EXPECT_EQ(ranStages(sweep), (std::set<std::string>{"local_visibility", "camera", "render"}));
     EXPECT_TRUE(allFinite(sweep.image));
