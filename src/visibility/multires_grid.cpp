@@ -357,13 +357,15 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
     glm::vec3 p;
     for (int a = 0; a < 3; ++a) p[a] = std::min(std::max(pIn[a], 0.f), float(d[a] - 1));
     out.count = 0;
-    const std::size_t owner = ownerBlock(p);
+    // The owner's coordinates directly (blockCoord(owner) would divide three times per sample).
+    const glm::ivec3 oc = ownerCoord(p);
+    const std::size_t owner = indexOf(oc);
     if (isolated_[owner]) return;
     // Fast path: inside the owner's sample box on every axis only the owner contributes.
     {
         const int l = selection_.level[owner];
         if (l != kNone) {
-            const glm::ivec3 b = pyramid_->blockCoord(owner);
+            const glm::ivec3& b = oc;
             const float s = float(levelSpacing(l));
             const glm::vec3 lo = glm::vec3(b * kBlockSize) + 0.5f * s - 0.5f;
             const glm::vec3 hi = glm::vec3(b * kBlockSize) + float(kBlockSize) - 0.5f * s - 0.5f;
@@ -380,7 +382,6 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
     }
     // Candidates: per axis the owner's column and the neighbouring column on p's side of the
     // owner's centre (no ramp reaches farther than 8 voxels past its block's face).
-    const glm::ivec3 oc = pyramid_->blockCoord(owner);
     int col[3][2];
     for (int a = 0; a < 3; ++a) {
         col[a][0] = oc[a];
