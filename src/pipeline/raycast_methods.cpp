@@ -914,14 +914,18 @@ std::shared_ptr<const visibility::LocalVisibility> lightLocalVisibility(const Ru
 
 /// block_pyramid ← volume (once per volume); multires_grid ← pyramid + TF + LOD budget;
 /// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
-Stage blockPyramidStage() {
+Stage blockPyramidStage(bool forSweep) {
     Stage pyramid{"block_pyramid", StageKind::Precompute, {"load_volume"}};
     pyramid.key = [](const Run& run) {
         return KeyBuilder(run, "block_pyramid").stage("load_volume").value();
     };
-    pyramid.compute = [](Run& run) {
+    pyramid.compute = [forSweep](Run& run) {
         auto p = std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(
             run.get<LoadedVolume>("load_volume")->volume, run.progress()));
+        // The line sweep's float copy of the voxels is kept with the pyramid (TF-independent):
+        // made here, so the cache counts it and no TF update pays for it. (A pyramid cached by
+        // a march run makes it on the sweep's first use, uncounted.)
+        if (forSweep) p->flatVoxels();
         const std::size_t bytes = p->bytes();
         return Artifact::of<visibility::BlockPyramid>(std::move(p), bytes);
     };
@@ -929,13 +933,17 @@ Stage blockPyramidStage() {
     pyramid.describe = [](const Run&, const Artifact& a) {
         const auto& p = *a.as<visibility::BlockPyramid>();
         return std::to_string(p.blockCount()) + " blocks of 16^3 at 5 levels, " +
-               std::to_string(p.bytes() >> 20) + " MB";
+               std::to_string(p.bytes() >> 20) + " MB" +
+               (p.flatBytes() > 0 ? " (" + std::to_string(p.flatBytes() >> 20) +
+                                        " MB of it the voxels as float for the line sweep)"
+                                  : std::string());
     };
     return pyramid;
 }
 
 void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const LightCuts& cuts) {
-    plan.stages.push_back(blockPyramidStage());
+    plan.stages.push_back(
+        blockPyramidStage(params.visibility.algorithm == visibility::VisibilityAlgorithm::Sweep));
 
     const json budgetKey = params.budgetKey();
     Stage grid{
@@ -1169,7 +1177,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
 /// in its key). A light or camera change reruns none.
 void addRitschelStages(Plan& plan, const visibility::HierarchicalVisibilityOptions& vo,
                        const LightCuts& cuts) {
-    plan.stages.push_back(blockPyramidStage());
+    plan.stages.push_back(blockPyramidStage(false));
 
     Stage opacity{"opacity_pyramid", StageKind::Precompute, {"block_pyramid", "transfer_function"}};
     opacity.key = [](const Run& run) {

@@ -133,6 +133,8 @@ class BlockPyramid {
     /// the pyramid — it does not depend on the TF, so a TF update reads it without copying the
     /// volume again (4 bytes per voxel more, counted in bytes() once made). Thread-safe.
     const float* flatVoxels() const;
+    /// The bytes of flatVoxels()' array once made, else 0.
+    std::size_t flatBytes() const { return flat_->bytes.load(); }
 
     /// Value ranges of kCellVoxels³ cells (cell c spans voxels [4c, 4c + 4] per axis: the voxels
     /// every trilinear sample inside it reads), for empty-space skipping of visibility rays.
