@@ -916,15 +916,19 @@ std::shared_ptr<const visibility::LocalVisibility> lightLocalVisibility(const Ru
 /// local_visibility ← grid + TF + rays/coefficients/radius. A light or camera change reruns none.
 Stage blockPyramidStage(bool forSweep) {
     Stage pyramid{"block_pyramid", StageKind::Precompute, {"load_volume"}};
-    pyramid.key = [](const Run& run) {
-        return KeyBuilder(run, "block_pyramid").stage("load_volume").value();
+    // The line sweep's float copy of the voxels is kept with the pyramid (TF-independent): made
+    // here, so the artifact's size counts it and no TF update pays for it. A pyramid with it is
+    // another artifact than one without (its own key): sizes, and so the memory the accuracy
+    // study charges a variant, never depend on which method ran first.
+    pyramid.key = [forSweep](const Run& run) {
+        KeyBuilder k(run, "block_pyramid");
+        k.stage("load_volume");
+        if (forSweep) k.text("float voxels");
+        return k.value();
     };
     pyramid.compute = [forSweep](Run& run) {
         auto p = std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(
             run.get<LoadedVolume>("load_volume")->volume, run.progress()));
-        // The line sweep's float copy of the voxels is kept with the pyramid (TF-independent):
-        // made here, so the cache counts it and no TF update pays for it. (A pyramid cached by
-        // a march run makes it on the sweep's first use, uncounted.)
         if (forSweep) p->flatVoxels();
         const std::size_t bytes = p->bytes();
         return Artifact::of<visibility::BlockPyramid>(std::move(p), bytes);

@@ -257,8 +257,11 @@ TEST(ShLocal, TheLineSweepIsAParamOfItsOwnStageAndServesShGlobal) {
         EXPECT_EQ(r.params["rays"], 32);
     }
     d["method"]["params"]["algorithm"] = "sweep";
-    // Another field (its own key): local visibility reruns, nothing before it.
-    EXPECT_EQ(ranStages(sweep), (std::set<std::string>{"local_visibility", "camera", "render"}));
+    // Another field (its own key): local visibility reruns, and the pyramid with the float copy
+    // of the voxels the sweep reads (its own artifact, so its size never depends on which
+    // integrator ran first) and the LOD grid on it; the volume is not loaded again.
+    EXPECT_EQ(ranStages(sweep), (std::set<std::string>{"block_pyramid", "multires_grid",
+                                                       "local_visibility", "camera", "render"}));
     EXPECT_TRUE(allFinite(sweep.image));
     EXPECT_NE(sweep.image.pixels, march.image.pixels);
     // Both approximate the same visibility; the reference is the march at full resolution
