@@ -707,12 +707,9 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
 }
 
 /// V^L at every sample point of the stored blocks by the line sweep (header comment), written at
-/// data + offset[b]. `directions`: latticeDirections of `steps`. Level-0 blocks are swept block by
-/// block: per direction, each lattice line through the block is integrated from its first traced
-/// point in the block to R past its last (reading on past the block's faces). Points of coarser
-/// blocks lie s voxels apart, so a line holds at most a few of a block's points and sharing saves
-/// nothing over their own rays, which the march takes in s-voxel steps: they are marched along the
-/// same directions.
+/// data + offset[b]. `directions`: latticeDirections of `steps`. Parallel over groups of G³ blocks
+/// (costliest first): per direction pair ±v and lattice, each line through the group's traced
+/// points is walked once in runs (header comment), P in fixed point.
 TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                         const LocalVisibilityOptions& options, const sh::SphereSamples& directions,
                         const std::vector<glm::ivec3>& steps,

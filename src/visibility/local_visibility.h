@@ -67,13 +67,19 @@
 //   τ = P(t + n) − P(t),   n = R / |v ⊙ spacing|   (fractional: P linear within a lattice step),
 // i.e. its ray to R, at the cost of O(1) per point and direction instead of R/step samples. Level-0
 // samples lie on the integer lattice; every coarser level's samples lie on the lattice shifted by
-// (½, ½, ½) (16·b + (j + ½)·s − ½ with s even), which has its own lines. A line is integrated only
-// from its first traced point to R past its last. The steps follow the voxels, not the LOD (finer
-// than the march in coarse blocks; the LOD still sets where V is stored). Points off both lattices
-// (samples of a partial edge block clamped onto the volume) are marched alone along the same
-// directions. The result is identical for any thread count (each point's directions are summed in
-// one fixed order). A block's points depend on the voxels alone, as the march's do, so the TF
-// update below recomputes only the blocks an edit reaches under either integrator.
+// (½, ½, ½) (16·b + (j + ½)·s − ½ with s even), which has its own lines. The unit of work is a
+// group of G³ blocks (sweepGroupBlocks; 4 unless too few groups for the threads): a line is
+// walked once through all of the group's traced points, in runs from R before a run's first point
+// to R past its last, a run ending where two consecutive points lie more than 2R apart. P is kept
+// in fixed point (each sub-step's depth rounded once to 2⁻³², summed in int64), so a ray's depth
+// is an exact difference, the same whichever sub-step its run started from: which points share a
+// line (G, the blocks being computed) changes no bit. The steps follow the voxels, not the LOD
+// (finer than the march in coarse blocks; the LOD still sets where V is stored). The voxels are
+// read from BlockPyramid::flatVoxels (made once per pyramid). Points off both lattices (samples of
+// a partial edge block clamped onto the volume) are marched alone along the same directions. The
+// result is identical for any thread count (each point's directions are summed in one fixed
+// order). A block's points depend on the voxels alone, as the march's do, so the TF update below
+// recomputes only the blocks an edit reaches under either integrator.
 //
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only
