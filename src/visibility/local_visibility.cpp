@@ -9,6 +9,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <numbers>
 #include <numeric>
@@ -1157,10 +1158,23 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 glm::vec3 at = position(tStart);
                                 double iFront = 0.0;
                                 bool haveIFront = false, haveStart = false;
+                                // The line's last lattice point inside the volume (an interval
+                                // along it, and tStart lies in it): the walk stops before the
+                                // step that would leave. Exact: half-integers over 1 or 2.
+                                int tEnd = std::numeric_limits<int>::max();
+                                for (int ax = 0; ax < 3; ++ax) {
+                                    if (d.v[ax] > 0)
+                                        tEnd = std::min(tEnd,
+                                                        int(std::floor((top[ax] - lineStart[ax]) /
+                                                                       float(d.v[ax]))));
+                                    if (d.v[ax] < 0)
+                                        tEnd = std::min(
+                                            tEnd, int(std::floor(lineStart[ax] / float(-d.v[ax]))));
+                                }
+                                const int tStop = std::min(want, tEnd);
                                 int t = tStart;
-                                for (; t < want; ++t) {
+                                for (; t < tStop; ++t) {
                                     const glm::vec3 next = position(t + 1);
-                                    if (!inVolume(next)) break;
                                     const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
                                     if (quietAt(at)) {
                                         // Transparent throughout: nothing to integrate or read (S
