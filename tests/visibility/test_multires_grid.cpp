@@ -222,3 +222,31 @@ TEST(MultiresGrid, InsideItsSampleBoxABlockIsInterpolatedAlone) {
     EXPECT_NEAR(w.weight[0] + w.weight[1], 1.f, 1e-6f);
     EXPECT_NEAR(std::min(w.weight[0], w.weight[1]), 0.3f, 1e-5f);
 }
+
+// The line sweep reads the voxels from one flat array kept with the pyramid: it must be the
+// volume itself, x fastest — also past partial edge blocks (dims not multiples of 16), where the
+// blocks repeat their edge voxel — counted in bytes() once made and shared by copies.
+TEST(BlockPyramid, FlatVoxelsAreTheVolumeXFastestAndCountedOnceMade) {
+    const glm::ivec3 dims(37, 18, 21);
+    const core::Volume v =
+        test::makeVolume(dims, [](int i, int j, int k) { return noise(i, j, k, -1000, 3000); });
+    const BlockPyramid pyr = BlockPyramid::build(v);
+    const std::size_t before = pyr.bytes();
+    EXPECT_EQ(pyr.flatBytes(), 0u);
+    const BlockPyramid copy = pyr;
+    const float* flat = pyr.flatVoxels();
+    ASSERT_NE(flat, nullptr);
+    const std::size_t voxels = std::size_t(dims.x) * dims.y * dims.z;
+    EXPECT_EQ(pyr.flatBytes(), voxels * sizeof(float));
+    EXPECT_EQ(pyr.bytes(), before + voxels * sizeof(float));
+    EXPECT_EQ(copy.flatVoxels(), flat);  // made once, shared
+    const auto* d = v.dataAs<std::int16_t>();
+    std::size_t wrong = 0;
+    for (int k = 0; k < dims.z; ++k)
+        for (int j = 0; j < dims.y; ++j)
+            for (int i = 0; i < dims.x; ++i)
+                wrong +=
+                    flat[std::size_t(i) + std::size_t(dims.x) * (j + std::size_t(dims.y) * k)] !=
+                    float(d[v.linearIndex(i, j, k)]);
+    EXPECT_EQ(wrong, 0u);
+}
