@@ -1481,14 +1481,48 @@ constexpr std::size_t kMaxVtiXmlBytes = std::size_t(64) << 20;
 /// level and overflows the stack on a few hundred thousand.
 constexpr int kMaxVtiDepth = 32;
 
-/// The value of attribute `name` in the tag starting at `tag` (up to its '>'), or "".
-std::string xmlAttribute(const std::string& xml, std::size_t tag, const std::string& name) {
-    const std::size_t end = xml.find('>', tag);
-    const std::string key = " " + name + "=\"";
-    const std::size_t at = xml.find(key, tag);
-    if (at == std::string::npos || at > end) return {};
-    const std::size_t from = at + key.size(), to = xml.find('"', from);
-    return to == std::string::npos || to > end ? std::string() : xml.substr(from, to - from);
+/// Reads the tag starting at `tag` ('<name ...>') as an XML parser does: attributes separated by
+/// white space, '=' with optional white space around it, values in "…" or '…' (which may hold
+/// '>'). Calls `visit(name, value)` per attribute; returns the position of the tag's closing '>',
+/// or npos when the text ends first.
+template <class Visit>
+std::size_t scanXmlTag(const std::string& xml, std::size_t tag, Visit&& visit) {
+    auto space = [](char c) { return c == ' ' || c == '\t' || c == '\r' || c == '\n'; };
+    const std::size_t n = xml.size();
+    std::size_t i = tag + 1;
+    while (i < n && !space(xml[i]) && xml[i] != '>' && xml[i] != '/') ++i;  // the element name
+    while (i < n) {
+        while (i < n && space(xml[i])) ++i;
+        if (i >= n) break;
+        if (xml[i] == '>') return i;
+        if (xml[i] == '/') {
+            ++i;
+            continue;
+        }
+        const std::size_t nameStart = i;
+        while (i < n && !space(xml[i]) && xml[i] != '=' && xml[i] != '>' && xml[i] != '/') ++i;
+        const std::string name = xml.substr(nameStart, i - nameStart);
+        while (i < n && space(xml[i])) ++i;
+        if (i >= n || xml[i] != '=') continue;  // malformed: the parser refuses the file
+        ++i;
+        while (i < n && space(xml[i])) ++i;
+        if (i >= n || (xml[i] != '"' && xml[i] != '\'')) continue;
+        const std::size_t close = xml.find(xml[i], i + 1);
+        if (close == std::string::npos) break;
+        visit(name, xml.substr(i + 1, close - i - 1));
+        i = close + 1;
+    }
+    return std::string::npos;
+}
+
+/// The value of attribute `name` in the tag starting at `tag`, or nullopt when it has none.
+std::optional<std::string> xmlAttribute(const std::string& xml, std::size_t tag,
+                                        const std::string& name) {
+    std::optional<std::string> found;
+    scanXmlTag(xml, tag, [&](const std::string& key, const std::string& value) {
+        if (key == name && !found) found = value;
+    });
+    return found;
 }
 
 /// Bytes of `n` words of `wordBytes` at `at` in the appended block (raw or base64), or empty
@@ -1524,8 +1558,9 @@ std::vector<unsigned char> appendedWords(std::ifstream& in, std::uint64_t at, st
 }
 
 /// What vtkXMLImageDataReader would be handed, checked first: element nesting (deep XML crashes
-/// its parser) and, for appended data, each array's size words against the extent and against
-/// the bytes the file holds (a compressed block relabelled raw makes VTK allocate gigabytes).
+/// its parser) and each binary array's size words — appended or inline — against the extent and
+/// against the bytes the file holds (a compressed block relabelled raw, or a compressed header
+/// claiming 2³² blocks, makes VTK allocate gigabytes).
 void checkVtiFile(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);
     if (!in) return;  // the reader reports it
@@ -1554,14 +1589,29 @@ void checkVtiFile(const fs::path& path) {
                                  " levels (byte " + std::to_string(i) + ")",
                              "the file is damaged or not a VTK image file");
     }
+    // An attribute as the XML parser hands it to VTK. A character reference ("&#48;") would be
+    // decoded there and not here, so a value holding one is refused rather than misread.
+    auto attribute = [&](const std::string& text, std::size_t tag,
+                         const char* name) -> std::optional<std::string> {
+        std::optional<std::string> v = xmlAttribute(text, tag, name);
+        if (v && v->find('&') != std::string::npos)
+            throw InputError(
+                path.string(), name,
+                "holds an XML character or entity reference ('" + v->substr(0, 40) + "')",
+                "write the value as plain text");
+        return v;
+    };
+    auto text = [&](const std::string& xmlText, std::size_t tag, const char* name) {
+        return attribute(xmlText, tag, name).value_or(std::string());
+    };
     // Geometry attributes: VTK replaces one that does not parse (Spacing="1 nan 1") by its
     // default (1 1 1) without a word — a silently wrong geometry.
     if (const std::size_t tag = xml.find("<ImageData"); tag != std::string::npos) {
         for (const auto& [name, count] :
              {std::pair<const char*, int>{"Spacing", 3}, {"Origin", 3}, {"Direction", 9}}) {
-            const std::string text = xmlAttribute(xml, tag, name);
-            if (text.empty()) continue;  // absent: VTK's default is right
-            std::istringstream words(text);
+            const std::string value = text(xml, tag, name);
+            if (value.empty()) continue;  // absent: VTK's default is right
+            std::istringstream words(value);
             std::string w;
             int n = 0;
             bool ok = true;
@@ -1574,7 +1624,7 @@ void checkVtiFile(const fs::path& path) {
             if (!ok || n != count)
                 throw InputError(
                     path.string(), name,
-                    "'" + text + "' is not " + std::to_string(count) + " finite numbers",
+                    "'" + value + "' is not " + std::to_string(count) + " finite numbers",
                     "repair the header");
         }
     }
@@ -1582,14 +1632,14 @@ void checkVtiFile(const fs::path& path) {
     // is inverted (7 0) or reaches outside the whole extent made it copy from a null pointer
     // (fuzzing: SEGV in vtkXMLDataParser::ReadCompressedData).
     if (const std::size_t tag = xml.find("<ImageData"); tag != std::string::npos) {
-        std::istringstream whole(xmlAttribute(xml, tag, "WholeExtent"));
+        std::istringstream whole(text(xml, tag, "WholeExtent"));
         long long w[6];
         bool haveWhole = true;
         for (auto& x : w) haveWhole = haveWhole && bool(whole >> x);
         for (std::size_t piece = xml.find("<Piece", tag); haveWhole && piece != std::string::npos;
              piece = xml.find("<Piece", piece + 1)) {
-            const std::string text = xmlAttribute(xml, piece, "Extent");
-            std::istringstream words(text);
+            const std::string value = text(xml, piece, "Extent");
+            std::istringstream words(value);
             long long e[6];
             bool ok = true;
             for (auto& x : e) ok = ok && bool(words >> x);
@@ -1598,38 +1648,20 @@ void checkVtiFile(const fs::path& path) {
                      e[2 * a + 1] <= w[2 * a + 1];
             if (!ok)
                 throw InputError(path.string(), "Piece Extent",
-                                 "'" + text + "' is not 3 ascending ranges inside WholeExtent",
+                                 "'" + value + "' is not 3 ascending ranges inside WholeExtent",
                                  "the file is damaged; re-export the image");
         }
     }
-    if (appended == std::string::npos) return;
-    // Appended data: one '_' then the arrays, each at its offset.
+    // Binary arrays: their size words.
     const std::size_t root = xml.find("<VTKFile");
     const std::size_t image = xml.find("<ImageData");
     if (root == std::string::npos || image == std::string::npos) return;  // the reader says so
-    const bool compressed = !xmlAttribute(xml, root, "compressor").empty();
-    const std::size_t word = xmlAttribute(xml, root, "header_type") == "UInt64" ? 8 : 4;
-    const bool bigEndian = xmlAttribute(xml, root, "byte_order") == "BigEndian";
-    std::ifstream tail(path, std::ios::binary);
-    std::string block(4096, '\0');
-    tail.seekg(std::streamoff(appended));
-    tail.read(block.data(), std::streamsize(block.size()));
-    block.resize(std::size_t(tail.gcount()));
-    const bool base64 = xmlAttribute(block, 0, "encoding") == "base64";
-    // The data starts after '_' (only white space between the tag and it). VTK searches the rest
-    // of the file for one and, without it, spent minutes on a 1 KB file.
-    const std::size_t tagEnd = block.find('>');
-    const std::size_t underscore = tagEnd == std::string::npos
-                                       ? std::string::npos
-                                       : block.find_first_not_of(" \t\r\n", tagEnd + 1);
-    if (underscore == std::string::npos || block[underscore] != '_')
-        throw InputError(path.string(), "AppendedData",
-                         "does not start with the '_' marker before its data",
-                         "the file is damaged or not a VTK image file");
-    const std::uint64_t dataStart = appended + underscore + 1;
+    const bool compressed = !text(xml, root, "compressor").empty();
+    const std::size_t word = text(xml, root, "header_type") == "UInt64" ? 8 : 4;
+    const bool bigEndian = text(xml, root, "byte_order") == "BigEndian";
     std::uint64_t voxels = 1;
     {
-        std::istringstream ext(xmlAttribute(xml, image, "WholeExtent"));
+        std::istringstream ext(text(xml, image, "WholeExtent"));
         long long e[6];
         for (auto& x : e)
             if (!(ext >> x)) return;  // the reader refuses a broken extent
@@ -1638,6 +1670,28 @@ void checkVtiFile(const fs::path& path) {
             if (n < 1 || n > core::kMaxDim) return;  // checkExtent words this one
             voxels *= std::uint64_t(n);
         }
+    }
+    // The appended block, when there is one: the data starts after '_' (only white space between
+    // the tag and it). VTK searches the rest of the file for one and, without it, spent minutes on
+    // a 1 KB file.
+    bool appendedBase64 = false;
+    std::uint64_t dataStart = 0;
+    if (appended != std::string::npos) {
+        std::ifstream tail(path, std::ios::binary);
+        std::string block(4096, '\0');
+        tail.seekg(std::streamoff(appended));
+        tail.read(block.data(), std::streamsize(block.size()));
+        block.resize(std::size_t(tail.gcount()));
+        appendedBase64 = text(block, 0, "encoding") == "base64";
+        const std::size_t tagEnd = scanXmlTag(block, 0, [](const auto&, const auto&) {});
+        const std::size_t underscore = tagEnd == std::string::npos
+                                           ? std::string::npos
+                                           : block.find_first_not_of(" \t\r\n", tagEnd + 1);
+        if (underscore == std::string::npos || block[underscore] != '_')
+            throw InputError(path.string(), "AppendedData",
+                             "does not start with the '_' marker before its data",
+                             "the file is damaged or not a VTK image file");
+        dataStart = appended + underscore + 1;
     }
     auto readWord = [&](const std::vector<unsigned char>& w, std::size_t k) {
         std::uint64_t v = 0;
@@ -1652,31 +1706,52 @@ void checkVtiFile(const fs::path& path) {
         {"UInt32", 4}, {"Int64", 8}, {"UInt64", 8}, {"Float32", 4}, {"Float64", 8}};
     for (std::size_t tag = xml.find("<DataArray"); tag != std::string::npos;
          tag = xml.find("<DataArray", tag + 1)) {
-        if (xmlAttribute(xml, tag, "format") != "appended") continue;
-        const auto type = kTypeBytes.find(xmlAttribute(xml, tag, "type"));
-        const std::string offsetText = xmlAttribute(xml, tag, "offset");
-        if (type == kTypeBytes.end() || offsetText.empty()) continue;  // the reader words these
+        // VTK reads an array with an 'offset' attribute from the appended block whatever its
+        // 'format' says (fuzzing: format="appgnded" skipped this check and VTK allocated 17 GB
+        // for a compressed header claiming 2³² blocks); without one, format="binary" is inline
+        // base64 and anything else ASCII text.
+        const std::optional<std::string> offsetText = attribute(xml, tag, "offset");
+        const bool inAppended = offsetText.has_value();
+        if (!inAppended && text(xml, tag, "format") != "binary") continue;  // ASCII: no sizes
+        if (inAppended && appended == std::string::npos) continue;          // the reader says so
+        const auto type = kTypeBytes.find(text(xml, tag, "type"));
+        if (type == kTypeBytes.end()) continue;  // the reader words this
         std::uint64_t offset = 0, comps = 1;
         try {
-            offset = std::stoull(offsetText);
-            if (const std::string c = xmlAttribute(xml, tag, "NumberOfComponents"); !c.empty())
+            if (inAppended) offset = std::stoull(*offsetText);
+            if (const std::string c = text(xml, tag, "NumberOfComponents"); !c.empty())
                 comps = std::stoull(c);
         } catch (const std::exception&) {
             throw InputError(path.string(), "DataArray",
                              "has a malformed offset or component count", "the file is damaged");
         }
         const std::uint64_t expected = voxels * std::max<std::uint64_t>(comps, 1) * type->second;
-        const std::uint64_t at = dataStart + offset;
         auto fail = [&](const std::string& problem) {
-            throw InputError(path.string(), "AppendedData", problem,
+            throw InputError(path.string(), inAppended ? "AppendedData" : "DataArray", problem,
                              "the file is damaged, or its compressor or sizes were edited");
         };
-        if (at >= fileSize)
-            fail("array offset " + std::to_string(offset) + " is past the file's end");
-        const std::uint64_t remaining = fileSize - at;
+        // Where the array's words start and how many bytes it can span: the rest of the file
+        // for appended data, the element's text for inline data (always base64).
+        std::uint64_t at = 0, remaining = 0;
+        bool base64 = true;
+        if (inAppended) {
+            at = dataStart + offset;
+            if (offset >= fileSize || at >= fileSize)
+                fail("array offset " + std::to_string(offset) + " is past the file's end");
+            remaining = fileSize - at;
+            base64 = appendedBase64;
+        } else {
+            const std::size_t tagEnd = scanXmlTag(xml, tag, [](const auto&, const auto&) {});
+            if (tagEnd == std::string::npos || xml[tagEnd - 1] == '/') continue;  // no data
+            at = xml.find_first_not_of(" \t\r\n", tagEnd + 1);
+            if (at == std::string::npos) continue;  // the reader says so
+            const std::size_t end = xml.find('<', at);
+            remaining = (end == std::string::npos ? fileSize : end) - at;
+        }
         if (!compressed) {
             const auto w = appendedWords(in, at, 1, word, base64);
             if (w.empty()) fail("ends inside an array's size word");
+            if (!inAppended) continue;  // VTK reads inline data into the extent's array
             const std::uint64_t n = readWord(w, 0);
             if (n != expected)
                 fail("array claims " + std::to_string(n) + " bytes; the extent needs " +

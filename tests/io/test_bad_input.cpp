@@ -788,6 +788,114 @@ TEST(BadInput, FuzzVtiZeroOrNonFiniteSpacingAndOriginAreRefused) {
     EXPECT_EQ(io::readVolume(tmp / "n.vti").voxelCount(), 8u * 8u * 8u);
 }
 
+namespace {
+std::string base64(const std::string& bytes) {
+    static const char* kAlphabet =
+        "ABCDEFGHIJKLMNOPQRSTUVWXYZabcdefghijklmnopqrstuvwxyz0123456789+/";
+    std::string out;
+    for (std::size_t i = 0; i < bytes.size(); i += 3) {
+        std::uint32_t v = 0;
+        for (std::size_t k = 0; k < 3; ++k)
+            v = (v << 8) | (i + k < bytes.size() ? static_cast<unsigned char>(bytes[i + k]) : 0);
+        const std::size_t n = std::min<std::size_t>(3, bytes.size() - i);
+        for (std::size_t k = 0; k < 4; ++k)
+            out += k <= n ? kAlphabet[(v >> (18 - 6 * k)) & 63] : '=';
+    }
+    return out;
+}
+
+std::string littleEndianWords(std::initializer_list<std::uint32_t> words) {
+    std::string out;
+    for (std::uint32_t w : words)
+        for (int b = 0; b < 4; ++b) out += char((w >> (8 * b)) & 0xff);
+    return out;
+}
+
+/// An 8³ UInt8 .vti whose one array is inline binary (format="binary": base64 in the element,
+/// as VTK writes it with SetDataModeToBinary), zlib-compressed in one block; `header` replaces
+/// the compression header's first three words when given.
+std::string inlineCompressedVti(const std::string& dataArrayAttributes,
+                                std::optional<std::string> header = std::nullopt) {
+    std::string voxels(512, '\0');
+    for (std::size_t i = 0; i < voxels.size(); ++i) voxels[i] = char(i * 7 % 251);
+    std::string packed(compressBound(uLong(voxels.size())), '\0');
+    uLongf packedSize = uLongf(packed.size());
+    compress(reinterpret_cast<Bytef*>(packed.data()), &packedSize,
+             reinterpret_cast<const Bytef*>(voxels.data()), uLong(voxels.size()));
+    packed.resize(packedSize);
+    const std::string words = header ? *header + littleEndianWords({std::uint32_t(packedSize)})
+                                     : littleEndianWords({1, 512, 512, std::uint32_t(packedSize)});
+    return "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" "
+           "byte_order=\"LittleEndian\" header_type=\"UInt32\" "
+           "compressor=\"vtkZLibDataCompressor\">\n<ImageData WholeExtent=\"0 7 0 7 0 7\" "
+           "Origin=\"0 0 0\" Spacing=\"1 1 1\">\n<Piece Extent=\"0 7 0 7 0 7\">\n"
+           "<PointData Scalars=\"s\"><DataArray type=\"UInt8\" Name=\"s\" " +
+           dataArrayAttributes + ">\n" + base64(words) + base64(packed) +
+           "\n</DataArray></PointData>\n<CellData></CellData>\n</Piece>\n</ImageData>\n"
+           "</VTKFile>\n";
+}
+}  // namespace
+
+TEST(BadInput, FuzzVtiArrayWithAnOffsetIsAppendedWhateverItsFormatSays) {
+    // fuzz_vti (CI, seed 1): format="appgnded" skipped the appended-data check, but VTK reads any
+    // array with an 'offset' attribute from the appended block; its compressed header claimed
+    // 2³² − 511 blocks and VTK allocated 17 GB for their sizes.
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("kronander", o), tmp / "k.vti");
+    const std::string good = readAll(tmp / "k.vti");
+    const std::size_t marker = good.find('_', good.find("<AppendedData"));
+    ASSERT_NE(marker, std::string::npos);
+    std::string claims = good;
+    const std::string huge = base64(littleEndianWords({0xfffffe01u, 512, 512}));
+    claims.replace(marker + 1, huge.size(), huge);
+    for (const char* format : {"format=\"appended\"", "format=\"appgnded\"", "format=\"binary\""}) {
+        std::string text = claims;
+        const std::string original = "format=\"appended\"";
+        text.replace(text.find(original), original.size(), format);
+        writeText(tmp / "f.vti", text);
+        expectInputError(tmp / "f.vti", "AppendedData", {"claims 4294966785 blocks"});
+    }
+    // Attributes as XML allows them — single quotes, white space around '=', a new line between
+    // them — are read as the parser reads them, not skipped.
+    std::string spaced = claims;
+    const std::string offset = "offset=\"0\"";
+    spaced.replace(spaced.find(offset), offset.size(), "\n  offset = '0'");
+    writeText(tmp / "q.vti", spaced);
+    expectInputError(tmp / "q.vti", "AppendedData", {"claims 4294966785 blocks"});
+    // A character reference is decoded by the parser, not by the check: refused.
+    std::string referenced = good;
+    referenced.replace(referenced.find(offset), offset.size(), "offset=\"&#48;\"");
+    writeText(tmp / "r.vti", referenced);
+    expectInputError(tmp / "r.vti", "offset", {"character or entity reference"});
+    // The untouched file, and one with the same attributes spaced out, still load.
+    std::string spacedGood = good;
+    spacedGood.replace(spacedGood.find(offset), offset.size(), "\n  offset = '0'");
+    writeText(tmp / "g.vti", spacedGood);
+    const core::Volume spacedRead = io::readVolume(tmp / "g.vti"),
+                       plainRead = io::readVolume(tmp / "k.vti");
+    ASSERT_EQ(spacedRead.voxelCount(), plainRead.voxelCount());
+    EXPECT_EQ(spacedRead.at(3, 4, 5), plainRead.at(3, 4, 5));
+}
+
+TEST(BadInput, InlineBinaryCompressedArraysHaveTheirHeaderChecked) {
+    // The same compressed header inline (format="binary", no offset) reaches the same
+    // allocation in VTK's parser.
+    test::TempDir tmp;
+    writeText(tmp / "ok.vti", inlineCompressedVti("format=\"binary\""));
+    const core::Volume ok = io::readVolume(tmp / "ok.vti");
+    ASSERT_EQ(ok.voxelCount(), 512u);
+    EXPECT_EQ(ok.at(3, 0, 0), float(3 * 7 % 251));
+    EXPECT_EQ(ok.at(1, 2, 3), float((1 + 8 * 2 + 64 * 3) * 7 % 251));
+    writeText(tmp / "huge.vti",
+              inlineCompressedVti("format=\"binary\"", littleEndianWords({0xfffffe01u, 512, 512})));
+    expectInputError(tmp / "huge.vti", "DataArray", {"claims 4294966785 blocks"});
+    writeText(tmp / "sizes.vti",
+              inlineCompressedVti("format=\"binary\"", littleEndianWords({1, 4096, 4096})));
+    expectInputError(tmp / "sizes.vti", "DataArray", {"holds 4096 bytes", "needs 512"});
+}
+
 TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
     // fuzz_nifti_gz: 80 non-NUL descrip bytes were read past their end (ASan heap-buffer-overflow).
     test::TempDir tmp;
