@@ -1702,18 +1702,48 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
     return out;
 }
 
-void LocalVisibility::sample(const glm::vec3& p, float* out) const {
-    const int C = coefficients_;
-    std::fill(out, out + C, 0.f);
+namespace {
+/// LocalVisibility::sample for a compile-time coefficient count (kC = 0: `runtimeC`): the
+/// interpolation unrolls per coefficient, and the result is zeroed without a call — this runs
+/// once per shaded sample of every SH frame.
+template <int kC>
+void sampleField(const MultiresGrid& grid, const float* data, const std::size_t* offset,
+                 const glm::vec3& p, float* out, int runtimeC = 0) {
+    const int C = kC > 0 ? kC : runtimeC;
+    for (int i = 0; i < C; ++i) out[i] = 0.f;
+    std::size_t block;
+    int level;
+    glm::vec3 local;
+    if (grid.ownerAlone(p, block, level, local)) {
+        addTrilinear<kC>(data + offset[block], levelResolution(level), C, local, 1.f, out);
+        return;
+    }
     BlockWeights w;
-    grid_->weights(p, w);
+    grid.weights(p, w);
     if (w.count == 0) {
         out[0] = float(std::sqrt(4.0 * std::numbers::pi));
         return;
     }
     for (int k = 0; k < w.count; ++k)
-        addTrilinear(blockData(w.block[k]), levelResolution(w.level[k]), C, w.local[k], w.weight[k],
-                     out);
+        addTrilinear<kC>(data + offset[w.block[k]], levelResolution(w.level[k]), C, w.local[k],
+                         w.weight[k], out);
+}
+}  // namespace
+
+void LocalVisibility::sample(const glm::vec3& p, float* out) const {
+    const MultiresGrid& g = *grid_;
+    switch (coefficients_) {
+        case 1:
+            return sampleField<1>(g, data_.data(), offset_.data(), p, out);
+        case 4:
+            return sampleField<4>(g, data_.data(), offset_.data(), p, out);
+        case 9:
+            return sampleField<9>(g, data_.data(), offset_.data(), p, out);
+        case 16:
+            return sampleField<16>(g, data_.data(), offset_.data(), p, out);
+        default:
+            return sampleField<0>(g, data_.data(), offset_.data(), p, out, coefficients_);
+    }
 }
 
 }  // namespace voxlight::visibility

@@ -361,32 +361,32 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
     const glm::ivec3 oc = ownerCoord(p);
     const std::size_t owner = indexOf(oc);
     if (isolated_[owner]) return;
-    // Fast path: inside the owner's sample box on every axis only the owner contributes.
-    {
-        const int l = selection_.level[owner];
-        if (l != kNone) {
-            const glm::ivec3& b = oc;
-            const float s = float(levelSpacing(l));
-            const glm::vec3 lo = glm::vec3(b * kBlockSize) + 0.5f * s - 0.5f;
-            const glm::vec3 hi = glm::vec3(b * kBlockSize) + float(kBlockSize) - 0.5f * s - 0.5f;
-            if (p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z &&
-                p.z <= hi.z) {
-                out.count = 1;
-                out.block[0] = std::uint32_t(owner);
-                out.weight[0] = 1.f;
-                out.level[0] = std::int8_t(l);
-                out.local[0] = (p - glm::vec3(b * kBlockSize) + 0.5f) / s - 0.5f;
-                return;
-            }
+    // Per axis: is p inside the owner's sample box? A neighbour across that axis then has weight
+    // exactly 0 (its ramp ends w_c/2 ≤ s_owner/2 past its face, where the box starts; in floats
+    // too: past/ramp rounds to ≥ ½), so its column is not visited. Inside on every axis only the
+    // owner contributes: the fast path.
+    bool inside[3] = {false, false, false};
+    if (const int l = selection_.level[owner]; l != kNone) {
+        glm::vec3 lo, hi;
+        sampleBox(oc, l, lo, hi);
+        for (int a = 0; a < 3; ++a) inside[a] = p[a] >= lo[a] && p[a] <= hi[a];
+        if (inside[0] && inside[1] && inside[2]) {  // ownerAlone()'s case
+            out.count = 1;
+            out.block[0] = std::uint32_t(owner);
+            out.weight[0] = 1.f;
+            out.level[0] = std::int8_t(l);
+            out.local[0] = (p - glm::vec3(oc * kBlockSize) + 0.5f) * levelInvSpacing(l) - 0.5f;
+            return;
         }
     }
-    // Candidates: per axis the owner's column and the neighbouring column on p's side of the
-    // owner's centre (no ramp reaches farther than 8 voxels past its block's face).
+    // Candidates: per axis the owner's column and, unless p is inside the owner's box on that
+    // axis, the neighbouring column on p's side of the owner's centre (no ramp reaches farther
+    // than 8 voxels past its block's face).
     int col[3][2];
     for (int a = 0; a < 3; ++a) {
         col[a][0] = oc[a];
         const int other = p[a] < float(oc[a] * kBlockSize) + 7.5f ? oc[a] - 1 : oc[a] + 1;
-        col[a][1] = other >= 0 && other < nb[a] ? other : -1;
+        col[a][1] = !inside[a] && other >= 0 && other < nb[a] ? other : -1;
     }
     float sum = 0.f;
     for (int c = 0; c < 8; ++c) {

@@ -198,8 +198,11 @@ LodSelection selectLod(const BlockPyramid& pyramid, const optics::TransferFuncti
 
 /// Trilinear interpolation of an n³ block payload of `channels` floats per sample (sample-major)
 /// at local sample coordinates u (already clamped to [0, n − 1]); adds w·value to out[0..channels).
-inline void addTrilinear(const float* data, int n, int channels, const glm::vec3& u, float w,
+/// kChannels > 0: `channels` is that compile-time count (the loop unrolls and vectorises).
+template <int kChannels = 0>
+inline void addTrilinear(const float* data, int n, int runtimeChannels, const glm::vec3& u, float w,
                          float* out) {
+    const int channels = kChannels > 0 ? kChannels : runtimeChannels;
     const int m = n > 1 ? n - 2 : 0;
     const int i = std::min(int(u.x), m), j = std::min(int(u.y), m), k = std::min(int(u.z), m);
     const float fx = u.x - float(i), fy = u.y - float(j), fz = u.z - float(k);
@@ -244,6 +247,33 @@ class MultiresGrid {
     /// Blocks and weights of the seamless interpolation at continuous voxel index p (clamped to
     /// the volume); count 0 where no stored block contributes.
     void weights(const glm::vec3& p, BlockWeights& out) const;
+    /// weights()' common case, inline (one call per shaded sample of every SH frame): true when
+    /// p (clamped) lies inside its stored owner's sample box on every axis, where the owner alone
+    /// contributes with weight 1 — then its index, level and local sample coordinates, exactly
+    /// as weights() gives them; false otherwise (call weights()).
+    bool ownerAlone(const glm::vec3& pIn, std::size_t& block, int& level, glm::vec3& local) const {
+        glm::vec3 p;
+        for (int a = 0; a < 3; ++a) p[a] = std::min(std::max(pIn[a], 0.f), hi_[a]);
+        const glm::ivec3 b = ownerCoord(p);
+        const std::size_t owner = indexOf(b);
+        const int l = selection_.level[owner];
+        if (l == kNone) return false;
+        glm::vec3 lo, hi;
+        sampleBox(b, l, lo, hi);
+        if (!(p.x >= lo.x && p.x <= hi.x && p.y >= lo.y && p.y <= hi.y && p.z >= lo.z &&
+              p.z <= hi.z))
+            return false;
+        block = owner;
+        level = l;
+        local = (p - glm::vec3(b * kBlockSize) + 0.5f) * levelInvSpacing(l) - 0.5f;  // exact: 2^-l
+        return true;
+    }
+    /// A block's sample box at a level: [16·b + s/2 − ½, 16·b + 16 − s/2 − ½] per axis.
+    static void sampleBox(const glm::ivec3& b, int level, glm::vec3& lo, glm::vec3& hi) {
+        const float s = float(levelSpacing(level));
+        lo = glm::vec3(b * kBlockSize) + 0.5f * s - 0.5f;
+        hi = glm::vec3(b * kBlockSize) + float(kBlockSize) - 0.5f * s - 0.5f;
+    }
     /// The block that owns the voxel nearest to p (p clamped to the volume).
     std::size_t ownerBlock(const glm::vec3& p) const { return indexOf(ownerCoord(p)); }
     /// Its block coordinates.

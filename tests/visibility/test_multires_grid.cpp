@@ -223,6 +223,84 @@ TEST(MultiresGrid, InsideItsSampleBoxABlockIsInterpolatedAlone) {
     EXPECT_NEAR(std::min(w.weight[0], w.weight[1]), 0.3f, 1e-5f);
 }
 
+// weights() visits only the candidate blocks its geometry allows (the owner's column per axis,
+// the neighbour's only where p is outside the owner's sample box on that axis): checked against
+// the header's formula evaluated over every block of a mixed-level grid with unstored blocks, the
+// ramp widths recomputed here from their definition.
+TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
+    const core::Volume v =
+        test::makeVolume({48, 40, 36}, [](int i, int j, int k) { return noise(i, j, k, 0, 1000); });
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const glm::ivec3 nb = pyr->blocks();
+    LodSelection sel;
+    sel.level.resize(pyr->blockCount());
+    for (std::size_t b = 0; b < sel.level.size(); ++b) {
+        const int r = int(core::hashCounters(b, 3, 0, 11) % 7);  // 0..4, two of seven unstored
+        sel.level[b] = std::int8_t(r <= 4 ? r : kNone);
+    }
+    sel.significance.assign(sel.level.size(), 0.f);
+    const MultiresGrid g(pyr, sel);
+    auto ramp = [&](const glm::ivec3& c) {  // smallest spacing among c and its stored neighbours
+        int w = 1 << 30;
+        for (int dz = -1; dz <= 1; ++dz)
+            for (int dy = -1; dy <= 1; ++dy)
+                for (int dx = -1; dx <= 1; ++dx) {
+                    const glm::ivec3 n = c + glm::ivec3(dx, dy, dz);
+                    if (glm::any(glm::lessThan(n, glm::ivec3(0))) ||
+                        glm::any(glm::greaterThanEqual(n, nb)))
+                        continue;
+                    const int l = sel.level[pyr->blockIndex(n.x, n.y, n.z)];
+                    if (l != kNone) w = std::min(w, levelSpacing(l));
+                }
+        return double(w);
+    };
+    std::size_t checked = 0, blended = 0;
+    for (std::uint64_t n = 0; n < 20000; ++n) {
+        glm::vec3 p;
+        for (int a = 0; a < 3; ++a)
+            p[a] = float(core::toUnitFloat(core::hashCounters(n, std::uint64_t(a), 0, 12)) *
+                             (v.geometry().dims[a] + 1.0) -
+                         1.0);  // a little past both ends too
+        glm::dvec3 q;
+        for (int a = 0; a < 3; ++a)
+            q[a] = std::clamp(double(p[a]), 0.0, double(v.geometry().dims[a] - 1));
+        std::vector<double> expected(pyr->blockCount(), 0.0);
+        double sum = 0.0;
+        for (int z = 0; z < nb.z; ++z)
+            for (int y = 0; y < nb.y; ++y)
+                for (int x = 0; x < nb.x; ++x) {
+                    const std::size_t b = pyr->blockIndex(x, y, z);
+                    if (sel.level[b] == kNone) continue;
+                    double w = 1.0;
+                    for (int a = 0; a < 3; ++a) {
+                        const double lo = 16.0 * glm::ivec3(x, y, z)[a] - 0.5;
+                        const double past = std::max(lo - q[a], q[a] - (lo + 16.0));
+                        w *= std::clamp(0.5 - past / ramp({x, y, z}), 0.0, 1.0);
+                    }
+                    expected[b] = w;
+                    sum += w;
+                }
+        BlockWeights got;
+        g.weights(p, got);
+        if (sum == 0.0) {
+            EXPECT_EQ(got.count, 0) << "p = " << p.x << " " << p.y << " " << p.z;
+            continue;
+        }
+        double gotSum = 0.0;
+        for (int k = 0; k < got.count; ++k) {
+            ASSERT_GT(expected[got.block[k]], 0.0)
+                << "block " << got.block[k] << " at p = " << p.x << " " << p.y << " " << p.z;
+            EXPECT_NEAR(got.weight[k], expected[got.block[k]] / sum, 1e-5);
+            gotSum += expected[got.block[k]];
+        }
+        EXPECT_NEAR(gotSum, sum, 1e-9 * sum) << "a contributing block was left out";
+        ++checked;
+        blended += got.count > 1;
+    }
+    EXPECT_GT(checked, 10000u);
+    EXPECT_GT(blended, 1000u);  // the test reaches the blending, not only block interiors
+}
+
 // The line sweep reads the voxels from one flat array kept with the pyramid: it must be the
 // volume itself, x fastest — also past partial edge blocks (dims not multiples of 16), where the
 // blocks repeat their edge voxel — counted in bytes() once made and shared by copies.
