@@ -12,8 +12,16 @@
 # -rss_limit_mb=2048 (the memory budget). Prints one summary line per target (executions, time,
 # exec/s, findings) and exits non-zero if any target found something.
 # VOXLIGHT_FUZZ_JOBS=N runs N targets at once (default 1).
+# VOXLIGHT_FUZZ_YIELD=1 for a long run beside other work: nice 19 only orders processes inside one
+# scheduler autogroup (Linux, /proc/sys/kernel/sched_autogroup_enabled), and a run started in its
+# own session (setsid, nohup from another terminal) is a group of its own that took a full core
+# from a benchmark beside it; this lowers the group's weight too. Not the default: it would lower
+# the whole calling session (a CI job) with it.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+if [ "${VOXLIGHT_FUZZ_YIELD:-0}" = 1 ] && [ -w /proc/self/autogroup ]; then
+  echo 19 >/proc/self/autogroup 2>/dev/null || true
+fi
 
 targets_all=(nifti nifti_gz nrrd nrrd_detached metaimage metaimage_mhd vti raw dicom dicom_series scene session)
 if [ $# -lt 2 ]; then
