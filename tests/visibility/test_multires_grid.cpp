@@ -242,16 +242,11 @@ TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
     const MultiresGrid g(pyr, sel);
     auto ramp = [&](const glm::ivec3& c) {  // smallest spacing among c and its stored neighbours
         int w = 1 << 30;
-        for (int dz = -1; dz <= 1; ++dz)
-            for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const glm::ivec3 n = c + glm::ivec3(dx, dy, dz);
-                    if (glm::any(glm::lessThan(n, glm::ivec3(0))) ||
-                        glm::any(glm::greaterThanEqual(n, nb)))
-                        continue;
-                    const int l = sel.level[pyr->blockIndex(n.x, n.y, n.z)];
-                    if (l != kNone) w = std::min(w, levelSpacing(l));
-                }
+        for (std::size_t b = 0; b < sel.level.size(); ++b) {
+            const glm::ivec3 d = glm::abs(pyr->blockCoord(b) - c);
+            if (std::max({d.x, d.y, d.z}) <= 1 && sel.level[b] != kNone)
+                w = std::min(w, levelSpacing(sel.level[b]));
+        }
         return double(w);
     };
     std::size_t checked = 0, blended = 0;
