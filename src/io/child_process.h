@@ -4,6 +4,7 @@
 // decoding): the parent owns the child and the descriptors it reads it through.
 
 #include <signal.h>
+#include <sys/resource.h>
 #include <sys/types.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -13,7 +14,39 @@
 #include <fstream>
 #include <string>
 
+#if defined(__has_feature)
+#if __has_feature(address_sanitizer) || __has_feature(memory_sanitizer) || \
+    __has_feature(thread_sanitizer)
+#define VOXLIGHT_SANITIZED 1
+#endif
+#endif
+#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
+#define VOXLIGHT_SANITIZED 1
+#endif
+#ifdef VOXLIGHT_SANITIZED
+#include <sanitizer/common_interface_defs.h>
+#endif
+
 namespace voxlight::io {
+
+/// Caps this (child) process's address space at what it uses now plus `extra` bytes (not in
+/// sanitized builds, whose shadow memory alone exceeds any cap). Returns `extra`, or 0 when no
+/// cap was set.
+inline std::size_t limitAddressSpace(std::size_t extra) {
+#ifdef VOXLIGHT_SANITIZED
+    (void)extra;
+    return 0;
+#else
+    std::size_t pages = 0;
+    std::ifstream("/proc/self/statm") >> pages;
+    const std::size_t cap = pages * std::size_t(::sysconf(_SC_PAGESIZE)) + extra;
+    rlimit r{};
+    if (::getrlimit(RLIMIT_AS, &r) != 0) return 0;
+    if (r.rlim_max != RLIM_INFINITY && cap > r.rlim_max) return 0;
+    r.rlim_cur = cap;
+    return ::setrlimit(RLIMIT_AS, &r) == 0 ? extra : 0;
+#endif
+}
 
 /// Kills (SIGKILL) and reaps the child unless it was reaped by wait(), and closes the
 /// descriptors: whatever way the parent leaves (an error, Ctrl-C's CancelledError), no child and

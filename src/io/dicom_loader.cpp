@@ -43,19 +43,6 @@
 #include "io/module_loader.h"
 #include "io/slice_stack.h"
 
-#if defined(__has_feature)
-#if __has_feature(address_sanitizer) || __has_feature(memory_sanitizer) || \
-    __has_feature(thread_sanitizer)
-#define VOXLIGHT_SANITIZED 1
-#endif
-#endif
-#if defined(__SANITIZE_ADDRESS__) || defined(__SANITIZE_THREAD__)
-#define VOXLIGHT_SANITIZED 1
-#endif
-#ifdef VOXLIGHT_SANITIZED
-#include <sanitizer/common_interface_defs.h>
-#endif
-
 namespace voxlight::io::detail {
 
 namespace {
@@ -136,31 +123,6 @@ struct Reader {
         return out;
     }
 };
-
-#ifndef VOXLIGHT_SANITIZED
-std::size_t currentAddressSpace() {
-    std::ifstream statm("/proc/self/statm");
-    std::size_t pages = 0;
-    statm >> pages;
-    return pages * std::size_t(::sysconf(_SC_PAGESIZE));
-}
-#endif
-
-/// Caps the child's address space (not in sanitized builds, whose shadow memory alone exceeds any
-/// cap). Returns the cap in bytes, 0 when none was set.
-std::size_t limitAddressSpace(std::size_t extra) {
-#ifdef VOXLIGHT_SANITIZED
-    (void)extra;
-    return 0;
-#else
-    const std::size_t cap = currentAddressSpace() + extra;
-    rlimit r{};
-    if (::getrlimit(RLIMIT_AS, &r) != 0) return 0;
-    if (r.rlim_max != RLIM_INFINITY && cap > r.rlim_max) return 0;
-    r.rlim_cur = cap;
-    return ::setrlimit(RLIMIT_AS, &r) == 0 ? extra : 0;
-#endif
-}
 
 /// Test seam (tests/io_dicom/test_dicom_hostile.cpp): VOXLIGHT_DICOM_CHILD_FAULT makes the child
 /// fail in each way GDCM and OpenJPEG were seen to fail, so that the containment is tested apart

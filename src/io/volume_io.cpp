@@ -377,6 +377,64 @@ std::string takeField(const std::string& in, std::size_t& at) {
         "check the system's limits on processes and memory");
 }
 
+/// Starts a reading child: a memfd for its voxels (child.mem), a pipe for its messages
+/// (child.msg), then fork; the child runs `body(msgFd)`, which never returns.
+template <class Body>
+void forkReader(ChildProcess& child, const fs::path& path, Body&& body) {
+    child.mem = ::memfd_create("voxlight-read", MFD_CLOEXEC);
+    if (child.mem < 0) systemFailure(path, "memfd_create");
+    int pipeFds[2];
+    if (::pipe2(pipeFds, O_CLOEXEC) != 0) systemFailure(path, "pipe");
+    child.msg = pipeFds[0];
+    std::fflush(nullptr);  // nothing buffered is written twice
+    child.pid = ::fork();
+    if (child.pid < 0) {
+        ::close(pipeFds[1]);
+        systemFailure(path, "fork");
+    }
+    if (child.pid == 0) {
+        ::close(pipeFds[0]);
+        body(pipeFds[1]);
+    }
+    ::close(pipeFds[1]);
+}
+
+/// The child's voxels (`values` of VTK type `type`, `comps` per tuple) mapped from its memfd as a
+/// VTK array that keeps the mapping alive.
+vtkSmartPointer<vtkDataArray> mappedScalars(int memFd, int type, int comps, std::size_t values) {
+    const std::size_t bytes = values * std::size_t(vtkDataArray::GetDataTypeSize(type));
+    struct stat st {};
+    if (::fstat(memFd, &st) != 0 || std::uint64_t(st.st_size) != bytes)
+        throw InternalError("volume reader: the child's voxel buffer has the wrong size");
+    void* p =
+        bytes ? ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0) : nullptr;
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    const std::shared_ptr<void> mapping(p, [bytes](void* q) {
+        if (q) ::munmap(q, bytes);
+    });
+    vtkSmartPointer<vtkDataArray> scalars;
+    scalars.TakeReference(vtkDataArray::CreateDataArray(type));
+    if (!scalars) throw InternalError("volume reader: VTK type " + std::to_string(type));
+    scalars->SetNumberOfComponents(comps);
+    scalars->SetVoidArray(p, vtkIdType(values), 1);  // 1: VTK must not free it
+    vtkNew<KeepAlive> keep;
+    keep->held = mapping;
+    scalars->AddObserver(vtkCommand::DeleteEvent, keep);
+    return scalars;
+}
+
+/// Sends `msg` whole through `fd` (the child's last act).
+void sendAll(int fd, const std::string& msg) {
+    const char* p = msg.data();
+    std::size_t left = msg.size();
+    while (left > 0) {
+        const ssize_t w = ::write(fd, p, left);
+        if (w < 0 && errno == EINTR) continue;
+        if (w <= 0) break;
+        p += w, left -= std::size_t(w);
+    }
+}
+
 /// The child: read the data, copy the voxels into `memFd`, send one message ('V' done, 'E'
 /// InputError fields, 'X' another exception) followed by what was printed on std::cerr.
 [[noreturn]] void readInChild(vtkImageReader2* r, const fs::path& path, std::size_t bytes,
@@ -413,48 +471,19 @@ std::string takeField(const std::string& in, std::size_t& at) {
         putField(msg, e.what());
     }
     putField(msg, printed.str());
-    const char* p = msg.data();
-    std::size_t left = msg.size();
-    while (left > 0) {
-        const ssize_t w = ::write(msgFd, p, left);
-        if (w < 0 && errno == EINTR) continue;
-        if (w <= 0) break;
-        p += w, left -= std::size_t(w);
-    }
+    sendAll(msgFd, msg);
     ::_exit(0);  // no atexit handlers, no flush of the parent's stdio buffers
 }
 
-/// Runs `r`'s data read (after UpdateInformation) in a child; the output image, its scalars
-/// mapped from the child's memfd. `expectedBytes` (the bytes the read will take from files, 0 if
-/// unknown) turns the child's read count into progress.
-vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& path,
-                                            std::uint64_t expectedBytes,
-                                            const core::Progress& progress) {
-    int ext[6];
-    r->GetDataExtent(ext);
-    const int comps = r->GetNumberOfScalarComponents();
-    const std::size_t values = std::size_t(ext[1] - ext[0] + 1) * std::size_t(ext[3] - ext[2] + 1) *
-                               std::size_t(ext[5] - ext[4] + 1) * std::size_t(comps);
-    const std::size_t bytes =
-        values * std::size_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType()));
-    ChildProcess child;
-    child.mem = ::memfd_create("voxlight-read", MFD_CLOEXEC);
-    if (child.mem < 0) systemFailure(path, "memfd_create");
-    int pipeFds[2];
-    if (::pipe2(pipeFds, O_CLOEXEC) != 0) systemFailure(path, "pipe");
-    child.msg = pipeFds[0];
-    std::fflush(nullptr);  // nothing buffered is written twice
-    child.pid = ::fork();
-    if (child.pid < 0) {
-        ::close(pipeFds[1]);
-        systemFailure(path, "fork");
-    }
-    if (child.pid == 0) {
-        ::close(pipeFds[0]);
-        readInChild(r, path, bytes, pipeFds[1], child.mem);
-    }
-    ::close(pipeFds[1]);
-
+/// The parent's side of a reading child: polls its message pipe (and the cancel flag: a
+/// CancelledError leaves the guard to kill the child) until it closes, reaps it, and throws what
+/// the child reported — its InputError, another exception (InternalError), an out-of-memory
+/// ('M', an InputError: the file asks for more than the child may use) or an abnormal end (a
+/// crash: InputError naming the signal). Returns the message of a 'V' (done) child; `at` is set
+/// past its kind byte. `expectedBytes` (file bytes the read takes, 0 if unknown) turns the
+/// child's read count into progress.
+std::string awaitChild(ChildProcess& child, const fs::path& path, const core::Progress& progress,
+                       std::uint64_t expectedBytes, std::size_t& at) {
     std::string msg;
     progress.report("read", 0.0);
     for (;;) {
@@ -478,7 +507,7 @@ vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& 
     const int status = child.wait();
     progress.checkCancel();
 
-    std::size_t at = 1;
+    at = 1;
     const char kind = msg.empty() ? '\0' : msg[0];
     if (kind == 'E') {
         const std::string source = takeField(msg, at), field = takeField(msg, at),
@@ -486,6 +515,12 @@ vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& 
         std::cerr << takeField(msg, at);  // into the caller's capture, as an in-process read
         throw InputError(source, field, problem, fix);
     }
+    if (kind == 'M')
+        throw InputError(path.string(), "data",
+                         "could not be read: the reader asked for more memory than the file's "
+                         "sizes justify (" +
+                             takeField(msg, at) + ")",
+                         "the file is damaged, or its sizes or compression headers were edited");
     if (kind == 'X') throw InternalError("volume reader: " + takeField(msg, at));
     if (kind != 'V') {
         std::string why = "the reader ended abnormally";
@@ -497,20 +532,29 @@ vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& 
         throw InputError(path.string(), "data", "could not be read: " + why,
                          "check that the file is complete and not corrupt");
     }
+    return msg;
+}
+
+/// Runs `r`'s data read (after UpdateInformation) in a child; the output image, its scalars
+/// mapped from the child's memfd. `expectedBytes` (the bytes the read will take from files, 0 if
+/// unknown) turns the child's read count into progress.
+vtkSmartPointer<vtkImageData> readContained(vtkImageReader2* r, const fs::path& path,
+                                            std::uint64_t expectedBytes,
+                                            const core::Progress& progress) {
+    int ext[6];
+    r->GetDataExtent(ext);
+    const int comps = r->GetNumberOfScalarComponents();
+    const std::size_t values = std::size_t(ext[1] - ext[0] + 1) * std::size_t(ext[3] - ext[2] + 1) *
+                               std::size_t(ext[5] - ext[4] + 1) * std::size_t(comps);
+    const std::size_t bytes =
+        values * std::size_t(vtkDataArray::GetDataTypeSize(r->GetDataScalarType()));
+    ChildProcess child;
+    forkReader(child, path, [&](int msgFd) { readInChild(r, path, bytes, msgFd, child.mem); });
+    std::size_t at = 1;
+    const std::string msg = awaitChild(child, path, progress, expectedBytes, at);
     std::cerr << takeField(msg, at);
-    struct stat st {};
-    if (::fstat(child.mem, &st) != 0 || std::uint64_t(st.st_size) != bytes)
-        throw InternalError("volume reader: the child's voxel buffer has the wrong size");
-    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, child.mem, 0);
-    if (p == MAP_FAILED) throw std::bad_alloc();
-    const std::shared_ptr<void> mapping(p, [bytes](void* q) { ::munmap(q, bytes); });
-    vtkSmartPointer<vtkDataArray> scalars;
-    scalars.TakeReference(vtkDataArray::CreateDataArray(r->GetDataScalarType()));
-    scalars->SetNumberOfComponents(comps);
-    scalars->SetVoidArray(p, vtkIdType(values), 1);  // 1: VTK must not free it
-    vtkNew<KeepAlive> keep;
-    keep->held = mapping;
-    scalars->AddObserver(vtkCommand::DeleteEvent, keep);
+    const vtkSmartPointer<vtkDataArray> scalars =
+        mappedScalars(child.mem, r->GetDataScalarType(), comps, values);
     auto img = vtkSmartPointer<vtkImageData>::New();
     img->SetExtent(ext);
     img->SetSpacing(r->GetDataSpacing());
@@ -1682,7 +1726,7 @@ void checkVtiFile(const fs::path& path) {
         tail.seekg(std::streamoff(appended));
         tail.read(block.data(), std::streamsize(block.size()));
         block.resize(std::size_t(tail.gcount()));
-        appendedBase64 = text(block, 0, "encoding") == "base64";
+        appendedBase64 = text(block, 0, "encoding") != "raw";  // VTK's default is base64
         const std::size_t tagEnd = scanXmlTag(block, 0, [](const auto&, const auto&) {});
         const std::size_t underscore = tagEnd == std::string::npos
                                            ? std::string::npos
@@ -1726,6 +1770,24 @@ void checkVtiFile(const fs::path& path) {
                              "has a malformed offset or component count", "the file is damaged");
         }
         const std::uint64_t expected = voxels * std::max<std::uint64_t>(comps, 1) * type->second;
+        // The exact size is known for point data of a piece covering the whole extent (what
+        // voxlight and most writers make); cell and field data, and pieces of a split image, get
+        // the structural checks only (and the contained read: readVtiInChild).
+        const auto lastBefore = [&](const char* name) {
+            const std::size_t at = xml.rfind(name, tag);
+            return at == std::string::npos ? -1.0 : double(at);
+        };
+        bool exact =
+            lastBefore("<PointData") > std::max({lastBefore("</PointData"), lastBefore("<CellData"),
+                                                 lastBefore("<FieldData")});
+        if (exact) {
+            const std::size_t piece = xml.rfind("<Piece", tag);
+            std::istringstream pe(piece == std::string::npos ? std::string()
+                                                             : text(xml, piece, "Extent")),
+                whole(text(xml, image, "WholeExtent"));
+            long long a = 0, b = 0;
+            for (int k = 0; k < 6 && exact; ++k) exact = (pe >> a) && (whole >> b) && a == b;
+        }
         auto fail = [&](const std::string& problem) {
             throw InputError(path.string(), inAppended ? "AppendedData" : "DataArray", problem,
                              "the file is damaged, or its compressor or sizes were edited");
@@ -1753,7 +1815,7 @@ void checkVtiFile(const fs::path& path) {
             if (w.empty()) fail("ends inside an array's size word");
             if (!inAppended) continue;  // VTK reads inline data into the extent's array
             const std::uint64_t n = readWord(w, 0);
-            if (n != expected)
+            if (exact && n != expected)
                 fail("array claims " + std::to_string(n) + " bytes; the extent needs " +
                      std::to_string(expected));
             if ((base64 ? n / 3 * 4 : n) > remaining)
@@ -1772,7 +1834,7 @@ void checkVtiFile(const fs::path& path) {
                 fail("compressed array's last block of " + std::to_string(last) +
                      " bytes is larger than its block size " + std::to_string(blockSize));
             const std::uint64_t total = (blocks - 1) * blockSize + (last ? last : blockSize);
-            if (total != expected)
+            if (exact && total != expected)
                 fail("compressed array holds " + std::to_string(total) +
                      " bytes; the extent needs " + std::to_string(expected));
             const auto all = appendedWords(in, at, std::size_t(3 + blocks), word, base64);
@@ -1786,17 +1848,140 @@ void checkVtiFile(const fs::path& path) {
     }
 }
 
+/// Address space a .vti reading child may use beyond what it had at fork, before the extent is
+/// known (VTK's XML parser keeps element text positions, not data) and on top of
+/// kVtiChildBytesPerValue per value of the extent after: the parse, the compressed blocks and the
+/// decoded array. A header claiming 2³² compressed blocks (17 GB of block sizes) fails there
+/// with bad_alloc instead of taking the machine's memory.
+constexpr std::size_t kVtiChildHeadroomBytes = std::size_t(512) << 20;
+/// Per value of the extent (at most 8 bytes each, several components at most 4×): the decoded
+/// array and VTK's copy of it.
+constexpr std::size_t kVtiChildBytesPerValue = 64;
+
+/// The .vti child: VTK's XML reader — header and data — runs here, so that what the checks of
+/// checkVtiFile do not catch (VTK's parser recursing on deep XML, a size word read from a place
+/// the checks did not look) ends this process, not voxlight. Sends 'V' + the image's extent,
+/// spacing, origin, direction, scalar type, components and tuples (its voxels in `memFd`), or
+/// 'E' (InputError), 'M' (out of memory), 'X' (another exception); then what was printed.
+[[noreturn]] void readVtiInChild(const fs::path& path, std::uint64_t fileBytes, int msgFd,
+                                 int memFd) {
+    ::signal(SIGINT, SIG_IGN);
+    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGPIPE})
+        ::signal(sig, SIG_DFL);
+    rlimit core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &core);
+#ifdef VOXLIGHT_SANITIZED
+    __sanitizer_set_death_callback(nullptr);  // a fuzzer's crash reporter is the parent's
+#endif
+    limitAddressSpace(kVtiChildHeadroomBytes);
+    std::ostringstream printed;
+    std::cerr.rdbuf(printed.rdbuf());
+    std::string msg;
+    try {
+        vtkNew<vtkXMLImageDataReader> r;
+        r->SetFileName(path.c_str());
+        runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
+        int ext[6];
+        r->GetOutputInformation(0)->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), ext);
+        checkExtent(ext, 1, path);
+        const std::size_t voxels = std::size_t(ext[1] - ext[0] + 1) *
+                                   std::size_t(ext[3] - ext[2] + 1) *
+                                   std::size_t(ext[5] - ext[4] + 1);
+        // A voxel takes at least a byte, or 1/kMaxDeflateRatio of one compressed: an extent the
+        // file cannot hold is refused before VTK allocates it (a 500-byte file claimed 1024³).
+        if (fileBytes > 0 && voxels > fileBytes * kMaxDeflateRatio + kDeflateSlackBytes)
+            throw InputError(path.string(), "WholeExtent",
+                             "claims " + std::to_string(voxels) + " voxels; a file of " +
+                                 std::to_string(fileBytes) + " bytes holds at most " +
+                                 std::to_string(fileBytes * kMaxDeflateRatio + kDeflateSlackBytes) +
+                                 " even deflate-compressed",
+                             "the file is damaged or truncated");
+        limitAddressSpace(kVtiChildHeadroomBytes + kVtiChildBytesPerValue * voxels);
+        runVtkChecked(r, path, "data", [&] { r->Update(); });
+        vtkImageData* img = r->GetOutput();
+        vtkDataArray* scalars = img->GetPointData()->GetScalars();
+        if (!scalars && img->GetPointData()->GetNumberOfArrays() > 0)
+            scalars = img->GetPointData()->GetArray(0);
+        if (!scalars)
+            throw InputError(path.string(), "scalars", "holds no point data array",
+                             "is this an image file?");
+        const std::size_t values = std::size_t(scalars->GetNumberOfValues());
+        const std::size_t bytes = values * std::size_t(scalars->GetDataTypeSize());
+        if (bytes > 0) {
+            if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
+            void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
+            if (p == MAP_FAILED) throw std::bad_alloc();
+            std::memcpy(p, scalars->GetVoidPointer(0), bytes);
+        }
+        img->GetExtent(ext);
+        msg = "V";
+        auto put = [&](const void* data, std::size_t n) {
+            putField(msg, std::string(static_cast<const char*>(data), n));
+        };
+        put(ext, sizeof ext);
+        put(img->GetSpacing(), 3 * sizeof(double));
+        put(img->GetOrigin(), 3 * sizeof(double));
+        put(img->GetDirectionMatrix()->GetData(), 9 * sizeof(double));
+        const std::int64_t shape[3] = {scalars->GetDataType(), scalars->GetNumberOfComponents(),
+                                       std::int64_t(values)};
+        put(shape, sizeof shape);
+    } catch (const InputError& e) {
+        msg = "E";
+        for (const std::string* f : {&e.source(), &e.field(), &e.problem(), &e.fix()})
+            putField(msg, *f);
+    } catch (const std::bad_alloc&) {
+        msg = "M";
+        putField(msg,
+                 "over " + std::to_string(kVtiChildHeadroomBytes >> 20) + " MB beyond its voxels");
+    } catch (const std::exception& e) {
+        msg = "X";
+        putField(msg, e.what());
+    }
+    putField(msg, printed.str());
+    sendAll(msgFd, msg);
+    ::_exit(0);
+}
+
+/// vtkXMLImageDataReader's output, read in a child (readVtiInChild): the image with its scalars
+/// mapped from the child's memfd. Progress follows the bytes the child has read of the file.
+vtkSmartPointer<vtkImageData> readVtiContained(const fs::path& path, std::uint64_t fileBytes,
+                                               const core::Progress& progress) {
+    ChildProcess child;
+    forkReader(child, path, [&](int msgFd) { readVtiInChild(path, fileBytes, msgFd, child.mem); });
+    std::size_t at = 1;
+    const std::string msg = awaitChild(child, path, progress, fileBytes, at);
+    auto take = [&](void* out, std::size_t n) {
+        const std::string f = takeField(msg, at);
+        if (f.size() != n) throw InternalError("volume reader: a short message from the child");
+        std::memcpy(out, f.data(), n);
+    };
+    int ext[6];
+    double spacing[3], origin[3], direction[9];
+    std::int64_t shape[3];
+    take(ext, sizeof ext);
+    take(spacing, sizeof spacing);
+    take(origin, sizeof origin);
+    take(direction, sizeof direction);
+    take(shape, sizeof shape);
+    std::cerr << takeField(msg, at);
+    const int comps = int(shape[1]);
+    const std::size_t values = std::size_t(shape[2]);
+    const vtkSmartPointer<vtkDataArray> scalars =
+        mappedScalars(child.mem, int(shape[0]), comps, comps > 0 ? values : 0);
+    auto img = vtkSmartPointer<vtkImageData>::New();
+    img->SetExtent(ext);
+    img->SetSpacing(spacing);
+    img->SetOrigin(origin);
+    img->SetDirectionMatrix(direction);
+    img->GetPointData()->SetScalars(scalars);
+    return img;
+}
+
 Volume readVti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
     checkVtiFile(path);
-    vtkNew<vtkXMLImageDataReader> r;
-    r->SetFileName(path.c_str());
-    runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
-    int ext[6];
-    r->GetOutputInformation(0)->Get(vtkStreamingDemandDrivenPipeline::WHOLE_EXTENT(), ext);
-    checkExtent(ext, 1, path);
-    runVtkChecked(
-        r, path, "data", [&] { r->Update(); }, progress);
-    vtkImageData* img = r->GetOutput();
+    std::error_code ec;
+    const std::uint64_t fileBytes = fs::file_size(path, ec);
+    const vtkSmartPointer<vtkImageData> img = readVtiContained(path, ec ? 0 : fileBytes, progress);
     Geometry g = spacingAndOrigin(img, path, "Spacing", "Origin");
     const double* d = img->GetDirectionMatrix()->GetData();  // row-major
     for (int c = 0; c < 3; ++c)

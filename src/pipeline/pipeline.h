@@ -54,6 +54,11 @@ std::string toString(StageKind k);
 class Run;
 
 struct Stage {
+    Stage() = default;
+    /// Name, kind and inputs; the functions are set one by one after (a constructor rather than
+    /// aggregate initialisation of the first three fields, which -Wextra flags for the rest).
+    Stage(std::string name_, StageKind kind_, std::vector<std::string> inputs_)
+        : name(std::move(name_)), kind(kind_), inputs(std::move(inputs_)) {}
     std::string name;
     StageKind kind = StageKind::Precompute;
     /// What the key covers, in words (stage names and scene keys), for --explain and the docs.

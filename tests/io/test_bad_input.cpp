@@ -896,6 +896,117 @@ TEST(BadInput, InlineBinaryCompressedArraysHaveTheirHeaderChecked) {
     expectInputError(tmp / "sizes.vti", "DataArray", {"holds 4096 bytes", "needs 512"});
 }
 
+// A review of the .vti checks (5 Dec) found files that still reached VTK's reader in ways the
+// checks did not model — element names hidden in comments, '>' inside quoted attributes, <Array>
+// elements, a 1024³ extent in a 360-byte file — and valid files they refused. VTK's XML reader
+// now runs in a child process (readVtiInChild, as MetaIO's and GDCM's reads do): a crash or an
+// allocation the file cannot justify ends the child, and voxlight reports one line.
+TEST(BadInput, VtiReaderRunsContainedAndCrashesBecomeInputErrors) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 8;
+    io::writeVolume(core::makePhantom("kronander", o), tmp / "k.vti");
+    const std::string good = readAll(tmp / "k.vti");
+    const std::size_t at = good.find("<AppendedData");
+    ASSERT_NE(at, std::string::npos);
+    // 300,000 '</' inside a comment fooled the nesting count; then 300,000 nested elements:
+    // VTK's parser recursed until the stack overflowed (SIGSEGV of voxlight before).
+    constexpr int kDepth = 300000;
+    std::string deep = "<!--";
+    for (int i = 0; i < kDepth; ++i) deep += "</";
+    deep += "-->\n";
+    for (int i = 0; i < kDepth; ++i) deep += "<a>";
+    for (int i = 0; i < kDepth; ++i) deep += "</a>";
+    writeText(tmp / "deep.vti", good.substr(0, at) + deep + "\n" + good.substr(at));
+    expectInputError(tmp / "deep.vti", "deep.vti", {"could not be read"});
+    // The file itself still loads after, through the same child.
+    EXPECT_EQ(io::readVolume(tmp / "k.vti").voxelCount(), 512u);
+}
+
+TEST(BadInput, VtiExtentTheFileCannotHoldIsRefusedBeforeVtkAllocatesIt) {
+    // 1024³ float64 voxels (8 GB) declared by a 360-byte ASCII file: VTK allocated them.
+    test::TempDir tmp;
+    writeText(tmp / "big.vti",
+              "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"0.1\" "
+              "byte_order=\"LittleEndian\" header_type=\"UInt32\">\n<ImageData WholeExtent=\"0 "
+              "1023 0 1023 0 1023\" Origin=\"0 0 0\" Spacing=\"1 1 1\">\n<Piece Extent=\"0 1023 0 "
+              "1023 0 1023\"><PointData Scalars=\"s\">\n<DataArray type=\"Float64\" Name=\"s\" "
+              "format=\"ascii\">1 2 3</DataArray>\n</PointData></Piece></ImageData></VTKFile>\n");
+    expectInputError(tmp / "big.vti", "WholeExtent", {"1073741824 voxels", "holds at most"});
+}
+
+TEST(BadInput, VtiWithCellDataSeveralPiecesOrNoEncodingStillLoads) {
+    // Valid files the size checks refused: a cell-data array (7³ values, not 8³) beside the point
+    // data, as vtkXMLImageDataWriter wrote it; an image in two pieces (each holding its own
+    // extent's values; first 0..255, then 255..0); appended data without an encoding attribute
+    // (VTK's default: base64).
+    test::TempDir tmp;
+    writeText(tmp / "cell.vti",
+              "<?xml version=\"1.0\"?>\n"
+              "<VTKFile type=\"ImageData\" version=\"0.1\" byte_order=\"LittleEndian\" "
+              "header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\">\n"
+              "  <ImageData WholeExtent=\"0 7 0 7 0 7\" Origin=\"0 0 0\" Spacing=\"1 1 1\" "
+              "Direction=\"1 0 0 0 1 0 0 0 1\">\n"
+              "    <Piece Extent=\"0 7 0 7 0 7\"                                                   "
+              "    >\n"
+              "      <PointData Scalars=\"s\">\n"
+              "        <DataArray type=\"UInt8\" Name=\"s\" format=\"appended\" RangeMin=\"0\"     "
+              "               RangeMax=\"255\"                  offset=\"0\"                   />\n"
+              "      </PointData>\n"
+              "      <CellData>\n"
+              "        <DataArray type=\"UInt8\" Name=\"c\" format=\"appended\" RangeMin=\"1\"     "
+              "               RangeMax=\"1\"                    offset=\"400\"                 />\n"
+              "      </CellData>\n"
+              "    </Piece>\n"
+              "  </ImageData>\n"
+              "  <AppendedData encoding=\"base64\">\n"
+              "   "
+              "_AQAAAACAAAAAAgAAGgEAAA==eJxjYGRiZmFlY+"
+              "fg5OLm4eXjFxAUEhYRFROXkJSSlpGVk1dQVFJWUVVT19DU0tbR1dM3MDQyNjE1M7ewtLK2sbWzd3B0cnZxdX"
+              "P38PTy9vH18w8IDAoOCQ0Lj4iMio6JjYtPSExKTklNS8/"
+              "IzMrOyc3LLygsKi4pLSuvqKyqrqmtq29obGpuaW1r7+"
+              "js6u7p7eufMHHS5ClTp02fMXPW7Dlz581fsHDR4iVLly1fsXLV6jVr163fsHHT5i1bt23fsXPX7j179+0/"
+              "cPDQ4SNHjx0/cfLU6TNnz52/cPHS5StXr12/cfPW7Tt3791/8PDR4ydPnz1/8fLV6zdv373/8PHT5y9fv33/"
+              "8fPX7z9///1nGOH+BwDjbP8BAQAAAACAAABXAQAADQAAAA==eJxjZBwFNAAA58sBWA==\n"
+              "  </AppendedData>\n"
+              "</VTKFile>\n");
+    EXPECT_EQ(io::readVolume(tmp / "cell.vti").voxelCount(), 512u);
+    const std::string pieces =
+        "<?xml version=\"1.0\"?>\n"
+        "<VTKFile type=\"ImageData\" version=\"0.1\" byte_order=\"LittleEndian\" "
+        "header_type=\"UInt32\" compressor=\"vtkZLibDataCompressor\">\n"
+        "<ImageData WholeExtent=\"0 7 0 7 0 7\" Origin=\"0 0 0\" Spacing=\"1 1 1\">\n"
+        "<Piece Extent=\"0 7 0 7 0 3\"><PointData Scalars=\"s\"><DataArray type=\"UInt8\" "
+        "Name=\"s\" format=\"appended\" offset=\"0\"/></PointData></Piece>\n"
+        "<Piece Extent=\"0 7 0 7 4 7\"><PointData Scalars=\"s\"><DataArray type=\"UInt8\" "
+        "Name=\"s\" format=\"appended\" offset=\"380\"/></PointData></Piece>\n"
+        "</ImageData>\n"
+        "<AppendedData encoding=\"base64\">\n"
+        " _AQAAAAABAAAAAAAACwEAAA==eJwBAAH//"
+        "gABAgMEBQYHCAkKCwwNDg8QERITFBUWFxgZGhscHR4fICEiIyQlJicoKSorLC0uLzAxMjM0NTY3ODk6Ozw9Pj9AQUJ"
+        "DREVGR0hJSktMTU5PUFFSU1RVVldYWVpbXF1eX2BhYmNkZWZnaGlqa2xtbm9wcXJzdHV2d3h5ent8fX5/"
+        "gIGCg4SFhoeIiYqLjI2Oj5CRkpOUlZaXmJmam5ydnp+goaKjpKWmp6ipqqusra6vsLGys7S1tre4ubq7vL2+"
+        "v8DBwsPExcbHyMnKy8zNzs/Q0dLT1NXW19jZ2tvc3d7f4OHi4+Tl5ufo6err7O3u7/Dx8vP09fb3+Pn6+/z9/"
+        "v+t9n+BAQAAAAABAAAAAAAACwEAAA==eJwBAAH//v/+/fz7+vn49/"
+        "b19PPy8fDv7u3s6+rp6Ofm5eTj4uHg397d3Nva2djX1tXU09LR0M/OzczLysnIx8bFxMPCwcC/"
+        "vr28u7q5uLe2tbSzsrGwr66trKuqqainpqWko6KhoJ+"
+        "enZybmpmYl5aVlJOSkZCPjo2Mi4qJiIeGhYSDgoGAf359fHt6eXh3dnV0c3JxcG9ubWxramloZ2ZlZGNiYWBfXl1cW"
+        "1pZWFdWVVRTUlFQT05NTEtKSUhHRkVEQ0JBQD8+"
+        "PTw7Ojk4NzY1NDMyMTAvLi0sKyopKCcmJSQjIiEgHx4dHBsaGRgXFhUUExIREA8ODQwLCgkIBwYFBAMCAQBa+3+B\n"
+        "</AppendedData>\n"
+        "</VTKFile>\n";
+    writeText(tmp / "pieces.vti", pieces);
+    const core::Volume v = io::readVolume(tmp / "pieces.vti");
+    ASSERT_EQ(v.voxelCount(), 512u);
+    EXPECT_EQ(v.at(3, 2, 1), float(3 + 8 * 2 + 64 * 1));
+    EXPECT_EQ(v.at(3, 2, 5), float(255 - (3 + 8 * 2 + 64 * 1)));
+    std::string noEncoding = pieces;
+    const std::string enc = " encoding=\"base64\"";
+    noEncoding.erase(noEncoding.find(enc), enc.size());
+    writeText(tmp / "noenc.vti", noEncoding);
+    EXPECT_EQ(io::readVolume(tmp / "noenc.vti").at(3, 2, 5), v.at(3, 2, 5));
+}
+
 TEST(BadInput, FuzzNiftiDescriptionWithoutTerminator) {
     // fuzz_nifti_gz: 80 non-NUL descrip bytes were read past their end (ASan heap-buffer-overflow).
     test::TempDir tmp;
