@@ -1615,7 +1615,22 @@ void checkVtiFile(const fs::path& path) {
     in.read(xml.data(), std::streamsize(xml.size()));
     const std::size_t appended = xml.find("<AppendedData");
     if (appended != std::string::npos) xml.resize(appended + 1);
-    // Nesting: '<name' opens, '</' closes, '/>' closes what it opened; <? ?> and <!-- --> skipped.
+    // Comments and CDATA sections are blanked (same length: positions stay file offsets) before
+    // anything is looked for: "<ImageData" or a run of "</" inside a comment made these checks
+    // read the wrong element or miscount the nesting, and VTK then crashed.
+    for (std::size_t i = xml.find('<'); i != std::string::npos; i = xml.find('<', i + 1)) {
+        for (const auto& [open, close] :
+             {std::pair<std::string_view, std::string_view>{"<!--", "-->"}, {"<![CDATA[", "]]>"}}) {
+            if (xml.compare(i, open.size(), open) != 0) continue;
+            const std::size_t end = xml.find(close, i + open.size());
+            const std::size_t stop = end == std::string::npos ? xml.size() : end + close.size();
+            std::fill(xml.begin() + std::ptrdiff_t(i), xml.begin() + std::ptrdiff_t(stop), ' ');
+            i = stop - 1;
+            break;
+        }
+    }
+    // Nesting: '<name' opens, '</' closes, '/>' closes what it opened; <? ?> skipped. A tag ends
+    // at its first '>' outside quotes ('<a x="/>">' is not self-closing).
     int depth = 0;
     for (std::size_t i = xml.find('<'); i != std::string::npos && i + 1 < xml.size();
          i = xml.find('<', i + 1)) {
@@ -1625,7 +1640,7 @@ void checkVtiFile(const fs::path& path) {
             --depth;
             continue;
         }
-        const std::size_t close = xml.find('>', i);
+        const std::size_t close = scanXmlTag(xml, i, [](const auto&, const auto&) {});
         if (close != std::string::npos && close > 0 && xml[close - 1] == '/') continue;
         if (++depth > kMaxVtiDepth)
             throw InputError(path.string(), "XML",
@@ -1748,8 +1763,27 @@ void checkVtiFile(const fs::path& path) {
     static const std::map<std::string, std::uint64_t> kTypeBytes = {
         {"Int8", 1},   {"UInt8", 1}, {"Int16", 2},  {"UInt16", 2},  {"Int32", 4},
         {"UInt32", 4}, {"Int64", 8}, {"UInt64", 8}, {"Float32", 4}, {"Float64", 8}};
-    for (std::size_t tag = xml.find("<DataArray"); tag != std::string::npos;
-         tag = xml.find("<DataArray", tag + 1)) {
+    // VTK reads <DataArray> and <Array> elements alike.
+    std::vector<std::size_t> arrays;
+    for (const std::string_view name : {std::string_view("<DataArray"), std::string_view("<Array")})
+        for (std::size_t at = xml.find(name); at != std::string::npos;
+             at = xml.find(name, at + 1)) {
+            const std::size_t next = at + name.size();
+            const char after = next < xml.size() ? xml[next] : '>';
+            if (after == ' ' || after == '\t' || after == '\r' || after == '\n' || after == '/' ||
+                after == '>')
+                arrays.push_back(at);
+        }
+    std::sort(arrays.begin(), arrays.end());
+    for (const std::size_t tag : arrays) {
+        // VTK takes an inline array's data to start after the tag's first '>', even one inside a
+        // quoted attribute value (Name="s>..." made it read a size word from the name).
+        scanXmlTag(xml, tag, [&](const std::string& name, const std::string& value) {
+            if (value.find('>') != std::string::npos)
+                throw InputError(path.string(), "DataArray " + name,
+                                 "holds '>' in its value, where VTK would start the array's data",
+                                 "the file is damaged; re-export the image");
+        });
         // VTK reads an array with an 'offset' attribute from the appended block whatever its
         // 'format' says (fuzzing: format="appgnded" skipped this check and VTK allocated 17 GB
         // for a compressed header claiming 2³² blocks); without one, format="binary" is inline
@@ -1758,8 +1792,10 @@ void checkVtiFile(const fs::path& path) {
         const bool inAppended = offsetText.has_value();
         if (!inAppended && text(xml, tag, "format") != "binary") continue;  // ASCII: no sizes
         if (inAppended && appended == std::string::npos) continue;          // the reader says so
+        // A type voxlight does not read as voxels (Bit, String, a metadata array) still has its
+        // size words checked for structure (a header claiming 2³² blocks), not for an exact size.
         const auto type = kTypeBytes.find(text(xml, tag, "type"));
-        if (type == kTypeBytes.end()) continue;  // the reader words this
+        const std::uint64_t typeBytes = type == kTypeBytes.end() ? 1 : type->second;
         std::uint64_t offset = 0, comps = 1;
         try {
             if (inAppended) offset = std::stoull(*offsetText);
@@ -1769,7 +1805,7 @@ void checkVtiFile(const fs::path& path) {
             throw InputError(path.string(), "DataArray",
                              "has a malformed offset or component count", "the file is damaged");
         }
-        const std::uint64_t expected = voxels * std::max<std::uint64_t>(comps, 1) * type->second;
+        const std::uint64_t expected = voxels * std::max<std::uint64_t>(comps, 1) * typeBytes;
         // The exact size is known for point data of a piece covering the whole extent (what
         // voxlight and most writers make); cell and field data, and pieces of a split image, get
         // the structural checks only (and the contained read: readVtiInChild).
@@ -1778,6 +1814,7 @@ void checkVtiFile(const fs::path& path) {
             return at == std::string::npos ? -1.0 : double(at);
         };
         bool exact =
+            type != kTypeBytes.end() &&
             lastBefore("<PointData") > std::max({lastBefore("</PointData"), lastBefore("<CellData"),
                                                  lastBefore("<FieldData")});
         if (exact) {
@@ -1878,6 +1915,16 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
     std::cerr.rdbuf(printed.rdbuf());
     std::string msg;
     try {
+        // Test seam (tests/io/test_bad_input.cpp): the containment itself, apart from the checks
+        // that keep the known damaged files away from VTK.
+        if (const char* fault = std::getenv("VOXLIGHT_VTI_CHILD_FAULT")) {
+            if (std::string_view(fault) == "segv") ::raise(SIGSEGV);
+            if (std::string_view(fault) == "alloc") {
+                static char* volatile sink;  // volatile: the allocation must stay
+                sink = new char[std::size_t(64) << 30];
+                delete[] sink;
+            }
+        }
         vtkNew<vtkXMLImageDataReader> r;
         r->SetFileName(path.c_str());
         runVtkChecked(r, path, "header", [&] { r->UpdateInformation(); });
