@@ -217,15 +217,22 @@ void convertCopy(const Src* src, Dst* dst, std::size_t n) {
     for (std::size_t i = 0; i < n; ++i) dst[i] = Dst(src[i]);
 }
 
-Volume fromImageData(vtkImageData* img, const fs::path& path, Geometry g) {
-    int ext[6];
-    img->GetExtent(ext);
+/// The image's voxel array: its active point scalars, else its first point data array;
+/// InputError when it has none.
+vtkDataArray* imageScalars(vtkImageData* img, const fs::path& path) {
     vtkDataArray* scalars = img->GetPointData()->GetScalars();
     if (!scalars && img->GetPointData()->GetNumberOfArrays() > 0)
         scalars = img->GetPointData()->GetArray(0);
     if (!scalars)
         throw InputError(path.string(), "scalars", "holds no point data array",
                          "is this an image file?");
+    return scalars;
+}
+
+Volume fromImageData(vtkImageData* img, const fs::path& path, Geometry g) {
+    int ext[6];
+    img->GetExtent(ext);
+    vtkDataArray* scalars = imageScalars(img, path);
     checkExtent(ext, scalars->GetNumberOfComponents(), path);
     g.dims = {ext[1] - ext[0] + 1, ext[3] - ext[2] + 1, ext[5] - ext[4] + 1};
     const std::size_t n = std::size_t(g.voxelCount());
@@ -1946,12 +1953,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
         limitAddressSpace(kVtiChildHeadroomBytes + kVtiChildBytesPerValue * voxels);
         runVtkChecked(r, path, "data", [&] { r->Update(); });
         vtkImageData* img = r->GetOutput();
-        vtkDataArray* scalars = img->GetPointData()->GetScalars();
-        if (!scalars && img->GetPointData()->GetNumberOfArrays() > 0)
-            scalars = img->GetPointData()->GetArray(0);
-        if (!scalars)
-            throw InputError(path.string(), "scalars", "holds no point data array",
-                             "is this an image file?");
+        vtkDataArray* scalars = imageScalars(img, path);
         const std::size_t values = std::size_t(scalars->GetNumberOfValues());
         const std::size_t bytes = values * std::size_t(scalars->GetDataTypeSize());
         if (bytes > 0) {

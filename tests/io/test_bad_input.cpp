@@ -970,13 +970,8 @@ TEST(BadInput, VtiReaderCrashInTheChildIsAnInputError) {
 }
 
 TEST(BadInput, VtiReaderAllocationBeyondItsBudgetIsAnInputError) {
-#if defined(__SANITIZE_ADDRESS__)
-    GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-    GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
-#endif
-#endif
+    if (voxlight::test::kAddressSanitized)
+        GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
     test::TempDir tmp;
     core::PhantomOptions o;
     o.size = 8;

@@ -278,13 +278,8 @@ TEST(DicomHostile, HangInGdcmIsStopped) {
 }
 
 TEST(DicomHostile, HugeAllocationInGdcmIsRefused) {
-#if defined(__SANITIZE_ADDRESS__)
-    GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-    GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
-#endif
-#endif
+    if (voxlight::test::kAddressSanitized)
+        GTEST_SKIP() << "sanitized builds run the child without an address-space limit";
     ScopedEnv fault("VOXLIGHT_DICOM_CHILD_FAULT", "alloc");
     expectRefused(validSlice(), {"DICOM decoding failed", "more memory", "MiB budget"});
 }

@@ -11,6 +11,21 @@
 
 namespace voxlight::test {
 
+/// Whether this build runs under AddressSanitizer, whose shadow memory rules out the reading
+/// children's address-space caps (tests of those caps skip).
+constexpr bool kAddressSanitized =
+#if defined(__SANITIZE_ADDRESS__)
+    true;
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)
+    true;
+#else
+    false;
+#endif
+#else
+    false;
+#endif
+
 /// A fresh directory under the system temp dir, removed when the object dies. Tests never write to
 /// the source tree.
 class TempDir {
