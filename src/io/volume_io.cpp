@@ -442,15 +442,34 @@ void sendAll(int fd, const std::string& msg) {
     }
 }
 
+/// A reading child's first act: crashes end it plainly (default handlers, no core file, no
+/// fuzzer crash reporter inherited from the parent); Ctrl-C reaches the parent, which kills it.
+void becomeReaderChild() {
+    ::signal(SIGINT, SIG_IGN);
+    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGPIPE})
+        ::signal(sig, SIG_DFL);
+    rlimit core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &core);
+#ifdef VOXLIGHT_SANITIZED
+    __sanitizer_set_death_callback(nullptr);
+#endif
+}
+
+/// Copies a child's voxels into its memfd (bad_alloc when the memfd cannot grow or map).
+void copyIntoMemfd(int memFd, const void* data, std::size_t bytes) {
+    if (bytes == 0) return;
+    if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
+    void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
+    if (p == MAP_FAILED) throw std::bad_alloc();
+    std::memcpy(p, data, bytes);
+    ::munmap(p, bytes);
+}
+
 /// The child: read the data, copy the voxels into `memFd`, send one message ('V' done, 'E'
 /// InputError fields, 'X' another exception) followed by what was printed on std::cerr.
 [[noreturn]] void readInChild(vtkImageReader2* r, const fs::path& path, std::size_t bytes,
                               int msgFd, int memFd) {
-    // Ctrl-C reaches the parent, which kills the child; a crash ends the child plainly.
-    ::signal(SIGINT, SIG_IGN);
-    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGPIPE}) ::signal(sig, SIG_DFL);
-    rlimit core{0, 0};
-    ::setrlimit(RLIMIT_CORE, &core);
+    becomeReaderChild();
     std::ostringstream printed;
     std::cerr.rdbuf(printed.rdbuf());  // the parent's capture (if any) is the parent's
     std::string msg;
@@ -461,10 +480,7 @@ void sendAll(int fd, const std::string& msg) {
             std::size_t(scalars->GetNumberOfValues()) * std::size_t(scalars->GetDataTypeSize()) !=
                 bytes)
             throw InternalError("the reader's output does not have the size of its header");
-        if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
-        void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
-        if (p == MAP_FAILED) throw std::bad_alloc();
-        std::memcpy(p, scalars->GetVoidPointer(0), bytes);
+        copyIntoMemfd(memFd, scalars->GetVoidPointer(0), bytes);
         msg = "V";
     } catch (const InputError& e) {
         msg = "E";
@@ -1909,14 +1925,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
 /// 'E' (InputError), 'M' (out of memory), 'X' (another exception); then what was printed.
 [[noreturn]] void readVtiInChild(const fs::path& path, std::uint64_t fileBytes, int msgFd,
                                  int memFd) {
-    ::signal(SIGINT, SIG_IGN);
-    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGPIPE})
-        ::signal(sig, SIG_DFL);
-    rlimit core{0, 0};
-    ::setrlimit(RLIMIT_CORE, &core);
-#ifdef VOXLIGHT_SANITIZED
-    __sanitizer_set_death_callback(nullptr);  // a fuzzer's crash reporter is the parent's
-#endif
+    becomeReaderChild();
     limitAddressSpace(kVtiChildHeadroomBytes);
     std::ostringstream printed;
     std::cerr.rdbuf(printed.rdbuf());
@@ -1956,12 +1965,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
         vtkDataArray* scalars = imageScalars(img, path);
         const std::size_t values = std::size_t(scalars->GetNumberOfValues());
         const std::size_t bytes = values * std::size_t(scalars->GetDataTypeSize());
-        if (bytes > 0) {
-            if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
-            void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
-            if (p == MAP_FAILED) throw std::bad_alloc();
-            std::memcpy(p, scalars->GetVoidPointer(0), bytes);
-        }
+        copyIntoMemfd(memFd, scalars->GetVoidPointer(0), bytes);
         img->GetExtent(ext);
         msg = "V";
         auto put = [&](const void* data, std::size_t n) {
