@@ -423,8 +423,13 @@ struct DvrMarcher {
     const View v;  ///< a copy: stores to the counters below cannot alias its fields
     const CellSampler<View, G::kByIndex> sampler;
     const RaySegment& r;
-    /// The shader's per-ray form (ray constants such as halfway vectors hoisted).
-    using RayShader = std::decay_t<decltype(std::declval<const S&>().forRay(glm::vec3()))>;
+    /// The shader's per-ray form (ray constants such as halfway vectors hoisted). A shader whose
+    /// forRay returns itself is referred to, not copied: the SH shaders hold a shared_ptr and
+    /// their lights, and copying them for every ray cost an atomic reference count on a cache
+    /// line both render threads write, plus, with point lights, an allocation per ray.
+    using RayShaderResult = decltype(std::declval<const S&>().forRay(glm::vec3()));
+    using RayShader = std::conditional_t<std::is_reference_v<RayShaderResult>, RayShaderResult,
+                                         std::decay_t<RayShaderResult>>;
     const RayShader shader;
     const optics::TfTable& table;
     const G* gradients;  ///< precomputed central differences, or nullptr
