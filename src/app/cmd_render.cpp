@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <memory>
+#include <optional>
 
 #include "app/cli_support.h"
 #include "app/output_files.h"
@@ -129,7 +130,14 @@ Command addRenderCommand(CLI::App& app) {
             throw InputError("command line", "--std-error",
                              "method '" + s.method.name + "' makes no standard-error image",
                              "use --std-error with --set method.name=pathtrace, or leave it out");
-        pipeline::RunResult r = session.run(s, {.frames = *frames}, terminalProgress(*quiet));
+        // OpenImageIO loads beside the stages after the volume read (io/image.h; not beside it:
+        // a reading child's fork waits for a background load).
+        std::optional<io::ImageModulePreload> imageSupport;
+        pipeline::RunOptions runOptions{.frames = *frames};
+        runOptions.afterStage = [&](const pipeline::StageRecord& stage) {
+            if (!imageSupport && stage.kind != pipeline::StageKind::Input) imageSupport.emplace();
+        };
+        pipeline::RunResult r = session.run(s, runOptions, terminalProgress(*quiet));
 
         OutputFiles files;
         core::Stopwatch sw;

@@ -24,6 +24,7 @@
 #include <cstring>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <regex>
 #include <thread>
 
@@ -32,6 +33,7 @@
 #include "app/ranks.h"
 #include "app/render_output.h"
 #include "core/timing.h"
+#include "io/image.h"
 #include "pipeline/pipeline.h"
 #include "session/session.h"
 
@@ -214,6 +216,12 @@ Command addReplayCommand(CLI::App& app) {
         fs::path ffmpeg;
         if (!video->empty()) ffmpeg = findOnPath("ffmpeg");
 
+        // OpenImageIO loads beside the first frame's stages after its volume read (io/image.h).
+        std::optional<io::ImageModulePreload> imageSupport;
+        pipeline::RunOptions runOptions;
+        runOptions.afterStage = [&](const pipeline::StageRecord& stage) {
+            if (!imageSupport && stage.kind != pipeline::StageKind::Input) imageSupport.emplace();
+        };
         // The frames: one pipeline session, each frame written as soon as it is done.
         // Rank 0 makes the folder; with MPI the others wait for it.
         const bool created = !fs::exists(dir, ec);
@@ -234,7 +242,7 @@ Command addReplayCommand(CLI::App& app) {
             // taking over a second shows one; elsewhere the line per frame is the progress
             // (plain lines for every stage of every frame would drown it).
             const core::Progress progress = terminalProgress(*quiet || !::isatty(STDERR_FILENO));
-            pipeline::RunResult r = pipe.run(scenes[i], {}, progress);
+            pipeline::RunResult r = pipe.run(scenes[i], runOptions, progress);
             throwIfCancelled();
             const fs::path file = dir / frameName(i);
             OutputFiles files;

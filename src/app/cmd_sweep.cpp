@@ -22,6 +22,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <memory>
+#include <optional>
 #include <set>
 
 #include "analysis/sweep.h"
@@ -104,6 +105,9 @@ Command addSweepCommand(CLI::App& app) {
         }
         pipeline::Session variants, references;
         analysis::validateSweep(spec, items, variants);
+        // OpenImageIO loads beside the reference's stages (io/image.h); the tables alone need none.
+        std::optional<io::ImageModulePreload> imageSupport;
+        if (!*noImages) imageSupport.emplace();
 
         // A bar on a terminal; in a log, one line per variant is enough (no 10 % lines).
         const core::Progress progress = talk && isatty(STDERR_FILENO)

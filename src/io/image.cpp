@@ -33,12 +33,17 @@ std::string lowerExtension(const std::filesystem::path& p) {
 
 /// The module's functions, loaded once per process (thread-safe); InputError naming `file` when the
 /// module cannot be loaded.
-const mod::Api& imageModule(const std::string& file) {
+const detail::LoadedModule& loadedImageModule() {
     static std::once_flag once;
     static detail::LoadedModule loaded;
     std::call_once(once, [] {
         loaded = detail::loadModule(mod::kFileName, mod::kEntryPoint, mod::kAbiVersion);
     });
+    return loaded;
+}
+
+const mod::Api& imageModule(const std::string& file) {
+    const detail::LoadedModule& loaded = loadedImageModule();
     if (!loaded.api)
         throw InputError(file, "image module",
                          "image support (OpenImageIO) is unavailable: " + loaded.error,
@@ -47,6 +52,27 @@ const mod::Api& imageModule(const std::string& file) {
     return *static_cast<const mod::Api*>(loaded.api);
 }
 }  // namespace
+
+ImageModulePreload::ImageModulePreload() {
+    detail::beginBackgroundLoad();  // before the thread exists: no fork slips in between
+    try {
+        loader_ = std::thread([] {
+            try {
+                (void)loadedImageModule();
+            } catch (...) {
+                // Out of memory while loading: the first read or write retries and reports it.
+            }
+            detail::endBackgroundLoad();
+        });
+    } catch (const std::system_error&) {
+        // No thread to spare: the first read or write loads the module itself.
+        detail::endBackgroundLoad();
+    }
+}
+
+ImageModulePreload::~ImageModulePreload() {
+    if (loader_.joinable()) loader_.join();
+}
 
 // --- Reading --------------------------------------------------------------------------------------
 

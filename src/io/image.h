@@ -21,6 +21,7 @@
 // cannot be loaded, every call throws InputError (field "image module") listing where it looked.
 #include <filesystem>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "core/image.h"
@@ -45,6 +46,24 @@ struct ImageWriteOptions {
 /// An HDR image for linear radiance (environment maps): readImage, then InputError (field "format")
 /// when the file stores integers (an 8-bit PNG/JPEG is display-encoded, not radiance).
 ImageRGBA readHdrImage(const std::filesystem::path& path);
+
+/// Loads the image module on a background thread while the caller works on; the first image read
+/// or write then finds it loaded, or waits for the rest of the load instead of doing all of it.
+/// OpenImageIO maps, relocates and initialises ~250 libraries on load: 0.5–0.65 s of one core on
+/// the development machine, which `voxlight render` paid after the image was ready. Started where
+/// a command knows it will write an image, the load overlaps the volume read (one core) and the
+/// precompute. Never throws (a load failure is reported by the first read or write, as without
+/// it); the destructor waits for the loader.
+class ImageModulePreload {
+  public:
+    ImageModulePreload();
+    ~ImageModulePreload();
+    ImageModulePreload(const ImageModulePreload&) = delete;
+    ImageModulePreload& operator=(const ImageModulePreload&) = delete;
+
+  private:
+    std::thread loader_;
+};
 
 void writeImage(const ImageRGBA& image, const std::filesystem::path& path);
 void writeImage(const ImageRGBA& image, const std::filesystem::path& path,

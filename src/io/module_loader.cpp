@@ -3,13 +3,25 @@
 
 #include <dlfcn.h>
 
+#include <condition_variable>
 #include <filesystem>
+#include <mutex>
 #include <system_error>
 #include <vector>
 
 namespace voxlight::io::detail {
 
 namespace {
+struct BackgroundLoads {
+    std::mutex mutex;
+    std::condition_variable done;
+    int running = 0;
+};
+BackgroundLoads& backgroundLoads() {
+    static BackgroundLoads b;
+    return b;
+}
+
 std::vector<std::filesystem::path> moduleDirectories() {
     std::vector<std::filesystem::path> dirs;
     std::error_code ec;
@@ -63,6 +75,27 @@ LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVer
     }
     m.error = "tried " + tried;
     return m;
+}
+
+void beginBackgroundLoad() {
+    BackgroundLoads& b = backgroundLoads();
+    const std::lock_guard<std::mutex> lock(b.mutex);
+    ++b.running;
+}
+
+void endBackgroundLoad() {
+    BackgroundLoads& b = backgroundLoads();
+    {
+        const std::lock_guard<std::mutex> lock(b.mutex);
+        --b.running;
+    }
+    b.done.notify_all();
+}
+
+void awaitBackgroundLoads() {
+    BackgroundLoads& b = backgroundLoads();
+    std::unique_lock<std::mutex> lock(b.mutex);
+    b.done.wait(lock, [&] { return b.running == 0; });
 }
 
 }  // namespace voxlight::io::detail

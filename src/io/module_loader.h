@@ -26,4 +26,13 @@ struct LoadedModule {
 /// callers keep the result in a function-local static under std::call_once.
 LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion);
 
+/// Module loads running on background threads (io::ImageModulePreload) are counted: fork() while
+/// one runs would copy a process whose dynamic loader is part-way through a dlopen, its lock held
+/// by a thread the child does not have (a child that then loads or unwinds could deadlock), and
+/// the parent's relocation writes would each copy a page the child shares. The reading children's
+/// fork sites call awaitBackgroundLoads() first.
+void beginBackgroundLoad();
+void endBackgroundLoad();
+void awaitBackgroundLoads();
+
 }  // namespace voxlight::io::detail

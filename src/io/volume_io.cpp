@@ -54,6 +54,7 @@
 #include "core/text.h"
 #include "io/child_process.h"
 #include "io/dicom_series.h"
+#include "io/module_loader.h"
 #include "io/nrrd_header.h"
 #include "io/volume_module.h"
 
@@ -393,7 +394,8 @@ void forkReader(ChildProcess& child, const fs::path& path, Body&& body) {
     int pipeFds[2];
     if (::pipe2(pipeFds, O_CLOEXEC) != 0) systemFailure(path, "pipe");
     child.msg = pipeFds[0];
-    std::fflush(nullptr);  // nothing buffered is written twice
+    std::fflush(nullptr);            // nothing buffered is written twice
+    detail::awaitBackgroundLoads();  // no fork during a dlopen (module_loader.h)
     child.pid = ::fork();
     if (child.pid < 0) {
         ::close(pipeFds[1]);

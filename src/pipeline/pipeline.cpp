@@ -248,6 +248,7 @@ std::vector<double> Session::runStages(const Plan& plan, Run& run, RunResult& re
             r.reason = st.skip;
             run.keys_[st.name] = kNotNeededKey;
             res.stages.push_back(r);
+            if (options.afterStage) options.afterStage(r);
             continue;
         }
         const std::optional<std::uint64_t> keyOpt = st.key(run);
@@ -315,6 +316,7 @@ std::vector<double> Session::runStages(const Plan& plan, Run& run, RunResult& re
         r.bytes = a.bytes;
         run.artifacts_[st.name] = a;
         res.stages.push_back(r);
+        if (options.afterStage) options.afterStage(r);
     }
     return frameSeconds;
 }

@@ -218,6 +218,9 @@ struct RunOptions {
     /// Stages downstream key on the stand-in, so no field computed for the old state is ever
     /// stored as the new state's. The records say which stages stood in (StageRecord::stale).
     bool staleFields = false;
+    /// Called with each stage's record once the stage is done (ran, cached or not needed), on the
+    /// calling thread: the CLI starts loading the image module once the volume is read.
+    std::function<void(const StageRecord&)> afterStage;
 };
 
 /// Most frames one run repeats (a timing aid, not a batch renderer).

@@ -1,14 +1,23 @@
 // SPDX-License-Identifier: MIT
 // The lazily loaded modules (src/io/module_loader.h): found from a test executable's directory,
-// refused when stale, and a missing one is an error that says where it looked.
+// refused when stale, a missing one is an error that says where it looked, and a load on a
+// background thread (the image preload) holds back the reading children's forks.
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
+#include <filesystem>
+#include <thread>
 #include <tuple>
 
+#include "core/phantoms.h"
 #include "io/dicom_module.h"
+#include "io/image.h"
 #include "io/image_module.h"
 #include "io/module_loader.h"
+#include "io/volume_io.h"
 #include "io/volume_module.h"
+#include "support/test_support.h"
 
 using namespace voxlight;
 
@@ -45,4 +54,44 @@ TEST(ModuleLoader, StaleModuleIsRefused) {
         io::detail::loadModule(io::image_module::kFileName, "voxlight_no_such_entry", 1);
     EXPECT_EQ(wrongEntry.api, nullptr);
     EXPECT_NE(wrongEntry.error.find("no entry point"), std::string::npos) << wrongEntry.error;
+}
+
+// A reading child is forked only when no module load runs on another thread (a dlopen's lock held
+// by a thread the child lacks): awaitBackgroundLoads returns only once the last load has ended.
+TEST(ModuleLoader, ForkSitesWaitForBackgroundLoads) {
+    io::detail::awaitBackgroundLoads();  // none running: returns at once
+    io::detail::beginBackgroundLoad();
+    std::atomic<bool> ended{false};
+    std::thread loader([&] {
+        std::this_thread::sleep_for(std::chrono::milliseconds(200));
+        ended = true;
+        io::detail::endBackgroundLoad();
+    });
+    io::detail::awaitBackgroundLoads();
+    EXPECT_TRUE(ended.load());
+    loader.join();
+}
+
+// The CLI's preload beside a forked read (MetaImage and VTI are read in a child) and an image write
+// right after it: the volume arrives whole, the image is written.
+TEST(ModuleLoader, ImagePreloadBesideForkedReadsAndWrites) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 20;
+    const core::Volume v = core::makePhantom("torso", o);
+    io::writeVolume(v, tmp / "v.mha");
+    io::writeVolume(v, tmp / "v.vti");
+    for (int round = 0; round < 2; ++round) {
+        const io::ImageModulePreload preload;
+        for (const char* name : {"v.mha", "v.vti"}) {
+            const core::Volume r = io::readVolume(tmp / name);
+            ASSERT_EQ(r.dims(), v.dims()) << name;
+            EXPECT_EQ(r.physicalRange(), v.physicalRange()) << name;
+        }
+        core::ImageRGBA image;
+        image.width = image.height = 4;
+        image.pixels.assign(4 * 4 * 4, 0.5f);
+        io::writeImage(image, tmp / "i.png");
+        EXPECT_TRUE(std::filesystem::exists(tmp / "i.png"));
+    }
 }
