@@ -36,8 +36,11 @@ constexpr int kExplainNameWidth = 18;
 /// The record of an output stage (written after the pipeline's stages, by this command).
 pipeline::StageRecord outputRecord(const std::string& name, const std::string& path,
                                    const std::string& option) {
-    pipeline::StageRecord r{name,      pipeline::StageKind::Frame, !path.empty(), "", 0.0, "",
-                            {"render"}};
+    pipeline::StageRecord r;
+    r.name = name;
+    r.kind = pipeline::StageKind::Frame;
+    r.ran = !path.empty();
+    r.inputs = {"render"};
     r.reason = path.empty() ? "not needed: no " + option + " given" : "computed: " + path;
     return r;
 }
@@ -133,7 +136,8 @@ Command addRenderCommand(CLI::App& app) {
         // OpenImageIO loads beside the stages after the volume read (io/image.h; not beside it:
         // a reading child's fork waits for a background load).
         std::optional<io::ImageModulePreload> imageSupport;
-        pipeline::RunOptions runOptions{.frames = *frames};
+        pipeline::RunOptions runOptions;
+        runOptions.frames = *frames;
         runOptions.afterStage = [&](const pipeline::StageRecord& stage) {
             if (!imageSupport && stage.kind != pipeline::StageKind::Input) imageSupport.emplace();
         };

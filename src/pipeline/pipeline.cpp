@@ -156,7 +156,10 @@ std::vector<StageRecord> Session::explain(const io::Scene& scene) {
     Run run(scene, cache_, core::Progress::none());
     std::vector<StageRecord> out;
     for (const Stage& st : plan.stages) {
-        StageRecord r{st.name, st.kind, false, "", 0.0, "", st.inputs};
+        StageRecord r;
+        r.name = st.name;
+        r.kind = st.kind;
+        r.inputs = st.inputs;
         if (!st.skip.empty()) {
             r.reason = st.skip;
             run.keys_[st.name] = kNotNeededKey;
@@ -243,7 +246,10 @@ std::vector<double> Session::runStages(const Plan& plan, Run& run, RunResult& re
     std::vector<double> frameSeconds(std::size_t(options.frames), 0.0);
     for (const Stage& st : plan.stages) {
         if (st.name == stopBefore) break;
-        StageRecord r{st.name, st.kind, false, "", 0.0, "", st.inputs};
+        StageRecord r;
+        r.name = st.name;
+        r.kind = st.kind;
+        r.inputs = st.inputs;
         if (!st.skip.empty()) {
             r.reason = st.skip;
             run.keys_[st.name] = kNotNeededKey;

@@ -220,7 +220,7 @@ struct RunOptions {
     bool staleFields = false;
     /// Called with each stage's record once the stage is done (ran, cached or not needed), on the
     /// calling thread: the CLI starts loading the image module once the volume is read.
-    std::function<void(const StageRecord&)> afterStage;
+    std::function<void(const StageRecord&)> afterStage = nullptr;
 };
 
 /// Most frames one run repeats (a timing aid, not a batch renderer).

@@ -60,7 +60,9 @@ void expectExplainMatches(const std::vector<StageRecord>& explained, const RunRe
         EXPECT_EQ(e.ran, r.ran) << e.name << ": explain '" << e.reason << "', run '" << r.reason
                                 << "'";
         EXPECT_EQ(category(e.reason), category(r.reason)) << e.name;
-        if (!e.key.empty()) EXPECT_EQ(e.key, r.key) << e.name;
+        if (!e.key.empty()) {
+            EXPECT_EQ(e.key, r.key) << e.name;
+        }
         EXPECT_EQ(e.inputs, r.inputs) << e.name;
     }
 }
@@ -78,8 +80,9 @@ TEST(Pipeline, SecondRenderOfTheSameSceneRunsNoPrecomputeStage) {
     const RunResult second = session.run(s);
     EXPECT_EQ(ranStages(second), kFrameStages);
     for (const auto& st : second.stages)
-        if (st.kind != StageKind::Frame && st.reason.rfind("not needed", 0) != 0)
+        if (st.kind != StageKind::Frame && st.reason.rfind("not needed", 0) != 0) {
             EXPECT_EQ(st.reason.rfind("cached " + st.key.substr(0, 8), 0), 0u) << st.reason;
+        }
     EXPECT_EQ(first.image.pixels, second.image.pixels);
 }
 
@@ -218,7 +221,9 @@ TEST(Pipeline, DiskCacheSurvivesARestartAndRefusesDamagedFiles) {
         // are seen as "computed" before the run.
         if (dmg.name != "flipped byte") {
             for (const auto& e : c.explain(s))
-                if (e.name == "brick_grid") EXPECT_TRUE(e.ran) << e.reason;
+                if (e.name == "brick_grid") {
+                    EXPECT_TRUE(e.ran) << e.reason;
+                }
         }
         std::vector<std::string> warnings;
         c.cache().setWarn([&](const std::string& w) { warnings.push_back(w); });

@@ -488,7 +488,9 @@ TEST(PvrtMethod, ExtremeAsymmetryStaysFinite) {
         EXPECT_TRUE(allFiniteNonNegative(r.image)) << "g " << g;
         // Forward scattering toward the eye shows; back-scattering of a sharp light may be
         // clamped to black (HG at |g| = 0.95 truncated after band 3 rings below 0 there).
-        if (g > 0) EXPECT_GT(meanRed(r.image), 0.0) << "g " << g;
+        if (g > 0) {
+            EXPECT_GT(meanRed(r.image), 0.0) << "g " << g;
+        }
     }
 }
 
