@@ -48,6 +48,20 @@ inline std::size_t limitAddressSpace(std::size_t extra) {
 #endif
 }
 
+/// A reading child's first act: crashes end it plainly (default handlers, no core file, no
+/// handler inherited from the parent: the CLI's Ctrl-C handler, a fuzzer's crash reporter); Ctrl-C
+/// reaches the parent, which kills the child.
+inline void becomeReaderChild() {
+    ::signal(SIGINT, SIG_IGN);
+    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGPIPE, SIGALRM, SIGXCPU})
+        ::signal(sig, SIG_DFL);
+    rlimit core{0, 0};
+    ::setrlimit(RLIMIT_CORE, &core);
+#ifdef VOXLIGHT_SANITIZED
+    __sanitizer_set_death_callback(nullptr);
+#endif
+}
+
 /// Kills (SIGKILL) and reaps the child unless it was reaped by wait(), and closes the
 /// descriptors: whatever way the parent leaves (an error, Ctrl-C's CancelledError), no child and
 /// no descriptor is left behind.

@@ -167,16 +167,7 @@ std::chrono::seconds stallLimit() {
     // JSON on stdout.
     ::dup2(errFd, STDOUT_FILENO);
     ::dup2(errFd, STDERR_FILENO);
-    // Crashes end the child plainly: no core file, no handler inherited from the parent (the CLI's
-    // Ctrl-C handler, a fuzzer's crash reporter); Ctrl-C reaches the parent, which kills the child.
-    rlimit core{0, 0};
-    ::setrlimit(RLIMIT_CORE, &core);
-    for (int sig : {SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGALRM, SIGXCPU, SIGTERM, SIGPIPE})
-        ::signal(sig, SIG_DFL);
-    ::signal(SIGINT, SIG_IGN);
-#ifdef VOXLIGHT_SANITIZED
-    __sanitizer_set_death_callback(nullptr);
-#endif
+    becomeReaderChild();
     const Writer out(msgFd);
     std::size_t budget = limitAddressSpace(kChildHeadroomBytes);
 

@@ -444,19 +444,6 @@ void sendAll(int fd, const std::string& msg) {
     }
 }
 
-/// A reading child's first act: crashes end it plainly (default handlers, no core file, no
-/// fuzzer crash reporter inherited from the parent); Ctrl-C reaches the parent, which kills it.
-void becomeReaderChild() {
-    ::signal(SIGINT, SIG_IGN);
-    for (int sig : {SIGTERM, SIGABRT, SIGSEGV, SIGBUS, SIGFPE, SIGILL, SIGPIPE})
-        ::signal(sig, SIG_DFL);
-    rlimit core{0, 0};
-    ::setrlimit(RLIMIT_CORE, &core);
-#ifdef VOXLIGHT_SANITIZED
-    __sanitizer_set_death_callback(nullptr);
-#endif
-}
-
 /// Copies a child's voxels into its memfd (bad_alloc when the memfd cannot grow or map).
 void copyIntoMemfd(int memFd, const void* data, std::size_t bytes) {
     if (bytes == 0) return;
