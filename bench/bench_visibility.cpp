@@ -18,16 +18,22 @@
 // (600 HU, ×2: 220…3071), its fat point (−90 HU, ×2: −160…−30), and a colour-only change; arg 2:
 // 0 = the march (32 rays), 1 = the line sweep (26). Counters: blocks recomputed / stored, and how
 // many changed level. Medians of 3; the end prints the ratio per edit (update / full).
-// bench-deps: visibility optics core
+// BM_TfUpdateBonsai: the same total (LOD + line-sweep local + 64³ recursive global) on the shared
+// bonsai CT (../shared/datasets/ct/bonsai.vti, 256³ uint8 — a real 256³ CT, Kronander's Fig. 15
+// data set), `generic` preset on its robust range, at 1:8 (the pipeline's default) and 1:16;
+// skipped with a message when the file is absent.
+// bench-deps: visibility optics core io
 #include <benchmark/benchmark.h>
 
 #include <chrono>
 #include <cstdio>
+#include <filesystem>
 #include <map>
 #include <optional>
 #include <string>
 
 #include "core/phantoms.h"
+#include "io/volume_io.h"
 #include "optics/presets.h"
 #include "visibility/global_visibility.h"
 #include "visibility/hierarchical_visibility.h"
@@ -139,6 +145,59 @@ void BM_TfUpdateTotal(benchmark::State& state) {
 }
 BENCHMARK(BM_TfUpdateTotal)
     ->ArgsProduct({{0, 1}, {16, 64}, {0, 1}})
+    ->Unit(benchmark::kMillisecond)
+    ->MeasureProcessCPUTime()
+    ->UseRealTime()
+    ->Iterations(2)
+    ->Repetitions(3)
+    ->ReportAggregatesOnly(true);
+
+void BM_TfUpdateBonsai(benchmark::State& state) {
+    static const std::filesystem::path file =
+        std::filesystem::path(VOXLIGHT_SOURCE_DIR) / "../shared/datasets/ct/bonsai.vti";
+    if (!std::filesystem::exists(file)) {
+        state.SkipWithError("../shared/datasets/ct/bonsai.vti is absent");
+        return;
+    }
+    static const core::Volume volume = io::readVolume(file);
+    static const auto pyramid =
+        std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(volume));
+    const optics::TransferFunction tf = optics::makePreset("generic", optics::robustRange(volume));
+    const double ratio = double(state.range(0));
+    visibility::LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = visibility::kSweepRaysCoarse;
+    o.radiusVoxels = 16.0;
+    o.algorithm = visibility::VisibilityAlgorithm::Sweep;
+    visibility::GlobalVisibilityOptions go;
+    go.resolution = 64;
+    go.integration = visibility::GlobalIntegration::Recursive;
+    double localSeconds = 0.0, globalSeconds = 0.0;
+    using Clock = std::chrono::steady_clock;
+    for (auto _ : state) {
+        const auto t0 = Clock::now();
+        const optics::TfTable table(tf);
+        auto grid = std::make_shared<const visibility::MultiresGrid>(
+            pyramid, visibility::selectLod(*pyramid, tf, table,
+                                           visibility::LodBudget::fromReduction(
+                                               ratio, pyramid->geometry().voxelCount())));
+        auto local = std::make_shared<const visibility::LocalVisibility>(
+            visibility::computeLocalVisibility(grid, table, o));
+        const auto t1 = Clock::now();
+        const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
+        benchmark::DoNotOptimize(g.at({0, 0, 0}, 0));
+        const auto t2 = Clock::now();
+        localSeconds += std::chrono::duration<double>(t1 - t0).count();
+        globalSeconds += std::chrono::duration<double>(t2 - t1).count();
+    }
+    state.SetLabel("bonsai generic 1:" + std::to_string(state.range(0)) +
+                   " sweep + global 64^3 recursive");
+    state.counters["local_s"] = localSeconds / double(state.iterations());
+    state.counters["global_s"] = globalSeconds / double(state.iterations());
+}
+BENCHMARK(BM_TfUpdateBonsai)
+    ->Arg(8)
+    ->Arg(16)
     ->Unit(benchmark::kMillisecond)
     ->MeasureProcessCPUTime()
     ->UseRealTime()
