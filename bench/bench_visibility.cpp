@@ -103,13 +103,11 @@ BENCHMARK(BM_TfUpdate)
 
 /// The TF-update total (Kronander Table 1: local / global / total): table, LOD selection,
 /// local visibility by the line sweep (26 lattice rays, 4 coefficients, r_s 16) and the 64³ global
-/// field from it (arg 2: 0 = piecewise, 1 = recursive integration), per update, at 1:16 and 1:64.
-/// Counters: wall seconds of the local part (LOD
-/// included) and of the global part, medians of 3 runs of 2 updates.
-void BM_TfUpdateTotal(benchmark::State& state) {
-    const auto pyramid = torsoPyramid();
-    const optics::TransferFunction tf = optics::makePreset(kPresets[state.range(0)]);
-    const double ratio = double(state.range(1));
+/// field from it, per update of `tf` at 1:`ratio`. Counters: wall seconds of the local part (LOD
+/// included) and of the global part, per update.
+void runTfUpdates(benchmark::State& state,
+                  const std::shared_ptr<const visibility::BlockPyramid>& pyramid,
+                  const optics::TransferFunction& tf, double ratio, bool recursive) {
     visibility::LocalVisibilityOptions o;
     o.coefficients = 4;
     o.rays = visibility::kSweepRaysCoarse;
@@ -117,7 +115,6 @@ void BM_TfUpdateTotal(benchmark::State& state) {
     o.algorithm = visibility::VisibilityAlgorithm::Sweep;
     visibility::GlobalVisibilityOptions go;
     go.resolution = 64;
-    const bool recursive = state.range(2) == 1;
     go.integration = recursive ? visibility::GlobalIntegration::Recursive
                                : visibility::GlobalIntegration::Piecewise;
     double localSeconds = 0.0, globalSeconds = 0.0;
@@ -138,19 +135,29 @@ void BM_TfUpdateTotal(benchmark::State& state) {
         localSeconds += std::chrono::duration<double>(t1 - t0).count();
         globalSeconds += std::chrono::duration<double>(t2 - t1).count();
     }
-    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)) +
-                   " sweep + global 64^3" + (recursive ? " recursive" : " piecewise"));
     state.counters["local_s"] = localSeconds / double(state.iterations());
     state.counters["global_s"] = globalSeconds / double(state.iterations());
 }
-BENCHMARK(BM_TfUpdateTotal)
-    ->ArgsProduct({{0, 1}, {16, 64}, {0, 1}})
-    ->Unit(benchmark::kMillisecond)
-    ->MeasureProcessCPUTime()
-    ->UseRealTime()
-    ->Iterations(2)
-    ->Repetitions(3)
-    ->ReportAggregatesOnly(true);
+
+/// The torso at 1:16 and 1:64, both CT presets (arg 2: 0 = piecewise, 1 = recursive integration);
+/// medians of 3 runs of 2 updates.
+void BM_TfUpdateTotal(benchmark::State& state) {
+    const bool recursive = state.range(2) == 1;
+    runTfUpdates(state, torsoPyramid(), optics::makePreset(kPresets[state.range(0)]),
+                 double(state.range(1)), recursive);
+    state.SetLabel(std::string(kPresets[state.range(0)]) + " 1:" + std::to_string(state.range(1)) +
+                   " sweep + global 64^3" + (recursive ? " recursive" : " piecewise"));
+}
+/// How the TF-update benchmarks run: 3 runs of 2 updates, wall time, the whole process's CPU.
+void tfUpdateRuns(benchmark::internal::Benchmark* b) {
+    b->Unit(benchmark::kMillisecond)
+        ->MeasureProcessCPUTime()
+        ->UseRealTime()
+        ->Iterations(2)
+        ->Repetitions(3)
+        ->ReportAggregatesOnly(true);
+}
+BENCHMARK(BM_TfUpdateTotal)->ArgsProduct({{0, 1}, {16, 64}, {0, 1}})->Apply(tfUpdateRuns);
 
 void BM_TfUpdateBonsai(benchmark::State& state) {
     static const std::filesystem::path file =
@@ -162,48 +169,12 @@ void BM_TfUpdateBonsai(benchmark::State& state) {
     static const core::Volume volume = io::readVolume(file);
     static const auto pyramid =
         std::make_shared<const visibility::BlockPyramid>(visibility::BlockPyramid::build(volume));
-    const optics::TransferFunction tf = optics::makePreset("generic", optics::robustRange(volume));
-    const double ratio = double(state.range(0));
-    visibility::LocalVisibilityOptions o;
-    o.coefficients = 4;
-    o.rays = visibility::kSweepRaysCoarse;
-    o.radiusVoxels = 16.0;
-    o.algorithm = visibility::VisibilityAlgorithm::Sweep;
-    visibility::GlobalVisibilityOptions go;
-    go.resolution = 64;
-    go.integration = visibility::GlobalIntegration::Recursive;
-    double localSeconds = 0.0, globalSeconds = 0.0;
-    using Clock = std::chrono::steady_clock;
-    for (auto _ : state) {
-        const auto t0 = Clock::now();
-        const optics::TfTable table(tf);
-        auto grid = std::make_shared<const visibility::MultiresGrid>(
-            pyramid, visibility::selectLod(*pyramid, tf, table,
-                                           visibility::LodBudget::fromReduction(
-                                               ratio, pyramid->geometry().voxelCount())));
-        auto local = std::make_shared<const visibility::LocalVisibility>(
-            visibility::computeLocalVisibility(grid, table, o));
-        const auto t1 = Clock::now();
-        const visibility::GlobalVisibility g = visibility::computeGlobalVisibility(local, go);
-        benchmark::DoNotOptimize(g.at({0, 0, 0}, 0));
-        const auto t2 = Clock::now();
-        localSeconds += std::chrono::duration<double>(t1 - t0).count();
-        globalSeconds += std::chrono::duration<double>(t2 - t1).count();
-    }
+    runTfUpdates(state, pyramid, optics::makePreset("generic", optics::robustRange(volume)),
+                 double(state.range(0)), true);
     state.SetLabel("bonsai generic 1:" + std::to_string(state.range(0)) +
                    " sweep + global 64^3 recursive");
-    state.counters["local_s"] = localSeconds / double(state.iterations());
-    state.counters["global_s"] = globalSeconds / double(state.iterations());
 }
-BENCHMARK(BM_TfUpdateBonsai)
-    ->Arg(8)
-    ->Arg(16)
-    ->Unit(benchmark::kMillisecond)
-    ->MeasureProcessCPUTime()
-    ->UseRealTime()
-    ->Iterations(2)
-    ->Repetitions(3)
-    ->ReportAggregatesOnly(true);
+BENCHMARK(BM_TfUpdateBonsai)->Arg(8)->Arg(16)->Apply(tfUpdateRuns);
 
 /// Global visibility alone (Kronander's "global" column) on the 64³ grid, from the local
 /// visibility of ct-bone at 1:16 (computed once); arg: 0 = piecewise (eq. 11 along every ray),
