@@ -316,7 +316,9 @@ const SweepReference& SweepRunner::reference(std::size_t index, const core::Prog
     if (const auto it = references_done_.find(index); it != references_done_.end())
         return it->second;
     const io::Scene s = referenceScene(spec_, index);
-    pipeline::RunResult r = references_.run(s, {}, progress);
+    pipeline::RunOptions options;
+    options.afterStage = afterStage_;
+    pipeline::RunResult r = references_.run(s, options, progress);
     SweepReference ref;
     ref.linear = std::move(r.image);
     ref.display = displayOf(ref.linear, s);
@@ -335,8 +337,10 @@ SweepRow SweepRunner::run(const SweepItem& item, const core::Progress& progress,
                           SweepImages* images) {
     const SweepReference& ref = reference(item.reference, progress);
     const io::Scene s = variantScene(spec_, item);
-    pipeline::RunResult r =
-        variants_.run(s, {.frames = item.method == "pathtrace" ? 1 : spec_.frames}, progress);
+    pipeline::RunOptions options;
+    options.frames = item.method == "pathtrace" ? 1 : spec_.frames;
+    options.afterStage = afterStage_;
+    pipeline::RunResult r = variants_.run(s, options, progress);
     SweepRow row;
     row.item = item;
     row.warnings = r.warnings;

@@ -50,6 +50,7 @@
 // Determinism: the errors are those of deterministic renders (fixed seeds), so they repeat
 // exactly for any thread count or distribution of the variants; the seconds do not.
 #include <filesystem>
+#include <functional>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <string>
@@ -168,12 +169,17 @@ class SweepRunner {
     /// Renders one variant and measures it. `images`, when given, receives its pictures.
     SweepRow run(const SweepItem& item, const core::Progress& progress = core::Progress::none(),
                  SweepImages* images = nullptr);
+    /// Called after every stage of the reference and variant runs (pipeline::RunOptions).
+    void setAfterStage(std::function<void(const pipeline::StageRecord&)> hook) {
+        afterStage_ = std::move(hook);
+    }
 
   private:
     const SweepSpec& spec_;
     pipeline::Session& variants_;
     pipeline::Session& references_;
     std::map<std::size_t, SweepReference> references_done_;
+    std::function<void(const pipeline::StageRecord&)> afterStage_;
     std::map<std::string, double> cost_;  ///< "stage:key" → seconds when computed
 };
 

@@ -105,9 +105,9 @@ Command addSweepCommand(CLI::App& app) {
         }
         pipeline::Session variants, references;
         analysis::validateSweep(spec, items, variants);
-        // OpenImageIO loads beside the reference's stages (io/image.h); the tables alone need none.
+        // OpenImageIO loads beside the stages after the first volume read (io/image.h; rank 0
+        // writes the reference's PNG even with --no-images, the other ranks only variant images).
         std::optional<io::ImageModulePreload> imageSupport;
-        if (!*noImages) imageSupport.emplace();
 
         // A bar on a terminal; in a log, one line per variant is enough (no 10 % lines).
         const core::Progress progress = talk && isatty(STDERR_FILENO)
@@ -115,6 +115,11 @@ Command addSweepCommand(CLI::App& app) {
                                             : core::Progress({}, &cancelFlag());
         references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
         analysis::SweepRunner runner(spec, variants, references);
+        if (lead || !*noImages)
+            runner.setAfterStage([&](const pipeline::StageRecord& stage) {
+                if (!imageSupport && stage.kind != pipeline::StageKind::Input)
+                    imageSupport.emplace();
+            });
 
         // Rank 0 makes the folders and the reference (into the disk cache, where the other ranks
         // find it); the others wait for it, and stop when it failed.

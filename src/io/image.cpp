@@ -64,8 +64,9 @@ ImageModulePreload::ImageModulePreload() {
             }
             detail::endBackgroundLoad();
         });
-    } catch (const std::system_error&) {
-        // No thread to spare: the first read or write loads the module itself.
+    } catch (...) {
+        // No thread to spare (system_error, or bad_alloc for its state): the first read or write
+        // loads the module itself. The count must not stay up: every later fork would wait on it.
         detail::endBackgroundLoad();
     }
 }

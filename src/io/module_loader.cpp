@@ -38,6 +38,11 @@ std::vector<std::filesystem::path> moduleDirectories() {
 
 LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion) {
     using Entry = const void* (*)();
+    // Counted while it runs (module_loader.h): a fork on another thread waits for it.
+    beginBackgroundLoad();
+    struct Counted {
+        ~Counted() { endBackgroundLoad(); }
+    } counted;
     LoadedModule m;
     std::string tried;
     for (const auto& dir : moduleDirectories()) {

@@ -26,11 +26,13 @@ struct LoadedModule {
 /// callers keep the result in a function-local static under std::call_once.
 LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion);
 
-/// Module loads running on background threads (io::ImageModulePreload) are counted: fork() while
-/// one runs would copy a process whose dynamic loader is part-way through a dlopen, its lock held
-/// by a thread the child does not have (a child that then loads or unwinds could deadlock), and
-/// the parent's relocation writes would each copy a page the child shares. The reading children's
-/// fork sites call awaitBackgroundLoads() first.
+/// Module loads are counted — every loadModule call, and a background preload
+/// (io::ImageModulePreload) from before its thread starts: fork() while one runs on another
+/// thread (the preload; the viewer's scene loads run on their own threads) would copy a process
+/// whose dynamic loader is part-way through a dlopen, its lock held by a thread the child does not
+/// have (a child that then loads or unwinds could deadlock), and the parent's relocation writes
+/// would each copy a page the child shares. The reading children's fork sites call
+/// awaitBackgroundLoads() first (never from inside a load: no fork happens there).
 void beginBackgroundLoad();
 void endBackgroundLoad();
 void awaitBackgroundLoads();

@@ -83,8 +83,11 @@ TEST(ModuleLoader, ImagePreloadBesideForkedReadsAndWrites) {
     io::writeVolume(v, tmp / "v.vti");
     for (int round = 0; round < 2; ++round) {
         const io::ImageModulePreload preload;
+        // A progress that can be cancelled: MetaImage is then read in a child too.
+        const std::atomic<bool> cancel{false};
+        const core::Progress progress({}, &cancel);
         for (const char* name : {"v.mha", "v.vti"}) {
-            const core::Volume r = io::readVolume(tmp / name);
+            const core::Volume r = io::readVolume(tmp / name, {}, progress);
             ASSERT_EQ(r.dims(), v.dims()) << name;
             EXPECT_EQ(r.physicalRange(), v.physicalRange()) << name;
         }
