@@ -40,8 +40,11 @@ for t in "${targets[@]}"; do
   case " ${targets_all[*]} " in *" $t "*) ;; *) echo "tools/fuzz.sh: unknown target '$t' (${targets_all[*]})" >&2; exit 2 ;; esac
   need_build+=("fuzz_$t")
 done
+# One build at a time (flock): two runs started together rebuilt the same modules at once, and a
+# fuzzer that loaded a module while the other build rewrote it fuzzed nothing (5 December).
 if [ ! -f "$build/build.ninja" ]; then cmake --preset fuzz >/dev/null; fi
-nice -n 19 cmake --build --preset fuzz --target "${need_build[@]}" >/dev/null
+mkdir -p "$build"
+flock "$build/.build.lock" nice -n 19 cmake --build --preset fuzz --target "${need_build[@]}" >/dev/null
 
 # Seeds: voxlight's phantom writer needs a built CLI (any preset's).
 seeds=$build/corpus-seeds
