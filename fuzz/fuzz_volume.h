@@ -17,11 +17,10 @@
 /// at coverage 221 instead of ~1,700). So the target stops with one line instead.
 extern "C" int LLVMFuzzerInitialize(int*, char***) {
     using namespace voxlight::io;
-    for (const auto& m :
-         {detail::loadModule(volume_module::kFileName, volume_module::kEntryPoint,
-                             volume_module::kAbiVersion),
-          detail::loadModule(dicom_module::kFileName, dicom_module::kEntryPoint,
-                             dicom_module::kAbiVersion)})
+    for (const auto& m : {detail::loadModule(volume_module::kFileName, volume_module::kEntryPoint,
+                                             volume_module::kAbiVersion),
+                          detail::loadModule(dicom_module::kFileName, dicom_module::kEntryPoint,
+                                             dicom_module::kAbiVersion)})
         if (!m.api) {
             std::fprintf(stderr, "voxlight fuzz: a reader module does not load: %s\n",
                          m.error.c_str());
