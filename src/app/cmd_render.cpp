@@ -138,9 +138,7 @@ Command addRenderCommand(CLI::App& app) {
         std::optional<io::ImageModulePreload> imageSupport;
         pipeline::RunOptions runOptions;
         runOptions.frames = *frames;
-        runOptions.afterStage = [&](const pipeline::StageRecord& stage) {
-            if (!imageSupport && stage.kind != pipeline::StageKind::Input) imageSupport.emplace();
-        };
+        runOptions.afterStage = preloadImagesAfterInputs(imageSupport);
         pipeline::RunResult r = session.run(s, runOptions, terminalProgress(*quiet));
 
         OutputFiles files;

@@ -219,9 +219,7 @@ Command addReplayCommand(CLI::App& app) {
         // OpenImageIO loads beside the first frame's stages after its volume read (io/image.h).
         std::optional<io::ImageModulePreload> imageSupport;
         pipeline::RunOptions runOptions;
-        runOptions.afterStage = [&](const pipeline::StageRecord& stage) {
-            if (!imageSupport && stage.kind != pipeline::StageKind::Input) imageSupport.emplace();
-        };
+        runOptions.afterStage = preloadImagesAfterInputs(imageSupport);
         // The frames: one pipeline session, each frame written as soon as it is done.
         // Rank 0 makes the folder; with MPI the others wait for it.
         const bool created = !fs::exists(dir, ec);

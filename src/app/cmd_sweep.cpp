@@ -29,6 +29,7 @@
 #include "app/cli_support.h"
 #include "app/output_files.h"
 #include "app/ranks.h"
+#include "app/render_output.h"
 #include "core/timing.h"
 #include "io/image.h"
 
@@ -115,11 +116,7 @@ Command addSweepCommand(CLI::App& app) {
                                             : core::Progress({}, &cancelFlag());
         references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
         analysis::SweepRunner runner(spec, variants, references);
-        if (lead || !*noImages)
-            runner.setAfterStage([&](const pipeline::StageRecord& stage) {
-                if (!imageSupport && stage.kind != pipeline::StageKind::Input)
-                    imageSupport.emplace();
-            });
+        if (lead || !*noImages) runner.setAfterStage(preloadImagesAfterInputs(imageSupport));
 
         // Rank 0 makes the folders and the reference (into the disk cache, where the other ranks
         // find it); the others wait for it, and stop when it failed.

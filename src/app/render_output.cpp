@@ -18,4 +18,11 @@ void writeDisplayImage(const pipeline::RunResult& run, const io::Scene& scene,
                    path);
 }
 
+std::function<void(const pipeline::StageRecord&)> preloadImagesAfterInputs(
+    std::optional<io::ImageModulePreload>& preload) {
+    return [&preload](const pipeline::StageRecord& stage) {
+        if (!preload && stage.kind != pipeline::StageKind::Input) preload.emplace();
+    };
+}
+
 }  // namespace voxlight::app

@@ -329,8 +329,8 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
     }
     child.msg = msgPipe[0];
     child.err = errPipe[0];
-    detail::awaitBackgroundLoads();  // no fork during a dlopen (module_loader.h)
-    std::fflush(nullptr);  // nothing buffered is written twice (the loader may have printed)
+    detail::awaitModuleLoads();  // no fork during a dlopen (module_loader.h)
+    std::fflush(nullptr);        // nothing buffered is written twice (the loader may have printed)
     child.pid = ::fork();
     if (child.pid < 0) {
         ::close(msgPipe[1]), ::close(errPipe[1]);

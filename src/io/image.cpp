@@ -54,7 +54,7 @@ const mod::Api& imageModule(const std::string& file) {
 }  // namespace
 
 ImageModulePreload::ImageModulePreload() {
-    detail::beginBackgroundLoad();  // before the thread exists: no fork slips in between
+    detail::beginModuleLoad();  // before the thread exists: no fork slips in between
     try {
         loader_ = std::thread([] {
             try {
@@ -62,12 +62,12 @@ ImageModulePreload::ImageModulePreload() {
             } catch (...) {
                 // Out of memory while loading: the first read or write retries and reports it.
             }
-            detail::endBackgroundLoad();
+            detail::endModuleLoad();
         });
     } catch (...) {
         // No thread to spare (system_error, or bad_alloc for its state): the first read or write
         // loads the module itself. The count must not stay up: every later fork would wait on it.
-        detail::endBackgroundLoad();
+        detail::endModuleLoad();
     }
 }
 

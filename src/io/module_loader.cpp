@@ -12,13 +12,13 @@
 namespace voxlight::io::detail {
 
 namespace {
-struct BackgroundLoads {
+struct ModuleLoads {
     std::mutex mutex;
     std::condition_variable done;
     int running = 0;
 };
-BackgroundLoads& backgroundLoads() {
-    static BackgroundLoads b;
+ModuleLoads& moduleLoads() {
+    static ModuleLoads b;
     return b;
 }
 
@@ -39,9 +39,9 @@ std::vector<std::filesystem::path> moduleDirectories() {
 LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion) {
     using Entry = const void* (*)();
     // Counted while it runs (module_loader.h): a fork on another thread waits for it.
-    beginBackgroundLoad();
+    beginModuleLoad();
     struct Counted {
-        ~Counted() { endBackgroundLoad(); }
+        ~Counted() { endModuleLoad(); }
     } counted;
     LoadedModule m;
     std::string tried;
@@ -82,14 +82,14 @@ LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVer
     return m;
 }
 
-void beginBackgroundLoad() {
-    BackgroundLoads& b = backgroundLoads();
+void beginModuleLoad() {
+    ModuleLoads& b = moduleLoads();
     const std::lock_guard<std::mutex> lock(b.mutex);
     ++b.running;
 }
 
-void endBackgroundLoad() {
-    BackgroundLoads& b = backgroundLoads();
+void endModuleLoad() {
+    ModuleLoads& b = moduleLoads();
     {
         const std::lock_guard<std::mutex> lock(b.mutex);
         --b.running;
@@ -97,8 +97,8 @@ void endBackgroundLoad() {
     b.done.notify_all();
 }
 
-void awaitBackgroundLoads() {
-    BackgroundLoads& b = backgroundLoads();
+void awaitModuleLoads() {
+    ModuleLoads& b = moduleLoads();
     std::unique_lock<std::mutex> lock(b.mutex);
     b.done.wait(lock, [&] { return b.running == 0; });
 }

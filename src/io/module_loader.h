@@ -32,9 +32,9 @@ LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVer
 /// whose dynamic loader is part-way through a dlopen, its lock held by a thread the child does not
 /// have (a child that then loads or unwinds could deadlock), and the parent's relocation writes
 /// would each copy a page the child shares. The reading children's fork sites call
-/// awaitBackgroundLoads() first (never from inside a load: no fork happens there).
-void beginBackgroundLoad();
-void endBackgroundLoad();
-void awaitBackgroundLoads();
+/// awaitModuleLoads() first (never from inside a load: no fork happens there).
+void beginModuleLoad();
+void endModuleLoad();
+void awaitModuleLoads();
 
 }  // namespace voxlight::io::detail

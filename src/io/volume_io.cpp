@@ -394,8 +394,8 @@ void forkReader(ChildProcess& child, const fs::path& path, Body&& body) {
     int pipeFds[2];
     if (::pipe2(pipeFds, O_CLOEXEC) != 0) systemFailure(path, "pipe");
     child.msg = pipeFds[0];
-    detail::awaitBackgroundLoads();  // no fork during a dlopen (module_loader.h)
-    std::fflush(nullptr);  // nothing buffered is written twice (the loader may have printed)
+    detail::awaitModuleLoads();  // no fork during a dlopen (module_loader.h)
+    std::fflush(nullptr);        // nothing buffered is written twice (the loader may have printed)
     child.pid = ::fork();
     if (child.pid < 0) {
         ::close(pipeFds[1]);

@@ -57,17 +57,17 @@ TEST(ModuleLoader, StaleModuleIsRefused) {
 }
 
 // A reading child is forked only when no module load runs on another thread (a dlopen's lock held
-// by a thread the child lacks): awaitBackgroundLoads returns only once the last load has ended.
-TEST(ModuleLoader, ForkSitesWaitForBackgroundLoads) {
-    io::detail::awaitBackgroundLoads();  // none running: returns at once
-    io::detail::beginBackgroundLoad();
+// by a thread the child lacks): awaitModuleLoads returns only once the last load has ended.
+TEST(ModuleLoader, ForkSitesWaitForModuleLoads) {
+    io::detail::awaitModuleLoads();  // none running: returns at once
+    io::detail::beginModuleLoad();
     std::atomic<bool> ended{false};
     std::thread loader([&] {
         std::this_thread::sleep_for(std::chrono::milliseconds(200));
         ended = true;
-        io::detail::endBackgroundLoad();
+        io::detail::endModuleLoad();
     });
-    io::detail::awaitBackgroundLoads();
+    io::detail::awaitModuleLoads();
     EXPECT_TRUE(ended.load());
     loader.join();
 }
