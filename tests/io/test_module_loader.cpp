@@ -98,3 +98,32 @@ TEST(ModuleLoader, ImagePreloadBesideForkedReadsAndWrites) {
         EXPECT_TRUE(std::filesystem::exists(tmp / "i.png"));
     }
 }
+
+// The fork sites themselves should wait: a VTI read (in a child when it can be cancelled) started
+// while a load is counted should finish only after that load has ended. DISABLED because it fails:
+// the VTK reads and their fork sites live in libvoxlight_volume_vtk.so, which is built with its
+// own copy of module_loader.cpp (src/io/CMakeLists.txt) and so counts in its own ModuleLoads, not
+// the one io's preload raises. Open defect (issue #11 note): the counter must be shared with the
+// module (e.g. handed to it through volume_module's Api) before this can be enabled.
+TEST(ModuleLoader, DISABLED_AReadingChildIsNotForkedDuringALoad) {
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 12;
+    io::writeVolume(core::makePhantom("torso", o), tmp / "v.vti");
+    io::detail::beginModuleLoad();
+    std::atomic<bool> loadEnded{false}, readDone{false}, readBeforeEnd{false};
+    const std::atomic<bool> cancel{false};
+    const core::Progress progress({}, &cancel);  // cancellable: the read runs in a child
+    std::thread reader([&] {
+        (void)io::readVolume(tmp / "v.vti", {}, progress);
+        readBeforeEnd = !loadEnded.load();
+        readDone = true;
+    });
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_FALSE(readDone.load()) << "the read went ahead while a module load was counted";
+    loadEnded = true;
+    io::detail::endModuleLoad();
+    reader.join();
+    EXPECT_TRUE(readDone.load());
+    EXPECT_FALSE(readBeforeEnd.load());
+}
