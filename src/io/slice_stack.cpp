@@ -27,7 +27,20 @@ constexpr double kEdgeTol = 1e-4;
 // series is usually thin slices through the region of interest and thicker ones elsewhere, and
 // the median or mean would average away the thin slices the scan was planned for; Slicer's
 // regularisation likewise keeps the finest spacing. The cost (more slices than acquired) is checked
-// against core::kMaxVoxels.
+// against core::kMaxVoxels and kMaxResampleGrowth.
+
+/// The regular grid may hold at most this many times the acquired voxels. A real series grows by
+/// its shear (a 30° tilt over a stack as deep as it is wide: ×1.6) times the ratio of its largest
+/// to its smallest slice gap (0.5 mm slices through a region of interest in a 5 mm scan: ×10);
+/// 64 is well above both together. Beyond it the positions are damaged, not acquired (a fuzzed
+/// series of three 8×6 slices tilted 89.8° with gaps of 0.4–520 mm asked for 12.7 M voxels, 88,000
+/// times its 144, all interpolated from nothing).
+constexpr double kMaxResampleGrowth = 64.0;
+
+std::string voxelCount(double nx, double ny, double nz) {
+    return std::to_string(std::int64_t(nx)) + "x" + std::to_string(std::int64_t(ny)) + "x" +
+           std::to_string(std::int64_t(nz));
+}
 
 }  // namespace
 
@@ -65,13 +78,23 @@ SliceStackGrid sliceStackGrid(const core::Geometry& stack, const std::vector<glm
 
     SliceStackGrid g;
     const double nx = i1 - i0 + 1.0, ny = j1 - j0 + 1.0, nz = steps + 1.0;
+    const double acquired = double(stack.dims.x) * double(stack.dims.y) * double(ns);
+    if (nx * ny * nz > kMaxResampleGrowth * acquired)
+        throw InputError(source, "ImagePositionPatient",
+                         "resampling the irregular slices onto a regular grid needs " +
+                             voxelCount(nx, ny, nz) + " voxels, " +
+                             std::to_string(std::int64_t(nx * ny * nz / acquired)) + " times the " +
+                             std::to_string(std::int64_t(acquired)) + " acquired (at most " +
+                             std::to_string(int(kMaxResampleGrowth)) +
+                             " times is resampled): the slice positions drift or jump far "
+                             "more than a gantry tilt or a variable spacing does",
+                         "check the files' ImagePositionPatient (the series looks damaged), or "
+                         "pass --strict-geometry to see the irregularity refused by name");
     if (nx > core::kMaxDim || ny > core::kMaxDim || nz > core::kMaxDim ||
         nx * ny * nz > double(core::kMaxVoxels))
         throw InputError(source, "ImagePositionPatient",
                          "resampling the irregular slices onto a regular grid needs " +
-                             std::to_string(std::int64_t(nx)) + "x" +
-                             std::to_string(std::int64_t(ny)) + "x" +
-                             std::to_string(std::int64_t(nz)) + " voxels, beyond voxlight's limit",
+                             voxelCount(nx, ny, nz) + " voxels, beyond voxlight's limit",
                          "load a part of the series, or resample it outside voxlight");
     g.geometry.dims = {int(nx), int(ny), int(nz)};
     g.geometry.spacing = {sx, sy, length / steps};

@@ -44,7 +44,8 @@ struct SliceStackGrid {
 };
 
 /// The output grid for `positions` (see above). Throws InputError (source `source`, field
-/// ImagePositionPatient) when the regular grid would exceed core::kMaxDim / kMaxVoxels.
+/// ImagePositionPatient) when the regular grid would exceed core::kMaxDim / kMaxVoxels, or hold more
+/// than 64 times the acquired voxels (damaged positions; kMaxResampleGrowth in the .cpp).
 SliceStackGrid sliceStackGrid(const core::Geometry& stack, const std::vector<glm::dvec3>& positions,
                               const std::string& source);
 

@@ -41,9 +41,10 @@ using voxlight::test::putU16;
 using voxlight::test::putU32;
 std::string us(unsigned v) { return voxlight::test::u16(v); }
 
-/// A valid single-slice CT (int16, 12x8, rescale -1024) in explicit VR little endian.
-std::string validSlice() {
-    const std::string sop = "1.2.826.0.1.3680043.2.1143.99.1";
+/// A valid single-slice CT (int16, 12x8, rescale -1024) in explicit VR little endian; `position`
+/// (Image Position (Patient), a DS triple) and `instance` make slices of one series.
+std::string validSlice(const std::string& position = "-10\\-12.5\\0", int instance = 1) {
+    const std::string sop = "1.2.826.0.1.3680043.2.1143.99." + std::to_string(instance);
     std::string meta = element(2, 1, "OB", std::string("\0\1", 2)) +
                        element(2, 2, "UI", "1.2.840.10008.5.1.4.1.1.2") + element(2, 3, "UI", sop) +
                        element(2, 0x10, "UI", "1.2.840.10008.1.2.1") +
@@ -55,14 +56,15 @@ std::string validSlice() {
     std::string ds =
         element(8, 0x16, "UI", "1.2.840.10008.5.1.4.1.1.2") + element(8, 0x18, "UI", sop) +
         element(8, 0x60, "CS", "CT") + element(0x20, 0xd, "UI", "1.2.826.0.1.3680043.2.1143.99") +
-        element(0x20, 0xe, "UI", "1.2.826.0.1.3680043.2.1143.98") + element(0x20, 0x13, "IS", "1") +
-        element(0x20, 0x32, "DS", "-10\\-12.5\\0") + element(0x20, 0x37, "DS", "1\\0\\0\\0\\1\\0") +
-        element(0x28, 2, "US", us(1)) + element(0x28, 4, "CS", "MONOCHROME2") +
-        element(0x28, 0x10, "US", us(kRows)) + element(0x28, 0x11, "US", us(kColumns)) +
-        element(0x28, 0x30, "DS", "0.75\\0.5") + element(0x28, 0x100, "US", us(16)) +
-        element(0x28, 0x101, "US", us(12)) + element(0x28, 0x102, "US", us(11)) +
-        element(0x28, 0x103, "US", us(1)) + element(0x28, 0x1052, "DS", "-1024") +
-        element(0x28, 0x1053, "DS", "1") + element(0x7fe0, 0x10, "OW", pixels);
+        element(0x20, 0xe, "UI", "1.2.826.0.1.3680043.2.1143.98") +
+        element(0x20, 0x13, "IS", std::to_string(instance)) + element(0x20, 0x32, "DS", position) +
+        element(0x20, 0x37, "DS", "1\\0\\0\\0\\1\\0") + element(0x28, 2, "US", us(1)) +
+        element(0x28, 4, "CS", "MONOCHROME2") + element(0x28, 0x10, "US", us(kRows)) +
+        element(0x28, 0x11, "US", us(kColumns)) + element(0x28, 0x30, "DS", "0.75\\0.5") +
+        element(0x28, 0x100, "US", us(16)) + element(0x28, 0x101, "US", us(12)) +
+        element(0x28, 0x102, "US", us(11)) + element(0x28, 0x103, "US", us(1)) +
+        element(0x28, 0x1052, "DS", "-1024") + element(0x28, 0x1053, "DS", "1") +
+        element(0x7fe0, 0x10, "OW", pixels);
     return std::string(128, '\0') + "DICM" + element(2, 0, "UL", groupLength) + meta + ds;
 }
 
@@ -316,4 +318,35 @@ TEST(DicomHostile, DescriptionThatIsNotUtf8IsEscaped) {
     const auto v = voxlight::io::readVolume(tmp / "slice.dcm");
     EXPECT_EQ(v.description.substr(0, 13), "Th\\xE9r\\x01x ") << v.description;
     EXPECT_NO_THROW((void)nlohmann::json(v.description).dump());
+}
+
+TEST(DicomHostile, SeriesWhosePositionsJumpIsRefusedNotResampled) {
+    // fuzz_dicom_series (a timeout, 6.5 s under ASan): three 8×6 slices at z 0, 0.4 and 521 mm,
+    // the middle one 112 mm sideways (a "gantry tilt" of 89.8°), were resampled onto a regular
+    // grid of 12.7 M voxels interpolated from 144. Now refused: the grid may hold at most 64 times
+    // the acquired voxels (slice_stack.cpp, kMaxResampleGrowth).
+    TempDir tmp;
+    writeFile(tmp / "s0.dcm", validSlice("-10\\-12.5\\0", 1));
+    writeFile(tmp / "s1.dcm", validSlice("-5\\-12\\521", 2));
+    writeFile(tmp / "s2.dcm", validSlice("-32\\-125\\.4", 3));
+    const auto start = std::chrono::steady_clock::now();
+    std::string message;
+    try {
+        (void)voxlight::io::readVolume(tmp.path());
+    } catch (const InputError& e) {
+        message = e.what();
+    }
+    std::cout << "[InputError] " << message << "\n";
+    ASSERT_FALSE(message.empty()) << "resampled";
+    for (const char* k :
+         {"ImagePositionPatient", "acquired", "at most 64 times", "--strict-geometry"})
+        EXPECT_NE(message.find(k), std::string::npos) << k << ": " << message;
+    EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+    EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
+    // A mild version of the same series (a 15° tilt, gaps of 2 and 3 mm) still loads, resampled.
+    writeFile(tmp / "s1.dcm", validSlice("-10\\-11.964\\2", 2));
+    writeFile(tmp / "s2.dcm", validSlice("-10\\-11.16\\5", 3));
+    const auto v = voxlight::io::readVolume(tmp.path());
+    EXPECT_EQ(v.warnings.size(), 1u);
+    EXPECT_GT(v.dims().z, 3);
 }
