@@ -3,6 +3,7 @@
 
 #include <dlfcn.h>
 
+#include <atomic>
 #include <condition_variable>
 #include <filesystem>
 #include <mutex>
@@ -82,13 +83,14 @@ LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVer
     return m;
 }
 
-void beginModuleLoad() {
+namespace {
+void ownBegin() {
     ModuleLoads& b = moduleLoads();
     const std::lock_guard<std::mutex> lock(b.mutex);
     ++b.running;
 }
 
-void endModuleLoad() {
+void ownEnd() {
     ModuleLoads& b = moduleLoads();
     {
         const std::lock_guard<std::mutex> lock(b.mutex);
@@ -97,10 +99,34 @@ void endModuleLoad() {
     b.done.notify_all();
 }
 
-void awaitModuleLoads() {
+void ownAwait() {
     ModuleLoads& b = moduleLoads();
     std::unique_lock<std::mutex> lock(b.mutex);
     b.done.wait(lock, [&] { return b.running == 0; });
+}
+
+/// The counter begin/end/await use: this copy's own until useLoadCounter hands over another.
+/// Set once, before the module's code runs (module_loader.h); atomic so that a reader on another
+/// thread never sees a torn pointer.
+std::atomic<const LoadCounter*> sharedCounter{nullptr};
+const LoadCounter kOwn{&ownBegin, &ownEnd, &ownAwait};
+const LoadCounter& counter() {
+    const LoadCounter* c = sharedCounter.load(std::memory_order_acquire);
+    return c ? *c : kOwn;
+}
+}  // namespace
+
+void beginModuleLoad() { counter().begin(); }
+void endModuleLoad() { counter().end(); }
+void awaitModuleLoads() { counter().await(); }
+
+LoadCounter ownLoadCounter() { return kOwn; }
+
+void useLoadCounter(const LoadCounter& c) {
+    // Kept for the process's life: the handed-over functions are the host's, never unloaded.
+    static const LoadCounter kept = c;
+    if (c.begin == &ownBegin) return;  // the same copy (io loading a module it is linked with)
+    sharedCounter.store(&kept, std::memory_order_release);
 }
 
 }  // namespace voxlight::io::detail

@@ -37,4 +37,19 @@ void beginModuleLoad();
 void endModuleLoad();
 void awaitModuleLoads();
 
+/// The counter's three operations as one value. A module built with its own copy of this file
+/// (libvoxlight_volume_vtk.so: it loads the DICOM module and forks the reading children) would
+/// otherwise count in, and wait on, a counter of its own that io's loads never raise; io hands
+/// the module this process's counter right after loading it (volume_module::Api::useLoadCounter),
+/// before anything in the module can load or fork.
+struct LoadCounter {
+    void (*begin)();
+    void (*end)();
+    void (*await)();
+};
+/// This copy's own counter.
+LoadCounter ownLoadCounter();
+/// From now on this copy's begin/end/await forward to `counter` (another copy's own).
+void useLoadCounter(const LoadCounter& counter);
+
 }  // namespace voxlight::io::detail

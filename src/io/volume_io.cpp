@@ -2362,9 +2362,12 @@ void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
 
 namespace {
 constexpr voxlight::io::volume_module::Api kApi{
-    voxlight::io::volume_module::kAbiVersion, &voxlight::io::detail::readVolumeWithVtk,
-    &voxlight::io::detail::writeVolumeWithVtk, &voxlight::io::detail::checkVolumeOutputPathWithVtk,
-    &voxlight::io::detail::supportedVolumeFormatsWithVtk};
+    voxlight::io::volume_module::kAbiVersion,
+    &voxlight::io::detail::readVolumeWithVtk,
+    &voxlight::io::detail::writeVolumeWithVtk,
+    &voxlight::io::detail::checkVolumeOutputPathWithVtk,
+    &voxlight::io::detail::supportedVolumeFormatsWithVtk,
+    &voxlight::io::detail::useLoadCounter};
 }  // namespace
 
 // The module's single exported symbol (it is built with hidden visibility; volume_module.h).

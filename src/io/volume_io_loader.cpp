@@ -20,6 +20,10 @@ const mod::Api& volumeModule(const std::string& source) {
     static detail::LoadedModule loaded;
     std::call_once(once, [] {
         loaded = detail::loadModule(mod::kFileName, mod::kEntryPoint, mod::kAbiVersion);
+        // One load counter in the process (module_loader.h): the module's reading children wait
+        // for io's loads (the image preload), and its DICOM module load counts in io's counter.
+        if (loaded.api)
+            static_cast<const mod::Api*>(loaded.api)->useLoadCounter(detail::ownLoadCounter());
     });
     if (!loaded.api)
         throw InputError(source, "volume module",

@@ -17,12 +17,13 @@
 
 #include "core/progress.h"
 #include "core/volume.h"
+#include "io/module_loader.h"
 #include "io/volume_io.h"
 
 namespace voxlight::io::volume_module {
 
 /// Bumped whenever Api or the types it passes change layout or meaning.
-inline constexpr int kAbiVersion = 2;
+inline constexpr int kAbiVersion = 3;
 inline constexpr const char* kFileName = "libvoxlight_volume_vtk.so";
 /// The one symbol the module exports: `const void* voxlight_volume_module()` returning an Api.
 inline constexpr const char* kEntryPoint = "voxlight_volume_module";
@@ -35,6 +36,9 @@ struct Api {
     void (*writeVolume)(const core::Volume& volume, const std::filesystem::path& path);
     void (*checkVolumeOutputPath)(const std::filesystem::path& path);
     std::vector<std::string> (*supportedVolumeFormats)();
+    /// Makes the module count its loads in, and its reading children wait on, io's load counter
+    /// (module_loader.h): called by io once, right after loading the module.
+    void (*useLoadCounter)(const detail::LoadCounter& counter);
 };
 
 }  // namespace voxlight::io::volume_module
