@@ -33,6 +33,7 @@
 #include <string>
 
 #include "core/phantoms.h"
+#include "core/timing.h"
 #include "io/volume_io.h"
 #include "optics/presets.h"
 #include "visibility/global_visibility.h"
@@ -403,6 +404,7 @@ class RatioReporter : public benchmark::ConsoleReporter {
 }  // namespace
 
 int main(int argc, char** argv) {
+    voxlight::core::retainFreedMemory();  // as voxlight's main does (core/timing.h)
     benchmark::Initialize(&argc, argv);
     if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
     RatioReporter reporter;

@@ -4,10 +4,12 @@
 #include <iostream>
 
 #include "app/cli_support.h"
+#include "core/timing.h"
 
 int main(int argc, char** argv) {
     using namespace voxlight::app;
     installSignalHandlers();
+    voxlight::core::retainFreedMemory();  // repeated TF updates reuse their fields' pages
     CLI::App app{"voxlight: medical direct volume rendering with realistic illumination"};
     app.require_subcommand(1);
     app.set_version_flag("--version", "voxlight 0.1.0");
