@@ -93,11 +93,22 @@ run_one() {
   # dicom_series inputs of 0.2-0.3 s were, beside a two-thread benchmark).
   local f
   for f in $(find "$findings" -maxdepth 1 -type f -name 'timeout-*' -newer "$log.start"); do
-    if ASAN_OPTIONS=detect_leaks=0 setsid -w timeout 60 "$build/fuzz/fuzz_$t" -timeout=5 \
-      -rss_limit_mb=2048 "$f" >"$f.recheck.log" 2>&1; then
+    local rerun=0
+    ASAN_OPTIONS=detect_leaks=0 setsid -w timeout 60 "$build/fuzz/fuzz_$t" -timeout=5 \
+      -rss_limit_mb=2048 "$f" >"$f.recheck.log" 2>&1 || rerun=$?
+    if [ $rerun -eq 0 ]; then
       mkdir -p "$findings/unconfirmed"
       mv "$f" "$f.recheck.log" "$findings/unconfirmed/"
       echo "$t: $(basename "$f") ran in time when repeated alone: set aside in $findings/unconfirmed/" >&2
+      [ $rc -eq 70 ] && rc=0
+    elif ! grep -q '^Running: ' "$f.recheck.log"; then
+      # The target stopped before it ran the input (a reader module that did not load, e.g. one
+      # a parallel build was replacing): neither confirmed nor dismissed (5 December, a stale
+      # module's abort at start confirmed a 0.46 s input as a timeout).
+      mkdir -p "$findings/unconfirmed"
+      mv "$f" "$f.recheck.log" "$findings/unconfirmed/"
+      echo "$t: $(basename "$f"): the recheck did not run it (exit $rerun: $(head -n 1 \
+        "$findings/unconfirmed/$(basename "$f").recheck.log")); set aside in $findings/unconfirmed/" >&2
       [ $rc -eq 70 ] && rc=0
     else
       rm -f "$f.recheck.log"
