@@ -3,6 +3,7 @@
 // A reader run in a forked child (volume_io.cpp's contained VTK reads, dicom_loader.cpp's GDCM
 // decoding): the parent owns the child and the descriptors it reads it through.
 
+#include <malloc.h>
 #include <signal.h>
 #include <sys/resource.h>
 #include <sys/types.h>
@@ -29,6 +30,10 @@
 
 namespace voxlight::io {
 
+/// A reading child's trim threshold: glibc's static default (128 KiB), undoing the parent's
+/// retainFreedMemory for the child.
+inline constexpr int kChildTrimThreshold = 128 * 1024;
+
 /// Caps this (child) process's address space at what it uses now plus `extra` bytes (not in
 /// sanitized builds, whose shadow memory alone exceeds any cap). Returns `extra`, or 0 when no
 /// cap was set.
@@ -37,6 +42,11 @@ inline std::size_t limitAddressSpace(std::size_t extra) {
     (void)extra;
     return 0;
 #else
+    // Heap the parent freed but kept mapped (core::retainFreedMemory keeps up to 1 GiB) would be
+    // reused inside the cap without growing the address space: hand back what can be first, so
+    // the cap counts from what is in use.
+    ::mallopt(M_TRIM_THRESHOLD, kChildTrimThreshold);
+    ::malloc_trim(0);
     std::size_t pages = 0;
     std::ifstream("/proc/self/statm") >> pages;
     const std::size_t cap = pages * std::size_t(::sysconf(_SC_PAGESIZE)) + extra;

@@ -59,6 +59,10 @@ constexpr double kMissingSliceRatioTol = 0.15;
 /// (orthonormal D) cannot hold: it is resampled (slice_stack.h), or refused under
 /// --strict-geometry.
 constexpr double kMaxShearPixels = 0.2;
+/// Image Position (Patient) beyond this far from the origin (mm; 100 m, where a scanner's frame
+/// spans metres) is damaged data: such positions made the slice geometry overflow (a position of
+/// 1e300 mm gave NaN gaps and grid sizes no integer holds).
+constexpr double kMaxPatientCoordinateMm = 1e5;
 /// Rescale slope/intercept count as identical across slices to this relative accuracy.
 constexpr double kRescaleMatchRel = 1e-9;
 
@@ -814,6 +818,13 @@ std::vector<SliceHeader> scanHeaders(const std::vector<fs::path>& candidates) {
                     str(f), "ImagePositionPatient",
                     "has " + std::to_string(p.size()) + " values \"" + *v + "\", expected 3",
                     "the file is damaged; re-export the series");
+            for (double c : p)
+                if (std::abs(c) > kMaxPatientCoordinateMm)
+                    throw InputError(str(f), "ImagePositionPatient",
+                                     "\"" + *v + "\" lies more than " +
+                                         formatNumber(kMaxPatientCoordinateMm) +
+                                         " mm from the scanner's origin",
+                                     "the file is damaged; re-export the series");
             h.position = {p[0], p[1], p[2]};
             h.hasPosition = true;
         }

@@ -22,6 +22,7 @@ ModuleLoads& moduleLoads() {
     static ModuleLoads b;
     return b;
 }
+const LoadCounter& counter();  // below: this copy's own, or the one handed over
 
 std::vector<std::filesystem::path> moduleDirectories() {
     std::vector<std::filesystem::path> dirs;
@@ -39,11 +40,14 @@ std::vector<std::filesystem::path> moduleDirectories() {
 
 LoadedModule loadModule(const char* fileName, const char* entryPoint, int abiVersion) {
     using Entry = const void* (*)();
-    // Counted while it runs (module_loader.h): a fork on another thread waits for it.
-    beginModuleLoad();
+    // Counted while it runs (module_loader.h): a fork on another thread waits for it. The counter
+    // is looked up once, so the load ends on the counter it began on.
+    const LoadCounter& loads = counter();
+    loads.begin();
     struct Counted {
-        ~Counted() { endModuleLoad(); }
-    } counted;
+        const LoadCounter& loads;
+        ~Counted() { loads.end(); }
+    } counted{loads};
     LoadedModule m;
     std::string tried;
     for (const auto& dir : moduleDirectories()) {

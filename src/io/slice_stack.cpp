@@ -7,7 +7,9 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <iomanip>
 #include <limits>
+#include <sstream>
 #include <type_traits>
 
 namespace voxlight::io::detail {
@@ -37,9 +39,18 @@ constexpr double kEdgeTol = 1e-4;
 /// times its 144, all interpolated from nothing).
 constexpr double kMaxResampleGrowth = 64.0;
 
+/// A count as text without converting it to an integer type (a damaged series' counts can exceed
+/// any: converting them would be undefined).
+std::string count(double n) {
+    std::ostringstream s;
+    if (n < 1e15)
+        s << std::fixed << std::setprecision(0) << n;
+    else
+        s << std::setprecision(3) << n;
+    return s.str();
+}
 std::string voxelCount(double nx, double ny, double nz) {
-    return std::to_string(std::int64_t(nx)) + "x" + std::to_string(std::int64_t(ny)) + "x" +
-           std::to_string(std::int64_t(nz));
+    return count(nx) + "x" + count(ny) + "x" + count(nz);
 }
 
 }  // namespace
@@ -83,9 +94,8 @@ SliceStackGrid sliceStackGrid(const core::Geometry& stack, const std::vector<glm
         throw InputError(source, "ImagePositionPatient",
                          "resampling the irregular slices onto a regular grid needs " +
                              voxelCount(nx, ny, nz) + " voxels, " +
-                             std::to_string(std::int64_t(nx * ny * nz / acquired)) + " times the " +
-                             std::to_string(std::int64_t(acquired)) + " acquired (at most " +
-                             std::to_string(int(kMaxResampleGrowth)) +
+                             count(std::ceil(nx * ny * nz / acquired)) + " times the " +
+                             count(acquired) + " acquired (at most " + count(kMaxResampleGrowth) +
                              " times is resampled): the slice positions drift or jump far "
                              "more than a gantry tilt or a variable spacing does",
                          "check the files' ImagePositionPatient (the series looks damaged), or "

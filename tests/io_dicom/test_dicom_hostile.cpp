@@ -343,6 +343,16 @@ TEST(DicomHostile, SeriesWhosePositionsJumpIsRefusedNotResampled) {
         EXPECT_NE(message.find(k), std::string::npos) << k << ": " << message;
     EXPECT_EQ(message.find('\n'), std::string::npos) << message;
     EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count(), 5.0);
+    // Positions no scanner gives (1e300 mm) are refused when read: they made the grid's sizes
+    // overflow any integer (undefined conversions, review) and the gaps NaN.
+    writeFile(tmp / "s1.dcm", validSlice("0\\1e300\\0", 2));
+    try {
+        (void)voxlight::io::readVolume(tmp.path());
+        ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("from the scanner's origin"), std::string::npos)
+            << e.what();
+    }
     // A mild version of the same series (a 15° tilt, gaps of 2 and 3 mm) still loads, resampled.
     writeFile(tmp / "s1.dcm", validSlice("-10\\-11.964\\2", 2));
     writeFile(tmp / "s2.dcm", validSlice("-10\\-11.16\\5", 3));
