@@ -24,8 +24,9 @@ double peakRssMiB();
 /// mmap threshold, 32 MiB, come from the heap, and free memory is handed back only past 1 GiB).
 /// Why: a TF update allocates ~45 MB of new fields (local and global visibility) per change, and
 /// with glibc's defaults each change touched them as fresh pages — ≈ 8,700 page faults, several µs
-/// each on this kind of VM; with this the bonsai TF update took 0.90–0.96× the time per
-/// alternating pair. Peak memory is unchanged; memory freed stays with the process for reuse.
+/// each on this kind of VM; with this the bonsai TF update took 0.91–0.93× the time per
+/// alternating pair (README, "Where we stand"). Peak memory is unchanged; memory freed stays with
+/// the process for reuse (a reading child hands it back before capping itself: child_process.h).
 /// Called once at start by voxlight's main and by the benchmarks that time repeated updates.
 void retainFreedMemory();
 
