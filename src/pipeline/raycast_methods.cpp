@@ -1058,6 +1058,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
         std::ostringstream os;
         os << v.rays() << " rays, " << v.coefficients() << " SH coefficients, r_s "
            << v.radiusVoxels() << " voxels, " << (v.bytes() >> 20) << " MB";
+        if (v.layerPoints() > 0) os << ", " << v.layerPoints() << " boundary-layer points";
         const json& u =
             run.details().value("local_visibility", json::object()).value("tf_update", json());
         if (u.is_object()) {

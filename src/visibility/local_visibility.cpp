@@ -452,6 +452,67 @@ void setEmpty(float* dst, int C) {
     for (int c = 1; c < C; ++c) dst[c] = 0.f;
 }
 
+/// The two axes of a boundary layer on a face across axis a, in increasing order.
+void layerAxes(int a, int& a1, int& a2) {
+    a1 = a == 0 ? 1 : 0;
+    a2 = a == 2 ? 1 : 2;
+}
+
+/// Calls f(origin, dst, s) for every point of block b's boundary layers (header comment), as
+/// forEachSamplePoint does for its samples: per face, n² points on the volume's face plane at the
+/// block's sample positions along the other two axes (clamped onto the volume), the first of
+/// those axes fastest.
+template <class F>
+void forEachLayerPoint(const MultiresGrid& grid, std::size_t b, int C, float* layerData,
+                       const std::vector<std::size_t>& layerOffset, F&& f) {
+    const int l = grid.level(b);
+    if (l <= 0) return;
+    const int n = levelResolution(l);
+    const float s = float(levelSpacing(l));
+    const glm::vec3 top(grid.dims() - 1);
+    for (int face = 0; face < 6; ++face) {
+        const std::size_t off = layerOffset[b * 6 + std::size_t(face)];
+        if (off == kNoLayer) continue;
+        const int a = face >> 1;
+        int a1, a2;
+        layerAxes(a, a1, a2);
+        float* dst = layerData + off;
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i, dst += C) {
+                glm::ivec3 at(0);
+                at[a1] = i;
+                at[a2] = j;
+                glm::vec3 origin = glm::min(grid.samplePosition(b, l, at.x, at.y, at.z), top);
+                origin[a] = (face & 1) ? top[a] : 0.f;
+                f(origin, dst, s);
+            }
+    }
+}
+
+/// Offsets of the boundary layers of `grid` (per block and face, kNoLayer where none) into an
+/// array of C floats per layer point, and per block the mask of its faces with one; returns the
+/// total float count.
+std::size_t layoutLayers(const MultiresGrid& grid, int C, std::vector<std::size_t>& layerOffset,
+                         std::vector<std::uint8_t>& faces) {
+    const std::size_t blocks = grid.pyramid().blockCount();
+    layerOffset.assign(blocks * 6, kNoLayer);
+    faces.assign(blocks, 0);
+    std::size_t floats = 0;
+    for (std::size_t b = 0; b < blocks; ++b) {
+        const int l = grid.level(b);
+        if (l <= 0) continue;
+        const std::size_t n = std::size_t(levelResolution(l));
+        for (int face = 0; face < 6; ++face) {
+            float plane;
+            if (!boundaryLayerPlane(grid, b, face >> 1, face & 1, plane)) continue;
+            layerOffset[b * 6 + std::size_t(face)] = floats;
+            faces[b] |= std::uint8_t(1u << face);
+            floats += n * n * std::size_t(C);
+        }
+    }
+    return floats;
+}
+
 }  // namespace
 
 /// Whether V at voxel coordinate x (a sample of spacing s) can be read by a shaded sample: some
@@ -591,6 +652,25 @@ sh::SphereSamples latticeDirections(const core::Geometry& g, int rays, int coeff
     return s;
 }
 
+bool boundaryLayerPlane(const MultiresGrid& grid, std::size_t block, int axis, int side,
+                        float& plane) {
+    const int l = grid.level(block);
+    if (l <= 0) return false;  // level 0 has samples on the face; kNone stores nothing
+    const int b = grid.pyramid().blockCoord(block)[axis];
+    const float s = float(levelSpacing(l));
+    const float top = float(grid.dims()[axis] - 1);
+    if (side == 0) {
+        if (b != 0) return false;
+        plane = 0.f;
+        return true;  // its first sample lies at (s − 1)/2 > 0
+    }
+    if (b != grid.blocks()[axis] - 1) return false;
+    const float last = float(b * kBlockSize + kBlockSize) - 0.5f * s - 0.5f;
+    if (!(last < top)) return false;  // a partial edge block: its samples reach the face
+    plane = top;
+    return true;
+}
+
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                         const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
                         std::uint64_t* samples) {
@@ -646,12 +726,12 @@ struct TraceCounts {
 /// an arena of `threads` (0 = all), with the local visibility's progress and cancel (the caller's
 /// thread reports; workers only stop taking blocks); returns the summed counts.
 template <class Body>
-TraceCounts overBlocks(std::size_t blocks, int threads, const core::Progress& progress,
-                       Body&& body) {
+TraceCounts overBlocks(std::size_t blocks, int threads, const core::Progress& progress, Body&& body,
+                       const char* stage = "local visibility") {
     std::atomic<std::uint64_t> samples{0}, rays{0}, skipped{0};
     std::atomic<std::size_t> done{0};
     const std::thread::id caller = std::this_thread::get_id();
-    progress.report("local visibility", 0.0);
+    progress.report(stage, 0.0);
     tbb::task_arena arena(threads > 0 ? threads : tbb::task_arena::automatic);
     arena.execute([&] {
         tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks, 1), [&](const auto& range) {
@@ -663,11 +743,11 @@ TraceCounts overBlocks(std::size_t blocks, int threads, const core::Progress& pr
             skipped += n.skipped;
             const std::size_t now = done.fetch_add(range.size()) + range.size();
             if (std::this_thread::get_id() == caller)
-                progress.report("local visibility", double(now) / double(blocks));
+                progress.report(stage, double(now) / double(blocks));
         });
     });
     if (progress.cancelled()) throw CancelledError();
-    progress.report("local visibility", 1.0);
+    progress.report(stage, 1.0);
     return {samples, rays, skipped};
 }
 
@@ -709,6 +789,52 @@ TraceCounts traceBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                   /*shareClamped=*/true);
                           }
                       });
+}
+
+/// V^L at every boundary-layer point of `blocks` (header comment), written at layerData +
+/// layerOffset[6·b + face], each point marched alone along `directions` (the field's own: the
+/// sweep's lattice directions under the sweep) — under either integrator, as the sweep does for
+/// the points off its lattices.
+TraceCounts traceLayers(const MultiresGrid& grid, const optics::TfTable& table,
+                        const LocalVisibilityOptions& options, const sh::SphereSamples& directions,
+                        const std::vector<std::size_t>& blocks, float* layerData,
+                        const std::vector<std::size_t>& layerOffset,
+                        const core::Progress& progress) {
+    const int C = options.coefficients, N = int(directions.size());
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RaySet set(g, directions, C);
+    const ValueField sigma(grid, table);
+    const float radius = float(options.radiusVoxels * h), hf = float(h);
+    std::vector<std::size_t> withLayers;
+    for (const std::size_t b : blocks)
+        for (int face = 0; face < 6; ++face)
+            if (layerOffset[b * 6 + std::size_t(face)] != kNoLayer) {
+                withLayers.push_back(b);
+                break;
+            }
+    if (withLayers.empty()) return {};
+    return overBlocks(
+        withLayers.size(), options.threads, progress,
+        [&](const auto& range, TraceCounts& counts) {
+            double v[16];
+            for (std::size_t r = range.begin(); r != range.end(); ++r)
+                forEachLayerPoint(grid, withLayers[r], C, layerData, layerOffset,
+                                  [&](const glm::vec3& origin, float* dst, float spacing) {
+                                      if (!visibilityNeeded(grid, origin, spacing)) {
+                                          setEmpty(dst, C);
+                                          ++counts.skipped;
+                                          return;
+                                      }
+                                      pointVisibility(
+                                          sigma, set, origin, grid.dims(), radius, hf,
+                                          [](int, float&, float&) { return true; }, v,
+                                          counts.samples);
+                                      counts.rays += std::uint64_t(N);
+                                      for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                                  });
+        },
+        "local visibility: boundary layers");
 }
 
 /// V^L at every sample point of the stored blocks by the line sweep (header comment), written at
@@ -1445,9 +1571,13 @@ LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid> gridP
                             stored, out.data_.data(), out.offset_, progress)
               : traceBlocks(*gridPtr, table, options, *out.directions_, stored, out.data_.data(),
                             out.offset_, progress);
-    out.samplesTaken_ = n.samples;
-    out.raysTraced_ = n.rays;
-    out.pointsSkipped_ = n.skipped;
+    out.layerData_.assign(
+        layoutLayers(*gridPtr, options.coefficients, out.layerOffset_, out.layerFaces_), 0.f);
+    const TraceCounts nl = traceLayers(*gridPtr, table, options, *out.directions_, stored,
+                                       out.layerData_.data(), out.layerOffset_, progress);
+    out.samplesTaken_ = n.samples + nl.samples;
+    out.raysTraced_ = n.rays + nl.rays;
+    out.pointsSkipped_ = n.skipped + nl.skipped;
     return out;
 }
 
@@ -1510,6 +1640,8 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
     out.directions_ = previous.directions_;
     std::vector<std::size_t> stored;
     out.data_.assign(layoutBlocks(grid, options.coefficients, out.offset_, stored), 0.f);
+    out.layerData_.assign(
+        layoutLayers(grid, options.coefficients, out.layerOffset_, out.layerFaces_), 0.f);
     std::vector<std::size_t> trace;
     const std::size_t C = std::size_t(options.coefficients);
     // The sweep integrates a line from up to ⌈reach⌉ + 1 lattice steps before a point's ray to as
@@ -1557,6 +1689,11 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
         } else {
             const std::size_t m = n * n * n * C;
             std::copy_n(previous.blockData(b), m, out.data_.data() + out.offset_[b]);
+            // Its layers too (the same level: the same faces and points).
+            for (std::size_t face = 0; face < 6; ++face)
+                if (const std::size_t off = out.layerOffset_[b * 6 + face]; off != kNoLayer)
+                    std::copy_n(previous.layerData_.data() + previous.layerOffset_[b * 6 + face],
+                                n * n * C, out.layerData_.data() + off);
         }
     }
     // Either integrator computes a block's points from the voxels alone (the sweep's lines start
@@ -1568,9 +1705,11 @@ LocalVisibility updateLocalVisibility(const LocalVisibility& previous,
                           out.data_.data(), out.offset_, progress)
             : traceBlocks(grid, table, options, *out.directions_, trace, out.data_.data(),
                           out.offset_, progress);
-    out.samplesTaken_ = counts.samples;
-    out.raysTraced_ = counts.rays;
-    out.pointsSkipped_ = counts.skipped;
+    const TraceCounts layers = traceLayers(grid, table, options, *out.directions_, trace,
+                                           out.layerData_.data(), out.layerOffset_, progress);
+    out.samplesTaken_ = counts.samples + layers.samples;
+    out.raysTraced_ = counts.rays + layers.rays;
+    out.pointsSkipped_ = counts.skipped + layers.skipped;
     st.incremental = true;
     st.seconds = clock.seconds();
     if (stats) *stats = st;
@@ -1646,44 +1785,46 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         }
                     if (far) continue;
                     bool anyChanged = false;
-                    forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b],
-                                       [&](const glm::vec3& origin, float* dst, float spacing) {
-                                           // Classify by the distance to every face (the origin as traced).
-                                           bool inside = true, outside = false;
-                                           for (std::size_t q = 0; q < faces.size(); ++q) {
-                                               dist0[q] = distance(faces[q], glm::dvec3(origin));
-                                               inside = inside && dist0[q] >= radius;
-                                               outside = outside || dist0[q] <= -radius;
-                                           }
-                                           if (inside) return;  // rays stay in the kept region
-                                           // Never read by a shaded sample: empty in the unclipped field too.
-                                           if (!visibilityNeeded(grid, origin, spacing)) return;
-                                           anyChanged = true;
-                                           if (outside) {
-                                               // Rays never reach the kept region: empty space's value.
-                                               setEmpty(dst, C);
-                                               ++cleared;
-                                               return;
-                                           }
-                                           // Ray k keeps the t where every face's distance stays ≥ 0.
-                                           auto narrow = [&](int d, float& ta, float& tb) {
-                                               for (std::size_t q = 0; q < faces.size(); ++q) {
-                                                   const float sl = faces[q].slope[std::size_t(d)];
-                                                   const float d0 = float(dist0[q]);
-                                                   if (sl > 0.f)
-                                                       ta = std::max(ta, -d0 / sl);
-                                                   else if (sl < 0.f)
-                                                       tb = std::min(tb, -d0 / sl);
-                                                   else if (d0 < 0.f)
-                                                       return false;
-                                               }
-                                               return true;
-                                           };
-                                           pointVisibility(sigma, set, origin, grid.dims(), radius,
-                                                           hf, narrow, v, samples);
-                                           ++traced;
-                                           for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
-                                       });
+                    auto perPoint = [&](const glm::vec3& origin, float* dst, float spacing) {
+                        // Classify by the distance to every face (the origin as traced).
+                        bool inside = true, outside = false;
+                        for (std::size_t q = 0; q < faces.size(); ++q) {
+                            dist0[q] = distance(faces[q], glm::dvec3(origin));
+                            inside = inside && dist0[q] >= radius;
+                            outside = outside || dist0[q] <= -radius;
+                        }
+                        if (inside) return;  // rays stay in the kept region
+                        // Never read by a shaded sample: empty in the unclipped field too.
+                        if (!visibilityNeeded(grid, origin, spacing)) return;
+                        anyChanged = true;
+                        if (outside) {
+                            // Rays never reach the kept region: empty space's value.
+                            setEmpty(dst, C);
+                            ++cleared;
+                            return;
+                        }
+                        // Ray k keeps the t where every face's distance stays ≥ 0.
+                        auto narrow = [&](int d, float& ta, float& tb) {
+                            for (std::size_t q = 0; q < faces.size(); ++q) {
+                                const float sl = faces[q].slope[std::size_t(d)];
+                                const float d0 = float(dist0[q]);
+                                if (sl > 0.f)
+                                    ta = std::max(ta, -d0 / sl);
+                                else if (sl < 0.f)
+                                    tb = std::min(tb, -d0 / sl);
+                                else if (d0 < 0.f)
+                                    return false;
+                            }
+                            return true;
+                        };
+                        pointVisibility(sigma, set, origin, grid.dims(), radius, hf, narrow, v,
+                                        samples);
+                        ++traced;
+                        for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
+                    };
+                    forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);
+                    forEachLayerPoint(grid, b, C, out.layerData_.data(), out.layerOffset_,
+                                      perPoint);
                     touched += anyChanged;
                 }
                 samplesTotal += samples;
@@ -1717,9 +1858,25 @@ namespace {
 /// LocalVisibility::sample for a compile-time coefficient count (kC = 0: `runtimeC`): the
 /// interpolation unrolls per coefficient, and the result is zeroed without a call — this runs
 /// once per shaded sample of every SH frame.
+/// addTrilinear's 2-D counterpart on an n × n layer (u, v already clamped to [0, n − 1]; x = u
+/// fastest), writing the value into out[0..C).
+template <int kC>
+void addBilinear(const float* data, int n, int runtimeC, float u, float v, float* out) {
+    const int C = kC > 0 ? kC : runtimeC;
+    const int m = n > 1 ? n - 2 : 0;
+    const int i = std::min(int(u), m), j = std::min(int(v), m);
+    const float fu = u - float(i), fv = v - float(j);
+    const std::size_t di = n > 1 ? std::size_t(C) : 0, dj = n > 1 ? std::size_t(n) * C : 0;
+    const float* p = data + (std::size_t(i) + std::size_t(n) * std::size_t(j)) * std::size_t(C);
+    const float w00 = (1 - fu) * (1 - fv), w10 = fu * (1 - fv), w01 = (1 - fu) * fv, w11 = fu * fv;
+    for (int c = 0; c < C; ++c)
+        out[c] += w00 * p[c] + w10 * p[di + c] + w01 * p[dj + c] + w11 * p[dj + di + c];
+}
+
 template <int kC>
 void sampleField(const MultiresGrid& grid, const float* data, const std::size_t* offset,
-                 const glm::vec3& p, float* out, int runtimeC = 0) {
+                 const float* layerData, const std::size_t* layerOffset,
+                 const std::uint8_t* layerFaces, const glm::vec3& p, float* out, int runtimeC = 0) {
     const int C = kC > 0 ? kC : runtimeC;
     for (int i = 0; i < C; ++i) out[i] = 0.f;
     std::size_t block;
@@ -1735,25 +1892,63 @@ void sampleField(const MultiresGrid& grid, const float* data, const std::size_t*
         out[0] = float(std::sqrt(4.0 * std::numbers::pi));
         return;
     }
-    for (int k = 0; k < w.count; ++k)
-        addTrilinear<kC>(data + offset[w.block[k]], levelResolution(w.level[k]), C, w.local[k],
-                         w.weight[k], out);
+    for (int k = 0; k < w.count; ++k) {
+        const std::size_t b = w.block[k];
+        if (!layerFaces[b]) {
+            addTrilinear<kC>(data + offset[b], levelResolution(w.level[k]), C, w.local[k],
+                             w.weight[k], out);
+            continue;
+        }
+        // A block with boundary layers: between a layer and the block's outermost samples, the
+        // two blend linearly across the gap (header comment).
+        const int l = w.level[k], n = levelResolution(l);
+        float v[16] = {};
+        addTrilinear<kC>(data + offset[b], n, C, w.local[k], 1.f, v);
+        const glm::ivec3 bc = grid.pyramid().blockCoord(b);
+        const float s = float(levelSpacing(l));
+        glm::vec3 q;  // p clamped onto the volume, as weights() reads it
+        for (int a = 0; a < 3; ++a) q[a] = std::min(std::max(p[a], 0.f), float(grid.dims()[a] - 1));
+        for (int face = 0; face < 6; ++face) {
+            if (!(layerFaces[b] & (1u << face))) continue;
+            const int a = face >> 1;
+            const float top = float(grid.dims()[a] - 1);
+            float g;
+            if (face & 1) {
+                const float last = float(bc[a] * kBlockSize + kBlockSize) - 0.5f * s - 0.5f;
+                g = q[a] > last ? (q[a] - last) / (top - last) : 0.f;
+            } else {
+                const float first = float(bc[a] * kBlockSize) + 0.5f * s - 0.5f;
+                g = q[a] < first ? (first - q[a]) / first : 0.f;
+            }
+            if (!(g > 0.f)) continue;
+            int a1, a2;
+            layerAxes(a, a1, a2);
+            float lv[16] = {};
+            addBilinear<kC>(layerData + layerOffset[b * 6 + std::size_t(face)], n, C,
+                            w.local[k][a1], w.local[k][a2], lv);
+            for (int c = 0; c < C; ++c) v[c] += g * (lv[c] - v[c]);
+        }
+        for (int c = 0; c < C; ++c) out[c] += w.weight[k] * v[c];
+    }
 }
 }  // namespace
 
 void LocalVisibility::sample(const glm::vec3& p, float* out) const {
     const MultiresGrid& g = *grid_;
+    const float* L = layerData_.data();
+    const std::size_t* O = layerOffset_.data();
+    const std::uint8_t* F = layerFaces_.data();
     switch (coefficients_) {
         case 1:
-            return sampleField<1>(g, data_.data(), offset_.data(), p, out);
+            return sampleField<1>(g, data_.data(), offset_.data(), L, O, F, p, out);
         case 4:
-            return sampleField<4>(g, data_.data(), offset_.data(), p, out);
+            return sampleField<4>(g, data_.data(), offset_.data(), L, O, F, p, out);
         case 9:
-            return sampleField<9>(g, data_.data(), offset_.data(), p, out);
+            return sampleField<9>(g, data_.data(), offset_.data(), L, O, F, p, out);
         case 16:
-            return sampleField<16>(g, data_.data(), offset_.data(), p, out);
+            return sampleField<16>(g, data_.data(), offset_.data(), L, O, F, p, out);
         default:
-            return sampleField<0>(g, data_.data(), offset_.data(), p, out, coefficients_);
+            return sampleField<0>(g, data_.data(), offset_.data(), L, O, F, p, out, coefficients_);
     }
 }
 

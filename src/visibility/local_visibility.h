@@ -81,6 +81,22 @@
 // order). A block's points depend on the voxels alone, as the march's do, so the TF update below
 // recomputes only the blocks an edit reaches under either integrator.
 //
+// Boundary layers. Where the volume's box cuts through matter (a CT's scan range through the
+// body, the bonsai's pot standing on the bottom slice) the cut is a face the viewer sees and the
+// light falls on: at a point on it the outward half of the directions leaves the volume at once
+// (V = 1 there) while a voxel inside, V drops steeply. A block at level l ≥ 1 has its outermost
+// samples (s − 1)/2 voxels inside its faces, so on the volume's face the interpolation clamps to
+// samples inside the matter: at 1:16 the bonsai's cut face was shaded from V_0/√(4π) ≈ 0.16 instead
+// of the 0.31 its level-0 neighbours gave, in block-shaped patches. So every stored block at a
+// level ≥ 1 whose outermost samples lie inside a face of the volume (boundaryLayerPlane) also
+// stores a layer on that face: n² points on the face's voxel plane (coordinate 0 or dims − 1) at
+// the block's sample positions along the other two axes, each marched alone along the field's
+// directions (under the sweep too: they are off its lattices). Between a layer and the block's
+// outermost samples the value blends linearly from the layer (on the face) to the block's own
+// interpolation (at its samples), per face in axis order; elsewhere nothing changes, so level 0
+// — which has samples on the face — and the interior are as before. A layer point costs one
+// point's rays: n² per face against the block's n³ points.
+//
 // TF update (updateLocalVisibility; Kronander asks for a TF change in about a second): the field under a
 // new TF from the one computed under the previous TF on the same block pyramid, recomputing only
 // the blocks the change can reach, with a result identical bit for bit to computeLocalVisibility.
@@ -237,8 +253,17 @@ struct TfUpdateStats {
 /// [4c, 4c + 4]) boundaries sit up to one voxel from a block's extent; one more against rounding.
 inline constexpr double kUpdateMarginVoxels = 2.0;
 
+/// "No layer" in LocalVisibility's layer offsets.
+inline constexpr std::size_t kNoLayer = ~std::size_t(0);
+
+/// Whether stored block `block` has a boundary layer on the volume's face across `axis` (`side`
+/// 0: the low face, 1: the high one; header comment) — a level ≥ 1 block touching that face whose
+/// outermost samples lie inside it — and the face's voxel coordinate along `axis`.
+bool boundaryLayerPlane(const MultiresGrid& grid, std::size_t block, int axis, int side,
+                        float& plane);
+
 /// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
-/// x fastest, then coefficient).
+/// x fastest, then coefficient), and on the boundary layers of coarse blocks at the volume's faces.
 class LocalVisibility {
   public:
     LocalVisibility() = default;
@@ -249,7 +274,17 @@ class LocalVisibility {
     std::shared_ptr<const MultiresGrid> gridPtr() const { return grid_; }
     /// First float of a block's coefficients (meaningless for kNone blocks).
     const float* blockData(std::size_t block) const { return data_.data() + offset_[block]; }
-    std::size_t bytes() const { return data_.size() * sizeof(float); }
+    std::size_t bytes() const { return (data_.size() + layerData_.size()) * sizeof(float); }
+    /// Boundary-layer points (header comment).
+    std::size_t layerPoints() const {
+        return coefficients_ > 0 ? layerData_.size() / std::size_t(coefficients_) : 0;
+    }
+    /// First float of a block's layer on face 2·axis + side (n² points, the lower other axis
+    /// fastest, then coefficient), nullptr where it has none.
+    const float* layerData(std::size_t block, int face) const {
+        const std::size_t off = layerOffset_[block * 6 + std::size_t(face)];
+        return off == kNoLayer ? nullptr : layerData_.data() + off;
+    }
     VisibilityAlgorithm algorithm() const { return algorithm_; }
     /// The ray directions and weights the field was projected with.
     const sh::SphereSamples& directions() const { return *directions_; }
@@ -286,6 +321,9 @@ class LocalVisibility {
     double radius_ = 0.0;
     std::vector<std::size_t> offset_;
     std::vector<float> data_;
+    std::vector<std::size_t> layerOffset_;  ///< per block × 6 faces (2·axis + side), or kNoLayer
+    std::vector<std::uint8_t> layerFaces_;  ///< per block: bit 2·axis + side set when it has one
+    std::vector<float> layerData_;
     std::uint64_t raysTraced_ = 0, samplesTaken_ = 0, pointsSkipped_ = 0;
 };
 

@@ -122,3 +122,38 @@ TEST(ClipAwareVisibility, PointsFarFromEveryFaceKeepTheUnclippedValuesBitForBit)
                 }
     }
 }
+
+TEST(ClipAwareVisibility, CoarseBlocksBoundaryLayersAreClippedToo) {
+    // The brute force above on a grid of 8³ blocks: on the volume's face y = 0 the field reads
+    // the blocks' boundary layers (local_visibility.h), which the update must clip as well.
+    const optics::TransferFunction tf = test::rampTf(kSigma);
+    const optics::TfTable table(tf);
+    const glm::ivec3 dims(40, 32, 32);
+    const core::Volume full = test::makeVolume(dims, [](int, int, int) { return 1000; });
+    const core::Volume zeroed =
+        test::makeVolume(dims, [](int i, int, int) { return i < kCutX ? 0 : 1000; });
+    auto grid = [](const core::Volume& v) {
+        return test::uniformGrid(std::make_shared<const BlockPyramid>(BlockPyramid::build(v)), 1);
+    };
+    const auto base = computeLocalVisibility(grid(full), table, options());
+    ASSERT_GT(base.layerPoints(), 0u);
+    const std::vector<core::HalfSpace> kept = {{{kCutX, 0.0, 0.0}, {1.0, 0.0, 0.0}}};
+    const LocalVisibility clipped =
+        clipAwareLocalVisibility(base, table, kept, 0, core::Progress::none(), nullptr);
+    const LocalVisibility truth = computeLocalVisibility(grid(zeroed), table, options());
+    // As above; the coarse march's 2-voxel steps meet the zeroed volume's ramp at other points
+    // than 1-voxel steps do, but the error bound per kink is the same.
+    const double kCutTol = kSigma / 4.0 * kSqrt4Pi;
+    bool differsFromUnclipped = false;
+    for (const float x : {12.f, 17.f, 20.f, 21.f, 23.f, 26.f, 31.f}) {
+        const glm::vec3 p(x, 0.f, 16.f);  // on the face: the layers alone
+        float got[16], want[16], before[16];
+        clipped.sample(p, got);
+        truth.sample(p, want);
+        base.sample(p, before);
+        for (int i = 0; i < kCoefficients; ++i)
+            EXPECT_NEAR(got[i], want[i], kCutTol) << "x " << p.x << ", coefficient " << i;
+        differsFromUnclipped = differsFromUnclipped || std::abs(got[0] - before[0]) > 10 * kCutTol;
+    }
+    EXPECT_TRUE(differsFromUnclipped) << "the cut must matter at this σ0";
+}

@@ -355,3 +355,104 @@ TEST(LocalVisibility, MarchedRaysInAHomogeneousBoxStopExactlyAtItsFaces) {
                 }
         }
 }
+
+TEST(LocalVisibility, OnTheVolumesFacesACoarseBlockReadsItsBoundaryLayer) {
+    // Matter up to every face of the box (a scan range cutting through the body): on a face the
+    // outward half of the directions leaves at once, a voxel inside V drops steeply. At every
+    // level 1…4 the field on the face must give the projected closed form — the level-0 samples
+    // lie on the faces, a coarse block's outermost ones (s − 1)/2 voxels inside, so without the
+    // boundary layers the face would read those (checked: 5× the tolerance away, and darker).
+    constexpr float kSigma = 0.3f;  // 1/mm, 1 mm voxels: ≈ 0.26 of V_0 lost over half a voxel
+    constexpr double kRadius = 6.0;
+    const glm::ivec3 dims(32, 32, 32);
+    const core::Volume v = test::makeVolume(dims, [](int, int, int) { return 1000; });
+    const optics::TransferFunction tf = test::rampTf(kSigma);
+    const optics::TfTable table(tf);
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    const glm::dvec3 hi(dims - 1);
+    LocalVisibilityOptions o;
+    o.coefficients = 4;
+    o.rays = 32;
+    o.radiusVoxels = kRadius;
+    const sh::SphereSamples dirs = visibilityDirections(o.rays, o.coefficients);
+    auto closedForm = [&](const glm::dvec3& x) {
+        return sh::projectFunction(1, dirs, [&](const glm::dvec3& w) {
+            return std::exp(-double(kSigma) * test::boxExitDistance(x, w, hi, kRadius));
+        });
+    };
+    // σt is constant and every ray ends at R or the box (the march's last step is shortened to
+    // it, MarchedRaysInAHomogeneousBoxStopExactlyAtItsFaces): float rounding of ≤ 32 rays only.
+    constexpr double kFaceTol = 1e-4 * 32;
+    // A point on each face, farther than R from the other faces: there the layer's points, at the
+    // block's sample positions along the face, all hold the same value.
+    const glm::dvec3 onFaces[6] = {{0.0, 15.3, 16.6},  {31.0, 15.3, 16.6}, {15.3, 0.0, 16.6},
+                                   {15.3, 31.0, 16.6}, {15.3, 16.6, 0.0},  {15.3, 16.6, 31.0}};
+    for (int level = 1; level < kLevels; ++level) {
+        const LocalVisibility field =
+            computeLocalVisibility(test::uniformGrid(pyr, level), table, o);
+        // 2 × 2 × 2 blocks, each with a layer on its three faces on the volume's box.
+        const std::size_t n = std::size_t(levelResolution(level));
+        EXPECT_EQ(field.layerPoints(), 8 * 3 * n * n) << "level " << level;
+        const float inset = 0.5f * float(levelSpacing(level)) - 0.5f;  // (s − 1)/2
+        for (int f = 0; f < 6; ++f) {
+            const glm::dvec3 x = onFaces[f];
+            const auto want = closedForm(x);
+            float got[4];
+            field.sample(glm::vec3(x), got);
+            for (int i = 0; i < 4; ++i)
+                EXPECT_NEAR(got[i], want[std::size_t(i)], kFaceTol)
+                    << "level " << level << ", face " << f << ", coefficient " << i;
+            // What the clamped interpolation read before: the outermost samples.
+            glm::vec3 first(x);
+            const int a = f >> 1;
+            first[a] = (f & 1) ? float(hi[a]) - inset : inset;
+            float inner[4];
+            field.sample(first, inner);
+            EXPECT_LT(inner[0], want[0] - 5 * kFaceTol) << "level " << level << ", face " << f;
+            // Halfway between the face and those samples the two blend linearly.
+            glm::vec3 mid(x);
+            mid[a] = 0.5f * (float(x[a]) + first[a]);
+            float half[4];
+            field.sample(mid, half);
+            for (int i = 0; i < 4; ++i)
+                EXPECT_NEAR(half[i], 0.5f * (got[i] + inner[i]), 1e-5f)
+                    << "level " << level << ", face " << f << ", coefficient " << i;
+        }
+    }
+    // Level 0 has samples on the faces: no layers, and the same closed form there.
+    const LocalVisibility fine = computeLocalVisibility(test::uniformGrid(pyr, 0), table, o);
+    EXPECT_EQ(fine.layerPoints(), 0u);
+    float got[4];
+    fine.sample(glm::vec3(onFaces[2]), got);
+    EXPECT_NEAR(got[0], closedForm(onFaces[2])[0], kFaceTol);
+}
+
+TEST(LocalVisibility, BoundaryLayersAreIdenticalForAnyThreadCountAndUnderTheSweep) {
+    // The layers' points are marched alone under either integrator, in a fixed order per point.
+    const core::Volume v = test::makeVolume({40, 24, 20}, [](int i, int j, int k) {
+        return (i * 37 + j * 11 + k * 5) % 17 < 9 ? 1000 : 200;
+    });
+    const optics::TransferFunction tf = test::rampTf(0.2f);
+    const optics::TfTable table(tf);
+    auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
+    for (const VisibilityAlgorithm alg : {VisibilityAlgorithm::March, VisibilityAlgorithm::Sweep}) {
+        LocalVisibilityOptions o;
+        o.coefficients = 4;
+        o.algorithm = alg;
+        o.rays = alg == VisibilityAlgorithm::Sweep ? kSweepRaysCoarse : 16;
+        o.radiusVoxels = 8.0;
+        const auto grid = test::uniformGrid(pyr, 1);
+        o.threads = 1;
+        const LocalVisibility one = computeLocalVisibility(grid, table, o);
+        o.threads = 2;
+        const LocalVisibility two = computeLocalVisibility(grid, table, o);
+        ASSERT_GT(one.layerPoints(), 0u);
+        for (std::size_t b = 0; b < pyr->blockCount(); ++b)
+            for (int face = 0; face < 6; ++face) {
+                const float* a = one.layerData(b, face);
+                ASSERT_EQ(a == nullptr, two.layerData(b, face) == nullptr);
+                if (a)
+                    ASSERT_EQ(std::memcmp(a, two.layerData(b, face), 8 * 8 * 4 * sizeof(float)), 0);
+            }
+    }
+}

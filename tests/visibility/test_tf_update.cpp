@@ -99,6 +99,15 @@ void expectIdentical(const LocalVisibility& a, const LocalVisibility& b) {
         const std::size_t floats = n * n * n * std::size_t(a.coefficients());
         ASSERT_EQ(std::memcmp(a.blockData(blk), b.blockData(blk), floats * sizeof(float)), 0)
             << "block " << blk << " at level " << g.level(blk);
+        for (int face = 0; face < 6; ++face) {  // and its boundary layers
+            const float* la = a.layerData(blk, face);
+            ASSERT_EQ(la == nullptr, b.layerData(blk, face) == nullptr) << "block " << blk;
+            if (la)
+                ASSERT_EQ(std::memcmp(la, b.layerData(blk, face),
+                                      n * n * std::size_t(a.coefficients()) * sizeof(float)),
+                          0)
+                    << "block " << blk << " layer " << face;
+        }
     }
 }
 
@@ -163,14 +172,21 @@ TEST_P(TfUpdateBy, AStepAcrossABlockFaceIntegratesTheValuesBetweenItsEnds) {
 }
 
 TEST_P(TfUpdateBy, AColourOnlyEditChangesNoValueAndTracesNothing) {
-    const Field f = field(GetParam());
-    const LocalVisibility before = f.full(ctTf(0.2f));
-    TfUpdateStats st;
-    const LocalVisibility after = f.update(before, ctTf(0.2f, 0.5f), st);
-    EXPECT_TRUE(st.changed.empty());
-    EXPECT_EQ(st.blocksRecomputed, 0u);
-    EXPECT_EQ(after.raysTraced(), 0u);
-    expectIdentical(after, f.full(ctTf(0.2f, 0.5f)));
+    Field f = field(GetParam());
+    // At full resolution, and under a budget (coarse blocks on the volume's faces: their boundary
+    // layers are copied too).
+    for (const double reduction : {1.0, 8.0}) {
+        if (reduction > 1.0)
+            f.budget = LodBudget::fromReduction(reduction, f.pyramid->geometry().voxelCount());
+        const LocalVisibility before = f.full(ctTf(0.2f));
+        TfUpdateStats st;
+        const LocalVisibility after = f.update(before, ctTf(0.2f, 0.5f), st);
+        EXPECT_TRUE(st.changed.empty());
+        EXPECT_EQ(st.blocksRecomputed, 0u);
+        EXPECT_EQ(after.raysTraced(), 0u);
+        EXPECT_EQ(after.layerPoints() > 0, reduction > 1.0);
+        expectIdentical(after, f.full(ctTf(0.2f, 0.5f)));
+    }
 }
 
 TEST_P(TfUpdateBy, UnderABudgetBlocksThatChangeLevelAreRecomputedAndTheFieldStillMatches) {
@@ -181,6 +197,7 @@ TEST_P(TfUpdateBy, UnderABudgetBlocksThatChangeLevelAreRecomputedAndTheFieldStil
     const LocalVisibility after = f.update(before, ctTf(1.5f), st);
     EXPECT_TRUE(st.incremental);
     EXPECT_GT(st.blocksLevelChanged, 0u) << "the edit should move the LOD selection";
+    EXPECT_GT(after.layerPoints(), 0u) << "coarse blocks on the volume's faces have layers";
     expectIdentical(after, f.full(ctTf(1.5f)));
 }
 

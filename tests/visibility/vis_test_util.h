@@ -66,4 +66,14 @@ inline std::shared_ptr<const visibility::MultiresGrid> fullGrid(
                                                 selectLod(*pyr, tf, table, LodBudget::unlimited()));
 }
 
+/// Every block of `pyr` at `level` (every cell visible).
+inline std::shared_ptr<const visibility::MultiresGrid> uniformGrid(
+    std::shared_ptr<const visibility::BlockPyramid> pyr, int level) {
+    using namespace visibility;
+    LodSelection sel;
+    sel.level.assign(pyr->blockCount(), std::int8_t(level));
+    sel.significance.assign(pyr->blockCount(), 0.f);
+    return std::make_shared<const MultiresGrid>(std::move(pyr), sel);
+}
+
 }  // namespace voxlight::test
