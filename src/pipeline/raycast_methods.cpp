@@ -12,7 +12,9 @@
 //   mip, minip:           (window from the TF)
 //   sh-local:             rays (32), coefficients (1/4/9/16; 4), radius (voxels; 16), and the LOD
 //                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
-//                         (MB of visibility coefficients; not both)
+//                         (MB of visibility coefficients; not both); near_shadow (false: each
+//                         directional/point light's first ½·(s − 1) voxels traced exactly where
+//                         the field is stored at spacing s — render/sh_shading.h ShLocalShader)
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims) and global_near ("local": the fine local field at the
 //                         sample times the far grid, default; "grid": Kronander's grid-only V^G —
@@ -449,6 +451,10 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
         o.blinnPhong.shininess = float(p.number("shininess", o.blinnPhong.shininess, 1.0, 1e4));
         o.centralDifferences = p.boolean("central_differences", o.centralDifferences);
     }
+    // The SH methods' ambient sky (render/sh_shading.h; registered since it was added, read only
+    // from 5 December: before, `ambient` was accepted and silently ignored).
+    if (isSh(kind)) o.shAmbient = float(p.number("ambient", 0.0, 0.0, 1e6));
+    if (kind == Kind::ShLocal) o.shNearShadow = p.boolean("near_shadow", false);
     if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
         o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
@@ -2589,7 +2595,7 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "within "
     "a radius under directional, point and environment lights",
     {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb", "window",
-     "window_strength", "ambient"},
+     "window_strength", "ambient", "near_shadow"},
     {"local_shadows"}));
 const RegisterMethod kShGlobal(rayCasterMethod(
     Kind::ShGlobal, "sh-global",

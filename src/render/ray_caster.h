@@ -128,6 +128,9 @@ struct RenderOptions {
     /// SH visibility shading: radiance of a uniform white sky added to the lights, shadowed by the
     /// same visibility (ambient occlusion: A·V_0/√(4π), A in empty space); 0 = none.
     float shAmbient = 0.f;
+    /// sh-local: trace each delta light's first stretch exactly where the field is coarse
+    /// (render/sh_shading.h ShLocalShader; method param `near_shadow`).
+    bool shNearShadow = false;
 };
 
 struct RenderStats {
@@ -303,6 +306,7 @@ class RayCaster {
     const core::Volume& volume() const { return *volume_; }
     const optics::TransferFunction& transferFunction() const { return *tf_; }
     const optics::TfTable& table() const { return *tables_.table; }
+    std::shared_ptr<const optics::TfTable> tablePtr() const { return tables_.table; }
     const grid::BrickMajorants& majorants() const { return *tables_.skipCells; }
     const RenderOptions& options() const { return options_; }
     float stepMm() const { return stepMm_; }

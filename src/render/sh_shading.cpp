@@ -37,16 +37,27 @@ ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const light
             window_[i] = window.empty() ? 1.f : float(window[std::size_t(l)]);
     VL_CHECK(ambient >= 0.f);
     constant_[0] += glm::vec3(ambient * float(std::sqrt(4.0 * std::numbers::pi)));  // w_0 = 1
+    spread_[0] = constant_[0];
     for (std::size_t n = 0; n < lights.size(); ++n) {
         const lights::Light* l = lights[n].get();
         VL_CHECK(l != nullptr);
         if (const auto* p = dynamic_cast<const lights::PointLight*>(l)) {
             points_.push_back({glm::vec3(p->position()), p->intensity(), float(p->minDistance())});
-        } else if (dynamic_cast<const lights::DirectionalLight*>(l) ||
-                   dynamic_cast<const lights::EnvironmentLight*>(l)) {
+        } else if (const auto* d = dynamic_cast<const lights::DirectionalLight*>(l)) {
             // Position-independent: project once.
             const std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), band);
-            for (int i = 0; i < coefficients_; ++i) constant_[i] += window_[i] * c[std::size_t(i)];
+            Directional dl{glm::normalize(d->direction()), {}};
+            for (int i = 0; i < coefficients_; ++i) {
+                dl.c[i] = window_[i] * c[std::size_t(i)];
+                constant_[i] += dl.c[i];
+            }
+            directional_.push_back(dl);
+        } else if (dynamic_cast<const lights::EnvironmentLight*>(l)) {
+            const std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), band);
+            for (int i = 0; i < coefficients_; ++i) {
+                constant_[i] += window_[i] * c[std::size_t(i)];
+                spread_[i] += window_[i] * c[std::size_t(i)];
+            }
         } else {
             throw InputError("lights", std::string(l->kind()),
                              "is a light type SH visibility shading does not know",
@@ -59,28 +70,7 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
     const int C = coefficients_;
     glm::vec3 sum(0.f);
     for (int i = 0; i < C; ++i) sum += constant_[i] * v[i];
-    for (const Point& p : points_) {
-        const glm::vec3 d = p.position - x;
-        const float dist = glm::length(d);
-        const float r = std::max(dist, p.minDistance);
-        const glm::vec3 e = p.intensity / (r * r);
-        const float directional = std::min(1.f, dist / p.minDistance);
-        if (directional > 0.f) {
-            float y[16];  // only the bands the field has (once per shaded sample and light)
-            const glm::vec3 u = d / dist;
-            if (C <= 4)
-                sh::evalShFixed<1>(u, y);
-            else if (C <= 9)
-                sh::evalShFixed<2>(u, y);
-            else
-                sh::evalShFixed<3>(u, y);
-            float dot = 0.f;
-            for (int i = 0; i < C; ++i) dot += window_[i] * y[i] * v[i];
-            sum += (directional * dot) * e;
-        }
-        // The uniform part inside minDistance: c_0 = E/√(4π).
-        sum += ((1.f - directional) * kInvSqrt4Pi * v[0]) * e;
-    }
+    sum = addPoints(sum, x, v, [v](const glm::vec3&, float, float*, float&) { return v; });
     return glm::max(sum * kInv4Pi, glm::vec3(0.f));
 }
 
@@ -120,6 +110,37 @@ Scatter ShCutFaceShader::scatter(const ShadeInput& in) const {
     return {lights_.shade(x, v), glm::vec3(0.f)};
 }
 
+ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> field,
+                             std::shared_ptr<const optics::TfTable> table,
+                             const core::Geometry& geometry,
+                             std::span<const std::shared_ptr<const lights::Light>> lights,
+                             std::span<const double> window, float ambient, bool nearShadow)
+    : field_(std::move(field)),
+      table_(std::move(table)),
+      near_(nearShadow),
+      lights_(field_->coefficients(), lights, window, ambient) {
+    VL_CHECK(field_ && table_);
+    worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
+    origin_ = glm::vec3(geometry.origin);
+    h_ = float(core::minComponent(geometry.spacing));
+}
+
+glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
+    const glm::vec3 p = worldToIndex_ * (x - origin_);
+    float v[16], s = 1.f;
+    field_->sample(p, v, &s);
+    const float ellMm = kNearShadowSpacings * (s - 1.f) * h_;
+    if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
+    return lights_.shadeToward(
+        x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
+            const float len = std::min(ellMm, maxMm);
+            T = float(visibility::nearTransmittance(field_->grid(), *table_, p, glm::dvec3(toward),
+                                                    double(len / h_)));
+            field_->sample(p + worldToIndex_ * (toward * len), scratch);
+            return static_cast<const float*>(scratch);
+        });
+}
+
 std::vector<core::HalfSpace> lightCutFaces(const RenderOptions& options) {
     std::vector<core::HalfSpace> faces;
     for (const ClipPlane& c : options.clipPlanes)
@@ -154,7 +175,12 @@ std::unique_ptr<ShadingModel> makeModel(const char* name, const RayCaster& caste
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::LocalVisibility> field) {
-    return makeModel("sh-local", caster, camera, std::move(field));
+    return std::make_unique<detail::DvrModel<ShLocalShader>>(
+        "sh-local",
+        ShLocalShader(std::move(field), caster.tablePtr(), caster.volume().geometry(),
+                      lightsOrHeadlight(caster, camera), caster.options().shWindow,
+                      caster.options().shAmbient, caster.options().shNearShadow),
+        PixelFootprint(caster, camera));
 }
 
 std::unique_ptr<ShadingModel> makeShVisibilityModel(

@@ -38,6 +38,8 @@ std::string glUnsupportedReason(const std::string& method, const pipeline::Caste
         const pipeline::CasterSetup::ShFields& f = setup->sh;
         if (!f.local && !f.global && !f.hierarchical)
             return "method '" + method + "': no SH visibility field was prepared";
+        if (o.shNearShadow)
+            return "sh-local with near_shadow: the exact near shadow is traced on the CPU only";
         int points = 0;
         for (const auto& l : o.lights)
             if (dynamic_cast<const lights::PointLight*>(l.get())) ++points;

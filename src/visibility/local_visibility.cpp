@@ -685,6 +685,28 @@ double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     return std::exp(-tau);
 }
 
+double nearTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
+                         const glm::vec3& origin, const glm::dvec3& dir, double lengthVoxels) {
+    const core::Geometry& g = grid.pyramid().geometry();
+    const double h = core::minComponent(g.spacing);
+    const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
+    const float length = std::min(float(lengthVoxels * h), ray.boxExit(origin, grid.dims()));
+    if (!(length > 0.f)) return 1.0;
+    const int n = std::max(1, int(std::ceil(double(length) / (kNearStepVoxels * h))));
+    const float dt = length / float(n);
+    const ValueField field(grid, table);
+    float s0 = field.value(origin);
+    double i0 = table.sigmaIntegral(s0), tau = 0.0;
+    for (int k = 1; k <= n; ++k) {
+        const float s1 = field.value(origin + (float(k) * dt) * ray.d);
+        const double i1 = table.sigmaIntegral(s1);
+        tau += double(table.meanExtinction(s0, i0, s1, i1)) * double(dt);
+        s0 = s1;
+        i0 = i1;
+    }
+    return std::exp(-tau);
+}
+
 double rayTransmittanceReference(const MultiresGrid& grid, const optics::TfTable& table,
                                  const glm::vec3& origin, const glm::dvec3& dir,
                                  double radiusVoxels) {
@@ -1855,9 +1877,6 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
 }
 
 namespace {
-/// LocalVisibility::sample for a compile-time coefficient count (kC = 0: `runtimeC`): the
-/// interpolation unrolls per coefficient, and the result is zeroed without a call — this runs
-/// once per shaded sample of every SH frame.
 /// addTrilinear's 2-D counterpart on an n × n layer (u, v already clamped to [0, n − 1]; x = u
 /// fastest), writing the value into out[0..C).
 template <int kC>
@@ -1873,10 +1892,14 @@ void addBilinear(const float* data, int n, int runtimeC, float u, float v, float
         out[c] += w00 * p[c] + w10 * p[di + c] + w01 * p[dj + c] + w11 * p[dj + di + c];
 }
 
+/// LocalVisibility::sample for a compile-time coefficient count (kC = 0: `runtimeC`): the
+/// interpolation unrolls per coefficient, and the result is zeroed without a call — this runs
+/// once per shaded sample of every SH frame. `spacing` (may be null): the blended sample spacing.
 template <int kC>
 void sampleField(const MultiresGrid& grid, const float* data, const std::size_t* offset,
                  const float* layerData, const std::size_t* layerOffset,
-                 const std::uint8_t* layerFaces, const glm::vec3& p, float* out, int runtimeC = 0) {
+                 const std::uint8_t* layerFaces, const glm::vec3& p, float* out, float* spacing,
+                 int runtimeC = 0) {
     const int C = kC > 0 ? kC : runtimeC;
     for (int i = 0; i < C; ++i) out[i] = 0.f;
     std::size_t block;
@@ -1884,13 +1907,19 @@ void sampleField(const MultiresGrid& grid, const float* data, const std::size_t*
     glm::vec3 local;
     if (grid.ownerAlone(p, block, level, local)) {
         addTrilinear<kC>(data + offset[block], levelResolution(level), C, local, 1.f, out);
+        if (spacing) *spacing = float(levelSpacing(level));
         return;
     }
     BlockWeights w;
     grid.weights(p, w);
     if (w.count == 0) {
         out[0] = float(std::sqrt(4.0 * std::numbers::pi));
+        if (spacing) *spacing = 1.f;
         return;
+    }
+    if (spacing) {
+        *spacing = 0.f;
+        for (int k = 0; k < w.count; ++k) *spacing += w.weight[k] * float(levelSpacing(w.level[k]));
     }
     for (int k = 0; k < w.count; ++k) {
         const std::size_t b = w.block[k];
@@ -1933,22 +1962,25 @@ void sampleField(const MultiresGrid& grid, const float* data, const std::size_t*
 }
 }  // namespace
 
-void LocalVisibility::sample(const glm::vec3& p, float* out) const {
+void LocalVisibility::sample(const glm::vec3& p, float* out) const { sample(p, out, nullptr); }
+
+void LocalVisibility::sample(const glm::vec3& p, float* out, float* spacing) const {
     const MultiresGrid& g = *grid_;
     const float* L = layerData_.data();
     const std::size_t* O = layerOffset_.data();
     const std::uint8_t* F = layerFaces_.data();
     switch (coefficients_) {
         case 1:
-            return sampleField<1>(g, data_.data(), offset_.data(), L, O, F, p, out);
+            return sampleField<1>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
         case 4:
-            return sampleField<4>(g, data_.data(), offset_.data(), L, O, F, p, out);
+            return sampleField<4>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
         case 9:
-            return sampleField<9>(g, data_.data(), offset_.data(), L, O, F, p, out);
+            return sampleField<9>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
         case 16:
-            return sampleField<16>(g, data_.data(), offset_.data(), L, O, F, p, out);
+            return sampleField<16>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
         default:
-            return sampleField<0>(g, data_.data(), offset_.data(), L, O, F, p, out, coefficients_);
+            return sampleField<0>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing,
+                                  coefficients_);
     }
 }
 

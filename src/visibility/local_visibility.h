@@ -296,6 +296,10 @@ class LocalVisibility {
     /// V at continuous voxel index p by the grid's seamless interpolation, into out[0..C); empty
     /// space's value (√(4π), 0, …) where no stored block contributes.
     void sample(const glm::vec3& p, float* out) const;
+    /// The same, and in `spacing` the sample spacing (voxels) of the levels read, blended with
+    /// the interpolation's weights (1 where no stored block contributes): how far apart the
+    /// points the value came from lie.
+    void sample(const glm::vec3& p, float* out, float* spacing) const;
 
     /// σt of the TF the field was computed under (what a TF update compares against).
     const optics::TfTable::ExtinctionProfile& extinction() const { return *extinction_; }
@@ -367,6 +371,16 @@ bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& 
 double rayTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                         const glm::vec3& origin, const glm::dvec3& dir, double radiusVoxels,
                         std::uint64_t* samples = nullptr);
+/// Sub-step (voxels) of nearTransmittance: the value is linear only within a voxel, and two
+/// pre-integrated steps per voxel keep a dense surface from being smeared over a step.
+inline constexpr double kNearStepVoxels = 0.5;
+/// Transmittance from voxel index `origin` along the *world* unit direction `dir` over
+/// `lengthVoxels` (units of the smallest spacing; clipped at the volume's box): the TF's σt
+/// pre-integrated between trilinear values at equal sub-steps of at most kNearStepVoxels, no LOD
+/// steps and no splitting — a march a shader can repeat sample for sample (sh-local's near shadow,
+/// render/sh_shading.h).
+double nearTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
+                         const glm::vec3& origin, const glm::dvec3& dir, double lengthVoxels);
 /// The same by the straightforward march the fast path must reproduce (every step through the
 /// TF table; the slow reference tests compare against).
 double rayTransmittanceReference(const MultiresGrid& grid, const optics::TfTable& table,

@@ -614,3 +614,37 @@ TEST(Ritschel, AfterATfChangeTheLastFieldStandsIn) {
     Session other;
     EXPECT_EQ(fresh.image.pixels, other.run(scene(d)).image.pixels);
 }
+
+// `ambient` (all three SH methods) and `near_shadow` (sh-local) are frame settings read from the
+// method params: changing them reruns no visibility stage and changes the image. (`ambient` was
+// registered but not read until 5 December: an ambient sky was accepted and silently dropped.)
+TEST(ShMethods, AmbientAndTheNearShadowAreReadAndRerunOnlyTheFrame) {
+    for (const char* method : {"sh-local", "sh-global", "ritschel"}) {
+        json d = shScene();
+        d["method"]["name"] = method;
+        if (std::string(method) == "ritschel") d["method"]["params"] = json::object();
+        if (std::string(method) == "sh-global") d["method"]["params"]["global_resolution"] = 16;
+        Session session;
+        const RunResult dark = session.run(scene(d));
+        d["method"]["params"]["ambient"] = 2.0;
+        const RunResult lit = session.run(scene(d));
+        EXPECT_EQ(ranStages(lit), (std::set<std::string>{"camera", "render"})) << method;
+        EXPECT_GT(meanRgb(lit.image), meanRgb(dark.image) * 1.05) << method;
+    }
+    // The near shadow: where the field is coarse (1:16 on a 48³ torso) it changes the image, and
+    // never brightens it (render/sh_shading.h); other methods refuse the param.
+    json d = shScene();
+    d["volume"]["size"] = 48;
+    d["method"]["params"]["data_reduction"] = 16;
+    d["lights"] = json::array({{{"type", "directional"}, {"direction", {-0.4, 0.6, 0.7}}}});
+    Session session;
+    const RunResult off = session.run(scene(d));
+    d["method"]["params"]["near_shadow"] = true;
+    const RunResult near = session.run(scene(d));
+    EXPECT_EQ(ranStages(near), (std::set<std::string>{"camera", "render"}));
+    EXPECT_NE(near.image.pixels, off.image.pixels);
+    EXPECT_LT(meanRgb(near.image), meanRgb(off.image));
+    EXPECT_TRUE(allFinite(near.image));
+    d["method"]["name"] = "sh-global";
+    EXPECT_THROW(session.plan(scene(d)), InputError);
+}

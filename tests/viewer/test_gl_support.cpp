@@ -76,6 +76,8 @@ TEST(GlSupport, OtherScenesSayWhyTheCpuDrawsThem) {
     EXPECT_NE(reasonFor(coarse).find("a step over one voxel"), std::string::npos);
     json forward = torsoDoc({{"name", "gradient"}, {"params", {{"central_differences", false}}}});
     EXPECT_NE(reasonFor(forward).find("forward-difference"), std::string::npos);
+    json near = torsoDoc({{"name", "sh-local"}, {"params", {{"near_shadow", true}}}});
+    EXPECT_NE(reasonFor(near).find("near_shadow"), std::string::npos);
     json shPoints = torsoDoc("sh-local");
     shPoints["lights"] = json::array();
     for (int i = 0; i <= viewer::kMaxGlShPointLights; ++i)
