@@ -32,41 +32,65 @@ LocalVisibilityOptions options() {
     return o;
 }
 
-}  // namespace
-
-TEST(ClipAwareVisibility, EqualsTheLocalVisibilityOfTheVolumeWithTheRemovedMatterZeroed) {
-    // Homogeneous matter (σt = σ0) everywhere; the plane x = 19.5 removes x < 19.5 for the light.
+/// Homogeneous matter (σt = σ0) everywhere in 40×32×32 voxels, its local visibility on the grid
+/// `grid` makes, that field clipped at the plane x = kCutX (x < kCutX removed for the light), and
+/// brute force: the field of the volume with the removed matter zeroed.
+struct CutCase {
+    LocalVisibility base, clipped, truth;
+    ClipUpdateStats stats;
+};
+template <class Grid>
+CutCase cutCase(Grid&& grid) {
     const optics::TransferFunction tf = test::rampTf(kSigma);
     const optics::TfTable table(tf);
     const glm::ivec3 dims(40, 32, 32);
     const core::Volume full = test::makeVolume(dims, [](int, int, int) { return 1000; });
     const core::Volume zeroed =
         test::makeVolume(dims, [](int i, int, int) { return i < kCutX ? 0 : 1000; });
-    const auto base = computeLocalVisibility(test::fullGrid(full, tf), table, options());
+    CutCase c;
+    c.base = computeLocalVisibility(grid(full, tf), table, options());
     const std::vector<core::HalfSpace> kept = {{{kCutX, 0.0, 0.0}, {1.0, 0.0, 0.0}}};
-    ClipUpdateStats st;
-    const LocalVisibility clipped =
-        clipAwareLocalVisibility(base, table, kept, 0, core::Progress::none(), &st);
-    const LocalVisibility truth =
-        computeLocalVisibility(test::fullGrid(zeroed, tf), table, options());
-    // The zeroed volume ramps σt linearly over the voxel layer 19..20, which integrates like the
-    // sharp cut at 19.5 along any ray crossing it; the midpoint rule (1-voxel steps) on the
-    // ramp's two kinks errs by ≤ σ0·Δ/8 per kink in τ, so |ΔV_i| ≤ (σ0/4)·√(4π) (as the slab test
-    // of test_local_visibility.cpp): 0.044 at σ0 = 0.05.
+    c.clipped = clipAwareLocalVisibility(c.base, table, kept, 0, core::Progress::none(), &c.stats);
+    c.truth = computeLocalVisibility(grid(zeroed, tf), table, options());
+    return c;
+}
+
+/// The clipped field against brute force at `points`: the zeroed volume ramps σt linearly over
+/// the voxel layer 19..20, which integrates like the sharp cut at 19.5 along any ray crossing
+/// it; the midpoint rule (1-voxel steps) on the ramp's two kinks errs by ≤ σ0·Δ/8 per kink in τ,
+/// so |ΔV_i| ≤ (σ0/4)·√(4π) (as the slab test of test_local_visibility.cpp): 0.044 at σ0 = 0.05.
+/// (Coarse steps meet the ramp at other points, with the same bound per kink.) Also that the cut
+/// matters at some point: the clipped field differs from the unclipped one there.
+void expectClippedAsZeroed(const CutCase& c, const std::vector<glm::vec3>& points) {
     const double kCutTol = kSigma / 4.0 * kSqrt4Pi;
     bool differsFromUnclipped = false;
-    for (const float x : {12.f, 17.f, 20.f, 21.f, 23.f, 26.f, 31.f})
-        for (const glm::vec3 p : {glm::vec3(x, 16.f, 16.f), glm::vec3(x, 3.f, 28.f)}) {
-            float got[16], want[16], before[16];
-            clipped.sample(p, got);
-            truth.sample(p, want);
-            base.sample(p, before);
-            for (int i = 0; i < kCoefficients; ++i)
-                EXPECT_NEAR(got[i], want[i], kCutTol) << "x " << p.x << ", coefficient " << i;
-            differsFromUnclipped =
-                differsFromUnclipped || std::abs(got[0] - before[0]) > 10 * kCutTol;
-        }
+    for (const glm::vec3& p : points) {
+        float got[16], want[16], before[16];
+        c.clipped.sample(p, got);
+        c.truth.sample(p, want);
+        c.base.sample(p, before);
+        for (int i = 0; i < kCoefficients; ++i)
+            EXPECT_NEAR(got[i], want[i], kCutTol)
+                << "at " << p.x << "," << p.y << "," << p.z << ", coefficient " << i;
+        differsFromUnclipped = differsFromUnclipped || std::abs(got[0] - before[0]) > 10 * kCutTol;
+    }
     EXPECT_TRUE(differsFromUnclipped) << "the cut must matter at this σ0";
+}
+
+}  // namespace
+
+TEST(ClipAwareVisibility, EqualsTheLocalVisibilityOfTheVolumeWithTheRemovedMatterZeroed) {
+    // Homogeneous matter (σt = σ0) everywhere; the plane x = 19.5 removes x < 19.5 for the light.
+    const CutCase c = cutCase([](const core::Volume& v, const optics::TransferFunction& tf) {
+        return test::fullGrid(v, tf);
+    });
+    std::vector<glm::vec3> points;
+    for (const float x : {12.f, 17.f, 20.f, 21.f, 23.f, 26.f, 31.f})
+        for (const glm::vec3 p : {glm::vec3(x, 16.f, 16.f), glm::vec3(x, 3.f, 28.f)})
+            points.push_back(p);
+    expectClippedAsZeroed(c, points);
+    const ClipUpdateStats& st = c.stats;
+    const glm::ivec3 dims(40, 32, 32);
     // Only the points within r_s of the plane were traced again: x ∈ (11.5, 27.5) of 0..39.
     EXPECT_GT(st.pointsTraced, 0u);
     EXPECT_LE(st.pointsTraced, std::uint64_t(16) * dims.y * dims.z);
@@ -126,34 +150,12 @@ TEST(ClipAwareVisibility, PointsFarFromEveryFaceKeepTheUnclippedValuesBitForBit)
 TEST(ClipAwareVisibility, CoarseBlocksBoundaryLayersAreClippedToo) {
     // The brute force above on a grid of 8³ blocks: on the volume's face y = 0 the field reads
     // the blocks' boundary layers (local_visibility.h), which the update must clip as well.
-    const optics::TransferFunction tf = test::rampTf(kSigma);
-    const optics::TfTable table(tf);
-    const glm::ivec3 dims(40, 32, 32);
-    const core::Volume full = test::makeVolume(dims, [](int, int, int) { return 1000; });
-    const core::Volume zeroed =
-        test::makeVolume(dims, [](int i, int, int) { return i < kCutX ? 0 : 1000; });
-    auto grid = [](const core::Volume& v) {
+    const CutCase c = cutCase([](const core::Volume& v, const optics::TransferFunction&) {
         return test::uniformGrid(std::make_shared<const BlockPyramid>(BlockPyramid::build(v)), 1);
-    };
-    const auto base = computeLocalVisibility(grid(full), table, options());
-    ASSERT_GT(base.layerPoints(), 0u);
-    const std::vector<core::HalfSpace> kept = {{{kCutX, 0.0, 0.0}, {1.0, 0.0, 0.0}}};
-    const LocalVisibility clipped =
-        clipAwareLocalVisibility(base, table, kept, 0, core::Progress::none(), nullptr);
-    const LocalVisibility truth = computeLocalVisibility(grid(zeroed), table, options());
-    // As above; the coarse march's 2-voxel steps meet the zeroed volume's ramp at other points
-    // than 1-voxel steps do, but the error bound per kink is the same.
-    const double kCutTol = kSigma / 4.0 * kSqrt4Pi;
-    bool differsFromUnclipped = false;
-    for (const float x : {12.f, 17.f, 20.f, 21.f, 23.f, 26.f, 31.f}) {
-        const glm::vec3 p(x, 0.f, 16.f);  // on the face: the layers alone
-        float got[16], want[16], before[16];
-        clipped.sample(p, got);
-        truth.sample(p, want);
-        base.sample(p, before);
-        for (int i = 0; i < kCoefficients; ++i)
-            EXPECT_NEAR(got[i], want[i], kCutTol) << "x " << p.x << ", coefficient " << i;
-        differsFromUnclipped = differsFromUnclipped || std::abs(got[0] - before[0]) > 10 * kCutTol;
-    }
-    EXPECT_TRUE(differsFromUnclipped) << "the cut must matter at this σ0";
+    });
+    ASSERT_GT(c.base.layerPoints(), 0u);
+    std::vector<glm::vec3> points;  // on the face: the layers alone
+    for (const float x : {12.f, 17.f, 20.f, 21.f, 23.f, 26.f, 31.f})
+        points.emplace_back(x, 0.f, 16.f);
+    expectClippedAsZeroed(c, points);
 }
