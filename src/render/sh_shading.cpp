@@ -114,10 +114,12 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
                              std::shared_ptr<const optics::TfTable> table,
                              const core::Geometry& geometry,
                              std::span<const std::shared_ptr<const lights::Light>> lights,
-                             std::span<const double> window, float ambient, bool nearShadow)
+                             std::span<const double> window, float ambient, bool nearShadow,
+                             std::span<const core::HalfSpace> cutFaces)
     : field_(std::move(field)),
       table_(std::move(table)),
       near_(nearShadow),
+      cutFaces_(cutFaces.begin(), cutFaces.end()),
       lights_(field_->coefficients(), lights, window, ambient) {
     VL_CHECK(field_ && table_);
     worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
@@ -133,7 +135,12 @@ glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
     if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
     return lights_.shadeToward(
         x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
-            const float len = std::min(ellMm, maxMm);
+            float len = std::min(ellMm, maxMm);
+            for (const core::HalfSpace& f : cutFaces_) {  // leaving the kept region: stop there
+                const float along = float(glm::dot(glm::dvec3(toward), f.normal));
+                if (along < 0.f)
+                    len = std::min(len, std::max(float(f.distance(glm::dvec3(x))), 0.f) / -along);
+            }
             T = float(visibility::nearTransmittance(field_->grid(), *table_, p, glm::dvec3(toward),
                                                     double(len / h_)));
             field_->sample(p + worldToIndex_ * (toward * len), scratch);
@@ -179,7 +186,8 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
         "sh-local",
         ShLocalShader(std::move(field), caster.tablePtr(), caster.volume().geometry(),
                       lightsOrHeadlight(caster, camera), caster.options().shWindow,
-                      caster.options().shAmbient, caster.options().shNearShadow),
+                      caster.options().shAmbient, caster.options().shNearShadow,
+                      lightCutFaces(caster.options())),
         PixelFootprint(caster, camera));
 }
 

@@ -212,7 +212,8 @@ inline constexpr float kNearShadowSpacings = 0.5f;
 /// plain product: V ≤ T(x → x + ℓω) holds for the true visibility, but a 4-coefficient
 /// reconstruction of the open hemisphere above a lit face overshoots (to 1.25 toward its pole),
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
-/// only darkens. Off unless the method param `near_shadow` is
+/// only darkens. Clip planes and a crop box that remove matter for the light end the trace where
+/// it leaves the kept region (the field read there is then the clip-aware one). Off unless the method param `near_shadow` is
 /// true (the viewer's GLSL path does not trace it yet and declines such scenes). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would
 /// cost a field's rays per sample).
@@ -223,7 +224,8 @@ class ShLocalShader {
     ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> field,
                   std::shared_ptr<const optics::TfTable> table, const core::Geometry& geometry,
                   std::span<const std::shared_ptr<const lights::Light>> lights,
-                  std::span<const double> window = {}, float ambient = 0.f, bool nearShadow = true);
+                  std::span<const double> window = {}, float ambient = 0.f, bool nearShadow = true,
+                  std::span<const core::HalfSpace> cutFaces = {});
     Scatter scatter(const ShadeInput& in) const {
         return {inScattered(in.position), glm::vec3(0.f)};
     }
@@ -234,6 +236,9 @@ class ShLocalShader {
     std::shared_ptr<const visibility::LocalVisibility> field_;
     std::shared_ptr<const optics::TfTable> table_;
     bool near_ = true;  ///< false: ShVisibilityShader's product exactly (method param off)
+    /// Kept half-spaces of the planes that remove matter for the light (lightCutFaces): the
+    /// trace ends where it leaves them, as the clip-aware field's rays do.
+    std::vector<core::HalfSpace> cutFaces_;
     ShLights lights_;
     glm::mat3 worldToIndex_{1.f};
     glm::vec3 origin_{0.f};
