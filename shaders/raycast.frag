@@ -110,6 +110,19 @@ uniform vec3 uShFaceNormal[kMaxShFaces];
 uniform float uShInvBand;
 uniform vec3 uShConstant[16];  // directional + environment + ambient L_i, windowed
 uniform float uShWindow[16];
+// sh-local's near shadow (render/sh_shading.h ShLocalShader): per directional light its
+// direction and coefficients (uShConstant sums them), uShConstant without them, the spacing the
+// field's interpolation blends (a texture beside the coefficients), the kept half-spaces.
+uniform bool uShNear;
+uniform sampler3D uShSpacing;
+uniform vec3 uShSpread[16];
+uniform int uShDirCount;
+uniform vec3 uShDirToward[kMaxLights];
+uniform vec3 uShDirCoeff[kMaxLights * 16];
+uniform float uShNearFactor, uShH;
+uniform int uShCutCount;
+uniform vec3 uShCutPoint[kMaxShFaces];
+uniform vec3 uShCutNormal[kMaxShFaces];
 uniform int uShPointCount;
 uniform vec3 uShPointPosition[kMaxShPoints];
 uniform vec3 uShPointIntensity[kMaxShPoints];
@@ -294,14 +307,108 @@ float meanScatterDepth(float tau, float dt) {
     return dt * (1.0 / tau - 1.0 / (exp(tau) - 1.0));
 }
 
+// The field's coefficients at texture coordinate tc.
+void shField(vec3 tc, out float v[16]) {
+    const int textures = (uShCount + 3) / 4;
+    for (int t = 0; t < textures; ++t) {
+        const vec4 c = texture(uShField[t], tc);
+        v[4 * t] = c.x, v[4 * t + 1] = c.y, v[4 * t + 2] = c.z, v[4 * t + 3] = c.w;
+    }
+}
+
+// TfTable::meanExtinction: mean σt over values varying linearly from sf to sb.
+float meanSigma(float sf, float sb) {
+    if (!(abs(sb - sf) * uTfInvCell > kPointSampleFraction)) return midpointSegment(sf, sb).sigma;
+    const vec4 d = difference(cumulativeAt(sf, 0, 2, 3), cumulativeAt(sb, 0, 2, 3));
+    return max(d.x / (sb - sf), 0.0);
+}
+
+// visibility::nearTransmittance: from voxel p along world unit vector w over lenMm (clipped at
+// the volume's box), pre-integrated in equal sub-steps of at most half a voxel.
+float nearTransmittance(vec3 p, vec3 w, float lenMm) {
+    const vec3 d = uWorldToIndex * w;  // index units per mm
+    const float largest = max(abs(d.x), max(abs(d.y), abs(d.z)));
+    float exitT = 1e30;
+    for (int a = 0; a < 3; ++a) {
+        if (abs(d[a]) <= 1e-9 * largest) continue;
+        exitT = min(exitT, ((d[a] > 0.0 ? uDims[a] - 1.0 : 0.0) - p[a]) / d[a]);
+    }
+    const float len = min(lenMm, max(exitT, 0.0));
+    if (!(len > 0.0)) return 1.0;
+    const int n = max(1, int(ceil(len / (0.5 * uShH))));
+    const float dt = len / float(n);
+    float s0 = valueAt(p), tau = 0.0;
+    for (int k = 1; k <= n; ++k) {
+        const float s1 = valueAt(p + (float(k) * dt) * d);
+        tau += meanSigma(s0, s1) * dt;
+        s0 = s1;
+    }
+    return exp(-tau);
+}
+
+// ShLocalShader's stretch toward a light: ℓ, shortened to the light and to the kept region.
+float nearLength(vec3 x, vec3 w, float ellMm, float maxMm) {
+    float len = min(ellMm, maxMm);
+    for (int f = 0; f < uShCutCount; ++f) {
+        const float along = dot(w, uShCutNormal[f]);
+        if (along < 0.0) len = min(len, max(dot(x - uShCutPoint[f], uShCutNormal[f]), 0.0) / -along);
+    }
+    return len;
+}
+
+// ShLocalShader::inScattered where the field is coarse: each delta light's term the smaller of
+// the plain product and the traced near shadow times the field at the stretch's end.
+vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
+    const vec3 p = uWorldToIndex * (x - uOrigin);
+    vec3 sum = vec3(0.0);
+    for (int i = 0; i < uShCount; ++i) sum += uShSpread[i] * v[i];
+    float vt[16];
+    for (int d = 0; d < uShDirCount; ++d) {
+        const vec3 w = uShDirToward[d];
+        const float len = nearLength(x, w, ellMm, 1e30);
+        const float T = nearTransmittance(p, w, len);
+        shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
+        vec3 s = vec3(0.0), plain = vec3(0.0);
+        for (int i = 0; i < uShCount; ++i) {
+            s += uShDirCoeff[16 * d + i] * vt[i];
+            plain += uShDirCoeff[16 * d + i] * v[i];
+        }
+        sum += min(plain, T * s);
+    }
+    for (int k = 0; k < uShPointCount; ++k) {
+        const vec3 dd = uShPointPosition[k] - x;
+        const float dist = length(dd);
+        const float r = max(dist, uShPointMinDistance[k]);
+        const vec3 e = uShPointIntensity[k] / (r * r);
+        const float directional = min(1.0, dist / uShPointMinDistance[k]);
+        if (directional > 0.0) {
+            const vec3 w = dd / dist;
+            float y[16];
+            shBasis(w, uShCount, y);
+            const float len = nearLength(x, w, ellMm, dist);
+            const float T = nearTransmittance(p, w, len);
+            shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
+            float s = 0.0, plain = 0.0;
+            for (int i = 0; i < uShCount; ++i) {
+                s += uShWindow[i] * y[i] * vt[i];
+                plain += uShWindow[i] * y[i] * v[i];
+            }
+            sum += (directional * min(plain, T * s)) * e;
+        }
+        sum += ((1.0 - directional) * kInvSqrt4Pi * v[0]) * e;
+    }
+    return max(sum * kInv4Pi, vec3(0.0));
+}
+
 // ShVisibilityShader / ShCutFaceShader::scatter at world point x: 1/(4π) Σ L_i V_i, clamped at 0.
 vec3 shShade(vec3 x) {
     const vec3 tc = (uWorldToIndex * (x - uOrigin)) * uShTexScale + uShTexOffset;
     float v[16];
     const int textures = (uShCount + 3) / 4;
-    for (int t = 0; t < textures; ++t) {
-        const vec4 c = texture(uShField[t], tc);
-        v[4 * t] = c.x, v[4 * t + 1] = c.y, v[4 * t + 2] = c.z, v[4 * t + 3] = c.w;
+    shField(tc, v);
+    if (uShNear) {
+        const float ellMm = uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH;
+        if (ellMm > 0.0) return shShadeNear(x, v, ellMm);
     }
     if (uShFaceCount > 0) {
         // Near a face that removes matter for the light: toward the local field.

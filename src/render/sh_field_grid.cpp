@@ -6,13 +6,14 @@
 #include <algorithm>
 #include <cmath>
 #include <glm/gtc/packing.hpp>
+#include <type_traits>
 
 #include "core/error.h"
 
 namespace voxlight::render {
 
 std::size_t ShFieldGrid::bytes() const {
-    std::size_t n = 0;
+    std::size_t n = spacing.size() * sizeof(std::uint16_t);
     for (const auto& t : texels) n += t.size() * sizeof(std::uint16_t);
     return n;
 }
@@ -55,15 +56,23 @@ void fill(const Field& field, ShFieldResampling& r, const core::Progress& progre
             progress.report("SH field resampling", double(r.slicesDone) / std::max(g.res.z, 1));
     };
     report();
+    constexpr bool kLocal = std::is_same_v<Field, visibility::LocalVisibility>;
+    if (kLocal) g.spacing.resize(std::size_t(g.res.x) * g.res.y * g.res.z);
     while (!r.finished()) {
         const int end = std::min(r.slicesDone + kShFieldResampleChunk, g.res.z);
         tbb::parallel_for(r.slicesDone, end, [&](int z) {
             float v[16];
             for (int y = 0; y < g.res.y; ++y)
                 for (int x = 0; x < g.res.x; ++x) {
-                    field.sample(g.position({x, y, z}), v);
                     const std::size_t i =
                         std::size_t(x) + std::size_t(g.res.x) * (y + std::size_t(g.res.y) * z);
+                    if constexpr (kLocal) {
+                        float s = 1.f;
+                        field.sample(g.position({x, y, z}), v, &s);
+                        g.spacing[i] = glm::packHalf1x16(s);
+                    } else {
+                        field.sample(g.position({x, y, z}), v);
+                    }
                     for (int c = 0; c < g.coefficients; ++c)
                         g.texels[std::size_t(c / 4)][4 * i + std::size_t(c % 4)] =
                             glm::packHalf1x16(v[c]);

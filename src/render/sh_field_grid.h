@@ -43,6 +43,10 @@ struct ShFieldGrid {
     /// texels[t][4·(g.x + res.x·(g.y + res.y·g.z)) + c] (IEEE half floats; 0 past `coefficients`).
     std::vector<std::vector<std::uint16_t>> texels;
     int textures() const { return int(texels.size()); }
+    /// A local field's (LocalVisibility) sample spacing at each point as its interpolation blends
+    /// it (LocalVisibility::sample), half floats: sh-local's near shadow reads it
+    /// (render/sh_shading.h ShLocalShader). Empty for other fields.
+    std::vector<std::uint16_t> spacing;
     std::size_t bytes() const;
     /// Coefficient i of point g as a float (tests).
     float at(const glm::ivec3& g, int i) const;

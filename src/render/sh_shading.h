@@ -77,12 +77,16 @@ class ShLights {
     /// w_l of coefficient i (1 without a window).
     float window(int i) const { return window_[i]; }
     const std::vector<Point>& points() const { return points_; }
-
-  private:
     struct Directional {
         glm::vec3 toward;  ///< world unit vector toward the light
-        glm::vec3 c[16];   ///< its windowed L_i (its share of constant_)
+        glm::vec3 c[16];   ///< its windowed L_i (its share of constants())
     };
+    /// The directional lights one by one, and constants() without them (environment + ambient):
+    /// what shadeToward reads (the viewer's shader repeats it).
+    const std::vector<Directional>& directionals() const { return directional_; }
+    const glm::vec3* spread() const { return spread_; }
+
+  private:
     template <class Toward>
     glm::vec3 addPoints(glm::vec3 sum, const glm::vec3& x, const float* v, Toward&& toward) const;
     int coefficients_ = 0;
@@ -214,7 +218,7 @@ inline constexpr float kNearShadowSpacings = 0.5f;
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
 /// only darkens. Clip planes and a crop box that remove matter for the light end the trace where
 /// it leaves the kept region (the field read there is then the clip-aware one). Off unless the method param `near_shadow` is
-/// true (the viewer's GLSL path does not trace it yet and declines such scenes). Environment
+/// true; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would
 /// cost a field's rays per sample).
 class ShLocalShader {

@@ -25,7 +25,7 @@ namespace {
 /// Rows of the TF texture (shaders/raycast.frag says what each holds).
 constexpr int kTfRows = 8;
 /// First texture units of the SH field's and sh-global's local field's textures (4 each).
-constexpr int kShFieldUnit = 4, kShLocalUnit = 8;
+constexpr int kShFieldUnit = 4, kShLocalUnit = 8, kShSpacingUnit = 12;
 /// Texels per glTextureSubImage3D call of a sliced upload (GlRayCaster::upload), or one whole
 /// z-slice where a slice holds more: 128 kB of a 16-bit volume, 512 kB of an RGBA16F field (a 512²
 /// CT slice: 512 kB) — well under a millisecond to copy, so a UI frame's budget is overrun by
@@ -347,7 +347,17 @@ void GlRayCaster::uploadJitter(int width, int height, bool jitter, std::uint64_t
 }
 
 GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid,
-                                            unsigned out[4], double seconds, std::string& why) {
+                                            unsigned out[4], double seconds, std::string& why,
+                                            unsigned* spacing) {
+    // Texture t < grid->textures(): coefficients 4t…4t+3 (RGBA16F); then, when the grid has
+    // one, its spacing (R16F).
+    const int coefficientTextures = grid->textures();
+    const int total = coefficientTextures + (grid->spacing.empty() ? 0 : 1);
+    const auto handOut = [&](const ShUpload& up) {
+        std::fill_n(out, 4, 0u);
+        std::copy_n(up.textures, coefficientTextures, out);
+        if (spacing) *spacing = total > coefficientTextures ? up.textures[coefficientTextures] : 0u;
+    };
     std::size_t at = shUploaded_.size();
     for (std::size_t i = 0; i < shUploaded_.size(); ++i)
         if (shUploaded_[i].grid == grid) at = i;
@@ -358,11 +368,12 @@ GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::
         ShUpload up;
         up.grid = grid;
         const glm::ivec3 n = grid->res;
-        for (int t = 0; t < grid->textures(); ++t) {
+        for (int t = 0; t < total; ++t) {
             GLuint tex = 0;
             glCreateTextures(GL_TEXTURE_3D, 1, &tex);
             up.textures[t] = tex;
-            glTextureStorage3D(tex, 1, GL_RGBA16F, n.x, n.y, n.z);
+            glTextureStorage3D(tex, 1, t < coefficientTextures ? GL_RGBA16F : GL_R16F, n.x, n.y,
+                               n.z);
             glTextureParameteri(tex, GL_TEXTURE_MIN_FILTER, GL_LINEAR);
             glTextureParameteri(tex, GL_TEXTURE_MAG_FILTER, GL_LINEAR);
             for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
@@ -381,33 +392,40 @@ GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::
                 if (t) glDeleteTextures(1, &t);
             shUploaded_.erase(shUploaded_.begin());
             std::fill_n(out, 4, 0u);
+            if (spacing) *spacing = 0u;
             return Upload::Failed;
         }
         // As for the volume: a budgeted call allocates the storage only.
         if (std::isfinite(seconds)) {
-            std::copy_n(up.textures, 4, out);
+            handOut(up);
             return Upload::Progress;
         }
     }
     ShUpload& up = shUploaded_.front();
-    std::copy_n(up.textures, 4, out);
-    const int textures = grid->textures();
-    if (up.texture >= textures) return Upload::Ready;
+    handOut(up);
+    if (up.texture >= total) return Upload::Ready;
     // Slabs of z-slices of one texture at a time, until `seconds` are spent.
     core::Stopwatch sw;
     const glm::ivec3 n = grid->res;
     const std::size_t slice = std::size_t(n.x) * std::size_t(n.y);
     const int slab = int(std::clamp(kUploadSlabTexels / slice, std::size_t(1), std::size_t(n.z)));
-    glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
-    while (up.texture < textures) {
+    while (up.texture < total) {
         const int z1 = std::min(n.z, up.z + slab);
-        glTextureSubImage3D(
-            up.textures[up.texture], 0, 0, 0, up.z, n.x, n.y, z1 - up.z, GL_RGBA, GL_HALF_FLOAT,
-            grid->texels[std::size_t(up.texture)].data() + 4 * slice * std::size_t(up.z));
+        if (up.texture < coefficientTextures) {
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+            glTextureSubImage3D(
+                up.textures[up.texture], 0, 0, 0, up.z, n.x, n.y, z1 - up.z, GL_RGBA, GL_HALF_FLOAT,
+                grid->texels[std::size_t(up.texture)].data() + 4 * slice * std::size_t(up.z));
+        } else {
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 2);  // rows of n.x half floats
+            glTextureSubImage3D(up.textures[up.texture], 0, 0, 0, up.z, n.x, n.y, z1 - up.z, GL_RED,
+                                GL_HALF_FLOAT, grid->spacing.data() + slice * std::size_t(up.z));
+            glPixelStorei(GL_UNPACK_ALIGNMENT, 4);
+        }
         up.z = z1;
         if (std::isfinite(seconds)) glFinish();
         if (up.z >= n.z) ++up.texture, up.z = 0;
-        if (up.texture < textures && sw.seconds() >= seconds) break;
+        if (up.texture < total && sw.seconds() >= seconds) break;
     }
     if (const std::string e = glErrorText(); !e.empty()) {
         why = "uploading the SH visibility field (" + std::to_string(n.x) + "x" +
@@ -417,9 +435,10 @@ GlRayCaster::Upload GlRayCaster::shTextures(const std::shared_ptr<const render::
             if (t) glDeleteTextures(1, &t);
         shUploaded_.erase(shUploaded_.begin());
         std::fill_n(out, 4, 0u);
+        if (spacing) *spacing = 0u;
         return Upload::Failed;
     }
-    if (up.texture >= textures) ++shUploads_;
+    if (up.texture >= total) ++shUploads_;
     return Upload::Progress;
 }
 
@@ -522,7 +541,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
     const std::vector<core::HalfSpace> faces = setup.sh.global && setup.sh.cutBandMm > 0.f
                                                    ? render::lightCutFaces(o)
                                                    : std::vector<core::HalfSpace>{};
-    unsigned shField[4] = {0, 0, 0, 0}, shLocal[4] = {0, 0, 0, 0};
+    unsigned shField[4] = {0, 0, 0, 0}, shLocal[4] = {0, 0, 0, 0}, shSpacing = 0;
     const bool shBlend = shMode && blendsLocalField(setup);
     if (shMode) {
         if (!sh.field || (shBlend && !sh.local)) {
@@ -534,7 +553,8 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
             why = "sh-global's local and global fields were resampled on different grids";
             return false;
         }
-        if (shTextures(sh.field, shField, kUploadAll, why) == Upload::Failed) return false;
+        if (shTextures(sh.field, shField, kUploadAll, why, &shSpacing) == Upload::Failed)
+            return false;
         if (shBlend && shTextures(sh.local, shLocal, kUploadAll, why) == Upload::Failed)
             return false;
     }
@@ -647,6 +667,30 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
             u.v3(u.indexed("uShFaceNormal", f).c_str(), glm::vec3(faces[std::size_t(f)].normal));
         }
         u.f("uShInvBand", setup.sh.cutBandMm > 0.f ? 1.f / setup.sh.cutBandMm : 0.f);
+        // sh-local's near shadow (render/sh_shading.h ShLocalShader): the directional lights one
+        // by one, the rest summed, the spacing the field's interpolation blends, the cut faces.
+        const bool nearShadow = o.shNearShadow && setup.sh.local && !setup.sh.global &&
+                                !setup.sh.hierarchical && shSpacing != 0;
+        u.i("uShNear", nearShadow ? 1 : 0);
+        if (nearShadow) {
+            for (int i = 0; i < shl.coefficients(); ++i)
+                u.v3(u.indexed("uShSpread", i).c_str(), shl.spread()[i]);
+            const auto& dirs = shl.directionals();
+            u.i("uShDirCount", int(dirs.size()));
+            for (int d = 0; d < int(dirs.size()); ++d) {
+                u.v3(u.indexed("uShDirToward", d).c_str(), dirs[std::size_t(d)].toward);
+                for (int i = 0; i < shl.coefficients(); ++i)
+                    u.v3(u.indexed("uShDirCoeff", 16 * d + i).c_str(), dirs[std::size_t(d)].c[i]);
+            }
+            u.f("uShNearFactor", render::kNearShadowSpacings);
+            u.f("uShH", float(core::minComponent(setup.volume->geometry().spacing)));
+            const std::vector<core::HalfSpace> cuts = render::lightCutFaces(o);
+            u.i("uShCutCount", int(cuts.size()));
+            for (int f = 0; f < int(cuts.size()); ++f) {
+                u.v3(u.indexed("uShCutPoint", f).c_str(), glm::vec3(cuts[std::size_t(f)].point));
+                u.v3(u.indexed("uShCutNormal", f).c_str(), glm::vec3(cuts[std::size_t(f)].normal));
+            }
+        }
     }
     if (o.mode == render::Mode::Gradient) {
         // The lights as the CPU shader flattens them (a scene without lights: the headlight).
@@ -680,6 +724,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
         u.i(u.indexed("uShField", t).c_str(), kShFieldUnit + t);
         u.i(u.indexed("uShLocal", t).c_str(), kShLocalUnit + t);
     }
+    u.i("uShSpacing", kShSpacingUnit);
 
     // Save the state ImGui's renderer relies on that we change.
     GLint prevFbo = 0, prevProgram = 0, prevVao = 0, prevViewport[4] = {0, 0, 0, 0};
@@ -712,6 +757,10 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
         glBindTextureUnit(GLuint(kShFieldUnit + t), f);
         glBindTextureUnit(GLuint(kShLocalUnit + t), l);
     }
+    // The spacing's unit holds a 3D texture too (never read without the near shadow).
+    glBindTextureUnit(GLuint(kShSpacingUnit), shSpacing    ? shSpacing
+                                              : shField[0] ? shField[0]
+                                                           : volumeTex_);
     if (rect.w > 0 && rect.h > 0) glDrawArrays(GL_TRIANGLES, 0, 3);
 
     // Pass 2: film → display bytes (the whole film).
@@ -737,6 +786,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
         glBindTextureUnit(GLuint(kShFieldUnit + t), 0);
         glBindTextureUnit(GLuint(kShLocalUnit + t), 0);
     }
+    glBindTextureUnit(GLuint(kShSpacingUnit), 0);
     glBindFramebuffer(GL_DRAW_FRAMEBUFFER, GLuint(prevFbo));
     glUseProgram(GLuint(prevProgram));
     glBindVertexArray(GLuint(prevVao));

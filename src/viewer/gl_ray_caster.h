@@ -109,8 +109,9 @@ class GlRayCaster {
     bool ensureDisplay(int width, int height, std::string& why);
     /// The textures of `grid` into out[0..4) (0 past its own), made the most recently used;
     /// uploads what is left of them for about `seconds`.
+    /// `spacing`: the grid's spacing texture (ShFieldGrid::spacing; 0 without one).
     Upload shTextures(const std::shared_ptr<const render::ShFieldGrid>& grid, unsigned out[4],
-                      double seconds, std::string& why);
+                      double seconds, std::string& why, unsigned* spacing = nullptr);
     void release();
 
     std::string renderer_;
@@ -128,7 +129,7 @@ class GlRayCaster {
     float valueScale_ = 1.f, valueOffset_ = 0.f;
     struct ShUpload {
         std::shared_ptr<const render::ShFieldGrid> grid;
-        unsigned textures[4] = {0, 0, 0, 0};
+        unsigned textures[5] = {0, 0, 0, 0, 0};  ///< the coefficients', then the spacing's
         int texture = 0, z = 0;  ///< the upload's progress: textures before `texture` are full
     };
     std::vector<ShUpload> shUploaded_;  ///< most recently used first

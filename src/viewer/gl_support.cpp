@@ -38,11 +38,16 @@ std::string glUnsupportedReason(const std::string& method, const pipeline::Caste
         const pipeline::CasterSetup::ShFields& f = setup->sh;
         if (!f.local && !f.global && !f.hierarchical)
             return "method '" + method + "': no SH visibility field was prepared";
-        if (o.shNearShadow)
-            return "sh-local with near_shadow: the exact near shadow is traced on the CPU only";
-        int points = 0;
+        int points = 0, directional = 0;
         for (const auto& l : o.lights)
-            if (dynamic_cast<const lights::PointLight*>(l.get())) ++points;
+            if (dynamic_cast<const lights::PointLight*>(l.get()))
+                ++points;
+            else if (dynamic_cast<const lights::DirectionalLight*>(l.get()))
+                ++directional;
+        if (o.shNearShadow && directional > kMaxGlLights)
+            return std::to_string(directional) +
+                   " directional lights with near_shadow: the GLSL SH shading traces at most " +
+                   std::to_string(kMaxGlLights);
         if (points > kMaxGlShPointLights)
             return std::to_string(points) + " point lights: the GLSL SH shading holds at most " +
                    std::to_string(kMaxGlShPointLights);

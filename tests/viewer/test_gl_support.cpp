@@ -50,6 +50,7 @@ TEST(GlSupport, ShVisibilityMethodsAreRenderedOnTheGpu) {
     EXPECT_EQ(reasonFor(torsoDoc("sh-local")), "");
     EXPECT_EQ(reasonFor(torsoDoc("sh-global")), "");
     EXPECT_EQ(reasonFor(torsoDoc("ritschel")), "");
+    EXPECT_EQ(reasonFor(torsoDoc({{"name", "sh-local"}, {"params", {{"near_shadow", true}}}})), "");
     // Directional and environment lights are summed on the CPU: any number of them.
     json many = torsoDoc("sh-global");
     many["lights"] = json::array();
@@ -76,8 +77,12 @@ TEST(GlSupport, OtherScenesSayWhyTheCpuDrawsThem) {
     EXPECT_NE(reasonFor(coarse).find("a step over one voxel"), std::string::npos);
     json forward = torsoDoc({{"name", "gradient"}, {"params", {{"central_differences", false}}}});
     EXPECT_NE(reasonFor(forward).find("forward-difference"), std::string::npos);
+    // sh-local's near shadow traces each directional light on its own: at most 8.
     json near = torsoDoc({{"name", "sh-local"}, {"params", {{"near_shadow", true}}}});
-    EXPECT_NE(reasonFor(near).find("near_shadow"), std::string::npos);
+    near["lights"] = json::array();
+    for (int i = 0; i <= viewer::kMaxGlLights; ++i)
+        near["lights"].push_back({{"type", "directional"}, {"direction", {0.1 * i, 1, 0}}});
+    EXPECT_NE(reasonFor(near).find("9 directional lights with near_shadow"), std::string::npos);
     json shPoints = torsoDoc("sh-local");
     shPoints["lights"] = json::array();
     for (int i = 0; i <= viewer::kMaxGlShPointLights; ++i)

@@ -450,10 +450,11 @@ GlRun runGlAgainstCpu(const test::TempDir& tmp, const std::string& display) {
     EXPECT_EQ(cpu.code, 0) << cpu.err;
     // The clip-plane gizmo is drawn over the image: hidden, as G does, for the comparison.
     std::ofstream(tmp / "steps.json") << R"([{"gizmo": false}])";
-    const Result view = runShell(
-        display + VOXLIGHT_BINARY + " view -q --log --renderer gpu " + quoted(tmp / "scene.json") +
-            " --script " + quoted(tmp / "steps.json") + " --screenshot " + quoted(tmp / "shot.png"),
-        tmp.path());
+    const Result view =
+        runShell(display + VOXLIGHT_BINARY + " view -q --log --renderer gpu --gl-slice-ms 0 " +
+                     quoted(tmp / "scene.json") + " --script " + quoted(tmp / "steps.json") +
+                     " --screenshot " + quoted(tmp / "shot.png"),
+                 tmp.path());
     out.err = view.err;
     if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos) {
         out.skipped = true;
@@ -547,6 +548,16 @@ TEST(ViewCli, GlslShShadingAgreesWithTheCpuRayCaster) {
                        "window": "hanning", "ambient": 0.2}},
             "camera": {"azimuth": 120, "elevation": 10},
             "lights": [{"type": "directional", "direction": [-0.5, 0.2, -1], "intensity": 12}],
+            "image": {"width": 240, "height": 200}})",
+        // sh-local's near shadow where the field is coarse (1:16), under a directional and a
+        // point light, traced only inside what a plane keeps for the light.
+        R"({"volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-bone",
+            "method": {"name": "sh-local", "params": {"data_reduction": 16, "near_shadow": true}},
+            "camera": {"azimuth": 30, "elevation": 15},
+            "lights": [{"type": "directional", "direction": [-0.4, 0.6, 0.7], "intensity": 9},
+                       {"type": "point", "position": [-150, -250, 150], "intensity": 400000}],
+            "clip_planes": [{"point": [0, 20, 0], "normal": [0, 1, 0],
+                             "shadows_from_removed": false}],
             "image": {"width": 240, "height": 200}})"};
     expectGlslAgreesWithCpu(scenes, *display, "GLSL SH");
 }
