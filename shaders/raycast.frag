@@ -346,9 +346,15 @@ float nearTransmittance(vec3 p, vec3 w, float lenMm) {
     return exp(-tau);
 }
 
-// ShLocalShader's stretch toward a light: ℓ, shortened to the light and to the kept region.
-float nearLength(vec3 x, vec3 w, float ellMm, float maxMm) {
+// ShLocalShader's stretch toward a light: ℓ, shortened to the light, the volume's box and the
+// kept region.
+float nearLength(vec3 x, vec3 p, vec3 w, float ellMm, float maxMm) {
     float len = min(ellMm, maxMm);
+    const vec3 d = uWorldToIndex * w;
+    for (int a = 0; a < 3; ++a) {
+        if (d[a] > 0.0) len = min(len, max((uDims[a] - 1.0 - p[a]) / d[a], 0.0));
+        if (d[a] < 0.0) len = min(len, max(-p[a] / d[a], 0.0));
+    }
     for (int f = 0; f < uShCutCount; ++f) {
         const float along = dot(w, uShCutNormal[f]);
         if (along < 0.0) len = min(len, max(dot(x - uShCutPoint[f], uShCutNormal[f]), 0.0) / -along);
@@ -365,7 +371,7 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
     float vt[16];
     for (int d = 0; d < uShDirCount; ++d) {
         const vec3 w = uShDirToward[d];
-        const float len = nearLength(x, w, ellMm, 1e30);
+        const float len = nearLength(x, p, w, ellMm, 1e30);
         const float T = nearTransmittance(p, w, len);
         shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
         vec3 s = vec3(0.0), plain = vec3(0.0);
@@ -385,7 +391,7 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
             const vec3 w = dd / dist;
             float y[16];
             shBasis(w, uShCount, y);
-            const float len = nearLength(x, w, ellMm, dist);
+            const float len = nearLength(x, p, w, ellMm, dist);
             const float T = nearTransmittance(p, w, len);
             shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
             float s = 0.0, plain = 0.0;

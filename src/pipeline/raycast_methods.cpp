@@ -12,7 +12,7 @@
 //   mip, minip:           (window from the TF)
 //   sh-local:             rays (32), coefficients (1/4/9/16; 4), radius (voxels; 16), and the LOD
 //                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
-//                         (MB of visibility coefficients; not both); near_shadow (false: each
+//                         (MB of visibility coefficients; not both); near_shadow (true: each
 //                         directional/point light's first ½·(s − 1) voxels traced exactly where
 //                         the field is stored at spacing s — render/sh_shading.h ShLocalShader)
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
@@ -454,7 +454,7 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     // The SH methods' ambient sky (render/sh_shading.h; registered since it was added, read only
     // from 5 December: before, `ambient` was accepted and silently ignored).
     if (isSh(kind)) o.shAmbient = float(p.number("ambient", 0.0, 0.0, 1e6));
-    if (kind == Kind::ShLocal) o.shNearShadow = p.boolean("near_shadow", false);
+    if (kind == Kind::ShLocal) o.shNearShadow = p.boolean("near_shadow", true);
     if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
         o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)

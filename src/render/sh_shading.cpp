@@ -136,7 +136,15 @@ glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
     return lights_.shadeToward(
         x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
             float len = std::min(ellMm, maxMm);
-            for (const core::HalfSpace& f : cutFaces_) {  // leaving the kept region: stop there
+            // Leaving the volume's box (nothing beyond it) or the kept region: stop there, and
+            // read the field there.
+            const glm::vec3 d = worldToIndex_ * toward;
+            const glm::vec3 top(field_->grid().dims() - 1);
+            for (int a = 0; a < 3; ++a) {
+                if (d[a] > 0.f) len = std::min(len, std::max((top[a] - p[a]) / d[a], 0.f));
+                if (d[a] < 0.f) len = std::min(len, std::max(-p[a] / d[a], 0.f));
+            }
+            for (const core::HalfSpace& f : cutFaces_) {
                 const float along = float(glm::dot(glm::dvec3(toward), f.normal));
                 if (along < 0.f)
                     len = std::min(len, std::max(float(f.distance(glm::dvec3(x))), 0.f) / -along);

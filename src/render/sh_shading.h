@@ -217,8 +217,8 @@ inline constexpr float kNearShadowSpacings = 0.5f;
 /// reconstruction of the open hemisphere above a lit face overshoots (to 1.25 toward its pole),
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
 /// only darkens. Clip planes and a crop box that remove matter for the light end the trace where
-/// it leaves the kept region (the field read there is then the clip-aware one). Off unless the method param `near_shadow` is
-/// true; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
+/// it leaves the kept region (the field read there is then the clip-aware one). On unless the method param `near_shadow` is
+/// false; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would
 /// cost a field's rays per sample).
 class ShLocalShader {
