@@ -13,7 +13,6 @@ namespace voxlight::render {
 
 namespace {
 constexpr float kInv4Pi = float(1.0 / (4.0 * std::numbers::pi));
-const float kInvSqrt4Pi = float(1.0 / std::sqrt(4.0 * std::numbers::pi));
 }  // namespace
 
 double ringingBound(int coefficients, std::span<const double> window) {
@@ -130,7 +129,10 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
 glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
     const glm::vec3 p = worldToIndex_ * (x - origin_);
     float v[16], s = 1.f;
-    field_->sample(p, v, &s);
+    if (near_)
+        field_->sample(p, v, &s);  // the blended spacing only when it is used
+    else
+        field_->sample(p, v);
     const float ellMm = kNearShadowSpacings * (s - 1.f) * h_;
     if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
     return lights_.shadeToward(
