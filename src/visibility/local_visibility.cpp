@@ -905,7 +905,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         std::ptrdiff_t delta = 0;  ///< voxel index change per lattice step
         std::vector<Stencil> stencil[2];  ///< per lattice: sub-steps 0…q (q: the next point)
         /// A ray's end, R past its point: endSub whole sub-steps and endFrac of one more, and the
-        /// stencil of the value there (the same for every point of the lattice).
+        /// stencil of the value there (the same for every point of the lattice; read only where
+        /// that sub-step was not walked, before the box face).
         std::size_t endSub[2] = {0, 0};
         float endFrac[2] = {0.f, 0.f};
         Stencil end[2];
@@ -913,7 +914,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         /// end lies backSub sub-steps back and backFrac of one forward again.
         std::size_t backSub[2] = {0, 0};
         float backFrac[2] = {0.f, 0.f};
-        Stencil back[2];
         int reverse = -1;  ///< index of −v
     };
     auto makeStencil = [&](const glm::dvec3& rel) {
@@ -959,7 +959,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             d.end[half] = makeStencil(glm::dvec3(half ? 0.5 : 0.0) + glm::dvec3(v) * d.reach);
             d.backSub[half] = std::size_t(std::ceil(subs));
             d.backFrac[half] = float(std::ceil(subs) - subs);
-            d.back[half] = makeStencil(glm::dvec3(half ? 0.5 : 0.0) - glm::dvec3(v) * d.reach);
         }
         d.reverse = int(std::find(steps.begin(), steps.end(), -v) - steps.begin());
         VL_CHECK(d.reverse < int(steps.size()));
@@ -1449,8 +1448,13 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         std::size_t(tu - tStart) * std::size_t(q);
                                     const std::ptrdiff_t baseU = base0 + tu * d.delta;
                                     // Each ray's end R from the point, in sub-steps: the whole
-                                    // sub-steps up to it, then the partial one pre-integrated to
-                                    // the end's value (as the march's shortened last step).
+                                    // sub-steps up to it, then the fraction f of the walked
+                                    // sub-step it ends in (P linear within a sub-step; header
+                                    // comment) — or, in a piece the walk did not take (before a
+                                    // box face), pre-integrated to the end's value.
+                                    auto fractionOf = [&](std::size_t e0, float f) {
+                                        return double(f) * depthBetween(P[e0], P[e0 + 1]);
+                                    };
                                     double tau, tauBack;
                                     {
                                         const std::size_t e0 = mu + d.endSub[lat];
@@ -1468,7 +1472,9 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         } else {
                                             tau = depthBetween(P[mu], P[e0]);
                                             if (f > 0.f)
-                                                tau += partial(e0, f, &d.end[lat], baseU, 1.f);
+                                                tau += e0 < lastSub ? fractionOf(e0, f)
+                                                                    : partial(e0, f, &d.end[lat],
+                                                                              baseU, 1.f);
                                         }
                                     }
                                     {
@@ -1484,8 +1490,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         } else {
                                             const std::size_t e0 = mu - d.backSub[lat];
                                             tauBack = depthBetween(P[e0], P[mu]);
-                                            if (f > 0.f)
-                                                tauBack -= partial(e0, f, &d.back[lat], baseU, 1.f);
+                                            if (f > 0.f) tauBack -= fractionOf(e0, f);
                                         }
                                     }
                                     const double T =
