@@ -92,7 +92,7 @@ uniform vec3 uLightValue[kMaxLights];
 uniform float uLightMinDistance[kMaxLights];
 uniform vec3 uLightEmitterNormal[kMaxLights];
 
-// SH visibility shading (uMode 2; render/sh_shading.h ShLights::shade, ShCutFaceShader): the
+// SH visibility shading (uMode 2; render/sh_shading.h ShLights::shade, ShGlobalShader): the
 // field resampled on a node-centred grid (render/sh_field_grid.h), coefficients
 // 4t…4t+3 in uShField[t]; sh-global's local field in uShLocal[t] for the cut faces' band.
 const int kMaxShTextures = 4;
@@ -362,9 +362,20 @@ float nearLength(vec3 x, vec3 p, vec3 w, float ellMm, float maxMm) {
     return len;
 }
 
-// ShLocalShader::inScattered where the field is coarse: each delta light's term the smaller of
-// the plain product and the traced near shadow times the field at the stretch's end.
-vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
+// ShGlobalShader near a face that removes matter for the light: v toward the local field by
+// 1 − w (w = 1 a band away from every face).
+void shBlendLocal(vec3 tc, float w, inout float v[16]) {
+    const int textures = (uShCount + 3) / 4;
+    for (int t = 0; t < textures; ++t) {
+        const vec4 l = texture(uShLocal[t], tc);
+        for (int c = 0; c < 4; ++c) v[4 * t + c] = w * v[4 * t + c] + (1.0 - w) * l[c];
+    }
+}
+
+// ShLocalShader::inScattered / ShGlobalShader::scatter where the local field is coarse: each
+// delta light's term the smaller of the plain product and the traced near shadow times the field
+// at the stretch's end (blended toward the local field by the sample's w, as v is).
+vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
     const vec3 p = uWorldToIndex * (x - uOrigin);
     vec3 sum = vec3(0.0);
     for (int i = 0; i < uShCount; ++i) sum += uShSpread[i] * v[i];
@@ -373,7 +384,9 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
         const vec3 w = uShDirToward[d];
         const float len = nearLength(x, p, w, ellMm, 1e30);
         const float T = nearTransmittance(p, w, len);
-        shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
+        const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
+        shField(endTc, vt);
+        if (blend < 1.0) shBlendLocal(endTc, blend, vt);
         vec3 s = vec3(0.0), plain = vec3(0.0);
         for (int i = 0; i < uShCount; ++i) {
             s += uShDirCoeff[16 * d + i] * vt[i];
@@ -393,7 +406,9 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
             shBasis(w, uShCount, y);
             const float len = nearLength(x, p, w, ellMm, dist);
             const float T = nearTransmittance(p, w, len);
-            shField((p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset, vt);
+            const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
+            shField(endTc, vt);
+            if (blend < 1.0) shBlendLocal(endTc, blend, vt);
             float s = 0.0, plain = 0.0;
             for (int i = 0; i < uShCount; ++i) {
                 s += uShWindow[i] * y[i] * vt[i];
@@ -406,27 +421,23 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm) {
     return max(sum * kInv4Pi, vec3(0.0));
 }
 
-// ShVisibilityShader / ShCutFaceShader::scatter at world point x: 1/(4π) Σ L_i V_i, clamped at 0.
+// ShVisibilityShader / ShGlobalShader::scatter at world point x: 1/(4π) Σ L_i V_i, clamped at 0.
 vec3 shShade(vec3 x) {
     const vec3 tc = (uWorldToIndex * (x - uOrigin)) * uShTexScale + uShTexOffset;
     float v[16];
-    const int textures = (uShCount + 3) / 4;
     shField(tc, v);
-    if (uShNear) {
-        const float ellMm = uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH;
-        if (ellMm > 0.0) return shShadeNear(x, v, ellMm);
-    }
+    float w = 1.0;
     if (uShFaceCount > 0) {
         // Near a face that removes matter for the light: toward the local field.
         float d = 1e30;
         for (int f = 0; f < uShFaceCount; ++f)
             d = min(d, dot(x - uShFacePoint[f], uShFaceNormal[f]));
-        const float w = clamp(d * uShInvBand, 0.0, 1.0);
-        if (w < 1.0)
-            for (int t = 0; t < textures; ++t) {
-                const vec4 l = texture(uShLocal[t], tc);
-                for (int c = 0; c < 4; ++c) v[4 * t + c] = w * v[4 * t + c] + (1.0 - w) * l[c];
-            }
+        w = clamp(d * uShInvBand, 0.0, 1.0);
+        if (w < 1.0) shBlendLocal(tc, w, v);
+    }
+    if (uShNear) {
+        const float ellMm = uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH;
+        if (ellMm > 0.0) return shShadeNear(x, v, ellMm, w);
     }
     vec3 sum = vec3(0.0);
     for (int i = 0; i < uShCount; ++i) sum += uShConstant[i] * v[i];

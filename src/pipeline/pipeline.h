@@ -109,7 +109,7 @@ struct CasterSetup {
         std::shared_ptr<const visibility::GlobalVisibility> global;              ///< sh-global
         std::shared_ptr<const visibility::HierarchicalVisibility> hierarchical;  ///< ritschel
         /// sh-global: the local field stands in within this distance (mm) of the caster's
-        /// render::lightCutFaces (ShCutFaceShader); 0 = none.
+        /// render::lightCutFaces (ShGlobalShader); 0 = none.
         float cutBandMm = 0.f;
     } sh;
 };

@@ -20,7 +20,9 @@
 //                         sample times the far grid, default; "grid": Kronander's grid-only V^G —
 //                         visibility/global_visibility.h) and global_integration ("recursive":
 //                         one piece per grid point and direction, the rest read back from the
-//                         grid, default; "piecewise": eq. 11 along every ray). Its local stages have the same keys as
+//                         grid, default; "piecewise": eq. 11 along every ray); near_shadow
+//                         reads its near factor as sh-local's does (ShGlobalShader; with
+//                         global_near "local" only). Its local stages have the same keys as
 //                         sh-local's, so switching between the two recomputes nothing once both
 //                         have run.
 //   ritschel:             hierarchical visibility (Ritschel 2007; visibility/
@@ -54,7 +56,7 @@
 // are traced again), and sh-global's global stage then integrates that field. Both keys cover the
 // removing planes only, so a section-view plane (true), or moving one, reruns no visibility stage.
 // sh-global shades from local visibility near the faces that remove matter for the light
-// (render/sh_shading.h ShCutFaceShader, within one global grid spacing). ritschel: the same
+// (render/sh_shading.h ShGlobalShader, within one global grid spacing). ritschel: the same
 // planes add clip_hierarchical_visibility in place of hierarchical_visibility (visibility/
 // hierarchical_visibility.h: the removed matter zeroed at the opacity pyramid's base, the rays
 // traced again — they reach the whole volume, so a move of such a plane retraces the field's kept
@@ -454,7 +456,8 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     // The SH methods' ambient sky (render/sh_shading.h; registered since it was added, read only
     // from 5 December: before, `ambient` was accepted and silently ignored).
     if (isSh(kind)) o.shAmbient = float(p.number("ambient", 0.0, 0.0, 1e6));
-    if (kind == Kind::ShLocal) o.shNearShadow = p.boolean("near_shadow", true);
+    if (kind == Kind::ShLocal || kind == Kind::ShGlobal)
+        o.shNearShadow = p.boolean("near_shadow", true);
     if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
         o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
@@ -2604,7 +2607,7 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb",
      "global_resolution", "global_near", "global_integration", "window", "window_strength",
-     "ambient"},
+     "ambient", "near_shadow"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",

@@ -56,8 +56,10 @@ void fill(const Field& field, ShFieldResampling& r, const core::Progress& progre
             progress.report("SH field resampling", double(r.slicesDone) / std::max(g.res.z, 1));
     };
     report();
-    constexpr bool kLocal = std::is_same_v<Field, visibility::LocalVisibility>;
-    if (kLocal) g.spacing.resize(std::size_t(g.res.x) * g.res.y * g.res.z);
+    // The local field's blended spacing, for the near shadow: sh-local's, and sh-global's where
+    // its near factor is that field (resamplesSpacing).
+    const bool withSpacing = resamplesSpacing(field);
+    if (withSpacing) g.spacing.resize(std::size_t(g.res.x) * g.res.y * g.res.z);
     while (!r.finished()) {
         const int end = std::min(r.slicesDone + kShFieldResampleChunk, g.res.z);
         tbb::parallel_for(r.slicesDone, end, [&](int z) {
@@ -66,13 +68,15 @@ void fill(const Field& field, ShFieldResampling& r, const core::Progress& progre
                 for (int x = 0; x < g.res.x; ++x) {
                     const std::size_t i =
                         std::size_t(x) + std::size_t(g.res.x) * (y + std::size_t(g.res.y) * z);
-                    if constexpr (kLocal) {
-                        float s = 1.f;
-                        field.sample(g.position({x, y, z}), v, &s);
-                        g.spacing[i] = glm::packHalf1x16(s);
-                    } else {
-                        field.sample(g.position({x, y, z}), v);
-                    }
+                    const glm::vec3 p = g.position({x, y, z});
+                    float s = 1.f;
+                    if constexpr (std::is_same_v<Field, visibility::HierarchicalVisibility>)
+                        field.sample(p, v);
+                    else if (withSpacing)
+                        field.sample(p, v, &s);
+                    else
+                        field.sample(p, v);
+                    if (withSpacing) g.spacing[i] = glm::packHalf1x16(s);
                     for (int c = 0; c < g.coefficients; ++c)
                         g.texels[std::size_t(c / 4)][4 * i + std::size_t(c % 4)] =
                             glm::packHalf1x16(v[c]);

@@ -44,8 +44,9 @@ struct ShFieldGrid {
     std::vector<std::vector<std::uint16_t>> texels;
     int textures() const { return int(texels.size()); }
     /// A local field's (LocalVisibility) sample spacing at each point as its interpolation blends
-    /// it (LocalVisibility::sample), half floats: sh-local's near shadow reads it
-    /// (render/sh_shading.h ShLocalShader). Empty for other fields.
+    /// it (LocalVisibility::sample), half floats: the near shadow reads it (render/sh_shading.h
+    /// ShLocalShader, ShGlobalShader). Also for a global field with the near/far split (its local
+    /// field's); empty for other fields.
     std::vector<std::uint16_t> spacing;
     std::size_t bytes() const;
     /// Coefficient i of point g as a float (tests).
@@ -58,6 +59,14 @@ struct ShFieldGrid {
 glm::ivec3 shFieldGridResolution(const glm::ivec3& dims, int coefficients,
                                  std::size_t budgetBytes = kShFieldGridBudgetBytes,
                                  int maxPerAxis = 0);
+/// Whether a resampling of the field stores ShFieldGrid::spacing too: 2 bytes per point on top
+/// of the coefficients the budget counts (a quarter more at 4 coefficients; the 256³ volumes keep
+/// their one point per voxel).
+inline bool resamplesSpacing(const visibility::LocalVisibility&) { return true; }
+inline bool resamplesSpacing(const visibility::GlobalVisibility& field) {
+    return field.nearFromLocal();
+}
+inline bool resamplesSpacing(const visibility::HierarchicalVisibility&) { return false; }
 
 /// A resampling that stops on a cancel and resumes where it stopped: z-slices [0, slicesDone) of
 /// `grid` hold their values.

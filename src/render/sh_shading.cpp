@@ -73,40 +73,94 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
     return glm::max(sum * kInv4Pi, glm::vec3(0.f));
 }
 
-ShCutFaceShader::ShCutFaceShader(std::shared_ptr<const visibility::GlobalVisibility> global,
-                                 std::shared_ptr<const visibility::LocalVisibility> local,
-                                 std::span<const core::HalfSpace> faces, float bandMm,
+NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
+                                 std::shared_ptr<const optics::TfTable> table,
                                  const core::Geometry& geometry,
-                                 std::span<const std::shared_ptr<const lights::Light>> lights,
-                                 std::span<const double> window, float ambient)
+                                 std::span<const core::HalfSpace> cutFaces)
+    : grid_(&grid), table_(std::move(table)), cutFaces_(cutFaces.begin(), cutFaces.end()) {
+    worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
+    origin_ = glm::vec3(geometry.origin);
+    h_ = float(core::minComponent(geometry.spacing));
+}
+
+glm::vec3 NearShadowTrace::trace(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
+                                 float ellMm, float maxMm, float& T) const {
+    VL_CHECK(table_ != nullptr);
+    float len = std::min(ellMm, maxMm);
+    // Leaving the volume's box (nothing beyond it) or the kept region: stop there, and read the
+    // field there.
+    const glm::vec3 d = worldToIndex_ * toward;
+    const glm::vec3 top(grid_->dims() - 1);
+    for (int a = 0; a < 3; ++a) {
+        if (d[a] > 0.f) len = std::min(len, std::max((top[a] - p[a]) / d[a], 0.f));
+        if (d[a] < 0.f) len = std::min(len, std::max(-p[a] / d[a], 0.f));
+    }
+    for (const core::HalfSpace& f : cutFaces_) {
+        const float along = float(glm::dot(glm::dvec3(toward), f.normal));
+        if (along < 0.f)
+            len = std::min(len, std::max(float(f.distance(glm::dvec3(x))), 0.f) / -along);
+    }
+    T = float(
+        visibility::nearTransmittance(*grid_, *table_, p, glm::dvec3(toward), double(len / h_)));
+    return p + worldToIndex_ * (toward * len);
+}
+
+ShGlobalShader::ShGlobalShader(std::shared_ptr<const visibility::GlobalVisibility> global,
+                               std::shared_ptr<const visibility::LocalVisibility> local,
+                               std::span<const core::HalfSpace> faces, float bandMm,
+                               const core::Geometry& geometry,
+                               std::span<const std::shared_ptr<const lights::Light>> lights,
+                               std::span<const double> window, float ambient, bool nearShadow,
+                               std::shared_ptr<const optics::TfTable> table)
     : global_(std::move(global)),
       local_(std::move(local)),
-      invBand_(bandMm > 0.f ? 1.f / bandMm : 0.f),
+      invBand_(bandMm > 0.f && !faces.empty() ? 1.f / bandMm : 0.f),
+      near_(nearShadow && global_ && global_->nearFromLocal()),
+      trace_(global_->local().grid(), std::move(table), geometry, faces),
       lights_(global_->coefficients(), lights, window, ambient) {
     VL_CHECK(global_ && local_);
     VL_CHECK(global_->coefficients() == local_->coefficients());
     for (const core::HalfSpace& f : faces)
         faces_.push_back({glm::vec3(f.point), glm::vec3(f.normal)});
-    worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
-    origin_ = glm::vec3(geometry.origin);
 }
 
-Scatter ShCutFaceShader::scatter(const ShadeInput& in) const {
+Scatter ShGlobalShader::scatter(const ShadeInput& in) const {
     const glm::vec3& x = in.position;
-    float d = INFINITY;
-    for (const Face& f : faces_) d = std::min(d, glm::dot(x - f.point, f.normal));
-    const float w = std::clamp(d * invBand_, 0.f, 1.f);
-    const glm::vec3 p = worldToIndex_ * (x - origin_);
+    float w = 1.f;
+    if (invBand_ > 0.f) {
+        float d = INFINITY;
+        for (const Face& f : faces_) d = std::min(d, glm::dot(x - f.point, f.normal));
+        w = std::clamp(d * invBand_, 0.f, 1.f);
+    }
+    const glm::vec3 p = trace_.index(x);
     const int C = lights_.coefficients();
-    float v[16];
-    global_->sample(p, v);
+    float v[16], s = 1.f;
+    if (near_)
+        global_->sample(p, v, &s);  // the blended spacing only when it is used
+    else
+        global_->sample(p, v);
     if (w < 1.f) {
         // Near a cut face: toward the local field.
         float vl[16];
         local_->sample(p, vl);
         for (int i = 0; i < C; ++i) v[i] = w * v[i] + (1.f - w) * vl[i];
     }
-    return {lights_.shade(x, v), glm::vec3(0.f)};
+    const float ellMm = trace_.ellMm(s);
+    if (!near_ || !(ellMm > 0.f)) return {lights_.shade(x, v), glm::vec3(0.f)};
+    return {
+        lights_.shadeToward(x, v,
+                            [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
+                                const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T);
+                                global_->sample(end, scratch);
+                                if (w < 1.f) {
+                                    float vl[16];
+                                    local_->sample(end, vl);
+                                    for (int i = 0; i < C; ++i)
+                                        scratch[i] = w * scratch[i] + (1.f - w) * vl[i];
+                                }
+                                return static_cast<const float*>(scratch);
+                            }),
+        glm::vec3(0.f)};
 }
 
 ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> field,
@@ -116,44 +170,24 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
                              std::span<const double> window, float ambient, bool nearShadow,
                              std::span<const core::HalfSpace> cutFaces)
     : field_(std::move(field)),
-      table_(std::move(table)),
       near_(nearShadow),
-      cutFaces_(cutFaces.begin(), cutFaces.end()),
+      trace_(field_->grid(), std::move(table), geometry, cutFaces),
       lights_(field_->coefficients(), lights, window, ambient) {
-    VL_CHECK(field_ && table_);
-    worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
-    origin_ = glm::vec3(geometry.origin);
-    h_ = float(core::minComponent(geometry.spacing));
+    VL_CHECK(field_);
 }
 
 glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
-    const glm::vec3 p = worldToIndex_ * (x - origin_);
+    const glm::vec3 p = trace_.index(x);
     float v[16], s = 1.f;
     if (near_)
         field_->sample(p, v, &s);  // the blended spacing only when it is used
     else
         field_->sample(p, v);
-    const float ellMm = kNearShadowSpacings * (s - 1.f) * h_;
+    const float ellMm = trace_.ellMm(s);
     if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
     return lights_.shadeToward(
         x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
-            float len = std::min(ellMm, maxMm);
-            // Leaving the volume's box (nothing beyond it) or the kept region: stop there, and
-            // read the field there.
-            const glm::vec3 d = worldToIndex_ * toward;
-            const glm::vec3 top(field_->grid().dims() - 1);
-            for (int a = 0; a < 3; ++a) {
-                if (d[a] > 0.f) len = std::min(len, std::max((top[a] - p[a]) / d[a], 0.f));
-                if (d[a] < 0.f) len = std::min(len, std::max(-p[a] / d[a], 0.f));
-            }
-            for (const core::HalfSpace& f : cutFaces_) {
-                const float along = float(glm::dot(glm::dvec3(toward), f.normal));
-                if (along < 0.f)
-                    len = std::min(len, std::max(float(f.distance(glm::dvec3(x))), 0.f) / -along);
-            }
-            T = float(visibility::nearTransmittance(field_->grid(), *table_, p, glm::dvec3(toward),
-                                                    double(len / h_)));
-            field_->sample(p + worldToIndex_ * (toward * len), scratch);
+            field_->sample(trace_.trace(x, p, toward, ellMm, maxMm, T), scratch);
             return static_cast<const float*>(scratch);
         });
 }
@@ -204,7 +238,8 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
     const RayCaster& caster, const Camera& camera,
     std::shared_ptr<const visibility::GlobalVisibility> field) {
-    return makeModel("sh-global", caster, camera, std::move(field));
+    auto local = std::shared_ptr<const visibility::LocalVisibility>(field, &field->local());
+    return makeShVisibilityModel(caster, camera, std::move(field), std::move(local), 0.f);
 }
 
 std::unique_ptr<ShadingModel> makeShVisibilityModel(
@@ -222,13 +257,12 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
     std::shared_ptr<const visibility::GlobalVisibility> global,
     std::shared_ptr<const visibility::LocalVisibility> local, float bandMm) {
     const std::vector<core::HalfSpace> faces = lightCutFaces(caster.options());
-    if (faces.empty() || !(bandMm > 0.f))
-        return makeShVisibilityModel(caster, camera, std::move(global));
-    return std::make_unique<detail::DvrModel<ShCutFaceShader>>(
+    return std::make_unique<detail::DvrModel<ShGlobalShader>>(
         "sh-global",
-        ShCutFaceShader(std::move(global), std::move(local), faces, bandMm,
-                        caster.volume().geometry(), lightsOrHeadlight(caster, camera),
-                        caster.options().shWindow, caster.options().shAmbient),
+        ShGlobalShader(std::move(global), std::move(local), faces, bandMm,
+                       caster.volume().geometry(), lightsOrHeadlight(caster, camera),
+                       caster.options().shWindow, caster.options().shAmbient,
+                       caster.options().shNearShadow, caster.tablePtr()),
         PixelFootprint(caster, camera));
 }
 

@@ -667,10 +667,11 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
             u.v3(u.indexed("uShFaceNormal", f).c_str(), glm::vec3(faces[std::size_t(f)].normal));
         }
         u.f("uShInvBand", setup.sh.cutBandMm > 0.f ? 1.f / setup.sh.cutBandMm : 0.f);
-        // sh-local's near shadow (render/sh_shading.h ShLocalShader): the directional lights one
-        // by one, the rest summed, the spacing the field's interpolation blends, the cut faces.
-        const bool nearShadow = o.shNearShadow && setup.sh.local && !setup.sh.global &&
-                                !setup.sh.hierarchical && shSpacing != 0;
+        // The near shadow (render/sh_shading.h ShLocalShader, ShGlobalShader): the directional
+        // lights one by one, the rest summed, the spacing the local field's interpolation blends
+        // (resampled beside sh-local's field, and beside sh-global's when its near factor is the
+        // local field), the cut faces.
+        const bool nearShadow = o.shNearShadow && !setup.sh.hierarchical && shSpacing != 0;
         u.i("uShNear", nearShadow ? 1 : 0);
         if (nearShadow) {
             for (int i = 0; i < shl.coefficients(); ++i)

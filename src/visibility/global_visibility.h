@@ -141,6 +141,9 @@ class GlobalVisibility {
     /// The grid alone at p (trilinear between grid points, weighted by their openness when
     /// nearFromLocal()), into out[0..C).
     void sampleFar(const glm::vec3& p, float* out) const;
+    /// sample(p, out), and the local field's blended sample spacing at p into *spacing
+    /// (LocalVisibility::sample; nearFromLocal() only).
+    void sample(const glm::vec3& p, float* out, float* spacing) const;
     const LocalVisibility& local() const { return *local_; }
 
   private:

@@ -618,7 +618,7 @@ TEST(Ritschel, AfterATfChangeTheLastFieldStandsIn) {
     EXPECT_EQ(fresh.image.pixels, other.run(scene(d)).image.pixels);
 }
 
-// `ambient` (all three SH methods) and `near_shadow` (sh-local) are frame settings read from the
+// `ambient` (all three SH methods) and `near_shadow` (sh-local, sh-global) are frame settings read from the
 // method params: changing them reruns no visibility stage and changes the image. (`ambient` was
 // registered but not read until 5 December: an ambient sky was accepted and silently dropped.)
 TEST(ShMethods, AmbientAndTheNearShadowAreReadAndRerunOnlyTheFrame) {
@@ -634,21 +634,34 @@ TEST(ShMethods, AmbientAndTheNearShadowAreReadAndRerunOnlyTheFrame) {
         EXPECT_EQ(ranStages(lit), (std::set<std::string>{"camera", "render"})) << method;
         EXPECT_GT(meanRgb(lit.image), meanRgb(dark.image) * 1.05) << method;
     }
-    // The near shadow: where the field is coarse (1:16 on a 48³ torso) it changes the image, and
-    // never brightens it (render/sh_shading.h); other methods refuse the param.
-    json d = shScene();
-    d["volume"]["size"] = 48;
-    d["method"]["params"]["data_reduction"] = 16;
-    d["lights"] = json::array({{{"type", "directional"}, {"direction", {-0.4, 0.6, 0.7}}}});
-    d["method"]["params"]["near_shadow"] = false;
-    Session session;
-    const RunResult off = session.run(scene(d));
-    d["method"]["params"]["near_shadow"] = true;  // the default
-    const RunResult near = session.run(scene(d));
-    EXPECT_EQ(ranStages(near), (std::set<std::string>{"camera", "render"}));
-    EXPECT_NE(near.image.pixels, off.image.pixels);
-    EXPECT_LT(meanRgb(near.image), meanRgb(off.image));
-    EXPECT_TRUE(allFinite(near.image));
-    d["method"]["name"] = "sh-global";
-    EXPECT_THROW(session.plan(scene(d)), InputError);
+    // The near shadow (sh-local, sh-global): where the field is coarse (1:16 on a 48³ torso) it
+    // changes the image, and never brightens it (render/sh_shading.h); ritschel refuses the param.
+    for (const char* method : {"sh-local", "sh-global"}) {
+        json d = shScene();
+        d["method"]["name"] = method;
+        d["volume"]["size"] = 48;
+        d["method"]["params"]["data_reduction"] = 16;
+        if (std::string(method) == "sh-global") d["method"]["params"]["global_resolution"] = 16;
+        d["lights"] = json::array({{{"type", "directional"}, {"direction", {-0.4, 0.6, 0.7}}}});
+        d["method"]["params"]["near_shadow"] = false;
+        Session session;
+        const RunResult off = session.run(scene(d));
+        d["method"]["params"]["near_shadow"] = true;  // the default
+        const RunResult near = session.run(scene(d));
+        EXPECT_EQ(ranStages(near), (std::set<std::string>{"camera", "render"})) << method;
+        EXPECT_NE(near.image.pixels, off.image.pixels) << method;
+        EXPECT_LT(meanRgb(near.image), meanRgb(off.image)) << method;
+        EXPECT_TRUE(allFinite(near.image)) << method;
+        // sh-global's grid-only field (global_near "grid") has no near factor to trace from:
+        // the param is accepted and changes nothing.
+        if (std::string(method) == "sh-global") {
+            d["method"]["params"]["global_near"] = "grid";
+            const RunResult gridNear = session.run(scene(d));
+            d["method"]["params"]["near_shadow"] = false;
+            EXPECT_EQ(session.run(scene(d)).image.pixels, gridNear.image.pixels);
+        }
+        d["method"]["name"] = "ritschel";
+        d["method"]["params"] = {{"near_shadow", true}};
+        EXPECT_THROW(session.plan(scene(d)), InputError);
+    }
 }
