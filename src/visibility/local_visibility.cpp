@@ -1324,6 +1324,11 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 }
                                 const int tStop = std::min(want, tEnd);
                                 int t = tStart;
+                                // Counted and carried in locals: `samples` (a uint64_t reference)
+                                // may alias P's int64_t elements, which would make every sub-step
+                                // reload P and store the count.
+                                std::uint64_t walkSamples = 0;
+                                std::int64_t depth = 0;  // P at the current sub-step
                                 for (; t < tStop; ++t) {
                                     const glm::vec3 next = position(t + 1);
                                     const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
@@ -1331,7 +1336,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         // Transparent throughout: nothing to integrate or read (S
                                         // stays unread there).
                                         sc.stepQuiet[std::size_t(t - tStart)] = 1;
-                                        for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = P[m];
+                                        for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = depth;
                                         haveStart = haveIFront = false;
                                         at = next;
                                         continue;
@@ -1346,7 +1351,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         const float sFront = S[m + std::size_t(j) - 1];
                                         const float sBack = read(base, sten[std::size_t(j)]);
                                         S[m + std::size_t(j)] = sBack;
-                                        ++samples;
+                                        ++walkSamples;
                                         bool haveIBack = false;
                                         double iBack = 0.0;
                                         std::int64_t tau = 0;
@@ -1360,15 +1365,17 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             tau = fixedDepth(preIntegratedStep(
                                                 table, sFront, iFront, sBack, iBack, subMm, 0.0,
                                                 along(at + (float(j - 1) / float(q)) * d.dv, 1.f),
-                                                samples));
+                                                walkSamples));
                                         }
-                                        P[m + std::size_t(j)] = P[m + std::size_t(j) - 1] + tau;
+                                        depth += tau;
+                                        P[m + std::size_t(j)] = depth;
                                         I[m + std::size_t(j)] = haveIBack ? iBack : NAN;
                                         iFront = iBack;
                                         haveIFront = haveIBack;
                                     }
                                     at = next;
                                 }
+                                samples += walkSamples;
                                 // P and S valid on sub-steps [0, lastSub].
                                 const std::size_t lastSub =
                                     std::size_t(t - tStart) * std::size_t(q);
