@@ -100,6 +100,7 @@ const int kMaxShFaces = 14;  // = viewer/gl_support.h kMaxGlClipPlanes + the cro
 const int kMaxShPoints = 8;  // = viewer/gl_support.h kMaxGlLights
 const float kInv4Pi = 0.07957747154594767;
 const float kInvSqrt4Pi = 0.28209479177387814;
+const float kSqrt4Pi = 3.5449077018110318;
 uniform int uShCount;  // 1, 4, 9 or 16
 uniform vec3 uShTexScale, uShTexOffset;  // voxel coordinate p → texture coordinate p·scale + offset
 uniform sampler3D uShField[kMaxShTextures];
@@ -384,6 +385,12 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
         const vec3 w = uShDirToward[d];
         const float len = nearLength(x, p, w, ellMm, 1e30);
         const float T = nearTransmittance(p, w, len);
+        if (len < ellMm) {
+            // Ended short of ℓ (the box, a face of the kept region): T is the light's whole
+            // visibility, an open field's (√(4π), 0, …) times T.
+            sum += T * kSqrt4Pi * uShDirCoeff[16 * d];
+            continue;
+        }
         const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
         shField(endTc, vt);
         if (blend < 1.0) shBlendLocal(endTc, blend, vt);
@@ -406,15 +413,18 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
             shBasis(w, uShCount, y);
             const float len = nearLength(x, p, w, ellMm, dist);
             const float T = nearTransmittance(p, w, len);
-            const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
-            shField(endTc, vt);
-            if (blend < 1.0) shBlendLocal(endTc, blend, vt);
-            float s = 0.0, plain = 0.0;
-            for (int i = 0; i < uShCount; ++i) {
-                s += uShWindow[i] * y[i] * vt[i];
-                plain += uShWindow[i] * y[i] * v[i];
+            float plain = 0.0;
+            for (int i = 0; i < uShCount; ++i) plain += uShWindow[i] * y[i] * v[i];
+            float term = T * uShWindow[0];  // ended short of ℓ: T is the whole visibility
+            if (!(len < ellMm)) {
+                const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
+                shField(endTc, vt);
+                if (blend < 1.0) shBlendLocal(endTc, blend, vt);
+                float s = 0.0;
+                for (int i = 0; i < uShCount; ++i) s += uShWindow[i] * y[i] * vt[i];
+                term = min(plain, T * s);
             }
-            sum += (directional * min(plain, T * s)) * e;
+            sum += (directional * term) * e;
         }
         sum += ((1.0 - directional) * kInvSqrt4Pi * v[0]) * e;
     }

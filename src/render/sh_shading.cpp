@@ -84,7 +84,7 @@ NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
 }
 
 glm::vec3 NearShadowTrace::trace(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
-                                 float ellMm, float maxMm, float& T) const {
+                                 float ellMm, float maxMm, float& T, bool& whole) const {
     VL_CHECK(table_ != nullptr);
     float len = std::min(ellMm, maxMm);
     // Leaving the volume's box (nothing beyond it) or the kept region: stop there, and read the
@@ -102,6 +102,7 @@ glm::vec3 NearShadowTrace::trace(const glm::vec3& x, const glm::vec3& p, const g
     }
     T = float(
         visibility::nearTransmittance(*grid_, *table_, p, glm::dvec3(toward), double(len / h_)));
+    whole = len < ellMm;
     return p + worldToIndex_ * (toward * len);
 }
 
@@ -148,18 +149,20 @@ Scatter ShGlobalShader::scatter(const ShadeInput& in) const {
     const float ellMm = trace_.ellMm(s);
     if (!near_ || !(ellMm > 0.f)) return {lights_.shade(x, v), glm::vec3(0.f)};
     return {
-        lights_.shadeToward(x, v,
-                            [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
-                                const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T);
-                                global_->sample(end, scratch);
-                                if (w < 1.f) {
-                                    float vl[16];
-                                    local_->sample(end, vl);
-                                    for (int i = 0; i < C; ++i)
-                                        scratch[i] = w * scratch[i] + (1.f - w) * vl[i];
-                                }
-                                return static_cast<const float*>(scratch);
-                            }),
+        lights_.shadeToward(
+            x, v,
+            [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) -> const float* {
+                bool whole = false;
+                const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T, whole);
+                if (whole) return nullptr;  // T is the light's whole visibility
+                global_->sample(end, scratch);
+                if (w < 1.f) {
+                    float vl[16];
+                    local_->sample(end, vl);
+                    for (int i = 0; i < C; ++i) scratch[i] = w * scratch[i] + (1.f - w) * vl[i];
+                }
+                return scratch;
+            }),
         glm::vec3(0.f)};
 }
 
@@ -186,9 +189,12 @@ glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
     const float ellMm = trace_.ellMm(s);
     if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
     return lights_.shadeToward(
-        x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) {
-            field_->sample(trace_.trace(x, p, toward, ellMm, maxMm, T), scratch);
-            return static_cast<const float*>(scratch);
+        x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) -> const float* {
+            bool whole = false;
+            const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T, whole);
+            if (whole) return nullptr;  // T is the light's whole visibility
+            field_->sample(end, scratch);
+            return scratch;
         });
 }
 

@@ -63,7 +63,9 @@ class ShLights {
     /// returns coefficients and a factor T (ω: world unit vector toward the light, maxMm: its
     /// distance, ∞ for a directional one), and the light's term is the smaller of its plain one
     /// (from v) and T times its reading of those (ShLocalShader says why); returning v itself
-    /// keeps the plain term. Environment, ambient and a point light's uniform part read v.
+    /// keeps the plain term, returning nullptr makes T the light's visibility (the trace reached
+    /// the light or left everything that can shadow it). Environment, ambient and a point
+    /// light's uniform part read v.
     template <class Toward>
     glm::vec3 shadeToward(const glm::vec3& x, const float* v, Toward&& toward) const;
 
@@ -120,10 +122,12 @@ glm::vec3 ShLights::addPoints(glm::vec3 sum, const glm::vec3& x, const float* v,
             const float* vt = toward(u, dist, scratch, T);
             float dot = 0.f, plain = 0.f;
             for (int i = 0; i < C; ++i) {
-                dot += window_[i] * y[i] * vt[i];
+                if (vt) dot += window_[i] * y[i] * vt[i];
                 plain += window_[i] * y[i] * v[i];
             }
-            sum += (directional * (vt == v ? plain : std::min(plain, T * dot))) * e;
+            // nullptr: T is the light's whole visibility (an open field: Ṽ = w_0).
+            const float term = !vt ? T * window_[0] : vt == v ? plain : std::min(plain, T * dot);
+            sum += (directional * term) * e;
         }
         // The uniform part inside minDistance: c_0 = E/√(4π).
         sum += ((1.f - directional) * float(1.0 / std::sqrt(4.0 * std::numbers::pi)) * v[0]) * e;
@@ -139,6 +143,10 @@ glm::vec3 ShLights::shadeToward(const glm::vec3& x, const float* v, Toward&& tow
     for (const Directional& d : directional_) {
         float scratch[16], T = 1.f;
         const float* vt = toward(d.toward, INFINITY, scratch, T);
+        if (!vt) {  // T is the light's whole visibility: an open field, (√(4π), 0, …)
+            sum += T * float(std::sqrt(4.0 * std::numbers::pi)) * d.c[0];
+            continue;
+        }
         glm::vec3 s(0.f), plain(0.f);
         for (int i = 0; i < C; ++i) {
             s += d.c[i] * vt[i];
@@ -213,9 +221,11 @@ class NearShadowTrace {
     /// The continuous voxel index of world point x (mm).
     glm::vec3 index(const glm::vec3& x) const { return worldToIndex_ * (x - origin_); }
     /// The stretch from x (voxel index p) toward the world unit vector ω: its end as a voxel
-    /// index, and T its transmittance.
+    /// index, and T its transmittance. `whole`: the stretch ended short of ℓ — at the light, the
+    /// volume's box or a face of the kept region (convex: a ray that leaves it never comes back),
+    /// so nothing beyond its end shadows the light and T is the light's whole visibility.
     glm::vec3 trace(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward, float ellMm,
-                    float maxMm, float& T) const;
+                    float maxMm, float& T, bool& whole) const;
 
   private:
     const visibility::MultiresGrid* grid_;
@@ -243,8 +253,12 @@ class NearShadowTrace {
 /// plain product: V ≤ T(x → x + ℓω) holds for the true visibility, but a 4-coefficient
 /// reconstruction of the open hemisphere above a lit face overshoots (to 1.25 toward its pole),
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
-/// only darkens. Clip planes and a crop box that remove matter for the light end the trace where
-/// it leaves the kept region (the field read there is then the clip-aware one). On unless the method param `near_shadow` is
+/// only darkens, with one exception: a stretch that ends short of ℓ — at a point light, at the
+/// volume's box or where it leaves the region that clip planes and a crop box removing matter for
+/// the light keep (convex: the ray never comes back) — has nothing beyond it that could shadow
+/// the light, so T is the light's whole visibility and replaces the term. That is exact, and on
+/// a cut face lit through the removed side it replaces the interpolation of the clip-aware field
+/// across the face (block-shaped patches at 1:8). On unless the method param `near_shadow` is
 /// false; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would
 /// cost a field's rays per sample).

@@ -290,16 +290,27 @@ TEST(ShShading, TheNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIsCoarse
     // On the lit face it never brightens the plain product (header comment): here it keeps it.
     const glm::vec3 lit(23.3f, 24.6f, 24.6f);
     EXPECT_EQ(coarseNear.inScattered(lit).x, coarseOff.inScattered(lit).x);
-    // A clip plane that removes the plate above z = 22.2 for the light ends the trace there: the
-    // removed matter casts no near shadow (the field read at the face is whatever the caller
-    // hands in — the pipeline's clip-aware one; here the unclipped field, so only less dark).
+    // A clip plane that removes the plate above z = 22.2 for the light ends the trace there, short
+    // of ℓ (1.5 voxels at level 2): past the kept region nothing shadows the light (it is convex:
+    // the ray never comes back), so the traced 0.2 mm are the light's whole visibility and replace
+    // the term — brighter than the plain product here, which reads the unclipped field (the
+    // pipeline hands in the clip-aware one, whose interpolation across the face left block-shaped
+    // patches on cut faces).
     const std::vector<core::HalfSpace> keepBelow = {{{0.0, 0.0, 22.2}, {0.0, 0.0, -1.0}}};
     const render::ShLocalShader coarseCut(coarse.field, coarse.table, coarse.geometry, ls, {}, 0.f,
                                           true, keepBelow);
     const glm::vec3 x(23.3f, 24.6f, 22.0f);
-    // Measured: 0.0050 with the plane (the plain product), 0.0023 traced through the plate.
-    EXPECT_GT(coarseCut.inScattered(x).x, coarseNear.inScattered(x).x + 0.002f);
-    EXPECT_LE(coarseCut.inScattered(x).x, coarseOff.inScattered(x).x);
+    const double T = visibility::nearTransmittance(coarse.field->grid(), *coarse.table, x,
+                                                   glm::dvec3(0.0, 0.0, 1.0), 0.2);
+    const float E = 1.f / float(4.0 * std::numbers::pi);  // unshadowed: E/(4π), E = 1
+    constexpr float kFloatTol = 1e-6f;
+    EXPECT_NEAR(coarseCut.inScattered(x).x, float(T) * E, kFloatTol);
+    EXPECT_LT(T, 0.9) << "the 0.2 mm inside the plate must shadow";
+    EXPECT_GT(coarseCut.inScattered(x).x, coarseOff.inScattered(x).x);
+    // The same at the volume's box: a sample 0.3 voxels below the top face, lit from +z, sees
+    // nothing but the 0.3 voxels of air above it: unshadowed exactly.
+    const glm::vec3 top(23.3f, 24.6f, 46.7f);
+    EXPECT_NEAR(coarseNear.inScattered(top).x, E, kFloatTol);
 }
 
 // sh-global's near shadow (ShGlobalShader): the same plate, the global field chained from each
