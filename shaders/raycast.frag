@@ -120,7 +120,7 @@ uniform vec3 uShSpread[16];
 uniform int uShDirCount;
 uniform vec3 uShDirToward[kMaxLights];
 uniform vec3 uShDirCoeff[kMaxLights * 16];
-uniform float uShNearFactor, uShH;
+uniform float uShNearFactor, uShH, uShWholeMm;
 uniform int uShCutCount;
 uniform vec3 uShCutPoint[kMaxShFaces];
 uniform vec3 uShCutNormal[kMaxShFaces];
@@ -373,33 +373,51 @@ void shBlendLocal(vec3 tc, float w, inout float v[16]) {
     }
 }
 
-// ShLocalShader::inScattered / ShGlobalShader::scatter where the local field is coarse: each
-// delta light's term the smaller of the plain product and the traced near shadow times the field
-// at the stretch's end (blended toward the local field by the sample's w, as v is).
+// render/sh_shading.h nearShadowReading for one delta light toward w (at most maxMm away): the
+// exit within reach = max(uShWholeMm, ℓ) gives Tw, the light's whole visibility, with weight ww
+// (1 up to reach/2, 0 at reach); returns 1 — T over ℓ (or to the exit) and the field at the
+// stretch's end in vt — or 2, the plain product (ℓ = 0, or ww = 1: not read).
+int nearReading(vec3 x, vec3 p, vec3 w, float ellMm, float maxMm, float blend, out float T,
+                out float vt[16], out float ww, out float Tw) {
+    const float exitMm = nearLength(x, p, w, 1e30, maxMm);
+    const float reach = max(uShWholeMm, ellMm);
+    ww = 0.0;
+    Tw = 1.0;
+    T = 1.0;
+    if (exitMm < reach) {
+        Tw = nearTransmittance(p, w, exitMm);
+        ww = min(1.0, 2.0 * (reach - exitMm) / reach);
+        if (ww >= 1.0) return 2;
+    }
+    if (!(ellMm > 0.0)) return 2;
+    const float len = min(ellMm, exitMm);
+    T = nearTransmittance(p, w, len);
+    const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
+    shField(endTc, vt);
+    if (blend < 1.0) shBlendLocal(endTc, blend, vt);
+    return 1;
+}
+
+// ShLocalShader::inScattered / ShGlobalShader::scatter with the near shadow: each delta light's
+// term from nearReading — ww·Tw for the traced whole visibility plus (1 − ww)·(the smaller of the
+// plain product and T times the field at the stretch's end, or the plain one).
 vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
     const vec3 p = uWorldToIndex * (x - uOrigin);
     vec3 sum = vec3(0.0);
     for (int i = 0; i < uShCount; ++i) sum += uShSpread[i] * v[i];
     float vt[16];
     for (int d = 0; d < uShDirCount; ++d) {
-        const vec3 w = uShDirToward[d];
-        const float len = nearLength(x, p, w, ellMm, 1e30);
-        const float T = nearTransmittance(p, w, len);
-        if (len < ellMm) {
-            // Ended short of ℓ (the box, a face of the kept region): T is the light's whole
-            // visibility, an open field's (√(4π), 0, …) times T.
-            sum += T * kSqrt4Pi * uShDirCoeff[16 * d];
-            continue;
+        float T, ww, Tw;
+        const int how = nearReading(x, p, uShDirToward[d], ellMm, 1e30, blend, T, vt, ww, Tw);
+        if (ww < 1.0) {
+            vec3 s = vec3(0.0), plain = vec3(0.0);
+            for (int i = 0; i < uShCount; ++i) {
+                if (how == 1) s += uShDirCoeff[16 * d + i] * vt[i];
+                plain += uShDirCoeff[16 * d + i] * v[i];
+            }
+            sum += (1.0 - ww) * (how == 1 ? min(plain, T * s) : plain);
         }
-        const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
-        shField(endTc, vt);
-        if (blend < 1.0) shBlendLocal(endTc, blend, vt);
-        vec3 s = vec3(0.0), plain = vec3(0.0);
-        for (int i = 0; i < uShCount; ++i) {
-            s += uShDirCoeff[16 * d + i] * vt[i];
-            plain += uShDirCoeff[16 * d + i] * v[i];
-        }
-        sum += min(plain, T * s);
+        sum += ww * Tw * kSqrt4Pi * uShDirCoeff[16 * d];  // an open field times Tw
     }
     for (int k = 0; k < uShPointCount; ++k) {
         const vec3 dd = uShPointPosition[k] - x;
@@ -411,19 +429,18 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
             const vec3 w = dd / dist;
             float y[16];
             shBasis(w, uShCount, y);
-            const float len = nearLength(x, p, w, ellMm, dist);
-            const float T = nearTransmittance(p, w, len);
-            float plain = 0.0;
-            for (int i = 0; i < uShCount; ++i) plain += uShWindow[i] * y[i] * v[i];
-            float term = T * uShWindow[0];  // ended short of ℓ: T is the whole visibility
-            if (!(len < ellMm)) {
-                const vec3 endTc = (p + uWorldToIndex * (w * len)) * uShTexScale + uShTexOffset;
-                shField(endTc, vt);
-                if (blend < 1.0) shBlendLocal(endTc, blend, vt);
-                float s = 0.0;
-                for (int i = 0; i < uShCount; ++i) s += uShWindow[i] * y[i] * vt[i];
-                term = min(plain, T * s);
+            float T, ww, Tw;
+            const int how = nearReading(x, p, w, ellMm, dist, blend, T, vt, ww, Tw);
+            float term = 0.0;
+            if (ww < 1.0) {
+                float plain = 0.0, s = 0.0;
+                for (int i = 0; i < uShCount; ++i) {
+                    plain += uShWindow[i] * y[i] * v[i];
+                    if (how == 1) s += uShWindow[i] * y[i] * vt[i];
+                }
+                term = (1.0 - ww) * (how == 1 ? min(plain, T * s) : plain);
             }
+            term += ww * Tw * uShWindow[0];
             sum += (directional * term) * e;
         }
         sum += ((1.0 - directional) * kInvSqrt4Pi * v[0]) * e;
@@ -446,8 +463,8 @@ vec3 shShade(vec3 x) {
         if (w < 1.0) shBlendLocal(tc, w, v);
     }
     if (uShNear) {
-        const float ellMm = uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH;
-        if (ellMm > 0.0) return shShadeNear(x, v, ellMm, w);
+        const float ellMm = max(uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH, 0.0);
+        return shShadeNear(x, v, ellMm, w);
     }
     vec3 sum = vec3(0.0);
     for (int i = 0; i < uShCount; ++i) sum += uShConstant[i] * v[i];

@@ -69,26 +69,25 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
     const int C = coefficients_;
     glm::vec3 sum(0.f);
     for (int i = 0; i < C; ++i) sum += constant_[i] * v[i];
-    sum = addPoints(sum, x, v, [v](const glm::vec3&, float, float*, float&) { return v; });
+    sum = addPoints(sum, x, v,
+                    [v](const glm::vec3&, float, float*, float&, WholeReading&) { return v; });
     return glm::max(sum * kInv4Pi, glm::vec3(0.f));
 }
 
 NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
                                  std::shared_ptr<const optics::TfTable> table,
                                  const core::Geometry& geometry,
-                                 std::span<const core::HalfSpace> cutFaces)
+                                 std::span<const core::HalfSpace> cutFaces, double radiusVoxels)
     : grid_(&grid), table_(std::move(table)), cutFaces_(cutFaces.begin(), cutFaces.end()) {
     worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
     origin_ = glm::vec3(geometry.origin);
     h_ = float(core::minComponent(geometry.spacing));
+    radiusMm_ = float(radiusVoxels) * h_;
 }
 
-glm::vec3 NearShadowTrace::trace(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
-                                 float ellMm, float maxMm, float& T, bool& whole) const {
-    VL_CHECK(table_ != nullptr);
-    float len = std::min(ellMm, maxMm);
-    // Leaving the volume's box (nothing beyond it) or the kept region: stop there, and read the
-    // field there.
+float NearShadowTrace::exitMm(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
+                              float maxMm) const {
+    float len = maxMm;
     const glm::vec3 d = worldToIndex_ * toward;
     const glm::vec3 top(grid_->dims() - 1);
     for (int a = 0; a < 3; ++a) {
@@ -100,10 +99,13 @@ glm::vec3 NearShadowTrace::trace(const glm::vec3& x, const glm::vec3& p, const g
         if (along < 0.f)
             len = std::min(len, std::max(float(f.distance(glm::dvec3(x))), 0.f) / -along);
     }
-    T = float(
-        visibility::nearTransmittance(*grid_, *table_, p, glm::dvec3(toward), double(len / h_)));
-    whole = len < ellMm;
-    return p + worldToIndex_ * (toward * len);
+    return len;
+}
+
+float NearShadowTrace::transmittance(const glm::vec3& p, const glm::vec3& toward, float mm) const {
+    VL_CHECK(table_ != nullptr);
+    return float(
+        visibility::nearTransmittance(*grid_, *table_, p, glm::dvec3(toward), double(mm / h_)));
 }
 
 ShGlobalShader::ShGlobalShader(std::shared_ptr<const visibility::GlobalVisibility> global,
@@ -117,7 +119,8 @@ ShGlobalShader::ShGlobalShader(std::shared_ptr<const visibility::GlobalVisibilit
       local_(std::move(local)),
       invBand_(bandMm > 0.f && !faces.empty() ? 1.f / bandMm : 0.f),
       near_(nearShadow && global_ && global_->nearFromLocal()),
-      trace_(global_->local().grid(), std::move(table), geometry, faces),
+      trace_(global_->local().grid(), std::move(table), geometry, faces,
+             global_->local().radiusVoxels()),
       lights_(global_->coefficients(), lights, window, ambient) {
     VL_CHECK(global_ && local_);
     VL_CHECK(global_->coefficients() == local_->coefficients());
@@ -146,24 +149,23 @@ Scatter ShGlobalShader::scatter(const ShadeInput& in) const {
         local_->sample(p, vl);
         for (int i = 0; i < C; ++i) v[i] = w * v[i] + (1.f - w) * vl[i];
     }
+    if (!near_) return {lights_.shade(x, v), glm::vec3(0.f)};
     const float ellMm = trace_.ellMm(s);
-    if (!near_ || !(ellMm > 0.f)) return {lights_.shade(x, v), glm::vec3(0.f)};
-    return {
-        lights_.shadeToward(
-            x, v,
-            [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) -> const float* {
-                bool whole = false;
-                const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T, whole);
-                if (whole) return nullptr;  // T is the light's whole visibility
-                global_->sample(end, scratch);
-                if (w < 1.f) {
-                    float vl[16];
-                    local_->sample(end, vl);
-                    for (int i = 0; i < C; ++i) scratch[i] = w * scratch[i] + (1.f - w) * vl[i];
-                }
-                return scratch;
-            }),
-        glm::vec3(0.f)};
+    const auto atEnd = [&](const glm::vec3& end, float* out) {
+        global_->sample(end, out);
+        if (w < 1.f) {  // the sample's blend toward the local field
+            float vl[16];
+            local_->sample(end, vl);
+            for (int i = 0; i < C; ++i) out[i] = w * out[i] + (1.f - w) * vl[i];
+        }
+    };
+    return {lights_.shadeToward(x, v,
+                                [&](const glm::vec3& toward, float maxMm, float* scratch, float& T,
+                                    WholeReading& whole) {
+                                    return nearShadowReading(trace_, x, p, v, ellMm, toward, maxMm,
+                                                             scratch, T, whole, atEnd);
+                                }),
+            glm::vec3(0.f)};
 }
 
 ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> field,
@@ -174,7 +176,7 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
                              std::span<const core::HalfSpace> cutFaces)
     : field_(std::move(field)),
       near_(nearShadow),
-      trace_(field_->grid(), std::move(table), geometry, cutFaces),
+      trace_(field_->grid(), std::move(table), geometry, cutFaces, field_->radiusVoxels()),
       lights_(field_->coefficients(), lights, window, ambient) {
     VL_CHECK(field_);
 }
@@ -186,15 +188,14 @@ glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
         field_->sample(p, v, &s);  // the blended spacing only when it is used
     else
         field_->sample(p, v);
+    if (!near_) return lights_.shade(x, v);
     const float ellMm = trace_.ellMm(s);
-    if (!near_ || !(ellMm > 0.f)) return lights_.shade(x, v);  // level 0: the plain product
+    const auto atEnd = [&](const glm::vec3& end, float* out) { field_->sample(end, out); };
     return lights_.shadeToward(
-        x, v, [&](const glm::vec3& toward, float maxMm, float* scratch, float& T) -> const float* {
-            bool whole = false;
-            const glm::vec3 end = trace_.trace(x, p, toward, ellMm, maxMm, T, whole);
-            if (whole) return nullptr;  // T is the light's whole visibility
-            field_->sample(end, scratch);
-            return scratch;
+        x, v,
+        [&](const glm::vec3& toward, float maxMm, float* scratch, float& T, WholeReading& whole) {
+            return nearShadowReading(trace_, x, p, v, ellMm, toward, maxMm, scratch, T, whole,
+                                     atEnd);
         });
 }
 

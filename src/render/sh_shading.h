@@ -48,6 +48,13 @@
 
 namespace voxlight::render {
 
+/// A delta light's visibility traced to where nothing beyond can shadow it (NearShadowTrace),
+/// and the weight it takes in the light's term (ShLights::shadeToward).
+struct WholeReading {
+    float weight = 0.f;
+    float T = 1.f;
+};
+
 /// The lights of a scene as SH radiance for the per-sample product with a visibility field.
 class ShLights {
   public:
@@ -59,13 +66,14 @@ class ShLights {
     /// 1/(4π) Σ L_i(x) V_i, clamped at 0, for visibility coefficients v at world point x (mm).
     glm::vec3 shade(const glm::vec3& x, const float* v) const;
     /// The same sum with a second reading of the delta lights' visibility: for each directional
-    /// light and the directional part of each point light, `toward(ω, maxMm, scratch, T)`
+    /// light and the directional part of each point light, `toward(ω, maxMm, scratch, T, whole)`
     /// returns coefficients and a factor T (ω: world unit vector toward the light, maxMm: its
     /// distance, ∞ for a directional one), and the light's term is the smaller of its plain one
     /// (from v) and T times its reading of those (ShLocalShader says why); returning v itself
-    /// keeps the plain term, returning nullptr makes T the light's visibility (the trace reached
-    /// the light or left everything that can shadow it). Environment, ambient and a point
-    /// light's uniform part read v.
+    /// keeps the plain term. `whole` (WholeReading) may add a traced visibility that is the
+    /// light's whole one: the term becomes weight·(that) + (1 − weight)·(the above), and with
+    /// weight 1 the return value is not read. Environment, ambient and a point light's uniform
+    /// part read v.
     template <class Toward>
     glm::vec3 shadeToward(const glm::vec3& x, const float* v, Toward&& toward) const;
 
@@ -119,14 +127,18 @@ glm::vec3 ShLights::addPoints(glm::vec3 sum, const glm::vec3& x, const float* v,
             else
                 sh::evalShFixed<3>(u, y);
             float scratch[16], T = 1.f;
-            const float* vt = toward(u, dist, scratch, T);
-            float dot = 0.f, plain = 0.f;
-            for (int i = 0; i < C; ++i) {
-                if (vt) dot += window_[i] * y[i] * vt[i];
-                plain += window_[i] * y[i] * v[i];
+            WholeReading whole;
+            const float* vt = toward(u, dist, scratch, T, whole);
+            float term = 0.f;
+            if (whole.weight < 1.f) {
+                float dot = 0.f, plain = 0.f;
+                for (int i = 0; i < C; ++i) {
+                    dot += window_[i] * y[i] * vt[i];
+                    plain += window_[i] * y[i] * v[i];
+                }
+                term = (1.f - whole.weight) * (vt == v ? plain : std::min(plain, T * dot));
             }
-            // nullptr: T is the light's whole visibility (an open field: Ṽ = w_0).
-            const float term = !vt ? T * window_[0] : vt == v ? plain : std::min(plain, T * dot);
+            term += whole.weight * whole.T * window_[0];  // an open field: Ṽ = w_0
             sum += (directional * term) * e;
         }
         // The uniform part inside minDistance: c_0 = E/√(4π).
@@ -142,17 +154,18 @@ glm::vec3 ShLights::shadeToward(const glm::vec3& x, const float* v, Toward&& tow
     for (int i = 0; i < C; ++i) sum += spread_[i] * v[i];
     for (const Directional& d : directional_) {
         float scratch[16], T = 1.f;
-        const float* vt = toward(d.toward, INFINITY, scratch, T);
-        if (!vt) {  // T is the light's whole visibility: an open field, (√(4π), 0, …)
-            sum += T * float(std::sqrt(4.0 * std::numbers::pi)) * d.c[0];
-            continue;
+        WholeReading whole;
+        const float* vt = toward(d.toward, INFINITY, scratch, T, whole);
+        if (whole.weight < 1.f) {
+            glm::vec3 s(0.f), plain(0.f);
+            for (int i = 0; i < C; ++i) {
+                s += d.c[i] * vt[i];
+                plain += d.c[i] * v[i];
+            }
+            sum += (1.f - whole.weight) * (vt == v ? plain : glm::min(plain, T * s));
         }
-        glm::vec3 s(0.f), plain(0.f);
-        for (int i = 0; i < C; ++i) {
-            s += d.c[i] * vt[i];
-            plain += d.c[i] * v[i];
-        }
-        sum += vt == v ? plain : glm::min(plain, T * s);
+        // An open field, (√(4π), 0, …), times the traced visibility.
+        sum += whole.weight * whole.T * float(std::sqrt(4.0 * std::numbers::pi)) * d.c[0];
     }
     sum = addPoints(sum, x, v, toward);
     return glm::max(sum * float(1.0 / (4.0 * std::numbers::pi)), glm::vec3(0.f));
@@ -207,25 +220,32 @@ class ShVisibilityShader {
 /// ¼ / ½ / ¾ / 1; bonsai 40.7 dB without, 41.7 / 40.1 / 38.6 / 37.3 dB.
 inline constexpr float kNearShadowSpacings = 0.5f;
 
-/// The near shadow's traced stretch (ShLocalShader, ShGlobalShader): from a sample toward a delta
-/// light, ℓ mm shortened to the light, the volume's box (nothing beyond it) and the kept region of
-/// the planes that remove matter for the light (lightCutFaces: the field read at the stretch's end
-/// is then the clip-aware one), and its transmittance by visibility::nearTransmittance.
+/// The near shadow's traced stretches (ShLocalShader, ShGlobalShader), from a sample toward a delta
+/// light (world unit vector ω). Its exit: where the ray reaches the light, the volume's box or a
+/// face of the region that clip planes and a crop box removing matter for the light keep (the
+/// field read there is then the clip-aware one). The kept region is convex, so a ray that leaves
+/// it never comes back: past the exit nothing can shadow the light.
 class NearShadowTrace {
   public:
+    /// `radiusVoxels`: the local field's r_s.
     NearShadowTrace(const visibility::MultiresGrid& grid,
                     std::shared_ptr<const optics::TfTable> table, const core::Geometry& geometry,
-                    std::span<const core::HalfSpace> cutFaces);
+                    std::span<const core::HalfSpace> cutFaces, double radiusVoxels);
     /// ℓ (mm) where the field is read at blended sample spacing s (0 at level 0).
     float ellMm(float spacing) const { return kNearShadowSpacings * (spacing - 1.f) * h_; }
     /// The continuous voxel index of world point x (mm).
     glm::vec3 index(const glm::vec3& x) const { return worldToIndex_ * (x - origin_); }
-    /// The stretch from x (voxel index p) toward the world unit vector ω: its end as a voxel
-    /// index, and T its transmittance. `whole`: the stretch ended short of ℓ — at the light, the
-    /// volume's box or a face of the kept region (convex: a ray that leaves it never comes back),
-    /// so nothing beyond its end shadows the light and T is the light's whole visibility.
-    glm::vec3 trace(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward, float ellMm,
-                    float maxMm, float& T, bool& whole) const;
+    /// How far (mm) the exit lies from x (voxel index p) toward ω, at most maxMm.
+    float exitMm(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
+                 float maxMm) const;
+    /// Exits closer than this are traced whole: r_s, or ℓ where that is longer.
+    float wholeMm(float ellMm) const { return std::max(radiusMm_, ellMm); }
+    /// Transmittance of the first `mm` toward ω from voxel index p (visibility::nearTransmittance).
+    float transmittance(const glm::vec3& p, const glm::vec3& toward, float mm) const;
+    /// The voxel index `mm` from p toward ω.
+    glm::vec3 along(const glm::vec3& p, const glm::vec3& toward, float mm) const {
+        return p + worldToIndex_ * (toward * mm);
+    }
 
   private:
     const visibility::MultiresGrid* grid_;
@@ -234,7 +254,31 @@ class NearShadowTrace {
     glm::mat3 worldToIndex_{1.f};
     glm::vec3 origin_{0.f};
     float h_ = 1.f;  ///< smallest spacing (mm): the field's voxel unit
+    float radiusMm_ = 0.f;
 };
+
+/// One delta light's reading under the near shadow (ShLights::shadeToward's `toward`). Its exit
+/// within reach = wholeMm(ℓ): T traced to there is the light's whole visibility, weighted 1 up to
+/// reach/2 and fading to 0 at reach (a hard switch left a seam at r_s where the field's
+/// band-limited value and the exact one differ). The rest of the term: where ℓ > 0, T over ℓ
+/// (or to the exit if closer) and `field(end, scratch)` at the stretch's end; else v (plain).
+template <class Field>
+const float* nearShadowReading(const NearShadowTrace& trace, const glm::vec3& x, const glm::vec3& p,
+                               const float* v, float ellMm, const glm::vec3& toward, float maxMm,
+                               float* scratch, float& T, WholeReading& whole, Field&& field) {
+    const float exit = trace.exitMm(x, p, toward, maxMm);
+    const float reach = trace.wholeMm(ellMm);
+    if (exit < reach) {
+        whole.T = trace.transmittance(p, toward, exit);
+        whole.weight = std::min(1.f, 2.f * (reach - exit) / reach);
+        if (whole.weight >= 1.f) return v;
+    }
+    if (!(ellMm > 0.f)) return v;
+    const float len = std::min(ellMm, exit);
+    T = trace.transmittance(p, toward, len);
+    field(trace.along(p, toward, len), scratch);
+    return scratch;
+}
 
 /// sh-local's shader: ShVisibilityShader<LocalVisibility>'s product, except that a delta light
 /// (directional, or a point light's directional part) may be read through the exact
@@ -253,12 +297,14 @@ class NearShadowTrace {
 /// plain product: V ≤ T(x → x + ℓω) holds for the true visibility, but a 4-coefficient
 /// reconstruction of the open hemisphere above a lit face overshoots (to 1.25 toward its pole),
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
-/// only darkens, with one exception: a stretch that ends short of ℓ — at a point light, at the
-/// volume's box or where it leaves the region that clip planes and a crop box removing matter for
-/// the light keep (convex: the ray never comes back) — has nothing beyond it that could shadow
-/// the light, so T is the light's whole visibility and replaces the term. That is exact, and on
-/// a cut face lit through the removed side it replaces the interpolation of the clip-aware field
-/// across the face (block-shaped patches at 1:8). On unless the method param `near_shadow` is
+/// only darkens. Near an exit, at any level: where the ray toward the light reaches the light,
+/// the volume's box or a face of the kept region (NearShadowTrace) within r_s (or ℓ if longer),
+/// nothing beyond could shadow the light, so T traced to there is the light's whole visibility
+/// and replaces the term — exact, where the field would give a band-limited hemisphere. At r_s,
+/// not only within ℓ: a rule depending on ℓ mixed exact and field terms block by block, and on
+/// the bonsai's pot (the volume's face, lit from outside) sh-global showed the levels as
+/// patches. On a cut face lit through the removed side it replaces the interpolation of the
+/// clip-aware field across the face (block-shaped patches at 1:8). On unless the method param `near_shadow` is
 /// false; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would
 /// cost a field's rays per sample).
