@@ -82,7 +82,7 @@ NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
     worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
     origin_ = glm::vec3(geometry.origin);
     h_ = float(core::minComponent(geometry.spacing));
-    radiusMm_ = float(radiusVoxels) * h_;
+    reachMm_ = std::min(kWholeReachVoxels, float(radiusVoxels)) * h_;
 }
 
 float NearShadowTrace::exitMm(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,

@@ -220,6 +220,14 @@ class ShVisibilityShader {
 /// ¼ / ½ / ¾ / 1; bonsai 40.7 dB without, 41.7 / 40.1 / 38.6 / 37.3 dB.
 inline constexpr float kNearShadowSpacings = 0.5f;
 
+/// How far (voxels) from a sample toward a delta light the near shadow looks for an exit (the
+/// light, the volume's box, a face of the kept region: NearShadowTrace): within this (or ℓ, or
+/// r_s if shorter) the light's visibility is traced whole, weighted 1 up to half of it. 4: the
+/// samples a viewer sees on a face lit from outside lie within 1–2 voxels of it; the first
+/// version looked as far as r_s (16) and cost the bonsai's frame 2–4.5× (its pot fills the
+/// volume's faces), against ≈ 1.1× at 4.
+inline constexpr float kWholeReachVoxels = 4.f;
+
 /// The near shadow's traced stretches (ShLocalShader, ShGlobalShader), from a sample toward a delta
 /// light (world unit vector ω). Its exit: where the ray reaches the light, the volume's box or a
 /// face of the region that clip planes and a crop box removing matter for the light keep (the
@@ -238,8 +246,9 @@ class NearShadowTrace {
     /// How far (mm) the exit lies from x (voxel index p) toward ω, at most maxMm.
     float exitMm(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
                  float maxMm) const;
-    /// Exits closer than this are traced whole: r_s, or ℓ where that is longer.
-    float wholeMm(float ellMm) const { return std::max(radiusMm_, ellMm); }
+    /// Exits closer than this are traced whole: kWholeReachVoxels (at most r_s), or ℓ where
+    /// that is longer.
+    float wholeMm(float ellMm) const { return std::max(reachMm_, ellMm); }
     /// Transmittance of the first `mm` toward ω from voxel index p (visibility::nearTransmittance).
     float transmittance(const glm::vec3& p, const glm::vec3& toward, float mm) const;
     /// The voxel index `mm` from p toward ω.
@@ -254,12 +263,12 @@ class NearShadowTrace {
     glm::mat3 worldToIndex_{1.f};
     glm::vec3 origin_{0.f};
     float h_ = 1.f;  ///< smallest spacing (mm): the field's voxel unit
-    float radiusMm_ = 0.f;
+    float reachMm_ = 0.f;
 };
 
 /// One delta light's reading under the near shadow (ShLights::shadeToward's `toward`). Its exit
 /// within reach = wholeMm(ℓ): T traced to there is the light's whole visibility, weighted 1 up to
-/// reach/2 and fading to 0 at reach (a hard switch left a seam at r_s where the field's
+/// reach/2 and fading to 0 at reach (a hard switch would leave a seam where the field's
 /// band-limited value and the exact one differ). The rest of the term: where ℓ > 0, T over ℓ
 /// (or to the exit if closer) and `field(end, scratch)` at the stretch's end; else v (plain).
 template <class Field>
@@ -298,12 +307,12 @@ const float* nearShadowReading(const NearShadowTrace& trace, const glm::vec3& x,
 /// reconstruction of the open hemisphere above a lit face overshoots (to 1.25 toward its pole),
 /// so the traced estimate would lighten lit faces the plain product gets right — the near shadow
 /// only darkens. Near an exit, at any level: where the ray toward the light reaches the light,
-/// the volume's box or a face of the kept region (NearShadowTrace) within r_s (or ℓ if longer),
-/// nothing beyond could shadow the light, so T traced to there is the light's whole visibility
-/// and replaces the term — exact, where the field would give a band-limited hemisphere. At r_s,
-/// not only within ℓ: a rule depending on ℓ mixed exact and field terms block by block, and on
-/// the bonsai's pot (the volume's face, lit from outside) sh-global showed the levels as
-/// patches. On a cut face lit through the removed side it replaces the interpolation of the
+/// the volume's box or a face of the kept region (NearShadowTrace) within kWholeReachVoxels (or
+/// ℓ if longer), nothing beyond could shadow the light, so T traced to there is the light's whole
+/// visibility and replaces the term (blended out over the reach's second half, so no seam) —
+/// exact, where the field would give a band-limited hemisphere. A fixed reach, not ℓ: a rule
+/// depending on ℓ mixed exact and field terms block by block, and on the bonsai's pot (the
+/// volume's face, lit from outside) sh-global showed the levels as patches. On a cut face lit through the removed side it replaces the interpolation of the
 /// clip-aware field across the face (block-shaped patches at 1:8). On unless the method param `near_shadow` is
 /// false; the viewer's shader traces it alike (shaders/raycast.frag shShadeNear). Environment
 /// light and ambient read the field at x (a per-sample projection of a traced hemisphere would

@@ -686,8 +686,11 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
             u.f("uShNearFactor", render::kNearShadowSpacings);
             const float h = float(core::minComponent(setup.volume->geometry().spacing));
             u.f("uShH", h);
-            // Exits within r_s are traced whole (render/sh_shading.h NearShadowTrace::wholeMm).
-            u.f("uShWholeMm", setup.sh.local ? float(setup.sh.local->radiusVoxels()) * h : 0.f);
+            // Exits this close are traced whole (render/sh_shading.h NearShadowTrace::wholeMm).
+            u.f("uShWholeMm",
+                setup.sh.local
+                    ? std::min(render::kWholeReachVoxels, float(setup.sh.local->radiusVoxels())) * h
+                    : 0.f);
             const std::vector<core::HalfSpace> cuts = render::lightCutFaces(o);
             u.i("uShCutCount", int(cuts.size()));
             for (int f = 0; f < int(cuts.size()); ++f) {
