@@ -221,11 +221,11 @@ class ShVisibilityShader {
 inline constexpr float kNearShadowSpacings = 0.5f;
 
 /// How far (voxels) from a sample toward a delta light the near shadow looks for an exit (the
-/// light, the volume's box, a face of the kept region: NearShadowTrace): within this (or ℓ, or
-/// r_s if shorter) the light's visibility is traced whole, weighted 1 up to half of it. 4: the
-/// samples a viewer sees on a face lit from outside lie within 1–2 voxels of it; the first
-/// version looked as far as r_s (16) and cost the bonsai's frame 2–4.5× (its pot fills the
-/// volume's faces), against ≈ 1.1× at 4.
+/// light, the volume's box, a face of the kept region: NearShadowTrace): within this (at most r_s;
+/// ℓ where that is longer) the light's visibility is traced whole, weighted 1 up to half of it.
+/// 4: the samples a viewer sees on a face lit from outside lie within 1–2 voxels of it; the first
+/// version looked as far as r_s (16) and cost the bonsai's frame at 1:8 2–4.5× that without the
+/// near shadow (its pot fills the volume's faces), against 1.31× at 4.
 inline constexpr float kWholeReachVoxels = 4.f;
 
 /// The near shadow's traced stretches (ShLocalShader, ShGlobalShader), from a sample toward a delta
@@ -294,8 +294,8 @@ const float* nearShadowReading(const NearShadowTrace& trace, const glm::vec3& x,
 /// transmittance of the first ℓ mm toward it and the field at the end of that stretch:
 ///   V(x, ω) = T(x → x + ℓω) · V(x + ℓω, ω)
 /// (exact for the continuous model up to the radius, which it extends by ℓ), with ℓ = 0 where
-/// the field is read at full resolution (level 0: the unchanged product, so a full budget is
-/// unaffected) and ℓ = kNearShadowSpacings·(s − 1) voxels where it is read at sample spacing s
+/// the field is read at full resolution (level 0: the unchanged product away from an exit, below)
+/// and ℓ = kNearShadowSpacings·(s − 1) voxels where it is read at sample spacing s
 /// (LocalVisibility::sample's blended spacing, continuous across blocks). Why: a coarse block
 /// stores V every s voxels, so at a thin structure (a rib 2–4 voxels thick) the interpolation
 /// mixes points in the open air on either side with points inside it, and the side facing away
