@@ -350,10 +350,7 @@ std::size_t recursiveTransientBytes(const glm::ivec3& resolution, int coefficien
 
 void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
     if (!product_) return sampleFar(p, out);
-    float nearV[16], farV[16];
-    local_->sample(p, nearV);
-    sampleFar(p, farV);
-    product_->apply(nearV, farV, out);
+    sample(p, out, nullptr);  // LocalVisibility::sample without the spacing: the same values
 }
 
 void GlobalVisibility::sample(const glm::vec3& p, float* out, float* spacing) const {
