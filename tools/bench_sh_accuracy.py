@@ -55,6 +55,9 @@ SWEEPS = [  # (method, param, values) — one at a time from DEFAULTS
     ("sh-global", "radius", [4, 8, 16, 32]),
     ("sh-global", "global_resolution", [16, 32, 64, 128]),
     ("sh-global", "global_near", ["grid", "local"]),
+    # The near shadow (traced first ½·(s − 1) voxels and the exit rule) against the plain product.
+    ("sh-local", "near_shadow", [False, True]),
+    ("sh-global", "near_shadow", [False, True]),
     ("ritschel", "subsample", [4, 2, 1]),
     ("ritschel", "coefficients", [4, 16]),
 ]
@@ -145,6 +148,7 @@ def main():
         global SWEEPS
         SWEEPS = [(m, "coefficients", [4, 16]) for m in ("sh-local", "sh-global", "ritschel")]
         SWEEPS.append(("sh-global", "global_near", ["grid", "local"]))
+        SWEEPS += [(m, "near_shadow", [False, True]) for m in ("sh-local", "sh-global")]
     if args.report_only:
         args.scenes = "-"  # run no scene; keep every earlier one
     voxlight = os.path.abspath(args.voxlight)
@@ -275,7 +279,7 @@ def report(rows, pictures, docs):
         for method, param, _ in SWEEPS:
             s = [r for r in rows if r["scene"] == scene and r["method"] == method and
                  r["param"] == param]
-            if not s or param == "global_near":  # alternatives, not a growing setting
+            if not s or param in ("global_near", "near_shadow"):  # alternatives, not a growing setting
                 continue
             rise = monotone(s)
             verdicts.append("%s %s %s: %s" % (scene, method, param,

@@ -104,8 +104,9 @@ float NearShadowTrace::exitMm(const glm::vec3& x, const glm::vec3& p, const glm:
 
 float NearShadowTrace::transmittance(const glm::vec3& p, const glm::vec3& toward, float mm) const {
     VL_CHECK(table_ != nullptr);
+    // mm ≤ exitMm: inside the box.
     return float(
-        visibility::nearTransmittance(*grid_, *table_, p, glm::dvec3(toward), double(mm / h_)));
+        visibility::nearTransmittanceIndex(*grid_, *table_, p, worldToIndex_ * toward, mm));
 }
 
 ShGlobalShader::ShGlobalShader(std::shared_ptr<const visibility::GlobalVisibility> global,

@@ -691,14 +691,20 @@ double nearTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
     const double h = core::minComponent(g.spacing);
     const RayDir ray((glm::transpose(g.direction) * dir) / g.spacing);
     const float length = std::min(float(lengthVoxels * h), ray.boxExit(origin, grid.dims()));
-    if (!(length > 0.f)) return 1.0;
-    const int n = std::max(1, int(std::ceil(double(length) / (kNearStepVoxels * h))));
-    const float dt = length / float(n);
+    return nearTransmittanceIndex(grid, table, origin, ray.d, length);
+}
+
+double nearTransmittanceIndex(const MultiresGrid& grid, const optics::TfTable& table,
+                              const glm::vec3& origin, const glm::vec3& dirIndex, float lengthMm) {
+    if (!(lengthMm > 0.f)) return 1.0;
+    const double h = core::minComponent(grid.pyramid().geometry().spacing);
+    const int n = std::max(1, int(std::ceil(double(lengthMm) / (kNearStepVoxels * h))));
+    const float dt = lengthMm / float(n);
     const ValueField field(grid, table);
     float s0 = field.value(origin);
     double i0 = table.sigmaIntegral(s0), tau = 0.0;
     for (int k = 1; k <= n; ++k) {
-        const float s1 = field.value(origin + (float(k) * dt) * ray.d);
+        const float s1 = field.value(origin + (float(k) * dt) * dirIndex);
         const double i1 = table.sigmaIntegral(s1);
         tau += double(table.meanExtinction(s0, i0, s1, i1)) * double(dt);
         s0 = s1;

@@ -384,6 +384,12 @@ inline constexpr double kNearStepVoxels = 0.5;
 /// render/sh_shading.h).
 double nearTransmittance(const MultiresGrid& grid, const optics::TfTable& table,
                          const glm::vec3& origin, const glm::dvec3& dir, double lengthVoxels);
+/// The same march with the direction already in index units per mm (`dirIndex`: the world
+/// direction through the geometry's world-to-index matrix) over `lengthMm`, which the caller has
+/// clipped to the volume's box: the per-sample form (render/sh_shading.h's NearShadowTrace clips
+/// at its exit and transforms each light's direction itself).
+double nearTransmittanceIndex(const MultiresGrid& grid, const optics::TfTable& table,
+                              const glm::vec3& origin, const glm::vec3& dirIndex, float lengthMm);
 /// The same by the straightforward march the fast path must reproduce (every step through the
 /// TF table; the slow reference tests compare against).
 double rayTransmittanceReference(const MultiresGrid& grid, const optics::TfTable& table,
