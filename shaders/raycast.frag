@@ -399,8 +399,8 @@ int nearReading(vec3 x, vec3 p, vec3 w, float ellMm, float maxMm, float blend, o
 }
 
 // ShLocalShader::inScattered / ShGlobalShader::scatter with the near shadow: each delta light's
-// term from nearReading — ww·Tw for the traced whole visibility plus (1 − ww)·(the smaller of the
-// plain product and T times the field at the stretch's end, or the plain one).
+// term from nearReading — ww·Tw for the traced whole visibility plus (1 − ww)·(T times the field
+// at the stretch's end, that reading at most an open field's; or the plain product).
 vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
     const vec3 p = uWorldToIndex * (x - uOrigin);
     vec3 sum = vec3(0.0);
@@ -415,7 +415,8 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
                 if (how == 1) s += uShDirCoeff[16 * d + i] * vt[i];
                 plain += uShDirCoeff[16 * d + i] * v[i];
             }
-            sum += (1.0 - ww) * (how == 1 ? min(plain, T * s) : plain);
+            const vec3 open = kSqrt4Pi * uShDirCoeff[16 * d];  // an open field's reading
+            sum += (1.0 - ww) * (how == 1 ? T * min(s, open) : plain);
         }
         sum += ww * Tw * kSqrt4Pi * uShDirCoeff[16 * d];  // an open field times Tw
     }
@@ -438,7 +439,7 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
                     plain += uShWindow[i] * y[i] * v[i];
                     if (how == 1) s += uShWindow[i] * y[i] * vt[i];
                 }
-                term = (1.0 - ww) * (how == 1 ? min(plain, T * s) : plain);
+                term = (1.0 - ww) * (how == 1 ? T * min(s, uShWindow[0]) : plain);
             }
             term += ww * Tw * uShWindow[0];
             sum += (directional * term) * e;

@@ -638,7 +638,8 @@ TEST(ShMethods, AmbientAndTheNearShadowAreReadAndRerunOnlyTheFrame) {
         EXPECT_GT(meanRgb(lit.image), meanRgb(dark.image) * 1.05) << method;
     }
     // The near shadow (sh-local, sh-global): where the field is coarse (1:16 on a 48³ torso) it
-    // changes the image, and never brightens it (render/sh_shading.h); ritschel refuses the param.
+    // changes the image and darkens it overall (thin bone's shadowed sides; render/sh_shading.h);
+    // ritschel refuses the param.
     for (const char* method : {"sh-local", "sh-global"}) {
         json d = shScene();
         d["method"]["name"] = method;
