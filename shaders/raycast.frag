@@ -120,7 +120,7 @@ uniform vec3 uShSpread[16];
 uniform int uShDirCount;
 uniform vec3 uShDirToward[kMaxLights];
 uniform vec3 uShDirCoeff[kMaxLights * 16];
-uniform float uShNearFactor, uShH, uShWholeMm;
+uniform float uShNearFactor, uShH, uShWholeMm, uShNearTrace;
 uniform int uShCutCount;
 uniform vec3 uShCutPoint[kMaxShFaces];
 uniform vec3 uShCutNormal[kMaxShFaces];
@@ -464,7 +464,8 @@ vec3 shShade(vec3 x) {
         if (w < 1.0) shBlendLocal(tc, w, v);
     }
     if (uShNear) {
-        const float ellMm = max(uShNearFactor * (texture(uShSpacing, tc).r - 1.0) * uShH, 0.0);
+        const float ellMm =
+            max((uShNearTrace + uShNearFactor * (texture(uShSpacing, tc).r - 1.0)) * uShH, 0.0);
         return shShadeNear(x, v, ellMm, w);
     }
     vec3 sum = vec3(0.0);

@@ -15,14 +15,15 @@
 //                         (MB of visibility coefficients; not both); near_shadow (true: each
 //                         directional/point light's first ½·(s − 1) voxels traced exactly where
 //                         the field is stored at spacing s — render/sh_shading.h ShLocalShader)
+//                         and near_trace (voxels traced at every level on top of that; 0)
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims) and global_near ("local": the fine local field at the
 //                         sample times the far grid, default; "grid": Kronander's grid-only V^G —
 //                         visibility/global_visibility.h) and global_integration ("recursive":
 //                         one piece per grid point and direction, the rest read back from the
 //                         grid, default; "piecewise": eq. 11 along every ray); near_shadow
-//                         reads its near factor as sh-local's does (ShGlobalShader; with
-//                         global_near "local" only). Its local stages have the same keys as
+//                         and near_trace read its near factor as sh-local's do (ShGlobalShader;
+//                         with global_near "local" only). Its local stages have the same keys as
 //                         sh-local's, so switching between the two recomputes nothing once both
 //                         have run.
 //   ritschel:             hierarchical visibility (Ritschel 2007; visibility/
@@ -456,8 +457,15 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
     // The SH methods' ambient sky (render/sh_shading.h; registered since it was added, read only
     // from 5 December: before, `ambient` was accepted and silently ignored).
     if (isSh(kind)) o.shAmbient = float(p.number("ambient", 0.0, 0.0, 1e6));
-    if (kind == Kind::ShLocal || kind == Kind::ShGlobal)
+    if (kind == Kind::ShLocal || kind == Kind::ShGlobal) {
         o.shNearShadow = p.boolean("near_shadow", true);
+        // Voxels traced at every level (render/sh_shading.h kNearShadowSpacings' note): accuracy
+        // against the path tracer for frame time.
+        if (!o.shNearShadow && p.has("near_trace"))
+            p.fail("near_trace", "is set but near_shadow is false",
+                   "set near_shadow to true or remove near_trace");
+        o.shNearTraceVoxels = float(p.number("near_trace", 0.0, 0.0, 64.0));
+    }
     if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));
         o.blinnPhong.specular = 0.f;  // Lambertian (ARCHITECTURE §1)
@@ -2598,7 +2606,7 @@ const RegisterMethod kShLocal(rayCasterMethod(
     "within "
     "a radius under directional, point and environment lights",
     {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb", "window",
-     "window_strength", "ambient", "near_shadow"},
+     "window_strength", "ambient", "near_shadow", "near_trace"},
     {"local_shadows"}));
 const RegisterMethod kShGlobal(rayCasterMethod(
     Kind::ShGlobal, "sh-global",
@@ -2607,7 +2615,7 @@ const RegisterMethod kShGlobal(rayCasterMethod(
     "on a regular grid; shadows from matter anywhere toward the light",
     {"rays", "coefficients", "radius", "algorithm", "data_reduction", "lod_budget_mb",
      "global_resolution", "global_near", "global_integration", "window", "window_strength",
-     "ambient", "near_shadow"},
+     "ambient", "near_shadow", "near_trace"},
     {"local_shadows", "global_shadows"}));
 const RegisterMethod kRitschel(rayCasterMethod(
     Kind::Ritschel, "ritschel",

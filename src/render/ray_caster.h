@@ -131,6 +131,9 @@ struct RenderOptions {
     /// sh-local: trace each delta light's first stretch exactly where the field is coarse
     /// (render/sh_shading.h ShLocalShader; method param `near_shadow`).
     bool shNearShadow = false;
+    /// With shNearShadow: voxels traced at every level on top of ½·(s − 1) (method param
+    /// `near_trace`; render/sh_shading.h kNearShadowSpacings).
+    float shNearTraceVoxels = 0.f;
 };
 
 struct RenderStats {

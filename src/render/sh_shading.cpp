@@ -77,8 +77,13 @@ glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
 NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
                                  std::shared_ptr<const optics::TfTable> table,
                                  const core::Geometry& geometry,
-                                 std::span<const core::HalfSpace> cutFaces, double radiusVoxels)
-    : grid_(&grid), table_(std::move(table)), cutFaces_(cutFaces.begin(), cutFaces.end()) {
+                                 std::span<const core::HalfSpace> cutFaces, double radiusVoxels,
+                                 float traceVoxels)
+    : grid_(&grid),
+      table_(std::move(table)),
+      cutFaces_(cutFaces.begin(), cutFaces.end()),
+      traceVoxels_(traceVoxels) {
+    VL_CHECK(traceVoxels >= 0.f);
     worldToIndex_ = glm::mat3(geometry.worldToIndexMatrix());
     origin_ = glm::vec3(geometry.origin);
     h_ = float(core::minComponent(geometry.spacing));
@@ -115,13 +120,13 @@ ShGlobalShader::ShGlobalShader(std::shared_ptr<const visibility::GlobalVisibilit
                                const core::Geometry& geometry,
                                std::span<const std::shared_ptr<const lights::Light>> lights,
                                std::span<const double> window, float ambient, bool nearShadow,
-                               std::shared_ptr<const optics::TfTable> table)
+                               std::shared_ptr<const optics::TfTable> table, float nearTraceVoxels)
     : global_(std::move(global)),
       local_(std::move(local)),
       invBand_(bandMm > 0.f && !faces.empty() ? 1.f / bandMm : 0.f),
       near_(nearShadow && global_ && global_->nearFromLocal()),
       trace_(global_->local().grid(), std::move(table), geometry, faces,
-             global_->local().radiusVoxels()),
+             global_->local().radiusVoxels(), nearTraceVoxels),
       lights_(global_->coefficients(), lights, window, ambient) {
     VL_CHECK(global_ && local_);
     VL_CHECK(global_->coefficients() == local_->coefficients());
@@ -174,10 +179,11 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
                              const core::Geometry& geometry,
                              std::span<const std::shared_ptr<const lights::Light>> lights,
                              std::span<const double> window, float ambient, bool nearShadow,
-                             std::span<const core::HalfSpace> cutFaces)
+                             std::span<const core::HalfSpace> cutFaces, float nearTraceVoxels)
     : field_(std::move(field)),
       near_(nearShadow),
-      trace_(field_->grid(), std::move(table), geometry, cutFaces, field_->radiusVoxels()),
+      trace_(field_->grid(), std::move(table), geometry, cutFaces, field_->radiusVoxels(),
+             nearTraceVoxels),
       lights_(field_->coefficients(), lights, window, ambient) {
     VL_CHECK(field_);
 }
@@ -239,7 +245,7 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
         ShLocalShader(std::move(field), caster.tablePtr(), caster.volume().geometry(),
                       lightsOrHeadlight(caster, camera), caster.options().shWindow,
                       caster.options().shAmbient, caster.options().shNearShadow,
-                      lightCutFaces(caster.options())),
+                      lightCutFaces(caster.options()), caster.options().shNearTraceVoxels),
         PixelFootprint(caster, camera));
 }
 
@@ -270,7 +276,8 @@ std::unique_ptr<ShadingModel> makeShVisibilityModel(
         ShGlobalShader(std::move(global), std::move(local), faces, bandMm,
                        caster.volume().geometry(), lightsOrHeadlight(caster, camera),
                        caster.options().shWindow, caster.options().shAmbient,
-                       caster.options().shNearShadow, caster.tablePtr()),
+                       caster.options().shNearShadow, caster.tablePtr(),
+                       caster.options().shNearTraceVoxels),
         PixelFootprint(caster, camera));
 }
 

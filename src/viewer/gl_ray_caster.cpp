@@ -684,6 +684,7 @@ bool GlRayCaster::draw(const pipeline::CasterSetup& setup, const ShGrids& sh, fl
                     u.v3(u.indexed("uShDirCoeff", 16 * d + i).c_str(), dirs[std::size_t(d)].c[i]);
             }
             u.f("uShNearFactor", render::kNearShadowSpacings);
+            u.f("uShNearTrace", o.shNearTraceVoxels);  // voxels at every level (near_trace)
             const float h = float(core::minComponent(setup.volume->geometry().spacing));
             u.f("uShH", h);
             // Exits this close are traced whole (render/sh_shading.h NearShadowTrace::wholeMm).

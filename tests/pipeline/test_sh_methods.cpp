@@ -656,6 +656,17 @@ TEST(ShMethods, AmbientAndTheNearShadowAreReadAndRerunOnlyTheFrame) {
         EXPECT_NE(near.image.pixels, off.image.pixels) << method;
         EXPECT_LT(meanRgb(near.image), meanRgb(off.image)) << method;
         EXPECT_TRUE(allFinite(near.image)) << method;
+        // near_trace: voxels traced at every level on top — only the frame reruns, the image
+        // changes; without the near shadow it is an input error.
+        d["method"]["params"]["near_trace"] = 2.0;
+        const RunResult traced = session.run(scene(d));
+        EXPECT_EQ(ranStages(traced), (std::set<std::string>{"camera", "render"})) << method;
+        EXPECT_NE(traced.image.pixels, near.image.pixels) << method;
+        EXPECT_TRUE(allFinite(traced.image)) << method;
+        d["method"]["params"]["near_shadow"] = false;
+        EXPECT_THROW(session.plan(scene(d)), InputError) << method;
+        d["method"]["params"]["near_shadow"] = true;
+        d["method"]["params"].erase("near_trace");
         // sh-global's grid-only field (global_near "grid") has no near factor to trace from:
         // the param is accepted and changes nothing.
         if (std::string(method) == "sh-global") {

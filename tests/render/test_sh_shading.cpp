@@ -275,6 +275,23 @@ TEST(ShShading, TheNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIsCoarse
         const glm::vec3 x(23.3f, 24.6f, z);
         EXPECT_EQ(fineNear.inScattered(x).x, fineOff.inScattered(x).x) << z;
     }
+    // Unless near_trace asks for a stretch at every level: 3 voxels up from inside the plate,
+    // then the field at the stretch's end, its reading capped at an open field's (E/(4π), E = 1).
+    {
+        const render::ShLocalShader fineTrace(fine.field, fine.table, fine.geometry, ls, {}, 0.f,
+                                              true, {}, 3.f);
+        constexpr float kTraceTol = 1e-6f;
+        const float open = 1.f / float(4.0 * std::numbers::pi);
+        for (const float z : {22.6f, 23.4f, 24.2f}) {
+            const glm::vec3 x(23.3f, 24.6f, z), end = x + glm::vec3(0.f, 0.f, 3.f);
+            const double T = visibility::nearTransmittance(fine.field->grid(), *fine.table, x,
+                                                           glm::dvec3(0.0, 0.0, 1.0), 3.0);
+            EXPECT_NEAR(fineTrace.inScattered(x).x,
+                        float(T) * std::min(fineOff.inScattered(end).x, open), kTraceTol)
+                << z;
+            EXPECT_NE(fineTrace.inScattered(x).x, fineOff.inScattered(x).x) << z;
+        }
+    }
     // Inside the plate below its lit face (z 22…24.5; coarse samples at z 21.5 and 25.5, the
     // latter in the open air): E/(4π) = 0.080 unshadowed, ≈ 0 at full resolution.
     // Measured 5 December: the coarse field alone 0.011 … 0.044, with the near shadow 0.003 …

@@ -560,9 +560,10 @@ TEST(ViewCli, GlslShShadingAgreesWithTheCpuRayCaster) {
                              "shadows_from_removed": false}],
             "image": {"width": 240, "height": 200}})",
         // sh-global's near shadow at 1:16 (the global field read at the stretch's end), with the
-        // cut face's band: there the end's coefficients blend toward the local field too.
+        // cut face's band: there the end's coefficients blend toward the local field too; and
+        // 1.5 voxels traced at every level (near_trace), full resolution included.
         R"({"volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-bone",
-            "method": {"name": "sh-global", "params": {"data_reduction": 16}},
+            "method": {"name": "sh-global", "params": {"data_reduction": 16, "near_trace": 1.5}},
             "camera": {"azimuth": 30, "elevation": 15},
             "lights": [{"type": "directional", "direction": [-0.4, 0.6, 0.7], "intensity": 9},
                        {"type": "point", "position": [-150, -250, 150], "intensity": 400000}],
