@@ -187,6 +187,9 @@ void BM_ShFrame512(benchmark::State& state) {
     // VOXLIGHT_BENCH_NEAR_SHADOW=0 measures the plain product.
     const char* near = std::getenv("VOXLIGHT_BENCH_NEAR_SHADOW");
     o.shNearShadow = !(near && std::string(near) == "0");
+    // VOXLIGHT_BENCH_NEAR_TRACE=N: method param near_trace (voxels traced at every level; 0).
+    const char* trace = std::getenv("VOXLIGHT_BENCH_NEAR_TRACE");
+    if (o.shNearShadow && trace) o.shNearTraceVoxels = float(std::atof(trace));
     // Both lights sit anterior, superior and to the patient's right of the volume's centre.
     const glm::dvec3 centre =
         p->volume.geometry().indexToWorld(glm::dvec3(p->volume.dims() - glm::ivec3(1)) * 0.5);
