@@ -58,6 +58,9 @@ SWEEPS = [  # (method, param, values) — one at a time from DEFAULTS
     # The near shadow (traced first ½·(s − 1) voxels and the exit rule) against the plain product.
     ("sh-local", "near_shadow", [False, True]),
     ("sh-global", "near_shadow", [False, True]),
+    # Voxels traced at every level on top (method param near_trace; default 0).
+    ("sh-local", "near_trace", [0, 2, 4]),
+    ("sh-global", "near_trace", [0, 2, 4]),
     ("ritschel", "subsample", [4, 2, 1]),
     ("ritschel", "coefficients", [4, 16]),
 ]

@@ -461,10 +461,12 @@ render::RenderOptions parseOptions(Kind kind, const io::Scene& scene, ParamReade
         o.shNearShadow = p.boolean("near_shadow", true);
         // Voxels traced at every level (render/sh_shading.h kNearShadowSpacings' note): accuracy
         // against the path tracer for frame time.
-        if (!o.shNearShadow && p.has("near_trace"))
+        // Like near_shadow, it changes nothing with sh-global's global_near "grid" (no near
+        // factor to trace from).
+        o.shNearTraceVoxels = float(p.number("near_trace", 0.0, 0.0, 64.0));
+        if (!o.shNearShadow && o.shNearTraceVoxels > 0.f)
             p.fail("near_trace", "is set but near_shadow is false",
                    "set near_shadow to true or remove near_trace");
-        o.shNearTraceVoxels = float(p.number("near_trace", 0.0, 0.0, 64.0));
     }
     if (kind == Kind::Iso || kind == Kind::IsoLattice) {
         if (p.has("iso_value")) o.isoValue = float(p.number("iso_value", 0.0, -1e9, 1e9));

@@ -309,10 +309,10 @@ const float* nearShadowReading(const NearShadowTrace& trace, const glm::vec3& x,
 /// (directional, or a point light's directional part) may be read through the exact
 /// transmittance of the first ℓ mm toward it and the field at the end of that stretch:
 ///   V(x, ω) = T(x → x + ℓω) · V(x + ℓω, ω)
-/// (exact for the continuous model up to the radius, which it extends by ℓ), with ℓ = 0 where
-/// the field is read at full resolution (level 0: the unchanged product away from an exit, below)
-/// and ℓ = kNearShadowSpacings·(s − 1) voxels where it is read at sample spacing s
-/// (LocalVisibility::sample's blended spacing, continuous across blocks). Why: a coarse block
+/// (exact for the continuous model up to the radius, which it extends by ℓ), with
+/// ℓ = near_trace + kNearShadowSpacings·(s − 1) voxels where the field is read at sample spacing s
+/// (LocalVisibility::sample's blended spacing, continuous across blocks) — with near_trace 0 (the
+/// default) ℓ = 0 at full resolution (level 0: the unchanged product away from an exit, below). Why: a coarse block
 /// stores V every s voxels, so at a thin structure (a rib 2–4 voxels thick) the interpolation
 /// mixes points in the open air on either side with points inside it, and the side facing away
 /// from the light read the air's V and lit up in block-shaped spots; the self-shadow of the first
@@ -384,7 +384,8 @@ class ShLocalShader {
 /// (the end's near factor covers the next r_s, its far factor the rest, so the three pieces
 /// meet without overlap), the end's reading capped at an open field's as there; near a cut
 /// face the end's coefficients blend as the sample's do. ℓ from the local field's blended
-/// spacing at the sample (0 at level 0: the plain shader bit for bit). Measured at 1:8 / 1:16
+/// spacing at the sample (0 at level 0 with near_trace 0: the plain shader bit for bit; near_trace
+/// adds its voxels at every level as there). Measured at 1:8 / 1:16
 /// against 1:1 (PSNR over the covered pixels, 512², one directional light, 5 December): 256³
 /// torso `ct-bone` 39.3 → 46.2 / 26.1 → 33.4 dB; bonsai 50.5 → 54.6 / 42.9 → 41.3 dB.
 class ShGlobalShader {

@@ -258,7 +258,7 @@ Plate plate(int level) {
 }  // namespace
 
 // sh-local's near shadow (ShLocalShader): a plate 3 voxels thick lit from +z. At full resolution
-// it changes nothing (ℓ = 0); where the field is stored every 4 voxels (level 2) the plate's
+// it changes nothing (ℓ = 0; unless near_trace asks for a stretch there too); where the field is stored every 4 voxels (level 2) the plate's
 // shadowed side read the open air's visibility through the interpolation and lit up — with the
 // first (s − 1)/2 voxels toward the light traced exactly it is dark again, as at full resolution.
 TEST(ShShading, TheNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIsCoarse) {
@@ -282,6 +282,7 @@ TEST(ShShading, TheNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIsCoarse
                                               true, {}, 3.f);
         constexpr float kTraceTol = 1e-6f;
         const float open = 1.f / float(4.0 * std::numbers::pi);
+        int capped = 0;
         for (const float z : {22.6f, 23.4f, 24.2f}) {
             const glm::vec3 x(23.3f, 24.6f, z), end = x + glm::vec3(0.f, 0.f, 3.f);
             const double T = visibility::nearTransmittance(fine.field->grid(), *fine.table, x,
@@ -290,7 +291,9 @@ TEST(ShShading, TheNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIsCoarse
                         float(T) * std::min(fineOff.inScattered(end).x, open), kTraceTol)
                 << z;
             EXPECT_NE(fineTrace.inScattered(x).x, fineOff.inScattered(x).x) << z;
+            capped += fineOff.inScattered(end).x > 1.05f * open;
         }
+        EXPECT_GE(capped, 1) << "some end must read above an open field, or the cap goes untested";
     }
     // Inside the plate below its lit face (z 22…24.5; coarse samples at z 21.5 and 25.5, the
     // latter in the open air): E/(4π) = 0.080 unshadowed, ≈ 0 at full resolution.
@@ -388,8 +391,22 @@ TEST(ShShading, ShGlobalsNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIs
     const float E = 1.f / float(4.0 * std::numbers::pi);
     const double litT = visibility::nearTransmittance(coarse.field->grid(), *coarse.table, lit,
                                                       glm::dvec3(0.0, 0.0, 1.0), 1.5);
-    constexpr float kFarTol = 1e-3f;  // the far factor's product with an open near factor
-    EXPECT_NEAR(shade(coarseNear, lit), float(litT) * E, kFarTol);
+    // With no cut faces the near path reads at the end what the plain shader reads there.
+    const float end = shade(coarseOff, lit + glm::vec3(0.f, 0.f, 1.5f));
+    constexpr float kFloatTol = 1e-6f;
+    EXPECT_GT(end, 1.05f * E) << "the overshoot the cap removes";
+    EXPECT_NEAR(shade(coarseNear, lit), float(litT) * std::min(end, E), kFloatTol);
+    // near_trace: 2 voxels traced at full resolution too (ShGlobalShader passes it on).
+    const render::ShGlobalShader fineTrace(fineGlobal, fine.field, {}, 0.f, fine.geometry, ls, {},
+                                           0.f, true, fine.table, 2.f);
+    for (const float z : {22.6f, 23.4f}) {
+        const glm::vec3 x(23.3f, 24.6f, z);
+        const double T = visibility::nearTransmittance(fine.field->grid(), *fine.table, x,
+                                                       glm::dvec3(0.0, 0.0, 1.0), 2.0);
+        const float atEnd = shade(fineOff, x + glm::vec3(0.f, 0.f, 2.f));
+        EXPECT_NEAR(shade(fineTrace, x), float(T) * std::min(atEnd, E), kFloatTol) << z;
+        EXPECT_NE(shade(fineTrace, x), shade(fineOff, x)) << z;
+    }
 }
 
 // Near an exit the traced visibility is the light's whole one at any level, faded out over the
