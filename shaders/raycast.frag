@@ -410,13 +410,12 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
         float T, ww, Tw;
         const int how = nearReading(x, p, uShDirToward[d], ellMm, 1e30, blend, T, vt, ww, Tw);
         if (ww < 1.0) {
-            vec3 s = vec3(0.0), plain = vec3(0.0);
-            for (int i = 0; i < uShCount; ++i) {
-                if (how == 1) s += uShDirCoeff[16 * d + i] * vt[i];
-                plain += uShDirCoeff[16 * d + i] * v[i];
-            }
+            // One sum: over the end's reading (capped at an open field's) or over v (plain).
+            vec3 s = vec3(0.0);
+            for (int i = 0; i < uShCount; ++i)
+                s += uShDirCoeff[16 * d + i] * (how == 1 ? vt[i] : v[i]);
             const vec3 open = kSqrt4Pi * uShDirCoeff[16 * d];  // an open field's reading
-            sum += (1.0 - ww) * (how == 1 ? T * min(s, open) : plain);
+            sum += (1.0 - ww) * (how == 1 ? T * min(s, open) : s);
         }
         sum += ww * Tw * kSqrt4Pi * uShDirCoeff[16 * d];  // an open field times Tw
     }
@@ -434,12 +433,10 @@ vec3 shShadeNear(vec3 x, float v[16], float ellMm, float blend) {
             const int how = nearReading(x, p, w, ellMm, dist, blend, T, vt, ww, Tw);
             float term = 0.0;
             if (ww < 1.0) {
-                float plain = 0.0, s = 0.0;
-                for (int i = 0; i < uShCount; ++i) {
-                    plain += uShWindow[i] * y[i] * v[i];
-                    if (how == 1) s += uShWindow[i] * y[i] * vt[i];
-                }
-                term = (1.0 - ww) * (how == 1 ? T * min(s, uShWindow[0]) : plain);
+                float s = 0.0;
+                for (int i = 0; i < uShCount; ++i)
+                    s += uShWindow[i] * y[i] * (how == 1 ? vt[i] : v[i]);
+                term = (1.0 - ww) * (how == 1 ? T * min(s, uShWindow[0]) : s);
             }
             term += ww * Tw * uShWindow[0];
             sum += (directional * term) * e;

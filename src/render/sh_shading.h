@@ -131,13 +131,11 @@ glm::vec3 ShLights::addPoints(glm::vec3 sum, const glm::vec3& x, const float* v,
             const float* vt = toward(u, dist, scratch, T, whole);
             float term = 0.f;
             if (whole.weight < 1.f) {
-                float dot = 0.f, plain = 0.f;
-                for (int i = 0; i < C; ++i) {
-                    dot += window_[i] * y[i] * vt[i];
-                    plain += window_[i] * y[i] * v[i];
-                }
-                // The end's reading at most an open field's (Ṽ = w_0): V ≤ T beyond the stretch.
-                term = (1.f - whole.weight) * (vt == v ? plain : T * std::min(dot, window_[0]));
+                // One sum: over v itself (the plain term) or over the end's reading, that one at
+                // most an open field's (Ṽ = w_0): V ≤ T beyond the stretch.
+                float dot = 0.f;
+                for (int i = 0; i < C; ++i) dot += window_[i] * y[i] * vt[i];
+                term = (1.f - whole.weight) * (vt == v ? dot : T * std::min(dot, window_[0]));
             }
             term += whole.weight * whole.T * window_[0];  // an open field: Ṽ = w_0
             sum += (directional * term) * e;
@@ -158,14 +156,12 @@ glm::vec3 ShLights::shadeToward(const glm::vec3& x, const float* v, Toward&& tow
         WholeReading whole;
         const float* vt = toward(d.toward, INFINITY, scratch, T, whole);
         if (whole.weight < 1.f) {
-            glm::vec3 s(0.f), plain(0.f);
-            for (int i = 0; i < C; ++i) {
-                s += d.c[i] * vt[i];
-                plain += d.c[i] * v[i];
-            }
-            // The end's reading at most an open field's, (√(4π), 0, …): V ≤ T beyond the stretch.
+            // One sum: over v itself (the plain term) or over the end's reading, that one at most
+            // an open field's, (√(4π), 0, …): V ≤ T beyond the stretch.
+            glm::vec3 s(0.f);
+            for (int i = 0; i < C; ++i) s += d.c[i] * vt[i];
             const glm::vec3 open = float(std::sqrt(4.0 * std::numbers::pi)) * d.c[0];
-            sum += (1.f - whole.weight) * (vt == v ? plain : T * glm::min(s, open));
+            sum += (1.f - whole.weight) * (vt == v ? s : T * glm::min(s, open));
         }
         // An open field, (√(4π), 0, …), times the traced visibility.
         sum += whole.weight * whole.T * float(std::sqrt(4.0 * std::numbers::pi)) * d.c[0];
