@@ -63,6 +63,8 @@ ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const light
                              "use directional, point or environment lights");
         }
     }
+    for (int i = 0; i < coefficients_; ++i)
+        if (spread_[i] != glm::vec3(0.f)) spreads_ = true;
 }
 
 glm::vec3 ShLights::shade(const glm::vec3& x, const float* v) const {
@@ -144,19 +146,30 @@ Scatter ShGlobalShader::scatter(const ShadeInput& in) const {
     }
     const glm::vec3 p = trace_.index(x);
     const int C = lights_.coefficients();
-    float v[16], s = 1.f;
-    if (near_)
-        global_->sample(p, v, &s);  // the blended spacing only when it is used
-    else
+    float v[16], s = 1.f, ellMm = 0.f;
+    bool atX = true;  // whether the field's value at x is read (see ShLocalShader::inScattered)
+    if (!near_) {
         global_->sample(p, v);
-    if (w < 1.f) {
+    } else if (lights_.readsPlain(x)) {
+        global_->sample(p, v, &s);  // the blended spacing only when it is used
+        ellMm = trace_.ellMm(s);
+    } else {
+        visibility::FieldLookup at;
+        global_->local().locate(p, at);
+        ellMm = trace_.ellMm(at.spacing);
+        atX = !(ellMm > 0.f);
+        if (atX)
+            global_->sample(at, p, v);
+        else
+            std::fill_n(v, C, 0.f);
+    }
+    if (w < 1.f && atX) {
         // Near a cut face: toward the local field.
         float vl[16];
         local_->sample(p, vl);
         for (int i = 0; i < C; ++i) v[i] = w * v[i] + (1.f - w) * vl[i];
     }
     if (!near_) return {lights_.shade(x, v), glm::vec3(0.f)};
-    const float ellMm = trace_.ellMm(s);
     const auto atEnd = [&](const glm::vec3& end, float* out) {
         global_->sample(end, out);
         if (w < 1.f) {  // the sample's blend toward the local field
@@ -190,13 +203,31 @@ ShLocalShader::ShLocalShader(std::shared_ptr<const visibility::LocalVisibility> 
 
 glm::vec3 ShLocalShader::inScattered(const glm::vec3& x) const {
     const glm::vec3 p = trace_.index(x);
-    float v[16], s = 1.f;
-    if (near_)
-        field_->sample(p, v, &s);  // the blended spacing only when it is used
-    else
+    float v[16];
+    if (!near_) {
         field_->sample(p, v);
-    if (!near_) return lights_.shade(x, v);
-    const float ellMm = trace_.ellMm(s);
+        return lights_.shade(x, v);
+    }
+    // Where every light's term comes from the end of its traced stretch (ℓ > 0, and no light
+    // reads the plain value: ShLights::readsPlain), the field at x itself is not read — zeros
+    // stand in, changing no bit of the result. Abdominal CT, 512², 1:8, one directional light:
+    // 31 % of the shaded samples (every one with near_trace); frame time, one thread, 2
+    // alternating pairs (5 December): sh-global −3…−5 % (−8…−9 % at near_trace 2), sh-local
+    // within the noise (−6…−7 % at near_trace 2). Where ℓ is 0 the lookup is shared with the read.
+    float ellMm;
+    if (lights_.readsPlain(x)) {
+        float s;
+        field_->sample(p, v, &s);
+        ellMm = trace_.ellMm(s);
+    } else {
+        visibility::FieldLookup at;
+        field_->locate(p, at);
+        ellMm = trace_.ellMm(at.spacing);
+        if (ellMm > 0.f)
+            std::fill_n(v, lights_.coefficients(), 0.f);
+        else
+            field_->read(at, p, v);
+    }
     const auto atEnd = [&](const glm::vec3& end, float* out) { field_->sample(end, out); };
     return lights_.shadeToward(
         x, v,

@@ -76,6 +76,16 @@ class ShLights {
     /// part read v.
     template <class Toward>
     glm::vec3 shadeToward(const glm::vec3& x, const float* v, Toward&& toward) const;
+    /// Whether shadeToward at x reads v when every `toward` returns its own reading (not v):
+    /// environment or ambient light, or a point light's uniform part (x within its
+    /// minDistance). Where not, v's values do not change the result: a shader whose readings all
+    /// come from the ends of traced stretches may pass zeros instead of reading the field at x.
+    bool readsPlain(const glm::vec3& x) const {
+        if (spreads_) return true;
+        for (const Point& p : points_)
+            if (!(glm::length(p.position - x) >= p.minDistance)) return true;
+        return false;
+    }
 
     // What shade() evaluates, for other evaluators of it (the viewer's shaders/raycast.frag).
     struct Point {
@@ -102,6 +112,7 @@ class ShLights {
     int coefficients_ = 0;
     glm::vec3 constant_[16] = {};  ///< directional + environment + ambient L_i, windowed
     glm::vec3 spread_[16] = {};    ///< constant_ without the directional lights
+    bool spreads_ = false;         ///< spread_ has a nonzero coefficient
     float window_[16] = {};        ///< w_l of each coefficient (1 without a window)
     std::vector<Directional> directional_;
     std::vector<Point> points_;

@@ -361,6 +361,14 @@ void GlobalVisibility::sample(const glm::vec3& p, float* out, float* spacing) co
     product_->apply(nearV, farV, out);
 }
 
+void GlobalVisibility::sample(const FieldLookup& at, const glm::vec3& p, float* out) const {
+    VL_CHECK(product_ != nullptr);
+    float nearV[16], farV[16];
+    local_->read(at, p, nearV);
+    sampleFar(p, farV);
+    product_->apply(nearV, farV, out);
+}
+
 void GlobalVisibility::pack() {
     // In place, point by point: [openness, V^F_i] → [q, q·V^F_i].
     const std::size_t S = std::size_t(coefficients_) + 1;

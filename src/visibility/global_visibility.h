@@ -144,6 +144,8 @@ class GlobalVisibility {
     /// sample(p, out), and the local field's blended sample spacing at p into *spacing
     /// (LocalVisibility::sample; nearFromLocal() only).
     void sample(const glm::vec3& p, float* out, float* spacing) const;
+    /// sample(p, out) where local().locate(p, at) was done (nearFromLocal() only).
+    void sample(const FieldLookup& at, const glm::vec3& p, float* out) const;
     const LocalVisibility& local() const { return *local_; }
 
   private:

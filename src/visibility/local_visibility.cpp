@@ -1910,34 +1910,25 @@ void addBilinear(const float* data, int n, int runtimeC, float u, float v, float
         out[c] += w00 * p[c] + w10 * p[di + c] + w01 * p[dj + c] + w11 * p[dj + di + c];
 }
 
-/// LocalVisibility::sample for a compile-time coefficient count (kC = 0: `runtimeC`): the
+/// LocalVisibility::read for a compile-time coefficient count (kC = 0: `runtimeC`): the
 /// interpolation unrolls per coefficient, and the result is zeroed without a call — this runs
-/// once per shaded sample of every SH frame. `spacing` (may be null): the blended sample spacing.
+/// once per shaded sample of every SH frame.
 template <int kC>
-void sampleField(const MultiresGrid& grid, const float* data, const std::size_t* offset,
-                 const float* layerData, const std::size_t* layerOffset,
-                 const std::uint8_t* layerFaces, const glm::vec3& p, float* out, float* spacing,
-                 int runtimeC = 0) {
+void readField(const MultiresGrid& grid, const float* data, const std::size_t* offset,
+               const float* layerData, const std::size_t* layerOffset,
+               const std::uint8_t* layerFaces, const FieldLookup& at, const glm::vec3& p,
+               float* out, int runtimeC = 0) {
     const int C = kC > 0 ? kC : runtimeC;
     for (int i = 0; i < C; ++i) out[i] = 0.f;
-    std::size_t block;
-    int level;
-    glm::vec3 local;
-    if (grid.ownerAlone(p, block, level, local)) {
-        addTrilinear<kC>(data + offset[block], levelResolution(level), C, local, 1.f, out);
-        if (spacing) *spacing = float(levelSpacing(level));
+    const BlockWeights& w = at.weights;
+    if (at.alone) {
+        addTrilinear<kC>(data + offset[w.block[0]], levelResolution(w.level[0]), C, w.local[0],
+                         1.f, out);
         return;
     }
-    BlockWeights w;
-    grid.weights(p, w);
     if (w.count == 0) {
         out[0] = float(std::sqrt(4.0 * std::numbers::pi));
-        if (spacing) *spacing = 1.f;
         return;
-    }
-    if (spacing) {
-        *spacing = 0.f;
-        for (int k = 0; k < w.count; ++k) *spacing += w.weight[k] * float(levelSpacing(w.level[k]));
     }
     for (int k = 0; k < w.count; ++k) {
         const std::size_t b = w.block[k];
@@ -1980,26 +1971,59 @@ void sampleField(const MultiresGrid& grid, const float* data, const std::size_t*
 }
 }  // namespace
 
-void LocalVisibility::sample(const glm::vec3& p, float* out) const { sample(p, out, nullptr); }
+void LocalVisibility::locate(const glm::vec3& p, FieldLookup& at) const {
+    BlockWeights& w = at.weights;
+    std::size_t block;
+    int level;
+    if ((at.alone = grid_->ownerAlone(p, block, level, w.local[0]))) {
+        w.count = 1;
+        w.block[0] = std::uint32_t(block);
+        w.level[0] = std::int8_t(level);
+        w.weight[0] = 1.f;
+        at.spacing = float(levelSpacing(level));
+        return;
+    }
+    grid_->weights(p, w);
+    if (w.count == 0) {
+        at.spacing = 1.f;
+        return;
+    }
+    at.spacing = 0.f;
+    for (int k = 0; k < w.count; ++k) at.spacing += w.weight[k] * float(levelSpacing(w.level[k]));
+}
 
-void LocalVisibility::sample(const glm::vec3& p, float* out, float* spacing) const {
+void LocalVisibility::read(const FieldLookup& at, const glm::vec3& p, float* out) const {
     const MultiresGrid& g = *grid_;
+    const float* D = data_.data();
+    const std::size_t* B = offset_.data();
     const float* L = layerData_.data();
     const std::size_t* O = layerOffset_.data();
     const std::uint8_t* F = layerFaces_.data();
     switch (coefficients_) {
         case 1:
-            return sampleField<1>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
+            return readField<1>(g, D, B, L, O, F, at, p, out);
         case 4:
-            return sampleField<4>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
+            return readField<4>(g, D, B, L, O, F, at, p, out);
         case 9:
-            return sampleField<9>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
+            return readField<9>(g, D, B, L, O, F, at, p, out);
         case 16:
-            return sampleField<16>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing);
+            return readField<16>(g, D, B, L, O, F, at, p, out);
         default:
-            return sampleField<0>(g, data_.data(), offset_.data(), L, O, F, p, out, spacing,
-                                  coefficients_);
+            return readField<0>(g, D, B, L, O, F, at, p, out, coefficients_);
     }
+}
+
+void LocalVisibility::sample(const glm::vec3& p, float* out) const {
+    FieldLookup at;
+    locate(p, at);
+    read(at, p, out);
+}
+
+void LocalVisibility::sample(const glm::vec3& p, float* out, float* spacing) const {
+    FieldLookup at;
+    locate(p, at);
+    read(at, p, out);
+    if (spacing) *spacing = at.spacing;
 }
 
 }  // namespace voxlight::visibility

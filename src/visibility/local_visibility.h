@@ -265,6 +265,14 @@ inline constexpr std::size_t kNoLayer = ~std::size_t(0);
 bool boundaryLayerPlane(const MultiresGrid& grid, std::size_t block, int axis, int side,
                         float& plane);
 
+/// Where LocalVisibility::locate found a point to read from: the blocks and weights of the
+/// grid's interpolation and their blended sample spacing.
+struct FieldLookup {
+    BlockWeights weights;
+    bool alone = false;  ///< the owner block alone, weight 1 (MultiresGrid::ownerAlone)
+    float spacing = 1.f;
+};
+
 /// SH coefficients of V^L at every sample of every stored block (block-major, then sample-major
 /// x fastest, then coefficient), and on the boundary layers of coarse blocks at the volume's faces.
 class LocalVisibility {
@@ -303,6 +311,11 @@ class LocalVisibility {
     /// the interpolation's weights (1 where no stored block contributes): how far apart the
     /// points the value came from lie.
     void sample(const glm::vec3& p, float* out, float* spacing) const;
+    /// sample() in two steps, for a caller that decides from the spacing whether it needs the
+    /// value (render::ShLocalShader): where p reads from (its blocks, weights and the blended
+    /// spacing), then the value; locate + read = sample, bit for bit.
+    void locate(const glm::vec3& p, FieldLookup& at) const;
+    void read(const FieldLookup& at, const glm::vec3& p, float* out) const;
 
     /// σt of the TF the field was computed under (what a TF update compares against).
     const optics::TfTable::ExtinctionProfile& extinction() const { return *extinction_; }

@@ -409,6 +409,58 @@ TEST(ShShading, ShGlobalsNearShadowDarkensAThinPlatesShadowedSideWhereTheFieldIs
     }
 }
 
+// Where every light's term comes from the end of a traced stretch, the shaders do not read the
+// field at the sample (ShLights::readsPlain; zeros stand in). Lights add: the directional light's
+// share measured beside an ambient sky (which reads the field at the sample, so that path reads
+// it) equals the directional light alone (the path that does not), on the coarse plate (ℓ > 0)
+// and with near_trace at full resolution.
+TEST(ShShading, TheValueAtTheSampleIsSkippedOnlyWhereNoLightReadsIt) {
+    const auto sun =
+        std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), glm::vec3(0.f, 0.f, 1.f));
+    const std::vector<std::shared_ptr<const lights::Light>> dir = {sun}, none = {};
+    const render::ShLights alone(4, dir), sky(4, dir, {}, 0.3f);
+    EXPECT_FALSE(alone.readsPlain(glm::vec3(0.f)));
+    EXPECT_TRUE(sky.readsPlain(glm::vec3(0.f)));
+    const std::vector<std::shared_ptr<const lights::Light>> point = {
+        std::make_shared<lights::PointLight>(glm::vec3(1.f), glm::dvec3(10.0, 0.0, 0.0), 2.0)};
+    const render::ShLights bulb(4, point);
+    EXPECT_TRUE(bulb.readsPlain(glm::vec3(9.f, 0.f, 0.f))) << "inside minDistance: uniform part";
+    EXPECT_FALSE(bulb.readsPlain(glm::vec3(0.f)));
+    // Float sums in a different order: a few ulps of E/(4π).
+    constexpr float kSumTol = 1e-6f;
+    for (const int level : {2, 0}) {
+        const Plate p = plate(level);
+        const float trace = level == 0 ? 2.f : 0.f;
+        const render::ShLocalShader withSun(p.field, p.table, p.geometry, dir, {}, 0.3f, true, {},
+                                            trace),
+            skyOnly(p.field, p.table, p.geometry, none, {}, 0.3f, true, {}, trace),
+            sunOnly(p.field, p.table, p.geometry, dir, {}, 0.f, true, {}, trace);
+        const auto global = std::make_shared<const visibility::GlobalVisibility>(
+            visibility::computeGlobalVisibility(p.field, {}));
+        auto g = [&](const auto& ls, float ambient) {
+            return render::ShGlobalShader(global, p.field, {}, 0.f, p.geometry, ls, {}, ambient,
+                                          true, p.table, trace);
+        };
+        const render::ShGlobalShader gWithSun = g(dir, 0.3f), gSky = g(none, 0.3f),
+                                     gSun = g(dir, 0.f);
+        auto shade = [](const render::ShGlobalShader& s, const glm::vec3& x) {
+            render::ShadeInput in{};
+            in.position = x;
+            return s.scatter(in).diffuse.x;
+        };
+        float lit = 0.f;
+        for (const float z : {21.8f, 22.6f, 23.4f, 24.6f}) {
+            const glm::vec3 x(23.3f, 24.6f, z);
+            const float sunShare = withSun.inScattered(x).x - skyOnly.inScattered(x).x;
+            EXPECT_NEAR(sunShare, sunOnly.inScattered(x).x, kSumTol) << level << " " << z;
+            EXPECT_NEAR(shade(gWithSun, x) - shade(gSky, x), shade(gSun, x), kSumTol)
+                << level << " " << z;
+            lit = std::max(lit, sunOnly.inScattered(x).x);
+        }
+        EXPECT_GT(lit, 0.5f / float(4.0 * std::numbers::pi)) << "the lit face must be in the test";
+    }
+}
+
 // Near an exit the traced visibility is the light's whole one at any level, faded out over the
 // second half of kWholeReachVoxels (no seam): on the fine plate field (ℓ = 0), a sample 0.1 voxel
 // inside the plate's lit face (+z), under a plane d voxels above it that removes matter for the
