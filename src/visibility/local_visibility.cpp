@@ -1922,8 +1922,8 @@ void readField(const MultiresGrid& grid, const float* data, const std::size_t* o
     for (int i = 0; i < C; ++i) out[i] = 0.f;
     const BlockWeights& w = at.weights;
     if (at.alone) {
-        addTrilinear<kC>(data + offset[w.block[0]], levelResolution(w.level[0]), C, w.local[0],
-                         1.f, out);
+        addTrilinear<kC>(data + offset[w.block[0]], levelResolution(w.level[0]), C, w.local[0], 1.f,
+                         out);
         return;
     }
     if (w.count == 0) {
