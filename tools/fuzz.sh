@@ -83,7 +83,12 @@ run_one() {
   local rc=0 start=$SECONDS
   # allocator_release_to_os_interval_ms=-1: ASan returning freed pages to the OS (madvise) was
   # most of the system time and made a 0.1 s input time out on a loaded machine.
-  ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:symbolize=1:allocator_release_to_os_interval_ms=-1 \
+  # symbolize=0: a reader child (dicom_loader.cpp) that asks for more than -rss_limit_mb in one
+  # malloc is stopped by libFuzzer's malloc hook, inherited across the fork, which printed a
+  # symbolized stack: 0.7 s per such input alone, over the 5 s limit beside other work — every
+  # long dicom_series run ended at such a "timeout" within minutes (5 December). Reports are
+  # symbolized afterwards by running each finding again (below).
+  ASAN_OPTIONS=detect_leaks=0:abort_on_error=1:symbolize=0:allocator_release_to_os_interval_ms=-1 \
   UBSAN_OPTIONS=print_stacktrace=1 \
     nice -n 19 "$build/fuzz/fuzz_$t" "${args[@]}" "$@" "$corpus" "$seeds/$t" >"$log" 2>&1 || rc=$?
   # A timeout under a loaded machine (nice 19) is confirmed by running the input again on its own:
@@ -127,7 +132,16 @@ run_one() {
     # The log and the input stay in build-fuzz/ (gone with a CI machine): show what matters here,
     # the report and the input as hex, so a finding can be reproduced from the CI log alone.
     grep -v -E '^(#[0-9]+|INFO:|MS:|stat::|Dictionary:|Done )' "$log" | tail -n 40 | sed "s/^/  $t| /" >&2
-    for f in $(find "$findings" -maxdepth 1 -type f -newer "$log.start" 2>/dev/null | head -n 3); do
+    # The run's stacks are addresses (symbolize=0 above): each input again, symbolized.
+    mkdir -p "$findings/recheck"
+    for f in $(find "$findings" -maxdepth 1 -type f -newer "$log.start" ! -name '*.log' 2>/dev/null | head -n 3); do
+      ASAN_OPTIONS=detect_leaks=0 flock -s "$build/.build.lock" timeout 120 \
+        "$build/fuzz/fuzz_$t" -timeout=5 -rss_limit_mb=2048 -artifact_prefix="$findings/recheck/" \
+        "$f" >"$f.report.log" 2>&1 || true
+      echo "  $t| $(basename "$f") again, symbolized:" >&2
+      grep -v -E '^(INFO:|Running:|Executed |\*\*\*)' "$f.report.log" | tail -n 40 | sed "s/^/  $t|   /" >&2
+    done
+    for f in $(find "$findings" -maxdepth 1 -type f -newer "$log.start" ! -name '*.log' 2>/dev/null | head -n 3); do
       echo "  $t| input $(basename "$f") ($(stat -c %s "$f") bytes), base64:" >&2
       head -c 16384 "$f" | base64 -w 120 | sed "s/^/  $t|   /" >&2
     done

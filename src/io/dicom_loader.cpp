@@ -140,6 +140,11 @@ void injectFault(const fs::path& path) {
         ::raise(SIGSEGV);
     } else if (f == "hang") {
         for (;;) ::pause();
+    } else if (f == "grow") {  // GDCM's ByteValue sized from a damaged length, zero-filled
+        std::vector<char> v;
+        v.resize(std::size_t(8) << 30);  // more than any budget, less than RAM
+        static char* volatile sink;
+        sink = v.data();
     } else if (f == "alloc") {
         static char* volatile sink;  // volatile: the allocation must not be optimised away
         sink = new char[std::size_t(64) << 30];  // what OpenJPEG asked for, times 16
@@ -404,6 +409,12 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
     const std::string fix =
         "the file is damaged or uses an encoding GDCM cannot decode; remove it from the folder, "
         "copy the series again, or convert it with gdcmconv --raw";
+    if (!haveResult && WIFEXITED(status) && WEXITSTATUS(status) == kChildOverBudgetStatus)
+        throw InputError(reading.string(), "PixelData",
+                         "DICOM decoding failed (GDCM needed more memory than the budget for this "
+                         "image" +
+                             (noise.empty() ? "" : ": " + noise) + ")",
+                         fix);
     if (!haveResult) {
         std::string why;
         if (WIFSIGNALED(status))
@@ -415,6 +426,15 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
 #ifdef VOXLIGHT_SANITIZED
         // A sanitizer report from voxlight's own code in the child is a bug, not bad input: let the
         // test or fuzzer see it.
+        // An allocation the sanitizer's allocator refused is the budget's refusal (an
+        // address-space cap refuses it in a release build).
+        if (captured.find("allocator is out of memory") != std::string::npos ||
+            captured.find("requested allocation size") != std::string::npos)
+            throw InputError(reading.string(), "PixelData",
+                             "DICOM decoding failed (GDCM needed more memory than the budget for "
+                             "this image: " +
+                                 noise + ")",
+                             fix);
         if (captured.find("runtime error:") != std::string::npos ||
             (captured.find("ERROR: AddressSanitizer") != std::string::npos &&
              captured.find("SEGV on unknown address") == std::string::npos))

@@ -534,6 +534,11 @@ std::string awaitChild(ChildProcess& child, const fs::path& path, const core::Pr
                              takeField(msg, at) + ")",
                          "the file is damaged, or its sizes or compression headers were edited");
     if (kind == 'X') throw InternalError("volume reader: " + takeField(msg, at));
+    if (kind != 'V' && WIFEXITED(status) && WEXITSTATUS(status) == kChildOverBudgetStatus)
+        throw InputError(path.string(), "data",
+                         "could not be read: the reader asked for more memory than the file's "
+                         "sizes justify (over its budget)",
+                         "the file is damaged, or its sizes or compression headers were edited");
     if (kind != 'V') {
         std::string why = "the reader ended abnormally";
         if (WIFSIGNALED(status))
@@ -1928,6 +1933,12 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
                 static char* volatile sink;  // volatile: the allocation must stay
                 sink = new char[std::size_t(64) << 30];
                 delete[] sink;
+            }
+            if (std::string_view(fault) == "grow") {  // the same, zero-filled as it grows
+                std::vector<char> v;
+                v.resize(std::size_t(8) << 30);  // more than any budget, less than RAM
+                static char* volatile sink;
+                sink = v.data();
             }
         }
         vtkNew<vtkXMLImageDataReader> r;
