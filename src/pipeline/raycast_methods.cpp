@@ -1172,6 +1172,7 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
             {"rays_traced", g->raysTraced()},
             {"points_skipped", g->pointsSkipped()},
             {"bytes", g->bytes()},
+            {"far_bytes", g->farBytes()},
             {"integration", g->integration() == visibility::GlobalIntegration::Recursive
                                 ? "recursive"
                                 : "piecewise"}};

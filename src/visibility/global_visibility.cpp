@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cmath>
 #include <numbers>
@@ -354,19 +355,13 @@ void GlobalVisibility::sample(const glm::vec3& p, float* out) const {
 }
 
 void GlobalVisibility::sample(const glm::vec3& p, float* out, float* spacing) const {
-    VL_CHECK(product_ != nullptr);
-    float nearV[16], farV[16];
-    local_->sample(p, nearV, spacing);
-    sampleFar(p, farV);
-    product_->apply(nearV, farV, out);
+    VL_CHECK(baked_ != nullptr);
+    baked_->sample(p, out, spacing);
 }
 
 void GlobalVisibility::sample(const FieldLookup& at, const glm::vec3& p, float* out) const {
-    VL_CHECK(product_ != nullptr);
-    float nearV[16], farV[16];
-    local_->read(at, p, nearV);
-    sampleFar(p, farV);
-    product_->apply(nearV, farV, out);
+    VL_CHECK(baked_ != nullptr);
+    baked_->read(at, p, out);
 }
 
 void GlobalVisibility::pack() {
@@ -381,6 +376,16 @@ void GlobalVisibility::pack() {
                               for (std::size_t e = 1; e < S; ++e) d[e] *= q;
                           }
                       });
+    if (product_) {  // V^L ⊗ V^F at the local field's points (header comment)
+        const int C = coefficients_;
+        baked_ = std::make_shared<const LocalVisibility>(
+            local_->mapped([&](const glm::vec3& x, float* c) {
+                float farV[16], v[16];
+                sampleFar(x, farV);
+                product_->apply(c, farV, v);
+                std::copy_n(v, C, c);
+            }));
+    }
 }
 
 namespace {

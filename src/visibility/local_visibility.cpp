@@ -1971,6 +1971,20 @@ void readField(const MultiresGrid& grid, const float* data, const std::size_t* o
 }
 }  // namespace
 
+void LocalVisibility::forEachPoint(const std::function<void(const glm::vec3&, float*)>& f) {
+    const MultiresGrid& grid = *grid_;
+    const int C = coefficients_;
+    const std::size_t blocks = grid.pyramid().blockCount();
+    tbb::parallel_for(tbb::blocked_range<std::size_t>(0, blocks), [&](const auto& range) {
+        for (std::size_t b = range.begin(); b != range.end(); ++b) {
+            if (grid.level(b) == kNone) continue;
+            const auto perPoint = [&](const glm::vec3& x, float* c, float) { f(x, c); };
+            forEachSamplePoint(grid, b, C, data_.data() + offset_[b], perPoint);
+            forEachLayerPoint(grid, b, C, layerData_.data(), layerOffset_, perPoint);
+        }
+    });
+}
+
 void LocalVisibility::locate(const glm::vec3& p, FieldLookup& at) const {
     BlockWeights& w = at.weights;
     std::size_t block;
