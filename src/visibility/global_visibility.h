@@ -28,12 +28,12 @@
 // boundary layers, with V^F read there) and interpolated by the local field's own interpolation,
 // so a shaded sample reads one field, as sh-local does, instead of two and a product. Against
 // the product of the two interpolations (until 5 December): the abdominal CT's 512² image at
-// 64 dB PSNR, the same NRMSE against the path tracer to ±0.001 in the accuracy study's
-// sh-global rows, sh-global's frame −15 % (one thread, 2 alternating pairs); the price is a
-// second field of the local field's size (bytes()) and the bake in the global stage.
+// 64 dB PSNR, the same NRMSE against the path tracer to ±0.003 in the accuracy study's
+// sh-global rows; BM_ShFrame512 (2 threads) ×2.10–2.19 the gradient frame → ×1.84–1.96. The
+// price: a second field of the local field's size (bytes()) and the bake in the global stage.
 //
 // GlobalVisibilityOptions::nearFromLocal = false keeps the paper's grid-only field (the chain from
-// j = 0, plain trilinear): cheaper per frame (one field lookup instead of two and the product).
+// j = 0, plain trilinear).
 //
 // Recursive integration (GlobalIntegration::Recursive, the default): eq. 11's product obeys
 //   F_k(x) = T_0(x, ω_k) · F_k(x + r_s·ω_k)
