@@ -13,6 +13,45 @@ namespace voxlight::render {
 
 namespace {
 constexpr float kInv4Pi = float(1.0 / (4.0 * std::numbers::pi));
+
+/// An environment's dominant direction (header comment): from its luminance's band-1
+/// coefficients, and per channel the irradiance E of the directional light along it whose band 1
+/// is the map's band 1 projected onto that direction (≥ 0, and at most what keeps the rest's band
+/// 0 ≥ 0); y: the SH of the direction. False for fewer than 4 coefficients or no band 1.
+bool dominantDirection(const std::vector<glm::vec3>& c, int coefficients, glm::vec3& toward,
+                       glm::vec3& E, float* y) {
+    if (coefficients < 4) return false;
+    // Band 1 is linear in the direction: Y_1(ω) = M·ω, M = √(3/4π) times a rotation.
+    glm::mat3 M;
+    for (int a = 0; a < 3; ++a) {
+        glm::vec3 e(0.f);
+        e[a] = 1.f;
+        float ya[4];
+        sh::evalShFixed<1>(e, ya);
+        M[a] = glm::vec3(ya[1], ya[2], ya[3]);
+    }
+    const glm::vec3 lum(0.2126f, 0.7152f, 0.0722f);
+    glm::vec3 l1;
+    for (int m = 0; m < 3; ++m) l1[m] = glm::dot(lum, c[std::size_t(1 + m)]);
+    const glm::vec3 w = glm::transpose(M) * l1;
+    const float l0 = glm::dot(lum, c[0]);
+    if (!(glm::length(w) > kDominantMinFraction * std::max(l0, 0.f)) || !(l0 > 0.f)) return false;
+    toward = glm::normalize(w);
+    std::fill_n(y, 16, 0.f);
+    if (coefficients <= 4)
+        sh::evalShFixed<1>(toward, y);
+    else if (coefficients <= 9)
+        sh::evalShFixed<2>(toward, y);
+    else
+        sh::evalShFixed<3>(toward, y);
+    const float k2 = y[1] * y[1] + y[2] * y[2] + y[3] * y[3];  // 3/(4π)
+    for (int ch = 0; ch < 3; ++ch) {
+        float along = 0.f;
+        for (int m = 0; m < 3; ++m) along += c[std::size_t(1 + m)][ch] * y[1 + m];
+        E[ch] = std::clamp(along / k2, 0.f, std::max(c[0][ch], 0.f) / y[0]);
+    }
+    return E != glm::vec3(0.f);
+}
 }  // namespace
 
 double ringingBound(int coefficients, std::span<const double> window) {
@@ -52,7 +91,20 @@ ShLights::ShLights(int coefficients, std::span<const std::shared_ptr<const light
             }
             directional_.push_back(dl);
         } else if (dynamic_cast<const lights::EnvironmentLight*>(l)) {
-            const std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), band);
+            std::vector<glm::vec3> c = l->shCoefficients(glm::dvec3(0.0), band);
+            glm::vec3 toward, E;
+            float y[16];
+            if (dominantDirection(c, coefficients_, toward, E, y)) {
+                // Split off as a directional light of irradiance E (header comment): its terms
+                // and the rest's add up to the map's exactly.
+                Directional dl{toward, {}};
+                for (int i = 0; i < coefficients_; ++i) {
+                    dl.c[i] = window_[i] * E * y[i];
+                    c[std::size_t(i)] -= E * y[i];
+                    constant_[i] += dl.c[i];
+                }
+                directional_.push_back(dl);
+            }
             for (int i = 0; i < coefficients_; ++i) {
                 constant_[i] += window_[i] * c[std::size_t(i)];
                 spread_[i] += window_[i] * c[std::size_t(i)];

@@ -24,7 +24,17 @@
 // Lights (lights/light.h conventions):
 //   directional  L_i = E · Y_i(ω_l)                                    (eq. 10, once per frame)
 //   environment  L_i = its SH projection (EnvironmentLight: projected once in the map frame,
-//                rotated by SH rotation when the light turns; once per frame here)
+//                rotated by SH rotation when the light turns; once per frame here). Its dominant
+//                direction is split off as a directional light (Sloan's dominant-light
+//                extraction): along the luminance's band-1 vector, of irradiance E per channel
+//                such that its band 1 is the map's band 1 projected onto that direction (clamped
+//                to [0, L_0·√(4π)]: the rest keeps band 0 ≥ 0); the rest (the map minus that
+//                light's SH) stays spread over the field at x. The two add up to the map's
+//                coefficients, so the plain product (ShVisibilityShader, ritschel, near_shadow
+//                false) is unchanged, while the near shadow traces the split-off light like any
+//                directional one. Accuracy study, torso under the courtyard map (128², 1:8, linear
+//                NRMSE against the path tracer, 5 December): sh-local 1.244 → 0.995, sh-global
+//                0.754 → 0.567; with 16 coefficients 1.427 → 1.180 and 0.846 → 0.665.
 //   point        per sample: L_i = E(x) · Y_i(ω(x)) with E = I / max(d, minDistance)², blending to
 //                a uniform radiance of the same irradiance within minDistance, exactly as
 //                PointLight::shCoefficients does (so a light inside the volume or on a grid point
@@ -47,6 +57,10 @@
 #include "visibility/local_visibility.h"
 
 namespace voxlight::render {
+
+/// An environment map's band-1 vector shorter than this fraction of its band 0 (luminance) has
+/// no dominant direction to split off (a uniform map has none).
+inline constexpr float kDominantMinFraction = 1e-3f;
 
 /// A delta light's visibility traced to where nothing beyond can shadow it (NearShadowTrace),
 /// and the weight it takes in the light's term (ShLights::shadeToward).

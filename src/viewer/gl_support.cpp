@@ -42,11 +42,13 @@ std::string glUnsupportedReason(const std::string& method, const pipeline::Caste
         for (const auto& l : o.lights)
             if (dynamic_cast<const lights::PointLight*>(l.get()))
                 ++points;
-            else if (dynamic_cast<const lights::DirectionalLight*>(l.get()))
-                ++directional;
+            else if (dynamic_cast<const lights::DirectionalLight*>(l.get()) ||
+                     dynamic_cast<const lights::EnvironmentLight*>(l.get()))
+                ++directional;  // an environment's dominant direction is traced as one
         if (o.shNearShadow && directional > kMaxGlLights)
             return std::to_string(directional) +
-                   " directional lights with near_shadow: the GLSL SH shading traces at most " +
+                   " directional and environment lights with near_shadow: the GLSL SH shading "
+                   "traces at most " +
                    std::to_string(kMaxGlLights);
         if (points > kMaxGlShPointLights)
             return std::to_string(points) + " point lights: the GLSL SH shading holds at most " +

@@ -170,6 +170,55 @@ TEST(ShShading, UniformEnvironmentInEmptySpaceScattersItsRadiance) {
     }
 }
 
+// An environment's dominant direction is split off as a directional light that the near shadow
+// traces (sh_shading.h, Lights): the split-off light and the rest add up to the map's
+// coefficients (the plain product is unchanged), the light points toward the bright half, takes
+// the map's band 1 along it, and leaves the rest's band 0 ≥ 0; a uniform map has none.
+TEST(ShShading, AnEnvironmentsDominantDirectionIsSplitOffAndTheSumIsUnchanged) {
+    core::ImageRGBA image(64, 32);
+    for (int j = 0; j < 32; ++j)
+        for (int i = 0; i < 64; ++i) {
+            float* px = &image.pixels[4 * (std::size_t(j) * 64 + std::size_t(i))];
+            const float L = j < 16 ? 2.f : 0.2f;  // one half of the sphere brighter
+            px[0] = L, px[1] = 0.8f * L, px[2] = 0.5f * L, px[3] = 1.f;
+        }
+    const auto env =
+        std::make_shared<lights::EnvironmentLight>(image, lights::EnvironmentOptions{}, "half");
+    const std::vector<std::shared_ptr<const lights::Light>> ls = {env};
+    // Float sums of a few coefficients: relative 1e-5 of band 0.
+    constexpr float kRelTol = 1e-5f;
+    for (const int C : {4, 9, 16}) {
+        const render::ShLights lights(C, ls);
+        const std::vector<glm::vec3> c =
+            env->shCoefficients(glm::dvec3(0.0), sh::shBandForCount(C));
+        ASSERT_EQ(lights.directionals().size(), 1u) << C;
+        const auto& d = lights.directionals()[0];
+        for (int i = 0; i < C; ++i)
+            for (int ch = 0; ch < 3; ++ch)
+                EXPECT_NEAR(lights.constants()[i][ch], c[std::size_t(i)][ch], kRelTol * c[0][ch])
+                    << C << " " << i;
+        // Toward the bright half: the map's reconstruction is larger there than opposite.
+        float yp[16] = {}, yn[16] = {};
+        sh::evalShFixed<3>(d.toward, yp);
+        sh::evalShFixed<3>(-d.toward, yn);
+        float along = 0.f, opposite = 0.f, restAlong = 0.f;
+        for (int i = 0; i < 4; ++i) {
+            along += c[std::size_t(i)].y * yp[i];
+            opposite += c[std::size_t(i)].y * yn[i];
+            if (i > 0) restAlong += lights.spread()[i].y * yp[i];
+        }
+        EXPECT_GT(along, 2.f * opposite) << C;
+        EXPECT_NEAR(restAlong, 0.f, kRelTol * c[0].y) << "the rest keeps no band 1 along it";
+        for (int ch = 0; ch < 3; ++ch) EXPECT_GE(lights.spread()[0][ch], 0.f);
+        EXPECT_GT(d.c[0].x, 0.f);
+    }
+    // A uniform map: nothing to split off.
+    for (std::size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = 1.f;
+    const std::vector<std::shared_ptr<const lights::Light>> uniform = {
+        std::make_shared<lights::EnvironmentLight>(image, lights::EnvironmentOptions{}, "u")};
+    EXPECT_TRUE(render::ShLights(4, uniform).directionals().empty());
+}
+
 TEST(ShShading, GlobalShaderBlendsFromLocalAtARemovingFaceToGlobalOneBandAway) {
     // Local field: empty space (unoccluded); global field: chained from an opaque volume (nearly
     // fully occluded), on the same geometry. A plane x ≥ 0 that removes matter for the light.

@@ -517,8 +517,9 @@ TEST(ViewCli, GlslImageAgreesWithTheCpuRayCaster) {
 // differences it reads the visibility field resampled as half floats on a grid of two points per
 // voxel and axis, interpolated by the texture unit (render/sh_field_grid.h), where the CPU
 // samples the field itself: that grid holds the fields' own sample points, so the texture
-// reproduces their interpolation, and sh-global's near ⊗ far product (not trilinear) differs only
-// between points half a voxel apart. Measured (llvmpipe): sh-global mean 0.003 levels, sh-local
+// reproduces their interpolation (sh-global's product is baked on the local field's points, so
+// the same holds for it; until 5 December its product of two interpolations differed between
+// points half a voxel apart). Measured (llvmpipe): sh-global mean 0.003 levels, sh-local
 // 0.002, ritschel 0.001, none over 2 levels, worst 1, PSNR 73–79 dB. The limits catch a real
 // mismatch: a first version read the field resampled cell centred (points between the fields'
 // own) and gave mean 0.4–0.9 levels, 5–12 % of channels over 2 levels (PSNR 39–50 dB); the
@@ -571,6 +572,22 @@ TEST(ViewCli, GlslShShadingAgreesWithTheCpuRayCaster) {
                              "shadows_from_removed": false}],
             "image": {"width": 240, "height": 200}})"};
     expectGlslAgreesWithCpu(scenes, *display, "GLSL SH");
+}
+
+// Under an environment map the near shadow traces the map's dominant direction as a directional
+// light (render/sh_shading.h): the GLSL shader takes it from the same light list and agrees.
+TEST(ViewCli, GlslShShadingUnderAnEnvironmentAgreesWithTheCpuRayCaster) {
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
+    const std::string scene =
+        R"({"volume": {"phantom": "torso", "size": 64}, "transfer_function": "ct-bone",
+            "method": {"name": "sh-local", "params": {"data_reduction": 16}},
+            "camera": {"azimuth": 30, "elevation": 15},
+            "lights": [{"type": "environment", "intensity": 1, "path": ")" +
+        std::filesystem::absolute(env).string() + R"("}], "image": {"width": 240, "height": 200}})";
+    const char* scenes[] = {scene.c_str()};
+    expectGlslAgreesWithCpu(scenes, *display, "GLSL SH environment");
 }
 
 // SH fields are uploaded once per field, not per frame: an orbit and a zoom on the GLSL path
