@@ -38,12 +38,7 @@ bool dominantDirection(const std::vector<glm::vec3>& c, int coefficients, glm::v
     if (!(glm::length(w) > kDominantMinFraction * std::max(l0, 0.f)) || !(l0 > 0.f)) return false;
     toward = glm::normalize(w);
     std::fill_n(y, 16, 0.f);
-    if (coefficients <= 4)
-        sh::evalShFixed<1>(toward, y);
-    else if (coefficients <= 9)
-        sh::evalShFixed<2>(toward, y);
-    else
-        sh::evalShFixed<3>(toward, y);
+    sh::evalShForCount(coefficients, toward, y);
     const float k2 = y[1] * y[1] + y[2] * y[2] + y[3] * y[3];  // 3/(4π)
     for (int ch = 0; ch < 3; ++ch) {
         float along = 0.f;

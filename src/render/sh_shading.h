@@ -145,12 +145,7 @@ glm::vec3 ShLights::addPoints(glm::vec3 sum, const glm::vec3& x, const float* v,
         if (directional > 0.f) {
             float y[16];  // only the bands the field has (once per shaded sample and light)
             const glm::vec3 u = d / dist;
-            if (C <= 4)
-                sh::evalShFixed<1>(u, y);
-            else if (C <= 9)
-                sh::evalShFixed<2>(u, y);
-            else
-                sh::evalShFixed<3>(u, y);
+            sh::evalShForCount(C, u, y);
             float scratch[16], T = 1.f;
             WholeReading whole;
             const float* vt = toward(u, dist, scratch, T, whole);

@@ -77,6 +77,17 @@ glm::dvec3 sphericalToDirection(double theta, double phi);
 template <int L>
 void evalShFixed(const glm::vec3& unitDir, float* out);
 
+/// evalShFixed for the bands of a field of `count` ≤ 16 coefficients (1–4: band 1, 5–9: band 2,
+/// else band 3): the hot-loop evaluation of a light's direction against such a field.
+inline void evalShForCount(int count, const glm::vec3& unitDir, float* out) {
+    if (count <= 4)
+        evalShFixed<1>(unitDir, out);
+    else if (count <= 9)
+        evalShFixed<2>(unitDir, out);
+    else
+        evalShFixed<3>(unitDir, out);
+}
+
 /// Recurrence evaluation at a unit direction, any L ≤ kMaxBand. `out.size() >= shCount(L)`.
 void evalShUnit(int maxBand, const glm::vec3& unitDir, std::span<float> out);
 void evalShUnitDouble(int maxBand, const glm::dvec3& unitDir, std::span<double> out);
