@@ -243,7 +243,7 @@ class ShVisibilityShader {
 /// NRMSE sh-local / sh-global, near_trace 0 → 2 → 4): corner case 0.325 → 0.185 → 0.157 /
 /// 0.465 → 0.281 → 0.221, torso `ct-bone` 0.854 → 0.758 → 0.750 / 0.709 → 0.618 → 0.606,
 /// `ct-soft-tissue` 0.228 → 0.164 → 0.142 / 0.216 → 0.186 → 0.173, abdominal CT 0.517 → 0.366
-/// → 0.328 / 0.519 → 0.313 → 0.268 — at +31–64 % (2) and +50–83 % (4) frame time
+/// → 0.328 / 0.519 → 0.313 → 0.268 — at +50–75 % (2) and +77–115 % (4) frame time
 /// (BM_ShFrame512, 512², torso and abdominal CT), so not the default.
 inline constexpr float kNearShadowSpacings = 0.5f;
 
