@@ -13,8 +13,9 @@
 //   sh-local:             rays (32), coefficients (1/4/9/16; 4), radius (voxels; 16), and the LOD
 //                         budget as data_reduction (voxels per grid sample; 8) or lod_budget_mb
 //                         (MB of visibility coefficients; not both); near_shadow (true: each
-//                         directional/point light's first ½·(s − 1) voxels traced exactly where
-//                         the field is stored at spacing s — render/sh_shading.h ShLocalShader)
+//                         directional/point light's, and an environment map's dominant
+//                         direction's, first ½·(s − 1) voxels traced exactly where the field is
+//                         stored at spacing s — render/sh_shading.h ShLocalShader)
 //                         and near_trace (voxels traced at every level on top of that; 0)
 //   sh-global:            the same + global_resolution (grid points per axis; 64, capped at the
 //                         volume's dims) and global_near ("local": the fine local field at the
