@@ -409,12 +409,16 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
     const std::string fix =
         "the file is damaged or uses an encoding GDCM cannot decode; remove it from the folder, "
         "copy the series again, or convert it with gdcmconv --raw";
+    // The budget's refusal, however the child met it (budget: bytes, 0 = not known here).
+    const auto overBudget = [&](std::uint64_t budget) {
+        return InputError(reading.string(), "PixelData",
+                          "DICOM decoding failed (GDCM needed more memory than the " +
+                              (budget ? std::to_string(budget >> 20) + " MiB " : std::string()) +
+                              "budget for this image" + (noise.empty() ? "" : ": " + noise) + ")",
+                          fix);
+    };
     if (!haveResult && WIFEXITED(status) && WEXITSTATUS(status) == kChildOverBudgetStatus)
-        throw InputError(reading.string(), "PixelData",
-                         "DICOM decoding failed (GDCM needed more memory than the budget for this "
-                         "image" +
-                             (noise.empty() ? "" : ": " + noise) + ")",
-                         fix);
+        throw overBudget(0);
     if (!haveResult) {
         std::string why;
         if (WIFSIGNALED(status))
@@ -430,11 +434,7 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
         // address-space cap refuses it in a release build).
         if (captured.find("allocator is out of memory") != std::string::npos ||
             captured.find("requested allocation size") != std::string::npos)
-            throw InputError(reading.string(), "PixelData",
-                             "DICOM decoding failed (GDCM needed more memory than the budget for "
-                             "this image: " +
-                                 noise + ")",
-                             fix);
+            throw overBudget(0);
         if (captured.find("runtime error:") != std::string::npos ||
             (captured.find("ERROR: AddressSanitizer") != std::string::npos &&
              captured.find("SEGV on unknown address") == std::string::npos))
@@ -455,12 +455,7 @@ mod::SeriesResult readIsolated(const mod::Api& api, const fs::path& path,
         case Msg::OutOfMemory: {
             std::uint64_t budget = 0;
             if (result.size() == sizeof budget) std::memcpy(&budget, result.data(), sizeof budget);
-            throw InputError(reading.string(), "PixelData",
-                             "DICOM decoding failed (GDCM needed more memory than the " +
-                                 (budget ? std::to_string(budget >> 20) + " MiB " : std::string()) +
-                                 "budget for this image" + (noise.empty() ? "" : ": " + noise) +
-                                 ")",
-                             fix);
+            throw overBudget(budget);
         }
         case Msg::Internal:
             throw InternalError("DICOM reader: " + result);

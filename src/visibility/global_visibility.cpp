@@ -289,7 +289,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         }
         out.rays_ = shaded * std::uint64_t(N);
         out.skipped_ = P - shaded;
-        arena.execute([&] { out.pack(); });
+        arena.execute([&] {
+            out.pack();
+            out.bake();
+        });
         progress.report("global visibility", 1.0);
         return out;
     }
@@ -337,7 +340,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
     if (progress.cancelled()) throw CancelledError();
     out.rays_ = raysTotal;
     out.skipped_ = skippedTotal;
-    arena.execute([&] { out.pack(); });
+    arena.execute([&] {
+        out.pack();
+        out.bake();
+    });
     progress.report("global visibility", 1.0);
     return out;
 }
@@ -376,16 +382,19 @@ void GlobalVisibility::pack() {
                               for (std::size_t e = 1; e < S; ++e) d[e] *= q;
                           }
                       });
-    if (product_) {  // V^L ⊗ V^F at the local field's points (header comment)
-        const int C = coefficients_;
-        baked_ = std::make_shared<const LocalVisibility>(
-            local_->mapped([&](const glm::vec3& x, float* c) {
-                float farV[16], v[16];
-                sampleFar(x, farV);
-                product_->apply(c, farV, v);
-                std::copy_n(v, C, c);
-            }));
-    }
+}
+
+void GlobalVisibility::bake() {
+    if (!product_) return;
+    // V^L ⊗ V^F at the local field's points (header comment), from the packed far grid.
+    const int C = coefficients_;
+    baked_ =
+        std::make_shared<const LocalVisibility>(local_->mapped([&](const glm::vec3& x, float* c) {
+            float farV[16], v[16];
+            sampleFar(x, farV);
+            product_->apply(c, farV, v);
+            std::copy_n(v, C, c);
+        }));
 }
 
 namespace {

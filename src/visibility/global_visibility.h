@@ -178,6 +178,8 @@ class GlobalVisibility {
     /// computed it holds [openness, V^F_i]; pack() weights it in place at the end.
     std::vector<float> packed_;
     void pack();
+    /// baked_ from the local field and the packed far grid (after pack()).
+    void bake();
     std::uint64_t rays_ = 0, skipped_ = 0;
     GlobalIntegration integration_ = GlobalIntegration::Piecewise;
     std::string integrationNote_;

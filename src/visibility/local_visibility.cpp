@@ -1971,7 +1971,9 @@ void readField(const MultiresGrid& grid, const float* data, const std::size_t* o
 }
 }  // namespace
 
-void LocalVisibility::forEachPoint(const std::function<void(const glm::vec3&, float*)>& f) {
+LocalVisibility LocalVisibility::mapped(
+    const std::function<void(const glm::vec3&, float*)>& f) const {
+    LocalVisibility out = *this;
     const MultiresGrid& grid = *grid_;
     const int C = coefficients_;
     const std::size_t blocks = grid.pyramid().blockCount();
@@ -1979,10 +1981,11 @@ void LocalVisibility::forEachPoint(const std::function<void(const glm::vec3&, fl
         for (std::size_t b = range.begin(); b != range.end(); ++b) {
             if (grid.level(b) == kNone) continue;
             const auto perPoint = [&](const glm::vec3& x, float* c, float) { f(x, c); };
-            forEachSamplePoint(grid, b, C, data_.data() + offset_[b], perPoint);
-            forEachLayerPoint(grid, b, C, layerData_.data(), layerOffset_, perPoint);
+            forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);
+            forEachLayerPoint(grid, b, C, out.layerData_.data(), out.layerOffset_, perPoint);
         }
     });
+    return out;
 }
 
 void LocalVisibility::locate(const glm::vec3& p, FieldLookup& at) const {

@@ -320,19 +320,12 @@ class LocalVisibility {
     /// A copy in which f(x, c) has rewritten the C coefficients c of every stored point (block
     /// samples and boundary-layer points) at its voxel coordinate x (clamped onto the volume, as
     /// computed); f is called concurrently. GlobalVisibility bakes V^L ⊗ V^F into one with it.
-    template <class F>
-    LocalVisibility mapped(F&& f) const {
-        LocalVisibility out = *this;
-        out.forEachPoint([&](const glm::vec3& x, float* c) { f(x, c); });
-        return out;
-    }
+    LocalVisibility mapped(const std::function<void(const glm::vec3&, float*)>& f) const;
 
     /// σt of the TF the field was computed under (what a TF update compares against).
     const optics::TfTable::ExtinctionProfile& extinction() const { return *extinction_; }
 
   private:
-    /// Calls f(x, c) for every stored point's coefficients (mapped()), in parallel over blocks.
-    void forEachPoint(const std::function<void(const glm::vec3&, float*)>& f);
     friend LocalVisibility computeLocalVisibility(std::shared_ptr<const MultiresGrid>,
                                                   const optics::TfTable&,
                                                   const LocalVisibilityOptions&,
