@@ -28,9 +28,10 @@
 // boundary layers, with V^F read there) and interpolated by the local field's own interpolation,
 // so a shaded sample reads one field, as sh-local does, instead of two and a product. Against
 // the product of the two interpolations (until 5 December): the abdominal CT's 512² image at
-// 64 dB PSNR, the same NRMSE against the path tracer to ±0.003 in the accuracy study's
-// sh-global rows; BM_ShFrame512 (2 threads) ×2.10–2.19 the gradient frame → ×1.84–1.96. The
-// price: a second field of the local field's size (bytes()) and the bake in the global stage.
+// 64 dB PSNR, the same NRMSE against the path tracer to ±0.004 in the accuracy study's
+// sh-global rows (three coarse corner-case rows 0.005–0.013 better); BM_ShFrame512 (2 threads)
+// ×2.10–2.19 the gradient frame → ×1.84–1.96. The price: a second field of the local field's size
+// (bytes()) and the bake in the global stage.
 //
 // GlobalVisibilityOptions::nearFromLocal = false keeps the paper's grid-only field (the chain from
 // j = 0, plain trilinear).
