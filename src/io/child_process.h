@@ -39,7 +39,7 @@ namespace voxlight::io {
 inline constexpr int kChildTrimThreshold = 128 * 1024;
 
 /// Exit status of a reading child that went over its memory budget in a sanitized build
-/// (limitAddressSpace); its parent reports it as the out-of-memory refusal.
+/// (limitChildMemory); its parent reports it as the out-of-memory refusal.
 inline constexpr int kChildOverBudgetStatus = 86;
 
 #ifdef VOXLIGHT_SANITIZED
@@ -62,7 +62,7 @@ inline std::size_t residentBytes() {
 /// Without it a damaged JPEG header that made GDCM zero-fill 4.7 GB took 5 s in the fuzzers
 /// (0.04 s in a release build, where the address-space cap refuses the allocation) and every
 /// long dicom_series run stopped at such a "timeout" within minutes (5 December).
-inline std::size_t limitAddressSpace(std::size_t extra) {
+inline std::size_t limitChildMemory(std::size_t extra) {
 #ifdef VOXLIGHT_SANITIZED
     static std::atomic<std::size_t> cap{0};
     cap = residentBytes() + extra + kSanitizedSlackBytes;

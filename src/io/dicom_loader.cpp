@@ -174,7 +174,7 @@ std::chrono::seconds stallLimit() {
     ::dup2(errFd, STDERR_FILENO);
     becomeReaderChild();
     const Writer out(msgFd);
-    std::size_t budget = limitAddressSpace(kChildHeadroomBytes);
+    std::size_t budget = limitChildMemory(kChildHeadroomBytes);
 
     mod::Hooks hooks;
     hooks.reading = [&](const fs::path& f) { out.send(Msg::Reading, f.string()); };
@@ -182,7 +182,7 @@ std::chrono::seconds stallLimit() {
         if (::ftruncate(memFd, off_t(bytes)) != 0) throw std::bad_alloc();
         void* p = ::mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_SHARED, memFd, 0);
         if (p == MAP_FAILED) throw std::bad_alloc();
-        budget = limitAddressSpace(kChildHeadroomBytes + kChildSliceFactor * sliceBytes);
+        budget = limitChildMemory(kChildHeadroomBytes + kChildSliceFactor * sliceBytes);
         return std::shared_ptr<std::byte>(static_cast<std::byte*>(p),
                                           [bytes](std::byte* q) { ::munmap(q, bytes); });
     };

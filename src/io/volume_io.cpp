@@ -1920,7 +1920,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
 [[noreturn]] void readVtiInChild(const fs::path& path, std::uint64_t fileBytes, int msgFd,
                                  int memFd) {
     becomeReaderChild();
-    limitAddressSpace(kVtiChildHeadroomBytes);
+    limitChildMemory(kVtiChildHeadroomBytes);
     std::ostringstream printed;
     std::cerr.rdbuf(printed.rdbuf());
     std::string msg;
@@ -1959,7 +1959,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
                                  std::to_string(fileBytes * kMaxDeflateRatio + kDeflateSlackBytes) +
                                  " even deflate-compressed",
                              "the file is damaged or truncated");
-        limitAddressSpace(kVtiChildHeadroomBytes + kVtiChildBytesPerValue * voxels);
+        limitChildMemory(kVtiChildHeadroomBytes + kVtiChildBytesPerValue * voxels);
         runVtkChecked(r, path, "data", [&] { r->Update(); });
         vtkImageData* img = r->GetOutput();
         vtkDataArray* scalars = imageScalars(img, path);
