@@ -992,10 +992,36 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                           d[dk + dj + di]);
     };
     auto read = [&](std::ptrdiff_t base, const Stencil& st) {
-        float value = 0.f;
-        for (int c = 0; c < st.n; ++c)
-            value += st.weight[c] * flat[std::size_t(base + st.offset[c])];
-        return value;
+        // Unrolled for the tap counts a trilinear stencil has (2^axes with a fraction: 1, 2, 4,
+        // 8; the hottest read of the sweep), summed in the loop's order: the same value.
+        const float* f = flat + base;
+        const std::ptrdiff_t* o = st.offset;
+        const float* w = st.weight;
+        float value = w[0] * f[o[0]];
+        switch (st.n) {
+            case 1:
+                return value;
+            case 2:
+                value += w[1] * f[o[1]];
+                return value;
+            case 4:
+                value += w[1] * f[o[1]];
+                value += w[2] * f[o[2]];
+                value += w[3] * f[o[3]];
+                return value;
+            case 8:
+                value += w[1] * f[o[1]];
+                value += w[2] * f[o[2]];
+                value += w[3] * f[o[3]];
+                value += w[4] * f[o[4]];
+                value += w[5] * f[o[5]];
+                value += w[6] * f[o[6]];
+                value += w[7] * f[o[7]];
+                return value;
+            default:
+                for (int c = 1; c < st.n; ++c) value += w[c] * f[o[c]];
+                return value;
+        }
     };
 
     // Empty space: a 4³ cell whose value range the TF makes transparent holds σt = 0 at every
@@ -1028,6 +1054,15 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                         quiet[i] = all;
                     }
         }
+    }
+    // A voxel coordinate's part of its cell's index in `quiet`, per axis (the walk's test per
+    // lattice step: three loads and two adds).
+    std::vector<std::size_t> cellPart[3];
+    for (int a = 0; a < 3; ++a) {
+        const std::size_t stride = a == 0   ? 1
+                                   : a == 1 ? std::size_t(cells.x)
+                                            : std::size_t(cells.x) * cells.y;
+        for (int x = 0; x < dims[a]; ++x) cellPart[a].push_back(std::size_t(x / kCell) * stride);
     }
     auto quietAt = [&](const glm::vec3& p) {
         const glm::ivec3 c =
@@ -1095,35 +1130,33 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                      [&](std::size_t a, std::size_t b) { return work[a] > work[b]; });
 
     const glm::vec3 top(dims - 1);
-    auto inVolume = [&](const glm::vec3& x) {
-        return glm::all(glm::greaterThanEqual(x, glm::vec3(0.f))) &&
-               glm::all(glm::lessThanEqual(x, top));
-    };
     const std::size_t boxPoints = std::size_t(box) * box * box;
     auto boxIndex = [&](const glm::ivec3& k) {
         return std::size_t(k.x) + std::size_t(box) * (std::size_t(k.y) + std::size_t(box) * k.z);
     };
     // Per thread: the group's lattice maps (point index per lattice position of each lattice,
-    // −1 = none; reset after each group) and which lines a direction has walked.
+    // −1 = none; reset after each group) and which walk last collected each point.
     struct Scratch {
         std::vector<std::int32_t> map[2];
-        std::vector<std::uint64_t> walked;
+        /// Per point of the group: the walk (direction and lattice) whose line collected it. A
+        /// point already collected lies on a line walked in full, so it needs no line of its own.
+        std::vector<std::uint32_t> collected;
+        std::uint32_t walk = 0;
         std::vector<std::uint8_t> occupied[2];  // per block of the group: points on the lattice
         std::vector<std::uint8_t> stepQuiet;    // per lattice step of a line
         std::vector<std::uint8_t> swept;        // per point of a block
         std::vector<std::int64_t> P;            // fixed-point optical depth from a run's start
         std::vector<float> S;                   // the value at each sub-step
-        std::vector<double> I;            // σt's integral to it where the walk took it, or NaN
-        std::vector<int> lineT, lineIdx;  // a line's points: lattice step, point index
-        std::vector<float*> dstOf;        // the group's swept points' coefficients
-        std::vector<glm::ivec3> at[2];    // their lattice positions in the group's box
+        std::vector<int> lineT, lineIdx;        // a line's points: lattice step, point index
+        std::vector<float*> dstOf;              // the group's swept points' coefficients
+        std::vector<glm::ivec3> at[2];          // their lattice positions in the group's box
+        std::vector<std::int32_t> atIndex[2];   // and their point indices
         std::vector<std::pair<float*, const float*>> copies;  // clamped ← source
     };
     tbb::enumerable_thread_specific<Scratch> scratch([&] {
         Scratch s;
         s.map[0].assign(boxPoints, -1);
         s.map[1].assign(boxPoints, -1);
-        s.walked.assign((boxPoints + 63) / 64, 0);
         s.swept.resize(std::size_t(kBlockSize) * kBlockSize * kBlockSize);
         return s;
     });
@@ -1143,6 +1176,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                 sc.dstOf.clear();
                 sc.at[0].clear();
                 sc.at[1].clear();
+                sc.atIndex[0].clear();
+                sc.atIndex[1].clear();
                 sc.copies.clear();
                 sc.occupied[0].assign(std::size_t(G) * G * G, 0);
                 sc.occupied[1].assign(std::size_t(G) * G * G, 0);
@@ -1170,6 +1205,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 std::fill(dst, dst + C, 0.f);
                                 const glm::ivec3 k = glm::ivec3(origin - (lat ? 0.5f : 0.f)) - lo;
                                 sc.map[lat][boxIndex(k)] = std::int32_t(sc.dstOf.size());
+                                sc.atIndex[lat].push_back(std::int32_t(sc.dstOf.size()));
                                 sc.dstOf.push_back(dst);
                                 sc.at[lat].push_back(k);
                                 const glm::ivec3 bk = k / kBlockSize;
@@ -1201,6 +1237,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                         });
                 }
 
+                sc.collected.assign(sc.dstOf.size(), 0);
+                sc.walk = 0;
                 // Per pair ±v, one walk along each line serves both rays of every point on it.
                 for (int k = 0; k < N; ++k) {
                     const Dir& d = dirs[std::size_t(k)];
@@ -1210,11 +1248,13 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                     const int reachSteps = int(std::ceil(d.reach)) + 1;
                     for (int lat = 0; lat < 2; ++lat) {
                         if (sc.at[lat].empty()) continue;
-                        std::fill(sc.walked.begin(), sc.walked.end(), 0);
+                        const std::uint32_t walk = ++sc.walk;
                         const std::vector<Stencil>& sten = d.stencil[lat];
                         const int q = d.q[lat];
                         const float subMm = d.stepMm / float(q);
-                        for (const glm::ivec3& p : sc.at[lat]) {
+                        for (std::size_t ai = 0; ai < sc.at[lat].size(); ++ai) {
+                            if (sc.collected[std::size_t(sc.atIndex[lat][ai])] == walk) continue;
+                            const glm::ivec3& p = sc.at[lat][ai];
                             // The line's first lattice position in the group's box.
                             int back = box;
                             for (int a = 0; a < 3; ++a) {
@@ -1222,9 +1262,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 if (d.v[a] < 0) back = std::min(back, (box - 1 - p[a]) / -d.v[a]);
                             }
                             const glm::ivec3 head = p - back * d.v;
-                            const std::size_t hi = boxIndex(head);
-                            if (sc.walked[hi / 64] >> (hi % 64) & 1u) continue;
-                            sc.walked[hi / 64] |= std::uint64_t(1) << (hi % 64);
                             sc.lineT.clear();
                             sc.lineIdx.clear();
                             {
@@ -1254,6 +1291,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                     for (int i = 0; i < stay; ++i, ++t, j += d.v) {
                                         const std::int32_t m = sc.map[lat][boxIndex(j)];
                                         if (m < 0) continue;
+                                        sc.collected[std::size_t(m)] = walk;
                                         sc.lineT.push_back(t);
                                         sc.lineIdx.push_back(m);
                                     }
@@ -1269,6 +1307,25 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                             auto latticeValue = [&](int tt) {
                                 return read(base0 + tt * d.delta, sten[0]);
                             };
+                            // The line's lattice points inside the volume: t in [tBegin, tEnd]
+                            // (an interval; exact: half-integers over 1 or 2).
+                            int tBegin = std::numeric_limits<int>::min();
+                            int tEnd = std::numeric_limits<int>::max();
+                            for (int ax = 0; ax < 3; ++ax) {
+                                if (d.v[ax] > 0) {
+                                    tBegin = std::max(
+                                        tBegin, int(std::ceil(-lineStart[ax] / float(d.v[ax]))));
+                                    tEnd = std::min(tEnd, int(std::floor((top[ax] - lineStart[ax]) /
+                                                                         float(d.v[ax]))));
+                                }
+                                if (d.v[ax] < 0) {
+                                    tBegin =
+                                        std::max(tBegin, int(std::ceil((lineStart[ax] - top[ax]) /
+                                                                       float(-d.v[ax]))));
+                                    tEnd = std::min(
+                                        tEnd, int(std::floor(lineStart[ax] / float(-d.v[ax]))));
+                                }
+                            }
                             const std::size_t count = sc.lineT.size();
                             std::size_t runBegin = 0;
                             for (std::size_t ri = 1; ri <= count; ++ri) {
@@ -1280,10 +1337,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // where the line enters the volume) to `want` (R past the last, or
                                 // where it leaves; outside the volume is empty); S the values there.
                                 const int want = last + reachSteps;
-                                int tStart = first;
-                                while (tStart > first - reachSteps &&
-                                       inVolume(position(tStart - 1)))
-                                    --tStart;
+                                const int tStart = std::max(first - reachSteps, tBegin);
                                 const bool entered = tStart > first - reachSteps;
                                 const std::size_t subs =
                                     std::size_t(want - tStart) * std::size_t(q) + 1;
@@ -1292,11 +1346,9 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // is read, and `unread` below marks the rest).
                                 std::vector<std::int64_t>& P = sc.P;
                                 std::vector<float>& S = sc.S;
-                                std::vector<double>& I = sc.I;
                                 if (P.size() < subs) {
                                     P.resize(subs);
                                     S.resize(subs);
-                                    I.resize(subs);
                                 }
                                 P[0] = 0;
                                 sc.stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
@@ -1315,19 +1367,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 glm::vec3 at = position(tStart);
                                 double iFront = 0.0;
                                 bool haveIFront = false, haveStart = false;
-                                // The line's last lattice point inside the volume (an interval
-                                // along it, and tStart lies in it): the walk stops before the
-                                // step that would leave. Exact: half-integers over 1 or 2.
-                                int tEnd = std::numeric_limits<int>::max();
-                                for (int ax = 0; ax < 3; ++ax) {
-                                    if (d.v[ax] > 0)
-                                        tEnd = std::min(tEnd,
-                                                        int(std::floor((top[ax] - lineStart[ax]) /
-                                                                       float(d.v[ax]))));
-                                    if (d.v[ax] < 0)
-                                        tEnd = std::min(
-                                            tEnd, int(std::floor(lineStart[ax] / float(-d.v[ax]))));
-                                }
+                                // The walk stops before the step that would leave the volume.
                                 const int tStop = std::min(want, tEnd);
                                 int t = tStart;
                                 // Counted and carried in locals: `samples` (a uint64_t reference)
@@ -1335,10 +1375,16 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // reload P and store the count.
                                 std::uint64_t walkSamples = 0;
                                 std::int64_t depth = 0;  // P at the current sub-step
-                                for (; t < tStop; ++t) {
+                                float sPrev = 0.f;       // S at the current sub-step, once read
+                                // Lattice point t's voxel (its position's floor: every coordinate
+                                // is ≥ 0 inside the volume), stepped in integers for quietAt's cell.
+                                glm::ivec3 voxel = v0 + tStart * d.v;
+                                for (; t < tStop; ++t, voxel += d.v) {
                                     const glm::vec3 next = position(t + 1);
                                     const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
-                                    if (quietAt(at)) {
+                                    if (quiet[cellPart[0][std::size_t(voxel.x)] +
+                                              cellPart[1][std::size_t(voxel.y)] +
+                                              cellPart[2][std::size_t(voxel.z)]]) {
                                         // Transparent throughout: nothing to integrate or read (S
                                         // stays unread there).
                                         sc.stepQuiet[std::size_t(t - tStart)] = 1;
@@ -1348,24 +1394,22 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         continue;
                                     }
                                     if (!haveStart) {
-                                        S[m] = latticeValue(t);
-                                        I[m] = NAN;
+                                        sPrev = latticeValue(t);
+                                        S[m] = sPrev;
                                     }
                                     const std::ptrdiff_t base = base0 + t * d.delta;
                                     haveStart = true;
                                     for (int j = 1; j <= q; ++j) {
-                                        const float sFront = S[m + std::size_t(j) - 1];
+                                        const float sFront = sPrev;
                                         const float sBack = read(base, sten[std::size_t(j)]);
                                         S[m + std::size_t(j)] = sBack;
+                                        sPrev = sBack;
                                         ++walkSamples;
                                         bool haveIBack = false;
                                         double iBack = 0.0;
                                         std::int64_t tau = 0;
                                         if (!transparent(sFront, sBack)) {
-                                            if (!haveIFront) {
-                                                iFront = table.sigmaIntegral(sFront);
-                                                I[m + std::size_t(j) - 1] = iFront;
-                                            }
+                                            if (!haveIFront) iFront = table.sigmaIntegral(sFront);
                                             iBack = table.sigmaIntegral(sBack);
                                             haveIBack = true;
                                             tau = fixedDepth(preIntegratedStep(
@@ -1375,7 +1419,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         }
                                         depth += tau;
                                         P[m + std::size_t(j)] = depth;
-                                        I[m + std::size_t(j)] = haveIBack ? iBack : NAN;
                                         iFront = iBack;
                                         haveIFront = haveIBack;
                                     }
@@ -1410,13 +1453,10 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                               : flatValue(from + (sign * f / float(q)) * d.dv);
                                     ++samples;
                                     if (transparent(s0, sEnd)) return 0.0;
-                                    // The walk's integral at s0 where it took one (the same value).
-                                    const double i0 = unread || std::isnan(I[e0])
-                                                          ? table.sigmaIntegral(s0)
-                                                          : I[e0];
-                                    return preIntegratedStep(table, s0, i0, sEnd,
-                                                             table.sigmaIntegral(sEnd), f * subMm,
-                                                             0.0, along(from, sign), samples);
+                                    return preIntegratedStep(table, s0, table.sigmaIntegral(s0),
+                                                             sEnd, table.sigmaIntegral(sEnd),
+                                                             f * subMm, 0.0, along(from, sign),
+                                                             samples);
                                 };
                                 // A line that leaves (enters) the volume ends at the box face (the
                                 // march's box exit), a fraction φ of a lattice step past its last
