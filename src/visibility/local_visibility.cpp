@@ -1364,7 +1364,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         return flatValue(from + (sign * mm / d.stepMm) * d.dv);
                                     };
                                 };
-                                glm::vec3 at = position(tStart);
                                 double iFront = 0.0;
                                 bool haveIFront = false, haveStart = false;
                                 // The walk stops before the step that would leave the volume.
@@ -1377,10 +1376,10 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 std::int64_t depth = 0;  // P at the current sub-step
                                 float sPrev = 0.f;       // S at the current sub-step, once read
                                 // Lattice point t's voxel (its position's floor: every coordinate
-                                // is ≥ 0 inside the volume), stepped in integers for quietAt's cell.
+                                // is ≥ 0 inside the volume), stepped in integers for its quiet
+                                // cell (cellPart).
                                 glm::ivec3 voxel = v0 + tStart * d.v;
                                 for (; t < tStop; ++t, voxel += d.v) {
-                                    const glm::vec3 next = position(t + 1);
                                     const std::size_t m = std::size_t(t - tStart) * std::size_t(q);
                                     if (quiet[cellPart[0][std::size_t(voxel.x)] +
                                               cellPart[1][std::size_t(voxel.y)] +
@@ -1390,7 +1389,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         sc.stepQuiet[std::size_t(t - tStart)] = 1;
                                         for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = depth;
                                         haveStart = haveIFront = false;
-                                        at = next;
                                         continue;
                                     }
                                     if (!haveStart) {
@@ -1414,7 +1412,14 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                             haveIBack = true;
                                             tau = fixedDepth(preIntegratedStep(
                                                 table, sFront, iFront, sBack, iBack, subMm, 0.0,
-                                                along(at + (float(j - 1) / float(q)) * d.dv, 1.f),
+                                                // Where a dense step is split (rare): its
+                                                // start's position only then.
+                                                [&](float mm) {
+                                                    return along(
+                                                        position(t) +
+                                                            (float(j - 1) / float(q)) * d.dv,
+                                                        1.f)(mm);
+                                                },
                                                 walkSamples));
                                         }
                                         depth += tau;
@@ -1422,7 +1427,6 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         iFront = iBack;
                                         haveIFront = haveIBack;
                                     }
-                                    at = next;
                                 }
                                 samples += walkSamples;
                                 // P and S valid on sub-steps [0, lastSub].
@@ -1473,7 +1477,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // The exit's piece past lastSub and the entry's before sub-step 0.
                                 double exitSub = double(lastSub), exitDepth = 0.0;
                                 if (t < want) {
-                                    const float phi = faceFraction(at, 1.f);
+                                    const float phi = faceFraction(position(t), 1.f);
                                     if (phi > 0.f) {
                                         exitSub += double(phi) * double(q);
                                         exitDepth =
