@@ -9,6 +9,7 @@
 #include <cmath>
 #include <numbers>
 
+#include "core/color.h"
 #include "core/error.h"
 
 namespace voxlight::analysis {
@@ -315,7 +316,7 @@ SsimResult ssim(const ImageRGBA& reference, const ImageRGBA& test, const MetricO
             const std::size_t i = std::size_t(y) * w + x;
             auto luma = [&](const ImageRGBA& img) {
                 const auto c = displayRgb(img, i, options.encoding);
-                return 0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2];
+                return core::luminance(c[0], c[1], c[2]);
             };
             a[i] = luma(reference), b[i] = luma(test);
             aa[i] = a[i] * a[i], bb[i] = b[i] * b[i], ab[i] = a[i] * b[i];

@@ -6,6 +6,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/color.h"
 #include "core/error.h"
 #include "sh/sh_basis.h"
 
@@ -13,8 +14,6 @@ namespace voxlight::lights {
 
 namespace {
 constexpr double kPi = std::numbers::pi;
-
-double luminance(const glm::vec3& c) { return 0.2126 * c.r + 0.7152 * c.g + 0.0722 * c.b; }
 
 // Angular-probe image → equirect of 2S × S (map frame of environment_light.h), bilinear.
 std::vector<glm::vec3> probeToEquirect(const core::ImageRGBA& img, int& w, int& h) {
@@ -137,7 +136,7 @@ void EnvironmentLight::buildSampling() {
         const double omega = dphi * (std::cos(kPi * r / h_) - std::cos(kPi * (r + 1) / h_));
         double* cdf = &colCdf_[std::size_t(r) * (w_ + 1)];
         for (int c = 0; c < w_; ++c)
-            cdf[c + 1] = cdf[c] + luminance(rgb_[std::size_t(r) * w_ + c]) * omega;
+            cdf[c + 1] = cdf[c] + core::luminance(rgb_[std::size_t(r) * w_ + c]) * omega;
         rowCdf_[r + 1] = rowCdf_[r] + cdf[w_];
     }
     lumIntegral_ = rowCdf_[h_];
@@ -181,14 +180,14 @@ LightSample EnvironmentLight::sample(const glm::dvec3&, const glm::vec2& u) cons
     const glm::vec3 texel = rgb_[std::size_t(r) * w_ + c];
     s.wi = glm::vec3(rotation_ * mapDir);
     s.value = scale_ * texel;
-    s.pdf = float(luminance(texel) / lumIntegral_);
+    s.pdf = float(core::luminance(texel) / lumIntegral_);
     return s;
 }
 
 float EnvironmentLight::pdf(const glm::dvec3&, const glm::vec3& wi) const {
     if (!(lumIntegral_ > 0)) return 0.0f;
     const glm::dvec3 d = glm::transpose(rotation_) * glm::normalize(glm::dvec3(wi));
-    return float(luminance(rgb_[pixelOf(d)]) / lumIntegral_);
+    return float(core::luminance(rgb_[pixelOf(d)]) / lumIntegral_);
 }
 
 void EnvironmentLight::writeSh(const glm::dvec3&, int maxBand, std::span<glm::vec3> out) const {

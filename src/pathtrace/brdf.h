@@ -36,6 +36,8 @@
 #include <glm/glm.hpp>
 #include <numbers>
 
+#include "core/color.h"
+
 namespace voxlight::pathtrace {
 
 /// The BRDF's parameters at one point.
@@ -72,7 +74,7 @@ inline double smithG1(double cosV, double alpha) {
     const double a2 = alpha * alpha;
     return 2.0 * cosV / (cosV + std::sqrt(a2 + (1.0 - a2) * cosV * cosV));
 }
-inline double luminance(const glm::dvec3& c) { return 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z; }
+using core::luminance;
 /// Probability of sampling the glossy lobe for this wo (a function of μo only).
 inline double glossyProbability(const SurfaceMaterial& m, double cosO) {
     const glm::dvec3 fo = schlick(m.specular, cosO);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <memory>
 
+#include "core/color.h"
 #include "core/error.h"
 #include "core/timing.h"
 
@@ -16,7 +17,7 @@ namespace voxlight::pathtrace {
 namespace {
 
 /// Rec. 709 luminance weights (linear RGB), as the path tracer's error estimate.
-constexpr float kLuminance[3] = {0.2126f, 0.7152f, 0.0722f};
+constexpr const float (&kLuminance)[3] = core::kLuminanceWeightsF;
 /// B3-spline taps of the à-trous transform (Dammertz et al. 2010).
 constexpr float kB3[5] = {1.f / 16.f, 1.f / 4.f, 3.f / 8.f, 1.f / 4.f, 1.f / 16.f};
 /// 3×3 Gaussian for the variance before the first pass (SVGF).

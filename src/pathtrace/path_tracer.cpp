@@ -14,6 +14,7 @@
 #include <tuple>
 #include <type_traits>
 
+#include "core/color.h"
 #include "core/error.h"
 #include "core/timing.h"
 #include "grid/brick_traversal.h"
@@ -43,7 +44,7 @@ constexpr double kAutofocusStepVoxels = 0.25;
 constexpr double kGuideStepVoxels = 1.0;
 constexpr double kGuideTransmittance = 1e-2;
 /// Rec. 709 luminance weights (linear RGB), for the error estimate.
-constexpr double kLuminance[3] = {0.2126, 0.7152, 0.0722};
+constexpr const double (&kLuminance)[3] = core::kLuminanceWeights;
 /// Voxels per fine-majorant cell side. On the 128³ torso under ct-bone (256², 32 spp): 1 voxel
 /// 5.7·10⁶ null collisions, 2 voxels 14.4·10⁶, the 4³ skip cells alone 34.8·10⁶; 1 was the fastest.
 constexpr int kFineVoxels = 1;

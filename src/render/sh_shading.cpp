@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <numbers>
 
+#include "core/color.h"
 #include "core/error.h"
 #include "lights/environment_light.h"
 #include "render/dvr_march.h"
@@ -30,7 +31,8 @@ bool dominantDirection(const std::vector<glm::vec3>& c, int coefficients, glm::v
         sh::evalShFixed<1>(e, ya);
         M[a] = glm::vec3(ya[1], ya[2], ya[3]);
     }
-    const glm::vec3 lum(0.2126f, 0.7152f, 0.0722f);
+    const glm::vec3 lum(core::kLuminanceWeightsF[0], core::kLuminanceWeightsF[1],
+                        core::kLuminanceWeightsF[2]);
     glm::vec3 l1;
     for (int m = 0; m < 3; ++m) l1[m] = glm::dot(lum, c[std::size_t(1 + m)]);
     const glm::vec3 w = glm::transpose(M) * l1;
