@@ -51,15 +51,18 @@ TEST(RayIntervals, TileTheRayContiguouslyAndMatchBruteForceBrickLookup) {
         while (it.next(iv)) {
             EXPECT_NEAR(iv.t0, t, kTTol);
             EXPECT_GE(iv.t1, iv.t0);
-            if (!first) EXPECT_NE(prevEmpty, iv.empty()) << "runs of one kind are merged";
+            if (!first) {
+                EXPECT_NE(prevEmpty, iv.empty()) << "runs of one kind are merged";
+            }
             // Every point strictly inside the interval lies in a brick of the interval's kind.
             for (float f = 0.05f; f < 1.f; f += 0.1f) {
                 const float tt = iv.t0 + f * (iv.t1 - iv.t0);
                 const glm::ivec3 b = glm::clamp(glm::ivec3(glm::floor((o + tt * d) / 16.f)),
                                                 glm::ivec3(0), m.counts() - 1);
                 const std::size_t i = m.index(b.x, b.y, b.z);
-                if (std::abs(tt - iv.t0) > kTTol && std::abs(tt - iv.t1) > kTTol)
+                if (std::abs(tt - iv.t0) > kTTol && std::abs(tt - iv.t1) > kTTol) {
                     EXPECT_EQ(m.majorant(i) > 0.f, !iv.empty()) << "ray " << n << " t " << tt;
+                }
             }
             prevEmpty = iv.empty();
             first = false;

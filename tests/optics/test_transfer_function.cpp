@@ -104,7 +104,9 @@ TEST(TfTable, PreintegratedSegmentIsTheExactMeanOverTheValueRange) {
         const double mean = sum / kQuadratureSteps;
         const auto seg = table.segment(p[0], p[1]);
         EXPECT_NEAR(seg.meanExtinction, mean, kTableTol * 2.0) << p[0] << " → " << p[1];
-        if (mean > 0) EXPECT_NEAR(seg.albedo.g, sumG / sum, kAlbedoTol) << p[0];
+        if (mean > 0) {
+            EXPECT_NEAR(seg.albedo.g, sumG / sum, kAlbedoTol) << p[0];
+        }
     }
     // Transparent TF: nothing anywhere, no NaN.
     const optics::TfTable empty(TransferFunction({pt(0, 0), pt(1, 0)}, {0.5f, 1}));
@@ -134,9 +136,10 @@ TEST(TfTable, FusedIntegralsGiveTheSameSegmentsAsTheCachedPath) {
         const double tol = kFusedRelTol * std::max(1.0, double(ref.meanExtinction));
         ASSERT_NEAR(got.meanExtinction, ref.meanExtinction, tol) << a << " -> " << b;
         ASSERT_TRUE(std::isfinite(got.meanExtinction));
-        if (ref.meanExtinction > 1e-3f)
+        if (ref.meanExtinction > 1e-3f) {
             for (int c = 0; c < 3; ++c)
                 ASSERT_NEAR(got.albedo[c], ref.albedo[c], 1e-4) << a << " -> " << b;
+        }
         checked += ref.meanExtinction > 0.f;
     }
     EXPECT_GT(checked, 5000) << "most pairs should see bone";
@@ -210,8 +213,9 @@ TEST(TfTable, ExtinctionChangeCoversEveryValueWhoseSigmaDiffers) {
             }
         }
         EXPECT_EQ(differing == 0, e.none);
-        if (!e.none && std::isfinite(changed.lo))  // tight: within the edit's span ± 3 cells
+        if (!e.none && std::isfinite(changed.lo)) {  // tight: within the edit's span ± 3 cells
             EXPECT_GT(changed.lo, -100.f - 3.f * a.cellWidth());
+        }
     }
 }
 
@@ -230,7 +234,9 @@ TEST(TransferFunction, SurfaceChannelsInterpolateLikeTheColours) {
         const optics::TfSample s = tf.eval(v);
         const optics::TfSurface u = tf.evalSurface(v);
         // The same weights as the albedo: red albedo 0→1 on [0, 100] like specular red.
-        if (v <= 100.f) EXPECT_NEAR(u.specular.r, s.albedo.r, 1e-6f) << v;
+        if (v <= 100.f) {
+            EXPECT_NEAR(u.specular.r, s.albedo.r, 1e-6f) << v;
+        }
         const float f = std::clamp(v / 100.f, 0.f, 1.f),
                     f2 = std::clamp((v - 100.f) / 100.f, 0.f, 1.f);
         const float rough = v <= 100.f ? 1.f + f * (0.2f - 1.f) : 0.2f + f2 * (0.5f - 0.2f);

@@ -469,9 +469,11 @@ TEST(Cpca, ReportsProgressInOrder) {
         [&](const std::string& stage, double f) { reports.emplace_back(stage, f); }, nullptr);
     pvrt::compressCpca(x, 12, pvrt::CpcaOptions{}, progress);
     ASSERT_FALSE(reports.empty());
-    for (std::size_t i = 1; i < reports.size(); ++i)
-        if (reports[i].first == reports[i - 1].first)
+    for (std::size_t i = 1; i < reports.size(); ++i) {
+        if (reports[i].first == reports[i - 1].first) {
             EXPECT_GE(reports[i].second, reports[i - 1].second) << reports[i].first;
+        }
+    }
     EXPECT_EQ(reports.front().first, "CPCA k-means");
     EXPECT_EQ(reports.back(), std::make_pair(std::string("CPCA PCA"), 1.0));
 }

@@ -295,7 +295,9 @@ TEST(PvrtExitance, CpcaDomainCombinationEqualsTheTwoStepOne) {
                 for (int ch = 0; ch < 3; ++ch) {
                     const float a = got.values[i][ch], b = want.values[i][ch];
                     ASSERT_TRUE(std::isfinite(a)) << i;
-                    if (layout.slot[i / std::size_t(n)] < 0) ASSERT_EQ(a, 0.f) << i;
+                    if (layout.slot[i / std::size_t(n)] < 0) {
+                        ASSERT_EQ(a, 0.f) << i;
+                    }
                     ASSERT_NEAR(a, b, kFusedTol * magnitude(i, ch)) << i << " " << ch;
                 }
             // Toward an eye per grid point (EyeFold), perspective and orthographic: Σ_j w_j t_j

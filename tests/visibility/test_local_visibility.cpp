@@ -451,8 +451,9 @@ TEST(LocalVisibility, BoundaryLayersAreIdenticalForAnyThreadCountAndUnderTheSwee
             for (int face = 0; face < 6; ++face) {
                 const float* a = one.layerData(b, face);
                 ASSERT_EQ(a == nullptr, two.layerData(b, face) == nullptr);
-                if (a)
+                if (a) {
                     ASSERT_EQ(std::memcmp(a, two.layerData(b, face), 8 * 8 * 4 * sizeof(float)), 0);
+                }
             }
     }
 }

@@ -102,11 +102,12 @@ void expectIdentical(const LocalVisibility& a, const LocalVisibility& b) {
         for (int face = 0; face < 6; ++face) {  // and its boundary layers
             const float* la = a.layerData(blk, face);
             ASSERT_EQ(la == nullptr, b.layerData(blk, face) == nullptr) << "block " << blk;
-            if (la)
+            if (la) {
                 ASSERT_EQ(std::memcmp(la, b.layerData(blk, face),
                                       n * n * std::size_t(a.coefficients()) * sizeof(float)),
                           0)
                     << "block " << blk << " layer " << face;
+            }
         }
     }
 }
