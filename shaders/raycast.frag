@@ -352,6 +352,7 @@ float nearTransmittance(vec3 p, vec3 w, float lenMm) {
 float nearLength(vec3 x, vec3 p, vec3 w, float ellMm, float maxMm) {
     float len = min(ellMm, maxMm);
     const vec3 d = uWorldToIndex * w;
+    // The box exit as visibility::boxExitIndex (local_visibility.h), the C++ trace's formula.
     for (int a = 0; a < 3; ++a) {
         if (d[a] > 0.0) len = min(len, max((uDims[a] - 1.0 - p[a]) / d[a], 0.0));
         if (d[a] < 0.0) len = min(len, max(-p[a] / d[a], 0.0));

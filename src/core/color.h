@@ -9,9 +9,8 @@
 namespace voxlight::core {
 
 inline constexpr double kLuminanceWeights[3] = {0.2126, 0.7152, 0.0722};
-inline constexpr float kLuminanceWeightsF[3] = {float(kLuminanceWeights[0]),
-                                                float(kLuminanceWeights[1]),
-                                                float(kLuminanceWeights[2])};
+inline constexpr float kLuminanceWeightsF[3] = {
+    float(kLuminanceWeights[0]), float(kLuminanceWeights[1]), float(kLuminanceWeights[2])};
 
 /// Y of a linear RGB colour, in double.
 constexpr double luminance(double r, double g, double b) {

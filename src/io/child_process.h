@@ -17,7 +17,9 @@
 #include <cstdio>
 #include <fstream>
 #include <string>
+#include <string_view>
 #include <thread>
+#include <vector>
 
 #if defined(__has_feature)
 #if __has_feature(address_sanitizer) || __has_feature(memory_sanitizer) || \
@@ -97,6 +99,24 @@ inline std::size_t limitChildMemory(std::size_t extra) {
     r.rlim_cur = cap;
     return ::setrlimit(RLIMIT_AS, &r) == 0 ? extra : 0;
 #endif
+}
+
+/// Test seam shared by the reading children (tests/io/test_bad_input.cpp,
+/// tests/io_dicom/test_dicom_hostile.cpp): the two ways their libraries were seen to ask for
+/// memory a damaged file does not justify, so that the budget's refusal is tested apart from the
+/// checks that now keep those files away. "alloc": one request of 64 GiB (what OpenJPEG asked
+/// for, ×16); "grow": 8 GiB zero-filled as a vector grows (GDCM's ByteValue sized from a damaged
+/// length) — more than any budget, less than RAM. Other names do nothing.
+inline void injectAllocationFault(std::string_view fault) {
+    static char* volatile sink;  // volatile: the allocation must not be optimised away
+    if (fault == "alloc") {
+        sink = new char[std::size_t(64) << 30];
+        delete[] sink;
+    } else if (fault == "grow") {
+        std::vector<char> v;
+        v.resize(std::size_t(8) << 30);
+        sink = v.data();
+    }
 }
 
 /// A reading child's first act: crashes end it plainly (default handlers, no core file, no

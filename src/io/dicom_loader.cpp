@@ -140,15 +140,8 @@ void injectFault(const fs::path& path) {
         ::raise(SIGSEGV);
     } else if (f == "hang") {
         for (;;) ::pause();
-    } else if (f == "grow") {  // GDCM's ByteValue sized from a damaged length, zero-filled
-        std::vector<char> v;
-        v.resize(std::size_t(8) << 30);  // more than any budget, less than RAM
-        static char* volatile sink;
-        sink = v.data();
-    } else if (f == "alloc") {
-        static char* volatile sink;  // volatile: the allocation must not be optimised away
-        sink = new char[std::size_t(64) << 30];  // what OpenJPEG asked for, times 16
-        delete[] sink;
+    } else if (f == "grow" || f == "alloc") {
+        injectAllocationFault(f);
     } else if (f == "noise") {  // OpenJPEG's habit: error lines on stderr, then GDCM returns false
         std::fprintf(stderr, "[ERROR] Stream too short\n[ERROR] Failed to decode the codestream\n");
         throw InputError(path.string(), "PixelData", "GDCM cannot decode the pixel data");

@@ -1929,17 +1929,7 @@ constexpr std::size_t kVtiChildBytesPerValue = 64;
         // that keep the known damaged files away from VTK.
         if (const char* fault = std::getenv("VOXLIGHT_VTI_CHILD_FAULT")) {
             if (std::string_view(fault) == "segv") ::raise(SIGSEGV);
-            if (std::string_view(fault) == "alloc") {
-                static char* volatile sink;  // volatile: the allocation must stay
-                sink = new char[std::size_t(64) << 30];
-                delete[] sink;
-            }
-            if (std::string_view(fault) == "grow") {  // the same, zero-filled as it grows
-                std::vector<char> v;
-                v.resize(std::size_t(8) << 30);  // more than any budget, less than RAM
-                static char* volatile sink;
-                sink = v.data();
-            }
+            injectAllocationFault(fault);
         }
         vtkNew<vtkXMLImageDataReader> r;
         r->SetFileName(path.c_str());

@@ -169,13 +169,8 @@ NearShadowTrace::NearShadowTrace(const visibility::MultiresGrid& grid,
 
 float NearShadowTrace::exitMm(const glm::vec3& x, const glm::vec3& p, const glm::vec3& toward,
                               float maxMm) const {
-    float len = maxMm;
-    const glm::vec3 d = worldToIndex_ * toward;
-    const glm::vec3 top(grid_->dims() - 1);
-    for (int a = 0; a < 3; ++a) {
-        if (d[a] > 0.f) len = std::min(len, std::max((top[a] - p[a]) / d[a], 0.f));
-        if (d[a] < 0.f) len = std::min(len, std::max(-p[a] / d[a], 0.f));
-    }
+    float len = std::min(
+        maxMm, visibility::boxExitIndex(p, worldToIndex_ * toward, glm::vec3(grid_->dims() - 1)));
     for (const core::HalfSpace& f : cutFaces_) {
         const float along = float(glm::dot(glm::dvec3(toward), f.normal));
         if (along < 0.f)

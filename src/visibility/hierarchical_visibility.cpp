@@ -59,11 +59,7 @@ struct IndexRay {
         : d((glm::transpose(g.direction) * world) / g.spacing) {}
     /// Parametric exit (mm) from the box [0, dims − 1] of a ray starting inside it.
     float boxExit(const glm::vec3& o, const glm::ivec3& dims) const {
-        float t = INFINITY;
-        for (int a = 0; a < 3; ++a)
-            if (d[a] != 0.f)
-                t = std::min(t, ((d[a] > 0.f ? float(dims[a] - 1) : 0.f) - o[a]) / d[a]);
-        return std::max(t, 0.f);
+        return boxExitIndex(o, d, glm::vec3(dims - 1));
     }
 };
 

@@ -170,11 +170,7 @@ struct RayDir {
     }
     /// Parametric exit (mm) from the box [0, dims − 1] of a ray starting inside it.
     float boxExit(const glm::vec3& o, const glm::ivec3& dims) const {
-        float t = INFINITY;
-        for (int a = 0; a < 3; ++a)
-            if (inv[a] != INFINITY)
-                t = std::min(t, ((d[a] > 0.f ? float(dims[a] - 1) : 0.f) - o[a]) * inv[a]);
-        return std::max(t, 0.f);
+        return boxExitIndex(o, d, glm::vec3(dims - 1));
     }
 };
 

@@ -150,6 +150,19 @@ inline constexpr int kMaxSubSteps = 16;
 /// Optical depth at which a visibility ray stops (e^−9.21 = 1e-4).
 inline constexpr double kOpaqueDepth = 9.21;
 
+/// Parametric exit from the box [0, top] (index space) of a ray o + t·d starting inside it: the
+/// smallest t at which a coordinate reaches its face, at least 0 (∞ for d = 0). The one formula
+/// behind the march's and ritschel's rays and the near shadow's trace (shaders/ mirrors it in
+/// GLSL).
+inline float boxExitIndex(const glm::vec3& o, const glm::vec3& d, const glm::vec3& top) {
+    float t = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+        if (d[a] > 0.f) t = std::min(t, (top[a] - o[a]) / d[a]);
+        if (d[a] < 0.f) t = std::min(t, -o[a] / d[a]);
+    }
+    return std::max(t, 0.f);
+}
+
 /// Optical depth of one ray step of length dt (mm) whose value runs from sFront to sBack
 /// (integrals iFront/iBack: TfTable::sigmaIntegral), pre-integrated; a step deeper than
 /// kRefineDepth is split into up to kMaxSubSteps sub-steps, value(x) giving the value x mm into
