@@ -959,7 +959,7 @@ Stage blockPyramidStage(bool forSweep) {
         return std::to_string(p.blockCount()) + " blocks of 16^3 at 5 levels, " +
                std::to_string(p.bytes() >> 20) + " MB" +
                (p.flatBytes() > 0 ? " (" + std::to_string(p.flatBytes() >> 20) +
-                                        " MB of it the voxels as float for the line sweep)"
+                                        " MB of it the voxels copied for the line sweep)"
                                   : std::string());
     };
     return pyramid;

@@ -971,7 +971,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         dirs.push_back(d);
     }
     // The pyramid's flat copy of the voxels (made once per pyramid, in this arena's threads).
-    const float* flat = nullptr;
+    BlockPyramid::FlatView flat;
     {
         tbb::task_arena copyArena(options.threads > 0 ? options.threads
                                                       : tbb::task_arena::automatic);
@@ -983,41 +983,44 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         const TrilinearCell cell(p, field.top, field.lastCorner);
         const glm::ivec3& c = cell.c;
         const std::ptrdiff_t di = cell.step.x, dj = cell.step.y * sy, dk = cell.step.z * sz;
-        const float* d = flat + (c.x + sy * c.y + sz * std::ptrdiff_t(c.z));
-        return cell.blend(d[0], d[di], d[dj], d[dj + di], d[dk], d[dk + di], d[dk + dj],
-                          d[dk + dj + di]);
+        const std::ptrdiff_t b = c.x + sy * c.y + sz * std::ptrdiff_t(c.z);
+        return cell.blend(flat[b], flat[b + di], flat[b + dj], flat[b + dj + di], flat[b + dk],
+                          flat[b + dk + di], flat[b + dk + dj], flat[b + dk + dj + di]);
     };
-    auto read = [&](std::ptrdiff_t base, const Stencil& st) {
-        // Unrolled for the tap counts a trilinear stencil has (2^axes with a fraction: 1, 2, 4,
-        // 8; the hottest read of the sweep), summed in the loop's order: the same value.
-        const float* f = flat + base;
+    // Unrolled for the tap counts a trilinear stencil has (2^axes with a fraction: 1, 2, 4, 8;
+    // the hottest read of the sweep), summed in the loop's order: the same value from either
+    // copy (an int16 voxel converts to exactly the float it stands for).
+    auto readFrom = [](const auto* f, const Stencil& st) {
         const std::ptrdiff_t* o = st.offset;
         const float* w = st.weight;
-        float value = w[0] * f[o[0]];
+        float value = w[0] * float(f[o[0]]);
         switch (st.n) {
             case 1:
                 return value;
             case 2:
-                value += w[1] * f[o[1]];
+                value += w[1] * float(f[o[1]]);
                 return value;
             case 4:
-                value += w[1] * f[o[1]];
-                value += w[2] * f[o[2]];
-                value += w[3] * f[o[3]];
+                value += w[1] * float(f[o[1]]);
+                value += w[2] * float(f[o[2]]);
+                value += w[3] * float(f[o[3]]);
                 return value;
             case 8:
-                value += w[1] * f[o[1]];
-                value += w[2] * f[o[2]];
-                value += w[3] * f[o[3]];
-                value += w[4] * f[o[4]];
-                value += w[5] * f[o[5]];
-                value += w[6] * f[o[6]];
-                value += w[7] * f[o[7]];
+                value += w[1] * float(f[o[1]]);
+                value += w[2] * float(f[o[2]]);
+                value += w[3] * float(f[o[3]]);
+                value += w[4] * float(f[o[4]]);
+                value += w[5] * float(f[o[5]]);
+                value += w[6] * float(f[o[6]]);
+                value += w[7] * float(f[o[7]]);
                 return value;
             default:
-                for (int c = 1; c < st.n; ++c) value += w[c] * f[o[c]];
+                for (int c = 1; c < st.n; ++c) value += w[c] * float(f[o[c]]);
                 return value;
         }
+    };
+    auto read = [&](std::ptrdiff_t base, const Stencil& st) {
+        return flat.i ? readFrom(flat.i + base, st) : readFrom(flat.f + base, st);
     };
 
     // Empty space: a 4³ cell whose value range the TF makes transparent holds σt = 0 at every

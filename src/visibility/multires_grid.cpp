@@ -48,30 +48,50 @@ glm::ivec3 BlockPyramid::blockCoord(std::size_t index) const {
     return {int(index % bx), int((index / bx) % by), int(index / (bx * by))};
 }
 
-const float* BlockPyramid::flatVoxels() const {
+BlockPyramid::FlatView BlockPyramid::flatVoxels() const {
     std::call_once(flat_->once, [&] {
         const glm::ivec3 d = dims();
         const std::size_t sy = std::size_t(d.x), sz = std::size_t(d.x) * std::size_t(d.y);
-        // Not zero-filled: every element is written below, in parallel (a value-initialised
-        // array zeroed the volume's 4 bytes per voxel on one thread first, page faults included).
-        std::unique_ptr<float[]> flat(new float[sz * std::size_t(d.z)]);
+        const std::size_t n = sz * std::size_t(d.z);
         // Row by row from each block's level 0 (x fastest there too).
-        tbb::parallel_for(0, d.z, [&](int z) {
-            for (int y = 0; y < d.y; ++y)
-                for (int bx = 0; bx < blocks_.x; ++bx) {
-                    const float* src = data(blockIndex(bx, y / kBlockSize, z / kBlockSize), 0) +
-                                       kBlockSize * (std::size_t(y % kBlockSize) +
-                                                     kBlockSize * std::size_t(z % kBlockSize));
-                    const int x0 = bx * kBlockSize, n = std::min(kBlockSize, d.x - x0);
-                    std::copy_n(
-                        src, n,
-                        flat.get() + std::size_t(x0) + sy * std::size_t(y) + sz * std::size_t(z));
-                }
+        auto forRows = [&](auto&& row) {
+            tbb::parallel_for(0, d.z, [&](int z) {
+                for (int y = 0; y < d.y; ++y)
+                    for (int bx = 0; bx < blocks_.x; ++bx) {
+                        const float* src = data(blockIndex(bx, y / kBlockSize, z / kBlockSize), 0) +
+                                           kBlockSize * (std::size_t(y % kBlockSize) +
+                                                         kBlockSize * std::size_t(z % kBlockSize));
+                        const int x0 = bx * kBlockSize;
+                        row(src, std::min(kBlockSize, d.x - x0),
+                            std::size_t(x0) + sy * std::size_t(y) + sz * std::size_t(z));
+                    }
+            });
+        };
+        std::atomic<bool> integral{true};
+        forRows([&](const float* src, int count, std::size_t) {
+            for (int k = 0; k < count; ++k)
+                if (!(src[k] >= -32768.f && src[k] <= 32767.f && src[k] == std::nearbyint(src[k])))
+                    integral.store(false, std::memory_order_relaxed);
         });
-        flat_->voxels = std::move(flat);
-        flat_->bytes = sz * std::size_t(d.z) * sizeof(float);
+        // Not zero-filled: every element is written below, in parallel (a value-initialised
+        // array zeroed the whole copy on one thread first, page faults included).
+        if (integral.load()) {
+            std::unique_ptr<std::int16_t[]> flat(new std::int16_t[n]);
+            forRows([&](const float* src, int count, std::size_t at) {
+                for (int k = 0; k < count; ++k) flat[at + std::size_t(k)] = std::int16_t(src[k]);
+            });
+            flat_->small = std::move(flat);
+            flat_->bytes = n * sizeof(std::int16_t);
+        } else {
+            std::unique_ptr<float[]> flat(new float[n]);
+            forRows([&](const float* src, int count, std::size_t at) {
+                std::copy_n(src, count, flat.get() + at);
+            });
+            flat_->voxels = std::move(flat);
+            flat_->bytes = n * sizeof(float);
+        }
     });
-    return flat_->voxels.get();
+    return {flat_->voxels.get(), flat_->small.get()};
 }
 
 BlockPyramid BlockPyramid::build(const core::Volume& volume, const core::Progress& progress) {

@@ -128,11 +128,23 @@ class BlockPyramid {
         return data_.size() * sizeof(float) + stats_.size() * sizeof(BlockStats) +
                cellRange_.size() * sizeof(cellRange_[0]) + flat_->bytes.load();
     }
-    /// The level-0 voxels as one x-fastest array (dims().x · dims().y · dims().z floats: the
+    /// The level-0 voxels as one x-fastest array (dims().x · dims().y · dims().z values: the
     /// line sweep's reads), made on first use in parallel in the calling task arena and kept with
     /// the pyramid — it does not depend on the TF, so a TF update reads it without copying the
-    /// volume again (4 bytes per voxel more, counted in bytes() once made). Thread-safe.
-    const float* flatVoxels() const;
+    /// volume again (counted in bytes() once made). Thread-safe. Held as int16 when every value
+    /// is an integer in int16's range (CT in HU, 8- and most 16-bit data: each read converts
+    /// back to exactly the same float), else as float: exactly one pointer is set. Half the
+    /// bytes (bonsai: 32 MB instead of 64) and half the cache lines the sweep's stencils touch;
+    /// its speed (6 December, bonsai 1:8, alternating pairs): an 8-bit trial copy 0.88–0.96× in
+    /// a slow sitting, this int16 copy 0.99–1.04× in a quiet one — the gain follows how
+    /// contended the machine's cache is.
+    struct FlatView {
+        const float* f = nullptr;
+        const std::int16_t* i = nullptr;
+        /// The value at index k.
+        float operator[](std::ptrdiff_t k) const { return i ? float(i[k]) : f[k]; }
+    };
+    FlatView flatVoxels() const;
     /// The bytes of flatVoxels()' array once made, else 0.
     std::size_t flatBytes() const { return flat_->bytes.load(); }
 
@@ -152,6 +164,7 @@ class BlockPyramid {
     struct FlatVoxels {
         std::once_flag once;
         std::unique_ptr<float[]> voxels;
+        std::unique_ptr<std::int16_t[]> small;
         std::atomic<std::size_t> bytes{0};
     };
     /// Shared by copies of the pyramid (same voxels); made by flatVoxels().

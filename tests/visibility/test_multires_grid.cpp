@@ -298,28 +298,46 @@ TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
 
 // The line sweep reads the voxels from one flat array kept with the pyramid: it must be the
 // volume itself, x fastest — also past partial edge blocks (dims not multiples of 16), where the
-// blocks repeat their edge voxel — counted in bytes() once made and shared by copies.
+// blocks repeat their edge voxel — counted in bytes() once made and shared by copies. Integer
+// data in int16's range is held as int16 (2 bytes per voxel), anything else as float.
 TEST(BlockPyramid, FlatVoxelsAreTheVolumeXFastestAndCountedOnceMade) {
     const glm::ivec3 dims(37, 18, 21);
-    const core::Volume v =
+    const core::Volume ints =
         test::makeVolume(dims, [](int i, int j, int k) { return noise(i, j, k, -1000, 3000); });
-    const BlockPyramid pyr = BlockPyramid::build(v);
-    const std::size_t before = pyr.bytes();
-    EXPECT_EQ(pyr.flatBytes(), 0u);
-    const BlockPyramid copy = pyr;
-    const float* flat = pyr.flatVoxels();
-    ASSERT_NE(flat, nullptr);
-    const std::size_t voxels = std::size_t(dims.x) * dims.y * dims.z;
-    EXPECT_EQ(pyr.flatBytes(), voxels * sizeof(float));
-    EXPECT_EQ(pyr.bytes(), before + voxels * sizeof(float));
-    EXPECT_EQ(copy.flatVoxels(), flat);  // made once, shared
-    const auto* d = v.dataAs<std::int16_t>();
-    std::size_t wrong = 0;
+    // The same values plus a quarter where (i + j + k) is odd, as float: not integral.
+    core::Volume fractions(ints.geometry(), core::VoxelType::Float32);
+    // And float data that happens to be integral but beyond int16 (a 32-bit CT's 40000).
+    core::Volume wide(ints.geometry(), core::VoxelType::Float32);
     for (int k = 0; k < dims.z; ++k)
         for (int j = 0; j < dims.y; ++j)
-            for (int i = 0; i < dims.x; ++i)
-                wrong +=
-                    flat[std::size_t(i) + std::size_t(dims.x) * (j + std::size_t(dims.y) * k)] !=
-                    float(d[v.linearIndex(i, j, k)]);
-    EXPECT_EQ(wrong, 0u);
+            for (int i = 0; i < dims.x; ++i) {
+                const std::size_t at = ints.linearIndex(i, j, k);
+                const float x = float(ints.dataAs<std::int16_t>()[at]);
+                fractions.dataAs<float>()[at] = x + ((i + j + k) % 2 ? 0.25f : 0.f);
+                wide.dataAs<float>()[at] = x + (i == 3 && j == 4 && k == 5 ? 40000.f : 0.f);
+            }
+    for (const auto& [v, compact] :
+         {std::pair<const core::Volume*, bool>{&ints, true}, {&fractions, false}, {&wide, false}}) {
+        const BlockPyramid pyr = BlockPyramid::build(*v);
+        const std::size_t before = pyr.bytes();
+        EXPECT_EQ(pyr.flatBytes(), 0u);
+        const BlockPyramid copy = pyr;
+        const BlockPyramid::FlatView flat = pyr.flatVoxels();
+        ASSERT_EQ(flat.i != nullptr, compact);
+        ASSERT_EQ(flat.f != nullptr, !compact);
+        const std::size_t voxels = std::size_t(dims.x) * dims.y * dims.z;
+        const std::size_t each = compact ? sizeof(std::int16_t) : sizeof(float);
+        EXPECT_EQ(pyr.flatBytes(), voxels * each);
+        EXPECT_EQ(pyr.bytes(), before + voxels * each);
+        EXPECT_EQ(copy.flatVoxels().i, flat.i);  // made once, shared
+        EXPECT_EQ(copy.flatVoxels().f, flat.f);
+        std::size_t wrong = 0;
+        for (int k = 0; k < dims.z; ++k)
+            for (int j = 0; j < dims.y; ++j)
+                for (int i = 0; i < dims.x; ++i)
+                    wrong += flat[std::ptrdiff_t(i) +
+                                  std::ptrdiff_t(dims.x) * (j + std::ptrdiff_t(dims.y) * k)] !=
+                             v->at(i, j, k);
+        EXPECT_EQ(wrong, 0u) << compact;
+    }
 }
