@@ -16,8 +16,6 @@ namespace voxlight::pathtrace {
 
 namespace {
 
-/// Rec. 709 luminance weights (linear RGB), as the path tracer's error estimate.
-constexpr const float (&kLuminance)[3] = core::kLuminanceWeightsF;
 /// B3-spline taps of the à-trous transform (Dammertz et al. 2010).
 constexpr float kB3[5] = {1.f / 16.f, 1.f / 4.f, 3.f / 8.f, 1.f / 4.f, 1.f / 16.f};
 /// 3×3 Gaussian for the variance before the first pass (SVGF).
@@ -26,7 +24,8 @@ constexpr float kG3[3] = {0.25f, 0.5f, 0.25f};
 constexpr float kLumEpsilon = 1e-10f;
 
 float luminance(const float* px) {
-    return kLuminance[0] * px[0] + kLuminance[1] * px[1] + kLuminance[2] * px[2];
+    return core::kLuminanceWeightsF[0] * px[0] + core::kLuminanceWeightsF[1] * px[1] +
+           core::kLuminanceWeightsF[2] * px[2];
 }
 
 }  // namespace
@@ -58,7 +57,8 @@ core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdE
     std::size_t lit = 0;
     for (std::size_t p = 0; p < n; ++p) {
         const float* se = stdError.pixels.data() + 4 * p;
-        const float s = kLuminance[0] * se[0] + kLuminance[1] * se[1] + kLuminance[2] * se[2];
+        const float s = core::kLuminanceWeightsF[0] * se[0] + core::kLuminanceWeightsF[1] * se[1] +
+                        core::kLuminanceWeightsF[2] * se[2];
         var[p] = s * s;
         const float l = luminance(mean.pixels.data() + 4 * p);
         if (l > 0.f) {

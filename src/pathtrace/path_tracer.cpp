@@ -43,8 +43,6 @@ constexpr double kAutofocusStepVoxels = 0.25;
 /// the denoised torso's NRMSE moved from 0.2763 to 0.2776 (4 spp).
 constexpr double kGuideStepVoxels = 1.0;
 constexpr double kGuideTransmittance = 1e-2;
-/// Rec. 709 luminance weights (linear RGB), for the error estimate.
-constexpr const double (&kLuminance)[3] = core::kLuminanceWeights;
 /// Voxels per fine-majorant cell side. On the 128³ torso under ct-bone (256², 32 spp): 1 voxel
 /// 5.7·10⁶ null collisions, 2 voxels 14.4·10⁶, the 4³ skip cells alone 34.8·10⁶; 1 was the fastest.
 constexpr int kFineVoxels = 1;
@@ -1166,7 +1164,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             const double v = std::isfinite(L[c]) ? L[c] : 0.0;
             sum[p * 3 + c] += v;
             sumSq[p * 3 + c] += v * v;
-            lum += kLuminance[c] * v;
+            lum += core::kLuminanceWeights[c] * v;
         }
         lumSq[p] += lum * lum;
         alpha[p] += covered;
@@ -1185,7 +1183,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         for (std::size_t p = 0; p < pixels; ++p) {
             if (!(alpha[p] > 0.0)) continue;
             double m = 0.0;
-            for (int c = 0; c < 3; ++c) m += kLuminance[c] * sum[p * 3 + c];
+            for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
             m /= n;
             var += std::max(0.0, lumSq[p] / n - m * m) / std::max(1.0, n - 1.0);
             mean += m;

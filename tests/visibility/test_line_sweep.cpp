@@ -426,6 +426,49 @@ TEST(LineSweep, IdenticalForAnyThreadCount) {
     expectSameBits(*f.grid, a, b, 9, "1 against 2 threads");
 }
 
+// The sweep reads its voxels from the pyramid's copy: int16 for integral data, float otherwise
+// (BlockPyramid::flatVoxels). Both must give the same field bit for bit: the same volume as
+// int16 and as float, the float one made non-integral by half a unit at one air voxel whose
+// neighbourhood within r_s + 2 voxels is transparent under the TF (so no ray's depth can move).
+TEST(LineSweep, TheInt16AndFloatVoxelCopiesGiveTheSameField) {
+    const glm::ivec3 dims(48, 40, 44);
+    const auto value = [](int i, int j, int k) {
+        if (k >= 10 && k <= 13) return 900 + 37 * ((i + 2 * j) % 5);
+        if (std::abs(i - 2 * j + 3) < 2) return 500 + 10 * k;
+        if (k > 36) return -1000;
+        return 40 + (i * 7 + j * 3 + k) % 11;
+    };
+    const core::Volume ints = test::makeVolume(dims, value);
+    core::Volume floats(ints.geometry(), core::VoxelType::Float32);
+    for (int k = 0; k < dims.z; ++k)
+        for (int j = 0; j < dims.y; ++j)
+            for (int i = 0; i < dims.x; ++i)
+                floats.dataAs<float>()[floats.linearIndex(i, j, k)] = float(value(i, j, k));
+    floats.dataAs<float>()[floats.linearIndex(47, 0, 43)] = -1000.5f;
+    const glm::vec3 c(1.f);
+    const optics::TransferFunction tf({{-1000.f, c, 0.f, glm::vec3(0.f)},
+                                       {100.f, c, 0.f, glm::vec3(0.f)},
+                                       {400.f, c, 0.2f, glm::vec3(0.f)},
+                                       {1000.f, c, 3.f, glm::vec3(0.f)},
+                                       {3071.f, c, 3.f, glm::vec3(0.f)}},
+                                      {400.f, 1000.f}, "bone");
+    const optics::TfTable table(tf);
+    std::shared_ptr<const MultiresGrid> grids[2];
+    const core::Volume* volumes[2] = {&ints, &floats};
+    for (int n = 0; n < 2; ++n) {
+        auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(*volumes[n]));
+        grids[n] = std::make_shared<const MultiresGrid>(
+            pyr, selectLod(*pyr, tf, table, LodBudget::fromReduction(3.0, ints.voxelCount())));
+    }
+    ASSERT_NE(grids[0]->pyramid().flatVoxels().i, nullptr);
+    ASSERT_NE(grids[1]->pyramid().flatVoxels().f, nullptr);
+    for (std::size_t b = 0; b < grids[0]->pyramid().blockCount(); ++b)
+        ASSERT_EQ(grids[0]->level(b), grids[1]->level(b)) << b;
+    const LocalVisibilityOptions o = sweepOptions(26, 4, 12.0);
+    expectSameBits(*grids[0], computeLocalVisibility(grids[0], table, o),
+                   computeLocalVisibility(grids[1], table, o), 4, "int16 against float copy");
+}
+
 // A point's optical depths are fixed-point differences along its line, so which points share a
 // line (the group of blocks a walk runs through, the blocks a TF update recomputes) changes no
 // bit by construction; here checked for every stored point, lines through 1 to 8³ blocks.
