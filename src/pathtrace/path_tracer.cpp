@@ -1174,14 +1174,19 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     if (options_.threads > 0)
         limit = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism,
                                                       std::size_t(options_.threads));
-    // The image's relative error after n samples (Stats::relativeStdError): the variance of each
-    // covered pixel's luminance mean, from its own samples (channels summed per sample, so their
-    // correlation counts), averaged, over the mean covered luminance.
-    auto relativeError = [&](int n) {
+    // Samples taken per pixel (all equal without adaptive sampling) and, with it, the samples
+    // each pixel takes in the coming pass and its carried fractional share.
+    std::vector<std::int32_t> count(pixels, 0), take(pixels, 0);
+    std::vector<double> credit;
+    // The image's relative error (Stats::relativeStdError): the variance of each covered pixel's
+    // luminance mean, from its own samples (channels summed per sample, so their correlation
+    // counts), averaged, over the mean covered luminance.
+    auto relativeError = [&] {
         double var = 0.0, mean = 0.0;
         std::size_t covered = 0;
         for (std::size_t p = 0; p < pixels; ++p) {
             if (!(alpha[p] > 0.0)) continue;
+            const double n = count[p];
             double m = 0.0;
             for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
             m /= n;
@@ -1192,25 +1197,81 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         return covered && mean > 0.0 ? std::sqrt(var / double(covered)) / (mean / double(covered))
                                      : 0.0;
     };
+    // Adaptive sampling (Options::adaptive): the pass's samples, `perPixel` × pixels in all, shared
+    // in proportion to each pixel's noise weight — √(3×3 mean of the one-sample luminance
+    // variance), floored at kAdaptiveFloor of the mean weight — through a carried credit, so over
+    // the passes a pixel's count follows its weight (rounding never loses a sample's share).
+    // Serial sums in pixel order: the same allocation for any thread count.
+    std::vector<double> sigma2;
+    auto allocate = [&](int perPixel) {
+        sigma2.assign(pixels, 0.0);
+        for (std::size_t p = 0; p < pixels; ++p) {
+            const double n = count[p];
+            double m = 0.0;
+            for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
+            m /= n;
+            sigma2[p] = std::max(0.0, lumSq[p] / n - m * m) * n / std::max(1.0, n - 1.0);
+        }
+        std::vector<double> weight(pixels, 0.0);
+        double total = 0.0;
+        for (int y = 0; y < h; ++y)
+            for (int x = 0; x < w; ++x) {
+                double v = 0.0;
+                int taps = 0;
+                for (int yy = std::max(0, y - 1); yy <= std::min(h - 1, y + 1); ++yy)
+                    for (int xx = std::max(0, x - 1); xx <= std::min(w - 1, x + 1); ++xx, ++taps)
+                        v += sigma2[std::size_t(yy) * std::size_t(w) + std::size_t(xx)];
+                const double wt = std::sqrt(v / taps);
+                weight[std::size_t(y) * std::size_t(w) + std::size_t(x)] = wt;
+                total += wt;
+            }
+        const double budget = double(perPixel) * double(pixels);
+        const int cap = kAdaptiveMaxPassFactor * perPixel;
+        if (!(total > 0.0) || !std::isfinite(total)) {
+            std::fill(take.begin(), take.end(), perPixel);  // no noise anywhere: uniform
+            return;
+        }
+        const double floorWeight = kAdaptiveFloor * total / double(pixels);
+        double floored = 0.0;
+        for (double& wt : weight) floored += (wt = std::max(wt, floorWeight));
+        for (std::size_t p = 0; p < pixels; ++p) {
+            credit[p] += budget * weight[p] / floored;
+            const int k = int(std::min(std::floor(credit[p]), double(cap)));
+            take[p] = k;
+            credit[p] = std::min(credit[p] - k, double(cap));
+        }
+    };
     int done = 0;
     double error = 0.0;
     bool reached = false;
     while (done < options_.samplesPerPixel) {
-        const int s0 = done, s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
+        const int s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
+        if (options_.adaptive && done >= kAdaptiveWarmupSamples) {
+            if (credit.empty()) credit.assign(pixels, 0.0);
+            allocate(s1 - done);
+        } else {
+            std::fill(take.begin(), take.end(), s1 - done);
+        }
         tbb::parallel_for(tbb::blocked_range2d<int>(0, h, 8, 0, w, 8), [&](const auto& r) {
             Counters n;
+            std::uint64_t taken = 0;
             im.volume->visit([&](const auto& view) {
                 for (int y = r.rows().begin(); y < r.rows().end(); ++y)
-                    for (int x = r.cols().begin(); x < r.cols().end(); ++x)
-                        for (int s = s0; s < s1; ++s) trace(view, x, y, s, n);
+                    for (int x = r.cols().begin(); x < r.cols().end(); ++x) {
+                        const std::size_t p = std::size_t(y) * std::size_t(w) + std::size_t(x);
+                        const int first = count[p], last = first + take[p];
+                        for (int s = first; s < last; ++s) trace(view, x, y, s, n);
+                        count[p] = last;
+                        taken += std::uint64_t(last - first);
+                    }
             });
-            paths += std::uint64_t(r.rows().size()) * r.cols().size() * std::uint64_t(s1 - s0);
+            paths += taken;
             real += n.real, null += n.null, shadow += n.shadow, violations += n.violations;
             budget += n.budget;
             surfaceEvents += n.surface;
         });
         done = s1;
-        error = relativeError(done);
+        error = relativeError();
         // Progress: the larger of the spp fraction and the error's (error ∝ 1/√n, so the target
         // needs about n·(error/target)² samples).
         double fraction = double(done) / options_.samplesPerPixel;
@@ -1230,8 +1291,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
 
     core::ImageRGBA film(w, h);
     if (stdError) *stdError = core::ImageRGBA(w, h);
-    const double n = done;
     for (std::size_t p = 0; p < pixels; ++p) {
+        const double n = count[p];
         float* out = film.pixels.data() + p * 4;
         for (int c = 0; c < 3; ++c) {
             const double mean = sum[p * 3 + c] / n;
@@ -1245,6 +1306,10 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     }
     if (stats) {
         stats->samplesPerPixel = done;
+        const auto [fewest, most] = std::minmax_element(count.begin(), count.end());
+        stats->minPixelSamples = pixels ? *fewest : 0;
+        stats->maxPixelSamples = pixels ? *most : 0;
+        stats->adaptive = options_.adaptive;
         stats->paths = paths;
         stats->realCollisions = real;
         stats->nullCollisions = null;

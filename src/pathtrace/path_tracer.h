@@ -96,6 +96,12 @@ struct Options {
     float gradientFactor = 0.5f;  ///< Kroes' g_f for Scattering::Hybrid, [0, 1]
     int rouletteAfter = 3;        ///< bounces before Russian roulette may end a path
     bool majorantGrid = true;     ///< false: one global majorant (Exposure Render's scheme)
+    /// Adaptive sampling: after kAdaptiveWarmupSamples uniform samples, each pass's samples (the
+    /// same total as a uniform pass) go to the pixels in proportion to their noise — the standard
+    /// deviation of one sample's luminance, 3×3-averaged, floored at kAdaptiveFloor of the mean —
+    /// which minimises the image's squared error for the budget (n_p ∝ σ_p). Consistent, not
+    /// unbiased (a pixel's count depends on its samples): never in reference renders.
+    bool adaptive = false;
     /// Samples spread over each pixel's area (antialiased photo); false: through its centre, as
     /// the ray caster and the SH methods sample — for pixel-by-pixel references.
     bool pixelJitter = true;
@@ -112,7 +118,11 @@ struct Options {
 };
 
 struct Stats {
-    int samplesPerPixel = 0;  ///< passes completed × samples per pass
+    /// Passes completed × samples per pass: with adaptive sampling the mean over the pixels (the
+    /// same total), each pixel's own count between minPixelSamples and maxPixelSamples.
+    int samplesPerPixel = 0;
+    int minPixelSamples = 0, maxPixelSamples = 0;
+    bool adaptive = false;
     std::uint64_t paths = 0, realCollisions = 0, nullCollisions = 0, shadowRays = 0;
     /// Real collisions that scattered by the BRDF (hybrid/brdf scattering).
     std::uint64_t surfaceEvents = 0;
@@ -136,6 +146,16 @@ struct Stats {
 /// Fewer samples than this do not trust their own variance estimate (a pixel whose first few
 /// paths all missed the light looks noise-free): the target-error stop waits for them.
 inline constexpr int kMinSamplesForErrorStop = 16;
+/// Adaptive sampling: uniform samples per pixel before the noise decides (a pixel's variance from
+/// fewer is too rough to allocate by) ...
+inline constexpr int kAdaptiveWarmupSamples = 8;
+/// ... the least share of the mean noise weight any pixel keeps (every pixel goes on being sampled
+/// at ≥ this fraction of the mean rate, so a pixel whose first paths all agreed by chance — a rare
+/// bright path not yet seen — is not starved) ...
+inline constexpr double kAdaptiveFloor = 0.1;
+/// ... and the most samples one pixel takes in one pass (in units of the uniform pass), so that a
+/// few very noisy pixels cannot take a whole pass.
+inline constexpr int kAdaptiveMaxPassFactor = 4;
 
 /// A ray in world millimetres.
 struct Ray {

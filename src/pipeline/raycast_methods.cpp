@@ -44,7 +44,9 @@
 //                         multiple_scattering effect), phase_g (a TF's phase_g channel
 //                         overrides it), scattering ("phase" | "brdf" | "hybrid"; "phase") and
 //                         gradient_factor (hybrid only; 0.5: Kroes' g_f, path_tracer.h),
-//                         majorant_grid, antialias,
+//                         majorant_grid, antialias, adaptive (true unless reference: each
+//                         pass's samples shared by the pixels' noise, path_tracer.h; never
+//                         with reference),
 //                         denoise (true | false | "auto" = on unless reference; never in
 //                         reference mode: true there is an error) and denoise_target (0.01: the
 //                         relative standard error at and below which a pixel is left as traced;
@@ -640,6 +642,12 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
         t.gradientFactor = float(p.number("gradient_factor", 0.5, 0.0, 1.0));
     t.majorantGrid = p.boolean("majorant_grid", true);
     t.pixelJitter = p.boolean("antialias", !reference);
+    // Adaptive sampling spends the same samples where the noise is (consistent, not unbiased):
+    // the progressive picture's default, never a reference's.
+    t.adaptive = p.boolean("adaptive", !reference);
+    if (reference && t.adaptive)
+        p.fail("adaptive", "is true but a reference render samples every pixel alike (unbiased)",
+               "remove adaptive or set it to false (or set reference to false)");
     t.seed = o.seed;
     t.threads = o.threads;
     t.background = o.background;
@@ -851,6 +859,9 @@ std::shared_ptr<const TracedImage> tracePath(
                       {"null_collision_budget_exceeded", st.budgetExceeded},
                       {"max_bounces", pt.maxBounces},
                       {"majorant_grid", pt.majorantGrid},
+                      {"adaptive", st.adaptive},
+                      {"pixel_spp_min", st.minPixelSamples},
+                      {"pixel_spp_max", st.maxPixelSamples},
                       {"surface_events", st.surfaceEvents},
                       {"acceleration_bytes", st.accelerationBytes}};
     if (st.budgetExceeded > 0)
@@ -2596,9 +2607,9 @@ const RegisterMethod kPathTrace([] {
         "Monte-Carlo path tracer: delta tracking over the majorant grid, exact shadows, "
         "single or multiple scattering (the reference)";
     m.effects = {"local_shadows", "global_shadows", "multiple_scattering"};
-    m.params = {"spp",           "seconds",   "target_error", "reference",
-                "max_bounces",   "phase_g",   "scattering",   "gradient_factor",
-                "majorant_grid", "antialias", "denoise",      "denoise_target"};
+    m.params = {"spp",      "seconds",    "target_error",    "reference",     "max_bounces",
+                "phase_g",  "scattering", "gradient_factor", "majorant_grid", "antialias",
+                "adaptive", "denoise",    "denoise_target"};
     m.plan = [](const io::Scene& scene, ParamReader& reader) {
         return planRayCaster(Kind::PathTrace, scene, reader);
     };

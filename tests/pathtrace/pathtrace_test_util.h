@@ -2,6 +2,8 @@
 #pragma once
 // A phantom under a TF, ready for the path tracer: the volume, its TF table and the majorant
 // cells the pipeline's skip_cells stage would build (emission-absorption skip rule).
+#include <cmath>
+#include <cstddef>
 #include <memory>
 #include <string>
 
@@ -50,6 +52,29 @@ inline optics::TransferFunction stepTf(float sigma, glm::vec3 albedo,
                                      {0.501f, albedo, sigma, {}},
                                      {1.f, albedo, sigma, {}}},
                                     {0.5f, 1.f}, name);
+}
+
+/// The torso under a TF with soft tissue and bone (the thread-count and denoiser scenes).
+inline Medium torsoMedium(int size = 48) {
+    return makeMedium("torso",
+                      optics::TransferFunction({{-200.f, {0.9f, 0.8f, 0.7f}, 0.f, {}},
+                                                {300.f, {0.9f, 0.8f, 0.7f}, 0.3f, {}},
+                                                {2000.f, {0.9f, 0.9f, 0.9f}, 0.5f, {}}},
+                                               {900.f, 2200.f}, "bone"),
+                      size);
+}
+
+/// RMS of RGB difference over the mean of the reference (NRMSE, as oiiotool's RMS over the mean).
+inline double nrmse(const core::ImageRGBA& a, const core::ImageRGBA& ref) {
+    double d = 0.0, m = 0.0;
+    std::size_t n = 0;
+    for (std::size_t p = 0; p < ref.pixels.size(); p += 4)
+        for (int c = 0; c < 3; ++c) {
+            d += std::pow(double(a.pixels[p + c]) - ref.pixels[p + c], 2);
+            m += ref.pixels[p + c];
+            ++n;
+        }
+    return std::sqrt(d / double(n)) / (m / double(n));
 }
 
 }  // namespace voxlight::test

@@ -75,19 +75,6 @@ double rmsRedAround(const core::ImageRGBA& im, float truth) {
     return std::sqrt(s / (double(im.width) * im.height));
 }
 
-/// RMS of RGB difference over the mean of the reference (NRMSE, as oiiotool's RMS over the mean).
-double nrmse(const core::ImageRGBA& a, const core::ImageRGBA& ref) {
-    double d = 0.0, m = 0.0;
-    std::size_t n = 0;
-    for (std::size_t p = 0; p < ref.pixels.size(); p += 4)
-        for (int c = 0; c < 3; ++c) {
-            d += std::pow(double(a.pixels[p + c]) - ref.pixels[p + c], 2);
-            m += ref.pixels[p + c];
-            ++n;
-        }
-    return std::sqrt(d / double(n)) / (m / double(n));
-}
-
 }  // namespace
 
 TEST(Denoise, AFlatNoisyRegionKeepsItsMeanAndLosesItsNoise) {
@@ -182,16 +169,10 @@ TEST(Denoise, TheSameForAnyThreadCount) {
     EXPECT_EQ(denoise(n.mean, n.stdError, g, o).pixels, one.pixels);
 }
 
+using test::nrmse;
+
 namespace {
-/// The torso under a TF with soft tissue and bone, the scene of the thread-count test.
-test::Medium torso() {
-    return test::makeMedium("torso",
-                            optics::TransferFunction({{-200.f, {0.9f, 0.8f, 0.7f}, 0.f, {}},
-                                                      {300.f, {0.9f, 0.8f, 0.7f}, 0.3f, {}},
-                                                      {2000.f, {0.9f, 0.9f, 0.9f}, 0.5f, {}}},
-                                                     {900.f, 2200.f}, "bone"),
-                            48);
-}
+test::Medium torso() { return test::torsoMedium(48); }
 }  // namespace
 
 TEST(Denoise, GuidesAreTheSameForAnyThreadCountAndSeeTheVolume) {

@@ -159,12 +159,7 @@ TEST(PathTracer, SingleScatteringFromAHomogeneousSlabMatchesTheClosedForm) {
 }
 
 TEST(PathTracer, TheImageIsTheSameForAnyThreadCount) {
-    const Medium s = makeMedium("torso",
-                                optics::TransferFunction({{-200.f, {0.9f, 0.8f, 0.7f}, 0.f, {}},
-                                                          {300.f, {0.9f, 0.8f, 0.7f}, 0.3f, {}},
-                                                          {2000.f, {0.9f, 0.9f, 0.9f}, 0.5f, {}}},
-                                                         {900.f, 2200.f}, "bone"),
-                                40);
+    const Medium s = test::torsoMedium(40);
     pathtrace::Options o;
     o.samplesPerPixel = 4;
     o.maxBounces = 4;

@@ -240,7 +240,8 @@ TEST(PathTraceMethod, DenoisesTheDisplayImageOnlyAndNeverAReference) {
     EXPECT_EQ(ref.images.count("denoised"), 0u);
     EXPECT_EQ(ref.details["denoise"]["applied"], false);
     EXPECT_FALSE(ref.params.contains("denoise")) << "the reference's cache key is unchanged";
-    d["method"]["params"] = {{"spp", 8}, {"antialias", false}, {"target_error", 0.01}};
+    d["method"]["params"] = {
+        {"spp", 8}, {"antialias", false}, {"adaptive", false}, {"target_error", 0.01}};
     const RunResult plain = Session().run(scene(d));
     EXPECT_EQ(ref.image.pixels, plain.image.pixels);
     EXPECT_EQ(plain.images.count("denoised"), 1u);
@@ -255,6 +256,32 @@ TEST(PathTraceMethod, DenoisesTheDisplayImageOnlyAndNeverAReference) {
             FAIL() << params.dump();
         } catch (const InputError& e) {
             EXPECT_EQ(e.field().rfind("method.params.denoise", 0), 0u) << e.what();
+        }
+    }
+}
+
+TEST(PathTraceMethod, SamplesAdaptivelyUnlessAReference) {
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    d["method"]["params"] = {{"spp", 24}};
+    const RunResult a = Session().run(scene(d));
+    EXPECT_EQ(a.details["pathtrace"]["adaptive"], true);
+    EXPECT_GT(a.details["pathtrace"]["pixel_spp_max"].get<int>(), 24);
+    d["method"]["params"]["adaptive"] = false;
+    const RunResult u = Session().run(scene(d));
+    EXPECT_EQ(u.details["pathtrace"]["adaptive"], false);
+    EXPECT_EQ(u.details["pathtrace"]["pixel_spp_max"], 24);
+    EXPECT_EQ(u.details["pathtrace"]["pixel_spp_min"], 24);
+    d["method"]["params"] = {{"reference", true}, {"spp", 24}};
+    EXPECT_EQ(Session().run(scene(d)).details["pathtrace"]["adaptive"], false);
+    for (const json& params :
+         {json{{"reference", true}, {"adaptive", true}}, json{{"adaptive", "yes"}}}) {
+        d["method"]["params"] = params;
+        try {
+            Session().plan(scene(d));
+            FAIL() << params.dump();
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "method.params.adaptive") << e.what();
         }
     }
 }
