@@ -146,9 +146,10 @@ struct Stats {
 /// Fewer samples than this do not trust their own variance estimate (a pixel whose first few
 /// paths all missed the light looks noise-free): the target-error stop waits for them.
 inline constexpr int kMinSamplesForErrorStop = 16;
-/// Adaptive sampling: uniform samples per pixel before the noise decides (a pixel's variance from
-/// fewer is too rough to allocate by) ...
-inline constexpr int kAdaptiveWarmupSamples = 8;
+/// Adaptive sampling: uniform samples per pixel before the noise decides (its 3×3 average then
+/// rests on 36 samples; against 8: the abdominal CT at 512² 4–6 % lower NRMS for the same
+/// seconds, raw and denoised, one run at 1 and 2 s each) ...
+inline constexpr int kAdaptiveWarmupSamples = 4;
 /// ... the least share of the mean noise weight any pixel keeps (every pixel goes on being sampled
 /// at ≥ this fraction of the mean rate, so a pixel whose first paths all agreed by chance — a rare
 /// bright path not yet seen — is not starved) ...
