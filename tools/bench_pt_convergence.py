@@ -3,9 +3,10 @@
 """How fast the path tracer converges (Kroes et al. 2012, Fig. 11): NRMS error against a long
 converged render, as a function of the tracer's seconds.
 
-Cases: the torso phantom (128³, ct-bone) and — when present — the abdominal CT
-(../shared/datasets/ct/abdomen-totalseg/example_ct.nii.gz beside the repository; skipped with a
-note otherwise), one directional light, anterior view; single scattering and multiple scattering
+Cases: the torso phantom (--phantom-size, 128³ by default; ct-bone) and — when present — two real
+CTs: the abdominal CT (../shared/datasets/ct/abdomen-totalseg/example_ct.nii.gz beside the
+repository, ct-bone, anterior view) and the bonsai (ct/bonsai.vti, 256³, generic, seen from the
+side); a CT that is absent is skipped with a note. One directional light; single scattering and multiple scattering
 (16 bounces, roulette after 3); the majorant grid and (single scattering, torso) one global majorant
 (`majorant_grid: false`, Exposure Render's scheme). Each curve is a ladder of renders capped at
 `seconds` (the tracer stops after the pass of 4 spp that crosses it, so the x value is the
@@ -21,7 +22,10 @@ Writes WORK/results.json and, with --docs DIR, DIR/convergence.png and DIR/conve
 table the README quotes). Run from the repository root:
 
     /usr/bin/python3 tools/bench_pt_convergence.py [--build build] [--work /tmp/pt-convergence]
-        [--docs docs/pathtrace] [--size 256] [--quick]
+        [--docs docs/pathtrace] [--size 256] [--phantom-size 128] [--curves "torso SS,..."]
+        [--quick]
+
+The README's figures: --size 512 --phantom-size 256 (≈ 25 min on the idle machine).
 
 The machine it runs on is shared (2 cores, other builds): seconds are as measured under that load,
 and the tool records the load average beside them. 11 min at 256² at load 8–9.5 (most of it the four
@@ -129,7 +133,9 @@ def main():
         if key not in refs:
             target = ref_target_ms if multiple else ref_target
             sc = scene(vol, view, tf, size, multiple, True,
-                       {"spp": ref_spp, "target_error": target, "denoise": False})
+                       {"spp": ref_spp, "target_error": target, "denoise": False,
+                        # every pixel alike: unbiased, and no shared allocation with the curves
+                        "adaptive": False})
             sc["render"] = {"seed": 7}
             base = os.path.join(args.work, tag + "-ref")
             t0 = time.time()
@@ -203,7 +209,8 @@ def plot(results, out_png):
     ax.axhline(100 * GOAL_NRMS, color="grey", lw=0.8)
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set_xlabel("seconds (tracer; denoised: + guides + filter), 2 shared cores under load")
+    load = results["load_before"][0]
+    ax.set_xlabel(f"seconds (tracer; denoised: + guides + filter), 2 cores, load before {load:.1f}")
     ax.set_ylabel("NRMS error against the converged image (%)")
     ax.set_title(f"Path tracer convergence, {results['size']}², one directional light")
     ax.grid(True, which="both", lw=0.3)

@@ -202,6 +202,18 @@ TfTable::TfTable(const TransferFunction& tf) {
             fused_[i].f[1 + c] = weighted_[i][c];
         }
     }
+    {
+        const int rows = std::bit_width(n);
+        sigmaRunMax_.assign(std::size_t(rows) * n, 0.f);
+        std::copy(sigma_.begin(), sigma_.end(), sigmaRunMax_.begin());
+        for (int j = 1; j < rows; ++j) {
+            const float* prev = sigmaRunMax_.data() + std::size_t(j - 1) * n;
+            float* row = sigmaRunMax_.data() + std::size_t(j) * n;
+            const std::size_t half = std::size_t(1) << (j - 1);
+            for (std::size_t i = 0; i < n; ++i)
+                row[i] = i + half < n ? std::max(prev[i], prev[i + half]) : prev[i];
+        }
+    }
     sigmaNodes_.resize(kTableCells);
     for (std::size_t i = 0; i < std::size_t(kTableCells); ++i)
         sigmaNodes_[i] = {cumSigma_[i], sigma_[i], sigma_[i + 1]};

@@ -33,6 +33,7 @@
 // tables are independent of Δ, partial segments (clip planes, jittered starts) are exact too.
 #include <algorithm>
 #include <array>
+#include <bit>
 #include <cmath>
 #include <glm/glm.hpp>
 #include <iosfwd>
@@ -164,7 +165,15 @@ class TfTable {
     float maxExtinction(float lo, float hi) const {
         const Position a = position(lo), b = position(hi);
         float m = std::max(extinction(lo), extinction(hi));
-        for (std::size_t k = a.cell + 1; k <= b.cell; ++k) m = std::max(m, nodes_[k].sigma);
+        if (b.cell > a.cell) {
+            // Nodes a.cell + 1 … b.cell: two overlapping power-of-two runs of the sparse table
+            // (the same maximum as a loop over them; that loop was half of a 256³ CT's majorant
+            // grid build under a wide TF).
+            const std::size_t first = a.cell + 1, count = b.cell - a.cell;
+            const int level = std::bit_width(count) - 1;
+            const float* row = sigmaRunMax_.data() + std::size_t(level) * nodes_.size();
+            m = std::max({m, row[first], row[b.cell + 1 - (std::size_t(1) << level)]});
+        }
         return m;
     }
 
@@ -350,7 +359,10 @@ class TfTable {
     std::vector<Node> nodes_;                  // kTableCells + 1
     std::vector<SurfaceNode> surface_;         // kTableCells + 1
     bool hasPhaseG_ = false;
-    std::vector<float> sigma_;                    // integrand σt at nodes
+    std::vector<float> sigma_;  // integrand σt at nodes
+    /// Sparse table of σt maxima: row j, entry i = max of sigma_[i … i + 2^j − 1] (rows of
+    /// nodes_.size() entries; past the end, the run is cut at the last node).
+    std::vector<float> sigmaRunMax_;
     std::vector<std::array<float, 6>> weighted_;  // σt·a, σt·(1−a)·e at nodes
     std::vector<double> cumSigma_;                // cumulative integrals at nodes
     std::vector<std::array<double, 6>> cumWeighted_;

@@ -86,6 +86,28 @@ TEST(TfTable, LookupMatchesExactEvaluation) {
         EXPECT_EQ(table.extinction(v), table.lookup(v).extinction) << v;
 }
 
+TEST(TfTable, MaxExtinctionIsTheMaximumOfExtinctionOverTheRangeExactly) {
+    // The largest extinction() over [lo, hi]: at the ends or at a table node between them. A
+    // brute-force scan of every node against the sparse-table query, over random ranges of every
+    // width (one node, a few, the whole table, past both ends).
+    const TransferFunction tf = optics::makePreset("ct-angio");
+    const optics::TfTable table(tf);
+    const float lo = tf.points().front().value, hi = tf.points().back().value;
+    const float cell = table.cellWidth();
+    core::CounterRng rng(17);
+    for (int i = 0; i < 4000; ++i) {
+        const float a = lo - 50.f + (hi - lo + 100.f) * rng.uniform();
+        const float width = i % 4 == 0 ? cell * rng.uniform() * 3.f : (hi - lo) * rng.uniform();
+        const float b = std::min(a + width, hi + 60.f);
+        float brute = std::max(table.extinction(a), table.extinction(b));
+        for (int k = 0; k <= optics::TfTable::kTableCells; ++k) {
+            const float v = lo + float(k) * cell;
+            if (v > a && v < b) brute = std::max(brute, table.extinction(v));
+        }
+        EXPECT_EQ(table.maxExtinction(a, b), brute) << a << " … " << b;
+    }
+}
+
 TEST(TfTable, PreintegratedSegmentIsTheExactMeanOverTheValueRange) {
     // For values varying linearly from sf to sb, mean σt = (1/(sb−sf)) ∫ σt(s) ds. Check against
     // brute-force quadrature of the exact TF, across a sharp step, both directions, and tails.
