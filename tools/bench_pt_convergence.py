@@ -27,7 +27,7 @@ table the README quotes). Run from the repository root:
         [--docs docs/pathtrace] [--size 256] [--phantom-size 128] [--curves "torso SS,..."]
         [--quick]
 
-The README's figures: --size 512 --phantom-size 256 (≈ 25 min on the idle machine).
+The README's figures: --size 512 --phantom-size 256 (≈ 15 min on the idle machine).
 
 The machine it runs on is shared (2 cores, other builds): seconds are as measured under that load,
 and the tool records the load average beside them. 11 min at 256² at load 8–9.5 (most of it the four

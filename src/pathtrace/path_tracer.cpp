@@ -1177,21 +1177,29 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     // Samples taken per pixel (all equal without adaptive sampling) and, with it, the samples
     // each pixel takes in the coming pass and its carried fractional share.
     std::vector<std::int32_t> count(pixels, 0), take(pixels, 0);
-    std::vector<double> credit;
+    std::vector<double> credit, sigma2, weight;
+    // Pixel p's luminance mean and the mean square of its samples' deviation from it (channels
+    // summed per sample, so their correlation counts), from its own samples.
+    struct Moments {
+        double mean, spread;
+    };
+    auto moments = [&](std::size_t p) {
+        const double n = count[p];
+        double m = 0.0;
+        for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
+        m /= n;
+        return Moments{m, std::max(0.0, lumSq[p] / n - m * m)};
+    };
     // The image's relative error (Stats::relativeStdError): the variance of each covered pixel's
-    // luminance mean, from its own samples (channels summed per sample, so their correlation
-    // counts), averaged, over the mean covered luminance.
+    // luminance mean, averaged, over the mean covered luminance.
     auto relativeError = [&] {
         double var = 0.0, mean = 0.0;
         std::size_t covered = 0;
         for (std::size_t p = 0; p < pixels; ++p) {
             if (!(alpha[p] > 0.0)) continue;
-            const double n = count[p];
-            double m = 0.0;
-            for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
-            m /= n;
-            var += std::max(0.0, lumSq[p] / n - m * m) / std::max(1.0, n - 1.0);
-            mean += m;
+            const Moments mo = moments(p);
+            var += mo.spread / std::max(1.0, double(count[p]) - 1.0);
+            mean += mo.mean;
             ++covered;
         }
         return covered && mean > 0.0 ? std::sqrt(var / double(covered)) / (mean / double(covered))
@@ -1202,17 +1210,13 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     // variance), floored at kAdaptiveFloor of the mean weight — through a carried credit, so over
     // the passes a pixel's count follows its weight (rounding never loses a sample's share).
     // Serial sums in pixel order: the same allocation for any thread count.
-    std::vector<double> sigma2;
     auto allocate = [&](int perPixel) {
-        sigma2.assign(pixels, 0.0);
+        sigma2.resize(pixels);
+        weight.resize(pixels);
         for (std::size_t p = 0; p < pixels; ++p) {
             const double n = count[p];
-            double m = 0.0;
-            for (int c = 0; c < 3; ++c) m += core::kLuminanceWeights[c] * sum[p * 3 + c];
-            m /= n;
-            sigma2[p] = std::max(0.0, lumSq[p] / n - m * m) * n / std::max(1.0, n - 1.0);
+            sigma2[p] = moments(p).spread * n / std::max(1.0, n - 1.0);  // one sample's variance
         }
-        std::vector<double> weight(pixels, 0.0);
         double total = 0.0;
         for (int y = 0; y < h; ++y)
             for (int x = 0; x < w; ++x) {

@@ -171,12 +171,8 @@ TEST(Denoise, TheSameForAnyThreadCount) {
 
 using test::nrmse;
 
-namespace {
-test::Medium torso() { return test::torsoMedium(48); }
-}  // namespace
-
 TEST(Denoise, GuidesAreTheSameForAnyThreadCountAndSeeTheVolume) {
-    const test::Medium s = torso();
+    const test::Medium s = test::torsoMedium();
     const auto b = s.volume->geometry().worldBounds();
     // Large enough that both threads take rows.
     const render::Camera cam(render::CameraSpec{}, b[0], b[1], 128, 96);
@@ -197,7 +193,7 @@ TEST(Denoise, GuidesAreTheSameForAnyThreadCountAndSeeTheVolume) {
 }
 
 TEST(Denoise, AtLowSppItIsCloserToTheConvergedTorsoThanTheRawEstimate) {
-    const test::Medium s = torso();
+    const test::Medium s = test::torsoMedium();
     const auto b = s.volume->geometry().worldBounds();
     const render::Camera cam(render::CameraSpec{}, b[0], b[1], 48, 40);
     pathtrace::Options o;

@@ -124,6 +124,26 @@ FieldError errorAgainstTruth(const core::Volume& v, const MultiresGrid& grid,
     return e;
 }
 
+/// Bone slabs with partial-volume faces, an oblique sheet, textured soft tissue and air (HU at
+/// voxel i, j, k of a 48 × 40 × 44 volume) ...
+int boneSlabsValue(int i, int j, int k) {
+    if (k >= 10 && k <= 13) return 900 + 37 * ((i + 2 * j) % 5);
+    if (std::abs(i - 2 * j + 3) < 2) return 500 + 10 * k;
+    if (k > 36) return -1000;
+    return 40 + (i * 7 + j * 3 + k) % 11;
+}
+
+/// ... under a TF that reaches σt 3/mm in bone (dense sub-steps) and is empty below 100 HU.
+optics::TransferFunction boneSlabsTf() {
+    const glm::vec3 c(1.f);
+    return optics::TransferFunction({{-1000.f, c, 0.f, glm::vec3(0.f)},
+                                     {100.f, c, 0.f, glm::vec3(0.f)},
+                                     {400.f, c, 0.2f, glm::vec3(0.f)},
+                                     {1000.f, c, 3.f, glm::vec3(0.f)},
+                                     {3071.f, c, 3.f, glm::vec3(0.f)}},
+                                    {400.f, 1000.f}, "bone");
+}
+
 }  // namespace
 
 TEST(LineSweep, LatticeDirectionsArePrimitiveSymmetricAndIntegrateTheLowBandsExactly) {
@@ -264,19 +284,8 @@ TEST(LineSweep, FollowsTheContinuousModelAsCloselyAsTheMarch) {
     // Bone slabs with partial-volume faces (σt up to 3/mm: dense sub-steps), an oblique sheet,
     // textured soft tissue and air, under a budget that puts blocks at mixed levels (level-0
     // blocks are swept, coarser ones marched along the same directions).
-    const core::Volume v = test::makeVolume({48, 40, 44}, [](int i, int j, int k) {
-        if (k >= 10 && k <= 13) return 900 + 37 * ((i + 2 * j) % 5);
-        if (std::abs(i - 2 * j + 3) < 2) return 500 + 10 * k;
-        if (k > 36) return -1000;
-        return 40 + (i * 7 + j * 3 + k) % 11;
-    });
-    const glm::vec3 c(1.f);
-    const optics::TransferFunction tf({{-1000.f, c, 0.f, glm::vec3(0.f)},
-                                       {100.f, c, 0.f, glm::vec3(0.f)},
-                                       {400.f, c, 0.2f, glm::vec3(0.f)},
-                                       {1000.f, c, 3.f, glm::vec3(0.f)},
-                                       {3071.f, c, 3.f, glm::vec3(0.f)}},
-                                      {400.f, 1000.f}, "bone");
+    const core::Volume v = test::makeVolume({48, 40, 44}, boneSlabsValue);
+    const optics::TransferFunction tf = boneSlabsTf();
     auto pyr = std::make_shared<const BlockPyramid>(BlockPyramid::build(v));
     const optics::TfTable table(tf);
     const auto grid = std::make_shared<const MultiresGrid>(
@@ -432,12 +441,7 @@ TEST(LineSweep, IdenticalForAnyThreadCount) {
 // neighbourhood within r_s + 2 voxels is transparent under the TF (so no ray's depth can move).
 TEST(LineSweep, TheInt16AndFloatVoxelCopiesGiveTheSameField) {
     const glm::ivec3 dims(48, 40, 44);
-    const auto value = [](int i, int j, int k) {
-        if (k >= 10 && k <= 13) return 900 + 37 * ((i + 2 * j) % 5);
-        if (std::abs(i - 2 * j + 3) < 2) return 500 + 10 * k;
-        if (k > 36) return -1000;
-        return 40 + (i * 7 + j * 3 + k) % 11;
-    };
+    const auto value = boneSlabsValue;
     const core::Volume ints = test::makeVolume(dims, value);
     core::Volume floats(ints.geometry(), core::VoxelType::Float32);
     for (int k = 0; k < dims.z; ++k)
@@ -445,13 +449,7 @@ TEST(LineSweep, TheInt16AndFloatVoxelCopiesGiveTheSameField) {
             for (int i = 0; i < dims.x; ++i)
                 floats.dataAs<float>()[floats.linearIndex(i, j, k)] = float(value(i, j, k));
     floats.dataAs<float>()[floats.linearIndex(47, 0, 43)] = -1000.5f;
-    const glm::vec3 c(1.f);
-    const optics::TransferFunction tf({{-1000.f, c, 0.f, glm::vec3(0.f)},
-                                       {100.f, c, 0.f, glm::vec3(0.f)},
-                                       {400.f, c, 0.2f, glm::vec3(0.f)},
-                                       {1000.f, c, 3.f, glm::vec3(0.f)},
-                                       {3071.f, c, 3.f, glm::vec3(0.f)}},
-                                      {400.f, 1000.f}, "bone");
+    const optics::TransferFunction tf = boneSlabsTf();
     const optics::TfTable table(tf);
     std::shared_ptr<const MultiresGrid> grids[2];
     const core::Volume* volumes[2] = {&ints, &floats};
