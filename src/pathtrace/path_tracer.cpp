@@ -107,36 +107,43 @@ struct Track {
 /// Octant skip distances (PathTracer::Impl::octant) over a grid of `n` cells (x fastest), 8 per
 /// cell, from nonEmpty(linear index): per octant one sweep against its directions,
 /// D = 1 + the smallest D of the 7 forward neighbours (their cubes of side D − 1 and the cell
-/// itself make up its cube of side D); neighbours past the grid count as empty.
+/// itself make up its cube of side D); neighbours past the grid count as empty. The sweep runs
+/// over `scratch`, the grid with a border of one cell a side holding 255 (past the grid: no
+/// bound), so a neighbour is a fixed offset away and needs no bounds test.
 template <class NonEmpty>
-void octantDistances(const glm::ivec3& n, NonEmpty&& nonEmpty, std::uint8_t* out) {
-    auto index = [&](int x, int y, int z) {
-        return std::size_t(x) +
-               std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
-    };
+void octantDistances(const glm::ivec3& n, NonEmpty&& nonEmpty, std::uint8_t* out,
+                     std::vector<std::uint8_t>& scratch) {
+    const std::ptrdiff_t px = n.x + 2, py = n.y + 2;
+    scratch.assign(std::size_t(px * py * (n.z + 2)), 255);
+    std::uint8_t* d = scratch.data();
     for (int o = 0; o < 8; ++o) {
         const glm::ivec3 sgn((o & 1) ? -1 : 1, (o & 2) ? -1 : 1, (o & 4) ? -1 : 1);
+        // The 7 forward neighbours' offsets in the padded grid.
+        const std::ptrdiff_t ox = sgn.x, oy = sgn.y * px, oz = sgn.z * px * py;
+        const std::ptrdiff_t nb[7] = {ox, oy, ox + oy, oz, ox + oz, oy + oz, ox + oy + oz};
         // Forward neighbours first: each axis swept against its direction.
-        auto coord = [&](int a, int m) { return sgn[a] > 0 ? n[a] - 1 - m : m; };
-        for (int mz = 0; mz < n.z; ++mz)
-            for (int my = 0; my < n.y; ++my)
+        for (int mz = 0; mz < n.z; ++mz) {
+            const int z = sgn.z > 0 ? n.z - 1 - mz : mz;
+            for (int my = 0; my < n.y; ++my) {
+                const int y = sgn.y > 0 ? n.y - 1 - my : my;
+                const std::size_t row =
+                    std::size_t(n.x) * (std::size_t(y) + std::size_t(n.y) * std::size_t(z));
+                std::uint8_t* drow = d + 1 + px * ((y + 1) + py * (z + 1));
                 for (int mx = 0; mx < n.x; ++mx) {
-                    const int x = coord(0, mx), y = coord(1, my), z = coord(2, mz);
-                    const std::size_t i = index(x, y, z);
-                    if (nonEmpty(i)) {
-                        out[i * 8 + std::size_t(o)] = 0;
-                        continue;
+                    const int x = sgn.x > 0 ? n.x - 1 - mx : mx;
+                    const std::size_t i = row + std::size_t(x);
+                    std::uint8_t* c = drow + x;
+                    std::uint8_t v = 0;
+                    if (!nonEmpty(i)) {
+                        std::uint8_t m = c[nb[0]];
+                        for (int e = 1; e < 7; ++e) m = std::min(m, c[nb[e]]);
+                        v = std::uint8_t(std::min(255, int(m) + 1));
                     }
-                    int m = 255;
-                    for (int e = 1; e < 8; ++e) {
-                        const int u = x + ((e & 1) ? sgn.x : 0), v = y + ((e & 2) ? sgn.y : 0),
-                                  w = z + ((e & 4) ? sgn.z : 0);
-                        if (u < 0 || v < 0 || w < 0 || u >= n.x || v >= n.y || w >= n.z)
-                            continue;  // past the grid: empty
-                        m = std::min(m, int(out[index(u, v, w) * 8 + std::size_t(o)]));
-                    }
-                    out[i * 8 + std::size_t(o)] = std::uint8_t(std::min(255, m + 1));
+                    *c = v;
+                    out[i * 8 + std::size_t(o)] = v;
                 }
+            }
+        }
     }
 }
 
@@ -277,8 +284,10 @@ struct PathTracer::Impl {
     /// Fills `octant` from the skip cells' majorants.
     void buildOctants() {
         octant.assign(cells->size() * 8, 0);
+        std::vector<std::uint8_t> scratch;
         octantDistances(
-            counts, [&](std::size_t i) { return cells->majorant(i) > 0.f; }, octant.data());
+            counts, [&](std::size_t i) { return cells->majorant(i) > 0.f; }, octant.data(),
+            scratch);
     }
 
     /// Fills the fine majorants of every non-empty skip cell.
@@ -305,7 +314,9 @@ struct PathTracer::Impl {
         struct Chunks {
             std::vector<std::unique_ptr<float[]>> chunks;
             std::size_t used = 0;
-            std::vector<float> scratch;
+            std::vector<float> scratch, lo, hi;
+            std::vector<std::uint8_t> own;      ///< the block's voxels when there is no corner copy
+            std::vector<std::uint8_t> octants;  ///< octantDistances' scratch
         };
         tbb::enumerable_thread_specific<Chunks> perThread;
         blockSampling = dims.x >= 2 && dims.y >= 2 && dims.z >= 2;
@@ -323,48 +334,85 @@ struct PathTracer::Impl {
                 Chunks& own = perThread.local();
                 own.scratch.resize(block);
                 float* out = own.scratch.data();
+                // The block's voxels, cellSize + 1 a side from its first voxel, clamped at the
+                // volume's far faces (where VolumeView::sample clamps too): the corner copy, or
+                // this thread's buffer when there is none.
+                T* c;
                 if (blockSampling) {
-                    const glm::ivec3 o = first * fs;
-                    T* c = corner.data() + b * cube;
-                    for (std::size_t z = 0; z < side; ++z)
-                        for (std::size_t y = 0; y < side; ++y)
-                            for (std::size_t x = 0; x < side; ++x) {
-                                const glm::ivec3 at =
-                                    glm::min(o + glm::ivec3(int(x), int(y), int(z)), dims - 1);
-                                c[x + side * (y + side * z)] =
-                                    v.data[std::size_t(at.x) + v.sy * std::size_t(at.y) +
-                                           v.sz * std::size_t(at.z)];
+                    c = corner.data() + b * cube;
+                } else {
+                    own.own.resize(cube * sizeof(T));
+                    c = reinterpret_cast<T*>(own.own.data());
+                }
+                const glm::ivec3 o = first * fs;
+                for (std::size_t z = 0; z < side; ++z)
+                    for (std::size_t y = 0; y < side; ++y) {
+                        const glm::ivec3 row =
+                            glm::min(o + glm::ivec3(0, int(y), int(z)), dims - 1);
+                        const T* src =
+                            v.data + v.sy * std::size_t(row.y) + v.sz * std::size_t(row.z);
+                        T* dst = c + side * (y + side * z);
+                        for (std::size_t x = 0; x < side; ++x)
+                            dst[x] = src[std::min(o.x + int(x), dims.x - 1)];
+                    }
+                // Each fine cell's value range over its (fs + 1)³ voxels, axis by axis: a
+                // window of fs + 1 values every fs along x, then y, then z. The values are the
+                // view's (slope · stored + intercept: what its trilinear sample returns at a
+                // voxel); a non-finite one makes its cells' range infinite.
+                own.lo.resize(cube);
+                own.hi.resize(cube);
+                float* lo = own.lo.data();
+                float* hi = own.hi.data();
+                for (std::size_t e = 0; e < cube; ++e) {
+                    const float val = v.slope * float(c[e]) + v.intercept;
+                    const bool ok = std::isfinite(val);
+                    lo[e] = ok ? val : -INFINITY;
+                    hi[e] = ok ? val : INFINITY;
+                }
+                // Axis a reduces n[a] = side values to fc windows in place (the window's first
+                // value's slot); strides as laid out: x fastest with stride 1, y side, z side².
+                const std::size_t stride[3] = {1, side, side * side};
+                std::size_t n[3] = {side, side, side};
+                for (int a = 0; a < 3; ++a) {
+                    const int b1 = (a + 1) % 3, b2 = (a + 2) % 3;
+                    for (std::size_t u = 0; u < n[b1]; ++u)
+                        for (std::size_t w = 0; w < n[b2]; ++w) {
+                            const std::size_t base = u * stride[b1] + w * stride[b2];
+                            for (int f = 0; f < fc; ++f) {
+                                const std::size_t at = base + std::size_t(f * fs) * stride[a];
+                                float l = lo[at], h = hi[at];
+                                for (int t = 1; t <= fs; ++t) {
+                                    l = std::min(l, lo[at + std::size_t(t) * stride[a]]);
+                                    h = std::max(h, hi[at + std::size_t(t) * stride[a]]);
+                                }
+                                // Slot f·stride[a] keeps window f (≥ its own start: the
+                                // windows are read before they are overwritten).
+                                lo[base + std::size_t(f) * stride[a]] = l;
+                                hi[base + std::size_t(f) * stride[a]] = h;
                             }
+                        }
+                    n[a] = std::size_t(fc);
                 }
                 for (std::size_t e = 0; e < block; ++e) out[e] = coarse;  // cells past the grid
                 for (int k = first.z; k <= last.z; ++k)
                     for (int j = first.y; j <= last.y; ++j)
                         for (int i = first.x; i <= last.x; ++i) {
-                            // The voxels of fine cell (i, j, k) and its far faces.
-                            const glm::ivec3 lo3 = glm::ivec3(i, j, k) * fs;
-                            const glm::ivec3 hi3 = glm::min(lo3 + fs, dims - 1);
-                            float lo = INFINITY, hi = -INFINITY;
-                            bool finite = true;
-                            for (int z = lo3.z; z <= hi3.z; ++z)
-                                for (int y = lo3.y; y <= hi3.y; ++y)
-                                    for (int x = lo3.x; x <= hi3.x; ++x) {
-                                        const float val = v.sample(float(x), float(y), float(z));
-                                        finite = finite && std::isfinite(val);
-                                        lo = std::min(lo, val);
-                                        hi = std::max(hi, val);
-                                    }
-                            // NaN voxels: the skip cell's majorant, as before.
-                            if (!finite) continue;
+                            const std::size_t at =
+                                std::size_t(i - first.x) +
+                                side * (std::size_t(j - first.y) + side * std::size_t(k - first.z));
+                            const float l = lo[at], h = hi[at];
+                            // Non-finite voxels: the skip cell's majorant, as before.
+                            if (!(std::isfinite(l) && std::isfinite(h))) continue;
                             // Widened against float rounding of positions and interpolation.
-                            const float pad = widen + kFineValuePad * (hi - lo) +
-                                              kFineValuePad * std::max(std::abs(lo), std::abs(hi));
+                            const float pad = widen + kFineValuePad * (h - l) +
+                                              kFineValuePad * std::max(std::abs(l), std::abs(h));
                             float& m =
                                 out[std::size_t(i - first.x) +
                                     std::size_t(fc) * (std::size_t(j - first.y) +
                                                        std::size_t(fc) * std::size_t(k - first.z))];
                             // Never above the skip cell's own majorant (also a bound).
                             m = std::min(coarse,
-                                         table->maxExtinction(lo - pad, hi + pad) * kFineSigmaPad);
+                                         table->maxExtinction(l - pad, h + pad) * kFineSigmaPad);
                         }
                 blockMajorant[b] = out[0];
                 if (std::all_of(out, out + block, [&](float m) { return m == out[0]; })) return;
@@ -376,9 +424,14 @@ struct PathTracer::Impl {
                 float* r = own.chunks.back().get() + own.used;
                 own.used += record;
                 std::copy_n(out, block, r);
-                octantDistances(
-                    glm::ivec3(fc), [&](std::size_t e) { return r[e] > 0.f; },
-                    reinterpret_cast<std::uint8_t*>(r + block));
+                auto* distances = reinterpret_cast<std::uint8_t*>(r + block);
+                // Without an empty fine cell every distance is 0 (bone, mostly: no sweeps).
+                if (std::all_of(out, out + block, [](float m) { return m > 0.f; }))
+                    std::fill_n(distances, 8 * block, std::uint8_t(0));
+                else
+                    octantDistances(
+                        glm::ivec3(fc), [&](std::size_t e) { return r[e] > 0.f; }, distances,
+                        own.octants);
                 fineOf[b] = r;
             });
         });
@@ -707,6 +760,10 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
         constexpr float kPad = 1e-3f;  // voxels
         impl->busyLo = glm::vec3(busy[0] * impl->cellSize) - kPad;
         impl->busyHi = glm::vec3((busy[1] + 1) * impl->cellSize) + kPad;
+        // A one-voxel axis's box reaches half a voxel before index 0 (boxLo), where samples
+        // clamp to the first voxel: the first cell's, so the box takes it in.
+        for (int ax = 0; ax < 3; ++ax)
+            if (g.dims[ax] == 1) impl->busyLo[ax] = float(impl->boxLo[ax]) - kPad;
     }
     impl_ = std::move(impl);
 }

@@ -106,6 +106,58 @@ void expectTrackingUnbiased(const PathTracer& t, const pathtrace::Ray& ray, doub
         << "delta tracking, " << what;
 }
 
+/// Dense samples (a twentieth of the smallest spacing apart) along rays in every octant and along
+/// the axes, through random points of the middle half of the box: every sample with σt > 0 must
+/// lie in a piece of majorantPieces whose majorant bounds it. Returns {covered, matter}: the
+/// samples found under their piece's majorant and all samples with σt > 0 (equal when right).
+std::pair<std::uint64_t, std::uint64_t> piecesBoundEverySample(const PathTracer& t,
+                                                               const core::Volume& v, int rays) {
+    const auto b = v.geometry().worldBounds();
+    const glm::dvec3 c = 0.5 * (b[0] + b[1]), size = b[1] - b[0];
+    const double voxel =
+        std::min({v.geometry().spacing.x, v.geometry().spacing.y, v.geometry().spacing.z});
+    core::CounterRng rng(core::hashCounters(5, 6, 7), 3);
+    std::vector<glm::dvec3> dirs = {{1, 0, 0},  {0, 1, 0},  {0, 0, 1},
+                                    {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+    for (int i = 0; i < rays; ++i) {
+        const double z = 2.0 * rng.uniformDouble() - 1.0,
+                     phi = 2.0 * std::numbers::pi * rng.uniformDouble();
+        const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
+        dirs.push_back({r * std::cos(phi), r * std::sin(phi), z});
+    }
+    std::uint64_t covered = 0, matter = 0;
+    for (std::size_t i = 0; i < dirs.size(); ++i) {
+        // Through a random point of the middle half of the box.
+        const glm::dvec3 p =
+            c +
+            size *
+                (glm::dvec3(rng.uniformDouble(), rng.uniformDouble(), rng.uniformDouble()) - 0.5) *
+                0.5;
+        const pathtrace::Ray ray{p - 400.0 * dirs[i], dirs[i]};
+        double t0 = 0.0, t1 = INFINITY;
+        if (!t.keptInterval(ray, t0, t1)) continue;
+        const auto pieces = t.majorantPieces(ray, t0, t1);
+        std::size_t k = 0;
+        const double step = 0.05 * voxel;
+        for (double u = t0 + 0.5 * step; u < t1; u += step) {
+            const float sig = t.extinctionAt(ray.origin + u * ray.direction);
+            if (!(sig > 0.f)) continue;
+            ++matter;
+            while (k < pieces.size() && pieces[k].t1 < u) ++k;
+            // Within rounding of a piece's ends (1e-4 voxel) either neighbour may hold it.
+            bool ok = false;
+            for (std::size_t q = k > 0 ? k - 1 : 0; q < std::min(pieces.size(), k + 2); ++q)
+                ok = ok || (u >= pieces[q].t0 - 1e-4 * voxel && u <= pieces[q].t1 + 1e-4 * voxel &&
+                            sig <= pieces[q].majorant);
+            EXPECT_TRUE(ok) << "ray " << i << " at " << u << " mm: σt " << sig
+                            << " outside the pieces";
+            if (!ok) return {covered, matter};
+            ++covered;
+        }
+    }
+    return {covered, matter};
+}
+
 }  // namespace
 
 TEST(PathTracer, RatioTrackingAndDeltaTrackingAreUnbiasedWithAndWithoutTheMajorantGrid) {
@@ -372,49 +424,42 @@ TEST(PathTracer, SkipDistancesNeverJumpOverMatter) {
     EXPECT_GT(checked, 100000u);
     EXPECT_EQ(bad, 0u);
 
-    const auto b = s.volume->geometry().worldBounds();
-    const glm::dvec3 c = 0.5 * (b[0] + b[1]), size = b[1] - b[0];
-    const double voxel = s.volume->geometry().spacing.x;
-    core::CounterRng rng(core::hashCounters(5, 6, 7), 3);
-    std::vector<glm::dvec3> dirs = {{1, 0, 0},  {0, 1, 0},  {0, 0, 1},
-                                    {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
-    for (int i = 0; i < 400; ++i) {
-        const double z = 2.0 * rng.uniformDouble() - 1.0,
-                     phi = 2.0 * std::numbers::pi * rng.uniformDouble();
-        const double r = std::sqrt(std::max(0.0, 1.0 - z * z));
-        dirs.push_back({r * std::cos(phi), r * std::sin(phi), z});
-    }
-    std::uint64_t covered = 0, matter = 0;
-    for (std::size_t i = 0; i < dirs.size(); ++i) {
-        // Through a random point of the middle half of the box.
-        const glm::dvec3 p =
-            c +
-            size *
-                (glm::dvec3(rng.uniformDouble(), rng.uniformDouble(), rng.uniformDouble()) - 0.5) *
-                0.5;
-        const pathtrace::Ray ray{p - 400.0 * dirs[i], dirs[i]};
-        double t0 = 0.0, t1 = INFINITY;
-        if (!t.keptInterval(ray, t0, t1)) continue;
-        const auto pieces = t.majorantPieces(ray, t0, t1);
-        std::size_t k = 0;
-        const double step = 0.05 * voxel;
-        for (double u = t0 + 0.5 * step; u < t1; u += step) {
-            const float sig = t.extinctionAt(ray.origin + u * ray.direction);
-            if (!(sig > 0.f)) continue;
-            ++matter;
-            while (k < pieces.size() && pieces[k].t1 < u) ++k;
-            // Within rounding of a piece's ends (1e-4 voxel) either neighbour may hold it.
-            bool ok = false;
-            for (std::size_t q = k > 0 ? k - 1 : 0; q < std::min(pieces.size(), k + 2); ++q)
-                ok = ok || (u >= pieces[q].t0 - 1e-4 * voxel && u <= pieces[q].t1 + 1e-4 * voxel &&
-                            sig <= pieces[q].majorant);
-            ASSERT_TRUE(ok) << "ray " << i << " at " << u << " mm: σt " << sig
-                            << " outside the pieces";
-            ++covered;
-        }
-    }
+    const auto [covered, matter] = piecesBoundEverySample(t, *s.volume, 400);
     EXPECT_GT(matter, 10000u) << "the rays must cross bone";
     EXPECT_EQ(covered, matter);
+}
+
+TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
+    // Random float values over the TF's whole range (every voxel cell a different majorant), a few
+    // NaN and infinite voxels (their cells fall back to the skip cell's majorant), on grids whose
+    // sizes are not multiples of the skip cells and one a single voxel thick on an axis (no
+    // per-block voxel copy there). Every σt sample along random rays lies under its piece's
+    // majorant, and the skip distances hold.
+    const optics::TransferFunction tf({{0.f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
+                                       {0.4f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
+                                       {0.6f, {0.8f, 0.8f, 0.8f}, 0.3f, {}},
+                                       {1.f, {0.8f, 0.8f, 0.8f}, 0.05f, {}}},
+                                      {0.f, 1.f}, "ramp");
+    for (const glm::ivec3 dims : {glm::ivec3(21, 17, 11), glm::ivec3(19, 13, 1)}) {
+        core::Geometry g;
+        g.dims = dims;
+        g.spacing = {0.9, 1.1, 1.3};
+        auto v = std::make_shared<core::Volume>(g, core::VoxelType::Float32);
+        float* d = v->dataAs<float>();
+        core::CounterRng vr(core::hashCounters(11, 12, 13), 1);
+        const std::size_t n = std::size_t(dims.x) * dims.y * dims.z;
+        for (std::size_t i = 0; i < n; ++i) d[i] = vr.uniform() * 1.1f - 0.05f;
+        d[n / 3] = NAN;
+        d[n / 2] = INFINITY;
+        d[2 * n / 3] = -INFINITY;
+        const Medium s = makeMedium(std::move(v), tf);
+        const PathTracer t = s.tracer();
+        const auto [checked, bad] = t.checkSkipDistances();
+        EXPECT_EQ(bad, 0u) << dims.x << "x" << dims.y << "x" << dims.z;
+        const auto [covered, matter] = piecesBoundEverySample(t, *s.volume, 200);
+        EXPECT_GT(matter, 1000u) << dims.x << "x" << dims.y << "x" << dims.z;
+        EXPECT_EQ(covered, matter) << dims.x << "x" << dims.y << "x" << dims.z;
+    }
 }
 
 TEST(PathTracer, AccelerationMemoryPerVoxelStaysSmallWhereTheMediumIsUniform) {
