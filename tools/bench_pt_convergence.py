@@ -25,7 +25,7 @@ table the README quotes). Run from the repository root:
 
     /usr/bin/python3 tools/bench_pt_convergence.py [--build build] [--work /tmp/pt-convergence]
         [--docs docs/pathtrace] [--size 256] [--phantom-size 128] [--curves "torso SS,..."]
-        [--quick]
+        [--quick] [--reuse-references]
 
 The README's figures: --size 512 --phantom-size 256 (≈ 15 min on the idle machine).
 
@@ -73,6 +73,15 @@ def scene(volume, camera, tf, size, multiple, grid, params):
             "image": {"width": size, "height": size}}
 
 
+def same_scene(path, sc):
+    """Whether the scene file at `path` exists and holds `sc` (as JSON values)."""
+    try:
+        with open(path) as f:
+            return json.load(f) == json.loads(json.dumps(sc))
+    except (OSError, ValueError):
+        return False
+
+
 def nrms(image, ref, ref_var, covered):
     """(NRMS with the reference's noise subtracted, raw NRMS) over covered pixels."""
     d = (image[..., :3] - ref[..., :3])[covered]
@@ -105,6 +114,9 @@ def main():
     ap.add_argument("--datasets", default=DATASETS, help="the shared datasets directory")
     ap.add_argument("--quick", action="store_true", help="torso only, short ladders")
     ap.add_argument("--curves", help="comma-separated curve names to run (default: all)")
+    ap.add_argument("--reuse-references", action="store_true",
+                    help="reuse a reference already in --work when it was rendered from the same "
+                         "scene (its .stats.scene.json), instead of rendering it again")
     args = ap.parse_args()
     exe = os.path.join(args.build, "voxlight")
     size = args.size or (128 if args.quick else 256)
@@ -141,8 +153,16 @@ def main():
             sc["render"] = {"seed": 7}
             base = os.path.join(args.work, tag + "-ref")
             t0 = time.time()
-            st = render(exe, sc, base + ".png", base + ".stats.json",
-                        ["--exr", base + ".exr", "--std-error", base + ".se.exr"])
+            reused = False
+            if args.reuse_references and same_scene(base + ".stats.scene.json", sc) and all(
+                    os.path.exists(base + x) for x in (".exr", ".se.exr", ".stats.json")):
+                with open(base + ".stats.json") as f:
+                    st = json.load(f)
+                reused = True
+                print(f"{tag} reference: reused from {base}.exr", flush=True)
+            else:
+                st = render(exe, sc, base + ".png", base + ".stats.json",
+                            ["--exr", base + ".exr", "--std-error", base + ".se.exr"])
             ref = read_exr(base + ".exr", args.work)
             se = read_exr(base + ".se.exr", args.work)
             covered = ref[..., 3] > 0.01
@@ -152,7 +172,8 @@ def main():
             pt = st.get("details", st)["pathtrace"]
             results.setdefault("references", {})[tag] = {
                 "spp": pt["spp"], "seconds": round(pt["seconds"], 1),
-                "nrms_floor": round(floor, 4), "wall_seconds": round(time.time() - t0, 1)}
+                "nrms_floor": round(floor, 4), "wall_seconds": round(time.time() - t0, 1),
+                "reused": reused}
             print(f"{tag} reference: {pt['spp']} spp, {pt['seconds']:.0f} s, own NRMS "
                   f"{100 * floor:.1f} %", flush=True)
         ref, ref_var, covered = refs[key]
