@@ -276,6 +276,10 @@ struct PathTracer::Impl {
         Track k;
         k.o = glm::vec3(indexOf(ray.origin + t0 * ray.direction));
         k.d = glm::vec3(toIndex * ray.direction);
+        // On a one-voxel axis every sample clamps to index 0 and the grids have one cell: the
+        // track runs at index 0 there, so no DDA sees a cell face at 0 inside the slab ±0.5.
+        for (int a = 0; a < 3; ++a)
+            if (dims[a] == 1) k.o[a] = 0.f, k.d[a] = 0.f;
         for (int a = 0; a < 3; ++a) k.invD[a] = k.d[a] != 0.f ? 1.f / k.d[a] : 0.f;
         k.length = float(t1 - t0);
         return k;
@@ -760,10 +764,6 @@ PathTracer::PathTracer(std::shared_ptr<const core::Volume> volume,
         constexpr float kPad = 1e-3f;  // voxels
         impl->busyLo = glm::vec3(busy[0] * impl->cellSize) - kPad;
         impl->busyHi = glm::vec3((busy[1] + 1) * impl->cellSize) + kPad;
-        // A one-voxel axis's box reaches half a voxel before index 0 (boxLo), where samples
-        // clamp to the first voxel: the first cell's, so the box takes it in.
-        for (int ax = 0; ax < 3; ++ax)
-            if (g.dims[ax] == 1) impl->busyLo[ax] = float(impl->boxLo[ax]) - kPad;
     }
     impl_ = std::move(impl);
 }

@@ -107,11 +107,14 @@ void expectTrackingUnbiased(const PathTracer& t, const pathtrace::Ray& ray, doub
 }
 
 /// Dense samples (a twentieth of the smallest spacing apart) along rays in every octant and along
-/// the axes, through random points of the middle half of the box: every sample with σt > 0 must
-/// lie in a piece of majorantPieces whose majorant bounds it. Returns {covered, matter}: the
-/// samples found under their piece's majorant and all samples with σt > 0 (equal when right).
+/// the axes, through random points of the middle half of the box — from outside the volume (as
+/// camera rays) and, with `inside`, also from the point itself (as shadow rays and bounces start):
+/// every sample with σt > 0 must lie in a piece of majorantPieces whose majorant bounds it.
+/// Returns {covered, matter}: the samples found under their piece's majorant and all samples with
+/// σt > 0 (equal when right).
 std::pair<std::uint64_t, std::uint64_t> piecesBoundEverySample(const PathTracer& t,
-                                                               const core::Volume& v, int rays) {
+                                                               const core::Volume& v, int rays,
+                                                               bool inside = false) {
     const auto b = v.geometry().worldBounds();
     const glm::dvec3 c = 0.5 * (b[0] + b[1]), size = b[1] - b[0];
     const double voxel =
@@ -133,26 +136,29 @@ std::pair<std::uint64_t, std::uint64_t> piecesBoundEverySample(const PathTracer&
             size *
                 (glm::dvec3(rng.uniformDouble(), rng.uniformDouble(), rng.uniformDouble()) - 0.5) *
                 0.5;
-        const pathtrace::Ray ray{p - 400.0 * dirs[i], dirs[i]};
-        double t0 = 0.0, t1 = INFINITY;
-        if (!t.keptInterval(ray, t0, t1)) continue;
-        const auto pieces = t.majorantPieces(ray, t0, t1);
-        std::size_t k = 0;
-        const double step = 0.05 * voxel;
-        for (double u = t0 + 0.5 * step; u < t1; u += step) {
-            const float sig = t.extinctionAt(ray.origin + u * ray.direction);
-            if (!(sig > 0.f)) continue;
-            ++matter;
-            while (k < pieces.size() && pieces[k].t1 < u) ++k;
-            // Within rounding of a piece's ends (1e-4 voxel) either neighbour may hold it.
-            bool ok = false;
-            for (std::size_t q = k > 0 ? k - 1 : 0; q < std::min(pieces.size(), k + 2); ++q)
-                ok = ok || (u >= pieces[q].t0 - 1e-4 * voxel && u <= pieces[q].t1 + 1e-4 * voxel &&
-                            sig <= pieces[q].majorant);
-            EXPECT_TRUE(ok) << "ray " << i << " at " << u << " mm: σt " << sig
-                            << " outside the pieces";
-            if (!ok) return {covered, matter};
-            ++covered;
+        for (const double back : {400.0, 0.0}) {
+            if (back == 0.0 && !inside) continue;
+            const pathtrace::Ray ray{p - back * dirs[i], dirs[i]};
+            double t0 = 0.0, t1 = INFINITY;
+            if (!t.keptInterval(ray, t0, t1)) continue;
+            const auto pieces = t.majorantPieces(ray, t0, t1);
+            std::size_t k = 0;
+            const double step = 0.05 * voxel;
+            for (double u = t0 + 0.5 * step; u < t1; u += step) {
+                const float sig = t.extinctionAt(ray.origin + u * ray.direction);
+                if (!(sig > 0.f)) continue;
+                ++matter;
+                while (k < pieces.size() && pieces[k].t1 < u) ++k;
+                // Within rounding of a piece's ends (1e-4 voxel) either neighbour may hold it.
+                bool ok = false;
+                for (std::size_t q = k > 0 ? k - 1 : 0; q < std::min(pieces.size(), k + 2); ++q)
+                    ok = ok || (u >= pieces[q].t0 - 1e-4 * voxel &&
+                                u <= pieces[q].t1 + 1e-4 * voxel && sig <= pieces[q].majorant);
+                EXPECT_TRUE(ok) << "ray " << i << " at " << u << " mm: σt " << sig
+                                << " outside the pieces";
+                if (!ok) return {covered, matter};
+                ++covered;
+            }
         }
     }
     return {covered, matter};
@@ -430,11 +436,14 @@ TEST(PathTracer, SkipDistancesNeverJumpOverMatter) {
 }
 
 TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
-    // Random float values over the TF's whole range (every voxel cell a different majorant), a few
+    // Float values over the TF's whole range (a noisy ramp: every voxel cell a different majorant), a few
     // NaN and infinite voxels (their cells fall back to the skip cell's majorant), on grids whose
     // sizes are not multiples of the skip cells and one a single voxel thick on an axis (no
     // per-block voxel copy there). Every σt sample along random rays lies under its piece's
-    // majorant, and the skip distances hold.
+    // majorant, and the skip distances hold — for rays from outside and from inside (a ray that
+    // starts in the half voxel below a one-voxel axis's index 0 and heads away from it once walked
+    // the rest of its piece under a skip cell's majorant: the DDA saw the cell's face at 0 behind
+    // it and took the ray as having left).
     const optics::TransferFunction tf({{0.f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
                                        {0.4f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
                                        {0.6f, {0.8f, 0.8f, 0.8f}, 0.3f, {}},
@@ -448,7 +457,11 @@ TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
         float* d = v->dataAs<float>();
         core::CounterRng vr(core::hashCounters(11, 12, 13), 1);
         const std::size_t n = std::size_t(dims.x) * dims.y * dims.z;
-        for (std::size_t i = 0; i < n; ++i) d[i] = vr.uniform() * 1.1f - 0.05f;
+        // A ramp along x with noise: skip cells far apart hold different majorants (a piece
+        // charged to the wrong cell shows), voxel cells within one differ too.
+        for (std::size_t i = 0; i < n; ++i)
+            d[i] = float(i % std::size_t(dims.x)) / float(dims.x - 1) * 1.1f - 0.05f +
+                   0.1f * (vr.uniform() - 0.5f);
         d[n / 3] = NAN;
         d[n / 2] = INFINITY;
         d[2 * n / 3] = -INFINITY;
@@ -456,7 +469,7 @@ TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
         const PathTracer t = s.tracer();
         const auto [checked, bad] = t.checkSkipDistances();
         EXPECT_EQ(bad, 0u) << dims.x << "x" << dims.y << "x" << dims.z;
-        const auto [covered, matter] = piecesBoundEverySample(t, *s.volume, 200);
+        const auto [covered, matter] = piecesBoundEverySample(t, *s.volume, 200, true);
         EXPECT_GT(matter, 1000u) << dims.x << "x" << dims.y << "x" << dims.z;
         EXPECT_EQ(covered, matter) << dims.x << "x" << dims.y << "x" << dims.z;
     }
