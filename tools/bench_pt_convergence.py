@@ -9,7 +9,8 @@ repository, ct-bone, anterior view) and the bonsai (ct/bonsai.vti, 256³, generi
 side); a CT that is absent is skipped with a note. One directional light; single scattering and multiple scattering
 (16 bounces, roulette after 3); the majorant grid and (single scattering, torso) one global majorant
 (`majorant_grid: false`, Exposure Render's scheme). Each curve is a ladder of renders capped at
-`seconds` (the tracer stops after the pass of 4 spp that crosses it, so the x value is the
+`seconds` (the tracer shrinks its passes to fit and stops within about one sample per pixel of
+it; the first pass of 4 spp always runs, so the x value is the
 tracer's own measured seconds, not the cap, plus its setup: the majorant grid it builds per render);
 each render gives two points: its raw estimate (the EXR) and the denoised image the PNG shows
 (--display-exr; x = setup + tracer + guide + filter seconds). Ladder renders use the defaults

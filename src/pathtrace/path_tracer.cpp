@@ -1305,8 +1305,22 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     int done = 0;
     double error = 0.0;
     bool reached = false;
+    // Under a time cap, passes after the first shrink to the samples per pixel that fit in the
+    // time left at the last pass's seconds per sample per pixel (an adaptive pass costs more
+    // than a uniform one: the rate follows the passes), and the render stops when not even half
+    // of one fits — so it ends within about one sample per pixel of the cap, not a whole pass.
+    double lastPassSeconds = 0.0;
+    int lastPassSamples = 0;
     while (done < options_.samplesPerPixel) {
-        const int s1 = std::min(options_.samplesPerPixel, done + kSamplesPerPass);
+        int pass = kSamplesPerPass;
+        if (options_.maxSeconds > 0.0 && lastPassSamples > 0) {
+            const double perSample = lastPassSeconds / lastPassSamples;
+            const double fits = (options_.maxSeconds - clock.seconds()) / perSample;
+            if (!(fits >= 0.5)) break;
+            pass = std::clamp(int(fits), 1, kSamplesPerPass);
+        }
+        const int s1 = std::min(options_.samplesPerPixel, done + pass);
+        const double passStart = clock.seconds();
         if (options_.adaptive && done >= kAdaptiveWarmupSamples) {
             if (credit.empty()) credit.assign(pixels, 0.0);
             allocate(s1 - done);
@@ -1331,8 +1345,10 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             budget += n.budget;
             surfaceEvents += n.surface;
         });
+        lastPassSamples = s1 - done;
         done = s1;
         error = relativeError();
+        lastPassSeconds = clock.seconds() - passStart;
         // Progress: the larger of the spp fraction and the error's (error ∝ 1/√n, so the target
         // needs about n·(error/target)² samples).
         double fraction = double(done) / options_.samplesPerPixel;
