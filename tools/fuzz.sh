@@ -81,6 +81,12 @@ run_one() {
   if [ -n "$dict" ]; then args+=(-dict="$dict"); fi
   # Leaks are not findings: VTK and GDCM keep process-wide singletons.
   local rc=0 start=$SECONDS
+  # The targets' scratch directories (fuzz/fuzz_common.h: mkdtemp under $TMPDIR, removed at a
+  # normal exit) go under one directory per run, removed below and by the trap when this script
+  # is stopped: a fuzzer killed by a signal or a timeout leaves its own behind.
+  local scratch
+  scratch=$(mktemp -d "${TMPDIR:-/tmp}/voxlight-fuzz-run-$$-$t-XXXXXX")
+  export TMPDIR=$scratch
   # allocator_release_to_os_interval_ms=-1: ASan returning freed pages to the OS (madvise) was
   # most of the system time and made a 0.1 s input time out on a loaded machine.
   # symbolize=0: a reader child (dicom_loader.cpp) that asks for more than -rss_limit_mb in one
@@ -146,9 +152,12 @@ run_one() {
       head -c 16384 "$f" | base64 -w 120 | sed "s/^/  $t|   /" >&2
     done
   fi
+  rm -rf "$scratch"
   [ $rc -eq 0 ] && [ "$found" -eq 0 ]
 }
 
+trap 'rm -rf "${TMPDIR:-/tmp}"/voxlight-fuzz-run-$$-* 2>/dev/null' EXIT
+trap 'exit 130' INT TERM
 jobs=${VOXLIGHT_FUZZ_JOBS:-1}
 status=0
 pids=()
