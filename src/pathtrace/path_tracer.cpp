@@ -10,6 +10,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdio>
+#include <limits>
 #include <numbers>
 #include <tuple>
 #include <type_traits>
@@ -327,6 +328,9 @@ struct PathTracer::Impl {
         cornerSide = cellSize + 1;
         const std::size_t side = std::size_t(cornerSide), cube = side * side * side;
         const float widen = table->cellWidth();
+        const float anyValue = table->maxExtinction(std::numeric_limits<float>::lowest(),
+                                                    std::numeric_limits<float>::max()) *
+                               kFineSigmaPad;
         volume->visit([&](const auto& v) {
             using T = std::remove_cvref_t<decltype(*v.data)>;
             auto& corner = std::get<std::vector<T>>(corners);
@@ -405,8 +409,16 @@ struct PathTracer::Impl {
                                 std::size_t(i - first.x) +
                                 side * (std::size_t(j - first.y) + side * std::size_t(k - first.z));
                             const float l = lo[at], h = hi[at];
-                            // Non-finite voxels: the skip cell's majorant, as before.
-                            if (!(std::isfinite(l) && std::isfinite(h))) continue;
+                            // A non-finite voxel: a sample in the cell may be anything the
+                            // table gives (NaN reads its low end, ±∞ an end or NaN), and the
+                            // skip cell's majorant ignored that voxel — the table's maximum.
+                            if (!(std::isfinite(l) && std::isfinite(h))) {
+                                out[std::size_t(i - first.x) +
+                                    std::size_t(fc) *
+                                        (std::size_t(j - first.y) +
+                                         std::size_t(fc) * std::size_t(k - first.z))] = anyValue;
+                                continue;
+                            }
                             // Widened against float rounding of positions and interpolation.
                             const float pad = widen + kFineValuePad * (h - l) +
                                               kFineValuePad * std::max(std::abs(l), std::abs(h));
@@ -1317,7 +1329,12 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             const double perSample = lastPassSeconds / lastPassSamples;
             const double fits = (options_.maxSeconds - clock.seconds()) / perSample;
             if (!(fits >= 0.5)) break;
-            pass = std::clamp(int(fits), 1, kSamplesPerPass);
+            // Clamped as a double: a long cap over a small image fits more than INT_MAX.
+            pass = int(std::clamp(fits, 1.0, double(kSamplesPerPass)));
+            // The first adaptive pass after the uniform warm-up costs more per sample (its
+            // samples go to the covered pixels) than the rate just measured: one sample per
+            // pixel, whose own rate then sizes the passes after it.
+            if (options_.adaptive && done == kAdaptiveWarmupSamples) pass = 1;
         }
         const int s1 = std::min(options_.samplesPerPixel, done + pass);
         const double passStart = clock.seconds();

@@ -437,7 +437,8 @@ TEST(PathTracer, SkipDistancesNeverJumpOverMatter) {
 
 TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
     // Float values over the TF's whole range (a noisy ramp: every voxel cell a different majorant), a few
-    // NaN and infinite voxels (their cells fall back to the skip cell's majorant), on grids whose
+    // NaN and infinite voxels (a sample in their cells may read the TF's largest σt, at its top end
+    // here, which the skip cell's majorant ignores: those cells take the table's maximum), on grids whose
     // sizes are not multiples of the skip cells and one a single voxel thick on an axis (no
     // per-block voxel copy there). Every σt sample along random rays lies under its piece's
     // majorant, and the skip distances hold — for rays from outside and from inside (a ray that
@@ -447,7 +448,8 @@ TEST(PathTracer, FineMajorantsBoundFloatVolumesWithNaNVoxelsAndThinAxes) {
     const optics::TransferFunction tf({{0.f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
                                        {0.4f, {0.8f, 0.8f, 0.8f}, 0.f, {}},
                                        {0.6f, {0.8f, 0.8f, 0.8f}, 0.3f, {}},
-                                       {1.f, {0.8f, 0.8f, 0.8f}, 0.05f, {}}},
+                                       {0.8f, {0.8f, 0.8f, 0.8f}, 0.05f, {}},
+                                       {1.f, {0.8f, 0.8f, 0.8f}, 0.5f, {}}},
                                       {0.f, 1.f}, "ramp");
     for (const glm::ivec3 dims : {glm::ivec3(21, 17, 11), glm::ivec3(19, 13, 1)}) {
         core::Geometry g;
