@@ -405,27 +405,24 @@ struct PathTracer::Impl {
                 for (int k = first.z; k <= last.z; ++k)
                     for (int j = first.y; j <= last.y; ++j)
                         for (int i = first.x; i <= last.x; ++i) {
-                            const std::size_t at =
-                                std::size_t(i - first.x) +
-                                side * (std::size_t(j - first.y) + side * std::size_t(k - first.z));
+                            // Fine cell (i, j, k): its range at its first voxel's slot of the
+                            // copy, its majorant in `out` (fc a side).
+                            const std::size_t li = std::size_t(i - first.x),
+                                              lj = std::size_t(j - first.y),
+                                              lk = std::size_t(k - first.z);
+                            const std::size_t at = li + side * (lj + side * lk);
+                            float& m = out[li + std::size_t(fc) * (lj + std::size_t(fc) * lk)];
                             const float l = lo[at], h = hi[at];
                             // A non-finite voxel: a sample in the cell may be anything the
                             // table gives (NaN reads its low end, ±∞ an end or NaN), and the
                             // skip cell's majorant ignored that voxel — the table's maximum.
                             if (!(std::isfinite(l) && std::isfinite(h))) {
-                                out[std::size_t(i - first.x) +
-                                    std::size_t(fc) *
-                                        (std::size_t(j - first.y) +
-                                         std::size_t(fc) * std::size_t(k - first.z))] = anyValue;
+                                m = anyValue;
                                 continue;
                             }
                             // Widened against float rounding of positions and interpolation.
                             const float pad = widen + kFineValuePad * (h - l) +
                                               kFineValuePad * std::max(std::abs(l), std::abs(h));
-                            float& m =
-                                out[std::size_t(i - first.x) +
-                                    std::size_t(fc) * (std::size_t(j - first.y) +
-                                                       std::size_t(fc) * std::size_t(k - first.z))];
                             // Never above the skip cell's own majorant (also a bound).
                             m = std::min(coarse,
                                          table->maxExtinction(l - pad, h + pad) * kFineSigmaPad);

@@ -120,8 +120,9 @@ struct Options {
 };
 
 struct Stats {
-    /// Passes completed × samples per pass: with adaptive sampling the mean over the pixels (the
-    /// same total), each pixel's own count between minPixelSamples and maxPixelSamples.
+    /// Samples per pixel taken over all passes (a time cap shrinks the last ones): with adaptive
+    /// sampling the mean over the pixels (the same total), each pixel's own count between
+    /// minPixelSamples and maxPixelSamples.
     int samplesPerPixel = 0;
     int minPixelSamples = 0, maxPixelSamples = 0;
     bool adaptive = false;
