@@ -320,7 +320,6 @@ struct PathTracer::Impl {
             std::vector<std::unique_ptr<float[]>> chunks;
             std::size_t used = 0;
             std::vector<float> scratch, lo, hi;
-            std::vector<std::uint8_t> own;      ///< the block's voxels when there is no corner copy
             std::vector<std::uint8_t> octants;  ///< octantDistances' scratch
         };
         tbb::enumerable_thread_specific<Chunks> perThread;
@@ -343,15 +342,15 @@ struct PathTracer::Impl {
                 own.scratch.resize(block);
                 float* out = own.scratch.data();
                 // The block's voxels, cellSize + 1 a side from its first voxel, clamped at the
-                // volume's far faces (where VolumeView::sample clamps too): the corner copy, or
-                // this thread's buffer when there is none.
-                T* c;
-                if (blockSampling) {
-                    c = corner.data() + b * cube;
-                } else {
-                    own.own.resize(cube * sizeof(T));
-                    c = reinterpret_cast<T*>(own.own.data());
-                }
+                // volume's far faces (where VolumeView::sample clamps too), into the corner copy
+                // (when the tracker reads one) and, as the view's values (slope · stored +
+                // intercept: what its trilinear sample returns at a voxel), into lo/hi — a
+                // non-finite one as an infinite range.
+                T* c = blockSampling ? corner.data() + b * cube : nullptr;
+                own.lo.resize(cube);
+                own.hi.resize(cube);
+                float* lo = own.lo.data();
+                float* hi = own.hi.data();
                 const glm::ivec3 o = first * fs;
                 for (std::size_t z = 0; z < side; ++z)
                     for (std::size_t y = 0; y < side; ++y) {
@@ -359,24 +358,18 @@ struct PathTracer::Impl {
                             glm::min(o + glm::ivec3(0, int(y), int(z)), dims - 1);
                         const T* src =
                             v.data + v.sy * std::size_t(row.y) + v.sz * std::size_t(row.z);
-                        T* dst = c + side * (y + side * z);
-                        for (std::size_t x = 0; x < side; ++x)
-                            dst[x] = src[std::min(o.x + int(x), dims.x - 1)];
+                        const std::size_t e0 = side * (y + side * z);
+                        for (std::size_t x = 0; x < side; ++x) {
+                            const T stored = src[std::min(o.x + int(x), dims.x - 1)];
+                            if (c) c[e0 + x] = stored;
+                            const float val = v.slope * float(stored) + v.intercept;
+                            const bool ok = std::isfinite(val);
+                            lo[e0 + x] = ok ? val : -INFINITY;
+                            hi[e0 + x] = ok ? val : INFINITY;
+                        }
                     }
                 // Each fine cell's value range over its (fs + 1)³ voxels, axis by axis: a
-                // window of fs + 1 values every fs along x, then y, then z. The values are the
-                // view's (slope · stored + intercept: what its trilinear sample returns at a
-                // voxel); a non-finite one makes its cells' range infinite.
-                own.lo.resize(cube);
-                own.hi.resize(cube);
-                float* lo = own.lo.data();
-                float* hi = own.hi.data();
-                for (std::size_t e = 0; e < cube; ++e) {
-                    const float val = v.slope * float(c[e]) + v.intercept;
-                    const bool ok = std::isfinite(val);
-                    lo[e] = ok ? val : -INFINITY;
-                    hi[e] = ok ? val : INFINITY;
-                }
+                // window of fs + 1 values every fs along x, then y, then z.
                 // Axis a reduces n[a] = side values to fc windows in place (the window's first
                 // value's slot); strides as laid out: x fastest with stride 1, y side, z side².
                 const std::size_t stride[3] = {1, side, side * side};
