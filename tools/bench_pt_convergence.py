@@ -117,7 +117,9 @@ def main():
     ap.add_argument("--curves", help="comma-separated curve names to run (default: all)")
     ap.add_argument("--reuse-references", action="store_true",
                     help="reuse a reference already in --work when it was rendered from the same "
-                         "scene (its .stats.scene.json), instead of rendering it again")
+                         "scene (its .stats.scene.json), instead of rendering it again; only valid "
+                         "while the tracer's converged image of that scene is unchanged (a fix to "
+                         "what it computes, not to how fast, needs new references)")
     args = ap.parse_args()
     exe = os.path.join(args.build, "voxlight")
     size = args.size or (128 if args.quick else 256)
