@@ -141,7 +141,10 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
         auto direction = [&](int k, float* F, float* far) {
             const glm::vec3 sk = step[std::size_t(k)];
             const int a = dominant[std::size_t(k)];
-            const int b = (a + 1) % 3, c = (a + 2) % 3;
+            // The plane's two axes, the one with the smaller stride innermost (x before y before
+            // z): points within a plane are independent, and a z-innermost walk strides a whole
+            // plane of the grid per point.
+            const int b = a == 0 ? 1 : 0, c = a == 2 ? 1 : 2;
             const bool forward = sk[a] > 0.f;  // the far end lies toward larger a
             const float* yk = y.data() + std::size_t(k) * C;
             auto piece = [&](const float* v) {
@@ -198,45 +201,63 @@ GlobalVisibility computeGlobalVisibility(std::shared_ptr<const LocalVisibility> 
                 return v;
             };
             float vq[16];
+            // A point whose far end's stencil leaves the grid or whose far end lies outside the
+            // box: the clamped read, eq. 11 piece by piece, or nothing past the box.
+            auto edgePoint = [&](const glm::ivec3& g, std::size_t i) {
+                float t = 1.f;
+                const glm::vec3 q = glm::min(out.position(g), hi) + sk;
+                if (inside(q)) {
+                    const glm::vec3 u = glm::vec3(g) + d;
+                    bool inGrid = true;
+                    for (int e = 0; e < 3; ++e)
+                        inGrid = inGrid && u[e] >= 0.f && u[e] <= float(res[e] - 1);
+                    if (inGrid) {
+                        t = readF(u);
+                    } else {
+                        // Inside the box but beyond its outermost grid points on some axis
+                        // (within half a grid step of a face): a clamped read would take F of
+                        // points up to a step farther from that face, where rays leaving through
+                        // it have farther to go. The rest of the chain piece by piece instead, as
+                        // eq. 11 (past the last plane along the dominant axis that is one piece,
+                        // then the box).
+                        t = float(chain(q, k, vq));
+                    }
+                }
+                if (far) far[i] = t;
+                F[i] = piece(vl.get() + i * std::size_t(C)) * t;
+            };
+            const std::size_t strideB = b == 0 ? 1 : std::size_t(res.x);
             for (int n = 0; n < res[a]; ++n) {
                 if (progress.cancelled()) return;
                 glm::ivec3 g;
                 g[a] = forward ? res[a] - 1 - n : n;
                 const bool planeFast = g[a] >= lo[a] && g[a] <= up[a];
-                for (g[c] = 0; g[c] < res[c]; ++g[c])
-                    for (g[b] = 0; g[b] < res[b]; ++g[b]) {
-                        const std::size_t i = out.index(g);
-                        float t = 1.f;
-                        if (planeFast && g[b] >= lo[b] && g[b] <= up[b] && g[c] >= lo[c] &&
-                            g[c] <= up[c]) {
-                            t = 0.f;
-                            const float* Fi = F + i;
-                            for (int q = 0; q < 8; ++q)
-                                if (w[q] != 0.f) t += w[q] * Fi[off[q]];
-                        } else {
-                            const glm::vec3 q = glm::min(out.position(g), hi) + sk;
-                            if (inside(q)) {
-                                const glm::vec3 u = glm::vec3(g) + d;
-                                bool inGrid = true;
-                                for (int e = 0; e < 3; ++e)
-                                    inGrid = inGrid && u[e] >= 0.f && u[e] <= float(res[e] - 1);
-                                if (inGrid) {
-                                    t = readF(u);
-                                } else {
-                                    // Inside the box but beyond its outermost grid points on
-                                    // some axis (within half a grid step of a face): a clamped
-                                    // read would take F of points up to a step farther from
-                                    // that face, where rays leaving through it have farther
-                                    // to go. The rest of the chain piece by piece instead, as
-                                    // eq. 11 (past the last plane along the dominant axis
-                                    // that is one piece, then the box).
-                                    t = float(chain(q, k, vq));
-                                }
-                            }
+                for (g[c] = 0; g[c] < res[c]; ++g[c]) {
+                    // The row's points whose stencil is fixed (lo..up along b) in one branch-free
+                    // run; every tap lies in a plane already computed (the far end is over a grid
+                    // step ahead along a), so a zero weight adds an exact 0: the same sums as
+                    // tap by tap.
+                    const bool rowFast =
+                        planeFast && g[c] >= lo[c] && g[c] <= up[c] && lo[b] <= up[b];
+                    const int fastLo = rowFast ? lo[b] : res[b];
+                    const int fastEnd = rowFast ? up[b] + 1 : res[b];  // first point after the run
+                    for (g[b] = 0; g[b] < fastLo; ++g[b]) edgePoint(g, out.index(g));
+                    if (rowFast) {
+                        const std::size_t i0 = out.index(g);  // g[b] = fastLo
+                        const std::size_t count = std::size_t(fastEnd - fastLo);
+                        float* const Fr = F + i0;
+                        float* const farRow = far ? far + i0 : nullptr;
+                        const float* const vr = vl.get() + i0 * std::size_t(C);
+                        for (std::size_t u = 0; u < count; ++u) {
+                            const float* Fi = Fr + u * strideB;
+                            float t = 0.f;
+                            for (int q = 0; q < 8; ++q) t += w[q] * Fi[off[q]];
+                            if (farRow) farRow[u * strideB] = t;
+                            Fr[u * strideB] = piece(vr + u * strideB * std::size_t(C)) * t;
                         }
-                        if (far) far[i] = t;
-                        F[i] = piece(vl.get() + i * std::size_t(C)) * t;
                     }
+                    for (g[b] = fastEnd; g[b] < res[b]; ++g[b]) edgePoint(g, out.index(g));
+                }
             }
         };
         // Directions in fixed groups, each in parallel with its own buffers (F_k, and the far part
