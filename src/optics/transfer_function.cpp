@@ -205,13 +205,19 @@ TfTable::TfTable(const TransferFunction& tf) {
     {
         const int rows = std::bit_width(n);
         sigmaRunMax_.assign(std::size_t(rows) * n, 0.f);
+        sigmaRunMin_.assign(std::size_t(rows) * n, 0.f);
         std::copy(sigma_.begin(), sigma_.end(), sigmaRunMax_.begin());
+        std::copy(sigma_.begin(), sigma_.end(), sigmaRunMin_.begin());
         for (int j = 1; j < rows; ++j) {
+            const std::size_t half = std::size_t(1) << (j - 1);
             const float* prev = sigmaRunMax_.data() + std::size_t(j - 1) * n;
             float* row = sigmaRunMax_.data() + std::size_t(j) * n;
-            const std::size_t half = std::size_t(1) << (j - 1);
-            for (std::size_t i = 0; i < n; ++i)
+            const float* prevMin = sigmaRunMin_.data() + std::size_t(j - 1) * n;
+            float* rowMin = sigmaRunMin_.data() + std::size_t(j) * n;
+            for (std::size_t i = 0; i < n; ++i) {
                 row[i] = i + half < n ? std::max(prev[i], prev[i + half]) : prev[i];
+                rowMin[i] = i + half < n ? std::min(prevMin[i], prevMin[i + half]) : prevMin[i];
+            }
         }
     }
     sigmaNodes_.resize(kTableCells);

@@ -177,6 +177,20 @@ class TfTable {
         return m;
     }
 
+    /// The smallest extinction(v) over v ∈ [lo, hi] (lo ≤ hi), as maxExtinction finds the
+    /// largest (the path tracer's control extinctions for residual ratio tracking).
+    float minExtinction(float lo, float hi) const {
+        const Position a = position(lo), b = position(hi);
+        float m = std::min(extinction(lo), extinction(hi));
+        if (b.cell > a.cell) {
+            const std::size_t first = a.cell + 1, count = b.cell - a.cell;
+            const int level = std::bit_width(count) - 1;
+            const float* row = sigmaRunMin_.data() + std::size_t(level) * nodes_.size();
+            m = std::min({m, row[first], row[b.cell + 1 - (std::size_t(1) << level)]});
+        }
+        return m;
+    }
+
     /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.
     struct Segment {
         float meanExtinction = 0.f;  ///< mean σt over the segment, 1/mm (τ = Δ · meanExtinction)
@@ -363,6 +377,7 @@ class TfTable {
     /// Sparse table of σt maxima: row j, entry i = max of sigma_[i … i + 2^j − 1] (rows of
     /// nodes_.size() entries; past the end, the run is cut at the last node).
     std::vector<float> sigmaRunMax_;
+    std::vector<float> sigmaRunMin_;              ///< the same for minima
     std::vector<std::array<float, 6>> weighted_;  // σt·a, σt·(1−a)·e at nodes
     std::vector<double> cumSigma_;                // cumulative integrals at nodes
     std::vector<std::array<double, 6>> cumWeighted_;

@@ -86,10 +86,10 @@ TEST(TfTable, LookupMatchesExactEvaluation) {
         EXPECT_EQ(table.extinction(v), table.lookup(v).extinction) << v;
 }
 
-TEST(TfTable, MaxExtinctionIsTheMaximumOfExtinctionOverTheRangeExactly) {
-    // The largest extinction() over [lo, hi]: at the ends or at a table node between them. A
-    // brute-force scan of every node against the sparse-table query, over random ranges of every
-    // width (one node, a few, the whole table, past both ends).
+TEST(TfTable, MaxAndMinExtinctionAreTheExtremesOfExtinctionOverTheRangeExactly) {
+    // The largest (smallest) extinction() over [lo, hi]: at the ends or at a table node between
+    // them. A brute-force scan of every node against the sparse-table queries, over random ranges
+    // of every width (one node, a few, the whole table, past both ends).
     const TransferFunction tf = optics::makePreset("ct-angio");
     const optics::TfTable table(tf);
     const float lo = tf.points().front().value, hi = tf.points().back().value;
@@ -100,11 +100,16 @@ TEST(TfTable, MaxExtinctionIsTheMaximumOfExtinctionOverTheRangeExactly) {
         const float width = i % 4 == 0 ? cell * rng.uniform() * 3.f : (hi - lo) * rng.uniform();
         const float b = std::min(a + width, hi + 60.f);
         float brute = std::max(table.extinction(a), table.extinction(b));
+        float bruteMin = std::min(table.extinction(a), table.extinction(b));
         for (int k = 0; k <= optics::TfTable::kTableCells; ++k) {
             const float v = lo + float(k) * cell;
-            if (v > a && v < b) brute = std::max(brute, table.extinction(v));
+            if (v > a && v < b) {
+                brute = std::max(brute, table.extinction(v));
+                bruteMin = std::min(bruteMin, table.extinction(v));
+            }
         }
         EXPECT_EQ(table.maxExtinction(a, b), brute) << a << " … " << b;
+        EXPECT_EQ(table.minExtinction(a, b), bruteMin) << a << " … " << b;
     }
 }
 
