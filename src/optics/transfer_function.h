@@ -38,6 +38,7 @@
 #include <glm/glm.hpp>
 #include <iosfwd>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace voxlight::optics {
@@ -189,6 +190,23 @@ class TfTable {
             m = std::min({m, row[first], row[b.cell + 1 - (std::size_t(1) << level)]});
         }
         return m;
+    }
+
+    /// {minExtinction(lo, hi), maxExtinction(lo, hi)} from one look at the table (the same
+    /// numbers).
+    std::pair<float, float> extinctionRange(float lo, float hi) const {
+        const Position a = position(lo), b = position(hi);
+        const float ea = extinction(lo), eb = extinction(hi);
+        float mn = std::min(ea, eb), mx = std::max(ea, eb);
+        if (b.cell > a.cell) {
+            const std::size_t first = a.cell + 1, count = b.cell - a.cell;
+            const int level = std::bit_width(count) - 1;
+            const std::size_t row = std::size_t(level) * nodes_.size();
+            const std::size_t second = b.cell + 1 - (std::size_t(1) << level);
+            mx = std::max({mx, sigmaRunMax_[row + first], sigmaRunMax_[row + second]});
+            mn = std::min({mn, sigmaRunMin_[row + first], sigmaRunMin_[row + second]});
+        }
+        return {mn, mx};
     }
 
     /// Segment quantities of the pre-integrated model for values varying linearly from sf to sb.

@@ -442,10 +442,9 @@ struct PathTracer::Impl {
                             const float pad = widen + kFineValuePad * (h - l) +
                                               kFineValuePad * std::max(std::abs(l), std::abs(h));
                             // Never above the skip cell's own majorant (also a bound).
-                            m = std::min(coarse,
-                                         table->maxExtinction(l - pad, h + pad) * kFineSigmaPad);
-                            control[e] = std::min(
-                                m, table->minExtinction(l - pad, h + pad) * kFineControlPad);
+                            const auto [least, most] = table->extinctionRange(l - pad, h + pad);
+                            m = std::min(coarse, most * kFineSigmaPad);
+                            control[e] = std::min(m, least * kFineControlPad);
                         }
                 blockMajorant[b] = out[0];
                 blockControl[b] = *std::min_element(control, control + block);

@@ -110,6 +110,9 @@ TEST(TfTable, MaxAndMinExtinctionAreTheExtremesOfExtinctionOverTheRangeExactly) 
         }
         EXPECT_EQ(table.maxExtinction(a, b), brute) << a << " … " << b;
         EXPECT_EQ(table.minExtinction(a, b), bruteMin) << a << " … " << b;
+        const auto [least, most] = table.extinctionRange(a, b);
+        EXPECT_EQ(least, bruteMin);
+        EXPECT_EQ(most, brute);
     }
 }
 
