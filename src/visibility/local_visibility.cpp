@@ -516,7 +516,15 @@ std::size_t layoutLayers(const MultiresGrid& grid, int C, std::vector<std::size_
 /// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
 /// of ≤ s/2 into a neighbour).
 bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
-    return visibilityNeeded(grid.pyramid().cells(), grid.selection().cellVisible, x, s);
+    // The box of cells the overload below scans, counted from the grid's summed-volume table.
+    constexpr int kCell = BlockPyramid::kCellVoxels;
+    const glm::ivec3 cells = grid.pyramid().cells();
+    const float r = 2.f * s + 1.f;
+    const glm::ivec3 lo =
+        glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
+    const glm::ivec3 hi =
+        glm::clamp(glm::ivec3(glm::floor((x + r) / float(kCell))), glm::ivec3(0), cells - 1);
+    return grid.anyVisibleCell(lo, hi);
 }
 
 bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& cellVisible,

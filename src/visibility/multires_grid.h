@@ -253,6 +253,20 @@ class MultiresGrid {
 
     const BlockPyramid& pyramid() const { return *pyramid_; }
     const LodSelection& selection() const { return selection_; }
+    /// Whether any BlockPyramid cell in the box [lo, hi] (cell coordinates, inclusive, within
+    /// the grid) is visible (LodSelection::cellVisible), from a summed-volume table: eight reads
+    /// whatever the box's size.
+    bool anyVisibleCell(const glm::ivec3& lo, const glm::ivec3& hi) const {
+        const std::size_t sx = std::size_t(cellsPlus_.x), sxy = sx * std::size_t(cellsPlus_.y);
+        auto at = [&](int x, int y, int z) {
+            return std::int64_t(
+                visibleSum_[std::size_t(x) + sx * std::size_t(y) + sxy * std::size_t(z)]);
+        };
+        const int x0 = lo.x, y0 = lo.y, z0 = lo.z, x1 = hi.x + 1, y1 = hi.y + 1, z1 = hi.z + 1;
+        const std::int64_t n = at(x1, y1, z1) - at(x0, y1, z1) - at(x1, y0, z1) - at(x1, y1, z0) +
+                               at(x0, y0, z1) + at(x0, y1, z0) + at(x1, y0, z0) - at(x0, y0, z0);
+        return n > 0;
+    }
     int level(std::size_t block) const { return selection_.level[block]; }
     const glm::ivec3& dims() const { return pyramid_->dims(); }
     const glm::ivec3& blocks() const { return pyramid_->blocks(); }
@@ -342,6 +356,10 @@ class MultiresGrid {
     /// count 0 at once there — most of a transparent TF's volume.
     std::vector<std::uint8_t> isolated_;
     std::vector<const float*> levelData_;
+    /// Summed-volume table of cellVisible: entry (x, y, z) of (cells + 1)³ counts the visible
+    /// cells with coordinates below (x, y, z) on every axis.
+    std::vector<std::uint32_t> visibleSum_;
+    glm::ivec3 cellsPlus_{1};
     glm::vec3 hi_{0.f};     ///< largest index per axis
     glm::ivec3 last_{0};    ///< largest block coordinate per axis
     glm::ivec3 stride_{0};  ///< block index strides (1, bx, bx·by)

@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "core/rng.h"
+#include "visibility/local_visibility.h"
 #include "visibility/multires_grid.h"
 #include "visibility/vis_test_util.h"
 
@@ -340,4 +341,36 @@ TEST(BlockPyramid, FlatVoxelsAreTheVolumeXFastestAndCountedOnceMade) {
                              v->at(i, j, k);
         EXPECT_EQ(wrong, 0u) << compact;
     }
+}
+
+TEST(MultiresGrid, VisibleCellBoxQueriesEqualTheScanOverTheBox) {
+    // The summed-volume table behind visibilityNeeded against the scan of every cell in the box:
+    // a sphere of visible matter in a transparent field (on a grid of 17×13×9 cells: not a power
+    // of two, not a cube), points of every sample spacing anywhere in and just outside the volume.
+    const core::Volume v = test::makeVolume({67, 50, 35}, [](int i, int j, int k) {
+        return std::hypot(i - 40.0, j - 20.0, k - 15.0) < 9.0 ? 800 : 0;
+    });
+    const optics::TransferFunction tf({{0.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
+                                       {500.f, glm::vec3(1.f), 0.f, glm::vec3(0.f)},
+                                       {700.f, glm::vec3(1.f), 0.5f, glm::vec3(0.f)}},
+                                      {350.f, 700.f});
+    const MultiresGrid grid = gridWith(v, tf, LodBudget::fromReduction(4.0, v.voxelCount()));
+    const std::vector<std::uint8_t>& visible = grid.selection().cellVisible;
+    std::size_t count = 0;
+    for (auto c : visible) count += c;
+    ASSERT_GT(count, 0u);
+    ASSERT_LT(count, visible.size() / 4);
+    core::CounterRng rng(core::hashCounters(3, 1, 4), 1);
+    int needed = 0;
+    for (int i = 0; i < 20000; ++i) {
+        const glm::vec3 x(-3.f + 73.f * rng.uniform(), -3.f + 56.f * rng.uniform(),
+                          -3.f + 41.f * rng.uniform());
+        const float s = float(levelSpacing(i % 5));
+        const bool fast = visibilityNeeded(grid, x, s);
+        EXPECT_EQ(fast, visibilityNeeded(grid.pyramid().cells(), visible, x, s))
+            << x.x << ", " << x.y << ", " << x.z << " at spacing " << s;
+        needed += fast;
+    }
+    EXPECT_GT(needed, 1000);
+    EXPECT_LT(needed, 19000);
 }
