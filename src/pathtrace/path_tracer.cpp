@@ -60,7 +60,7 @@ constexpr float kFineSigmaPad = 1.f + 1e-5f;
 constexpr float kFineControlPad = 1.f - 1e-5f;
 /// Records of non-uniform blocks per storage chunk (PathTracer::Impl::fineOf): large enough that
 /// a chunk's allocation is rare, small enough that each thread's last, partly used one wastes
-/// little (at cellSize 4: 48 KB a chunk).
+/// little (at cellSize 4: 64 KB a chunk).
 constexpr std::size_t kFineRecordsPerChunk = 64;
 
 struct HalfSpace {
@@ -221,7 +221,8 @@ struct PathTracer::Impl {
     /// there: unlike the symmetric skip distances, matter behind the ray does not shorten the
     /// jump (most empty cells next to bone have a symmetric distance of 1 or 2).
     std::vector<std::uint8_t> octant;
-    /// The same per fine cell of each non-uniform block (in its record, after the majorants), over
+    /// The same per fine cell of each non-uniform block (in its record, after the (majorant,
+    /// control) pairs), over
     /// the fine majorants, cells past the block counting as empty (a piece ends where the ray
     /// leaves its block).
     static const std::uint8_t* fineOctants(const float* record, std::size_t entries) {
@@ -418,6 +419,7 @@ struct PathTracer::Impl {
                     out[e] = coarse;
                     control[e] = 0.f;
                 }
+                float leastControl = INFINITY;
                 for (int k = first.z; k <= last.z; ++k)
                     for (int j = first.y; j <= last.y; ++j)
                         for (int i = first.x; i <= last.x; ++i) {
@@ -436,6 +438,7 @@ struct PathTracer::Impl {
                             // skip cell's majorant ignored that voxel — the table's maximum.
                             if (!(std::isfinite(l) && std::isfinite(h))) {
                                 m = anyValue;
+                                leastControl = 0.f;  // its control stays 0
                                 continue;
                             }
                             // Widened against float rounding of positions and interpolation.
@@ -444,10 +447,16 @@ struct PathTracer::Impl {
                             // Never above the skip cell's own majorant (also a bound).
                             const auto [least, most] = table->extinctionRange(l - pad, h + pad);
                             m = std::min(coarse, most * kFineSigmaPad);
-                            control[e] = std::min(m, least * kFineControlPad);
+                            // (A NaN minimum, which a validated table cannot give, would
+                            // fall back to 0 rather than to m.)
+                            const float cl = least * kFineControlPad;
+                            control[e] = cl >= 0.f ? std::min(m, cl) : 0.f;
+                            leastControl = std::min(leastControl, control[e]);
                         }
                 blockMajorant[b] = out[0];
-                blockControl[b] = *std::min_element(control, control + block);
+                // A uniform block's control: its cells' smallest (cells past the grid, which
+                // no piece reaches, do not count).
+                blockControl[b] = std::isfinite(leastControl) ? leastControl : 0.f;
                 if (std::all_of(out, out + block, [&](float m) { return m == out[0]; })) return;
                 // Not uniform: a record in this thread's chunk.
                 if (own.chunks.empty() || own.used + record > fineChunkFloats) {
@@ -659,7 +668,8 @@ struct PathTracer::Impl {
     /// Residual ratio tracking (Novák et al. 2014) over the pieces: per piece of majorant m and
     /// control c ≤ σt ≤ m, the control's transmittance e^{−c·Δ} in closed form (summed as an
     /// optical depth) and tentative collisions at the residual rate m − c, each weighing
-    /// 1 − (σt − c)/(m − c) ∈ [0, 1]: unbiased for e^{−∫σt}, with fewer lookups and less variance
+    /// 1 − (σt − c)/(m − c) ∈ [0, 1]: unbiased for e^{−∫σt} (for any c < m, given σt ≤ m; c ≤ σt
+    /// keeps the weights ≤ 1), with fewer lookups and less variance
     /// than plain ratio tracking (c = 0) wherever σt stays near its cell's minimum (uniform
     /// tissue). Stops when the estimate reaches 0 and plays Russian roulette (survivors doubled)
     /// whenever the estimate T·e^{−τc} is below kRouletteTransmittance — at collisions and at the
@@ -721,7 +731,9 @@ struct PathTracer::Impl {
                             return false;
                         }
                         const float sig = sigmaAt(v, blk, k.o + s * k.d);
-                        if (sig > m || sig < c) ++n.violations;
+                        // Only σt > m biases (its weight clamps at 0); a σt below the control
+                        // would weigh > 1 — unbiased still, only noisier (tests keep it ≥ c).
+                        if (sig > m) ++n.violations;
                         T *= std::max(0.0, 1.0 - (double(sig) - double(c)) / rd);
                         stale = true;
                         if (!(T > 0.0) || !roulette(tauC + double(c) * double(s - sa))) {
