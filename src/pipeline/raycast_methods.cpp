@@ -767,8 +767,10 @@ struct TracedImage {
 constexpr std::uint64_t kMaxCachedImagePixels = std::uint64_t(1) << 28;
 
 const Codec& tracedImageCodec() {
+    // 2: shadow rays by residual ratio tracking — the same expectation, other samples for a seed,
+    // so a disk cache from before does not hand back an image a fresh render would not give.
     static const Codec c{
-        1,
+        2,
         [](const Artifact& a, ByteWriter& w) {
             const auto& t = *a.as<TracedImage>();
             w.pod(std::int32_t(t.image.width));
