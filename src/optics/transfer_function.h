@@ -180,17 +180,7 @@ class TfTable {
 
     /// The smallest extinction(v) over v ∈ [lo, hi] (lo ≤ hi), as maxExtinction finds the
     /// largest (the path tracer's control extinctions for residual ratio tracking).
-    float minExtinction(float lo, float hi) const {
-        const Position a = position(lo), b = position(hi);
-        float m = std::min(extinction(lo), extinction(hi));
-        if (b.cell > a.cell) {
-            const std::size_t first = a.cell + 1, count = b.cell - a.cell;
-            const int level = std::bit_width(count) - 1;
-            const float* row = sigmaRunMin_.data() + std::size_t(level) * nodes_.size();
-            m = std::min({m, row[first], row[b.cell + 1 - (std::size_t(1) << level)]});
-        }
-        return m;
-    }
+    float minExtinction(float lo, float hi) const { return extinctionRange(lo, hi).first; }
 
     /// {minExtinction(lo, hi), maxExtinction(lo, hi)} from one look at the table (the same
     /// numbers).
