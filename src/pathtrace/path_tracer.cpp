@@ -242,12 +242,12 @@ struct PathTracer::Impl {
         return table->extinction(v.sample(ijk.x, ijk.y, ijk.z));
     }
 
-    /// σt at index point p, as sigma(v, p) bit for bit: the trilinear sample reads block `blk`'s
-    /// corner copy when the cell VolumeView::sample picks (after its clamps) lies in the block,
-    /// else the volume; the same arithmetic on the same floats.
+    /// The value at index point p, as v.sample(p) bit for bit: the trilinear sample reads block
+    /// `blk`'s corner copy when the cell VolumeView::sample picks (after its clamps) lies in the
+    /// block, else the volume; the same arithmetic on the same floats.
     template <class View>
-    [[gnu::always_inline]] float sigmaAt(const View& v, int blk, const glm::vec3& p) const {
-        if (blk < 0) return sigma(v, p);
+    [[gnu::always_inline]] float valueAt(const View& v, int blk, const glm::vec3& p) const {
+        if (blk < 0) return v.sample(p.x, p.y, p.z);
         const float x = std::min(std::max(p.x, 0.f), float(v.nx - 1));
         const float y = std::min(std::max(p.y, 0.f), float(v.ny - 1));
         const float z = std::min(std::max(p.z, 0.f), float(v.nz - 1));
@@ -256,7 +256,7 @@ struct PathTracer::Impl {
         const glm::ivec3 o = fineFirst[std::size_t(blk)] * fineSize;
         const unsigned li = unsigned(i - o.x), lj = unsigned(j - o.y), lk = unsigned(kk - o.z);
         const unsigned last = unsigned(cornerSide - 2);
-        if ((li > last) | (lj > last) | (lk > last)) return sigma(v, p);
+        if ((li > last) | (lj > last) | (lk > last)) return v.sample(p.x, p.y, p.z);
         const float fx = x - float(i), fy = y - float(j), fz = z - float(kk);
         const std::size_t dj = std::size_t(cornerSide), dk = dj * dj;
         using T = std::remove_cvref_t<decltype(*v.data)>;
@@ -269,7 +269,12 @@ struct PathTracer::Impl {
         const float c11 = float(q[dk + dj]) + fx * (float(q[dk + dj + 1]) - float(q[dk + dj]));
         const float c0 = c00 + fy * (c10 - c00);
         const float c1 = c01 + fy * (c11 - c01);
-        return table->extinction(v.slope * (c0 + fz * (c1 - c0)) + v.intercept);
+        return v.slope * (c0 + fz * (c1 - c0)) + v.intercept;
+    }
+    /// σt at index point p, as sigma(v, p) bit for bit (valueAt, then the table).
+    template <class View>
+    [[gnu::always_inline]] float sigmaAt(const View& v, int blk, const glm::vec3& p) const {
+        return table->extinction(valueAt(v, blk, p));
     }
 
     /// ∇s (value/mm, world) at index point ijk by central differences one voxel apart.
@@ -621,8 +626,8 @@ struct PathTracer::Impl {
 
     /// The tentative collisions along a track: one exponential optical depth ("budget") is spent
     /// across the pieces, each piece taking majorant × length, so a piece without a collision costs
-    /// no logarithm; after each collision a fresh one is drawn (memoryless). f(s, σt, majorant) at
-    /// each; returning false stops the walk.
+    /// no logarithm; after each collision a fresh one is drawn (memoryless). f(s, σt, majorant,
+    /// value) at each; returning false stops the walk.
     template <class View, class F>
     void tentativeCollisions(const View& v, const Track& k, core::CounterRng& rng, Counters& n,
                              F&& f) const {
@@ -638,30 +643,36 @@ struct PathTracer::Impl {
                         return true;
                     }
                     s = std::min(s + tau / m, sb);
-                    const float sig = sigmaAt(v, blk, k.o + s * k.d);
+                    const float value = valueAt(v, blk, k.o + s * k.d);
+                    const float sig = table->extinction(value);
                     if (sig > m) ++n.violations;
-                    if (!f(s, sig, m)) return false;
+                    if (!f(s, sig, m, value)) return false;
                     tau = exponentialStep(rng);
                 }
             });
     }
 
-    /// Delta tracking over the tentative collisions: real with probability σt / majorant.
+    /// Delta tracking over the tentative collisions: real with probability σt / majorant. With
+    /// `valueOut`, the value there (what a real collision reads the TF at: the sample the
+    /// acceptance test took, not a second one at the collision's position in double).
     template <class View>
     std::optional<double> freeFlight(const View& v, const Ray& ray, double t0, double t1,
-                                     core::CounterRng& rng, Counters& n) const {
+                                     core::CounterRng& rng, Counters& n,
+                                     float* valueOut = nullptr) const {
         std::optional<double> hit;
         int nulls = 0;
-        tentativeCollisions(v, track(ray, t0, t1), rng, n, [&](float s, float sig, float m) {
-            if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
-                if (nulls > kNullCollisionBudget) ++n.budget;
-                hit = t0 + double(s);
-                ++n.real;
-                return false;
-            }
-            ++n.null;
-            return true;
-        });
+        tentativeCollisions(v, track(ray, t0, t1), rng, n,
+                            [&](float s, float sig, float m, float value) {
+                                if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
+                                    if (nulls > kNullCollisionBudget) ++n.budget;
+                                    hit = t0 + double(s);
+                                    if (valueOut) *valueOut = value;
+                                    ++n.real;
+                                    return false;
+                                }
+                                ++n.null;
+                                return true;
+                            });
         return hit;
     }
 
@@ -1166,8 +1177,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         for (int bounce = 0;; ++bounce) {
             double t0 = 0.0, t1 = INFINITY;
             const bool kept = im.keptInterval(ray, t0, t1);
+            float value = 0.f;  // the value at the collision, from the flight's own sample
             const std::optional<double> hit =
-                kept ? im.freeFlight(view, ray, t0, t1, rng, n) : std::nullopt;
+                kept ? im.freeFlight(view, ray, t0, t1, rng, n, &value) : std::nullopt;
             if (!hit) {
                 if (bounce == 0) {
                     L += bg;  // the camera sees the background through the volume
@@ -1199,7 +1211,6 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             if (bounce == 0) covered = 1.0;
             const glm::dvec3 x3 = ray.origin + *hit * ray.direction;
             const glm::dvec3 ijk = im.indexOf(x3);
-            const float value = view.sample(float(ijk.x), float(ijk.y), float(ijk.z));
             const optics::TfSample ts = im.table->lookup(value);
             const glm::dvec3 albedo(ts.albedo);
             L += beta * (1.0 - albedo) * glm::dvec3(ts.emission);  // ARCHITECTURE §1: (1 − a)·e
