@@ -680,9 +680,9 @@ struct PathTracer::Impl {
     /// control c ≤ σt ≤ m, the control's transmittance e^{−c·Δ} in closed form (summed as an
     /// optical depth) and tentative collisions at the residual rate m − c, each weighing
     /// 1 − (σt − c)/(m − c) ∈ [0, 1]: unbiased for e^{−∫σt} (for any c < m, given σt ≤ m; c ≤ σt
-    /// keeps the weights ≤ 1), with fewer lookups and less variance
-    /// than plain ratio tracking (c = 0) wherever σt stays near its cell's minimum (uniform
-    /// tissue). Stops when the estimate reaches 0 and plays Russian roulette (survivors doubled)
+    /// keeps the weights ≤ 1), with fewer lookups and less variance than plain ratio tracking
+    /// (c = 0) wherever σt stays near its cell's minimum (uniform tissue). Stops when the
+    /// estimate reaches 0 and plays Russian roulette (survivors doubled)
     /// whenever the estimate T·e^{−τc} is below kRouletteTransmittance — at collisions and at the
     /// ends of pieces, where only τc grows.
     template <class View>
