@@ -209,6 +209,7 @@ OpacityPyramid OpacityPyramid::build(const BlockPyramid& pyramid,
     }
     o.cellVisible_ = visibleCells(pyramid, tf, table);
     o.cells_ = pyramid.cells();
+    o.visibleCounts_ = VisibleCellCounts(o.cells_, o.cellVisible_);
     progress.report("opacity pyramid", 1.0);
     return o;
 }
@@ -293,7 +294,7 @@ float OpacityPyramid::value(const glm::vec3& p) const {
 }
 
 std::size_t OpacityPyramid::bytes() const {
-    std::size_t b = cellVisible_.size() + values_.size() * sizeof(float);
+    std::size_t b = cellVisible_.size() + visibleCounts_.bytes() + values_.size() * sizeof(float);
     for (const auto& l : data_) b += l.size() * sizeof(float);
     return b;
 }
@@ -401,7 +402,7 @@ HierarchicalVisibility computeField(const OpacityPyramid& pyr,
                         const std::size_t idx = out.index(gp);
                         float* dst = out.data_.data() + idx * C;
                         const glm::vec3 origin(glm::min(gp * s, dims - 1));
-                        if (!visibilityNeeded(pyr.cells(), pyr.cellVisible(), origin, float(s))) {
+                        if (!visibilityNeeded(pyr.visibleCellCounts(), origin, float(s))) {
                             // Never read by a shaded sample: empty space's value.
                             dst[0] = kSqrt4Pi;
                             ++skipped;

@@ -135,6 +135,8 @@ class OpacityPyramid {
     /// Per BlockPyramid 4³ cell: whether the TF shows anything there (LodSelection::cellVisible).
     const std::vector<std::uint8_t>& cellVisible() const { return cellVisible_; }
     const glm::ivec3& cells() const { return cells_; }
+    /// cellVisible's summed-volume table (visibilityNeeded's box queries).
+    const VisibleCellCounts& visibleCellCounts() const { return visibleCounts_; }
 
   private:
     core::Geometry geometry_;
@@ -142,6 +144,7 @@ class OpacityPyramid {
     std::vector<std::vector<float>> data_;
     std::vector<std::uint8_t> cellVisible_;
     glm::ivec3 cells_{0};
+    VisibleCellCounts visibleCounts_;
     std::vector<float> values_;  ///< level-0 voxel values (NaN: removed)
     std::shared_ptr<const optics::TfTable> table_;
 };

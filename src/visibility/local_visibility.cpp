@@ -516,33 +516,18 @@ std::size_t layoutLayers(const MultiresGrid& grid, int C, std::vector<std::size_
 /// of a visible cell, and the interpolation reads samples within s of it, plus the blend's reach
 /// of ≤ s/2 into a neighbour).
 bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s) {
-    // The box of cells the overload below scans, counted from the grid's summed-volume table.
-    constexpr int kCell = BlockPyramid::kCellVoxels;
-    const glm::ivec3 cells = grid.pyramid().cells();
-    const float r = 2.f * s + 1.f;
-    const glm::ivec3 lo =
-        glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
-    const glm::ivec3 hi =
-        glm::clamp(glm::ivec3(glm::floor((x + r) / float(kCell))), glm::ivec3(0), cells - 1);
-    return grid.anyVisibleCell(lo, hi);
+    return visibilityNeeded(grid.visibleCellCounts(), x, s);
 }
 
-bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& cellVisible,
-                      const glm::vec3& x, float s) {
-    if (cellVisible.empty()) return true;
+bool visibilityNeeded(const VisibleCellCounts& counts, const glm::vec3& x, float s) {
     constexpr int kCell = BlockPyramid::kCellVoxels;
+    const glm::ivec3 cells = counts.cells();
     const float r = 2.f * s + 1.f;
     const glm::ivec3 lo =
         glm::clamp(glm::ivec3(glm::floor((x - r) / float(kCell))), glm::ivec3(0), cells - 1);
     const glm::ivec3 hi =
         glm::clamp(glm::ivec3(glm::floor((x + r) / float(kCell))), glm::ivec3(0), cells - 1);
-    for (int z = lo.z; z <= hi.z; ++z)
-        for (int y = lo.y; y <= hi.y; ++y)
-            for (int c = lo.x; c <= hi.x; ++c)
-                if (cellVisible[std::size_t(c) +
-                                std::size_t(cells.x) * (y + std::size_t(cells.y) * z)])
-                    return true;
-    return false;
+    return counts.any(lo, hi);
 }
 
 sh::SphereSamples visibilityDirections(int rays, int coefficients) {

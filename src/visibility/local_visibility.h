@@ -395,9 +395,9 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
 /// sample: some visible cell (LodSelection::cellVisible) within 2·s + 1 voxels (see the header
 /// comment).
 bool visibilityNeeded(const MultiresGrid& grid, const glm::vec3& x, float s);
-/// The same test on a cell-visibility mask over BlockPyramid's `cells` (empty mask: all visible).
-bool visibilityNeeded(const glm::ivec3& cells, const std::vector<std::uint8_t>& cellVisible,
-                      const glm::vec3& x, float s);
+/// The same test on the summed-volume table of a cell-visibility mask (the box of cells within
+/// 2·s + 1 voxels of x, counted in eight reads).
+bool visibilityNeeded(const VisibleCellCounts& counts, const glm::vec3& x, float s);
 
 /// Transmittance of one ray from voxel index `origin` along the *world* unit direction `dir` over
 /// `radiusVoxels`, integrated as computeLocalVisibility does (exposed for tests). `samples` counts

@@ -328,30 +328,35 @@ std::ostream& operator<<(std::ostream& os, const LodSelection& s) {
     return os << "}";
 }
 
+VisibleCellCounts::VisibleCellCounts(const glm::ivec3& cells,
+                                     const std::vector<std::uint8_t>& visible)
+    : cells_(cells) {
+    VL_CHECK(visible.empty() ||
+             visible.size() == std::size_t(cells.x) * std::size_t(cells.y) * std::size_t(cells.z));
+    const std::size_t sx = std::size_t(cells.x) + 1, sxy = sx * (std::size_t(cells.y) + 1);
+    sum_.assign(sxy * (std::size_t(cells.z) + 1), 0u);
+    for (int z = 1; z <= cells.z; ++z)
+        for (int y = 1; y <= cells.y; ++y) {
+            std::uint32_t row = 0;  // visible cells of this row up to x
+            for (int x = 1; x <= cells.x; ++x) {
+                row += visible.empty() ? 1u
+                                       : visible[std::size_t(x - 1) +
+                                                 std::size_t(cells.x) *
+                                                     (std::size_t(y - 1) +
+                                                      std::size_t(cells.y) * std::size_t(z - 1))];
+                const std::size_t i = std::size_t(x) + sx * std::size_t(y) + sxy * std::size_t(z);
+                sum_[i] = row + sum_[i - sx] + sum_[i - sxy] - sum_[i - sx - sxy];
+            }
+        }
+}
+
 MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelection selection)
     : pyramid_(std::move(pyramid)), selection_(std::move(selection)) {
     VL_CHECK(pyramid_ != nullptr);
     VL_CHECK_EQ(selection_.level.size(), pyramid_->blockCount());
     if (selection_.cellVisible.empty()) selection_.cellVisible.assign(pyramid_->cellCount(), 1);
     VL_CHECK_EQ(selection_.cellVisible.size(), pyramid_->cellCount());
-    {
-        const glm::ivec3 c = pyramid_->cells();
-        cellsPlus_ = c + 1;
-        const std::size_t sx = std::size_t(cellsPlus_.x), sxy = sx * std::size_t(cellsPlus_.y);
-        visibleSum_.assign(sxy * std::size_t(cellsPlus_.z), 0u);
-        for (int z = 1; z <= c.z; ++z)
-            for (int y = 1; y <= c.y; ++y) {
-                std::uint32_t row = 0;  // visible cells of this row up to x
-                for (int x = 1; x <= c.x; ++x) {
-                    row += selection_.cellVisible[std::size_t(x - 1) +
-                                                  std::size_t(c.x) * (std::size_t(y - 1) +
-                                                                      std::size_t(c.y) * (z - 1))];
-                    const std::size_t i = std::size_t(x) + sx * std::size_t(y) + sxy * z;
-                    visibleSum_[i] = row + visibleSum_[i - sx] + visibleSum_[i - sxy] -
-                                     visibleSum_[i - sx - sxy];
-                }
-            }
-    }
+    visibleCounts_ = VisibleCellCounts(pyramid_->cells(), selection_.cellVisible);
     const glm::ivec3 nb = blocks();
     hi_ = glm::vec3(dims() - 1);
     last_ = nb - 1;

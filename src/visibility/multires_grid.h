@@ -247,26 +247,42 @@ struct BlockWeights {
 };
 
 /// A pyramid with a selection: the grid that local visibility is computed and stored on.
-class MultiresGrid {
+/// A summed-volume table over a BlockPyramid cell-visibility mask (LodSelection::cellVisible;
+/// empty = every cell visible): whether any cell of a box is visible in eight reads, whatever the
+/// box's size — the visibility fields' "needed" test per stored point.
+class VisibleCellCounts {
   public:
-    MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelection selection);
-
-    const BlockPyramid& pyramid() const { return *pyramid_; }
-    const LodSelection& selection() const { return selection_; }
-    /// Whether any BlockPyramid cell in the box [lo, hi] (cell coordinates, inclusive, within
-    /// the grid) is visible (LodSelection::cellVisible), from a summed-volume table: eight reads
-    /// whatever the box's size.
-    bool anyVisibleCell(const glm::ivec3& lo, const glm::ivec3& hi) const {
-        const std::size_t sx = std::size_t(cellsPlus_.x), sxy = sx * std::size_t(cellsPlus_.y);
+    VisibleCellCounts() = default;
+    VisibleCellCounts(const glm::ivec3& cells, const std::vector<std::uint8_t>& visible);
+    const glm::ivec3& cells() const { return cells_; }
+    /// Whether any cell in [lo, hi] (cell coordinates, inclusive, within the grid) is visible.
+    bool any(const glm::ivec3& lo, const glm::ivec3& hi) const {
+        const std::size_t sx = std::size_t(cells_.x) + 1, sxy = sx * (std::size_t(cells_.y) + 1);
         auto at = [&](int x, int y, int z) {
-            return std::int64_t(
-                visibleSum_[std::size_t(x) + sx * std::size_t(y) + sxy * std::size_t(z)]);
+            return std::int64_t(sum_[std::size_t(x) + sx * std::size_t(y) + sxy * std::size_t(z)]);
         };
         const int x0 = lo.x, y0 = lo.y, z0 = lo.z, x1 = hi.x + 1, y1 = hi.y + 1, z1 = hi.z + 1;
         const std::int64_t n = at(x1, y1, z1) - at(x0, y1, z1) - at(x1, y0, z1) - at(x1, y1, z0) +
                                at(x0, y0, z1) + at(x0, y1, z0) + at(x1, y0, z0) - at(x0, y0, z0);
         return n > 0;
     }
+    std::size_t bytes() const { return sum_.size() * sizeof(sum_[0]); }
+
+  private:
+    glm::ivec3 cells_{0};
+    /// Entry (x, y, z) of (cells + 1)³: the visible cells with coordinates below (x, y, z) on
+    /// every axis.
+    std::vector<std::uint32_t> sum_;
+};
+
+class MultiresGrid {
+  public:
+    MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelection selection);
+
+    const BlockPyramid& pyramid() const { return *pyramid_; }
+    const LodSelection& selection() const { return selection_; }
+    /// The summed-volume table of selection().cellVisible (visibilityNeeded's box queries).
+    const VisibleCellCounts& visibleCellCounts() const { return visibleCounts_; }
     int level(std::size_t block) const { return selection_.level[block]; }
     const glm::ivec3& dims() const { return pyramid_->dims(); }
     const glm::ivec3& blocks() const { return pyramid_->blocks(); }
@@ -356,10 +372,7 @@ class MultiresGrid {
     /// count 0 at once there — most of a transparent TF's volume.
     std::vector<std::uint8_t> isolated_;
     std::vector<const float*> levelData_;
-    /// Summed-volume table of cellVisible: entry (x, y, z) of (cells + 1)³ counts the visible
-    /// cells with coordinates below (x, y, z) on every axis.
-    std::vector<std::uint32_t> visibleSum_;
-    glm::ivec3 cellsPlus_{1};
+    VisibleCellCounts visibleCounts_;
     glm::vec3 hi_{0.f};     ///< largest index per axis
     glm::ivec3 last_{0};    ///< largest block coordinate per axis
     glm::ivec3 stride_{0};  ///< block index strides (1, bx, bx·by)

@@ -344,7 +344,8 @@ TEST(BlockPyramid, FlatVoxelsAreTheVolumeXFastestAndCountedOnceMade) {
 }
 
 TEST(MultiresGrid, VisibleCellBoxQueriesEqualTheScanOverTheBox) {
-    // The summed-volume table behind visibilityNeeded against the scan of every cell in the box:
+    // The summed-volume table behind visibilityNeeded (VisibleCellCounts, which the hierarchical
+    // pyramid shares) against a scan of every cell in the box:
     // a sphere of visible matter in a transparent field (on a grid of 17×13×9 cells: not a power
     // of two, not a cube), points of every sample spacing anywhere in and just outside the volume.
     const core::Volume v = test::makeVolume({67, 50, 35}, [](int i, int j, int k) {
@@ -367,8 +368,22 @@ TEST(MultiresGrid, VisibleCellBoxQueriesEqualTheScanOverTheBox) {
                           -3.f + 41.f * rng.uniform());
         const float s = float(levelSpacing(i % 5));
         const bool fast = visibilityNeeded(grid, x, s);
-        EXPECT_EQ(fast, visibilityNeeded(grid.pyramid().cells(), visible, x, s))
-            << x.x << ", " << x.y << ", " << x.z << " at spacing " << s;
+        // The scan: every cell of the box within 2·s + 1 voxels of x.
+        const glm::ivec3 cells = grid.pyramid().cells();
+        const glm::ivec3 lo = glm::clamp(
+            glm::ivec3(glm::floor((x - (2.f * s + 1.f)) / float(BlockPyramid::kCellVoxels))),
+            glm::ivec3(0), cells - 1);
+        const glm::ivec3 hi = glm::clamp(
+            glm::ivec3(glm::floor((x + (2.f * s + 1.f)) / float(BlockPyramid::kCellVoxels))),
+            glm::ivec3(0), cells - 1);
+        bool scan = false;
+        for (int cz = lo.z; cz <= hi.z; ++cz)
+            for (int cy = lo.y; cy <= hi.y; ++cy)
+                for (int cx = lo.x; cx <= hi.x; ++cx)
+                    scan = scan || visible[std::size_t(cx) +
+                                           std::size_t(cells.x) *
+                                               (std::size_t(cy) + std::size_t(cells.y) * cz)] != 0;
+        EXPECT_EQ(fast, scan) << x.x << ", " << x.y << ", " << x.z << " at spacing " << s;
         needed += fast;
     }
     EXPECT_GT(needed, 1000);
