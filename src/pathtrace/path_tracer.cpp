@@ -31,7 +31,8 @@ constexpr double kInvFourPi = 0.25 / std::numbers::pi;
 /// and shadow rays through dense matter stop early.
 constexpr double kRouletteTransmittance = 0.1;
 /// −ln kRouletteTransmittance: the optical depth below which that is.
-constexpr double kRouletteDepth = 2.302585092994045684;
+constexpr double kRouletteDepth = std::numbers::ln10;
+static_assert(kRouletteTransmittance == 0.1, "kRouletteDepth is −ln kRouletteTransmittance");
 /// Null collisions one free flight or shadow ray may take. A cell that is partly empty under a
 /// huge σt (10⁶/mm at a sharp TF edge) would take σt × (empty length) of them; past the budget the
 /// matter ahead is opaque at the scale of a micrometre, so the flight collides where it is and the
@@ -271,11 +272,6 @@ struct PathTracer::Impl {
         const float c1 = c01 + fy * (c11 - c01);
         return v.slope * (c0 + fz * (c1 - c0)) + v.intercept;
     }
-    /// σt at index point p, as sigma(v, p) bit for bit (valueAt, then the table).
-    template <class View>
-    [[gnu::always_inline]] float sigmaAt(const View& v, int blk, const glm::vec3& p) const {
-        return table->extinction(valueAt(v, blk, p));
-    }
 
     /// ∇s (value/mm, world) at index point ijk by central differences one voxel apart.
     template <class View>
@@ -491,7 +487,7 @@ struct PathTracer::Impl {
 
     /// Calls f(sa, sb, majorant, control, block) for consecutive pieces of the track with a
     /// constant majorant (and a lower bound of σt there, the control; 0 where none is kept)
-    /// until f returns false (block: the fine block whose corner copy sigmaAt may read,
+    /// until f returns false (block: the fine block whose corner copy valueAt may read,
     /// or −1): the skip cells by a DDA (Amanatides & Woo), empty ones crossed in
     /// jumps (their skip distances), non-empty ones in voxel cells with the fine majorants. Under
     /// one global majorant: one piece.
@@ -625,30 +621,42 @@ struct PathTracer::Impl {
     }
 
     /// The tentative collisions along a track: one exponential optical depth ("budget") is spent
-    /// across the pieces, each piece taking majorant × length, so a piece without a collision costs
-    /// no logarithm; after each collision a fresh one is drawn (memoryless). f(s, σt, majorant,
-    /// value) at each; returning false stops the walk.
-    template <class View, class F>
+    /// across the pieces, each piece taking rate × length, so a piece without a collision costs
+    /// no logarithm; at each collision a fresh one is drawn (memoryless). The rate is the
+    /// piece's majorant m, or with kResidual its residual m − c over the control c (residual
+    /// ratio tracking). collide(s, sa, σt, m, c, value) at each collision (sa: the piece's
+    /// start), pieceEnd(sa, sb, c) after each piece with m > 0; either returning false stops the
+    /// walk.
+    template <bool kResidual, class View, class Collide, class PieceEnd>
     void tentativeCollisions(const View& v, const Track& k, core::CounterRng& rng, Counters& n,
-                             F&& f) const {
+                             Collide&& collide, PieceEnd&& pieceEnd) const {
         float tau = exponentialStep(rng);
         traverse(
-            k, [&](float sa, float sb, float m, float, int blk) __attribute__((always_inline)) {
+            k, [&](float sa, float sb, float m, float c, int blk) __attribute__((always_inline)) {
                 if (!(m > 0.f)) return true;
-                float s = sa;
-                while (true) {
-                    const float room = (sb - s) * m;
-                    if (tau >= room) {
-                        tau -= room;
-                        return true;
+                const float r = kResidual ? m - c : m;
+                if (r > 0.f) {
+                    float s = sa;
+                    while (true) {
+                        const float room = (sb - s) * r;
+                        if (tau >= room) {
+                            tau -= room;
+                            break;
+                        }
+                        s = std::min(s + tau / r, sb);
+                        // The next budget now (memoryless): its logarithm overlaps the lookup's
+                        // memory reads.
+                        tau = exponentialStep(rng);
+                        const float value = valueAt(v, blk, k.o + s * k.d);
+                        const float sig = table->extinction(value);
+                        // Only σt > m biases (delta tracking's acceptance and ratio tracking's
+                        // weight clamp there); a σt below the control would weigh > 1 in ratio
+                        // tracking — unbiased still, only noisier (tests keep it ≥ c).
+                        if (sig > m) ++n.violations;
+                        if (!collide(s, sa, sig, m, c, value)) return false;
                     }
-                    s = std::min(s + tau / m, sb);
-                    const float value = valueAt(v, blk, k.o + s * k.d);
-                    const float sig = table->extinction(value);
-                    if (sig > m) ++n.violations;
-                    if (!f(s, sig, m, value)) return false;
-                    tau = exponentialStep(rng);
                 }
+                return pieceEnd(sa, sb, c);
             });
     }
 
@@ -661,18 +669,20 @@ struct PathTracer::Impl {
                                      float* valueOut = nullptr) const {
         std::optional<double> hit;
         int nulls = 0;
-        tentativeCollisions(v, track(ray, t0, t1), rng, n,
-                            [&](float s, float sig, float m, float value) {
-                                if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
-                                    if (nulls > kNullCollisionBudget) ++n.budget;
-                                    hit = t0 + double(s);
-                                    if (valueOut) *valueOut = value;
-                                    ++n.real;
-                                    return false;
-                                }
-                                ++n.null;
-                                return true;
-                            });
+        tentativeCollisions<false>(
+            v, track(ray, t0, t1), rng, n,
+            [&](float s, float, float sig, float m, float, float value) {
+                if (rng.uniform() * m < sig || ++nulls > kNullCollisionBudget) {
+                    if (nulls > kNullCollisionBudget) ++n.budget;
+                    hit = t0 + double(s);
+                    if (valueOut) *valueOut = value;
+                    ++n.real;
+                    return false;
+                }
+                ++n.null;
+                return true;
+            },
+            [](float, float, float) { return true; });
         return hit;
     }
 
@@ -719,48 +729,29 @@ struct PathTracer::Impl {
             }
             return true;
         };
-        const Track k = track(ray, t0, t1);
-        float tau = exponentialStep(rng);
-        traverse(
-            k, [&](float sa, float sb, float m, float c, int blk) __attribute__((always_inline)) {
-                if (!(m > 0.f)) return true;
-                const float r = m - c;  // the residual majorant
-                if (r > 0.f) {
-                    const double rd = double(m) - double(c);
-                    float s = sa;
-                    while (true) {
-                        const float room = (sb - s) * r;
-                        if (tau >= room) {
-                            tau -= room;
-                            break;
-                        }
-                        s = std::min(s + tau / r, sb);
-                        tau = exponentialStep(rng);
-                        if (++steps > kNullCollisionBudget) {
-                            ++n.budget;
-                            killed = true;
-                            return false;
-                        }
-                        const float sig = sigmaAt(v, blk, k.o + s * k.d);
-                        // Only σt > m biases (its weight clamps at 0); a σt below the control
-                        // would weigh > 1 — unbiased still, only noisier (tests keep it ≥ c).
-                        if (sig > m) ++n.violations;
-                        T *= std::max(0.0, 1.0 - (double(sig) - double(c)) / rd);
-                        stale = true;
-                        if (!(T > 0.0) || !roulette(tauC + double(c) * double(s - sa))) {
-                            killed = true;
-                            return false;
-                        }
-                    }
+        tentativeCollisions<true>(
+            v, track(ray, t0, t1), rng, n,
+            [&](float s, float sa, float sig, float m, float c, float) {
+                if (++steps > kNullCollisionBudget) {
+                    ++n.budget;
+                    killed = true;
+                    return false;
                 }
-                if (c > 0.f) {
-                    tauC += double(c) * double(sb - sa);
-                    if (!roulette(tauC)) {
-                        killed = true;
-                        return false;
-                    }
+                T *= std::max(0.0, 1.0 - (double(sig) - double(c)) / (double(m) - double(c)));
+                stale = true;
+                // The roulette with τc up to the collision.
+                if (!(T > 0.0) || !roulette(tauC + double(c) * double(s - sa))) {
+                    killed = true;
+                    return false;
                 }
                 return true;
+            },
+            [&](float sa, float sb, float c) {
+                if (!(c > 0.f)) return true;
+                tauC += double(c) * double(sb - sa);
+                if (roulette(tauC)) return true;
+                killed = true;
+                return false;
             });
         return killed ? 0.0 : T * std::exp(-tauC);
     }
@@ -1210,7 +1201,6 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             }
             if (bounce == 0) covered = 1.0;
             const glm::dvec3 x3 = ray.origin + *hit * ray.direction;
-            const glm::dvec3 ijk = im.indexOf(x3);
             const optics::TfSample ts = im.table->lookup(value);
             const glm::dvec3 albedo(ts.albedo);
             L += beta * (1.0 - albedo) * glm::dvec3(ts.emission);  // ARCHITECTURE §1: (1 − a)·e
@@ -1225,7 +1215,7 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 const optics::TfSurface sf = im.table->surface(value);
                 if (phaseChannel) gHere = sf.phaseG;
                 if (im.scattering != Scattering::Phase) {
-                    const glm::dvec3 grad = im.gradient(view, ijk);
+                    const glm::dvec3 grad = im.gradient(view, im.indexOf(x3));
                     const double len = glm::length(grad);
                     const double pb = im.brdfProbability(ts.extinction, len);
                     if (pb > 0.0 && (pb >= 1.0 || rng.uniformDouble() < pb)) {
