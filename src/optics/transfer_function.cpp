@@ -1,6 +1,10 @@
 // SPDX-License-Identifier: MIT
 #include "optics/transfer_function.h"
 
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
+
 #include <algorithm>
 #include <bit>
 #include <cmath>
@@ -234,6 +238,132 @@ TfTable::TfTable(const TransferFunction& tf) {
         zeroBelow_ = first == 0 ? -INFINITY : float(double(lo_) + cell_ * double(first - 1));
         zeroAbove_ = last == n - 1 ? INFINITY : float(double(lo_) + cell_ * double(last + 1));
     }
+}
+
+namespace {
+#if defined(__AVX2__)
+/// Four lanes of sigmaIntegral (TfTable::sigmaIntegrals): the in-range formula at a clamped cell
+/// and the linear extensions past either end, selected per lane.
+struct SigmaIntegral4 {
+    __m256d lo, inv, width, half, cells, cumLo, fLo, cumHi, fHi;
+    const double* nodes;  // SigmaNode array as doubles: {cum, (f, fNext)} per node
+    __m256d operator()(__m128 s) const {
+        const __m256d zero = _mm256_setzero_pd();
+        const __m256d u = _mm256_mul_pd(_mm256_sub_pd(_mm256_cvtps_pd(s), lo), inv);
+        const __m256d inside =
+            _mm256_and_pd(_mm256_cmp_pd(u, zero, _CMP_GT_OQ), _mm256_cmp_pd(u, cells, _CMP_LT_OQ));
+        const __m256d uc = _mm256_and_pd(u, inside);  // 0 outside: reads cell 0, discarded
+        const __m128i cell = _mm256_cvttpd_epi32(uc);
+        const __m256d x = _mm256_mul_pd(_mm256_sub_pd(uc, _mm256_cvtepi32_pd(cell)), width);
+        const __m128i at = _mm_slli_epi32(cell, 1);  // node = 2 doubles
+        const __m256d cum = _mm256_i32gather_pd(nodes, at, 8);
+        const __m256 pair = _mm256_castpd_ps(_mm256_i32gather_pd(nodes + 1, at, 8));
+        const __m256 split =
+            _mm256_permutevar8x32_ps(pair, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));
+        const __m256d f = _mm256_cvtps_pd(_mm256_castps256_ps128(split));
+        const __m256d fNext = _mm256_cvtps_pd(_mm256_extractf128_ps(split, 1));
+        const __m256d in = _mm256_add_pd(
+            _mm256_add_pd(cum, _mm256_mul_pd(f, x)),
+            _mm256_mul_pd(_mm256_mul_pd(_mm256_sub_pd(fNext, f), _mm256_mul_pd(x, x)), half));
+        const __m256d above =
+            _mm256_add_pd(cumHi, _mm256_mul_pd(fHi, _mm256_mul_pd(_mm256_sub_pd(u, cells), width)));
+        const __m256d below = _mm256_add_pd(cumLo, _mm256_mul_pd(fLo, _mm256_mul_pd(u, width)));
+        const __m256d outside = _mm256_blendv_pd(below, above, _mm256_cmp_pd(u, zero, _CMP_GT_OQ));
+        return _mm256_blendv_pd(outside, in, inside);
+    }
+};
+#endif
+}  // namespace
+
+void TfTable::sigmaIntegrals(const float* s, std::size_t n, double* out) const {
+#if defined(__AVX2__)
+    static_assert(sizeof(SigmaNode) == 2 * sizeof(double));
+    const SigmaIntegral4 lanes{_mm256_set1_pd(double(lo_)),
+                               _mm256_set1_pd(invCellD_),
+                               _mm256_set1_pd(cell_),
+                               _mm256_set1_pd(0.5 * invCellD_),
+                               _mm256_set1_pd(double(kTableCells)),
+                               _mm256_set1_pd(fused_.front().cum[0]),
+                               _mm256_set1_pd(double(fused_.front().f[0])),
+                               _mm256_set1_pd(fused_.back().cum[0]),
+                               _mm256_set1_pd(double(fused_.back().f[0])),
+                               reinterpret_cast<const double*>(sigmaNodes_.data())};
+    std::size_t i = 0;
+    for (; i + 4 <= n; i += 4) _mm256_storeu_pd(out + i, lanes(_mm_loadu_ps(s + i)));
+    if (i < n) {  // the tail through the same lanes
+        alignas(16) float in[4] = {0.f, 0.f, 0.f, 0.f};
+        alignas(32) double res[4];
+        std::copy(s + i, s + n, in);
+        _mm256_store_pd(res, lanes(_mm_load_ps(in)));
+        std::copy(res, res + (n - i), out + i);
+    }
+#else
+    for (std::size_t i = 0; i < n; ++i) out[i] = sigmaIntegral(s[i]);
+#endif
+}
+
+void TfTable::meanExtinctions(const float* s, const double* integrals, std::size_t n,
+                              float* out) const {
+#if defined(__AVX2__)
+    // meanExtinction's two cases for four segments at a time, selected per lane (a point-sampled
+    // segment's quotient may divide by 0: discarded).
+    const __m256 lo = _mm256_set1_ps(lo_), invCell = _mm256_set1_ps(invCell_),
+                 cells = _mm256_set1_ps(float(kTableCells)), zero = _mm256_setzero_ps(),
+                 pointFraction = _mm256_set1_ps(kPointSampleFraction),
+                 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
+    const __m256i lastCell = _mm256_set1_epi32(kTableCells - 1);
+    const float* sigma = sigma_.data();
+    auto four = [&](__m128 sf4, __m128 sb4, __m256d iF, __m256d iB) {
+        // extinction(½ (sf + sb)) as position() clamps it, in 8-wide floats (upper half unused).
+        const __m256 sf = _mm256_castps128_ps256(sf4), sb = _mm256_castps128_ps256(sb4);
+        __m256 u = _mm256_mul_ps(
+            _mm256_sub_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), _mm256_add_ps(sf, sb)), lo), invCell);
+        u = _mm256_min_ps(_mm256_max_ps(u, zero), cells);
+        __m256i cell = _mm256_min_epi32(_mm256_cvttps_epi32(u), lastCell);
+        const __m128i c4 = _mm256_castsi256_si128(cell);
+        const __m128 fr = _mm_sub_ps(_mm256_castps256_ps128(u), _mm_cvtepi32_ps(c4));
+        const __m128 a = _mm_i32gather_ps(sigma, c4, 4), b = _mm_i32gather_ps(sigma + 1, c4, 4);
+        const __m128 mid = _mm_add_ps(a, _mm_mul_ps(fr, _mm_sub_ps(b, a)));
+        const __m128 point = _mm_cmp_ps(
+            _mm_mul_ps(_mm_and_ps(_mm_sub_ps(sb4, sf4), _mm256_castps256_ps128(absMask)),
+                       _mm256_castps256_ps128(invCell)),
+            _mm256_castps256_ps128(pointFraction), _CMP_NGT_UQ);  // !(|Δ|/cell > fraction)
+        const __m256d q = _mm256_div_pd(_mm256_sub_pd(iB, iF),
+                                        _mm256_sub_pd(_mm256_cvtps_pd(sb4), _mm256_cvtps_pd(sf4)));
+        const __m256d qPos = _mm256_and_pd(q, _mm256_cmp_pd(q, _mm256_setzero_pd(), _CMP_GT_OQ));
+        const __m128 quotient = _mm256_cvtpd_ps(qPos);
+        // 0 where both ends lie in one transparent tail (as segment() rejects them; the
+        // integrals there are equal anyway, but a point sample at a tail's end may round in).
+        const __m128 tail =
+            _mm_or_ps(_mm_cmp_ps(_mm_max_ps(sf4, sb4), _mm_set1_ps(zeroBelow_), _CMP_LE_OQ),
+                      _mm_cmp_ps(_mm_min_ps(sf4, sb4), _mm_set1_ps(zeroAbove_), _CMP_GE_OQ));
+        return _mm_andnot_ps(tail, _mm_blendv_ps(quotient, mid, point));
+    };
+    std::size_t e = 0;
+    for (; e + 4 <= n; e += 4)
+        _mm_storeu_ps(out + e,
+                      four(_mm_loadu_ps(s + e), _mm_loadu_ps(s + e + 1),
+                           _mm256_loadu_pd(integrals + e), _mm256_loadu_pd(integrals + e + 1)));
+    if (e < n) {
+        alignas(16) float f4[4] = {0.f, 0.f, 0.f, 0.f}, b4[4] = {0.f, 0.f, 0.f, 0.f};
+        alignas(32) double iF[4] = {0.0, 0.0, 0.0, 0.0}, iB[4] = {0.0, 0.0, 0.0, 0.0};
+        alignas(16) float res[4];
+        for (std::size_t k = 0; e + k < n; ++k) {
+            f4[k] = s[e + k];
+            b4[k] = s[e + k + 1];
+            iF[k] = integrals[e + k];
+            iB[k] = integrals[e + k + 1];
+        }
+        _mm_store_ps(
+            res, four(_mm_load_ps(f4), _mm_load_ps(b4), _mm256_load_pd(iF), _mm256_load_pd(iB)));
+        std::copy(res, res + (n - e), out + e);
+    }
+#else
+    for (std::size_t e = 0; e < n; ++e)
+        out[e] = transparentSegment(s[e], s[e + 1])
+                     ? 0.f
+                     : meanExtinction(s[e], integrals[e], s[e + 1], integrals[e + 1]);
+#endif
 }
 
 TfTable::Nodes TfTable::nodes() const {

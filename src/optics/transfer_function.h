@@ -272,6 +272,15 @@ class TfTable {
             u > 0.0 ? (u - double(kTableCells)) * cell_ : (std::isnan(u) ? 0.0 : u * cell_);
         return e.cum[0] + double(e.f[0]) * x;
     }
+    /// sigmaIntegral(s[i]) for i < n into out[i], four values at a time (AVX2 where compiled for
+    /// it): the visibility sweep's sub-step ends, a run of a line at a time. Every value goes
+    /// through the same arithmetic wherever it lies in the batch (a tail is padded to four), so
+    /// out[i] depends on s[i] alone; it agrees with sigmaIntegral to rounding. Finite s.
+    void sigmaIntegrals(const float* s, std::size_t n, double* out) const;
+    /// meanExtinction(s[e], integrals[e], s[e + 1], integrals[e + 1]) for e < n into out[e]
+    /// (integrals from sigmaIntegrals), 0 where transparentSegment(s[e], s[e + 1]); batched like
+    /// sigmaIntegrals (every segment through the same arithmetic).
+    void meanExtinctions(const float* s, const double* integrals, std::size_t n, float* out) const;
     /// Mean σt over values varying linearly from sf to sb, from the integrals at both ends
     /// (sigmaIntegral): exact for the table; below kPointSampleFraction of a cell apart, σt at the
     /// mid value.

@@ -6,6 +6,10 @@
 #include <tbb/task_arena.h>
 
 #include <Eigen/Dense>
+
+#if defined(__AVX2__)
+#include <immintrin.h>
+#endif
 #include <algorithm>
 #include <atomic>
 #include <cmath>
@@ -148,6 +152,56 @@ constexpr double kParallelRelTol = 1e-9;
 /// How many points ahead along a line the sweep prefetches a point's coefficients (a guess at
 /// one point's work against a cache miss; measured, not derived).
 constexpr std::size_t kDstPrefetch = 2;
+
+/// The line sweep's optical depths in fixed point: kDepthUnit per unit depth (2^32: 2.3e-10 per
+/// sub-step), each sub-step's depth clamped to kMaxSubStepDepth (e^−10⁴ = 0: a line's sum stays
+/// far inside int64, ≤ 10⁴ · sub-steps · 2³²).
+constexpr double kDepthUnit = 4294967296.0;
+constexpr double kMaxSubStepDepth = 1e4;
+/// subStepDepths' mark for a sub-step deeper than kRefineDepth (the caller splits it).
+constexpr std::int64_t kDenseSubStep = -1;
+
+/// out[e] for e < n: sub-step e's depth mean[e]·length in fixed point — ⌊min(τ, kMaxSubStepDepth)
+/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > kRefineDepth.
+/// Four at a time (AVX2 where compiled for it), a tail padded to four: out[e] depends on mean[e]
+/// alone, wherever it lies in the batch.
+void subStepDepths(const float* mean, std::size_t n, float length, std::int64_t* out) {
+#if defined(__AVX2__)
+    const __m256d len = _mm256_set1_pd(double(length)), refine = _mm256_set1_pd(kRefineDepth),
+                  cap = _mm256_set1_pd(kMaxSubStepDepth), unit = _mm256_set1_pd(kDepthUnit),
+                  half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(),
+                  magic = _mm256_set1_pd(4503599627370496.0);  // 2^52: y + 2^52 holds ⌊y⌋ exactly
+    const __m256i magicBits = _mm256_castpd_si256(magic), dense = _mm256_set1_epi64x(kDenseSubStep);
+    auto four = [&](__m128 m) {
+        const __m256d tau = _mm256_mul_pd(_mm256_cvtps_pd(m), len);
+        // min(NaN, cap) is cap; the τ > 0 mask then gives 0.
+        const __m256d y =
+            _mm256_floor_pd(_mm256_add_pd(_mm256_mul_pd(_mm256_min_pd(tau, cap), unit), half));
+        __m256i fixed = _mm256_sub_epi64(_mm256_castpd_si256(_mm256_add_pd(y, magic)), magicBits);
+        fixed = _mm256_and_si256(fixed, _mm256_castpd_si256(_mm256_cmp_pd(tau, zero, _CMP_GT_OQ)));
+        return _mm256_blendv_epi8(fixed, dense,
+                                  _mm256_castpd_si256(_mm256_cmp_pd(tau, refine, _CMP_GT_OQ)));
+    };
+    std::size_t e = 0;
+    for (; e + 4 <= n; e += 4)
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + e), four(_mm_loadu_ps(mean + e)));
+    if (e < n) {
+        alignas(16) float m[4] = {0.f, 0.f, 0.f, 0.f};
+        alignas(32) std::int64_t res[4];
+        std::copy(mean + e, mean + n, m);
+        _mm256_store_si256(reinterpret_cast<__m256i*>(res), four(_mm_load_ps(m)));
+        std::copy(res, res + (n - e), out + e);
+    }
+#else
+    for (std::size_t e = 0; e < n; ++e) {
+        const double tau = double(mean[e]) * double(length);
+        out[e] = tau > kRefineDepth ? kDenseSubStep
+                 : tau > 0.0
+                     ? std::int64_t(std::floor(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5))
+                     : std::int64_t(0);
+    }
+#endif
+}
 
 /// A ray direction in index space with what the march needs per axis.
 struct RayDir {
@@ -1069,9 +1123,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     // block of a group, and the TF update's subset of blocks gets the full computation's bits.
     // (The walk's carried state is start-independent too: a lattice point's value read as the
     // previous step's end and as a step's start is the same voxel sum in the same order.)
-    static constexpr double kDepthUnit = 4294967296.0;  // 2^32: 2.3e-10 per sub-step
-    // e^−10⁴ = 0: the clamp keeps a line's sum far inside int64 (≤ 10⁴ · sub-steps · 2³²).
-    static constexpr double kMaxSubStepDepth = 1e4;
+    // (kDepthUnit, kMaxSubStepDepth: subStepDepths.)
     auto fixedDepth = [](double tau) {  // NaN counts as 0, as a non-positive depth does
         return tau > 0.0 ? std::int64_t(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5)
                          : std::int64_t(0);
@@ -1139,6 +1191,9 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         std::vector<std::uint8_t> swept;        // per point of a block
         std::vector<std::int64_t> P;            // fixed-point optical depth from a run's start
         std::vector<float> S;                   // the value at each sub-step
+        std::vector<double> I;                  // ∫σt up to it (TfTable::sigmaIntegrals)
+        std::vector<float> M;                   // mean σt over each sub-step
+        std::vector<std::int64_t> T;            // its depth in fixed point (subStepDepths)
         std::vector<int> lineT, lineIdx;        // a line's points: lattice step, point index
         std::vector<float*> dstOf;              // the group's swept points' coefficients
         std::vector<glm::ivec3> at[2];          // their lattice positions in the group's box
@@ -1341,6 +1396,9 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 if (P.size() < subs) {
                                     P.resize(subs);
                                     S.resize(subs);
+                                    sc.I.resize(subs);
+                                    sc.M.resize(subs);
+                                    sc.T.resize(subs);
                                 }
                                 P[0] = 0;
                                 sc.stepQuiet.assign(std::size_t(want - tStart) + 1, 0);
@@ -1356,17 +1414,18 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         return flatValue(from + (sign * mm / d.stepMm) * d.dv);
                                     };
                                 };
-                                double iFront = 0.0;
-                                bool haveIFront = false, haveStart = false;
+                                bool haveStart = false;
                                 // The walk stops before the step that would leave the volume.
                                 const int tStop = std::min(want, tEnd);
                                 int t = tStart;
-                                // Counted and carried in locals: `samples` (a uint64_t reference)
-                                // may alias P's int64_t elements, which would make every sub-step
-                                // reload P and store the count.
+                                // Counted in a local: `samples` (a uint64_t reference) may alias
+                                // P's int64_t elements.
                                 std::uint64_t walkSamples = 0;
-                                std::int64_t depth = 0;  // P at the current sub-step
-                                float sPrev = 0.f;       // S at the current sub-step, once read
+                                // First the values (S at every sub-step of a step outside the
+                                // quiet cells; a quiet step reads nothing), then their σt
+                                // integrals and each sub-step's mean σt in one vectorised pass
+                                // each, then the fixed-point depths: a sub-step's depth is a
+                                // function of its two end values alone, whatever run computes it.
                                 // Lattice point t's voxel (its position's floor: every coordinate
                                 // is ≥ 0 inside the volume), stepped in integers for its quiet
                                 // cell (cellPart).
@@ -1379,51 +1438,56 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         // Transparent throughout: nothing to integrate or read (S
                                         // stays unread there).
                                         sc.stepQuiet[std::size_t(t - tStart)] = 1;
-                                        for (int j = 1; j <= q; ++j) P[m + std::size_t(j)] = depth;
-                                        haveStart = haveIFront = false;
+                                        haveStart = false;
                                         continue;
                                     }
-                                    if (!haveStart) {
-                                        sPrev = latticeValue(t);
-                                        S[m] = sPrev;
-                                    }
-                                    const std::ptrdiff_t base = base0 + t * d.delta;
+                                    if (!haveStart) S[m] = latticeValue(t);
                                     haveStart = true;
-                                    for (int j = 1; j <= q; ++j) {
-                                        const float sFront = sPrev;
-                                        const float sBack = read(base, sten[std::size_t(j)]);
-                                        S[m + std::size_t(j)] = sBack;
-                                        sPrev = sBack;
-                                        ++walkSamples;
-                                        bool haveIBack = false;
-                                        double iBack = 0.0;
-                                        std::int64_t tau = 0;
-                                        if (!transparent(sFront, sBack)) {
-                                            if (!haveIFront) iFront = table.sigmaIntegral(sFront);
-                                            iBack = table.sigmaIntegral(sBack);
-                                            haveIBack = true;
-                                            tau = fixedDepth(preIntegratedStep(
-                                                table, sFront, iFront, sBack, iBack, subMm, 0.0,
-                                                // Where a dense step is split (rare): its
-                                                // start's position only then.
-                                                [&](float mm) {
-                                                    return along(
-                                                        position(t) +
-                                                            (float(j - 1) / float(q)) * d.dv,
-                                                        1.f)(mm);
-                                                },
-                                                walkSamples));
-                                        }
-                                        depth += tau;
-                                        P[m + std::size_t(j)] = depth;
-                                        iFront = iBack;
-                                        haveIFront = haveIBack;
-                                    }
+                                    const std::ptrdiff_t base = base0 + t * d.delta;
+                                    for (int j = 1; j <= q; ++j)
+                                        S[m + std::size_t(j)] = read(base, sten[std::size_t(j)]);
+                                    walkSamples += std::uint64_t(q);
                                 }
-                                samples += walkSamples;
                                 // P and S valid on sub-steps [0, lastSub].
                                 const std::size_t lastSub =
                                     std::size_t(t - tStart) * std::size_t(q);
+                                // The passes also read a quiet step's unread values: stale but
+                                // finite (S grows zero-filled and holds only voxel values); the
+                                // depths below ignore what they give there.
+                                table.sigmaIntegrals(S.data(), lastSub + 1, sc.I.data());
+                                table.meanExtinctions(S.data(), sc.I.data(), lastSub, sc.M.data());
+                                subStepDepths(sc.M.data(), lastSub, subMm, sc.T.data());
+                                {
+                                    std::int64_t depth = 0;
+                                    std::size_t e = 0;  // the sub-step [e, e + 1]
+                                    for (int tt = tStart; tt < t; ++tt) {
+                                        if (stepQuiet[std::size_t(tt - tStart)]) {
+                                            for (int j = 1; j <= q; ++j)
+                                                P[e + std::size_t(j)] = depth;
+                                            e += std::size_t(q);
+                                            continue;
+                                        }
+                                        for (int j = 1; j <= q; ++j, ++e) {
+                                            // (0 in a transparent tail: meanExtinctions.)
+                                            std::int64_t tau = sc.T[e];
+                                            if (tau == kDenseSubStep)  // rare: split it as
+                                                // preIntegratedStep does, from its start
+                                                tau = fixedDepth(preIntegratedStep(
+                                                    table, S[e], sc.I[e], S[e + 1], sc.I[e + 1],
+                                                    subMm, 0.0,
+                                                    [&](float mm) {
+                                                        return along(
+                                                            position(tt) +
+                                                                (float(j - 1) / float(q)) * d.dv,
+                                                            1.f)(mm);
+                                                    },
+                                                    walkSamples));
+                                            depth += tau;
+                                            P[e + 1] = depth;
+                                        }
+                                    }
+                                }
+                                samples += walkSamples;
                                 // Optical depth from sub-step e0 over `f` sub-steps (forward: f ≤ 1,
                                 // or the exit's fraction; sign −1: backward from e0 = 0, the entry's
                                 // fraction), pre-integrated to the value there.

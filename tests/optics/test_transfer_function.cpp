@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "core/phantoms.h"
 #include "core/rng.h"
@@ -320,4 +321,69 @@ TEST(Presets, SurfaceChannelsAreSensibleAndCarryNoPhaseG) {
     EXPECT_GT(angio.surface(300.f).specular.r, angio.surface(1000.f).specular.r);
     for (const auto& info : optics::presetCatalog())
         EXPECT_FALSE(optics::makePreset(info.name, {0.f, 1.f}).hasPhaseG()) << info.name;
+}
+
+TEST(TfTable, BatchedIntegralsAndMeansAgreeWithTheScalarOnesWhereverAValueSitsInTheBatch) {
+    // sigmaIntegrals / meanExtinctions (the line sweep's vectorised passes) against sigmaIntegral
+    // and meanExtinction value by value — inside the table, in both transparent tails, past both
+    // ends, across a cell, equal ends (point-sampled) — and each output a function of its own
+    // inputs alone: the same batch shifted by 0…4 places (other lane, or the padded tail) gives
+    // the same bits. Transparent segments give 0 exactly (the sweep counts on it).
+    constexpr double kIntegralRelTol = 1e-12;  // double rounding, the formula's order only
+    constexpr float kMeanRelTol = 1e-6f;       // the float result's rounding
+    const TransferFunction tf = optics::makePreset("ct-bone");
+    const optics::TfTable table(tf);
+    ASSERT_GT(table.zeroBelow(), table.lo()) << "the case needs a lower transparent tail";
+    core::CounterRng rng(23);
+    const float lo = table.lo() - 300.f, hi = table.hi() + 300.f;
+    std::vector<float> s;
+    for (int i = 0; i < 4001; ++i) {
+        const float prev = s.empty() ? 0.f : s.back();
+        float v = lo + (hi - lo) * rng.uniform();
+        if (i % 7 == 1) v = prev;                                      // equal ends
+        if (i % 7 == 2) v = prev + 1e-3f * table.cellWidth();          // within a cell
+        if (i % 7 == 3) v = table.zeroBelow() - 20.f * rng.uniform();  // lower tail
+        if (i % 11 == 4) v = table.zeroBelow();                        // its end
+        s.push_back(v);
+    }
+    const std::size_t n = s.size();
+    std::vector<double> integrals(n);
+    std::vector<float> means(n - 1);
+    table.sigmaIntegrals(s.data(), n, integrals.data());
+    table.meanExtinctions(s.data(), integrals.data(), n - 1, means.data());
+    int transparent = 0, dense = 0;
+    for (std::size_t i = 0; i < n; ++i) {
+        const double ref = table.sigmaIntegral(s[i]);
+        ASSERT_NEAR(integrals[i], ref, kIntegralRelTol * std::max(1.0, std::abs(ref))) << s[i];
+        if (i + 1 == n) break;
+        const float mean = means[i];
+        if (table.transparentSegment(s[i], s[i + 1])) {
+            ASSERT_EQ(mean, 0.f) << s[i] << " -> " << s[i + 1];
+            ++transparent;
+            continue;
+        }
+        const float refMean =
+            table.meanExtinction(s[i], ref, s[i + 1], table.sigmaIntegral(s[i + 1]));
+        ASSERT_NEAR(mean, refMean, kMeanRelTol * std::max(1.f, refMean))
+            << s[i] << " -> " << s[i + 1];
+        dense += mean > 1.f;
+    }
+    EXPECT_GT(transparent, 500);
+    EXPECT_GT(dense, 100) << "some segments should meet bone";
+    for (std::size_t shift = 1; shift <= 4; ++shift) {
+        std::vector<double> shifted(n - shift);
+        std::vector<float> shiftedMeans(n - shift - 1);
+        table.sigmaIntegrals(s.data() + shift, n - shift, shifted.data());
+        table.meanExtinctions(s.data() + shift, shifted.data(), n - shift - 1, shiftedMeans.data());
+        for (std::size_t i = 0; i + shift < n; ++i) {
+            ASSERT_EQ(shifted[i], integrals[i + shift]) << "shift " << shift << ", value " << i;
+            if (i + shift + 1 < n) ASSERT_EQ(shiftedMeans[i], means[i + shift]) << shift;
+        }
+    }
+    // Batches of 1…7 values (all tail, no full lane of four) give the same bits too.
+    for (std::size_t len = 1; len <= 7; ++len) {
+        std::vector<double> part(len);
+        table.sigmaIntegrals(s.data() + 100, len, part.data());
+        for (std::size_t i = 0; i < len; ++i) ASSERT_EQ(part[i], integrals[100 + i]) << len;
+    }
 }
