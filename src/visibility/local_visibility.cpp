@@ -158,16 +158,17 @@ constexpr std::size_t kDstPrefetch = 2;
 /// far inside int64, ≤ 10⁴ · sub-steps · 2³²).
 constexpr double kDepthUnit = 4294967296.0;
 constexpr double kMaxSubStepDepth = 1e4;
-/// subStepDepths' mark for a sub-step deeper than kRefineDepth (the caller splits it).
+/// subStepDepths' mark for a sub-step deeper than its refine depth (the caller splits it).
 constexpr std::int64_t kDenseSubStep = -1;
 
 /// out[e] for e < n: sub-step e's depth mean[e]·length in fixed point — ⌊min(τ, kMaxSubStepDepth)
-/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > kRefineDepth.
-/// Four at a time (AVX2 where compiled for it), a tail padded to four: out[e] depends on mean[e]
-/// alone, wherever it lies in the batch.
-void subStepDepths(const float* mean, std::size_t n, float length, std::int64_t* out) {
+/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > `refine`
+/// (kRefineDepth; ∞ where no sub-step needs splitting). Four at a time (AVX2 where compiled for
+/// it), a tail padded to four: out[e] depends on mean[e] alone, wherever it lies in the batch.
+void subStepDepths(const float* mean, std::size_t n, float length, double refineDepth,
+                   std::int64_t* out) {
 #if defined(__AVX2__)
-    const __m256d len = _mm256_set1_pd(double(length)), refine = _mm256_set1_pd(kRefineDepth),
+    const __m256d len = _mm256_set1_pd(double(length)), refine = _mm256_set1_pd(refineDepth),
                   cap = _mm256_set1_pd(kMaxSubStepDepth), unit = _mm256_set1_pd(kDepthUnit),
                   half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(),
                   magic = _mm256_set1_pd(4503599627370496.0);  // 2^52: y + 2^52 holds ⌊y⌋ exactly
@@ -195,7 +196,7 @@ void subStepDepths(const float* mean, std::size_t n, float length, std::int64_t*
 #else
     for (std::size_t e = 0; e < n; ++e) {
         const double tau = double(mean[e]) * double(length);
-        out[e] = tau > kRefineDepth ? kDenseSubStep
+        out[e] = tau > refineDepth ? kDenseSubStep
                  : tau > 0.0
                      ? std::int64_t(std::floor(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5))
                      : std::int64_t(0);
@@ -964,6 +965,11 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         std::size_t backSub[2] = {0, 0};
         float backFrac[2] = {0.f, 0.f};
         int reverse = -1;  ///< index of −v
+        /// Along an axis (one non-zero component): within a sub-step, which stays inside one
+        /// voxel cell, the trilinear value is then linear in the distance, so pre-integration
+        /// over the sub-step is exact at any depth and a dense one needs no split (the split
+        /// is for the bilinear and trilinear profiles along the diagonals).
+        bool linear = false;
     };
     auto makeStencil = [&](const glm::dvec3& rel) {
         // rel: the position relative to the lattice point's voxel (floor of its coordinates).
@@ -1009,6 +1015,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
             d.backSub[half] = std::size_t(std::ceil(subs));
             d.backFrac[half] = float(std::ceil(subs) - subs);
         }
+        d.linear = (v.x != 0) + (v.y != 0) + (v.z != 0) == 1;
         d.reverse = int(std::find(steps.begin(), steps.end(), -v) - steps.begin());
         VL_CHECK(d.reverse < int(steps.size()));
         for (int half = 0; half < 2; ++half)
@@ -1456,7 +1463,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // depths below ignore what they give there.
                                 table.sigmaIntegrals(S.data(), lastSub + 1, sc.I.data());
                                 table.meanExtinctions(S.data(), sc.I.data(), lastSub, sc.M.data());
-                                subStepDepths(sc.M.data(), lastSub, subMm, sc.T.data());
+                                subStepDepths(sc.M.data(), lastSub, subMm,
+                                              d.linear ? INFINITY : kRefineDepth, sc.T.data());
                                 {
                                     std::int64_t depth = 0;
                                     std::size_t e = 0;  // the sub-step [e, e + 1]
