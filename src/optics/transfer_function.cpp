@@ -256,8 +256,12 @@ struct SigmaIntegral4 {
         const __m128i cell = _mm256_cvttpd_epi32(uc);
         const __m256d x = _mm256_mul_pd(_mm256_sub_pd(uc, _mm256_cvtepi32_pd(cell)), width);
         const __m128i at = _mm_slli_epi32(cell, 1);  // node = 2 doubles
-        const __m256d cum = _mm256_i32gather_pd(nodes, at, 8);
-        const __m256 pair = _mm256_castpd_ps(_mm256_i32gather_pd(nodes + 1, at, 8));
+        // Masked gathers with every lane on (the plain form leaves GCC 12 warning about its
+        // uninitialised source).
+        const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
+        const __m256d cum = _mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes, at, all, 8);
+        const __m256 pair =
+            _mm256_castpd_ps(_mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes + 1, at, all, 8));
         const __m256 split =
             _mm256_permutevar8x32_ps(pair, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));
         const __m256d f = _mm256_cvtps_pd(_mm256_castps256_ps128(split));
@@ -307,36 +311,34 @@ void TfTable::meanExtinctions(const float* s, const double* integrals, std::size
 #if defined(__AVX2__)
     // meanExtinction's two cases for four segments at a time, selected per lane (a point-sampled
     // segment's quotient may divide by 0: discarded).
-    const __m256 lo = _mm256_set1_ps(lo_), invCell = _mm256_set1_ps(invCell_),
-                 cells = _mm256_set1_ps(float(kTableCells)), zero = _mm256_setzero_ps(),
-                 pointFraction = _mm256_set1_ps(kPointSampleFraction),
-                 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7fffffff));
-    const __m256i lastCell = _mm256_set1_epi32(kTableCells - 1);
+    const __m128 lo = _mm_set1_ps(lo_), invCell = _mm_set1_ps(invCell_),
+                 cells = _mm_set1_ps(float(kTableCells)), zero = _mm_setzero_ps(),
+                 pointFraction = _mm_set1_ps(kPointSampleFraction),
+                 absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff)),
+                 below = _mm_set1_ps(zeroBelow_), above = _mm_set1_ps(zeroAbove_);
+    const __m128i lastCell = _mm_set1_epi32(kTableCells - 1), allLanes = _mm_set1_epi32(-1);
     const float* sigma = sigma_.data();
     auto four = [&](__m128 sf4, __m128 sb4, __m256d iF, __m256d iB) {
-        // extinction(½ (sf + sb)) as position() clamps it, in 8-wide floats (upper half unused).
-        const __m256 sf = _mm256_castps128_ps256(sf4), sb = _mm256_castps128_ps256(sb4);
-        __m256 u = _mm256_mul_ps(
-            _mm256_sub_ps(_mm256_mul_ps(_mm256_set1_ps(0.5f), _mm256_add_ps(sf, sb)), lo), invCell);
-        u = _mm256_min_ps(_mm256_max_ps(u, zero), cells);
-        __m256i cell = _mm256_min_epi32(_mm256_cvttps_epi32(u), lastCell);
-        const __m128i c4 = _mm256_castsi256_si128(cell);
-        const __m128 fr = _mm_sub_ps(_mm256_castps256_ps128(u), _mm_cvtepi32_ps(c4));
-        const __m128 a = _mm_i32gather_ps(sigma, c4, 4), b = _mm_i32gather_ps(sigma + 1, c4, 4);
+        // extinction(½ (sf + sb)) as position() clamps it.
+        __m128 u = _mm_mul_ps(_mm_sub_ps(_mm_mul_ps(_mm_set1_ps(0.5f), _mm_add_ps(sf4, sb4)), lo),
+                              invCell);
+        u = _mm_min_ps(_mm_max_ps(u, zero), cells);
+        const __m128i c4 = _mm_min_epi32(_mm_cvttps_epi32(u), lastCell);
+        const __m128 fr = _mm_sub_ps(u, _mm_cvtepi32_ps(c4));
+        const __m128 a = _mm_mask_i32gather_ps(zero, sigma, c4, _mm_castsi128_ps(allLanes), 4);
+        const __m128 b = _mm_mask_i32gather_ps(zero, sigma + 1, c4, _mm_castsi128_ps(allLanes), 4);
         const __m128 mid = _mm_add_ps(a, _mm_mul_ps(fr, _mm_sub_ps(b, a)));
-        const __m128 point = _mm_cmp_ps(
-            _mm_mul_ps(_mm_and_ps(_mm_sub_ps(sb4, sf4), _mm256_castps256_ps128(absMask)),
-                       _mm256_castps256_ps128(invCell)),
-            _mm256_castps256_ps128(pointFraction), _CMP_NGT_UQ);  // !(|Δ|/cell > fraction)
+        const __m128 point =
+            _mm_cmp_ps(_mm_mul_ps(_mm_and_ps(_mm_sub_ps(sb4, sf4), absMask), invCell),
+                       pointFraction, _CMP_NGT_UQ);  // !(|Δ|/cell > fraction)
         const __m256d q = _mm256_div_pd(_mm256_sub_pd(iB, iF),
                                         _mm256_sub_pd(_mm256_cvtps_pd(sb4), _mm256_cvtps_pd(sf4)));
         const __m256d qPos = _mm256_and_pd(q, _mm256_cmp_pd(q, _mm256_setzero_pd(), _CMP_GT_OQ));
         const __m128 quotient = _mm256_cvtpd_ps(qPos);
         // 0 where both ends lie in one transparent tail (as segment() rejects them; the
         // integrals there are equal anyway, but a point sample at a tail's end may round in).
-        const __m128 tail =
-            _mm_or_ps(_mm_cmp_ps(_mm_max_ps(sf4, sb4), _mm_set1_ps(zeroBelow_), _CMP_LE_OQ),
-                      _mm_cmp_ps(_mm_min_ps(sf4, sb4), _mm_set1_ps(zeroAbove_), _CMP_GE_OQ));
+        const __m128 tail = _mm_or_ps(_mm_cmp_ps(_mm_max_ps(sf4, sb4), below, _CMP_LE_OQ),
+                                      _mm_cmp_ps(_mm_min_ps(sf4, sb4), above, _CMP_GE_OQ));
         return _mm_andnot_ps(tail, _mm_blendv_ps(quotient, mid, point));
     };
     std::size_t e = 0;
