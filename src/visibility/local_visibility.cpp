@@ -162,7 +162,7 @@ constexpr double kMaxSubStepDepth = 1e4;
 constexpr std::int64_t kDenseSubStep = -1;
 
 /// out[e] for e < n: sub-step e's depth mean[e]·length in fixed point — ⌊min(τ, kMaxSubStepDepth)
-/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > `refine`
+/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > `refineDepth`
 /// (kRefineDepth; ∞ where no sub-step needs splitting). Four at a time (AVX2 where compiled for
 /// it), a tail padded to four: out[e] depends on mean[e] alone, wherever it lies in the batch.
 void subStepDepths(const float* mean, std::size_t n, float length, double refineDepth,
