@@ -165,7 +165,8 @@ constexpr std::int64_t kDenseSubStep = -1;
 /// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > `refineDepth`
 /// (kRefineDepth; ∞ where no sub-step needs splitting). Four at a time (AVX2 where compiled for
 /// it), a tail padded to four: out[e] depends on mean[e] alone, wherever it lies in the batch.
-void subStepDepths(const float* mean, std::size_t n, float length, double refineDepth,
+/// Returns whether any was marked dense.
+bool subStepDepths(const float* mean, std::size_t n, float length, double refineDepth,
                    std::int64_t* out) {
 #if defined(__AVX2__)
     const __m256d len = _mm256_set1_pd(double(length)), refine = _mm256_set1_pd(refineDepth),
@@ -173,6 +174,7 @@ void subStepDepths(const float* mean, std::size_t n, float length, double refine
                   half = _mm256_set1_pd(0.5), zero = _mm256_setzero_pd(),
                   magic = _mm256_set1_pd(4503599627370496.0);  // 2^52: y + 2^52 holds ⌊y⌋ exactly
     const __m256i magicBits = _mm256_castpd_si256(magic), dense = _mm256_set1_epi64x(kDenseSubStep);
+    __m256d anyDense = _mm256_setzero_pd();
     auto four = [&](__m128 m) {
         const __m256d tau = _mm256_mul_pd(_mm256_cvtps_pd(m), len);
         // min(NaN, cap) is cap; the τ > 0 mask then gives 0.
@@ -180,8 +182,9 @@ void subStepDepths(const float* mean, std::size_t n, float length, double refine
             _mm256_floor_pd(_mm256_add_pd(_mm256_mul_pd(_mm256_min_pd(tau, cap), unit), half));
         __m256i fixed = _mm256_sub_epi64(_mm256_castpd_si256(_mm256_add_pd(y, magic)), magicBits);
         fixed = _mm256_and_si256(fixed, _mm256_castpd_si256(_mm256_cmp_pd(tau, zero, _CMP_GT_OQ)));
-        return _mm256_blendv_epi8(fixed, dense,
-                                  _mm256_castpd_si256(_mm256_cmp_pd(tau, refine, _CMP_GT_OQ)));
+        const __m256d deep = _mm256_cmp_pd(tau, refine, _CMP_GT_OQ);
+        anyDense = _mm256_or_pd(anyDense, deep);
+        return _mm256_blendv_epi8(fixed, dense, _mm256_castpd_si256(deep));
     };
     std::size_t e = 0;
     for (; e + 4 <= n; e += 4)
@@ -193,14 +196,18 @@ void subStepDepths(const float* mean, std::size_t n, float length, double refine
         _mm256_store_si256(reinterpret_cast<__m256i*>(res), four(_mm_load_ps(m)));
         std::copy(res, res + (n - e), out + e);
     }
+    return _mm256_movemask_pd(anyDense) != 0;  // (a padded lane's mean 0 is never dense)
 #else
+    bool anyDense = false;
     for (std::size_t e = 0; e < n; ++e) {
         const double tau = double(mean[e]) * double(length);
+        anyDense = anyDense || tau > refineDepth;
         out[e] = tau > refineDepth ? kDenseSubStep
                  : tau > 0.0
                      ? std::int64_t(std::floor(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5))
                      : std::int64_t(0);
     }
+    return anyDense;
 #endif
 }
 
@@ -1185,6 +1192,11 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     auto boxIndex = [&](const glm::ivec3& k) {
         return std::size_t(k.x) + std::size_t(box) * (std::size_t(k.y) + std::size_t(box) * k.z);
     };
+    /// A dense sub-step of a run: its index, where its k + 1 piece ends start in denseV, k.
+    struct DenseSubStep {
+        std::size_t subStep, first;
+        int pieces;
+    };
     // Per thread: the group's lattice maps (point index per lattice position of each lattice,
     // −1 = none; reset after each group) and which walk last collected each point.
     struct Scratch {
@@ -1201,6 +1213,10 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
         std::vector<double> I;                  // ∫σt up to it (TfTable::sigmaIntegrals)
         std::vector<float> M;                   // mean σt over each sub-step
         std::vector<std::int64_t> T;            // its depth in fixed point (subStepDepths)
+        std::vector<DenseSubStep> denseAt;      // a run's dense sub-steps
+        std::vector<float> denseV;              // their pieces' end values, k + 1 each
+        std::vector<double> denseI;             // ∫σt up to those
+        std::vector<float> denseM;              // mean σt over each piece
         std::vector<int> lineT, lineIdx;        // a line's points: lattice step, point index
         std::vector<float*> dstOf;              // the group's swept points' coefficients
         std::vector<glm::ivec3> at[2];          // their lattice positions in the group's box
@@ -1463,8 +1479,53 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 // depths below ignore what they give there.
                                 table.sigmaIntegrals(S.data(), lastSub + 1, sc.I.data());
                                 table.meanExtinctions(S.data(), sc.I.data(), lastSub, sc.M.data());
-                                subStepDepths(sc.M.data(), lastSub, subMm,
-                                              d.linear ? INFINITY : kRefineDepth, sc.T.data());
+                                const bool anyDense =
+                                    subStepDepths(sc.M.data(), lastSub, subMm,
+                                                  d.linear ? INFINITY : kRefineDepth, sc.T.data());
+                                // Dense sub-steps (rare: a diagonal's value is not linear across
+                                // one) are split as preIntegratedStep splits them — k pieces of
+                                // depth ≤ kRefineDepth (at most kMaxSubSteps), summed until
+                                // opaque — their pieces' values read first, then pre-integrated in
+                                // one batch.
+                                sc.denseAt.clear();
+                                sc.denseV.clear();
+                                for (std::size_t e = 0; anyDense && e < lastSub; ++e) {
+                                    if (sc.T[e] != kDenseSubStep || stepQuiet[e / std::size_t(q)])
+                                        continue;
+                                    const double want =
+                                        std::ceil(double(sc.M[e]) * double(subMm) / kRefineDepth);
+                                    const int k = want < double(kMaxSubSteps)
+                                                      ? std::max(int(want), 1)
+                                                      : kMaxSubSteps;
+                                    const float piece = subMm / float(k);
+                                    const int j = int(e % std::size_t(q));  // pieces start there
+                                    const glm::vec3 from =
+                                        position(tStart + int(e / std::size_t(q))) +
+                                        (float(j) / float(q)) * d.dv;
+                                    sc.denseAt.push_back({e, sc.denseV.size(), k});
+                                    sc.denseV.push_back(S[e]);
+                                    for (int i = 1; i < k; ++i)
+                                        sc.denseV.push_back(
+                                            flatValue(from + (float(i) * piece / d.stepMm) * d.dv));
+                                    sc.denseV.push_back(S[e + 1]);
+                                    walkSamples += std::uint64_t(k - 1);
+                                }
+                                if (!sc.denseAt.empty()) {
+                                    const std::size_t nv = sc.denseV.size();
+                                    sc.denseI.resize(nv);
+                                    sc.denseM.resize(nv);
+                                    table.sigmaIntegrals(sc.denseV.data(), nv, sc.denseI.data());
+                                    table.meanExtinctions(sc.denseV.data(), sc.denseI.data(),
+                                                          nv - 1, sc.denseM.data());
+                                    for (const DenseSubStep& ds : sc.denseAt) {
+                                        const float piece = subMm / float(ds.pieces);
+                                        double sum = 0.0;
+                                        for (int i = 0; i < ds.pieces && sum <= kOpaqueDepth; ++i)
+                                            sum += double(sc.denseM[ds.first + std::size_t(i)]) *
+                                                   double(piece);
+                                        sc.T[ds.subStep] = fixedDepth(sum);
+                                    }
+                                }
                                 {
                                     std::int64_t depth = 0;
                                     std::size_t e = 0;  // the sub-step [e, e + 1]
@@ -1477,19 +1538,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                         }
                                         for (int j = 1; j <= q; ++j, ++e) {
                                             // (0 in a transparent tail: meanExtinctions.)
-                                            std::int64_t tau = sc.T[e];
-                                            if (tau == kDenseSubStep)  // rare: split it as
-                                                // preIntegratedStep does, from its start
-                                                tau = fixedDepth(preIntegratedStep(
-                                                    table, S[e], sc.I[e], S[e + 1], sc.I[e + 1],
-                                                    subMm, 0.0,
-                                                    [&](float mm) {
-                                                        return along(
-                                                            position(tt) +
-                                                                (float(j - 1) / float(q)) * d.dv,
-                                                            1.f)(mm);
-                                                    },
-                                                    walkSamples));
+                                            const std::int64_t tau = sc.T[e];
                                             depth += tau;
                                             P[e + 1] = depth;
                                         }
