@@ -158,11 +158,16 @@ constexpr std::size_t kDstPrefetch = 2;
 /// far inside int64, ≤ 10⁴ · sub-steps · 2³²).
 constexpr double kDepthUnit = 4294967296.0;
 constexpr double kMaxSubStepDepth = 1e4;
+/// A sub-step's optical depth in fixed point (NaN counts as 0, as a non-positive depth does).
+inline std::int64_t fixedDepth(double tau) {
+    return tau > 0.0 ? std::int64_t(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5)
+                     : std::int64_t(0);
+}
 /// subStepDepths' mark for a sub-step deeper than its refine depth (the caller splits it).
 constexpr std::int64_t kDenseSubStep = -1;
 
-/// out[e] for e < n: sub-step e's depth mean[e]·length in fixed point — ⌊min(τ, kMaxSubStepDepth)
-/// · kDepthUnit + ½⌋ for τ > 0, 0 for τ ≤ 0 or NaN — or kDenseSubStep where τ > `refineDepth`
+/// out[e] for e < n: fixedDepth(mean[e]·length) (⌊min(τ, kMaxSubStepDepth) · kDepthUnit + ½⌋ for
+/// τ > 0, 0 for τ ≤ 0 or NaN) — or kDenseSubStep where τ > `refineDepth`
 /// (kRefineDepth; ∞ where no sub-step needs splitting). Four at a time (AVX2 where compiled for
 /// it), a tail padded to four: out[e] depends on mean[e] alone, wherever it lies in the batch.
 /// Returns whether any was marked dense.
@@ -202,10 +207,7 @@ bool subStepDepths(const float* mean, std::size_t n, float length, double refine
     for (std::size_t e = 0; e < n; ++e) {
         const double tau = double(mean[e]) * double(length);
         anyDense = anyDense || tau > refineDepth;
-        out[e] = tau > refineDepth ? kDenseSubStep
-                 : tau > 0.0
-                     ? std::int64_t(std::floor(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5))
-                     : std::int64_t(0);
+        out[e] = tau > refineDepth ? kDenseSubStep : fixedDepth(tau);
     }
     return anyDense;
 #endif
@@ -1137,11 +1139,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
     // block of a group, and the TF update's subset of blocks gets the full computation's bits.
     // (The walk's carried state is start-independent too: a lattice point's value read as the
     // previous step's end and as a step's start is the same voxel sum in the same order.)
-    // (kDepthUnit, kMaxSubStepDepth: subStepDepths.)
-    auto fixedDepth = [](double tau) {  // NaN counts as 0, as a non-positive depth does
-        return tau > 0.0 ? std::int64_t(std::min(tau, kMaxSubStepDepth) * kDepthUnit + 0.5)
-                         : std::int64_t(0);
-    };
+    // (kDepthUnit, kMaxSubStepDepth, fixedDepth: above subStepDepths.)
     auto depthBetween = [](std::int64_t from, std::int64_t to) {
         return double(to - from) / kDepthUnit;
     };
@@ -1492,11 +1490,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                                 for (std::size_t e = 0; anyDense && e < lastSub; ++e) {
                                     if (sc.T[e] != kDenseSubStep || stepQuiet[e / std::size_t(q)])
                                         continue;
-                                    const double want =
-                                        std::ceil(double(sc.M[e]) * double(subMm) / kRefineDepth);
-                                    const int k = want < double(kMaxSubSteps)
-                                                      ? std::max(int(want), 1)
-                                                      : kMaxSubSteps;
+                                    const int k = densePieces(double(sc.M[e]) * double(subMm));
                                     const float piece = subMm / float(k);
                                     const int j = int(e % std::size_t(q));  // pieces start there
                                     const glm::vec3 from =

@@ -163,6 +163,15 @@ inline float boxExitIndex(const glm::vec3& o, const glm::vec3& d, const glm::vec
     return std::max(t, 0.f);
 }
 
+/// The pieces a step of pre-integrated depth `depth` > kRefineDepth is split into: enough for
+/// ≤ kRefineDepth each, at most kMaxSubSteps. Clamped before the conversion: an extreme σt × step
+/// (10⁶/mm over metres) or a NaN depth would overflow int (found by tests/stability under UBSan:
+/// k = INT_MIN gave depth 0). Shared by preIntegratedStep and the line sweep's batched splits.
+inline int densePieces(double depth) {
+    const double want = std::ceil(depth / kRefineDepth);
+    return want < double(kMaxSubSteps) ? std::max(int(want), 1) : kMaxSubSteps;
+}
+
 /// Optical depth of one ray step of length dt (mm) whose value runs from sFront to sBack
 /// (integrals iFront/iBack: TfTable::sigmaIntegral), pre-integrated; a step deeper than
 /// kRefineDepth is split into up to kMaxSubSteps sub-steps, value(x) giving the value x mm into
@@ -177,10 +186,7 @@ template <class Value>
     if (depth <= kRefineDepth) return depth;
     // Dense: the value is linear only within a voxel, so a step across a surface (where it
     // kinks) is split into sub-steps, each pre-integrated.
-    // Clamped before the conversion: an extreme σt × step (10⁶/mm over metres) or a NaN depth
-    // would overflow int (found by tests/stability under UBSan: k = INT_MIN gave depth 0).
-    const double want = std::ceil(depth / kRefineDepth);
-    const int k = want < double(kMaxSubSteps) ? std::max(int(want), 1) : kMaxSubSteps;
+    const int k = densePieces(depth);
     const float sub = dt / float(k);
     depth = 0.0;
     float s0 = sFront;

@@ -246,7 +246,6 @@ struct BlockWeights {
     std::int8_t level[8];
 };
 
-/// A pyramid with a selection: the grid that local visibility is computed and stored on.
 /// A summed-volume table over a BlockPyramid cell-visibility mask (LodSelection::cellVisible;
 /// empty = every cell visible): whether any cell of a box is visible in eight reads, whatever the
 /// box's size — the visibility fields' "needed" test per stored point.
@@ -275,6 +274,7 @@ class VisibleCellCounts {
     std::vector<std::uint32_t> sum_;
 };
 
+/// A pyramid with a selection: the grid that local visibility is computed and stored on.
 class MultiresGrid {
   public:
     MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelection selection);
