@@ -140,7 +140,7 @@ void runTfUpdates(benchmark::State& state,
     state.counters["global_s"] = globalSeconds / double(state.iterations());
 }
 
-/// The torso at 1:16 and 1:64, both CT presets (arg 2: 0 = piecewise, 1 = recursive integration);
+/// The torso at 1:8 (the pipeline's default), 1:16 and 1:64, both CT presets (arg 2: 0 = piecewise, 1 = recursive integration);
 /// medians of 3 runs of 2 updates.
 void BM_TfUpdateTotal(benchmark::State& state) {
     const bool recursive = state.range(2) == 1;
@@ -158,7 +158,7 @@ void tfUpdateRuns(benchmark::internal::Benchmark* b) {
         ->Repetitions(3)
         ->ReportAggregatesOnly(true);
 }
-BENCHMARK(BM_TfUpdateTotal)->ArgsProduct({{0, 1}, {16, 64}, {0, 1}})->Apply(tfUpdateRuns);
+BENCHMARK(BM_TfUpdateTotal)->ArgsProduct({{0, 1}, {8, 16, 64}, {0, 1}})->Apply(tfUpdateRuns);
 
 void BM_TfUpdateBonsai(benchmark::State& state) {
     static const std::filesystem::path file =
