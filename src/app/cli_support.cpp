@@ -83,7 +83,7 @@ int runGuarded(const std::function<int()>& body) {
     try {
         return body();
     } catch (const InputError& e) {
-        std::cerr << "voxlight: error: " << e.what() << "\n";
+        std::cerr << "voxlight: error: " << blameLoadedOverrides(e).what() << "\n";
         return kExitBadInput;
     } catch (const CancelledError&) {
         std::cerr << "\nvoxlight: cancelled; nothing was written\n";
@@ -115,6 +115,17 @@ bool inputIsVolume(const std::string& input) {
     return ext != ".json";
 }
 
+namespace {
+/// The overrides of every scene loadInput made, by the scene's source: an InputError a later
+/// stage throws for that source (a method parameter, an image size the renderer refuses) names the
+/// override it comes from (runGuarded).
+std::vector<std::pair<std::string, std::vector<io::OverrideRecord>>>& loadedOverrides() {
+    static std::vector<std::pair<std::string, std::vector<io::OverrideRecord>>> loaded;
+    return loaded;
+}
+std::mutex loadedOverridesMutex;
+}  // namespace
+
 io::Scene loadInput(const std::string& input, const std::vector<std::string>& overrides,
                     const std::string& view) {
     const bool volume = inputIsVolume(input);
@@ -126,8 +137,30 @@ io::Scene loadInput(const std::string& input, const std::vector<std::string>& ov
                 all.push_back(k);
         all.push_back("camera.view=" + view);
     }
+    const std::size_t fromView = all.size();  // the first ones stand for --view
     all.insert(all.end(), overrides.begin(), overrides.end());
-    return volume ? io::volumeScene(input, all) : io::loadScene(input, all);
+    io::Scene s;
+    try {
+        s = volume ? io::volumeScene(input, all) : io::loadScene(input, all);
+    } catch (const InputError& e) {
+        // The overrides standing for --view are named as the user gave them.
+        for (std::size_t i = 0; i < fromView; ++i)
+            if (e.source() == "--set " + all[i])
+                throw InputError("--view " + view, e.field(), e.problem(), e.fix());
+        throw;
+    }
+    for (std::size_t i = 0; i < fromView && i < s.overrides.size(); ++i)
+        s.overrides[i].said = "--view " + view;
+    const std::lock_guard lock(loadedOverridesMutex);
+    loadedOverrides().emplace_back(s.source, s.overrides);
+    return s;
+}
+
+InputError blameLoadedOverrides(const InputError& e) {
+    const std::lock_guard lock(loadedOverridesMutex);
+    for (auto it = loadedOverrides().rbegin(); it != loadedOverrides().rend(); ++it)
+        if (it->first == e.source()) return io::blameOverride(e, it->first, it->second);
+    return e;
 }
 
 }  // namespace voxlight::app

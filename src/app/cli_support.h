@@ -40,6 +40,9 @@ const std::vector<std::string>& viewNames();
 /// camera's placement (azimuth/elevation/eye/up) by that named view before the overrides.
 io::Scene loadInput(const std::string& input, const std::vector<std::string>& overrides,
                     const std::string& view = "");
+/// `e` naming the override it comes from (io::blameOverride) when its source is a scene loadInput
+/// loaded: runGuarded reports every InputError through this.
+InputError blameLoadedOverrides(const InputError& e);
 /// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
 bool inputIsVolume(const std::string& input);
 

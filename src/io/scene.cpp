@@ -308,7 +308,7 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 
 }  // namespace
 
-void applyOverride(json& doc, const std::string& assignment) {
+OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     const auto eq = assignment.find('=');
     if (eq == std::string::npos || eq == 0)
         throw InputError("--set", assignment, "is not of the form key=value",
@@ -328,6 +328,7 @@ void applyOverride(json& doc, const std::string& assignment) {
             "flatten the value");
     json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
+    OverrideRecord record{assignment, key, {}, "--set " + assignment};
     json* node = &doc;
     json* parent = nullptr;
     std::string last;
@@ -363,6 +364,8 @@ void applyOverride(json& doc, const std::string& assignment) {
                 throw InputError(
                     "--set", key,
                     "'" + part + "' descends into " + typeName(*node) + ", not an object");
+            if (record.created.empty() && !node->contains(part))
+                record.created = key.substr(0, dot);
             node = &(*node)[part];
             last = part;
         }
@@ -374,6 +377,42 @@ void applyOverride(json& doc, const std::string& assignment) {
         parent->erase(last);
     else
         *node = value;
+    return record;
+}
+
+namespace {
+/// A field as errors name it ("lights[0].intensity") in the overrides' dotted form
+/// ("lights.0.intensity").
+std::string dottedField(const std::string& field) {
+    std::string out;
+    for (const char c : field) {
+        if (c == '[')
+            out += '.';
+        else if (c != ']')
+            out += c;
+    }
+    return out;
+}
+/// Whether dotted path `path` is `prefix` or lies under it.
+bool atOrUnder(const std::string& path, const std::string& prefix) {
+    return !prefix.empty() && path.compare(0, prefix.size(), prefix) == 0 &&
+           (path.size() == prefix.size() || path[prefix.size()] == '.');
+}
+}  // namespace
+
+const OverrideRecord* blamedOverride(const std::vector<OverrideRecord>& overrides,
+                                     const std::string& field) {
+    const std::string f = dottedField(field);
+    for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)
+        if (atOrUnder(f, it->key) || atOrUnder(f, it->created)) return &*it;
+    return nullptr;
+}
+
+InputError blameOverride(const InputError& e, const std::string& source,
+                         const std::vector<OverrideRecord>& overrides) {
+    if (e.source() != source) return e;
+    const OverrideRecord* r = blamedOverride(overrides, e.field());
+    return r ? InputError(r->said, e.field(), e.problem(), e.fix()) : e;
 }
 
 namespace {
@@ -488,9 +527,10 @@ bool isPathKey(const std::string& key) {
            std::all_of(key.begin() + 7, key.begin() + long(dot), ::isdigit);
 }
 
-void applyOverrides(json& doc, const std::vector<std::string>& overrides) {
+std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::string>& overrides) {
+    std::vector<OverrideRecord> records;
     for (const auto& o : overrides) {
-        applyOverride(doc, o);
+        records.push_back(applyOverride(doc, o));
         const std::string key = o.substr(0, o.find('='));
         if (!isPathKey(key)) continue;
         json* node = &doc;
@@ -510,6 +550,7 @@ void applyOverrides(json& doc, const std::vector<std::string>& overrides) {
         if (node->is_string() && !fs::path(node->get<std::string>()).is_absolute())
             *node = fs::absolute(node->get<std::string>()).string();
     }
+    return records;
 }
 
 Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overrides) {
@@ -521,8 +562,14 @@ Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overri
                               "camera.eye=", "camera.up="})
             placed = placed || o.rfind(k, 0) == 0;
     if (!placed) doc["camera"] = {{"view", "auto"}};
-    applyOverrides(doc, overrides);
-    return parseScene(doc, volume.string(), fs::current_path());
+    const std::vector<OverrideRecord> records = applyOverrides(doc, overrides);
+    try {
+        Scene s = parseScene(doc, volume.string(), fs::current_path());
+        s.overrides = records;
+        return s;
+    } catch (const InputError& e) {
+        throw blameOverride(e, volume.string(), records);
+    }
 }
 
 namespace {
@@ -675,10 +722,16 @@ json readJsonFile(const fs::path& path) {
 
 Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
     json doc = readJsonFile(path);
-    applyOverrides(doc, overrides);
+    const std::vector<OverrideRecord> records = applyOverrides(doc, overrides);
     fs::path base = path.parent_path();
     if (base.empty()) base = ".";
-    return parseScene(doc, path.string(), base);
+    try {
+        Scene s = parseScene(doc, path.string(), base);
+        s.overrides = records;
+        return s;
+    } catch (const InputError& e) {
+        throw blameOverride(e, path.string(), records);
+    }
 }
 
 }  // namespace voxlight::io

@@ -66,6 +66,7 @@
 #include <string>
 #include <vector>
 
+#include "core/error.h"
 #include "io/volume_io.h"
 
 namespace voxlight::io {
@@ -171,6 +172,18 @@ struct RenderSettings {
     double termination = 1e-3;
 };
 
+/// What one override did to a document, so that an error its value causes names the override
+/// (what the user typed) instead of the scene file. `key` is its dotted key; `created` the
+/// shortest prefix of the key that the document lacked before it (empty when every parent
+/// existed): `--set method.params.rays=64` on a scene without a method creates "method", and
+/// "method: needs a 'name'" is then the override's doing.
+struct OverrideRecord {
+    std::string assignment;  ///< key=value as given
+    std::string key;
+    std::string created;
+    std::string said;  ///< how the user gave it: "--set key=value" unless the caller says otherwise
+};
+
 struct Scene {
     std::string source;  ///< file name used in error messages
     VolumeSource volume;
@@ -186,16 +199,31 @@ struct Scene {
     std::vector<std::string> effects;
     bool effectsGiven = false;  ///< the scene has an "effects" key (even an empty list)
     nlohmann::json document;    ///< the validated document after overrides (echoed into stats)
+    /// The overrides loadScene / volumeScene applied (errors their values cause name them).
+    std::vector<OverrideRecord> overrides;
 };
 
 /// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
 /// override, one that is not UTF-8, or a value nesting deeper than the scene's depth limit (64).
 /// The value null removes the key (its default applies again): --set camera.azimuth=null.
-void applyOverride(nlohmann::json& doc, const std::string& assignment);
+OverrideRecord applyOverride(nlohmann::json& doc, const std::string& assignment);
 
 /// Applies overrides in order (applyOverride); a relative path given by one to a path key
 /// (isPathKey) is made absolute against the current directory, where the user typed it.
-void applyOverrides(nlohmann::json& doc, const std::vector<std::string>& overrides);
+std::vector<OverrideRecord> applyOverrides(nlohmann::json& doc,
+                                           const std::vector<std::string>& overrides);
+
+/// The override an error at `field` comes from (a scene key as errors name it, array elements as
+/// "lights[0].intensity" or "lights.0.intensity"): the last one whose key is `field` or one of its
+/// parents (the error lies in the value it set), or that created `field` or one of its parents.
+/// nullptr when none did: the scene itself is at fault.
+const OverrideRecord* blamedOverride(const std::vector<OverrideRecord>& overrides,
+                                     const std::string& field);
+
+/// `e` with the override it comes from (blamedOverride) as its source, when its source is
+/// `source` (the scene the overrides were applied to); else `e` itself.
+InputError blameOverride(const InputError& e, const std::string& source,
+                         const std::vector<OverrideRecord>& overrides);
 
 /// Validates and converts a document. `source` names it in errors; relative paths resolve against
 /// `baseDir`. A document nesting arrays/objects deeper than 64 levels, or holding a value nlohmann

@@ -160,6 +160,52 @@ TEST(Scene, OverridesApplyBeforeValidation) {
     EXPECT_THROW(io::applyOverride(j, "camera.azimuth.x=1"), InputError);
 }
 
+TEST(Scene, AnErrorAnOverrideCausesNamesTheOverrideNotTheSceneFile) {
+    test::TempDir tmp;
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "camera": {"fov_y": 30},
+        "lights": [{"type": "directional"}]})";
+    auto sourceOf = [&](const std::vector<std::string>& overrides) {
+        try {
+            (void)io::loadScene(tmp / "s.json", overrides);
+        } catch (const InputError& e) {
+            return e.source() + " | " + e.field();
+        }
+        return std::string("no error");
+    };
+    // The override's own value, and a value inside an object it set.
+    EXPECT_EQ(sourceOf({"image.width=-3"}), "--set image.width=-3 | image.width");
+    EXPECT_EQ(sourceOf({"camera={\"fov_y\": 500}"}),
+              "--set camera={\"fov_y\": 500} | camera.fov_y");
+    EXPECT_EQ(sourceOf({"lights.0.intensity=-1"}),
+              "--set lights.0.intensity=-1 | lights[0].intensity");
+    // An object the override created: a method with parameters but no name.
+    EXPECT_EQ(sourceOf({"method.params.rays=64"}), "--set method.params.rays=64 | method");
+    // The scene's own fault stays the scene's, whatever else was overridden.
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "camera": {"fov_y": 500},
+        "method": {"params": {"rays": 8}}})";
+    EXPECT_EQ(sourceOf({"image.width=64"}), (tmp / "s.json").string() + " | camera.fov_y");
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "method": {"params": {"rays": 8}}})";
+    EXPECT_EQ(sourceOf({"method.params.rays=64"}), (tmp / "s.json").string() + " | method");
+    // Of two overrides of one key the last is named.
+    EXPECT_EQ(sourceOf({"camera.fov_y=40", "camera.fov_y=0"}),
+              "--set camera.fov_y=0 | camera.fov_y");
+
+    // Errors raised later (a method's parameters, checked by the pipeline) name it too.
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii"})";
+    const io::Scene s =
+        io::loadScene(tmp / "s.json", {"method.name=sh-local", "method.params.rays=abc"});
+    ASSERT_EQ(s.overrides.size(), 2u);
+    const InputError later(s.source, "method.params.rays", "must be an integer");
+    EXPECT_EQ(io::blameOverride(later, s.source, s.overrides).source(),
+              "--set method.params.rays=abc");
+    const InputError elsewhere(s.source, "image.width", "too large");
+    EXPECT_EQ(io::blameOverride(elsewhere, s.source, s.overrides).source(), s.source);
+    const InputError otherFile("t.nii", "method.params.rays", "unreadable");
+    EXPECT_EQ(io::blameOverride(otherFile, s.source, s.overrides).source(), "t.nii");
+    // "methods" is not under "method".
+    EXPECT_EQ(io::blamedOverride(s.overrides, "methods"), nullptr);
+}
+
 TEST(Scene, MalformedJsonFileNamesTheFile) {
     test::TempDir tmp;
     {
