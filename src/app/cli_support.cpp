@@ -151,9 +151,16 @@ io::Scene loadInput(const std::string& input, const std::vector<std::string>& ov
     }
     for (std::size_t i = 0; i < fromView && i < s.overrides.size(); ++i)
         s.overrides[i].said = "--view " + view;
-    const std::lock_guard lock(loadedOverridesMutex);
-    loadedOverrides().emplace_back(s.source, s.overrides);
+    rememberOverrides(s);
     return s;
+}
+
+void rememberOverrides(const io::Scene& scene) {
+    if (scene.overrides.empty()) return;
+    const std::lock_guard lock(loadedOverridesMutex);
+    for (const auto& [source, records] : loadedOverrides())
+        if (source == scene.source) return;  // a session's frames: the same overrides each
+    loadedOverrides().emplace_back(scene.source, scene.overrides);
 }
 
 InputError blameLoadedOverrides(const InputError& e) {

@@ -40,6 +40,9 @@ const std::vector<std::string>& viewNames();
 /// camera's placement (azimuth/elevation/eye/up) by that named view before the overrides.
 io::Scene loadInput(const std::string& input, const std::vector<std::string>& overrides,
                     const std::string& view = "");
+/// Keeps `scene`'s overrides for blameLoadedOverrides (loadInput does it for the scenes it loads;
+/// a command parsing scenes another way — a session's frames — calls it itself).
+void rememberOverrides(const io::Scene& scene);
 /// `e` naming the override it comes from (io::blameOverride) when its source is a scene loadInput
 /// loaded: runGuarded reports every InputError through this.
 InputError blameLoadedOverrides(const InputError& e);

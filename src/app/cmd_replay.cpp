@@ -193,6 +193,7 @@ Command addReplayCommand(CLI::App& app) {
         for (std::size_t i = 0; i < times.size(); ++i)
             scenes.push_back(interpolate ? ses.sceneAtTime(times[i], overrides)
                                          : ses.sceneAt(i, overrides));
+        rememberOverrides(scenes.back());
         pipeline::Session pipe;
         if (!cacheDir->empty()) pipe.cache().setDirectory(*cacheDir);
         for (const io::Scene& s : scenes) (void)pipe.plan(s);

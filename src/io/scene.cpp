@@ -562,13 +562,18 @@ Scene volumeScene(const fs::path& volume, const std::vector<std::string>& overri
                               "camera.eye=", "camera.up="})
             placed = placed || o.rfind(k, 0) == 0;
     if (!placed) doc["camera"] = {{"view", "auto"}};
+    return parseWithOverrides(std::move(doc), overrides, volume.string(), fs::current_path());
+}
+
+Scene parseWithOverrides(json doc, const std::vector<std::string>& overrides,
+                         const std::string& source, const fs::path& baseDir) {
     const std::vector<OverrideRecord> records = applyOverrides(doc, overrides);
     try {
-        Scene s = parseScene(doc, volume.string(), fs::current_path());
+        Scene s = parseScene(doc, source, baseDir);
         s.overrides = records;
         return s;
     } catch (const InputError& e) {
-        throw blameOverride(e, volume.string(), records);
+        throw blameOverride(e, source, records);
     }
 }
 
@@ -722,16 +727,9 @@ json readJsonFile(const fs::path& path) {
 
 Scene loadScene(const fs::path& path, const std::vector<std::string>& overrides) {
     json doc = readJsonFile(path);
-    const std::vector<OverrideRecord> records = applyOverrides(doc, overrides);
     fs::path base = path.parent_path();
     if (base.empty()) base = ".";
-    try {
-        Scene s = parseScene(doc, path.string(), base);
-        s.overrides = records;
-        return s;
-    } catch (const InputError& e) {
-        throw blameOverride(e, path.string(), records);
-    }
+    return parseWithOverrides(std::move(doc), overrides, path.string(), base);
 }
 
 }  // namespace voxlight::io

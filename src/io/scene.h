@@ -231,6 +231,12 @@ InputError blameOverride(const InputError& e, const std::string& source,
 Scene parseScene(const nlohmann::json& doc, const std::string& source,
                  const std::filesystem::path& baseDir);
 
+/// applyOverrides then parseScene, the result holding the overrides' records; an error a value of
+/// theirs causes names the override (blameOverride). What loadScene, volumeScene and a session's
+/// frames use.
+Scene parseWithOverrides(nlohmann::json doc, const std::vector<std::string>& overrides,
+                         const std::string& source, const std::filesystem::path& baseDir);
+
 /// The scene a volume file (or DICOM folder) makes on its own (`voxlight render ct.nii.gz`):
 /// {"volume": path, "camera": {"view": "auto"}}, everything else at its default (the TF is
 /// the modality's preset, chosen once the volume is loaded; no lights = a headlight), then the

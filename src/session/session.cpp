@@ -280,15 +280,11 @@ json Session::documentAtTime(double t) const {
 }
 
 io::Scene Session::sceneAt(std::size_t k, const std::vector<std::string>& overrides) const {
-    json doc = documentAt(k);
-    io::applyOverrides(doc, overrides);
-    return io::parseScene(doc, source, baseDir);
+    return io::parseWithOverrides(documentAt(k), overrides, source, baseDir);
 }
 
 io::Scene Session::sceneAtTime(double t, const std::vector<std::string>& overrides) const {
-    json doc = documentAtTime(t);
-    io::applyOverrides(doc, overrides);
-    return io::parseScene(doc, source, baseDir);
+    return io::parseWithOverrides(documentAtTime(t), overrides, source, baseDir);
 }
 
 std::vector<double> frameTimes(const Session& session, double fps) {

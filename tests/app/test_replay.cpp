@@ -188,7 +188,11 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "backwards.json"), "keyframes[2].time"},
         {q(tmp / "no-such-session.json"), "cannot be opened"},
         {q(tmp / "good.json") + " --set method=nosuch", "nosuch"},
-        {q(tmp / "good.json") + " --set camera.fov_y=wide", "camera.fov_y"},
+        {q(tmp / "good.json") + " --set camera.fov_y=wide",
+         "--set camera.fov_y=wide: camera.fov_y"},
+        // Found by the pipeline's method parameters, after the scenes parsed: the override named.
+        {q(tmp / "good.json") + " --set method=sh-local --set method.params.rays=abc",
+         "--set method.params.rays=abc: method.params.rays"},
         {q(tmp / "good.json") + " --size 16by16", "--size"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
