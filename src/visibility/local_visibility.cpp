@@ -463,6 +463,76 @@ void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3
     }
 }
 
+/// V at one point of a clip-aware update into v[0..C), given its unclipped value `before`: ray k
+/// counts over the part [ta, tb] of [0, length] that `narrow(k, ta, tb)` leaves (false: none of
+/// it). Two ways to the same sum, whichever marches the shorter total length: from scratch
+/// (pointVisibility: every ray over its kept part — short where the point lies outside a face),
+/// or by difference: only the rays a face cuts, each marched once over its whole length in
+/// pieces (the kept part and the rest), `before` + Σ_cut w_k·Y_k·(T_kept − T_whole) — short near a
+/// face on the kept side, where most rays never reach it. `before` comes from the field's own
+/// integrator (the sweep, or the march in one piece), so the difference way carries that
+/// integrator's ray depth into the cut rays: the two ways differ by the sweep's distance from the
+/// march on those rays (tested within the cut's own tolerance). Returns the rays marched.
+template <class Narrow>
+std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
+                                     const glm::vec3& origin, const glm::ivec3& dims, float radius,
+                                     float h, Narrow&& narrow, const float* before, double* v,
+                                     std::uint64_t& samples) {
+    const int C = set.c;
+    // Each ray's full length and kept part; the two ways' marched lengths.
+    constexpr int kMaxRays = 128;
+    float full[kMaxRays], ta[kMaxRays], tb[kMaxRays];
+    bool kept[kMaxRays];
+    VL_CHECK(set.n <= kMaxRays);
+    double scratchLength = 0.0, differenceLength = 0.0;
+    std::uint64_t cut = 0, partial = 0;
+    for (int d = 0; d < set.n; ++d) {
+        full[d] = std::min(radius, set.rays[std::size_t(d)].boxExit(origin, dims));
+        ta[d] = 0.f;
+        tb[d] = full[d];
+        kept[d] = narrow(d, ta[d], tb[d]) && tb[d] > ta[d];
+        if (kept[d]) {
+            scratchLength += double(tb[d] - ta[d]);
+            partial += 1;
+        }
+        if (!kept[d] || ta[d] > 0.f || tb[d] < full[d]) {
+            differenceLength += double(full[d]);
+            cut += 1;
+        }
+    }
+    if (!(differenceLength < scratchLength)) {
+        pointVisibility(sigma, set, origin, dims, radius, h, narrow, v, samples);
+        return partial;
+    }
+    for (int c = 0; c < C; ++c) v[c] = double(before[c]);
+    OriginValue atOrigin;
+    for (int d = 0; d < set.n; ++d) {
+        if (kept[d] && ta[d] == 0.f && tb[d] == full[d]) continue;  // no face within its reach
+        const RayDir& ray = set.rays[std::size_t(d)];
+        double tauKept = 0.0, tauWhole = 0.0;
+        if (!kept[d]) {
+            tauWhole = opticalDepth(sigma, origin, ray, full[d], h, samples, &atOrigin);
+        } else {
+            tauKept = ta[d] > 0.f ? opticalDepth(sigma, origin + ta[d] * ray.d, ray, tb[d] - ta[d],
+                                                 h, samples, nullptr)
+                                  : opticalDepth(sigma, origin, ray, tb[d], h, samples, &atOrigin);
+            tauWhole = tauKept;
+            if (ta[d] > 0.f)
+                tauWhole += opticalDepth(sigma, origin, ray, ta[d], h, samples, &atOrigin);
+            if (tb[d] < full[d])
+                tauWhole += opticalDepth(sigma, origin + tb[d] * ray.d, ray, full[d] - tb[d], h,
+                                         samples, nullptr);
+        }
+        auto transmittance = [](double tau) {
+            return tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // as pointVisibility
+        };
+        const double change = transmittance(tauKept) - transmittance(tauWhole);
+        const double* w = set.wy.data() + std::size_t(d) * C;
+        for (int c = 0; c < C; ++c) v[c] += change * w[c];
+    }
+    return cut;
+}
+
 /// Calls f(origin, dst, s) for every sample point of stored block b, x fastest: origin = the
 /// point's voxel coordinate, clamped onto the volume (sample points of a partial edge block beyond
 /// it are never read inside it), dst = its C floats starting at `data`, s = the block's sample
@@ -1912,7 +1982,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                                          const core::Progress& progress, ClipUpdateStats* stats) {
     core::Stopwatch clock;
     const MultiresGrid& grid = base.grid();
-    const int C = base.coefficients(), N = base.rays();
+    const int C = base.coefficients();
     const core::Geometry& g = grid.pyramid().geometry();
     const double h = core::minComponent(g.spacing);
     const RaySet set(g, base.directions(), C);
@@ -1945,7 +2015,8 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
     for (std::size_t b = 0; b < blocks; ++b)
         if (grid.level(b) != kNone) stored.push_back(b);
 
-    std::atomic<std::uint64_t> samplesTotal{0}, tracedTotal{0}, clearedTotal{0}, pointsTotal{0};
+    std::atomic<std::uint64_t> samplesTotal{0}, tracedTotal{0}, clearedTotal{0}, pointsTotal{0},
+        raysTotal{0};
     std::atomic<std::size_t> touchedTotal{0}, done{0};
     const std::thread::id caller = std::this_thread::get_id();
     progress.report("clip-aware local visibility", 0.0);
@@ -1954,7 +2025,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
         tbb::parallel_for(
             tbb::blocked_range<std::size_t>(0, stored.size(), 1), [&](const auto& range) {
                 if (progress.cancelled()) return;
-                std::uint64_t samples = 0, traced = 0, cleared = 0, points = 0;
+                std::uint64_t samples = 0, traced = 0, cleared = 0, points = 0, rays = 0;
                 std::size_t touched = 0;
                 double v[16];
                 std::vector<double> dist0(faces.size());
@@ -2008,8 +2079,8 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                             }
                             return true;
                         };
-                        pointVisibility(sigma, set, origin, grid.dims(), radius, hf, narrow, v,
-                                        samples);
+                        rays += clippedPointVisibility(sigma, set, origin, grid.dims(), radius, hf,
+                                                       narrow, dst, v, samples);
                         ++traced;
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
@@ -2020,6 +2091,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                 }
                 samplesTotal += samples;
                 tracedTotal += traced;
+                raysTotal += rays;
                 clearedTotal += cleared;
                 pointsTotal += points;
                 touchedTotal += touched;
@@ -2032,7 +2104,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
     if (progress.cancelled()) throw CancelledError();
     progress.report("clip-aware local visibility", 1.0);
     out.samplesTaken_ = samplesTotal;
-    out.raysTraced_ = tracedTotal * std::uint64_t(N);
+    out.raysTraced_ = raysTotal;
     if (stats) {
         stats->blocks = stored.size();
         stats->blocksTouched = touchedTotal;

@@ -50,10 +50,17 @@
 // R = r_s·h of a cut face can change: a point whose distance to every face is ≥ R on the kept side
 // sends rays that never leave the kept region (its value is copied from the unclipped field), and a
 // point ≥ R outside some face sends rays that never enter it (empty space's value, no rays). The
-// rest — the blocks and points within R of a cut face — are traced again, each ray integrated only
-// over its part inside the kept region (one interval: the region is convex). So moving a plane
-// costs rays in a slab of width 2R around it, not the whole field, and the unclipped field stays
-// cached for the next move.
+// rest — the blocks and points within R of a cut face — are computed again, each ray integrated
+// only over its part inside the kept region (one interval: the region is convex), in whichever of
+// two ways marches less: from scratch (every ray over its kept part: short outside a face), or by
+// difference — only the rays a face cuts are marched, each over its whole length in pieces, and
+// the point's unclipped value changes by Σ_cut w_k·Y_k·(T_kept − T_whole) (near a face on the kept
+// side most rays never reach it: a quarter of the rays on average). The rays no face cuts keep the
+// unclipped field's own values, so under the line sweep no march-vs-sweep seam appears at R from a
+// face (the sweep's depth of a cut ray still meets the march's T_whole: their difference, tested
+// within the cut's bound). So moving a plane costs rays in a slab of width 2R around it, a
+// quarter of them on the kept side, not the whole field, and the unclipped field stays cached for
+// the next move.
 //
 // Line sweep (algorithm Sweep, method param `algorithm: "sweep"`): the same V^L with the rays
 // shared between points. The directions are the primitive integer steps v of the voxel lattice
@@ -255,7 +262,7 @@ struct ClipUpdateStats {
     std::uint64_t points = 0;         ///< stored sample points
     std::uint64_t pointsTraced = 0;   ///< points whose rays were traced again
     std::uint64_t pointsCleared = 0;  ///< points ≥ R outside a face: empty space's value, no rays
-    std::uint64_t raysTraced = 0;
+    std::uint64_t raysTraced = 0;     ///< rays marched (a cut ray marched in pieces counts once)
     double seconds = 0.0;
 };
 
