@@ -473,17 +473,25 @@ void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3
 /// integrator (the sweep, or the march in one piece), so the difference way carries that
 /// integrator's ray depth into the cut rays: the two ways differ by the sweep's distance from the
 /// march on those rays (tested within the cut's own tolerance). Returns the rays marched.
+/// clippedPointVisibility's per-ray working arrays (one per task, any ray count).
+struct ClipRays {
+    std::vector<float> full, ta, tb;
+    std::vector<std::uint8_t> kept;
+    explicit ClipRays(int n)
+        : full(std::size_t(n)), ta(std::size_t(n)), tb(std::size_t(n)), kept(std::size_t(n)) {}
+};
 template <class Narrow>
 std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
                                      const glm::vec3& origin, const glm::ivec3& dims, float radius,
                                      float h, Narrow&& narrow, const float* before, double* v,
-                                     std::uint64_t& samples) {
+                                     std::uint64_t& samples, ClipRays& rays) {
     const int C = set.c;
     // Each ray's full length and kept part; the two ways' marched lengths.
-    constexpr int kMaxRays = 128;
-    float full[kMaxRays], ta[kMaxRays], tb[kMaxRays];
-    bool kept[kMaxRays];
-    VL_CHECK(set.n <= kMaxRays);
+    VL_CHECK(int(rays.full.size()) >= set.n);
+    float* full = rays.full.data();
+    float* ta = rays.ta.data();
+    float* tb = rays.tb.data();
+    std::uint8_t* kept = rays.kept.data();
     double scratchLength = 0.0, differenceLength = 0.0;
     std::uint64_t cut = 0, partial = 0;
     for (int d = 0; d < set.n; ++d) {
@@ -2027,6 +2035,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                 if (progress.cancelled()) return;
                 std::uint64_t samples = 0, traced = 0, cleared = 0, points = 0, rays = 0;
                 std::size_t touched = 0;
+                ClipRays rayScratch(set.n);
                 double v[16];
                 std::vector<double> dist0(faces.size());
                 for (std::size_t r = range.begin(); r != range.end(); ++r) {
@@ -2080,7 +2089,7 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                             return true;
                         };
                         rays += clippedPointVisibility(sigma, set, origin, grid.dims(), radius, hf,
-                                                       narrow, dst, v, samples);
+                                                       narrow, dst, v, samples, rayScratch);
                         ++traced;
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
