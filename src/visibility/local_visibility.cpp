@@ -463,6 +463,14 @@ void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3
     }
 }
 
+/// clippedPointVisibility's per-ray working arrays (one per task, any ray count).
+struct ClipRays {
+    std::vector<float> full, ta, tb;
+    std::vector<std::uint8_t> kept;
+    explicit ClipRays(int n)
+        : full(std::size_t(n)), ta(std::size_t(n)), tb(std::size_t(n)), kept(std::size_t(n)) {}
+};
+
 /// V at one point of a clip-aware update into v[0..C), given its unclipped value `before`: ray k
 /// counts over the part [ta, tb] of [0, length] that `narrow(k, ta, tb)` leaves (false: none of
 /// it). Two ways to the same sum, whichever marches the shorter total length: from scratch
@@ -472,14 +480,8 @@ void pointVisibility(const ValueField& sigma, const RaySet& set, const glm::vec3
 /// face on the kept side, where most rays never reach it. `before` comes from the field's own
 /// integrator (the sweep, or the march in one piece), so the difference way carries that
 /// integrator's ray depth into the cut rays: the two ways differ by the sweep's distance from the
-/// march on those rays (tested within the cut's own tolerance). Returns the rays marched.
-/// clippedPointVisibility's per-ray working arrays (one per task, any ray count).
-struct ClipRays {
-    std::vector<float> full, ta, tb;
-    std::vector<std::uint8_t> kept;
-    explicit ClipRays(int n)
-        : full(std::size_t(n)), ta(std::size_t(n)), tb(std::size_t(n)), kept(std::size_t(n)) {}
-};
+/// march on those rays (tested within the cut's own tolerance). Only a point whose stored value
+/// is its own has a `before` to start from (`before` null: from scratch). Returns the rays marched.
 template <class Narrow>
 std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
                                      const glm::vec3& origin, const glm::ivec3& dims, float radius,
@@ -503,19 +505,20 @@ std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
             scratchLength += double(tb[d] - ta[d]);
             partial += 1;
         }
-        if (!kept[d] || ta[d] > 0.f || tb[d] < full[d]) {
+        if (full[d] > 0.f && (!kept[d] || ta[d] > 0.f || tb[d] < full[d])) {
             differenceLength += double(full[d]);
             cut += 1;
         }
     }
-    if (!(differenceLength < scratchLength)) {
+    if (!before || !(differenceLength < scratchLength)) {
         pointVisibility(sigma, set, origin, dims, radius, h, narrow, v, samples);
         return partial;
     }
     for (int c = 0; c < C; ++c) v[c] = double(before[c]);
     OriginValue atOrigin;
     for (int d = 0; d < set.n; ++d) {
-        if (kept[d] && ta[d] == 0.f && tb[d] == full[d]) continue;  // no face within its reach
+        // No face within its reach, or no length (at the volume's face): unchanged.
+        if (!(full[d] > 0.f) || (kept[d] && ta[d] == 0.f && tb[d] == full[d])) continue;
         const RayDir& ray = set.rays[std::size_t(d)];
         double tauKept = 0.0, tauWhole = 0.0;
         if (!kept[d]) {
@@ -2016,6 +2019,17 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
     };
 
     const ValueField sigma(grid, table);
+    const bool swept = base.algorithm() == VisibilityAlgorithm::Sweep;
+    // Whether a sample point of spacing s lies on the sweep's lattice for it: integer coordinates
+    // at level 0, (j + ½)·s − ½ past a block corner (half-integers) above it (sweepBlocks).
+    auto onSweepLattice = [](const glm::vec3& p, float s) {
+        if (s <= 1.f) return p == glm::floor(p);
+        for (int a = 0; a < 3; ++a) {
+            const float k = (p[a] + 0.5f - 0.5f * s) / s;
+            if (k != std::floor(k)) return false;
+        }
+        return true;
+    };
     LocalVisibility out = base;  // the unclipped values wherever the cut cannot reach
     out.raysTraced_ = out.samplesTaken_ = 0;
     const std::size_t blocks = grid.pyramid().blockCount();
@@ -2088,8 +2102,13 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                             }
                             return true;
                         };
+                        // A swept field stores at a partial edge block's points past the volume
+                        // (off its lattices, clamped onto it) a copy of another point's value
+                        // (sweepBlocks): no `before` of their own.
+                        const bool own = !swept || onSweepLattice(origin, spacing);
                         rays += clippedPointVisibility(sigma, set, origin, grid.dims(), radius, hf,
-                                                       narrow, dst, v, samples, rayScratch);
+                                                       narrow, own ? dst : nullptr, v, samples,
+                                                       rayScratch);
                         ++traced;
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
