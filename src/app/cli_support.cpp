@@ -156,11 +156,12 @@ io::Scene loadInput(const std::string& input, const std::vector<std::string>& ov
 }
 
 void rememberOverrides(const io::Scene& scene) {
-    if (scene.overrides.empty()) return;
     const std::lock_guard lock(loadedOverridesMutex);
-    for (const auto& [source, records] : loadedOverrides())
-        if (source == scene.source) return;  // a session's frames: the same overrides each
-    loadedOverrides().emplace_back(scene.source, scene.overrides);
+    auto& loaded = loadedOverrides();
+    // The latest load of a source is the one its errors come from (a viewer reopening a file
+    // without overrides forgets the earlier ones).
+    std::erase_if(loaded, [&](const auto& entry) { return entry.first == scene.source; });
+    if (!scene.overrides.empty()) loaded.emplace_back(scene.source, scene.overrides);
 }
 
 InputError blameLoadedOverrides(const InputError& e) {

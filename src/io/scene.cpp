@@ -308,6 +308,27 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 
 }  // namespace
 
+namespace {
+/// A dotted key with its array indices in canonical form ("lights.00.x" → "lights.0.x"), as
+/// applyOverride reads them (std::stoul).
+std::string normalizedKey(const std::string& key) {
+    std::string out;
+    std::size_t start = 0;
+    while (true) {
+        const auto dot = key.find('.', start);
+        std::string part = key.substr(start, dot == std::string::npos ? dot : dot - start);
+        if (!part.empty() && std::all_of(part.begin(), part.end(), ::isdigit)) {
+            const auto nonzero = part.find_first_not_of('0');
+            part = nonzero == std::string::npos ? "0" : part.substr(nonzero);
+        }
+        out += part;
+        if (dot == std::string::npos) return out;
+        out += '.';
+        start = dot + 1;
+    }
+}
+}  // namespace
+
 OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     const auto eq = assignment.find('=');
     if (eq == std::string::npos || eq == 0)
@@ -328,10 +349,13 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
             "flatten the value");
     json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
-    OverrideRecord record{assignment, key, {}, "--set " + assignment};
+    // As errors name it: "--set key=value" once the key is known.
+    const std::string said = "--set " + assignment;
+    OverrideRecord record{assignment, normalizedKey(key), {}, said, value.is_null()};
     json* node = &doc;
     json* parent = nullptr;
     std::string last;
+    bool existed = true;  // whether the last key descended into was there before
     std::size_t start = 0;
     while (true) {
         parent = node;
@@ -339,13 +363,12 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
         const std::string part =
             key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
         if (part.empty())
-            throw InputError("--set", key, "has an empty path component",
-                             "e.g. lights.0.intensity=2");
+            throw InputError(said, key, "has an empty path component", "e.g. lights.0.intensity=2");
         const bool isIndex = std::all_of(part.begin(), part.end(), ::isdigit);
         if (isIndex && node->is_array()) {
             const std::size_t i = std::stoul(part);
             if (i >= node->size())
-                throw InputError("--set", key,
+                throw InputError(said, key,
                                  "index " + part + " is past the end (size " +
                                      std::to_string(node->size()) + ")");
             node = &(*node)[i];
@@ -360,12 +383,20 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
                 if (const auto it = kShorthandKey.find(parentKey); it != kShorthandKey.end())
                     *node = json{{it->second, *node}};
             }
-            if (!node->is_object())
+            if (!node->is_object()) {
+                // Removing a key that cannot exist changes nothing (the scene's own shape is
+                // the scene's to answer for when it is read).
+                if (record.removed) {
+                    record.removed = false;  // nothing was
+                    return record;
+                }
                 throw InputError(
-                    "--set", key,
+                    said, key,
                     "'" + part + "' descends into " + typeName(*node) + ", not an object");
-            if (record.created.empty() && !node->contains(part))
-                record.created = key.substr(0, dot);
+            }
+            existed = node->contains(part);
+            if (record.created.empty() && !existed)
+                record.created = normalizedKey(key.substr(0, dot));
             node = &(*node)[part];
             last = part;
         }
@@ -374,7 +405,7 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     }
     // null removes an object key: the default applies again (--set camera.azimuth=null).
     if (value.is_null() && parent && parent->is_object() && !last.empty())
-        parent->erase(last);
+        record.removed = parent->erase(last) > 0 && existed;  // not there before: nothing was
     else
         *node = value;
     return record;
@@ -404,7 +435,9 @@ const OverrideRecord* blamedOverride(const std::vector<OverrideRecord>& override
                                      const std::string& field) {
     const std::string f = dottedField(field);
     for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)
-        if (atOrUnder(f, it->key) || atOrUnder(f, it->created)) return &*it;
+        if (atOrUnder(f, it->key) || atOrUnder(f, it->created) ||
+            (it->removed && atOrUnder(it->key, f)))
+            return &*it;
     return nullptr;
 }
 

@@ -182,6 +182,8 @@ struct OverrideRecord {
     std::string key;
     std::string created;
     std::string said;  ///< how the user gave it: "--set key=value" unless the caller says otherwise
+    bool removed =
+        false;  ///< the value was null: the key was removed (an error then names its parent)
 };
 
 struct Scene {
@@ -215,8 +217,11 @@ std::vector<OverrideRecord> applyOverrides(nlohmann::json& doc,
 
 /// The override an error at `field` comes from (a scene key as errors name it, array elements as
 /// "lights[0].intensity" or "lights.0.intensity"): the last one whose key is `field` or one of its
-/// parents (the error lies in the value it set), or that created `field` or one of its parents.
-/// nullptr when none did: the scene itself is at fault.
+/// parents (the error lies in the value it set), that created `field` or one of its parents, or
+/// that removed a key under `field` (`--set method.name=null`: "method: needs a 'name'").
+/// nullptr when none did: the scene itself is at fault. (An error about two keys together — a
+/// width × height limit, a parameter another one rules out — names one of them and is blamed by
+/// that one alone.)
 const OverrideRecord* blamedOverride(const std::vector<OverrideRecord>& overrides,
                                      const std::string& field);
 

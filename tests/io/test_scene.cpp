@@ -189,6 +189,20 @@ TEST(Scene, AnErrorAnOverrideCausesNamesTheOverrideNotTheSceneFile) {
     // Of two overrides of one key the last is named.
     EXPECT_EQ(sourceOf({"camera.fov_y=40", "camera.fov_y=0"}),
               "--set camera.fov_y=0 | camera.fov_y");
+    // A removal names the override when the parent then lacks what it needs; array indices
+    // match however they were spelled.
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "method": {"name": "mip"},
+        "lights": [{"type": "directional"}]})";
+    EXPECT_EQ(sourceOf({"method.name=null"}), "--set method.name=null | method");
+    EXPECT_EQ(sourceOf({"lights.00.intensity=-5"}),
+              "--set lights.00.intensity=-5 | lights[0].intensity");
+    // Removing a key under something that is not an object changes nothing: the scene's own
+    // error, not the override's.
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "camera": "front"})";
+    EXPECT_EQ(sourceOf({"camera.azimuth=null"}), (tmp / "s.json").string() + " | camera");
+    // Nor does removing a key that is not there.
+    std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "method": {"params": {}}})";
+    EXPECT_EQ(sourceOf({"method.name=null"}), (tmp / "s.json").string() + " | method");
 
     // Errors raised later (a method's parameters, checked by the pipeline) name it too.
     std::ofstream(tmp / "s.json") << R"({"volume": "a.nii"})";
