@@ -566,19 +566,25 @@ std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::str
         records.push_back(applyOverride(doc, o));
         const std::string key = o.substr(0, o.find('='));
         if (!isPathKey(key)) continue;
+        // Walks to the value without creating anything: a removed key (null) stays removed.
         json* node = &doc;
         std::size_t start = 0;
         while (node && start <= key.size()) {
             const auto dot = key.find('.', start);
             const std::string part =
                 key.substr(start, dot == std::string::npos ? dot : dot - start);
-            if (node->is_array())
-                node = &(*node)[std::stoul(part)];
-            else
+            if (node->is_array()) {
+                const std::size_t i = std::stoul(part);
+                node = i < node->size() ? &(*node)[i] : nullptr;
+            } else if (node->is_object() && node->contains(part)) {
                 node = &(*node)[part];
+            } else {
+                node = nullptr;
+            }
             if (dot == std::string::npos) break;
             start = dot + 1;
         }
+        if (!node) continue;
         if (node->is_object() && node->contains("path")) node = &(*node)["path"];
         if (node->is_string() && !fs::path(node->get<std::string>()).is_absolute())
             *node = fs::absolute(node->get<std::string>()).string();

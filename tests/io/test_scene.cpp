@@ -204,6 +204,10 @@ TEST(Scene, AnErrorAnOverrideCausesNamesTheOverrideNotTheSceneFile) {
     std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "method": {"params": {}}})";
     EXPECT_EQ(sourceOf({"method.name=null"}), (tmp / "s.json").string() + " | method");
 
+    // Removing a path key leaves it removed (the absolute-path pass once put it back as null).
+    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "torso", "path": "a.nii"}})";
+    EXPECT_EQ(sourceOf({"volume.path=null"}), "no error");
+
     // Errors raised later (a method's parameters, checked by the pipeline) name it too.
     std::ofstream(tmp / "s.json") << R"({"volume": "a.nii"})";
     const io::Scene s =
