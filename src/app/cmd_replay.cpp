@@ -204,7 +204,14 @@ Command addReplayCommand(CLI::App& app) {
                 ses.scenePath.empty() || fs::path(ses.scenePath).is_absolute()
                     ? fs::path(ses.scenePath)
                     : fs::path(ses.source).parent_path() / ses.scenePath;
-            if (v.phantom.empty() && !fs::exists(v.path, ec))
+            if (v.phantom.empty() && !fs::exists(v.path, ec)) {
+                // A --set volume(.path)=… gave it: that override is named (the path was made
+                // absolute against the current directory, where it was typed).
+                if (const io::OverrideRecord* r =
+                        io::blamedOverride(scenes.front().overrides, "volume.path"))
+                    throw InputError(
+                        r->said, "volume", "names '" + v.path.string() + "', which does not exist",
+                        "fix the path; a relative one is read from the current directory");
                 throw InputError(ses.scenePath.empty() ? ses.source : sceneFile.string(),
                                  ses.scenePath.empty() ? "scene.volume" : "volume",
                                  "names '" + v.path.string() + "', which does not exist",
@@ -213,6 +220,7 @@ Command addReplayCommand(CLI::App& app) {
                                        "session file's folder)"
                                      : "fix the path in " + ses.scenePath +
                                            " (relative to that scene file's folder)");
+            }
         }
         fs::path ffmpeg;
         if (!video->empty()) ffmpeg = findOnPath("ffmpeg");

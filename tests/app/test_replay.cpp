@@ -193,6 +193,8 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         // Found by the pipeline's method parameters, after the scenes parsed: the override named.
         {q(tmp / "good.json") + " --set method=sh-local --set method.params.rays=abc",
          "--set method.params.rays=abc: method.params.rays"},
+        {q(tmp / "good.json") + " --set volume=no-such.nii.gz",
+         "--set volume=no-such.nii.gz: volume: names"},
         {q(tmp / "good.json") + " --size 16by16", "--size"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
