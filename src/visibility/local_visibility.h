@@ -260,7 +260,7 @@ struct ClipUpdateStats {
     std::size_t blocks = 0;           ///< stored blocks
     std::size_t blocksTouched = 0;    ///< blocks with at least one point recomputed or cleared
     std::uint64_t points = 0;         ///< stored sample points
-    std::uint64_t pointsTraced = 0;   ///< points whose rays were traced again
+    std::uint64_t pointsTraced = 0;   ///< points computed again (from scratch, or by the cut rays)
     std::uint64_t pointsCleared = 0;  ///< points ≥ R outside a face: empty space's value, no rays
     std::uint64_t raysTraced = 0;     ///< rays marched (a cut ray marched in pieces counts once)
     double seconds = 0.0;
