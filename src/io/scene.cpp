@@ -351,7 +351,7 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
     // As errors name it: "--set key=value" once the key is known.
     const std::string said = "--set " + assignment;
-    OverrideRecord record{assignment, normalizedKey(key), {}, said, value.is_null()};
+    OverrideRecord record{normalizedKey(key), {}, said, value.is_null()};
     json* node = &doc;
     json* parent = nullptr;
     std::string last;

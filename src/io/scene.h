@@ -178,12 +178,11 @@ struct RenderSettings {
 /// existed): `--set method.params.rays=64` on a scene without a method creates "method", and
 /// "method: needs a 'name'" is then the override's doing.
 struct OverrideRecord {
-    std::string assignment;  ///< key=value as given
-    std::string key;
-    std::string created;
-    std::string said;  ///< how the user gave it: "--set key=value" unless the caller says otherwise
-    bool removed =
-        false;  ///< the value was null: the key was removed (an error then names its parent)
+    std::string key;      ///< dotted, array indices canonical ("lights.0.x")
+    std::string created;  ///< see above
+    std::string said;     ///< how the user gave it: "--set key=value" unless the caller renames it
+    /// The value was null and a key that was there is gone (an error may then name its parent).
+    bool removed = false;
 };
 
 struct Scene {
@@ -205,9 +204,11 @@ struct Scene {
     std::vector<OverrideRecord> overrides;
 };
 
-/// Applies "dotted.key=value" to a JSON document. Throws InputError (source "--set") on a malformed
-/// override, one that is not UTF-8, or a value nesting deeper than the scene's depth limit (64).
-/// The value null removes the key (its default applies again): --set camera.azimuth=null.
+/// Applies "dotted.key=value" to a JSON document and says what it did. Throws InputError on a
+/// malformed override, one that is not UTF-8, a value nesting deeper than the scene's depth limit
+/// (64) — source "--set" — or a key that cannot be placed (source "--set key=value"). The value
+/// null removes the key (its default applies again): --set camera.azimuth=null; removing a key
+/// under something that is not an object changes nothing.
 OverrideRecord applyOverride(nlohmann::json& doc, const std::string& assignment);
 
 /// Applies overrides in order (applyOverride); a relative path given by one to a path key
