@@ -324,6 +324,8 @@ const SweepReference& SweepRunner::reference(std::size_t index, const core::Prog
     ref.display = displayOf(ref.linear, s);
     const json& pt = r.details.contains("pathtrace") ? r.details["pathtrace"] : json::object();
     ref.relativeStdError = pt.value("relative_std_error", std::numeric_limits<double>::quiet_NaN());
+    // A reference cached before 7 December has no expected_nrmse: nan, not a floor in other units.
+    ref.expectedNrmse = pt.value("expected_nrmse", std::numeric_limits<double>::quiet_NaN());
     ref.spp = pt.value("spp", 0LL);
     for (const auto& st : r.stages)
         if (st.ran && st.kind != pipeline::StageKind::Input) ref.seconds += st.seconds;
@@ -344,7 +346,7 @@ SweepRow SweepRunner::run(const SweepItem& item, const core::Progress& progress,
     SweepRow row;
     row.item = item;
     row.warnings = r.warnings;
-    row.referenceError = ref.relativeStdError;
+    row.referenceError = ref.expectedNrmse;
     std::size_t bytes = 0;
     for (const auto& st : r.stages) {
         if (st.kind != pipeline::StageKind::Precompute || st.key.empty()) continue;

@@ -41,9 +41,12 @@
 //   ssim         display images (mean SSIM over covered pixels)
 //   flip         display images (mean LDR-FLIP over covered pixels)
 //   detected     fraction of covered pixels with FLIP above 0.05 (detectionFraction)
-// The reference's own estimated relative error (its `relative_std_error`) is the floor no
-// variant's nrmse can be expected to fall below; the CSV carries it on every row (nan when the
-// reference is not the path tracer's). A run with its own "reference" (the isosurface methods: the
+// The reference's own noise in nrmse's terms (its `expected_nrmse`: √(Σ variance / Σ mean²) over
+// covered pixels and RGB) is the floor no variant's nrmse can be expected to fall below (a
+// perfect method's nrmse² against it is that value squared); the CSV carries it on every row as
+// `reference_error` (nan when the reference is not the path tracer's). Until 7 December the
+// column held the tracer's `relative_std_error`, normalised by the mean luminance rather than the
+// RMS value: a floor 1.4–1.5× too high on the convergence benchmark's images. A run with its own "reference" (the isosurface methods: the
 // path tracer renders the volume, not the surface) is measured against that one; the CSV's last
 // column says which (0 = the sweep's).
 //
@@ -135,6 +138,9 @@ struct SweepReference {
     core::ImageRGBA linear;       ///< radiance, alpha = coverage
     core::ImageRGBA display;      ///< the scene's display transform
     double relativeStdError = 0;  ///< the path tracer's estimate of its own relative error
+    /// Its noise in ErrorStats::nrmse's terms (pathtrace::Stats::expectedNrmse; nan when the
+    /// reference is not the path tracer's or was cached before the tracer reported it).
+    double expectedNrmse = 0;
     long long spp = 0;
     double seconds = 0;  ///< what it took now (0 when served from the cache)
     bool cached = false;
@@ -144,7 +150,7 @@ struct SweepRow {
     SweepItem item;
     double precomputeSeconds = 0, frameSeconds = 0, memoryMb = 0;
     double nrmse = 0, rmse255 = 0, psnrDb = 0, ssim = 0, flip = 0, detected = 0;
-    double referenceError = 0;  ///< SweepReference::relativeStdError (nan: not estimated)
+    double referenceError = 0;  ///< SweepReference::expectedNrmse (nan: not estimated)
     std::vector<std::string> warnings;
 };
 

@@ -1354,19 +1354,24 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         return Moments{m, std::max(0.0, lumSq[p] / n - m * m)};
     };
     // The image's relative error (Stats::relativeStdError): the variance of each covered pixel's
-    // luminance mean, averaged, over the mean covered luminance.
+    // mean in each of R, G and B, averaged over them, over the mean covered RGB value — the NRMS
+    // of the convergence benchmark (and the path tracer's issue), whose error is RGB too.
     auto relativeError = [&] {
         double var = 0.0, mean = 0.0;
         std::size_t covered = 0;
         for (std::size_t p = 0; p < pixels; ++p) {
             if (!(alpha[p] > 0.0)) continue;
-            const Moments mo = moments(p);
-            var += mo.spread / std::max(1.0, double(count[p]) - 1.0);
-            mean += mo.mean;
+            const double n = count[p];
+            for (int c = 0; c < 3; ++c) {
+                const double m = sum[p * 3 + c] / n;
+                var += std::max(0.0, sumSq[p * 3 + c] / n - m * m) / std::max(1.0, n - 1.0);
+                mean += m;
+            }
             ++covered;
         }
-        return covered && mean > 0.0 ? std::sqrt(var / double(covered)) / (mean / double(covered))
-                                     : 0.0;
+        return covered && mean > 0.0
+                   ? std::sqrt(var / double(3 * covered)) / (mean / double(3 * covered))
+                   : 0.0;
     };
     // Adaptive sampling (Options::adaptive): the pass's samples, `perPixel` × pixels in all, shared
     // in proportion to each pixel's noise weight — √(3×3 mean of the one-sample luminance
@@ -1508,6 +1513,19 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         stats->seconds = clock.seconds();
         stats->accelerationBytes = accelerationBytes();
         stats->relativeStdError = error;
+        // ErrorStats::nrmse's normalisation (the reference's RMS, not its mean) over the same
+        // covered pixels and channels: what a perfect image's nrmse against this one would be.
+        double var = 0.0, square = 0.0;
+        for (std::size_t p = 0; p < pixels; ++p) {
+            if (!(alpha[p] > 0.0)) continue;
+            const double n = count[p];
+            for (int c = 0; c < 3; ++c) {
+                const double m = sum[p * 3 + c] / n;
+                var += std::max(0.0, sumSq[p * 3 + c] / n - m * m) / std::max(1.0, n - 1.0);
+                square += m * m;
+            }
+        }
+        stats->expectedNrmse = square > 0.0 ? std::sqrt(var / square) : 0.0;
         stats->targetReached = reached;
         stats->focusMm = lens ? focus : 0.0;
         stats->autofocused = lens && !(options_.focusMm > 0.0);

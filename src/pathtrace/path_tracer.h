@@ -141,10 +141,16 @@ struct Stats {
     /// extreme σt): taken as blocked there. 0 for ordinary TFs.
     std::uint64_t budgetExceeded = 0;
     double seconds = 0.0;
-    /// The image's estimated relative error: √(mean over covered pixels of the variance of the
-    /// luminance mean) / (mean covered luminance) — the NRMS error against the converged image
-    /// that the samples predict (noise only; the estimator has no bias). 0 for a black image.
+    /// The image's estimated relative error: √(mean over covered pixels and R, G, B of the
+    /// variance of the pixel's mean) / (mean covered RGB value) — the NRMS error against the
+    /// converged image that the samples predict (noise only; the estimator has no bias), in the
+    /// convergence benchmark's terms. 0 for a black image. (Until 7 December it was the
+    /// luminance's: on coloured multiple-scattering images 15–24 % under the RGB error measured.)
     double relativeStdError = 0.0;
+    /// The same noise in analysis::ErrorStats::nrmse's terms (normalised by the image's RMS value
+    /// instead of its mean): √(Σ variance / Σ mean²) over covered pixels and RGB — the nrmse a
+    /// perfect method would show against this image, so the floor of an accuracy sweep.
+    double expectedNrmse = 0.0;
     bool targetReached = false;         ///< a target error was given and met
     double focusMm = 0.0;               ///< the plane in focus (aperture > 0)
     bool autofocused = false;           ///< focusMm came from autofocus

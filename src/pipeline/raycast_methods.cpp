@@ -852,6 +852,7 @@ std::shared_ptr<const TracedImage> tracePath(
                       {"seconds", st.seconds},
                       {"paths_per_second", st.seconds > 0 ? double(st.paths) / st.seconds : 0.0},
                       {"relative_std_error", st.relativeStdError},
+                      {"expected_nrmse", st.expectedNrmse},
                       {"target_error", pt.targetError},
                       {"target_reached", st.targetReached},
                       {"real_collisions", st.realCollisions},
