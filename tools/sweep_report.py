@@ -137,7 +137,9 @@ def plot_accuracy(rows, ref, metric, out):
                 if t and x == "precompute_s":
                     ax.annotate(t, (r[x], r[metric]), fontsize=6, xytext=(3, 2),
                                 textcoords="offset points", color=c)
-    floor = ref.get("relative_std_error") or 0
+    # The reference's noise in nrmse's own terms (absent from sweeps run before 7 December, whose
+    # relative_std_error is normalised by the mean, not the RMS: no floor drawn for them).
+    floor = ref.get("expected_nrmse") or 0
     for ax, x in zip(axes, ("precompute seconds (what a TF change costs)", "frame seconds")):
         ax.set_xscale("log")
         ax.set_yscale("log")

@@ -152,6 +152,10 @@ Command addSweepCommand(CLI::App& app) {
                         {"relative_std_error", std::isfinite(ref.relativeStdError)
                                                    ? nlohmann::json(ref.relativeStdError)
                                                    : nlohmann::json()},
+                        // The floor of its nrmse plots (the CSV's reference_error).
+                        {"expected_nrmse", std::isfinite(ref.expectedNrmse)
+                                               ? nlohmann::json(ref.expectedNrmse)
+                                               : nlohmann::json()},
                         {"seconds", ref.seconds},
                         {"cached", ref.cached}};
                     if (k == 0) {

@@ -587,7 +587,11 @@ TEST(Cli, SweepWritesOneCsvRowPerVariantWithItsImageAndErrorMap) {
         EXPECT_TRUE(fs::exists(out / "maps" / (std::string(id) + ".png"))) << id;
     }
     EXPECT_TRUE(fs::exists(out / "reference.png"));
-    EXPECT_TRUE(fs::exists(out / "reference.json"));
+    ASSERT_TRUE(fs::exists(out / "reference.json"));
+    // The plots' floor: the reference's noise in nrmse's terms, beside its relative error.
+    const auto ref = nlohmann::json::parse(std::ifstream(out / "reference.json"));
+    EXPECT_GT(ref["expected_nrmse"].get<double>(), 0.0);
+    EXPECT_GT(ref["relative_std_error"].get<double>(), 0.0);
     for (const auto& e : fs::recursive_directory_iterator(out))
         EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
 }
