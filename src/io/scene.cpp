@@ -2,6 +2,7 @@
 #include "io/scene.h"
 
 #include <algorithm>
+#include <charconv>
 #include <cmath>
 #include <fstream>
 #include <limits>
@@ -309,23 +310,48 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 }  // namespace
 
 namespace {
-/// A dotted key with its array indices in canonical form ("lights.00.x" → "lights.0.x"), as
-/// applyOverride reads them (std::stoul).
-std::string normalizedKey(const std::string& key) {
-    std::string out;
+/// A dotted key's parts, empty ones kept ("lights..x" → "lights", "", "x"): the one place an
+/// override's key is split.
+std::vector<std::string> keyParts(const std::string& key) {
+    std::vector<std::string> parts;
     std::size_t start = 0;
     while (true) {
         const auto dot = key.find('.', start);
-        std::string part = key.substr(start, dot == std::string::npos ? dot : dot - start);
-        if (!part.empty() && std::all_of(part.begin(), part.end(), ::isdigit)) {
-            const auto nonzero = part.find_first_not_of('0');
-            part = nonzero == std::string::npos ? "0" : part.substr(nonzero);
-        }
-        out += part;
-        if (dot == std::string::npos) return out;
-        out += '.';
+        parts.push_back(key.substr(start, dot == std::string::npos ? dot : dot - start));
+        if (dot == std::string::npos) return parts;
         start = dot + 1;
     }
+}
+
+bool isIndexPart(const std::string& part) {
+    return !part.empty() && std::all_of(part.begin(), part.end(), ::isdigit);
+}
+
+/// An all-digit part as an array index; an index no array can reach (past std::size_t) is the
+/// largest, so "is past the end" answers it like any other.
+std::size_t indexOfPart(const std::string& part) {
+    std::size_t i = 0;
+    const auto [end, ec] = std::from_chars(part.data(), part.data() + part.size(), i);
+    return ec == std::errc() && end == part.data() + part.size()
+               ? i
+               : std::numeric_limits<std::size_t>::max();
+}
+
+/// Parts [0, n) joined with dots, their indices in canonical form ("lights.00.x" → "lights.0.x"):
+/// the key as override records and errors' fields compare it.
+std::string normalizedKey(const std::vector<std::string>& parts, std::size_t n) {
+    std::string out;
+    for (std::size_t k = 0; k < n && k < parts.size(); ++k) {
+        if (k) out += '.';
+        const std::string& part = parts[k];
+        if (isIndexPart(part)) {
+            const auto nonzero = part.find_first_not_of('0');
+            out += nonzero == std::string::npos ? "0" : part.substr(nonzero);
+        } else {
+            out += part;
+        }
+    }
+    return out;
 }
 }  // namespace
 
@@ -351,57 +377,50 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
     // As errors name it: "--set key=value" once the key is known.
     const std::string said = "--set " + assignment;
-    OverrideRecord record{normalizedKey(key), {}, said, value.is_null()};
+    const std::vector<std::string> parts = keyParts(key);
+    OverrideRecord record{normalizedKey(parts, parts.size()), {}, said, value.is_null()};
     json* node = &doc;
     json* parent = nullptr;
     std::string last;
     bool existed = true;  // whether the last key descended into was there before
-    std::size_t start = 0;
-    while (true) {
+    for (std::size_t k = 0; k < parts.size(); ++k) {
         parent = node;
-        const auto dot = key.find('.', start);
-        const std::string part =
-            key.substr(start, dot == std::string::npos ? std::string::npos : dot - start);
+        const std::string& part = parts[k];
         if (part.empty())
             throw InputError(said, key, "has an empty path component", "e.g. lights.0.intensity=2");
-        const bool isIndex = std::all_of(part.begin(), part.end(), ::isdigit);
-        if (isIndex && node->is_array()) {
-            const std::size_t i = std::stoul(part);
+        if (isIndexPart(part) && node->is_array()) {
+            const std::size_t i = indexOfPart(part);
             if (i >= node->size())
                 throw InputError(said, key,
                                  "index " + part + " is past the end (size " +
                                      std::to_string(node->size()) + ")");
             node = &(*node)[i];
-        } else {
-            if (node->is_null()) *node = json::object();
-            // Shorthand forms expand so their keys can be overridden: "method": "mip" ≡ {"name":
-            // "mip"}, etc.
-            if (node->is_string() && node != &doc) {
-                static const std::map<std::string, std::string> kShorthandKey = {
-                    {"method", "name"}, {"volume", "path"}, {"transfer_function", "preset"}};
-                const std::string parentKey = key.substr(0, start == 0 ? 0 : start - 1);
-                if (const auto it = kShorthandKey.find(parentKey); it != kShorthandKey.end())
-                    *node = json{{it->second, *node}};
-            }
-            if (!node->is_object()) {
-                // Removing a key that cannot exist changes nothing (the scene's own shape is
-                // the scene's to answer for when it is read).
-                if (record.removed) {
-                    record.removed = false;  // nothing was
-                    return record;
-                }
-                throw InputError(
-                    said, key,
-                    "'" + part + "' descends into " + typeName(*node) + ", not an object");
-            }
-            existed = node->contains(part);
-            if (record.created.empty() && !existed)
-                record.created = normalizedKey(key.substr(0, dot));
-            node = &(*node)[part];
-            last = part;
+            continue;
         }
-        if (dot == std::string::npos) break;
-        start = dot + 1;
+        if (node->is_null()) *node = json::object();
+        // Shorthand forms expand so their keys can be overridden: "method": "mip" ≡ {"name":
+        // "mip"}, etc.
+        if (node->is_string() && node != &doc) {
+            static const std::map<std::string, std::string> kShorthandKey = {
+                {"method", "name"}, {"volume", "path"}, {"transfer_function", "preset"}};
+            if (const auto it = kShorthandKey.find(k == 1 ? parts[0] : std::string());
+                it != kShorthandKey.end())
+                *node = json{{it->second, *node}};
+        }
+        if (!node->is_object()) {
+            // Removing a key that cannot exist changes nothing (the scene's own shape is the
+            // scene's to answer for when it is read).
+            if (record.removed) {
+                record.removed = false;  // nothing was
+                return record;
+            }
+            throw InputError(said, key,
+                             "'" + part + "' descends into " + typeName(*node) + ", not an object");
+        }
+        existed = node->contains(part);
+        if (record.created.empty() && !existed) record.created = normalizedKey(parts, k + 1);
+        node = &(*node)[part];
+        last = part;
     }
     // null removes an object key: the default applies again (--set camera.azimuth=null).
     if (value.is_null() && parent && parent->is_object() && !last.empty())
@@ -568,21 +587,16 @@ std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::str
         if (!isPathKey(key)) continue;
         // Walks to the value without creating anything: a removed key (null) stays removed.
         json* node = &doc;
-        std::size_t start = 0;
-        while (node && start <= key.size()) {
-            const auto dot = key.find('.', start);
-            const std::string part =
-                key.substr(start, dot == std::string::npos ? dot : dot - start);
+        for (const std::string& part : keyParts(key)) {
             if (node->is_array()) {
-                const std::size_t i = std::stoul(part);
+                const std::size_t i = indexOfPart(part);
                 node = i < node->size() ? &(*node)[i] : nullptr;
             } else if (node->is_object() && node->contains(part)) {
                 node = &(*node)[part];
             } else {
                 node = nullptr;
             }
-            if (dot == std::string::npos) break;
-            start = dot + 1;
+            if (!node) break;
         }
         if (!node) continue;
         if (node->is_object() && node->contains("path")) node = &(*node)["path"];

@@ -156,6 +156,18 @@ TEST(Scene, OverridesApplyBeforeValidation) {
     expectBad(j, "camera.azimuth", {"must be a number"});
     EXPECT_THROW(io::applyOverride(j, "noequals"), InputError);
     EXPECT_THROW(io::applyOverride(j, "lights.7.intensity=1"), InputError);
+    // An index past any std::size_t (std::stoul threw std::out_of_range here: an internal error
+    // with exit code 1), also on a path key, whose value applyOverrides makes absolute.
+    for (const char* big :
+         {"lights.99999999999999999999.intensity=1", "lights.99999999999999999999.path=x"}) {
+        try {
+            io::applyOverrides(j, {big});
+            ADD_FAILURE() << big;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("is past the end (size 1)"), std::string::npos)
+                << e.what();
+        }
+    }
     EXPECT_THROW(io::applyOverride(j, "a..b=1"), InputError);
     EXPECT_THROW(io::applyOverride(j, "camera.azimuth.x=1"), InputError);
 }
