@@ -28,6 +28,7 @@ Command addPhantomCommand(CLI::App& app) {
     c.sub->add_option("--seed", *seed, "Noise seed (torso)");
     c.sub->add_flag("--list", *list, "List the phantoms and exit");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
+    CLI::App* sub = c.sub;
     c.run = [=] {
         if (*list) {
             for (const auto& [n, d] : core::phantomCatalog())
@@ -40,6 +41,13 @@ Command addPhantomCommand(CLI::App& app) {
         // Fail before the work, not after: the format, then the path (output_files.h).
         io::checkVolumeOutputPath(*out);
         checkOutputs({{"--output", *out, {}}});
+        // 0 means "the phantom's own size" to makePhantom; said on the command line it is a
+        // size like any other (-5 and 0 used to give the default silently).
+        if (sub->count("--size") && (*size < 8 || *size > 1024))
+            throw InputError("phantom " + *name, "--size",
+                             "must be between 8 and 1024, got " + std::to_string(*size),
+                             "pass --size N with 8 <= N <= 1024, or leave it out for the "
+                             "phantom's own size");
         core::PhantomOptions o;
         o.size = *size;
         o.seed = *seed;

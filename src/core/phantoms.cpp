@@ -354,7 +354,7 @@ Volume makePhantom(const std::string& name, const PhantomOptions& options,
 Volume makePhantomImpl(const std::string& name, const PhantomOptions& options,
                        const Progress& progress) {
     auto sizeOr = [&](int def) {
-        const int n = options.size > 0 ? options.size : def;
+        const int n = options.size != 0 ? options.size : def;  // negative: refused below
         if (n < 8 || n > 1024)
             throw InputError("phantom " + name, "size",
                              "must be between 8 and 1024, got " + std::to_string(n),

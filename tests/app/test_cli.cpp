@@ -71,6 +71,9 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         {"info '" + (tmp / "missing.nii").string() + "'", "does not exist"},
         {"phantom nosuch -o '" + (tmp / "x.nii.gz").string() + "'", "unknown phantom"},
         {"phantom torso --size 3 -o '" + (tmp / "x.nii.gz").string() + "'", "size"},
+        // Zero and negative sizes used to give the phantom's own size silently.
+        {"phantom torso --size 0 -o '" + (tmp / "x.nii.gz").string() + "'", "--size: must be"},
+        {"phantom torso --size=-5 -o '" + (tmp / "x.nii.gz").string() + "'", "got -5"},
         {"phantom torso -o '" + (tmp / "x.bmp").string() + "'", ".nii.gz"},
         {"scene '" + (tmp / "scene.json").string() + "'", "camera.fov_y"},
         {"scene '" + (tmp / "scene.json").string() + "' --set camera.fov_y=30 --set image.width=-3",
