@@ -552,7 +552,9 @@ std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
 /// clamp onto the same origin as an earlier point of the block (along an axis, every point from
 /// the first one at or past the last voxel plane clamps onto that plane) copy its C floats
 /// instead of calling f — the same values, without the rays (a partial edge block of a 133-slice
-/// volume is 11/16 such points at level 0).
+/// volume is 11/16 such points at level 0). An f that also takes a bool learns whether the point
+/// was clamped (off its level's lattice: the line sweep stores a copy of another point's value
+/// there, sweepBlocks), the one rule the sweep and the clip-aware update share.
 template <class F>
 void forEachSamplePoint(const MultiresGrid& grid, std::size_t b, int C, float* data, F&& f,
                         bool shareClamped = false) {
@@ -583,7 +585,11 @@ void forEachSamplePoint(const MultiresGrid& grid, std::size_t b, int C, float* d
                                 C, data);
                     continue;
                 }
-                f(glm::min(grid.samplePosition(b, l, i, j, k), top), data, s);
+                const glm::vec3 p = grid.samplePosition(b, l, i, j, k);
+                if constexpr (std::is_invocable_v<F&, const glm::vec3&, float*, float, bool>)
+                    f(glm::min(p, top), data, s, glm::any(glm::greaterThan(p, top)));
+                else
+                    f(glm::min(p, top), data, s);
             }
 }
 
@@ -1338,7 +1344,8 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                     float* blockData = data + offset[b];
                     std::size_t index = 0;
                     forEachSamplePoint(
-                        grid, b, C, blockData, [&](const glm::vec3& origin, float* dst, float s) {
+                        grid, b, C, blockData,
+                        [&](const glm::vec3& origin, float* dst, float s, bool clamped) {
                             const std::size_t me = index++;
                             sc.swept[me] = 0;
                             if (!visibilityNeeded(grid, origin, s)) {
@@ -1348,8 +1355,7 @@ TraceCounts sweepBlocks(const MultiresGrid& grid, const optics::TfTable& table,
                             }
                             traced += std::uint64_t(N);
                             const glm::ivec3 j(int(me % n), int(me / n % n), int(me / (n * n)));
-                            if (origin == p0 + float(spacing) * glm::vec3(j)) {
-                                // On its lattice (exact: integer or half-integer coordinates).
+                            if (!clamped) {  // on its lattice
                                 sc.swept[me] = 1;
                                 std::fill(dst, dst + C, 0.f);
                                 const glm::ivec3 k = glm::ivec3(origin - (lat ? 0.5f : 0.f)) - lo;
@@ -2020,16 +2026,6 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
 
     const ValueField sigma(grid, table);
     const bool swept = base.algorithm() == VisibilityAlgorithm::Sweep;
-    // Whether a sample point of spacing s lies on the sweep's lattice for it: integer coordinates
-    // at level 0, (j + ½)·s − ½ past a block corner (half-integers) above it (sweepBlocks).
-    auto onSweepLattice = [](const glm::vec3& p, float s) {
-        if (s <= 1.f) return p == glm::floor(p);
-        for (int a = 0; a < 3; ++a) {
-            const float k = (p[a] + 0.5f - 0.5f * s) / s;
-            if (k != std::floor(k)) return false;
-        }
-        return true;
-    };
     LocalVisibility out = base;  // the unclipped values wherever the cut cannot reach
     out.raysTraced_ = out.samplesTaken_ = 0;
     const std::size_t blocks = grid.pyramid().blockCount();
@@ -2070,7 +2066,9 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         }
                     if (far) continue;
                     bool anyChanged = false;
-                    auto perPoint = [&](const glm::vec3& origin, float* dst, float spacing) {
+                    // clamped: a partial edge block's point past the volume, clamped onto it.
+                    auto perPoint = [&](const glm::vec3& origin, float* dst, float spacing,
+                                        bool clamped) {
                         // Classify by the distance to every face (the origin as traced).
                         bool inside = true, outside = false;
                         for (std::size_t q = 0; q < faces.size(); ++q) {
@@ -2104,8 +2102,10 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         };
                         // A swept field stores at a partial edge block's points past the volume
                         // (off its lattices, clamped onto it) a copy of another point's value
-                        // (sweepBlocks): no `before` of their own.
-                        const bool own = !swept || onSweepLattice(origin, spacing);
+                        // (sweepBlocks): no `before` of their own — but at level 0 that point is
+                        // the one at the clamped position itself. A boundary layer's points hold
+                        // their own, marched with the same rays (traceLayers).
+                        const bool own = !swept || !clamped || spacing <= 1.f;
                         rays += clippedPointVisibility(sigma, set, origin, grid.dims(), radius, hf,
                                                        narrow, own ? dst : nullptr, v, samples,
                                                        rayScratch);
@@ -2114,7 +2114,9 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                     };
                     forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);
                     forEachLayerPoint(grid, b, C, out.layerData_.data(), out.layerOffset_,
-                                      perPoint);
+                                      [&](const glm::vec3& origin, float* dst, float spacing) {
+                                          perPoint(origin, dst, spacing, false);
+                                      });
                     touched += anyChanged;
                 }
                 samplesTotal += samples;

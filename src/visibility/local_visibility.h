@@ -58,7 +58,12 @@
 // side most rays never reach it: a quarter of the rays on average). The rays no face cuts keep the
 // unclipped field's own values, so under the line sweep no march-vs-sweep seam appears at R from a
 // face (the sweep's depth of a cut ray still meets the march's T_whole: their difference, tested
-// within the cut's bound). So moving a plane costs rays in a slab of width 2R around it, a
+// within the cut's bound). Every point holding its own value may take the difference way: the
+// sweep's lattice points, its boundary layers' points (marched with the same rays) and a partial
+// edge block's points past the volume at level 0 (a copy of the point at their clamped position);
+// at coarser levels those hold another point's value and are computed from scratch (the sweep and
+// the update tell them apart by the same rule: forEachSamplePoint's `clamped`). So moving a plane
+// costs rays in a slab of width 2R around it, a
 // quarter of them on the kept side, not the whole field, and the unclipped field stays cached for
 // the next move.
 //
