@@ -255,13 +255,18 @@ struct SigmaIntegral4 {
         const __m256d uc = _mm256_and_pd(u, inside);  // 0 outside: reads cell 0, discarded
         const __m128i cell = _mm256_cvttpd_epi32(uc);
         const __m256d x = _mm256_mul_pd(_mm256_sub_pd(uc, _mm256_cvtepi32_pd(cell)), width);
-        const __m128i at = _mm_slli_epi32(cell, 1);  // node = 2 doubles
-        // Masked gathers with every lane on (the plain form leaves GCC 12 warning about its
-        // uninitialised source).
-        const __m256d all = _mm256_castsi256_pd(_mm256_set1_epi64x(-1));
-        const __m256d cum = _mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes, at, all, 8);
-        const __m256 pair =
-            _mm256_castpd_ps(_mm256_mask_i32gather_pd(_mm256_setzero_pd(), nodes + 1, at, all, 8));
+        // Each lane's 16-byte node in one load, transposed: fewer and cheaper than two gathers
+        // (AMD Zen's gathers are microcoded; 4-lane gathers are no faster on Intel either).
+        alignas(16) std::int32_t c[4];
+        _mm_store_si128(reinterpret_cast<__m128i*>(c), cell);
+        const __m256d even =
+            _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(nodes + 2 * c[0])),
+                                 _mm_loadu_pd(nodes + 2 * c[2]), 1);
+        const __m256d odd =
+            _mm256_insertf128_pd(_mm256_castpd128_pd256(_mm_loadu_pd(nodes + 2 * c[1])),
+                                 _mm_loadu_pd(nodes + 2 * c[3]), 1);
+        const __m256d cum = _mm256_unpacklo_pd(even, odd);  // node cum of lanes 0, 1, 2, 3
+        const __m256 pair = _mm256_castpd_ps(_mm256_unpackhi_pd(even, odd));  // (f, fNext)
         const __m256 split =
             _mm256_permutevar8x32_ps(pair, _mm256_setr_epi32(0, 2, 4, 6, 1, 3, 5, 7));
         const __m256d f = _mm256_cvtps_pd(_mm256_castps256_ps128(split));
@@ -316,7 +321,7 @@ void TfTable::meanExtinctions(const float* s, const double* integrals, std::size
                  pointFraction = _mm_set1_ps(kPointSampleFraction),
                  absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7fffffff)),
                  below = _mm_set1_ps(zeroBelow_), above = _mm_set1_ps(zeroAbove_);
-    const __m128i lastCell = _mm_set1_epi32(kTableCells - 1), allLanes = _mm_set1_epi32(-1);
+    const __m128i lastCell = _mm_set1_epi32(kTableCells - 1);
     const float* sigma = sigma_.data();
     auto four = [&](__m128 sf4, __m128 sb4, __m256d iF, __m256d iB) {
         // extinction(½ (sf + sb)) as position() clamps it.
@@ -325,8 +330,17 @@ void TfTable::meanExtinctions(const float* s, const double* integrals, std::size
         u = _mm_min_ps(_mm_max_ps(u, zero), cells);
         const __m128i c4 = _mm_min_epi32(_mm_cvttps_epi32(u), lastCell);
         const __m128 fr = _mm_sub_ps(u, _mm_cvtepi32_ps(c4));
-        const __m128 a = _mm_mask_i32gather_ps(zero, sigma, c4, _mm_castsi128_ps(allLanes), 4);
-        const __m128 b = _mm_mask_i32gather_ps(zero, sigma + 1, c4, _mm_castsi128_ps(allLanes), 4);
+        // σt at cells c and c + 1 of each lane: one 8-byte load per lane instead of two gathers.
+        alignas(16) std::int32_t c[4];
+        _mm_store_si128(reinterpret_cast<__m128i*>(c), c4);
+        auto adjacent = [&](int lane) {
+            return _mm_castsi128_ps(
+                _mm_loadl_epi64(reinterpret_cast<const __m128i*>(sigma + c[lane])));
+        };
+        const __m128 p01 = _mm_movelh_ps(adjacent(0), adjacent(1));  // a0 b0 a1 b1
+        const __m128 p23 = _mm_movelh_ps(adjacent(2), adjacent(3));  // a2 b2 a3 b3
+        const __m128 a = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(2, 0, 2, 0));
+        const __m128 b = _mm_shuffle_ps(p01, p23, _MM_SHUFFLE(3, 1, 3, 1));
         const __m128 mid = _mm_add_ps(a, _mm_mul_ps(fr, _mm_sub_ps(b, a)));
         const __m128 point =
             _mm_cmp_ps(_mm_mul_ps(_mm_and_ps(_mm_sub_ps(sb4, sf4), absMask), invCell),
