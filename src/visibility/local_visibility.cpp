@@ -2106,10 +2106,11 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         // the one at the clamped position itself. A boundary layer's points hold
                         // their own, marched with the same rays (traceLayers).
                         const bool own = !swept || !clamped || spacing <= 1.f;
-                        rays += clippedPointVisibility(sigma, set, origin, grid.dims(), radius, hf,
-                                                       narrow, own ? dst : nullptr, v, samples,
-                                                       rayScratch);
-                        ++traced;
+                        const std::uint64_t marched = clippedPointVisibility(
+                            sigma, set, origin, grid.dims(), radius, hf, narrow,
+                            own ? dst : nullptr, v, samples, rayScratch);
+                        rays += marched;
+                        traced += marched > 0;  // none: no face cuts its rays, its value stays
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
                     forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);

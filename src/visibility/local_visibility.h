@@ -262,10 +262,12 @@ bool tryCorrectVisibilityWeights(sh::SphereSamples& samples, int coefficients);
 
 /// What a clip-aware update did (the pipeline's stats report it).
 struct ClipUpdateStats {
-    std::size_t blocks = 0;           ///< stored blocks
-    std::size_t blocksTouched = 0;    ///< blocks with at least one point recomputed or cleared
-    std::uint64_t points = 0;         ///< stored sample points
-    std::uint64_t pointsTraced = 0;   ///< points computed again (from scratch, or by the cut rays)
+    std::size_t blocks = 0;         ///< stored blocks
+    std::size_t blocksTouched = 0;  ///< blocks with at least one point recomputed or cleared
+    std::uint64_t points = 0;       ///< stored sample points
+    /// Points whose rays were marched again (all of them from scratch, or the cut ones alone); a
+    /// point within reach of a face whose rays it happens not to cut keeps its value uncounted.
+    std::uint64_t pointsTraced = 0;
     std::uint64_t pointsCleared = 0;  ///< points ≥ R outside a face: empty space's value, no rays
     std::uint64_t raysTraced = 0;     ///< rays marched (a cut ray marched in pieces counts once)
     double seconds = 0.0;
