@@ -510,12 +510,27 @@ std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
             cut += 1;
         }
     }
+    auto transmittance = [](double tau) {
+        return tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // as pointVisibility
+    };
+    OriginValue atOrigin;
     if (!before || !(differenceLength < scratchLength)) {
-        pointVisibility(sigma, set, origin, dims, radius, h, narrow, v, samples);
+        // From scratch: pointVisibility's sum over the kept parts found above.
+        std::fill(v, v + C, 0.0);
+        for (int d = 0; d < set.n; ++d) {
+            const RayDir& ray = set.rays[std::size_t(d)];
+            double tau = 0.0;
+            if (kept[d])
+                tau = ta[d] > 0.f ? opticalDepth(sigma, origin + ta[d] * ray.d, ray, tb[d] - ta[d],
+                                                 h, samples, nullptr)
+                                  : opticalDepth(sigma, origin, ray, tb[d], h, samples, &atOrigin);
+            const double T = transmittance(tau);
+            const double* w = set.wy.data() + std::size_t(d) * C;
+            for (int c = 0; c < C; ++c) v[c] += T * w[c];
+        }
         return partial;
     }
     for (int c = 0; c < C; ++c) v[c] = double(before[c]);
-    OriginValue atOrigin;
     for (int d = 0; d < set.n; ++d) {
         // No face within its reach, or no length (at the volume's face): unchanged.
         if (!(full[d] > 0.f) || (kept[d] && ta[d] == 0.f && tb[d] == full[d])) continue;
@@ -534,9 +549,6 @@ std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
                 tauWhole += opticalDepth(sigma, origin + tb[d] * ray.d, ray, full[d] - tb[d], h,
                                          samples, nullptr);
         }
-        auto transmittance = [](double tau) {
-            return tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // as pointVisibility
-        };
         const double change = transmittance(tauKept) - transmittance(tauWhole);
         const double* w = set.wy.data() + std::size_t(d) * C;
         for (int c = 0; c < C; ++c) v[c] += change * w[c];
