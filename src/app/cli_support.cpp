@@ -106,6 +106,17 @@ const std::vector<std::string>& viewNames() {
     return names;
 }
 
+std::string jsonForStdout(const nlohmann::json& doc, const std::string& input) {
+    try {
+        return doc.dump(2);
+    } catch (const nlohmann::json::type_error&) {
+        throw InputError(input, "path",
+                         "holds bytes that are not UTF-8, which JSON output cannot carry unchanged",
+                         "rename the file or folder to a UTF-8 name (render, iso and info without "
+                         "--json read it as it is)");
+    }
+}
+
 bool inputIsVolume(const std::string& input) {
     std::error_code ec;
     const std::filesystem::path p(input);

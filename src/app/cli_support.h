@@ -48,6 +48,10 @@ void rememberOverrides(const io::Scene& scene);
 InputError blameLoadedOverrides(const InputError& e);
 /// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
 bool inputIsVolume(const std::string& input);
+/// `doc` as indented JSON text for stdout. A string in it that is not UTF-8 (a file name's bytes)
+/// cannot be written as JSON without changing it — a replaced path names no file — so that is an
+/// InputError naming `input`, not an internal one.
+std::string jsonForStdout(const nlohmann::json& doc, const std::string& input);
 
 /// Subcommand registration: each adds itself to the app and sets `run` when chosen.
 struct Command {

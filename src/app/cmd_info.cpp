@@ -92,7 +92,7 @@ Command addInfoCommand(CLI::App& app) {
         for (const auto& w : v.warnings) std::fprintf(stderr, "voxlight: warning: %s\n", w.c_str());
         const nlohmann::json j = describe(v, *path, sw.seconds());
         if (*json)
-            std::cout << j.dump(2) << "\n";
+            std::cout << jsonForStdout(j, *path) << "\n";
         else
             printText(j);
         return kExitOk;

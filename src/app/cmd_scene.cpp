@@ -39,7 +39,7 @@ Command addSceneCommand(CLI::App& app) {
         // so that "valid" here means the scene renders.
         const pipeline::Plan plan = pipeline::Session().plan(s);
         if (!*init) {
-            std::cout << s.document.dump(2) << "\n";
+            std::cout << jsonForStdout(s.document, *path) << "\n";
             std::cerr << s.source << ": valid (method " << plan.method << ", " << s.lights.size()
                       << " light(s), " << s.clipPlanes.size() << " clip plane(s))\n";
             return kExitOk;
@@ -61,8 +61,8 @@ Command addSceneCommand(CLI::App& app) {
         if (!s.effectsGiven)
             if (const auto* m = pipeline::MethodRegistry::instance().find(s.method.name))
                 doc["effects"] = m->effects;
-        // Strings from the command line may be any bytes: replaced rather than failing.
-        std::cout << doc.dump(2, ' ', false, nlohmann::json::error_handler_t::replace) << "\n";
+        // A path's non-UTF-8 bytes replaced would name no file: refused (jsonForStdout).
+        std::cout << jsonForStdout(doc, *path) << "\n";
         return kExitOk;
     };
     return c;

@@ -107,6 +107,17 @@ void checkVolumeSize(const Geometry& geometry) {
     }
 }
 
+/// A spacing outside [kMinSpacingMm, kMaxSpacingMm] is bad input (a damaged header), not a volume.
+void checkSpacing(const Geometry& g) {
+    for (int a = 0; a < 3; ++a)
+        if (!(g.spacing[a] >= kMinSpacingMm && g.spacing[a] <= kMaxSpacingMm)) {
+            std::ostringstream os;
+            os << "voxel spacing " << g.spacing.x << " x " << g.spacing.y << " x " << g.spacing.z
+               << " mm is outside " << kMinSpacingMm << ".." << kMaxSpacingMm << " mm";
+            throw InputError("volume", "spacing", os.str(), "repair the header's voxel sizes");
+        }
+}
+
 /// A direction matrix that is not a rotation (a damaged sform/qform or space directions, found by
 /// fuzz_nifti_gz) is bad input, not an internal fault: readers name the file when they rethrow.
 void checkOrientation(const Geometry& g) {
@@ -122,6 +133,7 @@ void checkOrientation(const Geometry& g) {
 
 Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), type_(type) {
     checkVolumeSize(geometry);
+    checkSpacing(geometry);
     checkOrientation(geometry);
     geometry_.validate();
     data_ = std::shared_ptr<std::byte>(new std::byte[sizeBytes()](),
@@ -131,6 +143,7 @@ Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), 
 Volume::Volume(const Geometry& geometry, VoxelType type, std::shared_ptr<std::byte> storage)
     : geometry_(geometry), type_(type), data_(std::move(storage)) {
     checkVolumeSize(geometry);
+    checkSpacing(geometry);
     checkOrientation(geometry);
     geometry_.validate();
     VL_CHECK(data_ != nullptr);

@@ -61,6 +61,11 @@ std::string_view toString(Modality m);
 inline constexpr std::uint64_t kMaxVoxels = std::uint64_t(1) << 31;
 /// Largest size along one axis.
 inline constexpr int kMaxDim = 16384;
+/// Voxel spacings voxlight accepts (mm): 0.1 µm (past synchrotron micro-CT) to 10 m. Beyond them
+/// no scanner's file is meant, and the optics' squared distances and optical depths overflow (a
+/// spacing of 1e154 mm crashed the path tracer; 1e30 mm made PVRT's transfer NaN).
+inline constexpr double kMinSpacingMm = 1e-4;
+inline constexpr double kMaxSpacingMm = 1e4;
 
 inline double minComponent(const glm::dvec3& v) { return std::min(v.x, std::min(v.y, v.z)); }
 inline double maxComponent(const glm::dvec3& v) { return std::max(v.x, std::max(v.y, v.z)); }

@@ -537,8 +537,10 @@ core::Geometry nrrdGeometry(const NrrdHeader& h, const fs::path& path) {
             const double len = glm::length(v);
             if (!(len > 0) || !std::isfinite(len))
                 throw InputError(path.string(), "space directions",
-                                 "axis " + std::to_string(a) + " has a zero-length direction",
-                                 "every axis needs a non-zero spacing vector");
+                                 "axis " + std::to_string(a) +
+                                     (len > 0 ? " has a spacing vector too long to measure"
+                                              : " has a zero-length direction"),
+                                 "every axis needs a non-zero spacing vector in mm");
             g.spacing[a] = len;
             g.direction[a] = v / len;
         }

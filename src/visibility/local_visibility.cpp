@@ -797,7 +797,18 @@ sh::SphereSamples latticeDirections(const core::Geometry& g, int rays, int coeff
     }
     for (std::size_t k = 0; k < s.size(); ++k)
         s.weights.push_back(4.0 * std::numbers::pi * double(count[k]) / double(probe.size()));
-    correctVisibilityWeights(s, coefficients);
+    if (!tryCorrectVisibilityWeights(s, coefficients)) {
+        // Very anisotropic voxels crowd the lattice's steps into a few world directions (26 rays
+        // hold up to 100:1, not 300:1): no positive weights integrate the SH basis exactly.
+        const double ratio = core::maxComponent(g.spacing) / core::minComponent(g.spacing);
+        throw InputError("local visibility", "method.params.algorithm",
+                         "the line sweep's " + std::to_string(rays) +
+                             " lattice rays cannot cover the sphere evenly for voxels " +
+                             std::to_string(int(std::lround(ratio))) +
+                             " times longer on one axis than another",
+                         "set method.params.algorithm to \"march\" (evenly spread rays), or "
+                         "resample the volume to less anisotropic voxels");
+    }
     const std::lock_guard<std::mutex> lock(mutex);
     if (remembered.size() == kRemembered) remembered.erase(remembered.begin());
     remembered.push_back({g.spacing, g.direction, rays, coefficients, s});

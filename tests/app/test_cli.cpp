@@ -47,6 +47,26 @@ TEST(Cli, PhantomThenInfoJson) {
     EXPECT_LE(j["range"][0].get<double>(), -1000.0);
 }
 
+TEST(Cli, AFileNameThatIsNotUtf8IsReadButNotPrintedAsJson) {
+    // JSON cannot carry the name's 0xFF byte unchanged: info --json and scene used to fail with
+    // an internal error (nlohmann's type_error 316), scene --init printed a replaced path.
+    test::TempDir tmp;
+    const std::string file = "'" +
+                             (tmp / ("bad\xff"
+                                     "name.nii.gz"))
+                                 .string() +
+                             "'";
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + file, tmp.path()).code, 0);
+    EXPECT_EQ(run("info " + file, tmp.path()).code, 0);
+    for (const std::string cmd : {"info --json ", "scene ", "scene --init "}) {
+        const Result r = run(cmd + file, tmp.path());
+        EXPECT_EQ(r.code, 2) << cmd << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << cmd << r.err;
+        EXPECT_NE(r.err.find("not UTF-8"), std::string::npos) << cmd << r.err;
+        EXPECT_TRUE(r.out.empty()) << cmd << r.out;
+    }
+}
+
 TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
     test::TempDir tmp;
     {

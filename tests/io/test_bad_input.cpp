@@ -233,6 +233,16 @@ TEST(BadInput, NrrdBadSpacingOrSpaceFields) {
     expectNrrdError(tmp, "dir_zero.nrrd",
                     nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0,0,0) (0,0,1)\n"),
                     "space directions", {"zero-length"});
+    // Finite but absurd: a length that overflows is not "zero"; one that does not is outside the
+    // spacings voxlight accepts (1e154 mm crashed the path tracer, 1e308 the isosurface normals,
+    // 1e30 made PVRT's transfer NaN).
+    expectNrrdError(tmp, "dir_huge.nrrd",
+                    nrrdText(d3, "space: RAS\nspace directions: (1e300,0,0) (0,1,0) (0,0,1)\n"),
+                    "space directions", {"too long"});
+    for (const char* bad : {"1e200", "1e5", "1e-5"})
+        expectNrrdError(tmp, std::string("sp_") + bad + ".nrrd",
+                        nrrdText(d3, std::string("spacings: 1 ") + bad + " 1\n"), "spacing",
+                        {"outside 0.0001..10000 mm"});
     expectNrrdError(tmp, "dir_shear.nrrd",
                     nrrdText(d3, "space: RAS\nspace directions: (1,0,0) (0.5,1,0) (0,0,1)\n"),
                     "space directions", {"not orthogonal"});

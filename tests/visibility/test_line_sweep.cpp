@@ -175,6 +175,19 @@ TEST(LineSweep, LatticeDirectionsArePrimitiveSymmetricAndIntegrateTheLowBandsExa
         for (int i = 1; i < coefficients; ++i) EXPECT_NEAR(sum[std::size_t(i)], 0.0, kExactTol);
     }
     EXPECT_THROW(latticeSteps(32), InputError);
+    // Voxels 300× longer on one axis crowd the steps into a few world directions: no positive
+    // weights exist. An input error that names the march (it was an internal error); 100:1 holds.
+    core::Geometry flat;
+    flat.spacing = {1.0, 1.0, 100.0};
+    EXPECT_NO_THROW(latticeDirections(flat, 26, 4));
+    flat.spacing.z = 300.0;
+    try {
+        (void)latticeDirections(flat, 26, 4);
+        ADD_FAILURE() << "300:1 voxels accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.algorithm");
+        EXPECT_NE(std::string(e.what()).find("\"march\""), std::string::npos) << e.what();
+    }
     LocalVisibilityOptions o = sweepOptions(32, 4);
     const core::Volume v = test::makeVolume({16, 16, 16}, [](int, int, int) { return 0; });
     EXPECT_THROW(computeLocalVisibility(test::fullGrid(v, test::rampTf(1.f)),
