@@ -72,7 +72,8 @@ Command addCompareCommand(CLI::App& app) {
                      "Pixels averaged: all (none), or those covered in either image's alpha")
         ->check(CLI::IsMember({"none", "alpha"}));
     c.run = [=] {
-        checkOutputs({{"--map", *map, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}});
+        checkOutputs({{"--map", *map, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}},
+                     {{"REFERENCE", *refPath}, {"TEST", *testPath}});
         io::ImageReadInfo refInfo, testInfo;
         const core::ImageRGBA ref = io::readImage(*refPath, refInfo);
         const core::ImageRGBA test = io::readImage(*testPath, testInfo);

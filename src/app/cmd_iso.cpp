@@ -149,7 +149,8 @@ Command addIsoCommand(CLI::App& app) {
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     c.run = [=] {
         core::Stopwatch total;
-        checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}});
+        checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}},
+                     {{"INPUT", *scene}});
         if (*exportSh) {
             if (!*bake || *bakeFrom != "lattice" || *latticeMode != "sh")
                 throw InputError("command line", "--export-sh",

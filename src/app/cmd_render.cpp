@@ -127,8 +127,22 @@ Command addRenderCommand(CLI::App& app) {
                       {"--exr", *exr, {".exr"}},
                       {"--std-error", *stdErr, {".exr"}},
                       {"--display-exr", *displayExr, {".exr"}},
-                      {"--stats", *stats, {".json"}}});
+                      {"--stats", *stats, {".json"}}},
+                     {{"INPUT", *scene}});
         const io::Scene s = loadInput(*scene, *sets, *view);
+        {
+            // The files the scene reads: an environment map written over by -o or --exr.
+            std::vector<std::pair<std::string, std::filesystem::path>> inputs = {
+                {"INPUT", *scene}, {"the scene's volume", s.volume.path}};
+            for (std::size_t i = 0; i < s.lights.size(); ++i)
+                inputs.emplace_back("lights[" + std::to_string(i) + "].path", s.lights[i].path);
+            checkOutputs({{"--output", *out, {}},
+                          {"--exr", *exr, {}},
+                          {"--std-error", *stdErr, {}},
+                          {"--display-exr", *displayExr, {}},
+                          {"--stats", *stats, {}}},
+                         inputs);
+        }
         if (!stdErr->empty() && s.method.name != "pathtrace")
             throw InputError("command line", "--std-error",
                              "method '" + s.method.name + "' makes no standard-error image",

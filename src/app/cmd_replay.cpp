@@ -157,7 +157,8 @@ Command addReplayCommand(CLI::App& app) {
         const Ranks ranks;  // mpirun -n K: the frames split over K ranks (app/ranks.h)
         // Outputs first (nothing is rendered for a path that cannot be written).
         checkOutputs({{"--stats", *stats, {".json"}},
-                      {"--video", *video, {".mp4", ".mkv", ".mov", ".webm"}}});
+                      {"--video", *video, {".mp4", ".mkv", ".mov", ".webm"}}},
+                     {{"SESSION", *sessionFile}});
         const fs::path dir(*outDir);
         std::error_code ec;
         if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))

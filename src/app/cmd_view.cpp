@@ -74,7 +74,7 @@ Command addViewCommand(CLI::App& app) {
                                  "give SCENE.json or a volume before --screenshot");
         }
         if (!record->empty()) {
-            checkOutputs({{"--record", *record, {".json"}}});
+            checkOutputs({{"--record", *record, {".json"}}}, {{"INPUT", *input}});
             if (input->empty())
                 throw InputError("command line", "--record", "needs a scene or volume",
                                  "give SCENE.json or a volume before --record");

@@ -74,16 +74,24 @@ void checkOne(const OutputSpec& o) {
 }
 }  // namespace
 
-void checkOutputs(const std::vector<OutputSpec>& outputs) {
+void checkOutputs(const std::vector<OutputSpec>& outputs,
+                  const std::vector<std::pair<std::string, fs::path>>& inputs) {
+    auto sameFile = [](const fs::path& a, const fs::path& b) {
+        std::error_code ec;
+        return identity(a) == identity(b) || fs::equivalent(a, b, ec);
+    };
     std::vector<const OutputSpec*> given;
     for (const auto& o : outputs)
         if (!o.path.empty()) given.push_back(&o);
     for (const OutputSpec* o : given) checkOne(*o);
+    for (const OutputSpec* o : given)
+        for (const auto& [name, path] : inputs)
+            if (!path.empty() && sameFile(o->path, path))
+                fail(*o, "'" + o->path.string() + "' is " + name + ", which it would replace",
+                     "write the output to another file");
     for (std::size_t i = 0; i < given.size(); ++i) {
         for (std::size_t j = 0; j < i; ++j) {
-            std::error_code ec;
-            const bool same = identity(given[i]->path) == identity(given[j]->path) ||
-                              fs::equivalent(given[i]->path, given[j]->path, ec);
+            const bool same = sameFile(given[i]->path, given[j]->path);
             if (same)
                 fail(*given[i],
                      "'" + given[i]->path.string() + "' is the same file as " + given[j]->option,

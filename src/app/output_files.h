@@ -18,6 +18,7 @@
 #include <filesystem>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace voxlight::app {
@@ -29,7 +30,10 @@ struct OutputSpec {
 };
 
 /// Checks every given output before the work; InputError naming the option on the first problem.
-void checkOutputs(const std::vector<OutputSpec>& outputs);
+/// `inputs` (what the command reads: name as errors say it, path): an output that is one of them
+/// would replace what it was made from (`compare a.png b.png --map a.png` overwrote a.png).
+void checkOutputs(const std::vector<OutputSpec>& outputs,
+                  const std::vector<std::pair<std::string, std::filesystem::path>>& inputs = {});
 
 class OutputFiles {
   public:

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <system_error>
 
+#include "core/files.h"
 #include "io/dicom_series.h"
 
 namespace voxlight::io::detail {
@@ -19,6 +20,7 @@ constexpr int kProbeFiles = 16;
 }  // namespace
 
 bool looksLikeDicomFile(const fs::path& file, bool* hasPreamble) {
+    if (core::isSpecialFile(file)) return false;  // a FIFO in the folder would block open()
     std::ifstream in(file, std::ios::binary);
     if (!in) return false;
     std::array<unsigned char, 132> head{};

@@ -13,6 +13,7 @@
 #include <system_error>
 
 #include "core/error.h"
+#include "core/files.h"
 #include "io/image_module.h"
 #include "io/module_loader.h"
 
@@ -90,6 +91,7 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
     if (std::filesystem::is_directory(path, ec))
         throw InputError(file, "file", "is a directory, not an image file",
                          "give the path of an image file");
+    core::refuseSpecialFile(path);
     mod::ReadResult r;
     imageModule(file).read(file.c_str(), kMaxImagePixels, r);
     info.channels = r.channels;

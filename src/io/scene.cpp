@@ -11,6 +11,7 @@
 #include <string_view>
 #include <utility>
 
+#include "core/files.h"
 #include "io/json_field.h"
 
 namespace voxlight::io {
@@ -747,6 +748,7 @@ json readJsonFile(const fs::path& path) {
     std::error_code ec;
     if (fs::is_directory(path, ec))
         throw InputError(file, "", "is a directory, not a scene file", "give a .json file");
+    core::refuseSpecialFile(path);
     std::ifstream in(path, std::ios::binary);
     if (!in) throw InputError(file, "", "cannot be opened", "check the path");
     std::string text;

@@ -51,6 +51,7 @@
 #include <mutex>
 #include <sstream>
 
+#include "core/files.h"
 #include "core/text.h"
 #include "io/child_process.h"
 #include "io/dicom_series.h"
@@ -2170,6 +2171,7 @@ Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& option
     if (!fs::exists(path, ec))
         throw InputError(path.string(), "path", "does not exist",
                          "check the path (relative to the current directory)");
+    core::refuseSpecialFile(path);
     Volume v;
     if (options.raw) {
         if (fs::is_directory(path))

@@ -619,6 +619,44 @@ TEST(Cli, SweepWritesOneCsvRowPerVariantWithItsImageAndErrorMap) {
         EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
 }
 
+TEST(Cli, AnOutputNeverReplacesAnInput) {
+    // compare's --map over REFERENCE used to succeed (and the reference was gone); --stats over
+    // the scene file, --exr over the scene's environment map: refused before any work.
+    test::TempDir tmp;
+    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "image": {"width": 16, "height": 16}, "method": "gradient"})";
+    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "a.png"), tmp.path()).code,
+              0);
+    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "b.png") + " --exr " +
+                      q(tmp / "env.exr"),
+                  tmp.path())
+                  .code,
+              0);
+    std::ofstream(tmp / "e.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "image": {"width": 16, "height": 16}, "method": "sh-local",
+        "lights": [{"type": "environment", "path": "env.exr"}]})";
+    const auto before = fs::file_size(tmp / "a.png");
+    const std::vector<std::pair<std::string, std::string>> cases = {
+        {"compare " + q(tmp / "a.png") + " " + q(tmp / "b.png") + " --map " + q(tmp / "a.png"),
+         "--map: '" + (tmp / "a.png").string() + "' is REFERENCE"},
+        {"render -q " + q(tmp / "s.json") + " -o " + q(tmp / "c.png") + " --stats " +
+             q(tmp / "s.json"),
+         "is INPUT"},
+        {"render -q " + q(tmp / "e.json") + " -o " + q(tmp / "c.png") + " --exr " +
+             q(tmp / "env.exr"),
+         "is lights[0].path"},
+    };
+    for (const auto& [args, words] : cases) {
+        const Result r = run(args, tmp.path());
+        EXPECT_EQ(r.code, 2) << args << "\n" << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+        EXPECT_NE(r.err.find(words), std::string::npos) << r.err;
+    }
+    EXPECT_EQ(fs::file_size(tmp / "a.png"), before);
+    EXPECT_FALSE(fs::exists(tmp / "c.png"));
+    EXPECT_TRUE(nlohmann::json::parse(std::ifstream(tmp / "s.json")).contains("volume"));
+}
+
 TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
     test::TempDir tmp;
     std::ofstream(tmp / "sweep.json") << R"({

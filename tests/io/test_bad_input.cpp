@@ -2,6 +2,7 @@
 // Malformed files: one clear InputError naming the file, never a crash or a half-filled volume.
 // These run under ASan/UBSan in CI (the `asan` preset).
 #include <gtest/gtest.h>
+#include <sys/stat.h>
 #include <zlib.h>
 
 #include <chrono>
@@ -9,6 +10,8 @@
 #include <limits>
 
 #include "core/phantoms.h"
+#include "io/image.h"
+#include "io/scene.h"
 #include "io/volume_io.h"
 #include "support/test_support.h"
 
@@ -43,6 +46,27 @@ void expectInputError(const fs::path& path, const std::string& mustName,
 TEST(BadInput, MissingFile) {
     test::TempDir tmp;
     expectInputError(tmp / "nope.nii.gz", "nope.nii.gz", {"does not exist"});
+}
+
+TEST(BadInput, AFifoIsRefusedBeforeItsOpenBlocks) {
+    // open() of a FIFO waits for a writer (Ctrl-C could not end it): volumes, scenes and images
+    // refuse one by its type; /dev/zero (a device) the same.
+    test::TempDir tmp;
+    ASSERT_EQ(::mkfifo((tmp / "pipe.nii").c_str(), 0600), 0);
+    ASSERT_EQ(::mkfifo((tmp / "pipe.json").c_str(), 0600), 0);
+    ASSERT_EQ(::mkfifo((tmp / "pipe.png").c_str(), 0600), 0);
+    expectInputError(tmp / "pipe.nii", "pipe.nii", {"FIFO"});
+    expectInputError("/dev/zero", "/dev/zero", {"device"});
+    auto refused = [](const auto& read, const std::string& name) {
+        try {
+            read();
+            ADD_FAILURE() << name << " was read";
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("FIFO"), std::string::npos) << e.what();
+        }
+    };
+    refused([&] { (void)io::readJsonFile(tmp / "pipe.json"); }, "pipe.json");
+    refused([&] { (void)io::readImage(tmp / "pipe.png"); }, "pipe.png");
 }
 
 TEST(BadInput, TruncatedNiftiGz) {
