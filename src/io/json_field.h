@@ -115,9 +115,12 @@ class Field {
     }
     glm::dvec3 unitVec3() const {
         const glm::dvec3 v = vec3();
-        const double len = glm::length(v);
-        if (!(len > 1e-12)) fail("must be a non-zero direction, got [0, 0, 0]");
-        return v / len;
+        // Scaled by the largest component first: [1e200, 0, 0] is a direction too (its length
+        // overflowed to ∞, and v/∞ read as the zero vector).
+        const double largest = std::max({std::abs(v.x), std::abs(v.y), std::abs(v.z)});
+        if (!(largest > 0.0)) fail("must be a non-zero direction, got [0, 0, 0]");
+        const glm::dvec3 u = v / largest;
+        return u / glm::length(u);
     }
 
     // Optional accessors: keep the default when the key is absent.

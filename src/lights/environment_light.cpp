@@ -46,7 +46,7 @@ std::vector<glm::vec3> probeToEquirect(const core::ImageRGBA& img, int& w, int& 
 }  // namespace
 
 std::string_view toString(EnvironmentLayout l) {
-    return l == EnvironmentLayout::Equirect ? "equirect" : "angular_probe";
+    return l == EnvironmentLayout::Equirect ? "equirect" : "probe";  // as scenes spell it
 }
 
 EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const EnvironmentOptions& options,
@@ -86,7 +86,7 @@ EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const Environme
                 source_, "layout",
                 "an equirectangular map needs width = 2·height, got " +
                     std::to_string(image.width) + "×" + std::to_string(image.height),
-                "resample it to 2:1, or use layout \"angular_probe\" for a square light probe");
+                "resample it to 2:1, or use layout \"probe\" for a square light probe");
         w_ = image.width, h_ = image.height;
         rgb_.resize(std::size_t(w_) * h_);
         for (std::size_t p = 0; p < rgb_.size(); ++p)

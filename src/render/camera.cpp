@@ -49,7 +49,17 @@ Camera::Camera(const CameraSpec& spec, std::span<const glm::dvec3> points, int w
     glm::dvec3 up = spec.up, orbitDir(0.0);
     if (spec.eye) {
         eye_ = *spec.eye;
-        forward_ = glm::normalize(target - eye_);
+        // The scene checks an eye against an explicit target; the default target (the visible
+        // matter's centre) is known only here.
+        const glm::dvec3 toTarget = target - eye_;
+        const double largest =
+            std::max({std::abs(toTarget.x), std::abs(toTarget.y), std::abs(toTarget.z)});
+        if (!(largest > 1e-9))
+            throw InputError("camera", "camera.eye",
+                             "coincides with the target (without camera.target: the centre of "
+                             "the visible matter)",
+                             "move camera.eye away from it, or set camera.target");
+        forward_ = glm::normalize(toTarget / largest);
     } else {
         const double az = spec.azimuthDeg * kDegToRad, el = spec.elevationDeg * kDegToRad;
         orbitDir =

@@ -169,6 +169,13 @@ TEST(Scene, OverridesApplyBeforeValidation) {
         }
     }
     EXPECT_THROW(io::applyOverride(j, "a..b=1"), InputError);
+    // A direction whose length overflows is still a direction (it read as the zero vector).
+    json big = json::parse(R"({"volume": "a.nii",
+        "lights": [{"type": "directional", "direction": [-1e200, 0, 0]}],
+        "camera": {"up": [0, 1e300, 1e300]}})");
+    const io::Scene b = parse(big);
+    EXPECT_EQ(b.lights[0].direction, glm::dvec3(-1, 0, 0));
+    EXPECT_NEAR(b.camera.up.y, std::sqrt(0.5), 1e-15);
     EXPECT_THROW(io::applyOverride(j, "camera.azimuth.x=1"), InputError);
 }
 
@@ -358,12 +365,20 @@ TEST(Scene, HostileOverridesAreInputErrors) {
 }
 
 TEST(Scene, EndlessFileIsRefusedAtTheSizeLimit) {
-    // /dev/zero never ends: the reader stops at the size limit instead of exhausting memory.
-    try {
-        (void)io::loadScene("/dev/zero");
-        ADD_FAILURE() << "read /dev/zero";
-    } catch (const InputError& e) {
-        EXPECT_NE(std::string(e.what()).find("16 MiB"), std::string::npos) << e.what();
+    // A file past the limit (sparse: no disk used) is refused at 16 MiB read instead of exhausting
+    // memory; /dev/zero, which never ends, is a device and refused before it is opened.
+    test::TempDir tmp;
+    std::ofstream(tmp / "huge.json") << "{";
+    std::filesystem::resize_file(tmp / "huge.json", std::uintmax_t(17) << 20);
+    for (const auto& [path, words] :
+         {std::pair<std::filesystem::path, std::string>{tmp / "huge.json", "16 MiB"},
+          {"/dev/zero", "device"}}) {
+        try {
+            (void)io::loadScene(path);
+            ADD_FAILURE() << "read " << path;
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find(words), std::string::npos) << e.what();
+        }
     }
 }
 

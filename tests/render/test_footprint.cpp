@@ -272,5 +272,22 @@ TEST(Camera, APlacedCameraDoesNotDependOnThePoints) {
             }
 }
 
+TEST(Camera, AnEyeOnTheDefaultTargetIsAnInputErrorNamingTheEye) {
+    // Without camera.target the target is the matter's centre; an eye placed there used to give
+    // a NaN view direction, reported as the headlight's "light: direction".
+    const std::vector<glm::dvec3> box = {{-10, -10, -10}, {10, 10, 10}};
+    render::CameraSpec spec;
+    spec.eye = glm::dvec3(0.0);
+    try {
+        const render::Camera c(spec, box, 32, 32);
+        ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "camera.eye");
+    }
+    spec.eye = glm::dvec3(1e-6, 0.0, 0.0);  // a micrometre away: a direction
+    spec.target = glm::dvec3(0.0);
+    EXPECT_NO_THROW(render::Camera(spec, box, 32, 32));
+}
+
 }  // namespace
 }  // namespace voxlight
