@@ -215,6 +215,18 @@ Command addIsoCommand(CLI::App& app) {
             "extract", true,
             "computed: flying edges " + std::to_string(es.flyingEdgesTriangles) + " triangles",
             sw.seconds()));
+        if (ex.mesh.n_faces() == 0 && options.keep.empty()) {
+            // Nothing cut it away: the surface itself has no triangles here.
+            const glm::ivec3 d = volume.dims();
+            const bool thin = d.x < 2 || d.y < 2 || d.z < 2;
+            throw InputError(
+                s.source, "volume",
+                thin ? "is one voxel thick along an axis: marching cubes needs 2 voxels per axis "
+                       "for a surface"
+                     : "has no isosurface triangles at " + std::to_string(options.isovalue),
+                thin ? "use a volume with at least 2 voxels on every axis"
+                     : "choose another isovalue (--isovalue)");
+        }
         if (ex.mesh.n_faces() == 0)
             throw InputError(s.source, s.cropBox ? "crop_box" : "clip_planes",
                              "the clip planes and crop box remove the whole isosurface (" +

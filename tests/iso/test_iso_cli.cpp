@@ -119,6 +119,21 @@ TEST(IsoCli, FlatVolumeHasNoIsosurface) {
                    "flat", {"flat.nii.gz"});
 }
 
+TEST(IsoCli, AVolumeOneVoxelThickSaysSoInsteadOfBlamingClipPlanes) {
+    // 10×1×1 voxels with values 0..9: the isovalue is inside the range, yet marching cubes has no
+    // cell; the error used to blame "the clip planes and crop box", of which there were none.
+    test::TempDir tmp;
+    core::Geometry g;
+    g.dims = {10, 1, 1};
+    core::Volume line(g, core::VoxelType::Int16);
+    for (int i = 0; i < 10; ++i) line.dataAs<std::int16_t>()[i] = std::int16_t(i);
+    io::writeVolume(line, tmp / "line.nii.gz");
+    expectBadInput(tmp,
+                   "iso -q '" + (tmp / "line.nii.gz").string() + "' -o '" +
+                       (tmp / "m.ply").string() + "' --isovalue 4.5",
+                   "one voxel thick", {"line.nii.gz"});
+}
+
 TEST(IsoCli, UnwritableOrUnknownOutputsAreRefusedBeforeTheWork) {
     test::TempDir tmp;
     const fs::path scene = writeScene(tmp, std::string(kSphere) + "}");
