@@ -766,6 +766,12 @@ json readJsonFile(const fs::path& path) {
                          "nests arrays/objects deeper than " + std::to_string(kMaxSceneDepth) +
                              " levels (at byte " + std::to_string(at) + ")",
                          "a scene needs a handful of levels; is this the right file?");
+    // nlohmann's lexer takes a NUL byte for the end of the input: what follows one was ignored.
+    if (const std::size_t nul = text.find('\0'); nul != std::string::npos)
+        throw InputError(file, "",
+                         "is not valid JSON: a NUL byte at byte " + std::to_string(nul) +
+                             " (JSON text holds none)",
+                         "is this the right file? (a binary file, or text saved as UTF-16?)");
     json doc;
     try {
         doc = json::parse(text);

@@ -2136,8 +2136,9 @@ void applyNonFinitePolicy(Volume& v, const fs::path& path, NonFinitePolicy polic
     if (policy == NonFinitePolicy::Reject)
         throw InputError(path.string(), "voxels",
                          std::to_string(bad) + " of " + std::to_string(v.voxelCount()) +
-                             " voxels are NaN or Inf",
-                         "pass --nonfinite=min to replace them by the lowest finite value");
+                             " voxels are NaN, infinite or beyond float's range (±3.4e38)",
+                         "pass --nonfinite=min to replace them by the lowest finite value, or "
+                         "rescale data that overflows float");
     const float lo = float((v.mapping.slope >= 0 ? v.physicalRange()[0] : v.physicalRange()[1]) -
                            v.mapping.intercept) /
                      float(v.mapping.slope);

@@ -144,7 +144,7 @@ TEST(BadInput, NonFiniteVoxelsRejectedOrReplaced) {
     v.dataAs<float>()[6] = -INFINITY;
     io::writeVolume(v, tmp / "nan.nii.gz");
     expectInputError(tmp / "nan.nii.gz", "nan.nii.gz",
-                     {"2 of 4096 voxels are NaN or Inf", "--nonfinite=min"});
+                     {"2 of 4096 voxels are NaN, infinite or beyond float", "--nonfinite=min"});
     io::ReadOptions opt;
     opt.nonFinite = io::NonFinitePolicy::ReplaceWithMin;
     const core::Volume fixed = io::readVolume(tmp / "nan.nii.gz", opt);

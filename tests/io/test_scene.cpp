@@ -364,6 +364,19 @@ TEST(Scene, HostileOverridesAreInputErrors) {
     EXPECT_THROW((void)parse(built), InputError);
 }
 
+TEST(Scene, TextAfterANulByteIsNotIgnored) {
+    // nlohmann's lexer ends the input at a NUL: the bytes after it were never read.
+    test::TempDir tmp;
+    std::ofstream(tmp / "nul.json", std::ios::binary)
+        << std::string("{\"volume\": \"a.nii\"}\0{{{{", 24);
+    try {
+        (void)io::loadScene(tmp / "nul.json");
+        ADD_FAILURE() << "accepted";
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("NUL byte at byte 19"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Scene, EndlessFileIsRefusedAtTheSizeLimit) {
     // A file past the limit (sparse: no disk used) is refused at 16 MiB read instead of exhausting
     // memory; /dev/zero, which never ends, is a device and refused before it is opened.
