@@ -5,10 +5,12 @@
 // file instead of reading a header; rendering it renders what `render VOLUME` renders.
 #include <algorithm>
 #include <cstdio>
+#include <filesystem>
 #include <iostream>
 #include <memory>
 
 #include "app/cli_support.h"
+#include "core/files.h"
 #include "io/scene.h"
 #include "optics/presets.h"
 #include "pipeline/pipeline.h"
@@ -38,6 +40,15 @@ Command addSceneCommand(CLI::App& app) {
         // Everything `render` checks before loading the volume (method, params, effects, preset),
         // so that "valid" here means the scene renders.
         const pipeline::Plan plan = pipeline::Session().plan(s);
+        // ... and the volume it names is there (loading it is render's work; a missing file or
+        // a FIFO is not a valid scene).
+        if (!s.volume.path.empty()) {
+            std::error_code ec;
+            if (!std::filesystem::exists(s.volume.path, ec))
+                throw InputError(s.volume.path.string(), "path", "does not exist",
+                                 "check the path (relative to the scene file's folder)");
+            core::refuseSpecialFile(s.volume.path);
+        }
         if (!*init) {
             std::cout << jsonForStdout(s.document, *path) << "\n";
             std::cerr << s.source << ": valid (method " << plan.method << ", " << s.lights.size()

@@ -77,6 +77,8 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
             << R"({"volume": {"phantom": "torso"}, "transfer_function": "ct-bonez"})";
         std::ofstream(tmp / "param.json") << R"({"volume": {"phantom": "torso"},
             "method": {"name": "gradient", "params": {"shinyness": 30}}})";
+        // Valid JSON naming a volume that is not there: `scene` said "valid" (render refused).
+        std::ofstream(tmp / "novolume.json") << R"({"volume": "nope.nii"})";
         std::ofstream(tmp / "clip.json") << R"({"volume": {"phantom": "torso"},
             "clip_planes": [{"normal": [0, 1, 0], "shadows_from_removed": "yes"}]})";
     }
@@ -99,6 +101,7 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         {"scene '" + (tmp / "scene.json").string() + "' --set camera.fov_y=30 --set image.width=-3",
          "--set image.width=-3: image.width"},
         {"scene '" + (tmp / "preset.json").string() + "'", "transfer_function.preset"},
+        {"scene '" + (tmp / "novolume.json").string() + "'", "nope.nii: path: does not exist"},
         {"scene '" + (tmp / "param.json").string() + "'", "shinyness"},
         {"scene '" + (tmp / "clip.json").string() + "'", "clip_planes[0].shadows_from_removed"},
         {"info --dims 1,2 '" + (tmp / "junk.nii").string() + "'", "--dims"},
