@@ -135,17 +135,32 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
                                     : "is missing",
                    "give a scene file (relative to the sweep) or an inline scene object");
     }
+    std::vector<io::OverrideRecord> records;
     if (top.has("overrides")) {
         const io::Field o = top.child("overrides");
         const std::vector<std::string> assignments = strings(o);
         try {
-            io::applyOverrides(spec.scene, assignments);
+            records = io::applyOverrides(spec.scene, assignments);
         } catch (const InputError& e) {
             o.fail(e.what());
         }
     }
     // The scene's own method and effects give way to each run's.
     spec.scene.erase("method");
+    // The scene alone (each run adds its method): its own errors are the scene's or an
+    // override's, not the first reference's or run's that happens to be parsed first.
+    try {
+        json alone = spec.scene;
+        alone.erase("effects");
+        (void)io::parseScene(alone, source, spec.sceneDir);
+    } catch (const InputError& e) {
+        std::string where = "scene";
+        if (const io::OverrideRecord* r = io::blamedOverride(records, e.field())) {
+            const std::string said = r->said;  // "--set key=value": the sweep says it without
+            where = "overrides: " + (said.rfind("--set ", 0) == 0 ? said.substr(6) : said);
+        }
+        throw InputError(source, where + ": " + e.field(), e.problem(), e.fix());
+    }
     if (top.has("reference")) spec.references[0] = parseReference(top.child("reference"));
     top.get("frames", spec.frames, 1, kMaxSweepFrames);
     const io::Field runs = top.child("runs");

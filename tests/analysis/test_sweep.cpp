@@ -111,6 +111,10 @@ TEST(Sweep, BadSweepsNameTheirKey) {
         {"reference params not an object", [](json& d) { d["reference"]["params"] = 1; },
          "reference.params"},
         {"bad override", [](json& d) { d["overrides"] = {"image.width"}; }, "overrides"},
+        // A scene error is the scene's or its override's, not the first reference's parsed.
+        {"override with a bad value", [](json& d) { d["overrides"] = {"image.width=abc"}; },
+         "overrides: image.width=abc: image.width"},
+        {"unknown scene key", [](json& d) { d["scene"]["bogus"] = 1; }, "scene: bogus"},
         // Checked by planning every variant: the method's strict params and the scene.
         {"unknown method", [](json& d) { d["runs"][0]["method"] = "raytrace"; },
          "runs[0] (raytrace): method.name"},
