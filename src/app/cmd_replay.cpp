@@ -59,6 +59,14 @@ std::vector<std::string> sizeOverrides(const std::string& size) {
     if (!std::regex_match(size, m, re) || std::stoi(m[1]) < 1 || std::stoi(m[2]) < 1)
         throw InputError("command line", "--size", "'" + size + "' is not WIDTHxHEIGHT",
                          "e.g. --size 256x256");
+    // The scene's image limits, said here: as overrides they would be blamed on a "--set" the
+    // user never typed.
+    constexpr int kMaxSide = 16384;  // io::parseScene's image.width/height
+    if (std::stoi(m[1]) > kMaxSide || std::stoi(m[2]) > kMaxSide)
+        throw InputError(
+            "command line", "--size",
+            "'" + size + "' is larger than " + std::to_string(kMaxSide) + " pixels on a side",
+            "e.g. --size 1920x1080");
     return {"image.width=" + m[1].str(), "image.height=" + m[2].str()};
 }
 
@@ -197,7 +205,18 @@ Command addReplayCommand(CLI::App& app) {
         rememberOverrides(scenes.back());
         pipeline::Session pipe;
         if (!cacheDir->empty()) pipe.cache().setDirectory(*cacheDir);
-        for (const io::Scene& s : scenes) (void)pipe.plan(s);
+        for (std::size_t i = 0; i < scenes.size(); ++i) {
+            try {
+                (void)pipe.plan(scenes[i]);
+            } catch (const InputError& e) {
+                // The method's strict params: named by the keyframe that set them.
+                if (e.source() != ses.source) throw;
+                throw InputError(
+                    ses.source,
+                    interpolate ? ses.fieldAtTime(times[i], e.field()) : ses.fieldAt(i, e.field()),
+                    e.problem(), e.fix());
+            }
+        }
         {
             // Named by the file that holds the volume key: the session, or its scene file.
             const io::VolumeSource& v = scenes.front().volume;

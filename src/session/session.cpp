@@ -279,12 +279,37 @@ json Session::documentAtTime(double t) const {
     return doc;
 }
 
+std::string Session::fieldAt(std::size_t k, const std::string& field) const {
+    const std::string part = field.substr(0, field.find_first_of(".["));
+    for (std::size_t i = std::min(k + 1, keyframes.size()); i-- > 0;)
+        if (keyframes[i].parts.contains(part))
+            return "keyframes[" + std::to_string(i) + "]." + field;
+    return field;
+}
+
+std::string Session::fieldAtTime(double t, const std::string& field) const {
+    std::size_t k = 0;
+    while (k + 1 < keyframes.size() && keyframes[k + 1].time <= t) ++k;
+    return fieldAt(k, field);
+}
+
 io::Scene Session::sceneAt(std::size_t k, const std::vector<std::string>& overrides) const {
-    return io::parseWithOverrides(documentAt(k), overrides, source, baseDir);
+    try {
+        return io::parseWithOverrides(documentAt(k), overrides, source, baseDir);
+    } catch (const InputError& e) {
+        // An error of this file's (not an override's) names the keyframe that set the key.
+        if (e.source() != source) throw;
+        throw InputError(source, fieldAt(k, e.field()), e.problem(), e.fix());
+    }
 }
 
 io::Scene Session::sceneAtTime(double t, const std::vector<std::string>& overrides) const {
-    return io::parseWithOverrides(documentAtTime(t), overrides, source, baseDir);
+    try {
+        return io::parseWithOverrides(documentAtTime(t), overrides, source, baseDir);
+    } catch (const InputError& e) {
+        if (e.source() != source) throw;
+        throw InputError(source, fieldAtTime(t, e.field()), e.problem(), e.fix());
+    }
 }
 
 std::vector<double> frameTimes(const Session& session, double fps) {

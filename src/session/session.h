@@ -105,6 +105,12 @@ struct Session {
     /// applied last, validated (io::parseScene). InputError naming the file and key otherwise.
     io::Scene sceneAt(std::size_t k, const std::vector<std::string>& overrides = {}) const;
     io::Scene sceneAtTime(double t, const std::vector<std::string>& overrides = {}) const;
+    /// `field` of the scene in force at keyframe k ("method.params.rays") as the session file
+    /// spells its origin: "keyframes[i].method.params.rays" for the last keyframe i ≤ k that set
+    /// its top-level part, else `field` itself (the scene's own).
+    std::string fieldAt(std::size_t k, const std::string& field) const;
+    /// The same for the keyframe in force at time t.
+    std::string fieldAtTime(double t, const std::string& field) const;
 };
 
 /// Most frames one replay may ask for (keyframes, or duration × fps + 1).

@@ -172,6 +172,10 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
     json backwards = smallSession();
     backwards["keyframes"][2]["time"] = 0.5;
     writeJson(tmp / "backwards.json", backwards);
+    // A keyframe's bad part: named with the keyframe (it read as the scene's own key).
+    json badPart = smallSession();
+    badPart["keyframes"][2]["transfer_function"] = "bogus";
+    writeJson(tmp / "bad-part.json", badPart);
     writeJson(tmp / "good.json", smallSession());
     std::ofstream(tmp / "a-file") << "x";
 
@@ -196,6 +200,9 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --set volume=no-such.nii.gz",
          "--set volume=no-such.nii.gz: volume: names"},
         {q(tmp / "good.json") + " --size 16by16", "--size"},
+        // Past the image's limit: --size named (it read as a "--set image.width" never typed).
+        {q(tmp / "good.json") + " --size 99999x16", "--size: '99999x16' is larger"},
+        {q(tmp / "bad-part.json"), "keyframes[2].transfer_function.preset"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
         {q(tmp / "good.json") + " --video v.gif", "--video"},
