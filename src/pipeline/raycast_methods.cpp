@@ -695,8 +695,8 @@ optics::Window extremumWindow(Kind kind, const optics::Window& w, const core::Vo
 /// A CT preset (in HU) on a volume with no air: its values are not Hounsfield units (8-bit
 /// windowed exports, raw CT numbers), and the preset shows the wrong tissue or nothing.
 /// Returns whether it warned.
-bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf,
-                         const grid::BrickGrid& grid) {
+bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf, const grid::BrickGrid& grid,
+                         std::vector<std::string>* sink = nullptr) {
     const io::TransferFunctionDesc& d = run.scene().transferFunction;
     if (d.preset.rfind("ct-", 0) != 0 || d.window) return false;
     if (grid.valueLo() < kNoAirAbove) return false;
@@ -704,23 +704,22 @@ bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf,
     os << "'" << tf.name() << "' expects Hounsfield units (air at -1000); this volume holds "
        << grid.valueLo() << ".." << grid.valueHi()
        << " (not HU: use \"generic\", or set transfer_function.window to where the tissue lies)";
-    run.warn(os.str());
+    if (sink)
+        sink->push_back(os.str());
+    else
+        run.warn(os.str());
     return true;
 }
 
 /// Coverage (alpha) below which a pixel shows nothing: under one 8-bit display level.
 constexpr float kVisibleAlpha = 0.5f / 255.f;
 
-/// Never a black image without a word: says why nothing shows and what to do.
-void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
-                        const render::RenderStats& stats, const optics::TransferFunction& tf,
-                        const grid::BrickGrid& grid) {
-    bool anything = false;
-    for (std::size_t i = 3; i < film.pixels.size() && !anything; i += 4)
-        anything = film.pixels[i] > kVisibleAlpha;
-    if (anything) return;
+/// Why an image shows nothing, and what to do: the TF (or isovalue) leaves every skip cell empty
+/// (`anyCellVisible` false), or no camera ray meets what it shows.
+std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible,
+                             const optics::TransferFunction& tf, const grid::BrickGrid& grid) {
     const std::string& method = run.scene().method.name;
-    if (stats.skipCellsVisible == 0) {
+    if (!anyCellVisible) {
         // The TF (or isovalue) leaves every cell empty: compare what it shows with what is there.
         float lo = INFINITY, hi = -INFINITY;
         for (const auto& p : tf.points())
@@ -739,12 +738,29 @@ void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
                 os << "; it shows nothing anywhere";
             os << " (choose a preset for this modality, or set transfer_function.window)";
         }
-        run.warn(os.str());
-    } else if (stats.rays == 0 || (kind != Kind::Mip && kind != Kind::MinIp)) {
-        run.warn("the image is empty: no camera ray meets what '" + method +
-                 "' shows here (the camera looks past it, or clip_planes/crop_box remove it; "
-                 "check camera.target, camera.eye/azimuth/elevation, clip_planes and crop_box)");
+        return os.str();
     }
+    return "the image is empty: no camera ray meets what '" + method +
+           "' shows here (the camera looks past it, or clip_planes/crop_box remove it; "
+           "check camera.target, camera.eye/azimuth/elevation, clip_planes and crop_box)";
+}
+
+bool filmShowsAnything(const core::ImageRGBA& film) {
+    for (std::size_t i = 3; i < film.pixels.size(); i += 4)
+        if (film.pixels[i] > kVisibleAlpha) return true;
+    return false;
+}
+
+/// Never a black image without a word: says why nothing shows and what to do.
+void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
+                        const render::RenderStats& stats, const optics::TransferFunction& tf,
+                        const grid::BrickGrid& grid) {
+    if (filmShowsAnything(film)) return;
+    // A MIP/MinIP whose rays ran shows the background's grey on purpose.
+    if (stats.skipCellsVisible != 0 && stats.rays != 0 &&
+        (kind == Kind::Mip || kind == Kind::MinIp))
+        return;
+    run.warn(emptyImageReason(run, kind, stats.skipCellsVisible != 0, tf, grid));
 }
 
 std::string dims(const glm::ivec3& d) {
@@ -882,6 +898,15 @@ std::shared_ptr<const TracedImage> tracePath(
             " spp with an estimated error of " + std::to_string(100.0 * st.relativeStdError) +
             " % above method.params.target_error (" + std::to_string(100.0 * pt.targetError) +
             " %): raise method.params.spp or method.params.seconds");
+    if (run.has("brick_grid")) {
+        // As the ray caster's methods say it (the warnings travel with a cached reference).
+        const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
+        if (!warnIfNotHounsfield(run, tfa->tf, bricks, &out->warnings) &&
+            !filmShowsAnything(out->image))
+            out->warnings.push_back(emptyImageReason(
+                run, Kind::PathTrace,
+                run.get<grid::BrickMajorants>("skip_cells")->nonEmptyCount() > 0, tfa->tf, bricks));
+    }
     const render::Camera& cam = *camera;
     d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},
                    {"forward", {cam.forward().x, cam.forward().y, cam.forward().z}},

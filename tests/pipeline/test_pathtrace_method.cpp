@@ -332,3 +332,19 @@ TEST(PathTraceMethod, ScatteringAndGradientFactorAreReadStrictly) {
               "method.params.gradient_factor");
     EXPECT_EQ(field({{"scattering", "hybrid"}, {"gradient_factor", 0.0}}), "accepted");
 }
+
+TEST(PathTraceMethod, AnEmptyImageSaysWhyAsTheCastersMethodsDo) {
+    // It said nothing: a black image from a camera looking away, or a TF that shows nothing.
+    json d = tracedScene();
+    d["effects"] = {"global_shadows"};
+    EXPECT_TRUE(Session().run(scene(d)).warnings.empty());
+    d["camera"] = {{"target", {1e6, 0, 0}}};
+    const RunResult away = Session().run(scene(d));
+    ASSERT_EQ(away.warnings.size(), 1u);
+    EXPECT_NE(away.warnings[0].find("no camera ray meets"), std::string::npos) << away.warnings[0];
+    d.erase("camera");
+    d["transfer_function"] = {{"preset", "ct-bone"}, {"extinction_scale", 0}};
+    const RunResult clear = Session().run(scene(d));
+    ASSERT_EQ(clear.warnings.size(), 1u);
+    EXPECT_NE(clear.warnings[0].find("is transparent"), std::string::npos) << clear.warnings[0];
+}
