@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <cctype>
+#include <charconv>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -104,6 +105,20 @@ const std::vector<std::string>& viewNames() {
         return n;
     }();
     return names;
+}
+
+CLI::Validator wholeNumber() {
+    return CLI::Validator(
+        [](std::string& text) -> std::string {
+            if (text.empty() || text.find_first_not_of("0123456789") != std::string::npos)
+                return "'" + text + "' is not a non-negative whole number";
+            std::uint64_t v = 0;
+            const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+            if (ec != std::errc() || end != text.data() + text.size())
+                return "'" + text + "' is larger than 18446744073709551615";
+            return {};
+        },
+        "UINT");
 }
 
 std::string jsonForStdout(const nlohmann::json& doc, const std::string& input) {

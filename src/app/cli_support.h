@@ -46,6 +46,10 @@ void rememberOverrides(const io::Scene& scene);
 /// `e` naming the override it comes from (io::blameOverride) when its source is a scene loadInput
 /// loaded: runGuarded reports every InputError through this.
 InputError blameLoadedOverrides(const InputError& e);
+/// For unsigned options: the text must be decimal digits that fit 64 bits. CLI11 read "-1" and
+/// numbers past 2^64 as 2^64 − 1 without a word (a seed, a header size).
+CLI::Validator wholeNumber();
+
 /// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
 bool inputIsVolume(const std::string& input);
 /// `doc` as indented JSON text for stdout. A string in it that is not UTF-8 (a file name's bytes)

@@ -25,7 +25,7 @@ Command addPhantomCommand(CLI::App& app) {
     c.sub->add_option("NAME", *name, "Phantom name:" + names);
     c.sub->add_option("-o,--output", *out, "Output volume (.nii.gz, .nii, .vti, .mha)");
     c.sub->add_option("--size", *size, "Voxels per axis (default: the phantom's own)");
-    c.sub->add_option("--seed", *seed, "Noise seed (torso)");
+    c.sub->add_option("--seed", *seed, "Noise seed (torso)")->check(wholeNumber());
     c.sub->add_flag("--list", *list, "List the phantoms and exit");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
     CLI::App* sub = c.sub;

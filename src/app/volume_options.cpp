@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "app/volume_options.h"
 
+#include "app/cli_support.h"
+
 namespace voxlight::app {
 
 std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
@@ -15,7 +17,8 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
         ->delimiter(',')
         ->expected(3);
     g->add_flag("--big-endian", o->bigEndian, "Raw file: big-endian voxels");
-    g->add_option("--header-bytes", o->headerBytes, "Raw file: bytes to skip before the data");
+    g->add_option("--header-bytes", o->headerBytes, "Raw file: bytes to skip before the data")
+        ->check(wholeNumber());
     g->add_option("--series", o->series,
                   "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
                   "files without one)");

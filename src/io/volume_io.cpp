@@ -2057,7 +2057,12 @@ Volume readRaw(const fs::path& path, const RawLayout& layout) {
     std::error_code ec;
     const auto have = fs::file_size(path, ec);
     if (ec) throw InputError(path.string(), "file", "cannot be opened", "check the path");
-    if (have < layout.headerBytes + need)
+    if (layout.headerBytes > have)  // (before the sum below, which a huge value overflows)
+        throw InputError(path.string(), "--header-bytes",
+                         std::to_string(layout.headerBytes) + " is past the end of the file (" +
+                             std::to_string(have) + " bytes)",
+                         "give the size of the file's header in bytes");
+    if (have - layout.headerBytes < need)
         throw InputError(path.string(), "data",
                          "is " + std::to_string(have) + " bytes but " +
                              std::to_string(layout.headerBytes) + " header bytes + " +
@@ -2077,6 +2082,13 @@ Volume readRaw(const fs::path& path, const RawLayout& layout) {
             std::reverse(p + i * bytes, p + (i + 1) * bytes);
     }
     v.description = path.filename().string();
+    // Read, but said: a file longer than its layout usually means wrong --dims or --type (or a
+    // header, or a compressed file read as raw).
+    if (const std::uint64_t extra = have - layout.headerBytes - need; extra > 0)
+        v.warnings.push_back(path.filename().string() + " holds " + std::to_string(extra) +
+                             " bytes more than --header-bytes + the --dims/--type layout (" +
+                             std::to_string(layout.headerBytes + need) +
+                             "); they were not read: check --dims and --type");
     return v;
 }
 

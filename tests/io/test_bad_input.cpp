@@ -161,6 +161,18 @@ TEST(BadInput, RawLayoutLargerThanFile) {
     o.raw->spacing = {1, 0, 1};
     writeText(tmp / "w.raw", std::string(1000, '\0'));
     expectInputError(tmp / "w.raw", "w.raw", {"spacing"}, o);
+    // A header past the end (one near 2^64 overflowed the size check into a short read).
+    o.raw->spacing = {1, 1, 1};
+    for (const std::uint64_t header : {std::uint64_t(1001), ~std::uint64_t(0) - 10}) {
+        o.raw->headerBytes = header;
+        expectInputError(tmp / "w.raw", "w.raw", {"--header-bytes", "past the end"}, o);
+    }
+    // Longer than the layout: read, with a warning (it was silent).
+    o.raw->headerBytes = 0;
+    o.raw->dims = {5, 5, 5};
+    const core::Volume v = io::readVolume(tmp / "w.raw", o);
+    ASSERT_EQ(v.warnings.size(), 1u);
+    EXPECT_NE(v.warnings[0].find("875 bytes more"), std::string::npos) << v.warnings[0];
 }
 
 TEST(BadInput, WritingToMissingDirectoryLeavesNothing) {
