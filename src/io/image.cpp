@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdio>
 #include <mutex>
 #include <string>
 #include <system_error>
@@ -83,6 +84,49 @@ ImageRGBA readImage(const std::filesystem::path& path) {
     return readImage(path, info);
 }
 
+namespace {
+/// Holds what is written to file descriptor 2 while it lives (libpng's default error handler,
+/// which OpenImageIO's PNG reader leaves in place, prints "libpng error: …" there itself: a
+/// second line beside voxlight's one). release() restores stderr and returns the text.
+class StderrCapture {
+  public:
+    StderrCapture() {
+        std::fflush(stderr);
+        file_ = std::tmpfile();
+        if (!file_) return;
+        saved_ = ::dup(STDERR_FILENO);
+        if (saved_ < 0 || ::dup2(::fileno(file_), STDERR_FILENO) < 0) {
+            if (saved_ >= 0) ::close(saved_);
+            saved_ = -1;
+            std::fclose(file_);
+            file_ = nullptr;
+        }
+    }
+    StderrCapture(const StderrCapture&) = delete;
+    StderrCapture& operator=(const StderrCapture&) = delete;
+    ~StderrCapture() { (void)release(); }
+    std::string release() {
+        if (saved_ < 0) return {};
+        std::fflush(stderr);
+        ::dup2(saved_, STDERR_FILENO);
+        ::close(saved_);
+        saved_ = -1;
+        std::string text;
+        std::rewind(file_);
+        char buffer[4096];
+        std::size_t n = 0;
+        while ((n = std::fread(buffer, 1, sizeof buffer, file_)) > 0) text.append(buffer, n);
+        std::fclose(file_);
+        file_ = nullptr;
+        return text;
+    }
+
+  private:
+    std::FILE* file_ = nullptr;
+    int saved_ = -1;
+};
+}  // namespace
+
 ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
     const std::string file = path.string();
     std::error_code ec;
@@ -93,7 +137,14 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
                          "give the path of an image file");
     core::refuseSpecialFile(path);
     mod::ReadResult r;
-    imageModule(file).read(file.c_str(), kMaxImagePixels, r);
+    {
+        const mod::Api& api = imageModule(file);  // (a loading error is reported as it is)
+        StderrCapture capture;
+        api.read(file.c_str(), kMaxImagePixels, r);
+        // A codec's own lines: kept when the image was read; a failure's message carries them.
+        const std::string said = capture.release();
+        if (r.status == mod::Status::Ok && !said.empty()) std::fputs(said.c_str(), stderr);
+    }
     info.channels = r.channels;
     info.floatingPoint = r.floatingPoint;
     info.format = r.format;

@@ -16,7 +16,17 @@ namespace {
 std::string oiioError(const std::string& fromObject) {
     std::string e = fromObject.empty() ? OIIO::geterror() : fromObject;
     while (!e.empty() && (e.back() == '\n' || e.back() == ' ')) e.pop_back();
-    return e.empty() ? "unknown OpenImageIO error" : e;
+    // One line: OpenImageIO joins a codec's several complaints with newlines (they reached the
+    // message as literal "\x0A").
+    std::string line;
+    for (const char c : e) {
+        if (c == '\n' || c == '\r') {
+            if (!line.empty() && line.back() != ' ') line += "; ";
+        } else {
+            line += c;
+        }
+    }
+    return line.empty() ? "unknown OpenImageIO error" : line;
 }
 
 OIIO::TypeDesc toOiio(PixelType t) {

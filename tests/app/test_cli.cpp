@@ -660,6 +660,22 @@ TEST(Cli, AnOutputNeverReplacesAnInput) {
     EXPECT_TRUE(nlohmann::json::parse(std::ifstream(tmp / "s.json")).contains("volume"));
 }
 
+TEST(Cli, ATruncatedPngIsOneLine) {
+    // libpng printed its own "libpng error: …" line beside voxlight's, whose message carried
+    // OpenImageIO's newlines as "\x0A".
+    test::TempDir tmp;
+    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "image": {"width": 64, "height": 64}, "method": "gradient"})";
+    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "a.png"), tmp.path()).code,
+              0);
+    fs::resize_file(tmp / "a.png", fs::file_size(tmp / "a.png") / 2);
+    const Result r = run("compare " + q(tmp / "a.png") + " " + q(tmp / "a.png"), tmp.path());
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+    EXPECT_EQ(r.err.find("\\x0A"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.rfind("voxlight: error: ", 0), 0u) << r.err;
+}
+
 TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
     test::TempDir tmp;
     std::ofstream(tmp / "sweep.json") << R"({
