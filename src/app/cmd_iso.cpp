@@ -147,8 +147,16 @@ Command addIsoCommand(CLI::App& app) {
                     "--bake --bake-from lattice --lattice-mode sh: also write each vertex's SH "
                     "irradiance transfer into the PLY (relight the mesh without tracing)");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output");
+    CLI::App* sub = c.sub;
     c.run = [=] {
         core::Stopwatch total;
+        // The bake's own options do nothing without it: said, not ignored.
+        if (!*bake)
+            for (const char* o : {"--samples", "--bounces", "--lattice-resolution", "--bake-from",
+                                  "--lattice-mode"})
+                if (sub->count(o) > 0)
+                    throw InputError("command line", o, "takes effect only with --bake",
+                                     std::string("add --bake, or leave out ") + o);
         checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}},
                      {{"INPUT", *scene}});
         if (*exportSh) {

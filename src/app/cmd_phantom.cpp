@@ -48,6 +48,11 @@ Command addPhantomCommand(CLI::App& app) {
                              "must be between 8 and 1024, got " + std::to_string(*size),
                              "pass --size N with 8 <= N <= 1024, or leave it out for the "
                              "phantom's own size");
+        if (sub->count("--seed") && *name != "torso")
+            std::fprintf(stderr,
+                         "voxlight: warning: --seed changes the torso's noise only; phantom '%s' "
+                         "has none\n",
+                         name->c_str());
         core::PhantomOptions o;
         o.size = *size;
         o.seed = *seed;

@@ -104,6 +104,7 @@ Command addRenderCommand(CLI::App& app) {
             plan.push_back(outputRecord("write_exr", *exr, "--exr"));
             plan.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
             plan.push_back(outputRecord("write_display_exr", *displayExr, "--display-exr"));
+            plan.push_back(outputRecord("write_stats", *stats, "--stats"));
             // The stage column fits the longest name (hierarchical_visibility is 23 characters).
             int width = kExplainNameWidth;
             for (const auto& r : plan) width = std::max(width, int(r.name.size()));

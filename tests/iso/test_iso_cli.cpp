@@ -321,6 +321,12 @@ TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
                    "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
                        (tmp / "m.ply").string() + "' --bake --lattice-mode sh --bake-from vertices",
                    "needs the lattice", {"scene.json"});
+    // A bake option without --bake did nothing silently.
+    for (const char* option : {"--samples 5", "--bounces 2", "--bake-from lattice"})
+        expectBadInput(tmp,
+                       "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                           (tmp / "m.ply").string() + "' " + option,
+                       "takes effect only with --bake", {"scene.json"});
 }
 
 }  // namespace
