@@ -65,8 +65,21 @@ Command addCompareCommand(CLI::App& app) {
         ->add_option("--threshold", *threshold,
                      "detect: FLIP value above which a pixel's difference counts as detected")
         ->check(CLI::Range(0.0, 0.999));
+    // Bounded: a peak near DBL_MAX squared to ∞ (psnr "inf dB"), and CLI::PositiveNumber's
+    // message printed DBL_MAX in 309 digits.
     c.sub->add_option("--peak", *peak, "PSNR's peak value (1 for 0..1 images)")
-        ->check(CLI::PositiveNumber);
+        ->check(CLI::Validator(
+            [](std::string& text) -> std::string {
+                double v = 0.0;
+                try {
+                    v = std::stod(text);
+                } catch (const std::exception&) {
+                    return "'" + text + "' is not a number";
+                }
+                return v >= 1e-12 && v <= 1e12 ? std::string()
+                                               : "'" + text + "' is not in [1e-12, 1e12]";
+            },
+            "PEAK"));
     c.sub
         ->add_option("--mask", *mask,
                      "Pixels averaged: all (none), or those covered in either image's alpha")

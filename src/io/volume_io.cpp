@@ -2145,6 +2145,12 @@ const std::vector<Reader>& registry() {
 void applyNonFinitePolicy(Volume& v, const fs::path& path, NonFinitePolicy policy) {
     const std::uint64_t bad = v.countNonFinite();
     if (bad == 0) return;
+    if (bad == v.voxelCount())
+        throw InputError(path.string(), "voxels",
+                         "all " + std::to_string(bad) +
+                             " voxels are NaN, infinite or beyond float's range: no finite value "
+                             "to show or to replace them with",
+                         "check the file's data type and byte order");
     if (policy == NonFinitePolicy::Reject)
         throw InputError(path.string(), "voxels",
                          std::to_string(bad) + " of " + std::to_string(v.voxelCount()) +

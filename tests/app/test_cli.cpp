@@ -674,6 +674,14 @@ TEST(Cli, ATruncatedPngIsOneLine) {
     EXPECT_EQ(lineCount(r.err), 1u) << r.err;
     EXPECT_EQ(r.err.find("\\x0A"), std::string::npos) << r.err;
     EXPECT_EQ(r.err.rfind("voxlight: error: ", 0), 0u) << r.err;
+    // --peak bounded: 1e308 gave "psnr: inf dB"; 0's message printed DBL_MAX in 309 digits.
+    fs::copy_file(tmp / "a.png", tmp / "b.png");
+    for (const char* peak : {"1e308", "0"}) {
+        const Result p = run(
+            "compare " + q(tmp / "b.png") + " " + q(tmp / "b.png") + " --peak " + peak, tmp.path());
+        EXPECT_EQ(p.code, 2) << p.err;
+        EXPECT_NE(p.err.find("is not in [1e-12, 1e12]"), std::string::npos) << p.err;
+    }
 }
 
 TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {

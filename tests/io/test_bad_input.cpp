@@ -8,6 +8,7 @@
 #include <chrono>
 #include <fstream>
 #include <limits>
+#include <span>
 
 #include "core/phantoms.h"
 #include "io/image.h"
@@ -150,6 +151,10 @@ TEST(BadInput, NonFiniteVoxelsRejectedOrReplaced) {
     const core::Volume fixed = io::readVolume(tmp / "nan.nii.gz", opt);
     EXPECT_EQ(fixed.countNonFinite(), 0u);
     EXPECT_EQ(fixed.dataAs<float>()[5], 0.0f);  // the sphere's background
+    // Nothing finite to replace them with: refused either way (it read as a volume of zeros).
+    for (float& x : std::span(v.dataAs<float>(), std::size_t(v.voxelCount()))) x = NAN;
+    io::writeVolume(v, tmp / "allnan.nii.gz");
+    expectInputError(tmp / "allnan.nii.gz", "allnan.nii.gz", {"all 4096 voxels"}, opt);
 }
 
 TEST(BadInput, RawLayoutLargerThanFile) {
