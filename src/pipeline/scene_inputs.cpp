@@ -114,9 +114,23 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
         const std::string name = d.preset.empty() ? optics::defaultPresetName(volume) : d.preset;
         const optics::PresetInfo* info = optics::findPreset(name);
         const bool relative = info && info->relative;
+        // A relative preset spans the data's robust range — unless a window replaces it anyway
+        // (withWindow below is affine in it): data near ±3.4e38 could not be windowed even with
+        // an explicit window, whose error then blamed the user's valid window.
+        std::array<float, 2> range{0.f, 1.f};
+        if (relative && !d.window) {
+            range = optics::robustRange(volume);
+            if (!std::isfinite(range[1] - range[0])) {
+                std::ostringstream os;
+                os << "the data's values span [" << range[0] << ", " << range[1]
+                   << "], too wide to window in float arithmetic";
+                throw InputError(scene.source, "transfer_function.window", os.str(),
+                                 "set transfer_function.window to the values to show, or rescale "
+                                 "the data");
+            }
+        }
         try {
-            tf = optics::makePreset(
-                name, relative ? optics::robustRange(volume) : std::array<float, 2>{0.f, 1.f});
+            tf = optics::makePreset(name, range);
         } catch (const InputError& e) {
             throw InputError(scene.source, "transfer_function.preset", e.problem(), e.fix());
         }

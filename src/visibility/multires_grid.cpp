@@ -148,13 +148,17 @@ BlockPyramid BlockPyramid::build(const core::Volume& volume, const core::Progres
                 st.max = hi;
                 st.mean = level0[levelOffset(kLevels - 1)];
                 st.histogram.fill(0);
-                const float scale = hi > lo ? float(kHistogramBins) / (hi - lo) : 0.f;
+                // In double: hi − lo overflows float for data near ±3.4e38, and (val − lo)·0
+                // was NaN, a negative bin (a crash found by a hostile-input probe).
+                const double scale =
+                    hi > lo ? double(kHistogramBins) / (double(hi) - double(lo)) : 0.0;
                 const glm::ivec3 own = glm::min(glm::ivec3(kBlockSize), d - bc * kBlockSize);
                 for (int k = 0; k < own.z; ++k)
                     for (int j = 0; j < own.y; ++j)
                         for (int i = 0; i < own.x; ++i) {
                             const float val = level0[i + kBlockSize * (j + kBlockSize * k)];
-                            const int bin = std::min(int((val - lo) * scale), kHistogramBins - 1);
+                            const int bin = std::clamp(int((double(val) - double(lo)) * scale), 0,
+                                                       kHistogramBins - 1);
                             ++st.histogram[std::size_t(bin)];
                         }
             }
@@ -221,7 +225,7 @@ std::vector<float> blockSignificance(const BlockPyramid& pyramid,
             }
             const glm::vec3 mean = colour(st.mean);
             double total = 0.0, sum = 0.0;
-            const double width = double(st.max - st.min) / kHistogramBins;
+            const double width = (double(st.max) - double(st.min)) / kHistogramBins;
             for (int j = 0; j < kHistogramBins; ++j) {
                 const std::uint32_t c = st.histogram[std::size_t(j)];
                 if (c == 0) continue;

@@ -78,6 +78,27 @@ TEST(SceneRender, WindowRemapsPresetsAndSetsMipGrey) {
     EXPECT_FLOAT_EQ(tf.points().back().value, 600.f + (3071.f - 500.f) / 2.f);
 }
 
+TEST(SceneRender, DataNearFloatsLimitsTakeAnExplicitWindowAndOtherwiseSaySo) {
+    // Values ±3e38: the generic preset's robust range is too wide to window in float. The error
+    // used to come even with an explicit window (blaming it); now that window is used as given.
+    core::Geometry g;
+    g.dims = {8, 8, 8};
+    core::Volume v(g, core::VoxelType::Float32);
+    for (std::size_t i = 0; i < 512; ++i) v.dataAs<float>()[i] = i % 2 ? 3e38f : -3e38f;
+    json d;
+    d["volume"] = {{"phantom", "torso"}, {"size", 8}};  // parsed only; v is the volume
+    d["transfer_function"] = {{"preset", "generic"}};
+    try {
+        (void)pipeline::buildTransferFunction(scene(d), v);
+        ADD_FAILURE() << "windowed ±3e38";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "transfer_function.window");
+    }
+    d["transfer_function"]["window"] = {{"level", 0}, {"width", 1}};
+    const auto tf = pipeline::buildTransferFunction(scene(d), v);
+    EXPECT_FLOAT_EQ(tf.window().width, 1.f);
+}
+
 TEST(SceneRender, TerminationThresholdTradesSamplesForAnErrorBelowTheThreshold) {
     // A looser termination stops rays earlier: fewer samples, and each pixel differs from the
     // strict render by at most what the remaining transmittance could still add (≤ threshold

@@ -389,3 +389,20 @@ TEST(MultiresGrid, VisibleCellBoxQueriesEqualTheScanOverTheBox) {
     EXPECT_GT(needed, 1000);
     EXPECT_LT(needed, 19000);
 }
+
+TEST(BlockPyramid, FloatDataNearItsLimitsBinsEveryVoxel) {
+    // ±3e38: the histogram's hi − lo overflowed float, (val − lo)·0 was NaN and the bin index
+    // negative — a crash of every SH method on such data (found by a hostile-input probe).
+    core::Geometry g;
+    g.dims = {16, 16, 16};
+    core::Volume v(g, core::VoxelType::Float32);
+    float* p = v.dataAs<float>();
+    for (std::size_t i = 0; i < std::size_t(v.voxelCount()); ++i) p[i] = i % 2 ? 3e38f : -3e38f;
+    const BlockPyramid pyr = BlockPyramid::build(v);
+    const BlockStats& st = pyr.stats(0);
+    std::uint64_t counted = 0;
+    for (const std::uint32_t c : st.histogram) counted += c;
+    EXPECT_EQ(counted, 4096u);
+    EXPECT_EQ(st.histogram.front(), 2048u);
+    EXPECT_EQ(st.histogram.back(), 2048u);
+}
