@@ -424,10 +424,12 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
         last = part;
     }
     // null removes an object key: the default applies again (--set camera.azimuth=null).
-    if (value.is_null() && parent && parent->is_object() && !last.empty())
-        record.removed = parent->erase(last) > 0 && existed;  // not there before: nothing was
-    else
+    if (value.is_null() && parent && parent->is_object() && !last.empty()) {
+        record.removed = parent->erase(last) > 0 && existed;       // not there before: nothing was
+        if (record.created == record.key) record.created.clear();  // made and erased at once
+    } else {
         *node = value;
+    }
     return record;
 }
 
@@ -455,8 +457,11 @@ const OverrideRecord* blamedOverride(const std::vector<OverrideRecord>& override
                                      const std::string& field) {
     const std::string f = dottedField(field);
     for (auto it = overrides.rbegin(); it != overrides.rend(); ++it)
-        if (atOrUnder(f, it->key) || atOrUnder(f, it->created) ||
-            (it->removed && atOrUnder(it->key, f)))
+        if (atOrUnder(f, it->key) || atOrUnder(field, it->key) || atOrUnder(f, it->created) ||
+            (it->removed && atOrUnder(it->key, f)) ||
+            // A key it added under an object whose error names that object ("volume: needs
+            // exactly one of 'path' or 'phantom'" after --set volume.path=… on a phantom).
+            (!f.empty() && !it->created.empty() && atOrUnder(it->created, f)))
             return &*it;
     return nullptr;
 }

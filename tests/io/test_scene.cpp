@@ -223,6 +223,12 @@ TEST(Scene, AnErrorAnOverrideCausesNamesTheOverrideNotTheSceneFile) {
     std::ofstream(tmp / "s.json") << R"({"volume": "a.nii", "method": {"params": {}}})";
     EXPECT_EQ(sourceOf({"method.name=null"}), (tmp / "s.json").string() + " | method");
 
+    // A key the override added under an object whose error names the object; a key spelled
+    // with brackets (not index syntax) as the error spells it.
+    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "torso"}})";
+    EXPECT_EQ(sourceOf({"volume.path=b.nii"}), "--set volume.path=b.nii | volume");
+    EXPECT_EQ(sourceOf({"image.width[0]=5"}), "--set image.width[0]=5 | image.width[0]");
+
     // Removing a path key leaves it removed (the absolute-path pass once put it back as null).
     std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "torso", "path": "a.nii"}})";
     EXPECT_EQ(sourceOf({"volume.path=null"}), "no error");
