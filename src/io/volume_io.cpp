@@ -310,6 +310,11 @@ Volume fromImageData(vtkImageData* img, const fs::path& path, Geometry g) {
 void checkDirection(const glm::dmat3& d, const fs::path& path, const std::string& field) {
     constexpr double kOrthoTol =
         1e-3;  // headers store cosines to ~6 digits; shear of 0.06° still passes
+    for (int c = 0; c < 3; ++c)
+        for (int r = 0; r < 3; ++r)
+            if (!std::isfinite(d[c][r]))
+                throw InputError(path.string(), field, "holds a NaN or infinite orientation value",
+                                 "repair the header's " + field + " (e.g. with nibabel)");
     const glm::dmat3 g = glm::transpose(d) * d;
     for (int r = 0; r < 3; ++r)
         for (int c = 0; c < 3; ++c)
