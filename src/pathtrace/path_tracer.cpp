@@ -1356,21 +1356,30 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     // The image's relative error (Stats::relativeStdError): the variance of each covered pixel's
     // mean in each of R, G and B, averaged over them, over the mean covered RGB value — the NRMS
     // of the convergence benchmark (and the path tracer's issue), whose error is RGB too.
-    auto relativeError = [&] {
-        double var = 0.0, mean = 0.0;
-        std::size_t covered = 0;
+    // Over covered pixels and R, G, B: Σ variance of the pixel's mean, Σ mean, Σ mean², count.
+    struct CoveredSums {
+        double var = 0.0, mean = 0.0, square = 0.0;
+        std::size_t values = 0;
+    };
+    auto coveredSums = [&] {
+        CoveredSums t;
         for (std::size_t p = 0; p < pixels; ++p) {
             if (!(alpha[p] > 0.0)) continue;
             const double n = count[p];
             for (int c = 0; c < 3; ++c) {
                 const double m = sum[p * 3 + c] / n;
-                var += std::max(0.0, sumSq[p * 3 + c] / n - m * m) / std::max(1.0, n - 1.0);
-                mean += m;
+                t.var += std::max(0.0, sumSq[p * 3 + c] / n - m * m) / std::max(1.0, n - 1.0);
+                t.mean += m;
+                t.square += m * m;
+                ++t.values;
             }
-            ++covered;
         }
-        return covered && mean > 0.0
-                   ? std::sqrt(var / double(3 * covered)) / (mean / double(3 * covered))
+        return t;
+    };
+    auto relativeError = [&] {
+        const CoveredSums t = coveredSums();
+        return t.values && t.mean > 0.0
+                   ? std::sqrt(t.var / double(t.values)) / (t.mean / double(t.values))
                    : 0.0;
     };
     // Adaptive sampling (Options::adaptive): the pass's samples, `perPixel` × pixels in all, shared
@@ -1515,17 +1524,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         stats->relativeStdError = error;
         // ErrorStats::nrmse's normalisation (the reference's RMS, not its mean) over the same
         // covered pixels and channels: what a perfect image's nrmse against this one would be.
-        double var = 0.0, square = 0.0;
-        for (std::size_t p = 0; p < pixels; ++p) {
-            if (!(alpha[p] > 0.0)) continue;
-            const double n = count[p];
-            for (int c = 0; c < 3; ++c) {
-                const double m = sum[p * 3 + c] / n;
-                var += std::max(0.0, sumSq[p * 3 + c] / n - m * m) / std::max(1.0, n - 1.0);
-                square += m * m;
-            }
-        }
-        stats->expectedNrmse = square > 0.0 ? std::sqrt(var / square) : 0.0;
+        const CoveredSums t = coveredSums();
+        stats->expectedNrmse = t.square > 0.0 ? std::sqrt(t.var / t.square) : 0.0;
         stats->targetReached = reached;
         stats->focusMm = lens ? focus : 0.0;
         stats->autofocused = lens && !(options_.focusMm > 0.0);
