@@ -62,7 +62,7 @@ def main():
         voxlight, scene, "reference", args.work, "pathtrace", {"reference": True, "phase_g": G},
         MULTIPLE, os.path.join(args.work, "cache"))
     ref_lin = read_exr(ref_exr, args.work)
-    floor = ref_st["pathtrace"]["relative_std_error"]
+    floor = ref_st["pathtrace"].get("expected_nrmse", ref_st["pathtrace"]["relative_std_error"])
     print("reference: %d spp, estimated NRMS %.3f (%.0f s wall)" %
           (ref_st["pathtrace"]["spp"], floor, ref_wall), flush=True)
     rows, pngs = [], {}

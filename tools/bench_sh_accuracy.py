@@ -173,7 +173,7 @@ def main():
             voxlight, scene, name + "-reference", args.work, "pathtrace", {"reference": True},
             ["global_shadows"], cache)
         ref_lin = read_exr(ref_exr, args.work)
-        floor = ref_st["pathtrace"]["relative_std_error"]
+        floor = ref_st["pathtrace"].get("expected_nrmse", ref_st["pathtrace"]["relative_std_error"])
         print("%s: reference %d spp, estimated NRMS %.2f %% (%.0f s wall, cached after)" %
               (name, ref_st["pathtrace"]["spp"], 100 * floor, ref_wall), flush=True)
         done = {}

@@ -153,7 +153,7 @@ Command addIsoCommand(CLI::App& app) {
         // The bake's own options do nothing without it: said, not ignored.
         if (!*bake)
             for (const char* o : {"--samples", "--bounces", "--lattice-resolution", "--bake-from",
-                                  "--lattice-mode"})
+                                  "--lattice-mode", "--sh-order", "--lattice-texels"})
                 if (sub->count(o) > 0)
                     throw InputError("command line", o, "takes effect only with --bake",
                                      std::string("add --bake, or leave out ") + o);
@@ -223,17 +223,18 @@ Command addIsoCommand(CLI::App& app) {
             "extract", true,
             "computed: flying edges " + std::to_string(es.flyingEdgesTriangles) + " triangles",
             sw.seconds()));
-        if (ex.mesh.n_faces() == 0 && options.keep.empty()) {
+        if (ex.mesh.n_faces() == 0 && es.flyingEdgesTriangles == 0) {
             // Nothing cut it away: the surface itself has no triangles here.
             const glm::ivec3 d = volume.dims();
-            const bool thin = d.x < 2 || d.y < 2 || d.z < 2;
+            if (d.x < 2 || d.y < 2 || d.z < 2)
+                throw InputError(s.source, "volume",
+                                 "is one voxel thick along an axis: marching cubes needs 2 voxels "
+                                 "per axis for a surface",
+                                 "use a volume with at least 2 voxels on every axis");
             throw InputError(
-                s.source, "volume",
-                thin ? "is one voxel thick along an axis: marching cubes needs 2 voxels per axis "
-                       "for a surface"
-                     : "has no isosurface triangles at " + std::to_string(options.isovalue),
-                thin ? "use a volume with at least 2 voxels on every axis"
-                     : "choose another isovalue (--isovalue)");
+                isoSource, isoField,
+                "gives no isosurface triangles (value " + std::to_string(options.isovalue) + ")",
+                "choose another isovalue");
         }
         if (ex.mesh.n_faces() == 0)
             throw InputError(s.source, s.cropBox ? "crop_box" : "clip_planes",

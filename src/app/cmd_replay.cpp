@@ -209,8 +209,11 @@ Command addReplayCommand(CLI::App& app) {
             try {
                 (void)pipe.plan(scenes[i]);
             } catch (const InputError& e) {
-                // The method's strict params: named by the keyframe that set them.
+                // The method's strict params: named by the --set that set them, else by the
+                // keyframe that did.
                 if (e.source() != ses.source) throw;
+                if (io::blamedOverride(scenes[i].overrides, e.field()))
+                    throw io::blameOverride(e, ses.source, scenes[i].overrides);
                 throw InputError(
                     ses.source,
                     interpolate ? ses.fieldAtTime(times[i], e.field()) : ses.fieldAt(i, e.field()),

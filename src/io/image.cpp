@@ -139,11 +139,24 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
     mod::ReadResult r;
     {
         const mod::Api& api = imageModule(file);  // (a loading error is reported as it is)
+        // One capture at a time (the viewer's two pipeline threads may both read an environment
+        // map): overlapping ones would leave stderr pointing at the other's temporary file.
+        static std::mutex captureMutex;
+        const std::lock_guard<std::mutex> lock(captureMutex);
         StderrCapture capture;
         api.read(file.c_str(), kMaxImagePixels, r);
-        // A codec's own lines: kept when the image was read; a failure's message carries them.
+        // Printed again, but for libpng's own lines when the read failed (the error carries
+        // them); other threads' lines written meanwhile are kept either way.
         const std::string said = capture.release();
-        if (r.status == mod::Status::Ok && !said.empty()) std::fputs(said.c_str(), stderr);
+        std::size_t start = 0;
+        while (start < said.size()) {
+            std::size_t end = said.find('\n', start);
+            end = end == std::string::npos ? said.size() : end + 1;
+            const std::string line = said.substr(start, end - start);
+            if (r.status == mod::Status::Ok || line.rfind("libpng", 0) != 0)
+                std::fputs(line.c_str(), stderr);
+            start = end;
+        }
     }
     info.channels = r.channels;
     info.floatingPoint = r.floatingPoint;

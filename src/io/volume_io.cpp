@@ -2055,8 +2055,9 @@ Volume readRaw(const fs::path& path, const RawLayout& layout) {
     const int ext[6] = {0, layout.dims.x - 1, 0, layout.dims.y - 1, 0, layout.dims.z - 1};
     checkExtent(ext, 1, path);
     for (int a = 0; a < 3; ++a)
-        if (!(layout.spacing[a] > 0) || !std::isfinite(layout.spacing[a]))
-            throw InputError(path.string(), "spacing", "must be positive and finite",
+        if (!(layout.spacing[a] >= core::kMinSpacingMm && layout.spacing[a] <= core::kMaxSpacingMm))
+            throw InputError(path.string(), "--spacing",
+                             "must be between 0.0001 and 10000 mm on every axis",
                              "pass --spacing X,Y,Z in mm");
     const std::uint64_t need = g.voxelCount() * core::voxelBytes(layout.type);
     std::error_code ec;

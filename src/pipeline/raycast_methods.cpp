@@ -664,8 +664,10 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
         {"step", "render.step"},
         {"termination", "render.termination"},
         {"iso_value", "method.params.iso_value"},
-        {"image size", "image.width"}};
-    if (e.source() == "render options" || e.source() == "camera") {
+        {"image size", "image.width"},
+        {"rays", "method.params.rays"}};
+    if (e.source() == "render options" || e.source() == "camera" ||
+        e.source() == "local visibility") {
         const auto it = kSceneKey.find(e.field());
         throw InputError(scene.source, it != kSceneKey.end() ? it->second : e.field(), e.problem(),
                          e.fix());
@@ -785,8 +787,10 @@ constexpr std::uint64_t kMaxCachedImagePixels = std::uint64_t(1) << 28;
 const Codec& tracedImageCodec() {
     // 2: shadow rays by residual ratio tracking — the same expectation, other samples for a seed,
     // so a disk cache from before does not hand back an image a fresh render would not give.
+    // 3: the target-error stop reads the RGB error (more samples on coloured scenes), and the
+    // details carry expected_nrmse and the empty-image warnings.
     static const Codec c{
-        2,
+        3,
         [](const Artifact& a, ByteWriter& w) {
             const auto& t = *a.as<TracedImage>();
             w.pod(std::int32_t(t.image.width));
@@ -1084,10 +1088,16 @@ void addVisibilityStages(Plan& plan, const ShParams& params, bool global, const 
                 if (const auto a = run.cache().findInMemory("local_visibility", *k))
                     previous = a->as<visibility::LocalVisibility>();
         visibility::TfUpdateStats st;
-        auto v = std::make_shared<const visibility::LocalVisibility>(
-            previous ? visibility::updateLocalVisibility(*previous, grid, *tfa->table, vo,
-                                                         run.progress(), &st)
-                     : visibility::computeLocalVisibility(grid, *tfa->table, vo, run.progress()));
+        std::shared_ptr<const visibility::LocalVisibility> v;
+        try {
+            v = std::make_shared<const visibility::LocalVisibility>(
+                previous
+                    ? visibility::updateLocalVisibility(*previous, grid, *tfa->table, vo,
+                                                        run.progress(), &st)
+                    : visibility::computeLocalVisibility(grid, *tfa->table, vo, run.progress()));
+        } catch (const InputError& e) {
+            rethrowAsScene(run.scene(), e);  // the sweep's anisotropy limit names the scene
+        }
         if (const auto own = visStageKey(run); own && lineage)
             run.cache().putRecord("local_visibility_last", *lineage, *own, false);
         json d = {{"rays_traced", v->raysTraced()},

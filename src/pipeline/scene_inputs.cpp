@@ -120,7 +120,7 @@ optics::TransferFunction buildTransferFunction(const io::Scene& scene, const cor
         std::array<float, 2> range{0.f, 1.f};
         if (relative && !d.window) {
             range = optics::robustRange(volume);
-            if (!std::isfinite(range[1] - range[0])) {
+            if (!std::isfinite(range[1] - range[0]) || !std::isfinite(range[0] + range[1])) {
                 std::ostringstream os;
                 os << "the data's values span [" << range[0] << ", " << range[1]
                    << "], too wide to window in float arithmetic";

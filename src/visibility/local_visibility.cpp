@@ -2133,7 +2133,9 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                             sigma, set, origin, grid.dims(), radius, hf, narrow,
                             own ? dst : nullptr, v, samples, rayScratch);
                         rays += marched;
-                        traced += marched > 0;  // none: no face cuts its rays, its value stays
+                        // None marched: no face cuts its rays (its value stays) or none of them
+                        // is kept (it became empty space's value without a ray).
+                        traced += marched > 0;
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
                     forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);

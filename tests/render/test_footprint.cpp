@@ -284,7 +284,7 @@ TEST(Camera, AnEyeOnTheDefaultTargetIsAnInputErrorNamingTheEye) {
     } catch (const InputError& e) {
         EXPECT_EQ(e.field(), "camera.eye");
     }
-    spec.eye = glm::dvec3(1e-6, 0.0, 0.0);  // a micrometre away: a direction
+    spec.eye = glm::dvec3(1e-6, 0.0, 0.0);  // a nanometre away: a direction
     spec.target = glm::dvec3(0.0);
     EXPECT_NO_THROW(render::Camera(spec, box, 32, 32));
 }
