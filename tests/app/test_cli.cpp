@@ -622,14 +622,22 @@ TEST(Cli, SweepWritesOneCsvRowPerVariantWithItsImageAndErrorMap) {
         EXPECT_EQ(e.path().string().find(".tmp"), std::string::npos) << e.path();
 }
 
+/// Writes tmp/s.json (a gradient render of the small sphere phantom, size² pixels) and renders
+/// it to tmp/a.png.
+void sphereSceneAndImage(const test::TempDir& tmp, int size) {
+    const std::string side = std::to_string(size);
+    std::ofstream(tmp / "s.json")
+        << R"({"volume": {"phantom": "sphere", "size": 16}, "image": {"width": )" + side +
+               R"(, "height": )" + side + R"(}, "method": "gradient"})";
+    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "a.png"), tmp.path()).code,
+              0);
+}
+
 TEST(Cli, AnOutputNeverReplacesAnInput) {
     // compare's --map over REFERENCE used to succeed (and the reference was gone); --stats over
     // the scene file, --exr over the scene's environment map: refused before any work.
     test::TempDir tmp;
-    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "sphere", "size": 16},
-        "image": {"width": 16, "height": 16}, "method": "gradient"})";
-    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "a.png"), tmp.path()).code,
-              0);
+    ASSERT_NO_FATAL_FAILURE(sphereSceneAndImage(tmp, 16));
     ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "b.png") + " --exr " +
                       q(tmp / "env.exr"),
                   tmp.path())
@@ -664,10 +672,7 @@ TEST(Cli, ATruncatedPngIsOneLine) {
     // libpng printed its own "libpng error: …" line beside voxlight's, whose message carried
     // OpenImageIO's newlines as "\x0A".
     test::TempDir tmp;
-    std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "sphere", "size": 16},
-        "image": {"width": 64, "height": 64}, "method": "gradient"})";
-    ASSERT_EQ(run("render -q " + q(tmp / "s.json") + " -o " + q(tmp / "a.png"), tmp.path()).code,
-              0);
+    ASSERT_NO_FATAL_FAILURE(sphereSceneAndImage(tmp, 64));
     fs::resize_file(tmp / "a.png", fs::file_size(tmp / "a.png") / 2);
     const Result r = run("compare " + q(tmp / "a.png") + " " + q(tmp / "a.png"), tmp.path());
     EXPECT_EQ(r.code, 2) << r.err;
