@@ -2055,10 +2055,14 @@ Volume readRaw(const fs::path& path, const RawLayout& layout) {
     const int ext[6] = {0, layout.dims.x - 1, 0, layout.dims.y - 1, 0, layout.dims.z - 1};
     checkExtent(ext, 1, path);
     for (int a = 0; a < 3; ++a)
-        if (!(layout.spacing[a] >= core::kMinSpacingMm && layout.spacing[a] <= core::kMaxSpacingMm))
-            throw InputError(path.string(), "--spacing",
-                             "must be between 0.0001 and 10000 mm on every axis",
-                             "pass --spacing X,Y,Z in mm");
+        if (!(layout.spacing[a] >= core::kMinSpacingMm &&
+              layout.spacing[a] <= core::kMaxSpacingMm)) {
+            // core::Volume's own check would ask to repair a header a raw file does not have.
+            std::ostringstream os;
+            os << "must be between " << core::kMinSpacingMm << " and " << core::kMaxSpacingMm
+               << " mm on every axis";
+            throw InputError(path.string(), "--spacing", os.str(), "pass --spacing X,Y,Z in mm");
+        }
     const std::uint64_t need = g.voxelCount() * core::voxelBytes(layout.type);
     std::error_code ec;
     const auto have = fs::file_size(path, ec);
