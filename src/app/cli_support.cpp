@@ -107,6 +107,15 @@ const std::vector<std::string>& viewNames() {
     return names;
 }
 
+std::string repeatedOption(const CLI::ParseError& e) {
+    // CLI11 (2.1) words it "NAME: At Most 1 required but received N" (ArgumentMismatch::AtMost).
+    if (dynamic_cast<const CLI::ArgumentMismatch*>(&e) == nullptr) return {};
+    const std::string what = e.what();
+    const std::string marker = ": At Most 1 required but received ";
+    const std::size_t at = what.find(marker);
+    return at == std::string::npos || at == 0 ? std::string() : what.substr(0, at);
+}
+
 CLI::Validator wholeNumber() {
     return CLI::Validator(
         [](std::string& text) -> std::string {

@@ -49,6 +49,9 @@ InputError blameLoadedOverrides(const InputError& e);
 /// For unsigned options: the text must be decimal digits that fit 64 bits. CLI11 read "-1" and
 /// numbers past 2^64 as 2^64 − 1 without a word (a seed, a header size).
 CLI::Validator wholeNumber();
+/// The option `e` refuses because it was given more than once (main's Throw policy), or "" for
+/// any other parse error.
+std::string repeatedOption(const CLI::ParseError& e);
 
 /// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
 bool inputIsVolume(const std::string& input);

@@ -13,6 +13,9 @@ int main(int argc, char** argv) {
     CLI::App app{"voxlight: medical direct volume rendering with realistic illumination"};
     app.require_subcommand(1);
     app.set_version_flag("--version", "voxlight 0.1.0");
+    // An option given twice is a mistake to point out, not a value to drop silently (CLI11 would
+    // keep the last); options that take lists (--set, --dims) take every occurrence.
+    app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::Throw);
     std::vector<Command> commands = {
         addInfoCommand(app),   addPhantomCommand(app), addSceneCommand(app),
         addRenderCommand(app), addIsoCommand(app),     addReplayCommand(app),
@@ -35,6 +38,11 @@ int main(int argc, char** argv) {
         if (argc > 1 && argv[1][0] != '-' && !known) {
             std::cerr << "voxlight: error: unknown command '" << argv[1]
                       << "' (choose one of: " << names << ")\n";
+            return kExitBadInput;
+        }
+        if (const std::string twice = repeatedOption(e); !twice.empty()) {
+            std::cerr << "voxlight: error: " << twice
+                      << " is given more than once (give it once: which value was meant?)\n";
             return kExitBadInput;
         }
         std::cerr << "voxlight: error: " << e.what() << " (see voxlight --help)\n";

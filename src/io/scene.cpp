@@ -7,6 +7,8 @@
 #include <fstream>
 #include <limits>
 #include <map>
+#include <memory>
+#include <optional>
 #include <set>
 #include <string_view>
 #include <utility>
@@ -354,6 +356,53 @@ std::string normalizedKey(const std::vector<std::string>& parts, std::size_t n) 
     }
     return out;
 }
+/// A parser callback recording in `repeated` the first key that appears twice in one object, as
+/// the path errors name (`lights[1].intensity`).
+json::parser_callback_t duplicateKeyFinder(std::optional<std::string>& repeated) {
+    struct Frame {
+        bool array = false;
+        std::size_t index = 0;  // arrays: the element being read
+        std::string key;        // objects: the key being read
+        std::set<std::string> keys;
+    };
+    auto frames = std::make_shared<std::vector<Frame>>();
+    const auto path = [frames](const std::string& last) {
+        std::string out;
+        for (const Frame& f : *frames) {
+            if (&f == &frames->back()) break;
+            out += f.array ? "[" + std::to_string(f.index) + "]" : (out.empty() ? "" : ".") + f.key;
+        }
+        return out + (out.empty() ? "" : ".") + last;
+    };
+    // An element of an array ends: the next one has the next index.
+    const auto elementDone = [frames] {
+        if (!frames->empty() && frames->back().array) ++frames->back().index;
+    };
+    return [frames, path, elementDone, &repeated](int /*depth*/, json::parse_event_t event,
+                                                  json& parsed) {
+        switch (event) {
+            case json::parse_event_t::object_start:
+            case json::parse_event_t::array_start:
+                frames->push_back({event == json::parse_event_t::array_start, 0, {}, {}});
+                break;
+            case json::parse_event_t::object_end:
+            case json::parse_event_t::array_end:
+                frames->pop_back();
+                elementDone();
+                break;
+            case json::parse_event_t::key: {
+                Frame& f = frames->back();
+                f.key = parsed.get<std::string>();
+                if (!f.keys.insert(f.key).second && !repeated) repeated = path(f.key);
+                break;
+            }
+            case json::parse_event_t::value:
+                elementDone();
+                break;
+        }
+        return true;
+    };
+}
 }  // namespace
 
 OverrideRecord applyOverride(json& doc, const std::string& assignment) {
@@ -374,8 +423,14 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
             "--set", key,
             "value nests arrays/objects deeper than " + std::to_string(kMaxSceneDepth) + " levels",
             "flatten the value");
-    json value = json::parse(text, nullptr, /*allow_exceptions=*/false);
-    if (value.is_discarded()) value = text;  // bare words are strings: --set method.name=mip
+    std::optional<std::string> repeated;
+    json value = json::parse(text, duplicateKeyFinder(repeated), /*allow_exceptions=*/false);
+    if (value.is_discarded())
+        value = text;  // bare words are strings: --set method.name=mip
+    else if (repeated)
+        throw InputError("--set " + assignment, key + "." + *repeated,
+                         "is given twice in the same object",
+                         "keep one of the two: which value was meant?");
     // As errors name it: "--set key=value" once the key is known.
     const std::string said = "--set " + assignment;
     const std::vector<std::string> parts = keyParts(key);
@@ -778,8 +833,9 @@ json readJsonFile(const fs::path& path) {
                              " (JSON text holds none)",
                          "is this the right file? (a binary file, or text saved as UTF-16?)");
     json doc;
+    std::optional<std::string> repeated;  // the first key an object holds twice, as a dotted path
     try {
-        doc = json::parse(text);
+        doc = json::parse(text, duplicateKeyFinder(repeated));
     } catch (const json::out_of_range& e) {
         throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
                          "numbers must be within double range (about ±1.8e308)");
@@ -788,6 +844,11 @@ json readJsonFile(const fs::path& path) {
         throw InputError(file, "", "is not valid JSON: " + jsonMessage(e),
                          "fix the syntax at the byte shown");
     }
+    // JSON readers disagree on which of two equal keys counts (nlohmann keeps the last, others
+    // the first): the value a user edited may be the one dropped, so neither is taken.
+    if (repeated)
+        throw InputError(file, *repeated, "is given twice in the same object",
+                         "keep one of the two: which value was meant?");
     return doc;
 }
 

@@ -105,6 +105,9 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         {"scene '" + (tmp / "param.json").string() + "'", "shinyness"},
         {"scene '" + (tmp / "clip.json").string() + "'", "clip_planes[0].shadows_from_removed"},
         {"info --dims 1,2 '" + (tmp / "junk.nii").string() + "'", "--dims"},
+        // An option given twice kept CLI11's last value without a word.
+        {"phantom torso --size 16 --size 32 -o '" + (tmp / "x.nii.gz").string() + "'",
+         "--size is given more than once"},
         {"frobnicate", "frobnicate"},
     };
     for (const auto& [args, word] : cases) {

@@ -265,6 +265,42 @@ TEST(Scene, MalformedJsonFileNamesTheFile) {
     EXPECT_THROW(io::loadScene(tmp / "missing.json"), InputError);
 }
 
+TEST(Scene, AKeyGivenTwiceInOneObjectIsRefusedByItsPath) {
+    test::TempDir tmp;
+    const auto refusal = [&](const std::string& text) {
+        std::ofstream(tmp / "s.json") << text;
+        try {
+            (void)io::readJsonFile(tmp / "s.json");
+        } catch (const InputError& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    // nlohmann keeps the last of two equal keys, other readers the first: the edited value could
+    // be the one dropped, so the file is refused naming the key where it repeats.
+    EXPECT_NE(refusal(R"({"camera": {"azimuth": 10}, "camera": {"azimuth": 20}})")
+                  .find("s.json: camera: is given twice"),
+              std::string::npos);
+    const std::string nested = refusal(R"({"lights": [{"type": "directional"},
+        {"type": "point", "position": [0, [1], 0], "intensity": 1, "intensity": 2}]})");
+    EXPECT_NE(nested.find("lights[1].intensity: is given twice"), std::string::npos) << nested;
+    const std::string deep =
+        refusal(R"({"a": [[{"x": 1}], [{"y": 1}, {"x": 1, "y": {}, "y": 2}]]})");
+    EXPECT_NE(deep.find("a[1][1].y: is given twice"), std::string::npos) << deep;
+    // The same key in different objects, or in sibling array elements, is not a repeat.
+    EXPECT_EQ(refusal(R"({"lights": [{"type": "point"}, {"type": "point"}],
+        "camera": {"type": "x", "eye": {"type": 1}}})"),
+              "accepted");
+    json doc = json::object();
+    try {
+        io::applyOverride(doc, R"(camera={"azimuth": 1, "azimuth": 2})");
+        ADD_FAILURE();
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find("camera.azimuth: is given twice"), std::string::npos)
+            << e.what();
+    }
+}
+
 TEST(Scene, OverridesReachIntoShorthandForms) {
     json j =
         json::parse(R"({"volume": "a.nii", "method": "gradient", "transfer_function": "ct-bone"})");
