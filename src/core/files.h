@@ -25,7 +25,7 @@ inline bool isSpecialFile(const std::filesystem::path& p) {
 inline void refuseSpecialFile(const std::filesystem::path& p) {
     if (isSpecialFile(p))
         throw InputError(p.string(), "path", "is a FIFO, socket or device, not a file",
-                         "give a regular file (or copy the stream to one first)");
+                         "give a regular file, or copy the stream to one first");
 }
 
 }  // namespace voxlight::core

@@ -612,6 +612,35 @@ vtkSmartPointer<vtkImageData> runImageReader(vtkImageReader2* r, const fs::path&
     return r->GetOutput();
 }
 
+/// The path without ".hdr"/".img" (and ".gz") when `path` is one file of an Analyze-style pair,
+/// read from both files; nothing for a .nii, which holds header and data.
+std::optional<std::string> analyzePairStem(const fs::path& path) {
+    std::string stem = path.string();
+    const auto strip = [&](const std::string& ext) {
+        if (stem.size() <= ext.size() ||
+            stem.compare(stem.size() - ext.size(), ext.size(), ext) != 0)
+            return false;
+        stem.resize(stem.size() - ext.size());
+        return true;
+    };
+    (void)strip(".gz");
+    if (!strip(".hdr") && !strip(".img")) return std::nullopt;
+    return stem;
+}
+
+/// The file of `path`'s pair that is not named must not be a FIFO, socket or device either (VTK's
+/// open() of a FIFO blocks where Ctrl-C cannot reach it).
+void refuseSpecialCompanion(const fs::path& path) {
+    const std::optional<std::string> stem = analyzePairStem(path);
+    if (!stem) return;
+    for (const char* ext : {".hdr", ".hdr.gz", ".img", ".img.gz"})
+        if (const fs::path companion = *stem + ext; core::isSpecialFile(companion))
+            throw InputError(path.string(), "data file",
+                             "is read with '" + companion.filename().string() +
+                                 "', a FIFO, socket or device, not a file",
+                             "put the header and image files beside each other as regular files");
+}
+
 /// NIfTI-1 (and Analyze) / NIfTI-2 header fields voxlight checks before vtkNIFTIImageReader sees
 /// the file: VTK 9.1 crashes on a datatype it does not know and takes NaN spacing at face value.
 /// Offsets from nifti1.h / nifti2.h.
@@ -626,7 +655,14 @@ const std::map<int, int>& niftiDatatypes() {
     return m;
 }
 
-void checkNiftiHeader(const fs::path& path) {
+void checkNiftiHeader(const fs::path& named) {
+    // VTK reads the header of a pair from the .hdr when the .img is named.
+    fs::path path = named;
+    if (const std::optional<std::string> stem = analyzePairStem(named);
+        stem && named.string().find(".img", stem->size()) == stem->size()) {
+        std::error_code ec;
+        path = fs::exists(*stem + ".hdr", ec) ? *stem + ".hdr" : *stem + ".hdr.gz";
+    }
     gzFile f = gzopen(path.c_str(), "rb");  // reads plain files too
     if (!f) return;                         // the reader reports the missing file
     unsigned char h[kNifti2HeaderSize] = {};
@@ -761,6 +797,7 @@ void checkNiftiHeader(const fs::path& path) {
 }
 
 Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
+    refuseSpecialCompanion(path);
     checkNiftiHeader(path);
     vtkNew<vtkNIFTIImageReader> r;
     const vtkSmartPointer<vtkImageData> img = runImageReader(r, path, progress);
@@ -1245,6 +1282,20 @@ class MetaScratch {
 /// The data files of a validated header, in MetaIO's order (one file; LIST names; a pattern
 /// expanded), with how many dimensions each file holds. InputError when the count does not match
 /// DimSize or a file cannot be opened.
+/// A data file `name` (at `f`) the header `path` names must be a file: a FIFO would block MetaIO
+/// until a writer came (Ctrl-C could stop it, but nothing would be read).
+void checkMetaDataFile(const fs::path& f, const std::string& name, const fs::path& path) {
+    std::error_code ec;
+    if (!fs::exists(f, ec) || fs::is_directory(f, ec))
+        throw InputError(path.string(), "ElementDataFile",
+                         "names '" + name + "', which cannot be opened",
+                         "put the data file beside the header");
+    if (core::isSpecialFile(f))
+        throw InputError(path.string(), "ElementDataFile",
+                         "names '" + name + "', a FIFO, socket or device, not a file",
+                         "name a regular file, or copy the stream to one first");
+}
+
 std::vector<fs::path> metaDataFiles(const MetaHeader& h, const fs::path& path, int& fileDims) {
     const std::string df = h.value("ElementDataFile");
     const int ndims = h.value("NDims")[0] - '0';
@@ -1255,11 +1306,7 @@ std::vector<fs::path> metaDataFiles(const MetaHeader& h, const fs::path& path, i
     const bool pattern = df.find('%') != std::string::npos;
     if (!list && !pattern) {
         const fs::path f = path.parent_path() / df;
-        std::error_code ec;
-        if (!fs::exists(f, ec) || fs::is_directory(f, ec))
-            throw InputError(path.string(), "ElementDataFile",
-                             "names '" + df + "', which cannot be opened",
-                             "put the data file beside the header");
+        checkMetaDataFile(f, df, path);
         return {f};
     }
     std::vector<std::string> names;
@@ -1309,11 +1356,7 @@ std::vector<fs::path> metaDataFiles(const MetaHeader& h, const fs::path& path, i
     std::vector<fs::path> files;
     for (const std::string& n : names) {
         const fs::path f = path.parent_path() / n;
-        std::error_code ec;  // (a FIFO or device is MetaIO's to read, cancellably)
-        if (!fs::exists(f, ec) || fs::is_directory(f, ec))
-            throw InputError(path.string(), "ElementDataFile",
-                             "names '" + n + "', which cannot be opened",
-                             "put the data files beside the header");
+        checkMetaDataFile(f, n, path);
         files.push_back(f);
     }
     return files;

@@ -6,6 +6,7 @@
 #include <zlib.h>
 
 #include <chrono>
+#include <cstring>
 #include <fstream>
 #include <limits>
 #include <span>
@@ -68,6 +69,47 @@ TEST(BadInput, AFifoIsRefusedBeforeItsOpenBlocks) {
     };
     refused([&] { (void)io::readJsonFile(tmp / "pipe.json"); }, "pipe.json");
     refused([&] { (void)io::readImage(tmp / "pipe.png"); }, "pipe.png");
+}
+
+TEST(BadInput, AFifoNamedByAHeaderIsRefusedToo) {
+    // A header naming its data in another file: MetaImage's ElementDataFile (one file or a list)
+    // and an Analyze-style .hdr/.img pair. The .img as a FIFO blocked VTK's open() where Ctrl-C
+    // could not end it.
+    test::TempDir tmp;
+    ASSERT_EQ(::mkfifo((tmp / "data.raw").c_str(), 0600), 0);
+    const std::string meta =
+        "ObjectType = Image\nNDims = 3\nDimSize = 16 16 16\nElementType = MET_UCHAR\n";
+    writeText(tmp / "one.mhd", meta + "ElementDataFile = data.raw\n");
+    expectInputError(tmp / "one.mhd", "one.mhd", {"ElementDataFile", "data.raw", "FIFO"});
+    std::ofstream(tmp / "slice.raw", std::ios::binary) << std::string(16 * 16, '\0');
+    std::string list = meta + "ElementDataFile = LIST 2D\n";
+    for (int z = 0; z < 16; ++z) list += (z == 7 ? "data.raw\n" : "slice.raw\n");
+    writeText(tmp / "list.mhd", list);
+    expectInputError(tmp / "list.mhd", "list.mhd", {"ElementDataFile", "data.raw", "FIFO"});
+
+    // The pair: a NIfTI-1 .nii cut into its header (magic "ni1") and data, read by either name.
+    core::PhantomOptions o;
+    o.size = 16;
+    io::writeVolume(core::makePhantom("sphere", o), tmp / "s.nii");
+    std::ifstream in(tmp / "s.nii", std::ios::binary);
+    std::string nii((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    ASSERT_GT(nii.size(), 352u);
+    std::string header = nii.substr(0, 348);
+    header.replace(344, 4, std::string("ni1\0", 4));
+    const float zero = 0.0f;  // vox_offset: the data starts the .img
+    header.replace(108, 4, reinterpret_cast<const char*>(&zero), 4);
+    std::ofstream(tmp / "pair.hdr", std::ios::binary) << header;
+    std::ofstream(tmp / "pair.img", std::ios::binary) << nii.substr(352);
+    const core::Volume whole = io::readVolume(tmp / "s.nii");
+    for (const char* name : {"pair.hdr", "pair.img"}) {
+        const core::Volume v = io::readVolume(tmp / name);
+        ASSERT_EQ(v.dims(), whole.dims()) << name;
+        ASSERT_EQ(v.sizeBytes(), whole.sizeBytes()) << name;
+        EXPECT_EQ(std::memcmp(v.data(), whole.data(), v.sizeBytes()), 0) << name;
+    }
+    fs::remove(tmp / "pair.img");
+    ASSERT_EQ(::mkfifo((tmp / "pair.img").c_str(), 0600), 0);
+    expectInputError(tmp / "pair.hdr", "pair.hdr", {"pair.img", "FIFO"});
 }
 
 TEST(BadInput, TruncatedNiftiGz) {
