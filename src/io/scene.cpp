@@ -5,6 +5,7 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
+#include <iomanip>
 #include <limits>
 #include <map>
 #include <memory>
@@ -24,6 +25,12 @@ using nlohmann::json;
 namespace {
 
 constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
+/// Largest |value| of a TF point: a float, with the span between two points (the interpolation's
+/// denominator) still finite in float.
+constexpr double kMaxTfValue = 1e37;
+/// Roughness below which every value shades alike (GGX α = roughness² is held at ≥ 1e-3 in
+/// pathtrace/brdf.h): tiny values are stored as this instead of rounding to float 0.
+constexpr double kMinTfRoughness = 1e-3;
 
 /// What an invalid shadows_from_removed should become.
 constexpr const char* kShadowsFromRemovedFix =
@@ -137,13 +144,22 @@ VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
 TransferFunctionDesc parseTransferFunction(const Field& f) {
     TransferFunctionDesc tf;
     if (f.raw().is_null()) return tf;  // renderer picks a default for the modality
+    // An empty name would be taken as no preset (the modality's default) without a word.
+    const auto presetName = [](const Field& name) {
+        std::string text = name.string();
+        if (text.empty())
+            name.fail("is an empty preset name",
+                      "name a preset (e.g. \"ct-bone\"), or leave "
+                      "transfer_function out for the modality's default");
+        return text;
+    };
     if (f.isString()) {
-        tf.preset = f.string();
+        tf.preset = presetName(f);
         return tf;
     }
     f.allowOnly({"preset", "points", "extinction_scale", "window"});
     if (f.has("preset") == f.has("points")) f.fail("needs exactly one of 'preset' or 'points'");
-    if (f.has("preset")) tf.preset = f.child("preset").string();
+    if (f.has("preset")) tf.preset = presetName(f.child("preset"));
     f.get("extinction_scale", tf.extinctionScale, 0.0, 1e6);
     if (f.has("window")) {
         const Field w = f.child("window");
@@ -163,7 +179,9 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
                 {"value", "color", "extinction", "emission", "specular", "roughness", "phase_g"});
             TransferFunctionPoint tp;
             if (!p.has("value")) p.fail("needs a 'value'");
-            tp.value = p.child("value").number();
+            // Voxel values and the TF's points are 32-bit floats from here on: a value must be
+            // one, and two points a double tells apart may be one float (checked below).
+            tp.value = p.child("value").number(-kMaxTfValue, kMaxTfValue);
             p.get("color", tp.color, 0.0, 1.0);
             p.get("extinction", tp.extinction, 0.0, 1e6);
             p.get("emission", tp.emission, 0.0, 1e9);
@@ -182,7 +200,9 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
                     r.fail("must be a number in (0, 1], got " + typeName(r.raw()) + " " +
                                shortDump(r.raw()),
                            "e.g. \"roughness\": 0.5 (small: glossy, 1: matte)");
-                tp.roughness = r.raw().get<double>();
+                // Below GGX's smallest α (pathtrace/brdf.h) every roughness is the same mirror;
+                // one that rounds to float 0 would be refused later as "not in (0, 1]".
+                tp.roughness = std::max(r.raw().get<double>(), kMinTfRoughness);
             }
             if (p.has("phase_g")) {
                 const Field g = p.child("phase_g");
@@ -190,6 +210,10 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
                     g.fail("must be a number strictly between -1 and 1, got " + typeName(g.raw()) +
                                " " + shortDump(g.raw()),
                            "e.g. \"phase_g\": 0.3 (0: isotropic, > 0: forward)");
+                if (!(std::abs(float(g.raw().get<double>())) < 1.0f))
+                    g.fail("is " + shortDump(g.raw()) +
+                               ", which single precision (the renderers') rounds to ±1",
+                           "give |phase_g| at most 0.9999999");
                 tp.phaseG = g.raw().get<double>();
             }
             if (i > 0 && tp.phaseG.has_value() != tf.points.front().phaseG.has_value())
@@ -202,6 +226,13 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
                 os << "must be strictly increasing; got " << tp.value << " after "
                    << tf.points.back().value;
                 p.child("value").fail(os.str(), "sort the points by value");
+            }
+            if (!tf.points.empty() && !(float(tp.value) > float(tf.points.back().value))) {
+                std::ostringstream os;
+                os << std::setprecision(17) << "is " << tp.value << ", the same as points[" << i - 1
+                   << "]'s " << tf.points.back().value
+                   << " in single precision (voxel values are 32-bit floats)";
+                p.child("value").fail(os.str(), "space the two points further apart");
             }
             tf.points.push_back(tp);
         }

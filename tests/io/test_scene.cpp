@@ -474,3 +474,33 @@ TEST(Scene, TransferFunctionSurfaceChannelsAreReadStrictlyAndRoundTrip) {
     expectBad(tf(R"({"value": 0, "roughnes": 0.1})"), "transfer_function.points[0].roughnes",
               {"did you mean 'roughness'"});
 }
+
+TEST(Scene, TransferFunctionPointsAreCheckedInTheRenderersSinglePrecision) {
+    // The scene is read in double, the TF built in float: what only a double tells apart was
+    // refused later by the TF itself, naming neither the file nor the field (and 1e308 as "not
+    // finite").
+    const auto tf = [](const std::string& points) {
+        return json::parse(R"({"volume": "a.nii", "transfer_function": {"points": [)" + points +
+                           "]}}");
+    };
+    expectBad(tf(R"({"value": 0}, {"value": 1000.0}, {"value": 1000.00001})"),
+              "transfer_function.points[2].value", {"same as points[1]", "single precision"});
+    expectBad(tf(R"({"value": 0}, {"value": 5e-324})"), "transfer_function.points[1].value",
+              {"single precision"});
+    expectBad(tf(R"({"value": -1e308}, {"value": 0})"), "transfer_function.points[0].value",
+              {"1e+37"});
+    // An empty preset name was the modality's default, silently.
+    expectBad(json::parse(R"({"volume": "a.nii", "transfer_function": ""})"), "transfer_function",
+              {"empty preset name"});
+    expectBad(json::parse(R"({"volume": "a.nii", "transfer_function": {"preset": ""}})"),
+              "transfer_function.preset", {"empty preset name"});
+    expectBad(tf(R"({"value": 0, "phase_g": 0.999999999})"), "transfer_function.points[0].phase_g",
+              {"rounds to ±1"});
+    // Distinct floats and a g float tells from 1 are fine; a roughness below the smallest GGX
+    // lobe's is that lobe (not float 0).
+    const io::Scene s = parse(tf(R"({"value": 1000, "phase_g": 0.9999999, "roughness": 1e-300},
+        {"value": 1000.0001, "phase_g": -0.9999999})"));
+    ASSERT_EQ(s.transferFunction.points.size(), 2u);
+    EXPECT_GT(s.transferFunction.points[0].roughness, 0.0);
+    EXPECT_LT(std::abs(float(*s.transferFunction.points[1].phaseG)), 1.0f);
+}
