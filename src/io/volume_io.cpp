@@ -1282,18 +1282,15 @@ class MetaScratch {
 /// The data files of a validated header, in MetaIO's order (one file; LIST names; a pattern
 /// expanded), with how many dimensions each file holds. InputError when the count does not match
 /// DimSize or a file cannot be opened.
-/// A data file `name` (at `f`) the header `path` names must be a file: a FIFO would block MetaIO
-/// until a writer came (Ctrl-C could stop it, but nothing would be read).
+/// A data file `name` (at `f`) the header `path` names must exist and not be a folder. (A FIFO or
+/// device is MetaIO's to read, in the child process Ctrl-C can stop — as a hung network share:
+/// test_cli's CtrlCStopsAReadBlockedInsideTheReader.)
 void checkMetaDataFile(const fs::path& f, const std::string& name, const fs::path& path) {
     std::error_code ec;
     if (!fs::exists(f, ec) || fs::is_directory(f, ec))
         throw InputError(path.string(), "ElementDataFile",
                          "names '" + name + "', which cannot be opened",
                          "put the data file beside the header");
-    if (core::isSpecialFile(f))
-        throw InputError(path.string(), "ElementDataFile",
-                         "names '" + name + "', a FIFO, socket or device, not a file",
-                         "name a regular file, or copy the stream to one first");
 }
 
 std::vector<fs::path> metaDataFiles(const MetaHeader& h, const fs::path& path, int& fileDims) {
