@@ -264,6 +264,7 @@ Command addReplayCommand(CLI::App& app) {
         }
         json frames = json::array();
         std::size_t done = 0;
+        std::vector<fs::path> added;  // frames this run wrote where none was before
         std::vector<double> frameSeconds;
         // One frame: rendered, written atomically, its stats entry returned.
         auto renderFrame = [&](std::size_t i) {
@@ -275,11 +276,13 @@ Command addReplayCommand(CLI::App& app) {
             pipeline::RunResult r = pipe.run(scenes[i], runOptions, progress);
             throwIfCancelled();
             const fs::path file = dir / frameName(i);
+            const bool isNew = !fs::exists(file, ec);
             OutputFiles files;
             files.write(file, "--out",
                         [&](const fs::path& p) { writeDisplayImage(r, scenes[i], p); });
             throwIfCancelled();
             files.commit();
+            if (isNew) added.push_back(file);
             ++done;
             const double seconds = sw.seconds();
             std::vector<std::string> ran, cached;
@@ -303,11 +306,26 @@ Command addReplayCommand(CLI::App& app) {
                 {"ran", ran}, {"cached", cached}, {"warnings", r.warnings}, {"stages", stages}};
         };
         if (ranks.size() == 1) {
+            std::size_t current = 0;
             try {
-                for (std::size_t i = 0; i < scenes.size(); ++i) {
-                    frames.push_back(renderFrame(i));
+                for (; current < scenes.size(); ++current) {
+                    frames.push_back(renderFrame(current));
                     frameSeconds.push_back(frames.back()["seconds"].get<double>());
                 }
+            } catch (const InputError& e) {
+                // Bad input only a frame's stages find (an environment map that does not read, an
+                // isovalue outside the data): the frames this run added go again, as does a
+                // folder it created — DIR as it was (frames it replaced stay replaced).
+                for (const fs::path& f : added) fs::remove(f, ec);
+                if (created) fs::remove(dir, ec);  // only when empty
+                // Named by the keyframe that set the field, as the checks before the first frame.
+                if (e.source() != ses.source ||
+                    io::blamedOverride(scenes[current].overrides, e.field()))
+                    throw;
+                throw InputError(ses.source,
+                                 interpolate ? ses.fieldAtTime(times[current], e.field())
+                                             : ses.fieldAt(current, e.field()),
+                                 e.problem(), e.fix());
             } catch (const CancelledError&) {
                 if (done == 0 && created) fs::remove(dir, ec);  // empty: as if never run
                 std::fprintf(stderr,

@@ -178,6 +178,17 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
     writeJson(tmp / "bad-part.json", badPart);
     writeJson(tmp / "good.json", smallSession());
     std::ofstream(tmp / "a-file") << "x";
+    // Bad input only a frame's stages find, after frames 0 and 1 are written: an environment map
+    // that does not read, an isovalue outside the data (named with its keyframe).
+    std::ofstream(tmp / "sky.hdr") << "not an image";
+    json badMap = smallSession();
+    badMap["keyframes"][2]["lights"] =
+        json::array({{{"type", "environment"}, {"path", "sky.hdr"}}});
+    writeJson(tmp / "bad-map.json", badMap);
+    json badIso = smallSession();
+    badIso["version"] = 2;
+    badIso["keyframes"][2]["method"] = {{"name", "iso-lattice"}, {"params", {{"iso_value", 1e6}}}};
+    writeJson(tmp / "bad-iso.json", badIso);
 
     struct Case {
         std::string args, expect;
@@ -206,6 +217,8 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
         {q(tmp / "good.json") + " --video v.gif", "--video"},
+        {q(tmp / "bad-map.json"), "sky.hdr"},
+        {q(tmp / "bad-iso.json"), "keyframes[2].method.params.iso_value"},
     };
     for (const Case& c : cases) {
         // A fresh --out (must not be created) and an existing one (must stay as it was).
