@@ -314,6 +314,15 @@ void validateSweep(const SweepSpec& spec, const std::vector<SweepItem>& items,
     for (std::size_t i = 0; i < spec.references.size(); ++i)
         check(referenceScene(spec, i), referenceField(spec, i));
     for (const SweepItem& it : items) check(variantScene(spec, it), itemWhere(spec, it));
+    // A missing volume file: before any folder is made (the read would name the path alone).
+    const io::VolumeSource& v = referenceScene(spec).volume;
+    std::error_code ec;
+    if (v.phantom.empty() && !std::filesystem::exists(v.path, ec)) {
+        const std::string base = spec.sceneDir.empty() ? "." : spec.sceneDir.string();
+        throw InputError(spec.source, "scene.volume",
+                         "names '" + v.path.string() + "', which does not exist",
+                         "fix the path; a relative one is read from " + base);
+    }
 }
 
 SweepRunner::SweepRunner(const SweepSpec& spec, pipeline::Session& variants,

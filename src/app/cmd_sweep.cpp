@@ -114,6 +114,13 @@ Command addSweepCommand(CLI::App& app) {
         const core::Progress progress = talk && isatty(STDERR_FILENO)
                                             ? terminalProgress(false)
                                             : core::Progress({}, &cancelFlag());
+        // What this run adds before the first variant: removed again when the reference meets
+        // bad input only its stages find (an environment map that does not read), so that a
+        // mistake leaves nothing written. The folders in creation order.
+        std::vector<fs::path> added;
+        for (const fs::path& p :
+             {dir, dir / "images", dir / "maps", dir / "cache", dir / "reference.json"})
+            if (!fs::exists(p, ec)) added.push_back(p);
         references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
         analysis::SweepRunner runner(spec, variants, references);
         if (lead || !*noImages) runner.setAfterStage(preloadImagesAfterInputs(imageSupport));
@@ -140,6 +147,7 @@ Command addSweepCommand(CLI::App& app) {
                     const analysis::SweepReference& ref = runner.reference(k, progress);
                     const std::string png =
                         k == 0 ? "reference.png" : "reference-" + std::to_string(k) + ".png";
+                    if (!fs::exists(dir / png, ec)) added.push_back(dir / png);
                     writeAtomically(dir / png,
                                     [&](const fs::path& p) { io::writeImage(ref.display, p); });
                     const auto& rs = spec.references[k];
@@ -186,6 +194,12 @@ Command addSweepCommand(CLI::App& app) {
             } catch (...) {
                 ok = false;
                 failure = std::current_exception();
+                try {
+                    std::rethrow_exception(failure);
+                } catch (const InputError&) {
+                    for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
+                } catch (...) {
+                }
             }
         if (!ranks.allTrue(ok)) {
             if (failure) std::rethrow_exception(failure);

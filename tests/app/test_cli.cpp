@@ -699,7 +699,20 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
       "runs": [{"method": "gradient"}, {"method": "sh-local", "axes": {"rays": [16, -4]}}]})";
     std::ofstream(tmp / "list.json") << R"([1, 2])";
     std::ofstream(tmp / "file") << "x";
+    // Found before any folder is made: a volume file that is not there (named with the sweep's
+    // key); found by the reference's stages after the folders are made: a sky that does not read
+    // (what the run made is removed again).
+    std::ofstream(tmp / "novolume.json") << R"({"scene": {"volume": "nope.nii"},
+      "runs": [{"method": "gradient"}]})";
+    std::ofstream(tmp / "sky.hdr") << "not an image";
+    std::ofstream(tmp / "badsky.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16},
+                "lights": [{"type": "environment", "path": "sky.hdr"}]},
+      "runs": [{"method": "gradient"}]})";
     const std::vector<std::pair<std::string, std::string>> cases = {
+        {"sweep " + q(tmp / "novolume.json") + " --out " + q(tmp / "out"),
+         "novolume.json: scene.volume: names"},
+        {"sweep " + q(tmp / "badsky.json") + " --out " + q(tmp / "out"), "sky.hdr"},
         {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out"), "runs[1].axes.rays=-4"},
         {"sweep " + q(tmp / "list.json") + " --out " + q(tmp / "out"), "must be a JSON object"},
         {"sweep " + q(tmp / "missing.json") + " --out " + q(tmp / "out"), "missing.json"},
@@ -714,6 +727,13 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
         EXPECT_NE(r.err.find(word), std::string::npos) << args << "\n" << r.err;
         EXPECT_FALSE(fs::exists(tmp / "out")) << args;
     }
+    // An --out that exists keeps what it held, and only that.
+    fs::create_directories(tmp / "mine");
+    std::ofstream(tmp / "mine" / "keep.txt") << "mine";
+    const Result r =
+        run("sweep " + q(tmp / "badsky.json") + " --out " + q(tmp / "mine"), tmp.path());
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_EQ(listing(tmp / "mine"), std::vector<std::string>{"keep.txt"});
 }
 
 TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
