@@ -49,15 +49,7 @@ std::string_view toString(EnvironmentLayout l) {
     return l == EnvironmentLayout::Equirect ? "equirect" : "probe";  // as scenes spell it
 }
 
-EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const EnvironmentOptions& options,
-                                   std::string source)
-    : source_(std::move(source)) {
-    if (image.width <= 0 || image.height <= 0 ||
-        image.pixels.size() != std::size_t(4) * image.width * image.height)
-        throw InputError(source_, "size",
-                         "environment map is empty (" + std::to_string(image.width) + "×" +
-                             std::to_string(image.height) + ")",
-                         "give a non-empty HDR image");
+void EnvironmentLight::checkTexels(const core::ImageRGBA& image, const std::string& source) {
     // Every pixel must be a finite, non-negative radiance. Lossy EXR compression (DWAA/DWAB) leaves
     // tiny negative values next to dark edges; those down to −kLossyNegativeTolerance × the map's
     // largest value are set to 0 and counted (clampedTexels()); anything more negative is an error.
@@ -70,16 +62,36 @@ EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const Environme
         for (int x = 0; x < image.width; ++x)
             for (int c = 0; c < 3; ++c) {
                 const float v = image.at(x, y)[c];
-                if (!std::isfinite(v) || v < negativeFloor) {
+                if (!std::isfinite(v) || v < negativeFloor || v > kMaxRadiance) {
                     std::ostringstream os;
                     os << "pixel (" << x << ", " << y << ") channel "
-                       << "RGB"[c] << " is " << v
-                       << (std::isfinite(v) ? " (negative radiance)" : " (not finite)");
+                       << "RGB"[c] << " is " << v;
+                    if (!std::isfinite(v))
+                        os << " (not finite)";
+                    else if (v < 0)
+                        os << " (negative radiance)";
+                    else
+                        os << " (brighter than the " << kMaxRadiance << " voxlight carries)";
                     throw InputError(
-                        source_, "pixels", os.str(),
-                        "repair the map (e.g. clamp or inpaint the bad pixels) and re-export it");
+                        source, "pixels", os.str(),
+                        v > kMaxRadiance
+                            ? "scale the map down, and raise the light's intensity to match"
+                            : "repair the map (e.g. clamp or inpaint the bad "
+                              "pixels) and re-export it");
                 }
             }
+}
+
+EnvironmentLight::EnvironmentLight(const core::ImageRGBA& image, const EnvironmentOptions& options,
+                                   std::string source)
+    : source_(std::move(source)) {
+    if (image.width <= 0 || image.height <= 0 ||
+        image.pixels.size() != std::size_t(4) * image.width * image.height)
+        throw InputError(source_, "size",
+                         "environment map is empty (" + std::to_string(image.width) + "×" +
+                             std::to_string(image.height) + ")",
+                         "give a non-empty HDR image");
+    checkTexels(image, source_);
     if (options.layout == EnvironmentLayout::Equirect) {
         if (image.width != 2 * image.height)
             throw InputError(

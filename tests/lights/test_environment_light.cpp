@@ -345,7 +345,8 @@ TEST(EnvironmentLight, BadInputIsAClearError) {
     }
     // Zero size, NaN, Inf, negative, wrong aspect.
     EXPECT_THROW(EnvironmentLight(core::ImageRGBA{}, {}, "empty"), InputError);
-    for (float bad : {NAN, INFINITY, -1.0f}) {
+    // Brighter than kMaxRadiance: the SH methods' image went black (float overflow) from 1e20 on.
+    for (float bad : {NAN, INFINITY, -1.0f, 1e16f, 3e38f}) {
         auto img = randomEquirect(16, 8, 3);
         img.at(5, 3)[1] = bad;
         try {

@@ -359,6 +359,29 @@ TEST(Pipeline, UniformEnvironmentLightAddsDiffuseTimesPiL) {
     EXPECT_LE(worst, kUniformEnvTol);
 }
 
+TEST(Pipeline, AnEnvironmentMapPushedPastTheRadianceLimitBlamesTheLightsIntensity) {
+    // A map within EnvironmentLight::kMaxRadiance that colour × intensity push past it: the light's
+    // key is at fault (the map's "pixel … is inf" had named the file).
+    test::TempDir tmp;
+    core::ImageRGBA env(32, 16);
+    for (std::size_t i = 0; i < env.pixels.size(); ++i) env.pixels[i] = (i % 4 == 3) ? 1.f : 1e10f;
+    io::writeImage(env, tmp / "bright.exr");
+    json d = gradientScene();
+    d["lights"] = json::array(
+        {{{"type", "environment"}, {"path", (tmp / "bright.exr").string()}, {"intensity", 1e12}}});
+    Session session;
+    try {
+        (void)session.run(scene(d));
+        ADD_FAILURE() << "radiance 1e22 accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "lights[0].intensity") << e.what();
+        EXPECT_NE(std::string(e.what()).find("1e+22"), std::string::npos) << e.what();
+    }
+    d["lights"][0]["intensity"] = 1e4;  // 1e14: within the limit, rendered
+    const RunResult ok = session.run(scene(d));
+    for (const float v : ok.image.pixels) ASSERT_TRUE(std::isfinite(v));
+}
+
 // ---- The method seam: a toy method registered here ------------------------------------------
 
 namespace {
