@@ -25,6 +25,18 @@ std::string sizeText(const core::ImageRGBA& i) {
 }
 
 /// JSON has no infinity: an infinite value (PSNR of identical images) is null.
+void refuseNonFinitePixels(const core::ImageRGBA& image, const std::string& path) {
+    for (std::size_t i = 0; i < image.pixels.size(); ++i)
+        if (!std::isfinite(image.pixels[i])) {
+            const std::size_t p = i / 4;
+            const std::string where = "pixel (" + std::to_string(p % std::size_t(image.width)) +
+                                      ", " + std::to_string(p / std::size_t(image.width)) +
+                                      ") channel " + "RGBA"[i % 4];
+            throw InputError(path, "pixels",
+                             where + " is " + (std::isnan(image.pixels[i]) ? "NaN" : "infinite"),
+                             "compare finite images: re-render it, or repair the pixel");
+        }
+}
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
 }  // namespace
@@ -90,6 +102,10 @@ Command addCompareCommand(CLI::App& app) {
         io::ImageReadInfo refInfo, testInfo;
         const core::ImageRGBA ref = io::readImage(*refPath, refInfo);
         const core::ImageRGBA test = io::readImage(*testPath, testInfo);
+        // A NaN or Inf pixel (an EXR from a broken render) made RMSE/PSNR nan or inf while SSIM
+        // and FLIP, on the clamped display values, still read "identical".
+        refuseNonFinitePixels(ref, *refPath);
+        refuseNonFinitePixels(test, *testPath);
         if (ref.width != test.width || ref.height != test.height)
             throw InputError("command line", "TEST",
                              *refPath + " is " + sizeText(ref) + " pixels but " + *testPath +

@@ -8,6 +8,7 @@
 #include <chrono>
 #include <cstdio>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -554,6 +555,14 @@ TEST(Cli, CompareReportsMetricsAsJsonAndWritesTheMap) {
     io::writeImage(a, tmp / "a.png");
     io::writeImage(b, tmp / "b.png");
     io::writeImage(small, tmp / "small.png");
+    // Linear EXRs with a NaN or an infinite pixel (a broken render): RMSE was nan/inf while SSIM
+    // and FLIP, on clamped display values, read "identical".
+    core::ImageRGBA nan = a, inf = a;
+    nan.at(3, 5)[1] = std::numeric_limits<float>::quiet_NaN();
+    inf.at(7, 2)[0] = std::numeric_limits<float>::infinity();
+    io::writeImage(a, tmp / "a.exr");
+    io::writeImage(nan, tmp / "nan.exr");
+    io::writeImage(inf, tmp / "inf.exr");
     Result r = run("compare --json " + q(tmp / "a.png") + " " + q(tmp / "b.png") + " --map " +
                        q(tmp / "map.png"),
                    tmp.path());
@@ -580,6 +589,10 @@ TEST(Cli, CompareReportsMetricsAsJsonAndWritesTheMap) {
         {"compare " + q(tmp / "a.png") + " " + q(tmp / "small.png"), "16x24"},
         {"compare " + q(tmp / "a.png") + " " + q(tmp / "missing.png"), "does not exist"},
         {"compare --metrics rmse,nope " + q(tmp / "a.png") + " " + q(tmp / "b.png"), "nope"},
+        {"compare " + q(tmp / "a.exr") + " " + q(tmp / "nan.exr"),
+         "nan.exr: pixels: pixel (3, 5) channel G is NaN"},
+        {"compare " + q(tmp / "inf.exr") + " " + q(tmp / "a.exr"),
+         "inf.exr: pixels: pixel (7, 2) channel R is infinite"},
     };
     for (const auto& [args, word] : cases) {
         const Result e = run(args + " --map " + q(tmp / "bad.png"), tmp.path());
