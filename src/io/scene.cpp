@@ -15,6 +15,7 @@
 #include <utility>
 
 #include "core/files.h"
+#include "core/phantoms.h"
 #include "io/json_field.h"
 
 namespace voxlight::io {
@@ -117,18 +118,31 @@ fs::path resolvePath(const std::string& p, const fs::path& baseDir) {
     return path.is_absolute() ? path : baseDir / path;
 }
 
+/// A file named by `f` (a string), resolved against `baseDir`; an empty name is refused here (it
+/// resolved to the folder, and std::filesystem refused to make "" absolute: an internal error).
+fs::path pathOf(const Field& f, const fs::path& baseDir) {
+    const std::string name = f.string();
+    if (name.empty()) f.fail("is an empty path", "name a file");
+    return resolvePath(name, baseDir);
+}
+
 VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
     VolumeSource v;
     if (f.raw().is_null())
         f.fail("is required", "add \"volume\": \"path/to/volume\" or {\"phantom\": \"torso\"}");
     if (f.isString()) {
-        v.path = resolvePath(f.string(), baseDir);
+        v.path = pathOf(f, baseDir);
         return v;
     }
     f.allowOnly({"path", "phantom", "size", "series", "nonfinite", "strict_geometry"});
     if (f.has("path") == f.has("phantom")) f.fail("needs exactly one of 'path' or 'phantom'");
-    if (f.has("path")) v.path = resolvePath(f.child("path").string(), baseDir);
-    if (f.has("phantom")) v.phantom = f.child("phantom").string();
+    if (f.has("path")) v.path = pathOf(f.child("path"), baseDir);
+    if (f.has("phantom")) {
+        // Named here, with the scene's key (makePhantom's own refusal names no file).
+        std::vector<std::string> names;
+        for (const auto& entry : core::phantomCatalog()) names.push_back(entry.first);
+        v.phantom = f.child("phantom").oneOf(names);
+    }
     f.get("size", v.phantomSize, 8, 1024);
     if (f.has("series")) v.readOptions.dicomSeriesUid = f.child("series").string();
     f.get("strict_geometry", v.readOptions.strictGeometry,
@@ -334,7 +348,7 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
     }
     if (l.type == "environment") {
         if (!f.has("path")) f.fail("needs a 'path' to an .hdr or .exr environment map");
-        l.path = resolvePath(f.child("path").string(), baseDir);
+        l.path = pathOf(f.child("path"), baseDir);
     }
     f.get("rotation", l.rotationDeg, -360.0, 360.0);
     f.get("layout", l.layout, {"equirect", "probe"});
@@ -692,7 +706,9 @@ std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::str
         }
         if (!node) continue;
         if (node->is_object() && node->contains("path")) node = &(*node)["path"];
-        if (node->is_string() && !fs::path(node->get<std::string>()).is_absolute())
+        // (An empty path stays empty: the scene's check names it.)
+        if (node->is_string() && !node->get<std::string>().empty() &&
+            !fs::path(node->get<std::string>()).is_absolute())
             *node = fs::absolute(node->get<std::string>()).string();
     }
     return records;

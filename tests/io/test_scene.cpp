@@ -406,6 +406,21 @@ TEST(Scene, HostileOverridesAreInputErrors) {
     EXPECT_THROW((void)parse(built), InputError);
 }
 
+TEST(Scene, EmptyPathsAndUnknownPhantomsAreNamedByTheirKey) {
+    // "" resolved to the scene's folder ("./: is a directory"), and through --set made
+    // std::filesystem throw (an internal error); an unknown phantom named no file.
+    expectBad(json::parse(R"({"volume": ""})"), "volume", {"empty path"});
+    expectBad(json::parse(R"({"volume": {"path": ""}})"), "volume.path", {"empty path"});
+    expectBad(json::parse(R"({"volume": {"phantom": "torsoo"}})"), "volume.phantom",
+              {"torsoo", "torso, sphere"});
+    expectBad(
+        json::parse(R"({"volume": "a.nii", "lights": [{"type": "environment", "path": ""}]})"),
+        "lights[0].path", {"empty path"});
+    json doc = json::parse(R"({"volume": "a.nii"})");
+    (void)io::applyOverrides(doc, {"volume.path="});
+    expectBad(doc, "volume.path", {"empty path"});
+}
+
 TEST(Scene, TextAfterANulByteIsNotIgnored) {
     // nlohmann's lexer ends the input at a NUL: the bytes after it were never read.
     test::TempDir tmp;
