@@ -20,12 +20,14 @@ using nlohmann::json;
 
 namespace {
 
-/// An array of strings (effects, overrides).
-std::vector<std::string> strings(const io::Field& f) {
+constexpr const char* kEffectsExample = "[\"global_shadows\"]";
+
+/// An array of strings (effects, overrides); `example` shows the right form.
+std::vector<std::string> strings(const io::Field& f, const std::string& example) {
     if (!f.isArray())
         f.fail("must be an array of strings, got " + io::typeName(f.raw()) + " " +
                    io::shortDump(f.raw()),
-               "write e.g. [\"global_shadows\"]");
+               "write e.g. " + example);
     std::vector<std::string> out;
     for (std::size_t i = 0; i < f.size(); ++i) out.push_back(f.at(i).string());
     return out;
@@ -100,7 +102,7 @@ SweepReferenceSpec parseReference(const io::Field& r) {
         if (ref.method != "pathtrace") ref.params = json::object(), ref.effects.reset();
     }
     if (r.has("params")) ref.params = object(r.child("params"));
-    if (r.has("effects")) ref.effects = strings(r.child("effects"));
+    if (r.has("effects")) ref.effects = strings(r.child("effects"), kEffectsExample);
     return ref;
 }
 
@@ -138,7 +140,7 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
     std::vector<io::OverrideRecord> records;
     if (top.has("overrides")) {
         const io::Field o = top.child("overrides");
-        const std::vector<std::string> assignments = strings(o);
+        const std::vector<std::string> assignments = strings(o, "[\"image.width=96\"]");
         try {
             records = io::applyOverrides(spec.scene, assignments);
         } catch (const InputError& e) {
@@ -179,7 +181,7 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
             r.child("label").fail("'" + run.label + "' is used twice",
                                   "give each run of the same method its own \"label\"");
         if (r.has("params")) run.params = object(r.child("params"));
-        if (r.has("effects")) run.effects = strings(r.child("effects"));
+        if (r.has("effects")) run.effects = strings(r.child("effects"), kEffectsExample);
         if (r.has("axes")) {
             const io::Field axes = r.child("axes");
             axes.expectObject();

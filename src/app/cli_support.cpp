@@ -116,6 +116,17 @@ std::string repeatedOption(const CLI::ParseError& e) {
     return at == std::string::npos || at == 0 ? std::string() : what.substr(0, at);
 }
 
+std::string optionWithEmptyValue(const CLI::App& app) {
+    for (const CLI::Option* o : app.get_options())
+        if (o->get_expected_min() > 0)  // flags take no value
+            for (const std::string& r : o->results())
+                if (r.empty()) return o->get_name();
+    // Every subcommand and option group (those not used hold no results).
+    for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+        if (const std::string name = optionWithEmptyValue(*sub); !name.empty()) return name;
+    return {};
+}
+
 CLI::Validator wholeNumber() {
     return CLI::Validator(
         [](std::string& text) -> std::string {

@@ -52,6 +52,8 @@ CLI::Validator wholeNumber();
 /// The option `e` refuses because it was given more than once (main's Throw policy), or "" for
 /// any other parse error.
 std::string repeatedOption(const CLI::ParseError& e);
+/// The first option of the parsed command (option groups included) given "" as its value, or "".
+std::string optionWithEmptyValue(const CLI::App& app);
 
 /// True when INPUT is taken as a volume (a directory, or a file not ending in .json).
 bool inputIsVolume(const std::string& input);

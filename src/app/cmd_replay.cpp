@@ -54,15 +54,23 @@ std::string frameName(std::size_t i) {
 
 /// --size WxH → the two overrides image.width / image.height.
 std::vector<std::string> sizeOverrides(const std::string& size) {
-    static const std::regex re("([0-9]{1,5})x([0-9]{1,5})");
+    static const std::regex re("([0-9]+)x([0-9]+)");
     std::smatch m;
-    if (!std::regex_match(size, m, re) || std::stoi(m[1]) < 1 || std::stoi(m[2]) < 1)
+    if (!std::regex_match(size, m, re))
         throw InputError("command line", "--size", "'" + size + "' is not WIDTHxHEIGHT",
                          "e.g. --size 256x256");
     // The scene's image limits, said here: as overrides they would be blamed on a "--set" the
-    // user never typed.
+    // user never typed. (Six digits or more are past the limit without a stoi that overflows.)
     constexpr int kMaxSide = 16384;  // io::parseScene's image.width/height
-    if (std::stoi(m[1]) > kMaxSide || std::stoi(m[2]) > kMaxSide)
+    const auto side = [&](int k) {
+        std::string digits = m[k].str();
+        digits.erase(0, std::min(digits.find_first_not_of('0'), digits.size() - 1));
+        return digits.size() > 5 ? kMaxSide + 1 : std::stoi(digits);
+    };
+    if (side(1) < 1 || side(2) < 1)
+        throw InputError("command line", "--size", "'" + size + "' has a side of 0 pixels",
+                         "e.g. --size 256x256");
+    if (side(1) > kMaxSide || side(2) > kMaxSide)
         throw InputError(
             "command line", "--size",
             "'" + size + "' is larger than " + std::to_string(kMaxSide) + " pixels on a side",

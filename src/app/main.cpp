@@ -48,6 +48,12 @@ int main(int argc, char** argv) {
         std::cerr << "voxlight: error: " << e.what() << " (see voxlight --help)\n";
         return kExitBadInput;
     }
+    // An empty value ("--isovalue ''") reads as 0 for a number in CLI11: a mistake to name.
+    if (const std::string empty = optionWithEmptyValue(app); !empty.empty()) {
+        std::cerr << "voxlight: error: " << empty
+                  << " is given an empty value (give a value, or leave the option out)\n";
+        return kExitBadInput;
+    }
     for (auto& c : commands)
         if (c.sub->parsed()) return runGuarded(c.run);
     return kExitBadInput;

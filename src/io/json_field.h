@@ -72,7 +72,12 @@ class Field {
         const double v = j_.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
             std::ostringstream os;
-            os << "must be in [" << lo << ", " << hi << "], got " << v;
+            os << "must be in [" << lo << ", " << hi << "], got ";
+            // As written (the shortest round trip): "got 170" for 170.0000001 hid why.
+            if (std::isfinite(v))
+                os << shortDump(j_);
+            else
+                os << v;
             fail(os.str());
         }
         return v;

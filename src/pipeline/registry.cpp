@@ -3,7 +3,10 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <sstream>
+
+#include "io/json_field.h"
 
 namespace voxlight::pipeline {
 
@@ -27,11 +30,18 @@ void ParamReader::fail(const std::string& key, const std::string& problem,
 double ParamReader::number(const std::string& k, double def, double lo, double hi) {
     double v = def;
     if (params_.contains(k)) {
-        if (!params_[k].is_number()) fail(k, "must be a number");
-        v = params_[k].get<double>();
+        const json& j = params_[k];
+        if (!j.is_number())
+            fail(k, "must be a number, got " + io::typeName(j) + " " + io::shortDump(j));
+        v = j.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
+            // The value as written (shortest round trip): "got 170" for 170.0000001 hid why.
             std::ostringstream os;
-            os << "must be in [" << lo << ", " << hi << "], got " << v;
+            os << "must be in [" << lo << ", " << hi << "], got ";
+            if (std::isfinite(v))
+                os << io::shortDump(j);
+            else
+                os << v;
             fail(k, os.str());
         }
     }
@@ -43,11 +53,16 @@ int ParamReader::integer(const std::string& k, int def, int lo, int hi) {
     int v = def;
     if (params_.contains(k)) {
         const json& j = params_[k];
-        if (!j.is_number_integer() && !j.is_number_unsigned()) fail(k, "must be an integer");
+        const std::string range =
+            "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got ";
+        if (!j.is_number_integer() && !j.is_number_unsigned())
+            fail(k, range + io::typeName(j) + " " + io::shortDump(j));
+        // Unsigned values past long long's range wrapped to negatives.
+        if (j.is_number_unsigned() &&
+            j.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max()))
+            fail(k, range + io::shortDump(j));
         const long long x = j.get<long long>();
-        if (x < lo || x > hi)
-            fail(k, "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
-                        "], got " + std::to_string(x));
+        if (x < lo || x > hi) fail(k, range + std::to_string(x));
         v = int(x);
     }
     used[k] = v;

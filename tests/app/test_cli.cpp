@@ -109,6 +109,9 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         // An option given twice kept CLI11's last value without a word.
         {"phantom torso --size 16 --size 32 -o '" + (tmp / "x.nii.gz").string() + "'",
          "--size is given more than once"},
+        // An empty value read as 0 for a number.
+        {"phantom torso --size '' -o '" + (tmp / "x.nii.gz").string() + "'",
+         "--size is given an empty value"},
         {"frobnicate", "frobnicate"},
     };
     for (const auto& [args, word] : cases) {

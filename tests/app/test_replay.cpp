@@ -213,6 +213,8 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --size 16by16", "--size"},
         // Past the image's limit: --size named (it read as a "--set image.width" never typed).
         {q(tmp / "good.json") + " --size 99999x16", "--size: '99999x16' is larger"},
+        {q(tmp / "good.json") + " --size 100000x16", "--size: '100000x16' is larger"},
+        {q(tmp / "good.json") + " --size 0x16", "a side of 0 pixels"},
         {q(tmp / "bad-part.json"), "keyframes[2].transfer_function.preset"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
