@@ -498,6 +498,16 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
             node = &(*node)[i];
             continue;
         }
+        // An index into nothing (a preset TF's points): no list to index, said so here — an
+        // object created for it would read later as "points: must be a non-empty array".
+        if (isIndexPart(part) && node->is_null() && k > 0) {
+            if (record.removed) {
+                record.removed = false;  // nothing was
+                return record;
+            }
+            throw InputError(said, key, "'" + normalizedKey(parts, k) + "' is not there to index",
+                             "set the whole list, e.g. " + normalizedKey(parts, k) + "=[...]");
+        }
         if (node->is_null()) *node = json::object();
         // Shorthand forms expand so their keys can be overridden: "method": "mip" ≡ {"name":
         // "mip"}, etc.

@@ -387,6 +387,20 @@ TEST(Scene, HugeUnsignedIntegerIsReportedAsGiven) {
 TEST(Scene, HostileOverridesAreInputErrors) {
     json doc = json::parse(R"({"volume": {"phantom": "torso"}})");
     EXPECT_THROW(io::applyOverride(doc, "description=caf\xe9"), InputError);
+    // An index into a list that is not there (a preset TF's points) is said at once; it had made
+    // "points" an object, refused later as "must be a non-empty array".
+    {
+        json preset = json::parse(R"({"volume": "a.nii", "transfer_function": "ct-bone"})");
+        try {
+            io::applyOverride(preset, "transfer_function.points.0.value=0");
+            ADD_FAILURE() << preset.dump();
+        } catch (const InputError& e) {
+            EXPECT_NE(std::string(e.what()).find("'transfer_function.points' is not there"),
+                      std::string::npos)
+                << e.what();
+        }
+        EXPECT_FALSE(io::applyOverride(preset, "transfer_function.points.0=null").removed);
+    }
     EXPECT_THROW(io::applyOverride(doc, "description=" + std::string(100000, '[')), InputError);
     // A key path of 100 components nests 100 objects: refused before anything recurses into it.
     std::string key = "a";
