@@ -177,6 +177,9 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
         SweepRun run;
         run.method = name(r.child("method"));
         run.label = r.has("label") ? name(r.child("label")) : run.method;
+        if (run.label.find(',') != std::string::npos)
+            r.child("label").fail("'" + run.label + "' holds a comma, where --only splits its list",
+                                  "write the label without commas");
         if (!labels.insert(run.label).second)
             r.child("label").fail("'" + run.label + "' is used twice",
                                   "give each run of the same method its own \"label\"");

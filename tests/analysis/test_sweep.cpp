@@ -106,6 +106,8 @@ TEST(Sweep, BadSweepsNameTheirKey) {
              d["runs"].push_back({{"method", "gradient"}});
          },
          "runs[1].label"},
+        // --only splits its list at commas: such a label could never be chosen.
+        {"label with a comma", [](json& d) { d["runs"][0]["label"] = "rays,16"; }, "runs[0].label"},
         {"effects not strings", [](json& d) { d["runs"][0]["effects"] = {1}; },
          "runs[0].effects[0]"},
         {"reference params not an object", [](json& d) { d["reference"]["params"] = 1; },
