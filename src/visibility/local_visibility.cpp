@@ -481,12 +481,13 @@ struct ClipRays {
 /// integrator (the sweep, or the march in one piece), so the difference way carries that
 /// integrator's ray depth into the cut rays: the two ways differ by the sweep's distance from the
 /// march on those rays (tested within the cut's own tolerance). Only a point whose stored value
-/// is its own has a `before` to start from (`before` null: from scratch). Returns the rays marched.
+/// is its own has a `before` to start from (`before` null: from scratch). Returns the rays marched;
+/// `emptied`: a face cuts some ray and none keeps a part (v is empty space's, no ray marched).
 template <class Narrow>
 std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
                                      const glm::vec3& origin, const glm::ivec3& dims, float radius,
                                      float h, Narrow&& narrow, const float* before, double* v,
-                                     std::uint64_t& samples, ClipRays& rays) {
+                                     std::uint64_t& samples, ClipRays& rays, bool& emptied) {
     const int C = set.c;
     // Each ray's full length and kept part; the two ways' marched lengths.
     VL_CHECK(int(rays.full.size()) >= set.n);
@@ -514,6 +515,8 @@ std::uint64_t clippedPointVisibility(const ValueField& sigma, const RaySet& set,
         return tau > 0.0 ? double(std::exp(-float(tau))) : 1.0;  // as pointVisibility
     };
     OriginValue atOrigin;
+    // A face cuts some ray and none keeps any part: empty space's value, without a ray.
+    emptied = cut > 0 && partial == 0;
     if (!before || !(differenceLength < scratchLength)) {
         // From scratch: pointVisibility's sum over the kept parts found above.
         std::fill(v, v + C, 0.0);
@@ -2129,13 +2132,15 @@ LocalVisibility clipAwareLocalVisibility(const LocalVisibility& base, const opti
                         // the one at the clamped position itself. A boundary layer's points hold
                         // their own, marched with the same rays (traceLayers).
                         const bool own = !swept || !clamped || spacing <= 1.f;
+                        bool emptied = false;
                         const std::uint64_t marched = clippedPointVisibility(
                             sigma, set, origin, grid.dims(), radius, hf, narrow,
-                            own ? dst : nullptr, v, samples, rayScratch);
+                            own ? dst : nullptr, v, samples, rayScratch, emptied);
                         rays += marched;
                         // None marched: no face cuts its rays (its value stays) or none of them
-                        // is kept (it became empty space's value without a ray).
+                        // is kept (it became empty space's value without a ray: cleared).
                         traced += marched > 0;
+                        cleared += emptied;
                         for (int c = 0; c < C; ++c) dst[c] = float(v[c]);
                     };
                     forEachSamplePoint(grid, b, C, out.data_.data() + out.offset_[b], perPoint);

@@ -95,8 +95,11 @@ TEST(ClipAwareVisibility, EqualsTheLocalVisibilityOfTheVolumeWithTheRemovedMatte
     // Only the points within r_s of the plane were traced again: x ∈ (11.5, 27.5) of 0..39.
     EXPECT_GT(st.pointsTraced, 0u);
     EXPECT_LE(st.pointsTraced, std::uint64_t(16) * dims.y * dims.z);
-    EXPECT_EQ(st.pointsCleared, std::uint64_t(12) * dims.y * dims.z);  // x ≤ 11: rays never reach
-    EXPECT_EQ(st.points, std::uint64_t(48) * 32 * 32);                 // 3×2×2 blocks of 16³
+    // x ≤ 11: rays never reach the kept side; and a few nearer points on the volume's faces whose
+    // every ray reaching that far leaves the volume first (empty space's value, no ray either).
+    EXPECT_GE(st.pointsCleared, std::uint64_t(12) * dims.y * dims.z);
+    EXPECT_LT(st.pointsCleared, std::uint64_t(13) * dims.y * dims.z);
+    EXPECT_EQ(st.points, std::uint64_t(48) * 32 * 32);  // 3×2×2 blocks of 16³
     // Rays are marched only where a face cuts them (or, outside a face, only their kept parts):
     // a point on the kept side at distance d from the plane has about (1 − d/R)/2 of its rays
     // cut, so well under half of the traced points' rays are marched (the field has 4× fewer).
