@@ -25,7 +25,6 @@
 #include <filesystem>
 #include <memory>
 #include <optional>
-#include <regex>
 #include <thread>
 
 #include "app/cli_support.h"
@@ -54,28 +53,34 @@ std::string frameName(std::size_t i) {
 
 /// --size WxH → the two overrides image.width / image.height.
 std::vector<std::string> sizeOverrides(const std::string& size) {
-    static const std::regex re("([0-9]+)x([0-9]+)");
-    std::smatch m;
-    if (!std::regex_match(size, m, re))
-        throw InputError("command line", "--size", "'" + size + "' is not WIDTHxHEIGHT",
+    // Digits, 'x', digits — parsed by hand: std::regex recurses once per character (a long
+    // argument overflowed the stack).
+    const std::size_t x = size.find('x');
+    const auto digits = [](std::string_view d) {
+        return !d.empty() && d.find_first_not_of("0123456789") == std::string_view::npos;
+    };
+    const std::string shown = size.size() > 24 ? size.substr(0, 21) + "..." : size;
+    if (x == std::string::npos || !digits(std::string_view(size).substr(0, x)) ||
+        !digits(std::string_view(size).substr(x + 1)))
+        throw InputError("command line", "--size", "'" + shown + "' is not WIDTHxHEIGHT",
                          "e.g. --size 256x256");
     // The scene's image limits, said here: as overrides they would be blamed on a "--set" the
-    // user never typed. (Six digits or more are past the limit without a stoi that overflows.)
+    // user never typed. (More than five digits after leading zeros: past the limit.)
     constexpr int kMaxSide = 16384;  // io::parseScene's image.width/height
-    const auto side = [&](int k) {
-        std::string digits = m[k].str();
-        digits.erase(0, std::min(digits.find_first_not_of('0'), digits.size() - 1));
-        return digits.size() > 5 ? kMaxSide + 1 : std::stoi(digits);
+    const auto side = [&](std::string d) {
+        d.erase(0, std::min(d.find_first_not_of('0'), d.size() - 1));
+        return d.size() > 5 ? kMaxSide + 1 : std::stoi(d);
     };
-    if (side(1) < 1 || side(2) < 1)
-        throw InputError("command line", "--size", "'" + size + "' has a side of 0 pixels",
+    const int w = side(size.substr(0, x)), h = side(size.substr(x + 1));
+    if (w < 1 || h < 1)
+        throw InputError("command line", "--size", "'" + shown + "' has a side of 0 pixels",
                          "e.g. --size 256x256");
-    if (side(1) > kMaxSide || side(2) > kMaxSide)
+    if (w > kMaxSide || h > kMaxSide)
         throw InputError(
             "command line", "--size",
-            "'" + size + "' is larger than " + std::to_string(kMaxSide) + " pixels on a side",
+            "'" + shown + "' is larger than " + std::to_string(kMaxSide) + " pixels on a side",
             "e.g. --size 1920x1080");
-    return {"image.width=" + m[1].str(), "image.height=" + m[2].str()};
+    return {"image.width=" + std::to_string(w), "image.height=" + std::to_string(h)};
 }
 
 /// The executable `name` on PATH, or empty.

@@ -614,31 +614,57 @@ vtkSmartPointer<vtkImageData> runImageReader(vtkImageReader2* r, const fs::path&
 
 /// The path without ".hdr"/".img" (and ".gz") when `path` is one file of an Analyze-style pair,
 /// read from both files; nothing for a .nii, which holds header and data.
-std::optional<std::string> analyzePairStem(const fs::path& path) {
-    std::string stem = path.string();
-    const auto strip = [&](const std::string& ext) {
-        if (stem.size() <= ext.size() ||
-            stem.compare(stem.size() - ext.size(), ext.size(), ext) != 0)
-            return false;
-        stem.resize(stem.size() - ext.size());
+struct AnalyzePair {
+    std::string stem;         ///< the path without its extensions
+    bool imageNamed = false;  ///< the .img was named (else the .hdr)
+    bool upperCase = false;   ///< its extension is upper case (.IMG)
+    /// The pair's files that may hold its header or image, the named file's case first (VTK
+    /// swaps .img and .hdr keeping the case; the reader is chosen whatever the case).
+    std::vector<fs::path> candidates(const char* ext) const {
+        std::string upper = ext;
+        for (char& c : upper) c = char(std::toupper(static_cast<unsigned char>(c)));
+        std::vector<fs::path> out;
+        for (const std::string& e : {std::string(ext), upper})
+            for (const char* gz : {"", ".gz", ".GZ"}) out.push_back(stem + e + gz);
+        if (upperCase) std::swap(out[0], out[3]);
+        return out;
+    }
+};
+
+/// `path` as one file of an Analyze-style pair (.hdr beside .img, either gzipped, any case),
+/// read from both files; nothing for a .nii, which holds header and data.
+std::optional<AnalyzePair> analyzePair(const fs::path& path) {
+    AnalyzePair pair{path.string()};
+    const auto strip = [&](const char* ext) {
+        const std::string e = ext;
+        if (pair.stem.size() <= e.size()) return false;
+        const std::string tail = lowerName(pair.stem.substr(pair.stem.size() - e.size()));
+        if (tail != e) return false;
+        pair.upperCase = pair.stem.substr(pair.stem.size() - e.size()) != e;
+        pair.stem.resize(pair.stem.size() - e.size());
         return true;
     };
     (void)strip(".gz");
-    if (!strip(".hdr") && !strip(".img")) return std::nullopt;
-    return stem;
+    if (strip(".img"))
+        pair.imageNamed = true;
+    else if (!strip(".hdr"))
+        return std::nullopt;
+    return pair;
 }
 
 /// The file of `path`'s pair that is not named must not be a FIFO, socket or device either (VTK's
 /// open() of a FIFO blocks where Ctrl-C cannot reach it).
 void refuseSpecialCompanion(const fs::path& path) {
-    const std::optional<std::string> stem = analyzePairStem(path);
-    if (!stem) return;
-    for (const char* ext : {".hdr", ".hdr.gz", ".img", ".img.gz"})
-        if (const fs::path companion = *stem + ext; core::isSpecialFile(companion))
-            throw InputError(path.string(), "data file",
-                             "is read with '" + companion.filename().string() +
-                                 "', a FIFO, socket or device, not a file",
-                             "put the header and image files beside each other as regular files");
+    const std::optional<AnalyzePair> pair = analyzePair(path);
+    if (!pair) return;
+    for (const char* ext : {".hdr", ".img"})
+        for (const fs::path& companion : pair->candidates(ext))
+            if (core::isSpecialFile(companion))
+                throw InputError(
+                    path.string(), "data file",
+                    "is read with '" + companion.filename().string() +
+                        "', a FIFO, socket or device, not a file",
+                    "put the header and image files beside each other as regular files");
 }
 
 /// NIfTI-1 (and Analyze) / NIfTI-2 header fields voxlight checks before vtkNIFTIImageReader sees
@@ -658,10 +684,13 @@ const std::map<int, int>& niftiDatatypes() {
 void checkNiftiHeader(const fs::path& named) {
     // VTK reads the header of a pair from the .hdr when the .img is named.
     fs::path path = named;
-    if (const std::optional<std::string> stem = analyzePairStem(named);
-        stem && named.string().find(".img", stem->size()) == stem->size()) {
+    if (const std::optional<AnalyzePair> pair = analyzePair(named); pair && pair->imageNamed) {
         std::error_code ec;
-        path = fs::exists(*stem + ".hdr", ec) ? *stem + ".hdr" : *stem + ".hdr.gz";
+        for (const fs::path& header : pair->candidates(".hdr"))
+            if (fs::exists(header, ec)) {
+                path = header;
+                break;
+            }
     }
     gzFile f = gzopen(path.c_str(), "rb");  // reads plain files too
     if (!f) return;                         // the reader reports the missing file

@@ -215,6 +215,8 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --size 99999x16", "--size: '99999x16' is larger"},
         {q(tmp / "good.json") + " --size 100000x16", "--size: '100000x16' is larger"},
         {q(tmp / "good.json") + " --size 0x16", "a side of 0 pixels"},
+        // std::regex recursed once per character: 50,000 digits overflowed the stack.
+        {q(tmp / "good.json") + " --size " + std::string(50000, '1') + "x16", "is larger"},
         {q(tmp / "bad-part.json"), "keyframes[2].transfer_function.preset"},
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},

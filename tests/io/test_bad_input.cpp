@@ -96,9 +96,16 @@ TEST(BadInput, AFifoAsTheImageOfAnAnalyzePairIsRefused) {
         ASSERT_EQ(v.sizeBytes(), whole.sizeBytes()) << name;
         EXPECT_EQ(std::memcmp(v.data(), whole.data(), v.sizeBytes()), 0) << name;
     }
-    fs::remove(tmp / "pair.img");
-    ASSERT_EQ(::mkfifo((tmp / "pair.img").c_str(), 0600), 0);
+    // Upper case too: the reader is chosen whatever the case, and VTK keeps it when it swaps.
+    fs::copy_file(tmp / "pair.hdr", tmp / "UP.HDR");
+    fs::copy_file(tmp / "pair.img", tmp / "UP.IMG");
+    EXPECT_EQ(io::readVolume(tmp / "UP.IMG").dims(), whole.dims());
+    for (const char* image : {"pair.img", "UP.IMG"}) {
+        fs::remove(tmp / image);
+        ASSERT_EQ(::mkfifo((tmp / image).c_str(), 0600), 0);
+    }
     expectInputError(tmp / "pair.hdr", "pair.hdr", {"pair.img", "FIFO"});
+    expectInputError(tmp / "UP.HDR", "UP.HDR", {"UP.IMG", "FIFO"});
 }
 
 TEST(BadInput, TruncatedNiftiGz) {
