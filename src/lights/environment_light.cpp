@@ -49,7 +49,8 @@ std::string_view toString(EnvironmentLayout l) {
     return l == EnvironmentLayout::Equirect ? "equirect" : "probe";  // as scenes spell it
 }
 
-void EnvironmentLight::checkTexels(const core::ImageRGBA& image, const std::string& source) {
+void EnvironmentLight::checkTexels(const core::ImageRGBA& image, const std::string& source,
+                                   const glm::vec3& scale) {
     // Every pixel must be a finite, non-negative radiance. Lossy EXR compression (DWAA/DWAB) leaves
     // tiny negative values next to dark edges; those down to −kLossyNegativeTolerance × the map's
     // largest value are set to 0 and counted (clampedTexels()); anything more negative is an error.
@@ -62,23 +63,26 @@ void EnvironmentLight::checkTexels(const core::ImageRGBA& image, const std::stri
         for (int x = 0; x < image.width; ++x)
             for (int c = 0; c < 3; ++c) {
                 const float v = image.at(x, y)[c];
-                if (!std::isfinite(v) || v < negativeFloor || v > kMaxRadiance) {
-                    std::ostringstream os;
-                    os << "pixel (" << x << ", " << y << ") channel "
-                       << "RGB"[c] << " is " << v;
-                    if (!std::isfinite(v))
-                        os << " (not finite)";
-                    else if (v < 0)
-                        os << " (negative radiance)";
-                    else
-                        os << " (brighter than the " << kMaxRadiance << " voxlight carries)";
+                const double radiance = double(v) * double(scale[c]);
+                const bool bad = !std::isfinite(v) || v < negativeFloor;
+                if (!bad && !(radiance > kMaxRadiance)) continue;
+                std::ostringstream os;
+                os << "pixel (" << x << ", " << y << ") channel "
+                   << "RGB"[c] << " is " << v;
+                if (bad)
                     throw InputError(
-                        source, "pixels", os.str(),
-                        v > kMaxRadiance
-                            ? "scale the map down, and raise the light's intensity to match"
-                            : "repair the map (e.g. clamp or inpaint the bad "
-                              "pixels) and re-export it");
-                }
+                        source, "pixels",
+                        os.str() + (std::isfinite(v) ? " (negative radiance)" : " (not finite)"),
+                        "repair the map (e.g. clamp or inpaint the bad pixels) and "
+                        "re-export it");
+                os << ", radiance " << radiance
+                   << " under the light's colour × intensity, above the " << kMaxRadiance
+                   << " voxlight carries";
+                // The map alone past the limit names the map; a scale that pushed it, the light.
+                if (v > kMaxRadiance)
+                    throw InputError(source, "pixels", os.str(), "scale the map's values down");
+                throw InputError("light", "intensity", "with " + source + "'s " + os.str(),
+                                 "lower intensity or color");
             }
 }
 

@@ -72,11 +72,14 @@ class EnvironmentLight final : public Light {
     /// Largest texel radiance (after the light's colour × intensity): the renderers carry radiance
     /// in float and some square it (the SH projection's windowing), which overflowed to a black
     /// image from ≈ 1e20 on. 1e15 keeps that margin and is 10⁶ × the sun's luminance in cd/m².
-    static constexpr float kMaxRadiance = 1e15f;
-    /// InputError naming `source` and the first texel that is not finite, more negative than
-    /// lossy compression leaves, or above kMaxRadiance (the constructor's own check, for callers
-    /// that scale a map before handing it over).
-    static void checkTexels(const core::ImageRGBA& image, const std::string& source);
+    static constexpr double kMaxRadiance = 1e15;
+    /// InputError naming `source` and the first texel that is not finite or more negative than
+    /// lossy compression leaves, or whose radiance × scale[channel] is above kMaxRadiance (that
+    /// texel alone above it names `source`; else the scale is to blame: source "light", field
+    /// "intensity"). The constructor's own check, for callers that scale a map before handing it
+    /// over (the scene's colour × intensity).
+    static void checkTexels(const core::ImageRGBA& image, const std::string& source,
+                            const glm::vec3& scale = glm::vec3(1.0f));
 
     /// Radiance arriving from world direction ω (scaled).
     glm::vec3 lookup(const glm::vec3& worldDir) const;

@@ -234,20 +234,9 @@ std::shared_ptr<const lights::Light> buildLight(const io::LightDesc& l) {
         }
     }
     core::ImageRGBA image = io::readHdrImage(l.path);
-    // The map's own bad texels name the file; one within the radiance limit that colour ×
-    // intensity push past it names the light's fields.
-    lights::EnvironmentLight::checkTexels(image, l.path.string());
-    float brightest = 0.0f;
-    for (std::size_t i = 0; i < image.pixels.size(); ++i)
-        if (i % 4 != 3 && std::isfinite(image.pixels[i]))
-            brightest = std::max(brightest, image.pixels[i]);
-    const double scaled = double(brightest) * std::max({power.x, power.y, power.z});
-    if (scaled > double(lights::EnvironmentLight::kMaxRadiance)) {
-        std::ostringstream os;
-        os << "times the map's brightest texel (" << brightest << ") is radiance " << scaled
-           << ", above the " << lights::EnvironmentLight::kMaxRadiance << " voxlight carries";
-        throw InputError("light", "intensity", os.str(), "lower intensity or color");
-    }
+    // The map's own bad texels name the file; colour × intensity pushing one past the radiance
+    // limit names the light's fields (the constructor sees only the product).
+    lights::EnvironmentLight::checkTexels(image, l.path.string(), power);
     for (std::size_t i = 0; i < image.pixels.size(); ++i)
         if (i % 4 != 3) image.pixels[i] *= power[int(i % 4)];
     lights::EnvironmentOptions o;

@@ -358,6 +358,26 @@ TEST(EnvironmentLight, BadInputIsAClearError) {
             EXPECT_NE(std::string(e.what()).find("bad.exr"), std::string::npos);
         }
     }
+    // The limit is on the radiance the light gives (texel × colour·intensity): a bright map
+    // dimmed is fine; one a large intensity pushes past it blames the light's intensity.
+    {
+        auto bright = randomEquirect(16, 8, 3);
+        bright.at(4, 2)[0] = 1e16f;
+        EXPECT_NO_THROW(EnvironmentLight::checkTexels(bright, "sun.exr", glm::vec3(1e-3f)));
+        auto dim = randomEquirect(16, 8, 3);
+        dim.at(4, 2)[2] = 1e10f;
+        try {
+            EnvironmentLight::checkTexels(dim, "sky.exr", glm::vec3(1.0f, 1.0f, 1e6f));
+            FAIL() << "radiance 1e16 accepted";
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.source(), "light");
+            EXPECT_EQ(e.field(), "intensity");
+            EXPECT_NE(std::string(e.what()).find("sky.exr's pixel (4, 2) channel B"),
+                      std::string::npos)
+                << e.what();
+        }
+        EXPECT_NO_THROW(EnvironmentLight::checkTexels(dim, "sky.exr", glm::vec3(1e6f, 1e5f, 1.0f)));
+    }
     EXPECT_THROW(EnvironmentLight(randomEquirect(30, 20, 1), {}, "aspect"), InputError);
     // Lossy-compression noise (−1e-6 of a map with values up to 4) is accepted and zeroed, and
     // counted.
