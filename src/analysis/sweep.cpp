@@ -151,17 +151,30 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
     spec.scene.erase("method");
     // The scene alone (each run adds its method): its own errors are the scene's or an
     // override's, not the first reference's or run's that happens to be parsed first.
+    // A volume file that is not there is found here too, before any folder is made (the read
+    // would name the path alone).
+    const auto blame = [&](const std::string& field) {
+        if (const io::OverrideRecord* r = io::blamedOverride(records, field)) {
+            const std::string said = r->said;  // "--set key=value": the sweep says it without
+            return "overrides: " + (said.rfind("--set ", 0) == 0 ? said.substr(6) : said);
+        }
+        return std::string("scene");
+    };
     try {
         json alone = spec.scene;
         alone.erase("effects");
-        (void)io::parseScene(alone, source, spec.sceneDir);
-    } catch (const InputError& e) {
-        std::string where = "scene";
-        if (const io::OverrideRecord* r = io::blamedOverride(records, e.field())) {
-            const std::string said = r->said;  // "--set key=value": the sweep says it without
-            where = "overrides: " + (said.rfind("--set ", 0) == 0 ? said.substr(6) : said);
+        const io::VolumeSource v = io::parseScene(alone, source, spec.sceneDir).volume;
+        std::error_code ec;
+        if (v.phantom.empty() && !fs::exists(v.path, ec)) {
+            const bool overridden = io::blamedOverride(records, "volume.path") != nullptr;
+            const std::string base = spec.sceneDir.empty() ? "." : spec.sceneDir.string();
+            throw InputError(source, "volume",
+                             "names '" + v.path.string() + "', which does not exist",
+                             "fix the path; a relative one is read from " +
+                                 (overridden ? std::string("the current directory") : base));
         }
-        throw InputError(source, where + ": " + e.field(), e.problem(), e.fix());
+    } catch (const InputError& e) {
+        throw InputError(source, blame(e.field()) + ": " + e.field(), e.problem(), e.fix());
     }
     if (top.has("reference")) spec.references[0] = parseReference(top.child("reference"));
     top.get("frames", spec.frames, 1, kMaxSweepFrames);
@@ -319,15 +332,6 @@ void validateSweep(const SweepSpec& spec, const std::vector<SweepItem>& items,
     for (std::size_t i = 0; i < spec.references.size(); ++i)
         check(referenceScene(spec, i), referenceField(spec, i));
     for (const SweepItem& it : items) check(variantScene(spec, it), itemWhere(spec, it));
-    // A missing volume file: before any folder is made (the read would name the path alone).
-    const io::VolumeSource& v = referenceScene(spec).volume;
-    std::error_code ec;
-    if (v.phantom.empty() && !std::filesystem::exists(v.path, ec)) {
-        const std::string base = spec.sceneDir.empty() ? "." : spec.sceneDir.string();
-        throw InputError(spec.source, "scene.volume",
-                         "names '" + v.path.string() + "', which does not exist",
-                         "fix the path; a relative one is read from " + base);
-    }
 }
 
 SweepRunner::SweepRunner(const SweepSpec& spec, pipeline::Session& variants,

@@ -107,13 +107,41 @@ const std::vector<std::string>& viewNames() {
     return names;
 }
 
-std::string repeatedOption(const CLI::ParseError& e) {
-    // CLI11 (2.1) words it "NAME: At Most 1 required but received N" (ArgumentMismatch::AtMost).
+namespace {
+/// The option named `name` (CLI11's get_name()) in `app`, its subcommands or option groups.
+const CLI::Option* findOption(const CLI::App& app, const std::string& name) {
+    for (const CLI::Option* o : app.get_options())
+        if (o->get_name() == name) return o;
+    for (const CLI::App* sub : app.get_subcommands([](const CLI::App*) { return true; }))
+        if (const CLI::Option* o = findOption(*sub, name)) return o;
+    return nullptr;
+}
+}  // namespace
+
+std::string repeatedOption(const CLI::ParseError& e, const CLI::App& app, int argc,
+                           const char* const* argv) {
+    // CLI11 (2.1) words it "NAME: At Most N required but received M" (ArgumentMismatch::AtMost)
+    // — for a list option (--dims) too, where it counts values, not occurrences: so the
+    // occurrences are counted on the command line, under every name of the option.
     if (dynamic_cast<const CLI::ArgumentMismatch*>(&e) == nullptr) return {};
     const std::string what = e.what();
-    const std::string marker = ": At Most 1 required but received ";
-    const std::size_t at = what.find(marker);
-    return at == std::string::npos || at == 0 ? std::string() : what.substr(0, at);
+    const std::size_t at = what.find(": At Most ");
+    if (at == std::string::npos || at == 0) return {};
+    const std::string name = what.substr(0, at);
+    const CLI::Option* o = findOption(app, name);
+    if (!o) return {};
+    std::vector<std::string> spellings;
+    for (const std::string& l : o->get_lnames()) spellings.push_back("--" + l);
+    for (const std::string& s : o->get_snames()) spellings.push_back("-" + s);
+    int given = 0;
+    for (int i = 1; i < argc; ++i)
+        for (const std::string& sp : spellings) {
+            const std::string_view arg = argv[i];
+            if (arg == sp ||
+                (arg.size() > sp.size() && arg.substr(0, sp.size()) == sp && arg[sp.size()] == '='))
+                ++given;
+        }
+    return given > 1 ? name : std::string();
 }
 
 std::string optionWithEmptyValue(const CLI::App& app) {

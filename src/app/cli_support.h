@@ -49,9 +49,10 @@ InputError blameLoadedOverrides(const InputError& e);
 /// For unsigned options: the text must be decimal digits that fit 64 bits. CLI11 read "-1" and
 /// numbers past 2^64 as 2^64 − 1 without a word (a seed, a header size).
 CLI::Validator wholeNumber();
-/// The option `e` refuses because it was given more than once (main's Throw policy), or "" for
-/// any other parse error.
-std::string repeatedOption(const CLI::ParseError& e);
+/// The option `e` refuses because it was given more than once on the command line `argv`
+/// (main's Throw policy), or "" for any other parse error.
+std::string repeatedOption(const CLI::ParseError& e, const CLI::App& app, int argc,
+                           const char* const* argv);
 /// The first option of the parsed command (option groups included) given "" as its value, or "".
 std::string optionWithEmptyValue(const CLI::App& app);
 

@@ -24,7 +24,7 @@ std::string sizeText(const core::ImageRGBA& i) {
     return std::to_string(i.width) + "x" + std::to_string(i.height);
 }
 
-/// JSON has no infinity: an infinite value (PSNR of identical images) is null.
+/// InputError naming `path` and its first NaN or infinite pixel.
 void refuseNonFinitePixels(const core::ImageRGBA& image, const std::string& path) {
     for (std::size_t i = 0; i < image.pixels.size(); ++i)
         if (!std::isfinite(image.pixels[i])) {
@@ -37,6 +37,8 @@ void refuseNonFinitePixels(const core::ImageRGBA& image, const std::string& path
                              "compare finite images: re-render it, or repair the pixel");
         }
 }
+
+/// JSON has no infinity: an infinite value (PSNR of identical images) is null.
 nlohmann::json number(double v) { return std::isfinite(v) ? nlohmann::json(v) : nlohmann::json(); }
 
 }  // namespace

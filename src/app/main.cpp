@@ -14,7 +14,8 @@ int main(int argc, char** argv) {
     app.require_subcommand(1);
     app.set_version_flag("--version", "voxlight 0.1.0");
     // An option given twice is a mistake to point out, not a value to drop silently (CLI11 would
-    // keep the last); options that take lists (--set, --dims) take every occurrence.
+    // keep the last); options that take any number of values (--set, --only) take every
+    // occurrence, flags keep CLI11's own policy (-q -q is -q).
     app.option_defaults()->multi_option_policy(CLI::MultiOptionPolicy::Throw);
     std::vector<Command> commands = {
         addInfoCommand(app),   addPhantomCommand(app), addSceneCommand(app),
@@ -40,7 +41,7 @@ int main(int argc, char** argv) {
                       << "' (choose one of: " << names << ")\n";
             return kExitBadInput;
         }
-        if (const std::string twice = repeatedOption(e); !twice.empty()) {
+        if (const std::string twice = repeatedOption(e, app, argc, argv); !twice.empty()) {
             std::cerr << "voxlight: error: " << twice
                       << " is given more than once (give it once: which value was meant?)\n";
             return kExitBadInput;

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "io/json_field.h"
 
+#include <cmath>
+
 namespace voxlight::io {
 
 using nlohmann::json;
@@ -29,6 +31,12 @@ std::string typeName(const json& j) {
 std::string shortDump(const json& j) {
     std::string s = j.dump(-1, ' ', false, json::error_handler_t::replace);
     return s.size() > 40 ? s.substr(0, 37) + "..." : s;
+}
+
+std::string numberAsWritten(const json& j) {
+    const double v = j.is_number() ? j.get<double>() : 0.0;
+    if (!j.is_number() || std::isfinite(v)) return shortDump(j);
+    return std::isnan(v) ? "nan" : (v > 0 ? "inf" : "-inf");
 }
 
 std::size_t editDistance(const std::string& a, const std::string& b) {

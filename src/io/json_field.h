@@ -21,6 +21,9 @@ namespace voxlight::io {
 std::string typeName(const nlohmann::json& j);
 /// The value as compact JSON, cut to 40 characters (bytes that are not UTF-8 replaced).
 std::string shortDump(const nlohmann::json& j);
+/// A number as written (the shortest text that reads back as it: "got 170" for 170.0000001 hid
+/// why it was refused); a non-finite one (built in code) as "nan"/"inf", not JSON's "null".
+std::string numberAsWritten(const nlohmann::json& j);
 /// Levenshtein distance, for "did you mean" suggestions.
 std::size_t editDistance(const std::string& a, const std::string& b);
 
@@ -72,12 +75,7 @@ class Field {
         const double v = j_.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
             std::ostringstream os;
-            os << "must be in [" << lo << ", " << hi << "], got ";
-            // As written (the shortest round trip): "got 170" for 170.0000001 hid why.
-            if (std::isfinite(v))
-                os << shortDump(j_);
-            else
-                os << v;
+            os << "must be in [" << lo << ", " << hi << "], got " << numberAsWritten(j_);
             fail(os.str());
         }
         return v;

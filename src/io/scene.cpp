@@ -5,7 +5,6 @@
 #include <charconv>
 #include <cmath>
 #include <fstream>
-#include <iomanip>
 #include <limits>
 #include <map>
 #include <memory>
@@ -29,9 +28,10 @@ constexpr double kMaxCoord = 1e6;  // mm; a kilometre is not a medical scene
 /// Largest |value| of a TF point: a float, with the span between two points (the interpolation's
 /// denominator) still finite in float.
 constexpr double kMaxTfValue = 1e37;
-/// Roughness below which every value shades alike (GGX α = roughness² is held at ≥ 1e-3 in
-/// pathtrace/brdf.h): tiny values are stored as this instead of rounding to float 0.
-constexpr double kMinTfRoughness = 1e-3;
+/// Smallest stored roughness: the smallest normal float, so that a tiny one (1e-300) does not
+/// round to float 0 and be refused later as "not in (0, 1]". (Every roughness below ≈ 0.03
+/// shades alike: GGX α = roughness² is held at ≥ kMinAlpha = 1e-3 in pathtrace/brdf.h.)
+constexpr double kMinTfRoughness = double(std::numeric_limits<float>::min());
 
 /// What an invalid shadows_from_removed should become.
 constexpr const char* kShadowsFromRemovedFix =
@@ -163,7 +163,7 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
         std::string text = name.string();
         if (text.empty())
             name.fail("is an empty preset name",
-                      "name a preset (e.g. \"ct-bone\"), or leave "
+                      "name a preset such as \"ct-bone\", or leave "
                       "transfer_function out for the modality's default");
         return text;
     };
@@ -214,8 +214,6 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
                     r.fail("must be a number in (0, 1], got " + typeName(r.raw()) + " " +
                                shortDump(r.raw()),
                            "e.g. \"roughness\": 0.5 (small: glossy, 1: matte)");
-                // Below GGX's smallest α (pathtrace/brdf.h) every roughness is the same mirror;
-                // one that rounds to float 0 would be refused later as "not in (0, 1]".
                 tp.roughness = std::max(r.raw().get<double>(), kMinTfRoughness);
             }
             if (p.has("phase_g")) {
@@ -243,8 +241,8 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
             }
             if (!tf.points.empty() && !(float(tp.value) > float(tf.points.back().value))) {
                 std::ostringstream os;
-                os << std::setprecision(17) << "is " << tp.value << ", the same as points[" << i - 1
-                   << "]'s " << tf.points.back().value
+                os << "is " << shortDump(p.child("value").raw()) << ", the same as points[" << i - 1
+                   << "]'s " << shortDump(pts.at(i - 1).child("value").raw())
                    << " in single precision (voxel values are 32-bit floats)";
                 p.child("value").fail(os.str(), "space the two points further apart");
             }
@@ -473,9 +471,9 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
     if (value.is_discarded())
         value = text;  // bare words are strings: --set method.name=mip
     else if (repeated)
-        throw InputError("--set " + assignment, key + "." + *repeated,
-                         "is given twice in the same object",
-                         "keep one of the two: which value was meant?");
+        throw InputError(
+            "--set " + assignment, key + (repeated->rfind('[', 0) == 0 ? "" : ".") + *repeated,
+            "is given twice in the same object", "keep one of the two: which value was meant?");
     // As errors name it: "--set key=value" once the key is known.
     const std::string said = "--set " + assignment;
     const std::vector<std::string> parts = keyParts(key);

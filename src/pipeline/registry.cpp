@@ -35,13 +35,8 @@ double ParamReader::number(const std::string& k, double def, double lo, double h
             fail(k, "must be a number, got " + io::typeName(j) + " " + io::shortDump(j));
         v = j.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
-            // The value as written (shortest round trip): "got 170" for 170.0000001 hid why.
             std::ostringstream os;
-            os << "must be in [" << lo << ", " << hi << "], got ";
-            if (std::isfinite(v))
-                os << io::shortDump(j);
-            else
-                os << v;
+            os << "must be in [" << lo << ", " << hi << "], got " << io::numberAsWritten(j);
             fail(k, os.str());
         }
     }

@@ -109,6 +109,10 @@ TEST(Cli, BadInputIsOneLineAndExitCodeTwo) {
         // An option given twice kept CLI11's last value without a word.
         {"phantom torso --size 16 --size 32 -o '" + (tmp / "x.nii.gz").string() + "'",
          "--size is given more than once"},
+        // A list option given twice: CLI11 counted its values ("At Most 3 required but received
+        // 6"); counted on the command line instead.
+        {"info --dims 4,4,4 --dims 4,4,4 '" + (tmp / "junk.nii").string() + "'",
+         "--dims is given more than once"},
         // An empty value read as 0 for a number.
         {"phantom torso --size '' -o '" + (tmp / "x.nii.gz").string() + "'",
          "--size is given an empty value"},
@@ -727,7 +731,7 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
       "runs": [{"method": "gradient"}]})";
     const std::vector<std::pair<std::string, std::string>> cases = {
         {"sweep " + q(tmp / "novolume.json") + " --out " + q(tmp / "out"),
-         "novolume.json: scene.volume: names"},
+         "novolume.json: scene: volume: names"},
         {"sweep " + q(tmp / "badsky.json") + " --out " + q(tmp / "out"), "sky.hdr"},
         {"sweep " + q(tmp / "sweep.json") + " --out " + q(tmp / "out"), "runs[1].axes.rays=-4"},
         {"sweep " + q(tmp / "list.json") + " --out " + q(tmp / "out"), "must be a JSON object"},

@@ -293,6 +293,13 @@ TEST(Scene, AKeyGivenTwiceInOneObjectIsRefusedByItsPath) {
               "accepted");
     json doc = json::object();
     try {
+        io::applyOverride(doc, R"(lights=[{"type": "point"}, {"type": "point", "type": "spot"}])");
+        ADD_FAILURE();
+    } catch (const InputError& e) {
+        EXPECT_NE(std::string(e.what()).find(": lights[1].type: is given twice"), std::string::npos)
+            << e.what();
+    }
+    try {
         io::applyOverride(doc, R"(camera={"azimuth": 1, "azimuth": 2})");
         ADD_FAILURE();
     } catch (const InputError& e) {
