@@ -118,8 +118,13 @@ Command addSweepCommand(CLI::App& app) {
         // bad input only its stages find (an environment map that does not read), so that a
         // mistake leaves nothing written. The folders in creation order.
         std::vector<fs::path> added;
+        // The outermost folder --out's creation makes (its missing parents are made too).
+        fs::path outermost = fs::absolute(dir, ec).lexically_normal();
+        while (!fs::exists(outermost.parent_path(), ec) && outermost.has_relative_path() &&
+               outermost.parent_path() != outermost)
+            outermost = outermost.parent_path();
         for (const fs::path& p :
-             {dir, dir / "images", dir / "maps", dir / "cache", dir / "reference.json"})
+             {outermost, dir / "images", dir / "maps", dir / "cache", dir / "reference.json"})
             if (!fs::exists(p, ec)) added.push_back(p);
         references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
         analysis::SweepRunner runner(spec, variants, references);

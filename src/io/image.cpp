@@ -168,7 +168,7 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
         case mod::Status::OpenFailed:
             throw InputError(
                 file, "file", "cannot be read as an image: " + r.message,
-                "give a valid .hdr, .exr, .png or .jpg file (is it truncated or mislabelled?)");
+                "give a valid .hdr, .exr, .png or .jpg file; is it truncated or mislabelled?");
         case mod::Status::ZeroSize:
             throw InputError(file, "size",
                              "image has zero size (" + std::to_string(w) + "×" + std::to_string(h) +
