@@ -612,8 +612,7 @@ vtkSmartPointer<vtkImageData> runImageReader(vtkImageReader2* r, const fs::path&
     return r->GetOutput();
 }
 
-/// The path without ".hdr"/".img" (and ".gz") when `path` is one file of an Analyze-style pair,
-/// read from both files; nothing for a .nii, which holds header and data.
+/// One file of an Analyze-style pair (analyzePair): the rest of its name and how it was named.
 struct AnalyzePair {
     std::string stem;         ///< the path without its extensions
     bool imageNamed = false;  ///< the .img was named (else the .hdr)

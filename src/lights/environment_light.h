@@ -69,9 +69,11 @@ class EnvironmentLight final : public Light {
     /// Negative texels down to −this × the map's maximum are compression noise (set to 0); below:
     /// InputError.
     static constexpr float kLossyNegativeTolerance = 1e-4f;
-    /// Largest texel radiance (after the light's colour × intensity): the renderers carry radiance
-    /// in float and some square it (the SH projection's windowing), which overflowed to a black
-    /// image from ≈ 1e20 on. 1e15 keeps that margin and is 10⁶ × the sun's luminance in cd/m².
+    /// Largest texel radiance (after the light's colour × intensity). Measured on a 64² sphere:
+    /// one texel of 1e20 still rendered, 1e22 gave `sh-local` a black image (3e38 everywhere:
+    /// black `gradient`/`pvrt`, Inf pixels in the path tracer) — float overflow somewhere in the
+    /// chain, not traced to one operation. 1e15 keeps five orders of margin (all six methods
+    /// render a uniform 1e15 map finite) and is ≈ 10⁶ × the sun's luminance in cd/m².
     static constexpr double kMaxRadiance = 1e15;
     /// InputError naming `source` and the first texel that is not finite or more negative than
     /// lossy compression leaves, or whose radiance × scale[channel] is above kMaxRadiance (that
