@@ -218,19 +218,22 @@ Command addReplayCommand(CLI::App& app) {
         rememberOverrides(scenes.back());
         pipeline::Session pipe;
         if (!cacheDir->empty()) pipe.cache().setDirectory(*cacheDir);
+        // An error the session's frame i raises, named by the --set that set its field, else by
+        // the keyframe that did (errors of other files name those files).
+        const auto frameError = [&](const InputError& e, std::size_t i) {
+            if (e.source() != ses.source) return e;
+            if (io::blamedOverride(scenes[i].overrides, e.field()))
+                return io::blameOverride(e, ses.source, scenes[i].overrides);
+            return InputError(
+                ses.source,
+                interpolate ? ses.fieldAtTime(times[i], e.field()) : ses.fieldAt(i, e.field()),
+                e.problem(), e.fix());
+        };
         for (std::size_t i = 0; i < scenes.size(); ++i) {
             try {
-                (void)pipe.plan(scenes[i]);
+                (void)pipe.plan(scenes[i]);  // the method's strict params
             } catch (const InputError& e) {
-                // The method's strict params: named by the --set that set them, else by the
-                // keyframe that did.
-                if (e.source() != ses.source) throw;
-                if (io::blamedOverride(scenes[i].overrides, e.field()))
-                    throw io::blameOverride(e, ses.source, scenes[i].overrides);
-                throw InputError(
-                    ses.source,
-                    interpolate ? ses.fieldAtTime(times[i], e.field()) : ses.fieldAt(i, e.field()),
-                    e.problem(), e.fix());
+                throw frameError(e, i);
             }
         }
         {
@@ -331,14 +334,7 @@ Command addReplayCommand(CLI::App& app) {
                 // folder it created — DIR as it was (frames it replaced stay replaced).
                 for (const fs::path& f : added) fs::remove(f, ec);
                 if (created) fs::remove(dir, ec);  // only when empty
-                // Named by the keyframe that set the field, as the checks before the first frame.
-                if (e.source() != ses.source ||
-                    io::blamedOverride(scenes[current].overrides, e.field()))
-                    throw;
-                throw InputError(ses.source,
-                                 interpolate ? ses.fieldAtTime(times[current], e.field())
-                                             : ses.fieldAt(current, e.field()),
-                                 e.problem(), e.fix());
+                throw frameError(e, current);
             } catch (const CancelledError&) {
                 if (done == 0 && created) fs::remove(dir, ec);  // empty: as if never run
                 std::fprintf(stderr,

@@ -196,15 +196,13 @@ Command addSweepCommand(CLI::App& app) {
                     writeTextFile(
                         p, refJson.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
                 });
+            } catch (const InputError&) {
+                ok = false;
+                failure = std::current_exception();
+                for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
             } catch (...) {
                 ok = false;
                 failure = std::current_exception();
-                try {
-                    std::rethrow_exception(failure);
-                } catch (const InputError&) {
-                    for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
-                } catch (...) {
-                }
             }
         if (!ranks.allTrue(ok)) {
             if (failure) std::rethrow_exception(failure);
