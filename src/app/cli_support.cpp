@@ -14,6 +14,7 @@
 #include <mutex>
 
 #include "core/error.h"
+#include "core/timing.h"
 
 namespace voxlight::app {
 
@@ -44,13 +45,15 @@ core::Progress terminalProgress(bool quiet) {
         std::chrono::steady_clock::time_point start;
         int lastTenth = -1;
         int lastPercent = -1;
+        long long lastSecond = -1;
+        std::size_t lastWidth = 0;  ///< of the bar's last line, to blank what a shorter one leaves
     };
     // Work that finishes within kQuietSeconds shows nothing: progress is for long work, and a quick
     // failure stays one line on stderr.
     constexpr double kQuietSeconds = 1.0;
     auto state = std::make_shared<State>();
-    return core::Progress(
-        [state, tty](const std::string& stage, double f) {
+    return core::Progress::detailed(
+        [state, tty](const std::string& stage, double f, const std::string& detail) {
             std::lock_guard<std::mutex> lock(state->m);
             const auto now = std::chrono::steady_clock::now();
             if (stage != state->stage) {
@@ -59,21 +62,39 @@ core::Progress terminalProgress(bool quiet) {
                 state->stage = stage;
                 state->start = now;
                 state->lastTenth = state->lastPercent = -1;
+                state->lastSecond = -1;
+                state->lastWidth = 0;
             }
-            if (std::chrono::duration<double>(now - state->start).count() < kQuietSeconds) return;
+            const double elapsed = std::chrono::duration<double>(now - state->start).count();
+            if (elapsed < kQuietSeconds) return;
             const int percent = int(f * 100.0 + 0.5);
             if (tty) {
-                if (percent == state->lastPercent) return;
+                // Redrawn when the percentage or the elapsed second changes (long stages tick).
+                const long long second = (long long)elapsed;
+                if (percent == state->lastPercent && second == state->lastSecond) return;
+                if (state->lastPercent >= 100) return;  // finished: its line is ended
                 state->lastPercent = percent;
-                const int filled = percent * 30 / 100;
-                std::fprintf(stderr, "\r%-12s [%.*s%*s] %3d%%", stage.c_str(), filled,
-                             "##############################", 30 - filled, "", percent);
+                state->lastSecond = second;
+                const int filled = std::clamp(percent, 0, 100) * 30 / 100;
+                char bar[256];
+                const int n = std::snprintf(
+                    bar, sizeof bar, "\r%-12s [%.*s%*s] %3d%%  %s%s%s", stage.c_str(), filled,
+                    "##############################", 30 - filled, "", percent,
+                    detail.c_str(), detail.empty() ? "" : ", ",
+                    core::progressTimes(elapsed, f).c_str());
+                const std::size_t width = n > 0 ? std::min<std::size_t>(n, sizeof bar - 1) : 0;
+                std::fputs(bar, stderr);
+                if (width < state->lastWidth)
+                    std::fprintf(stderr, "%*s", int(state->lastWidth - width), "");
+                state->lastWidth = width;
                 if (percent >= 100) std::fputc('\n', stderr);
             } else {
                 const int tenth = int(f * 10.0);
                 if (tenth == state->lastTenth) return;
                 state->lastTenth = tenth;
-                std::fprintf(stderr, "%s: %d%%\n", stage.c_str(), tenth * 10);
+                std::fprintf(stderr, "%s: %d%% (%s%s%s)\n", stage.c_str(), tenth * 10,
+                             detail.c_str(), detail.empty() ? "" : ", ",
+                             core::progressTimes(elapsed, f).c_str());
             }
             std::fflush(stderr);
         },

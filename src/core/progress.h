@@ -15,15 +15,29 @@ namespace voxlight::core {
 class Progress {
   public:
     using Sink = std::function<void(const std::string& stage, double fraction)>;
+    /// A sink that also shows what a stage says of itself as it goes (the path tracer's spp and
+    /// error): `detail` changes from report to report while `stage` stays the same.
+    using DetailedSink =
+        std::function<void(const std::string& stage, double fraction, const std::string& detail)>;
     Progress() = default;
-    Progress(Sink sink, const std::atomic<bool>* cancel)
-        : sink_(std::move(sink)), cancel_(cancel) {}
+    Progress(Sink sink, const std::atomic<bool>* cancel) : cancel_(cancel) {
+        if (sink)
+            sink_ = [sink = std::move(sink)](const std::string& stage, double f,
+                                             const std::string&) { sink(stage, f); };
+    }
+    static Progress detailed(DetailedSink sink, const std::atomic<bool>* cancel) {
+        Progress p;
+        p.sink_ = std::move(sink);
+        p.cancel_ = cancel;
+        return p;
+    }
     static const Progress& none();
 
-    /// Report `fraction` ∈ [0,1] of `stage`; throws CancelledError if cancellation was requested.
-    void report(const std::string& stage, double fraction) const {
+    /// Report `fraction` ∈ [0,1] of `stage` (with `detail`, for sinks that show it); throws
+    /// CancelledError if cancellation was requested.
+    void report(const std::string& stage, double fraction, const std::string& detail = {}) const {
         checkCancel();
-        if (sink_) sink_(stage, fraction);
+        if (sink_) sink_(stage, fraction, detail);
     }
     void checkCancel() const {
         if (cancel_ && cancel_->load(std::memory_order_relaxed)) throw CancelledError();
@@ -34,7 +48,7 @@ class Progress {
     bool cancellable() const { return cancel_ != nullptr; }
 
   private:
-    Sink sink_;
+    DetailedSink sink_;
     const std::atomic<bool>* cancel_ = nullptr;
 };
 

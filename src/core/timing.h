@@ -2,6 +2,7 @@
 #pragma once
 // Wall-clock timing and process memory, for stats JSON and benchmarks.
 #include <chrono>
+#include <string>
 
 namespace voxlight::core {
 
@@ -16,6 +17,18 @@ class Stopwatch {
   private:
     std::chrono::steady_clock::time_point start_;
 };
+
+/// A duration for people: whole seconds under a minute ("42 s"), then minutes and seconds
+/// ("3 min 05 s"), then hours and minutes ("2 h 07 min"); negative or NaN reads as 0 s, and
+/// anything past 10⁹ s (an estimate from a tiny fraction) as 10⁹ s.
+std::string durationText(double seconds);
+
+/// What a progress line shows after its percentage: the stage's time so far and, once at least
+/// kEstimateFraction of it is done (an earlier rate says little: set-up, the first cache misses),
+/// the time left at the rate so far — "12 s, ≈ 36 s left"; "12 s" alone before, and at or past
+/// the end. A linear extrapolation: work whose later part is slower (adaptive passes) reads short.
+std::string progressTimes(double elapsedSeconds, double fraction);
+inline constexpr double kEstimateFraction = 0.01;
 
 /// Peak resident set size of this process in MiB (VmHWM from /proc/self/status; 0 if unavailable).
 double peakRssMiB();

@@ -1474,15 +1474,17 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         done = s1;
         error = relativeError();
         lastPassSeconds = clock.seconds() - passStart;
-        // Progress: the larger of the spp fraction and the error's (error ∝ 1/√n, so the target
-        // needs about n·(error/target)² samples).
+        // Progress: the largest of the spp fraction, the error's (error ∝ 1/√n, so the target
+        // needs about n·(error/target)² samples) and the time cap's.
         double fraction = double(done) / options_.samplesPerPixel;
         if (options_.targetError > 0.0 && error > 0.0)
             fraction = std::max(fraction, std::min(1.0, (options_.targetError / error) *
                                                             (options_.targetError / error)));
+        if (options_.maxSeconds > 0.0)
+            fraction = std::max(fraction, std::min(1.0, clock.seconds() / options_.maxSeconds));
         char text[96];
-        std::snprintf(text, sizeof text, "pathtrace %d spp, error %.2f%%", done, 100.0 * error);
-        progress.report(text, fraction);
+        std::snprintf(text, sizeof text, "%d spp, error %.2f%%", done, 100.0 * error);
+        progress.report("pathtrace", fraction, text);
         if (options_.targetError > 0.0 && done >= kMinSamplesForErrorStop &&
             error <= options_.targetError) {
             reached = true;
