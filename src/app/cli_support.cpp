@@ -79,9 +79,8 @@ core::Progress terminalProgress(bool quiet) {
                 char bar[256];
                 const int n = std::snprintf(
                     bar, sizeof bar, "\r%-12s [%.*s%*s] %3d%%  %s%s%s", stage.c_str(), filled,
-                    "##############################", 30 - filled, "", percent,
-                    detail.c_str(), detail.empty() ? "" : ", ",
-                    core::progressTimes(elapsed, f).c_str());
+                    "##############################", 30 - filled, "", percent, detail.c_str(),
+                    detail.empty() ? "" : ", ", core::progressTimes(elapsed, f).c_str());
                 const std::size_t width = n > 0 ? std::min<std::size_t>(n, sizeof bar - 1) : 0;
                 std::fputs(bar, stderr);
                 if (width < state->lastWidth)

@@ -1,6 +1,9 @@
 // SPDX-License-Identifier: MIT
 // voxlight: medical direct volume rendering with realistic illumination. Thin main: subcommands
 // live beside it.
+#include <cerrno>
+#include <cstdio>
+#include <cstring>
 #include <iostream>
 
 #include "app/cli_support.h"
@@ -56,6 +59,22 @@ int main(int argc, char** argv) {
         return kExitBadInput;
     }
     for (auto& c : commands)
-        if (c.sub->parsed()) return runGuarded(c.run);
+        if (c.sub->parsed()) {
+            const int code = runGuarded(c.run);
+            // What a command printed (scene --init > scene.json, info --json) must have reached
+            // its file: a full disk or /dev/full made the writes fail silently, exit 0 over an
+            // empty file.
+            errno = 0;
+            std::cout.flush();
+            const bool failed = std::fflush(stdout) != 0 || std::ferror(stdout) || !std::cout;
+            const int error = errno ? errno : EIO;
+            if (failed && code == kExitOk) {
+                std::cerr << "voxlight: error: standard output: cannot be written: "
+                          << std::strerror(error)
+                          << " (free disk space, or redirect the output elsewhere)\n";
+                return kExitBadInput;
+            }
+            return code;
+        }
     return kExitBadInput;
 }

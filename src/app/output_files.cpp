@@ -12,11 +12,15 @@
 #include <system_error>
 
 #include "core/error.h"
+#include "core/files.h"
 
 namespace voxlight::app {
 
 namespace {
 namespace fs = std::filesystem;
+
+/// The temporaries' names begin so (hidden; a crash's leftovers are recognisable).
+const std::string kTemporaryPrefix = ".voxlight-partial-";
 
 std::string lower(std::string s) {
     for (auto& ch : s) ch = char(std::tolower(static_cast<unsigned char>(ch)));
@@ -56,6 +60,15 @@ void checkOne(const OutputSpec& o) {
     std::error_code ec;
     if (fs::is_directory(o.path, ec))
         fail(o, "'" + name + "' is a directory", "give a file name inside it");
+    // A name the file system cannot hold fails only at the end of the work otherwise.
+    const long nameMax = ::pathconf(directoryOf(o.path).c_str(), _PC_NAME_MAX);
+    const std::size_t nameBytes = o.path.filename().string().size();
+    if (nameMax > 0 && nameBytes > std::size_t(nameMax))
+        fail(o,
+             "the file name of '" + name + "' is " + std::to_string(nameBytes) +
+                 " bytes long, more than the " + std::to_string(nameMax) +
+                 " its file system allows",
+             "give a shorter name");
     const fs::path dir = directoryOf(o.path);
     const fs::file_status st = fs::status(dir, ec);
     if (!fs::exists(st))
@@ -109,37 +122,77 @@ OutputFiles::~OutputFiles() {
 
 void OutputFiles::write(const fs::path& target, const std::string& option,
                         const std::function<void(const fs::path&)>& writer) {
-    // Unique per process and output; hidden, and ending in the target's name (and extension).
+    // Unique per process and output; hidden, short (a target's name may be near the file system's
+    // limit) and ending in the target's extensions (writers that pick the format by extension
+    // still do: "a.nii.gz" → ".nii.gz").
     static std::atomic<int> counter{0};
+    const std::string name = target.filename().string();
+    const std::size_t dot = name.find('.', 1);
+    const fs::path dir = directoryOf(target);
     const fs::path temporary =
-        directoryOf(target) / (".voxlight-partial-" + std::to_string(::getpid()) + "-" +
-                               std::to_string(counter++) + "-" + target.filename().string());
+        dir / (kTemporaryPrefix + std::to_string(::getpid()) + "-" + std::to_string(counter++) +
+               (dot == std::string::npos ? "" : name.substr(dot)));
     entries_.push_back({temporary, target, option});
     try {
         writer(temporary);
     } catch (const InputError& e) {
-        if (e.source() != temporary.string()) throw;
+        // A full disk explains the writer's own message (which may name its temporaries).
+        if (core::fileSystemFull(dir)) throw core::noSpaceLeft(target.string());
+        // The writer's errors name the temporary (or a temporary of its own beside it).
+        if (e.source().rfind((dir / kTemporaryPrefix).string(), 0) != 0) throw;
         throw InputError(target.string(), e.field(), e.problem(), e.fix());
+    } catch (const std::exception&) {
+        if (core::fileSystemFull(dir)) throw core::noSpaceLeft(target.string());
+        throw;
     }
+    // Writers that ignore a failed write report success over a short file (core::fileSystemFull).
+    if (core::fileSystemFull(dir)) throw core::noSpaceLeft(target.string());
 }
 
 void OutputFiles::commit() {
-    for (std::size_t i = 0; i < entries_.size(); ++i) {
-        const Entry& e = entries_[i];
-        std::error_code ec;
-        fs::rename(e.temporary, e.target, ec);
-        if (!ec) continue;
-        // All or nothing: take back what this commit already moved (the destructor removes the
-        // temporaries still waiting).
-        for (std::size_t j = 0; j < i; ++j) {
+    // All or nothing, and a target that existed before keeps its old content unless the whole
+    // commit succeeds: each is first renamed aside (a target that cannot be renamed — immutable,
+    // on a read-only mount — fails there, before anything of it changed), then the new file takes
+    // its place; a failure moves every old file back.
+    struct Moved {
+        fs::path target, aside;  ///< aside empty: there was no old file
+    };
+    std::vector<Moved> moved;
+    auto rollback = [&] {
+        for (auto m = moved.rbegin(); m != moved.rend(); ++m) {
             std::error_code ignored;
-            fs::remove(entries_[j].target, ignored);
+            if (m->aside.empty())
+                fs::remove(m->target, ignored);
+            else
+                fs::rename(m->aside, m->target, ignored);
         }
-        throw InputError("command line", e.option,
-                         "cannot move the written file into place as '" + e.target.string() +
-                             "': " + ec.message(),
-                         "check the directory's permissions and free space");
+    };
+    for (const Entry& e : entries_) {
+        std::error_code ec, statusError;  // status sets its error code for a missing file too
+        Moved m{e.target, {}};
+        if (fs::exists(fs::symlink_status(e.target, statusError))) {
+            m.aside = e.temporary.string() + ".old";
+            fs::rename(e.target, m.aside, ec);
+        }
+        if (!ec) fs::rename(e.temporary, e.target, ec);
+        if (ec && !m.aside.empty()) {
+            std::error_code ignored;
+            if (fs::exists(m.aside, ignored)) fs::rename(m.aside, e.target, ignored);
+        }
+        if (ec) {
+            rollback();
+            throw InputError("command line", e.option,
+                             "cannot move the written file into place as '" + e.target.string() +
+                                 "': " + ec.message(),
+                             "check the file's and the directory's permissions and free space");
+        }
+        moved.push_back(m);
     }
+    for (const Moved& m : moved)
+        if (!m.aside.empty()) {
+            std::error_code ignored;
+            fs::remove(m.aside, ignored);
+        }
     entries_.clear();
 }
 

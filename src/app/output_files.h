@@ -9,12 +9,16 @@
 // (symlinks and hard links included).
 //
 // OutputFiles::write() runs a writer on a temporary file in the target's directory (same file
-// system, so the final rename is atomic; the temporary keeps the target's file name as its suffix,
-// so writers that pick the format by extension still do). commit() renames every temporary into
-// place only after all were written. Destroying an OutputFiles before commit() (an error or Ctrl-C
-// unwinding) removes every temporary; a rename failing during commit() also removes the targets
-// this commit already moved, so a run leaves all of its outputs or none of them. Errors name the
-// option and the target, with the system's reason (never the temporary's name, never "Success").
+// system, so the final rename is atomic; the temporary's name is short and ends in the target's
+// extensions, so writers that pick the format by extension still do). A writer that returns while
+// the disk is full failed, whatever it says (libraries that ignore a failed write leave a short
+// file and report success): that is an error naming the target. commit() renames every temporary
+// into place only after all were written, each old target first renamed aside and removed only
+// when the whole commit succeeded. Destroying an OutputFiles before commit() (an error or Ctrl-C
+// unwinding) removes every temporary; a rename failing during commit() moves back every old file
+// this commit replaced and removes the new ones, so a run leaves all of its outputs or none of
+// them, and a failed run leaves the files that were there as they were. Errors name the option and
+// the target, with the system's reason (never the temporary's name, never "Success").
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -43,7 +47,9 @@ class OutputFiles {
     ~OutputFiles();  ///< removes every temporary not committed
 
     /// Calls `writer` with a fresh temporary path beside `target`. An InputError the writer raises
-    /// about the temporary is rethrown naming `target`; any failure removes the temporary.
+    /// about the temporary (or one of its own beside it) is rethrown naming `target`; a writer
+    /// that leaves the disk full fails with core::noSpaceLeft(target), whatever it raised or not;
+    /// any failure removes the temporary.
     void write(const std::filesystem::path& target, const std::string& option,
                const std::function<void(const std::filesystem::path&)>& writer);
 

@@ -3,6 +3,12 @@
 // Input paths that are not files: a FIFO blocks its reader in open() until a writer appears (and
 // Ctrl-C cannot end it: the signal handler's flag is only read between steps), a character device
 // streams without end. Every reader of user-named paths asks this first.
+#include <sys/statvfs.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <climits>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 
@@ -26,6 +32,28 @@ inline void refuseSpecialFile(const std::filesystem::path& p) {
     if (isSpecialFile(p))
         throw InputError(p.string(), "path", "is a FIFO, socket or device, not a file",
                          "give a regular file, or copy the stream to one first");
+}
+
+/// Bytes this process may still write on the file system holding directory `dir` (statvfs:
+/// the blocks available to everyone, or every free block for root, who may use the reserved
+/// ones); -1 when it cannot be asked.
+inline std::int64_t freeBytes(const std::filesystem::path& dir) {
+    struct statvfs st {};
+    if (::statvfs(dir.empty() ? "." : dir.c_str(), &st) != 0) return -1;
+    const std::uint64_t blocks = ::geteuid() == 0 ? st.f_bfree : st.f_bavail;
+    return std::int64_t(std::min<std::uint64_t>(blocks * st.f_frsize, INT64_MAX));
+}
+
+/// Whether the file system holding `dir` has no block left for this process. Writers that ignore
+/// a failed write (OpenImageIO's PNG and BMP, VTK's MetaImage, tinygltf) leave a short file and
+/// report success: a file system full right after the write is how that failure shows (a file
+/// that filled it exactly is refused too — the disk is full either way).
+inline bool fileSystemFull(const std::filesystem::path& dir) { return freeBytes(dir) == 0; }
+
+/// The InputError for a file that could not be written whole because its disk is full.
+inline InputError noSpaceLeft(const std::string& file) {
+    return InputError(file, "", "cannot be written: no space left on the device (the disk is full)",
+                      "free disk space, or write it to another disk");
 }
 
 }  // namespace voxlight::core

@@ -257,6 +257,16 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
         }
     }
     const mod::Api& api = imageModule(file);
+    // libjpeg ends the process (exit(1)) when its output fails, as on a full disk: no error comes
+    // back to refuse. A JPEG is never larger than its raw pixels plus headers, so with that much
+    // free the write cannot run out of space.
+    constexpr std::int64_t kJpegHeaderBytes = 1 << 16;
+    if ((ext == ".jpg" || ext == ".jpeg")) {
+        const std::int64_t free = core::freeBytes(
+            path.has_parent_path() ? path.parent_path() : std::filesystem::path("."));
+        if (free >= 0 && free < std::int64_t(w) * h * channels + kJpegHeaderBytes)
+            throw core::noSpaceLeft(file);
+    }
 
     // Temporary name in the same directory, same extension (OpenImageIO picks the format from it).
     static std::atomic<int> counter{0};
@@ -278,9 +288,12 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
         throw InputError(file, "extension",
                          "no image writer for \"" + ext + "\": " + result.message,
                          "use .exr (linear HDR), .hdr or .png");
-    if (result.status != mod::Status::Ok) {
+    // OpenImageIO's PNG and BMP writers report success over a short file when the disk fills
+    // (core::fileSystemFull); the others' messages name this temporary.
+    if (const bool full = core::fileSystemFull(dir); result.status != mod::Status::Ok || full) {
         std::error_code ec;
-        std::filesystem::remove(tmp, ec);
+        std::filesystem::remove(tmp, ec);  // frees the space: asked before
+        if (full) throw core::noSpaceLeft(file);
         throw InputError(file, "file", "cannot write image: " + result.message,
                          "check that the directory exists and is writable");
     }

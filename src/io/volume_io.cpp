@@ -2377,9 +2377,12 @@ std::string outputExtension(const fs::path& path) {
 }
 fs::path outputDirectory(const fs::path& path) {
     const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
-    if (!fs::is_directory(dir))
-        throw InputError(path.string(), "path", "its directory does not exist",
-                         "create the directory first");
+    std::error_code ec;  // a path past PATH_MAX is an error code here, not an exception
+    if (!fs::is_directory(dir, ec))
+        throw InputError(
+            path.string(), "path",
+            ec ? "its directory cannot be used: " + ec.message() : "its directory does not exist",
+            ec ? "give a shorter path" : "create the directory first");
     return dir;
 }
 }  // namespace
@@ -2400,8 +2403,11 @@ void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
     vtkSmartPointer<vtkImageWriter> dummy;
     captureWindow().take();
     auto fail = [&](const std::string& why) {
+        // A full disk is the reason whatever VTK said (its XML writer dumps its pipeline state).
+        const bool full = core::fileSystemFull(dir);
         std::error_code ec;
-        fs::remove(tmp, ec);
+        fs::remove(tmp, ec);  // frees the space: asked before
+        if (full) throw core::noSpaceLeft(path.string());
         throw InputError(path.string(), "write", why, "check free disk space and permissions");
     };
     if (ext == ".nii" || ext == ".nii.gz") {
@@ -2453,6 +2459,8 @@ void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
     }
     for (auto& m : captureWindow().take())
         if (m.find("ERROR") != std::string::npos) fail(cleanVtkMessage(m));
+    // The MetaImage writer reports success over a short file when the disk fills.
+    if (core::fileSystemFull(dir)) fail("");
     std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) fail("rename from temporary file failed: " + ec.message());
