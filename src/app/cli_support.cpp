@@ -100,6 +100,14 @@ core::Progress terminalProgress(bool quiet) {
         &cancelFlag());
 }
 
+std::vector<std::pair<std::string, std::filesystem::path>> sceneFileInputs(const io::Scene& s) {
+    std::vector<std::pair<std::string, std::filesystem::path>> inputs = {
+        {"the scene's volume", s.volume.path}};
+    for (std::size_t i = 0; i < s.lights.size(); ++i)
+        inputs.emplace_back("lights[" + std::to_string(i) + "].path", s.lights[i].path);
+    return inputs;
+}
+
 int runGuarded(const std::function<int()>& body) {
     try {
         return body();

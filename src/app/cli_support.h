@@ -7,8 +7,10 @@
 //   130  cancelled (Ctrl-C)
 #include <CLI/CLI.hpp>
 #include <atomic>
+#include <filesystem>
 #include <functional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "core/progress.h"
@@ -28,6 +30,10 @@ void throwIfCancelled();
 /// Progress sink for the terminal: a redrawn bar when stderr is a TTY, plain lines every 10%
 /// otherwise; silent when `quiet`.
 core::Progress terminalProgress(bool quiet);
+
+/// The files a scene reads, as checkOutputs names them: its volume and every light's map
+/// ("the scene's volume", "lights[i].path"); paths that are empty are left out by checkOutputs.
+std::vector<std::pair<std::string, std::filesystem::path>> sceneFileInputs(const io::Scene& s);
 
 /// Runs a subcommand body, mapping exceptions to one line on stderr and the exit codes above.
 int runGuarded(const std::function<int()>& body);

@@ -133,10 +133,8 @@ Command addRenderCommand(CLI::App& app) {
         const io::Scene s = loadInput(*scene, *sets, *view);
         {
             // The files the scene reads: an environment map written over by -o or --exr.
-            std::vector<std::pair<std::string, std::filesystem::path>> inputs = {
-                {"INPUT", *scene}, {"the scene's volume", s.volume.path}};
-            for (std::size_t i = 0; i < s.lights.size(); ++i)
-                inputs.emplace_back("lights[" + std::to_string(i) + "].path", s.lights[i].path);
+            std::vector<std::pair<std::string, std::filesystem::path>> inputs = sceneFileInputs(s);
+            inputs.emplace_back("INPUT", *scene);
             checkOutputs({{"--output", *out, {}},
                           {"--exr", *exr, {}},
                           {"--std-error", *stdErr, {}},

@@ -236,13 +236,13 @@ Command addReplayCommand(CLI::App& app) {
                 throw frameError(e, i);
             }
         }
+        // The session's scene file as a path from here ("" when the scene is inline).
+        const fs::path sceneFile = ses.scenePath.empty() || fs::path(ses.scenePath).is_absolute()
+                                       ? fs::path(ses.scenePath)
+                                       : fs::path(ses.source).parent_path() / ses.scenePath;
         {
             // Named by the file that holds the volume key: the session, or its scene file.
             const io::VolumeSource& v = scenes.front().volume;
-            const fs::path sceneFile =
-                ses.scenePath.empty() || fs::path(ses.scenePath).is_absolute()
-                    ? fs::path(ses.scenePath)
-                    : fs::path(ses.source).parent_path() / ses.scenePath;
             if (v.phantom.empty() && !fs::exists(v.path, ec)) {
                 // A --set volume(.path)=… gave it: that override is named (the path was made
                 // absolute against the current directory, where it was typed).
@@ -260,6 +260,17 @@ Command addReplayCommand(CLI::App& app) {
                                      : "fix the path in " + ses.scenePath +
                                            " (relative to that scene file's folder)");
             }
+        }
+        {
+            // The files the frames read (the session's scene file, every frame's volume and
+            // maps): --stats or --video over one of them would replace it.
+            std::vector<std::pair<std::string, fs::path>> inputs = {{"SESSION", *sessionFile}};
+            inputs.emplace_back("the session's scene file", sceneFile);
+            for (const io::Scene& s : scenes)
+                for (auto& in : sceneFileInputs(s))
+                    if (std::find(inputs.begin(), inputs.end(), in) == inputs.end())
+                        inputs.push_back(std::move(in));
+            checkOutputs({{"--stats", *stats, {}}, {"--video", *video, {}}}, inputs);
         }
         fs::path ffmpeg;
         if (!video->empty()) ffmpeg = findOnPath("ffmpeg");
@@ -404,21 +415,38 @@ Command addReplayCommand(CLI::App& app) {
                     *outDir;
             } else {
                 const double rate = interpolate ? *fps : 1.0;
-                files.write(*video, "--video", [&](const fs::path& p) {
-                    const fs::path err = p.string() + ".log";
-                    const int code = runProgram(
-                        {ffmpeg.string(), "-y", "-loglevel", "error", "-framerate",
-                         std::to_string(rate), "-i", (dir / "frame_%05d.png").string(), "-frames:v",
-                         std::to_string(scenes.size()), "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2",
-                         "-pix_fmt", "yuv420p", p.string()},
-                        err);
-                    const std::string why = firstLine(err);
-                    fs::remove(err, ec);
-                    if (code != 0)
-                        throw InputError(
-                            *video, "", "ffmpeg failed" + (why.empty() ? "" : ": " + why),
-                            "the frames are in " + *outDir + "; run ffmpeg on them by hand");
-                });
+                try {
+                    files.write(*video, "--video", [&](const fs::path& p) {
+                        const fs::path err = p.string() + ".log";
+                        int code = -1;
+                        try {
+                            code = runProgram(
+                                {ffmpeg.string(), "-y", "-loglevel", "error", "-framerate",
+                                 std::to_string(rate), "-i", (dir / "frame_%05d.png").string(),
+                                 "-frames:v", std::to_string(scenes.size()), "-vf",
+                                 "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-pix_fmt", "yuv420p",
+                                 p.string()},
+                                err);
+                        } catch (const CancelledError&) {
+                            fs::remove(err, ec);  // goes with the video's temporary
+                            throw;
+                        }
+                        const std::string why = firstLine(err);
+                        fs::remove(err, ec);
+                        if (code != 0)
+                            throw InputError(
+                                *video, "", "ffmpeg failed" + (why.empty() ? "" : ": " + why),
+                                "the frames are in " + *outDir + "; run ffmpeg on them by hand");
+                    });
+                } catch (const CancelledError&) {
+                    // Ctrl-C while ffmpeg runs: the frames, all written, stay (runGuarded's line
+                    // would say nothing was written).
+                    std::fprintf(stderr,
+                                 "\nvoxlight: cancelled while making the video; the %zu frames "
+                                 "are complete in %s, no video or stats were written\n",
+                                 scenes.size(), outDir->c_str());
+                    return kExitCancelled;
+                }
             }
         }
         if (!stats->empty()) {

@@ -90,6 +90,14 @@ Command addSweepCommand(CLI::App& app) {
         if (fs::exists(dir, ec) && !fs::is_directory(dir, ec))
             throw InputError("command line", "--out", "'" + *outDir + "' is not a folder",
                              "give a folder (it is created if missing)");
+        // The files the sweep writes into DIR must not be the sweep file it reads (a sweep kept
+        // as DIR/reference.json was replaced by the first run's reference.json).
+        for (const char* written : {"results.csv", "reference.json", "reference.png"})
+            if (fs::equivalent(dir / written, *sweepPath, ec))
+                throw InputError("command line", "--out",
+                                 "'" + *outDir + "' would get a " + written +
+                                     " that replaces the sweep file " + *sweepPath,
+                                 "move the sweep file out of the folder, or give another --out");
         const analysis::SweepSpec spec = analysis::loadSweep(*sweepPath);
         std::vector<analysis::SweepItem> items = analysis::expandSweep(spec);
         if (!only->empty()) {
@@ -126,7 +134,15 @@ Command addSweepCommand(CLI::App& app) {
         for (const fs::path& p :
              {outermost, dir / "images", dir / "maps", dir / "cache", dir / "reference.json"})
             if (!fs::exists(p, ec)) added.push_back(p);
-        references.cache().setDirectory(cacheDir->empty() ? dir / "cache" : fs::path(*cacheDir));
+        try {
+            references.cache().setDirectory(cacheDir->empty() ? dir / "cache"
+                                                              : fs::path(*cacheDir));
+        } catch (const InputError&) {
+            if (!cacheDir->empty()) throw;
+            // DIR/cache is --out's folder: name the option that was given.
+            throw InputError("command line", "--out", "cannot create folders in '" + *outDir + "'",
+                             "choose a folder you can write to");
+        }
         analysis::SweepRunner runner(spec, variants, references);
         if (lead || !*noImages) runner.setAfterStage(preloadImagesAfterInputs(imageSupport));
 
@@ -200,6 +216,11 @@ Command addSweepCommand(CLI::App& app) {
                 ok = false;
                 failure = std::current_exception();
                 for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
+            } catch (const CancelledError&) {
+                // Ctrl-C before the first variant: as if never run ("nothing was written").
+                ok = false;
+                failure = std::current_exception();
+                for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
             } catch (...) {
                 ok = false;
                 failure = std::current_exception();
@@ -215,33 +236,48 @@ Command addSweepCommand(CLI::App& app) {
         std::vector<analysis::SweepRow> rows;
         const std::size_t n = items.size(), k = std::size_t(ranks.size()),
                           r = std::size_t(ranks.rank());
-        const std::string error = runRankWork(ranks, [&] {
-            for (std::size_t i = n * r / k; i < n * (r + 1) / k; ++i) {
-                throwIfCancelled();
-                analysis::SweepImages images;
-                analysis::SweepRow row =
-                    runner.run(items[i], progress, *noImages ? nullptr : &images);
-                if (!*noImages) {
-                    const std::string file = row.item.id + ".png";
-                    writeAtomically(dir / "images" / file,
-                                    [&](const fs::path& p) { io::writeImage(images.display, p); });
-                    writeAtomically(dir / "maps" / file,
-                                    [&](const fs::path& p) { io::writeImage(images.errorMap, p); });
+        std::string error;
+        try {
+            error = runRankWork(ranks, [&] {
+                for (std::size_t i = n * r / k; i < n * (r + 1) / k; ++i) {
+                    throwIfCancelled();
+                    analysis::SweepImages images;
+                    analysis::SweepRow row =
+                        runner.run(items[i], progress, *noImages ? nullptr : &images);
+                    if (!*noImages) {
+                        const std::string file = row.item.id + ".png";
+                        writeAtomically(dir / "images" / file, [&](const fs::path& p) {
+                            io::writeImage(images.display, p);
+                        });
+                        writeAtomically(dir / "maps" / file, [&](const fs::path& p) {
+                            io::writeImage(images.errorMap, p);
+                        });
+                    }
+                    for (const auto& w : row.warnings)
+                        std::fprintf(stderr, "voxlight: warning: %s: %s\n", row.item.id.c_str(),
+                                     w.c_str());
+                    if (talk)
+                        std::fprintf(
+                            stderr,
+                            "[%zu/%zu] %-40s precompute %7.2f s  frame %6.3f s  NRMSE %.4f  "
+                            "FLIP %.4f  SSIM %.4f\n",
+                            i + 1, items.size(), describe(row.item).c_str(), row.precomputeSeconds,
+                            row.frameSeconds, row.nrmse, row.flip, row.ssim);
+                    rows.push_back(std::move(row));
+                    if (ranks.size() == 1) writeCsv(dir / "results.csv", rows);
                 }
-                for (const auto& w : row.warnings)
-                    std::fprintf(stderr, "voxlight: warning: %s: %s\n", row.item.id.c_str(),
-                                 w.c_str());
-                if (talk)
-                    std::fprintf(stderr,
-                                 "[%zu/%zu] %-40s precompute %7.2f s  frame %6.3f s  NRMSE %.4f  "
-                                 "FLIP %.4f  SSIM %.4f\n",
-                                 i + 1, items.size(), describe(row.item).c_str(),
-                                 row.precomputeSeconds, row.frameSeconds, row.nrmse, row.flip,
-                                 row.ssim);
-                rows.push_back(std::move(row));
-                if (ranks.size() == 1) writeCsv(dir / "results.csv", rows);
-            }
-        });
+            });
+        } catch (const CancelledError&) {
+            // One rank (several report through rank 0 below): what was finished stays, as the
+            // header says; runGuarded's line would say nothing was written.
+            const std::string kept =
+                rows.empty() ? "" : (dir / "results.csv").string() + " holds the finished ones, ";
+            std::fprintf(stderr,
+                         "\nvoxlight: cancelled after %zu of %zu variants; %sthe reference is in "
+                         "%s\n",
+                         rows.size(), items.size(), kept.c_str(), dir.c_str());
+            return kExitCancelled;
+        }
         if (ranks.size() > 1) {
             std::string mine;
             for (const auto& r : rows) mine += analysis::sweepCsvRow(r) + "\n";
