@@ -2454,7 +2454,14 @@ void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
         w->SetInputData(img);
         w->SetFileName(tmp.c_str());
         w->SetCompression(true);
-        w->Write();
+        {
+            // MetaIO prints its write failures to std::cerr (a second line beside ours); the
+            // full-disk check below reports them.
+            std::ostringstream metaIo;
+            std::streambuf* const cerr = std::cerr.rdbuf(metaIo.rdbuf());
+            w->Write();
+            std::cerr.rdbuf(cerr);
+        }
         if (w->GetErrorCode() != 0) fail("VTK MetaImage writer failed");
     }
     for (auto& m : captureWindow().take())
