@@ -128,11 +128,17 @@ void OutputFiles::write(const fs::path& target, const std::string& option,
     static std::atomic<int> counter{0};
     const std::string name = target.filename().string();
     const std::size_t dot = name.find('.', 1);
-    const fs::path dir = directoryOf(target);
+    // A symlink to a file is written through (the file it names is replaced, the link stays).
+    std::error_code linkError;
+    const fs::path file = fs::is_symlink(fs::symlink_status(target, linkError)) &&
+                                  fs::is_regular_file(fs::status(target, linkError))
+                              ? fs::canonical(target, linkError)
+                              : target;
+    const fs::path dir = directoryOf(linkError ? target : file);
     const fs::path temporary =
         dir / (kTemporaryPrefix + std::to_string(::getpid()) + "-" + std::to_string(counter++) +
                (dot == std::string::npos ? "" : name.substr(dot)));
-    entries_.push_back({temporary, target, option});
+    entries_.push_back({temporary, linkError ? target : file, option, target});
     try {
         writer(temporary);
     } catch (const InputError& e) {
@@ -174,6 +180,11 @@ void OutputFiles::commit() {
             m.aside = e.temporary.string() + ".old";
             fs::rename(e.target, m.aside, ec);
         }
+        // The new file keeps the old one's permission bits (a private 0600 output stays so).
+        if (!ec && !m.aside.empty()) {
+            std::error_code ignored;
+            fs::permissions(e.temporary, fs::status(m.aside, ignored).permissions(), ignored);
+        }
         if (!ec) fs::rename(e.temporary, e.target, ec);
         if (ec && !m.aside.empty()) {
             std::error_code ignored;
@@ -182,7 +193,7 @@ void OutputFiles::commit() {
         if (ec) {
             rollback();
             throw InputError("command line", e.option,
-                             "cannot move the written file into place as '" + e.target.string() +
+                             "cannot move the written file into place as '" + e.shown.string() +
                                  "': " + ec.message(),
                              "check the file's and the directory's permissions and free space");
         }

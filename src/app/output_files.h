@@ -18,7 +18,9 @@
 // unwinding) removes every temporary; a rename failing during commit() moves back every old file
 // this commit replaced and removes the new ones, so a run leaves all of its outputs or none of
 // them, and a failed run leaves the files that were there as they were. Errors name the option and
-// the target, with the system's reason (never the temporary's name, never "Success").
+// the target, with the system's reason (never the temporary's name, never "Success"). A target
+// that is a symlink to a file is written through (the file is replaced, the link stays); a
+// replaced file keeps its permission bits.
 #include <filesystem>
 #include <functional>
 #include <string>
@@ -58,8 +60,9 @@ class OutputFiles {
 
   private:
     struct Entry {
-        std::filesystem::path temporary, target;
+        std::filesystem::path temporary, target;  ///< target: a symlink's file, resolved
         std::string option;
+        std::filesystem::path shown;  ///< the target as the command line gave it (errors)
     };
     std::vector<Entry> entries_;
 };

@@ -58,7 +58,8 @@ class SmallDisk {
     SmallDisk(const fs::path& at, std::size_t bytes) : at_(at) {
         fs::create_directories(at);
         const std::string options = "size=" + std::to_string(bytes);
-        mounted_ = ::geteuid() == 0 && ::mount("tmpfs", at.c_str(), "tmpfs", 0, options.c_str()) == 0;
+        mounted_ =
+            ::geteuid() == 0 && ::mount("tmpfs", at.c_str(), "tmpfs", 0, options.c_str()) == 0;
     }
     ~SmallDisk() {
         if (mounted_) ::umount2(at_.c_str(), MNT_DETACH);
@@ -77,8 +78,8 @@ constexpr const char* kOld = "OLD CONTENT\n";
 TEST(WriteFailures, AFullDiskFailsTheRunInOneLineAndKeepsTheOldFile) {
     test::TempDir tmp;
     ASSERT_EQ(run("phantom torso --size 48 -q -o " + quoted(tmp / "t.nii.gz"), tmp.path()).code, 0);
-    const std::string render = "render " + quoted(tmp / "t.nii.gz") +
-                               " -q --set image.width=256 --set image.height=256 ";
+    const std::string render =
+        "render " + quoted(tmp / "t.nii.gz") + " -q --set image.width=256 --set image.height=256 ";
     ASSERT_EQ(run(render + "-o " + quoted(tmp / "r1.png"), tmp.path()).code, 0);
     ASSERT_EQ(run(render + "--view left -o " + quoted(tmp / "r2.png"), tmp.path()).code, 0);
     // 16 KiB: the old file takes a 4-KiB page, and none of the outputs below fits in the rest.
@@ -124,7 +125,8 @@ TEST(WriteFailures, ReplayOnAFullDiskNamesTheFrameAndLeavesNoFolder) {
         {"time": 4, "camera": {"azimuth": 60}}]})";
     SmallDisk disk(tmp / "full", 24 << 10);
     if (!disk.mounted()) GTEST_SKIP() << "needs root to mount a small tmpfs";
-    const Result r = run("replay s.json -q --fps 2 --out " + quoted(tmp / "full" / "rp"), tmp.path());
+    const Result r =
+        run("replay s.json -q --fps 2 --out " + quoted(tmp / "full" / "rp"), tmp.path());
     EXPECT_EQ(r.code, 2) << r.err;
     EXPECT_EQ(lineCount(r.err), 1u) << r.err;
     EXPECT_NE(r.err.find("no space left"), std::string::npos) << r.err;
@@ -138,7 +140,8 @@ TEST(WriteFailures, ARenameRefusedAtCommitLeavesEveryOldFileAsItWas) {
     // render -o a.png --stats s.json with s.json immutable: a.png was renamed into place, then
     // the rollback deleted it, and the old a.png was gone for good.
     test::TempDir tmp;
-    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code, 0);
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code,
+              0);
     std::ofstream(tmp / "a.png") << kOld;
     std::ofstream(tmp / "s.json") << kOld;
     if (::geteuid() != 0 ||
@@ -162,7 +165,8 @@ TEST(WriteFailures, ARenameRefusedAtCommitLeavesEveryOldFileAsItWas) {
 TEST(WriteFailures, StandardOutputThatCannotBeWrittenIsExitTwo) {
     // `scene --init ct.nii.gz > scene.json` on a full disk gave an empty scene.json and exit 0.
     test::TempDir tmp;
-    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code, 0);
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code,
+              0);
     for (const std::string cmd : {"scene --init v.nii.gz", "info --json v.nii.gz"}) {
         const Result r = run(cmd + " > /dev/full", tmp.path());
         EXPECT_EQ(r.code, 2) << cmd << ": " << r.err;
@@ -174,7 +178,8 @@ TEST(WriteFailures, StandardOutputThatCannotBeWrittenIsExitTwo) {
 
 TEST(WriteFailures, ANameTheFileSystemCannotHoldIsRefusedBeforeTheWork) {
     test::TempDir tmp;
-    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code, 0);
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code,
+              0);
     const std::string render = "render v.nii.gz -q --set image.width=32 --set image.height=32 ";
     const Result tooLong = run(render + "-o " + std::string(260, 'c') + ".png", tmp.path());
     EXPECT_EQ(tooLong.code, 2) << tooLong.err;
@@ -182,19 +187,20 @@ TEST(WriteFailures, ANameTheFileSystemCannotHoldIsRefusedBeforeTheWork) {
     // 250 bytes is a legal name: it failed after the work when the temporaries' names wrapped
     // it (".voxlight-partial-PID-N-" + name + the image layer's ".tmpPID_N").
     const std::string legal = std::string(246, 'c') + ".png";
-    const Result r = run(render + "-o " + legal + " --exr " + std::string(246, 'c') + ".exr",
-                         tmp.path());
+    const Result r =
+        run(render + "-o " + legal + " --exr " + std::string(246, 'c') + ".exr", tmp.path());
     EXPECT_EQ(r.code, 0) << r.err;
     EXPECT_TRUE(fs::exists(tmp / legal));
-    const Result phantom = run("phantom sphere --size 16 -q -o " + std::string(243, 'p') + ".nii.gz",
-                               tmp.path());
+    const Result phantom =
+        run("phantom sphere --size 16 -q -o " + std::string(243, 'p') + ".nii.gz", tmp.path());
     EXPECT_EQ(phantom.code, 0) << phantom.err;
     EXPECT_TRUE(temporariesIn(tmp.path()).empty()) << temporariesIn(tmp.path()).front();
 }
 
 TEST(WriteFailures, OutputsOverACommandsOwnInputsAreRefused) {
     test::TempDir tmp;
-    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code, 0);
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code,
+              0);
     const std::string scene = R"({"volume": "v.nii.gz", "image": {"width": 16, "height": 16}})";
     std::ofstream(tmp / "scene.json") << scene;
     std::ofstream(tmp / "s.json") << R"({"format": "voxlight-session", "version": 2,
@@ -207,11 +213,36 @@ TEST(WriteFailures, OutputsOverACommandsOwnInputsAreRefused) {
     EXPECT_FALSE(fs::exists(tmp / "frames"));
     // A sweep file kept as DIR/reference.json was replaced by the first run's reference.json.
     fs::create_directories(tmp / "sw");
-    const std::string sweep = R"({"name": "t", "scene": {"volume": {"phantom": "sphere", "size": 16},
+    const std::string sweep =
+        R"({"name": "t", "scene": {"volume": {"phantom": "sphere", "size": 16},
         "image": {"width": 16, "height": 16}}, "runs": [{"method": "gradient"}]})";
     std::ofstream(tmp / "sw" / "reference.json") << sweep;
     const Result sw = run("sweep sw/reference.json -q --out sw", tmp.path());
     EXPECT_EQ(sw.code, 2) << sw.err;
     EXPECT_NE(sw.err.find("replaces the sweep file"), std::string::npos) << sw.err;
     EXPECT_EQ(contents(tmp / "sw" / "reference.json"), sweep);
+}
+
+TEST(WriteFailures, AReplacedOutputKeepsItsModeAndASymlinkIsWrittenThrough) {
+    // The temporary-and-rename scheme turned a 0600 output into 0644 and replaced a symlink
+    // (latest.png → renders/one.png) by a plain file.
+    test::TempDir tmp;
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o " + quoted(tmp / "v.nii.gz"), tmp.path()).code,
+              0);
+    fs::create_directories(tmp / "renders");
+    std::ofstream(tmp / "renders" / "one.png") << kOld;
+    fs::create_symlink(fs::path("renders") / "one.png", tmp / "latest.png");
+    std::ofstream(tmp / "s.json") << kOld;
+    fs::permissions(tmp / "s.json", fs::perms::owner_read | fs::perms::owner_write);
+    const Result r =
+        run("render v.nii.gz -q --set image.width=16 --set image.height=16 "
+            "-o latest.png --stats s.json",
+            tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_TRUE(fs::is_symlink(tmp / "latest.png"));
+    EXPECT_NE(contents(tmp / "renders" / "one.png"), kOld);  // the PNG, through the link
+    EXPECT_EQ(contents(tmp / "renders" / "one.png").substr(1, 3), "PNG");
+    EXPECT_EQ(fs::status(tmp / "s.json").permissions() & fs::perms::all,
+              fs::perms::owner_read | fs::perms::owner_write);
+    EXPECT_TRUE(temporariesIn(tmp.path()).empty()) << temporariesIn(tmp.path()).front();
 }
