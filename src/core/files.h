@@ -36,10 +36,11 @@ inline void refuseSpecialFile(const std::filesystem::path& p) {
 
 /// Bytes this process may still write on the file system holding directory `dir` (statvfs:
 /// the blocks available to everyone, or every free block for root, who may use the reserved
-/// ones); -1 when it cannot be asked.
+/// ones); -1 when it cannot be asked or the file system counts no blocks at all (procfs, some
+/// FUSE file systems: they say nothing about space).
 inline std::int64_t freeBytes(const std::filesystem::path& dir) {
     struct statvfs st {};
-    if (::statvfs(dir.empty() ? "." : dir.c_str(), &st) != 0) return -1;
+    if (::statvfs(dir.empty() ? "." : dir.c_str(), &st) != 0 || st.f_blocks == 0) return -1;
     const std::uint64_t blocks = ::geteuid() == 0 ? st.f_bfree : st.f_bavail;
     return std::int64_t(std::min<std::uint64_t>(blocks * st.f_frsize, INT64_MAX));
 }
