@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "app/cli_support.h"
 
+#include <sys/ioctl.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -36,6 +37,15 @@ void throwIfCancelled() {
     if (cancelFlag().load()) throw CancelledError();
 }
 
+namespace {
+/// The terminal's width in characters (stderr's), 80 when it cannot be asked.
+std::size_t terminalColumns() {
+    winsize ws{};
+    if (::ioctl(STDERR_FILENO, TIOCGWINSZ, &ws) == 0 && ws.ws_col > 0) return ws.ws_col;
+    return 80;
+}
+}  // namespace
+
 core::Progress terminalProgress(bool quiet) {
     if (quiet) return core::Progress({}, &cancelFlag());
     const bool tty = ::isatty(STDERR_FILENO);
@@ -46,7 +56,8 @@ core::Progress terminalProgress(bool quiet) {
         int lastTenth = -1;
         int lastPercent = -1;
         long long lastSecond = -1;
-        std::size_t lastWidth = 0;  ///< of the bar's last line, to blank what a shorter one leaves
+        std::size_t lastWidth =
+            0;  ///< characters of the bar's last line, to blank what a shorter one leaves
     };
     // Work that finishes within kQuietSeconds shows nothing: progress is for long work, and a quick
     // failure stays one line on stderr.
@@ -82,10 +93,20 @@ core::Progress terminalProgress(bool quiet) {
                     "##############################", 30 - filled, "", percent, detail.c_str(),
                     detail.empty() ? "" : ", ", core::progressTimes(elapsed, f).c_str());
                 const std::size_t width = n > 0 ? std::min<std::size_t>(n, sizeof bar - 1) : 0;
-                std::fputs(bar, stderr);
-                if (width < state->lastWidth)
-                    std::fprintf(stderr, "%*s", int(state->lastWidth - width), "");
-                state->lastWidth = width;
+                // One terminal row: a line wider than the terminal wraps, and \r then redraws
+                // only its last row. Cut at the width, counted in characters (UTF-8: "≈").
+                const std::size_t columns = terminalColumns();
+                std::size_t bytes = 0, shown = 0;
+                for (; bytes < width && shown + 1 < columns; ++bytes)
+                    if ((static_cast<unsigned char>(bar[bytes]) & 0xC0) != 0x80 &&
+                        bar[bytes] != '\r')
+                        ++shown;
+                while (bytes < width && (static_cast<unsigned char>(bar[bytes]) & 0xC0) == 0x80)
+                    ++bytes;  // never cut inside a character
+                std::fwrite(bar, 1, bytes, stderr);
+                if (shown < state->lastWidth)
+                    std::fprintf(stderr, "%*s", int(state->lastWidth - shown), "");
+                state->lastWidth = shown;
                 if (percent >= 100) std::fputc('\n', stderr);
             } else {
                 const int tenth = int(f * 10.0);

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <iostream>
+#include <string>
 
 #include "app/cli_support.h"
 #include "core/timing.h"
@@ -67,10 +68,11 @@ int main(int argc, char** argv) {
             errno = 0;
             std::cout.flush();
             const bool failed = std::fflush(stdout) != 0 || std::ferror(stdout) || !std::cout;
-            const int error = errno ? errno : EIO;
+            const int error = errno;  // 0 when an earlier write failed (its errno is gone)
             if (failed && code == kExitOk) {
-                std::cerr << "voxlight: error: standard output: cannot be written: "
-                          << std::strerror(error)
+                std::cerr << "voxlight: error: standard output: cannot be written"
+                          << (error ? std::string(": ") + std::strerror(error)
+                                    : std::string(" (a write to it failed)"))
                           << " (free disk space, or redirect the output elsewhere)\n";
                 return kExitBadInput;
             }

@@ -47,6 +47,27 @@ fs::path identity(const fs::path& path) {
     return ec ? fs::absolute(path, ec).lexically_normal() : p;
 }
 
+/// Where an output is written: a symlink to a regular file is written through (the file it
+/// names is replaced, the link stays); any other path as given. checkOne probes the folder
+/// this gives, OutputFiles::write writes there.
+fs::path resolveOutput(const fs::path& path) {
+    std::error_code ec;
+    if (!fs::is_symlink(fs::symlink_status(path, ec)) || !fs::is_regular_file(fs::status(path, ec)))
+        return path;
+    const fs::path file = fs::canonical(path, ec);
+    return ec ? path : file;
+}
+
+/// The ending a temporary keeps so that writers choosing the format by extension still do: the
+/// last extension, or the last two when the last is a compression suffix ("a.nii.gz" →
+/// ".nii.gz"); short whatever the name (a long name with an early dot stays a long name).
+std::string formatSuffix(const fs::path& target) {
+    fs::path name = target.filename();
+    std::string suffix = name.extension().string();
+    if (lower(suffix) == ".gz") suffix = name.stem().extension().string() + suffix;
+    return suffix;
+}
+
 void checkOne(const OutputSpec& o) {
     const std::string name = o.path.string();
     if (!o.extensions.empty()) {
@@ -60,8 +81,14 @@ void checkOne(const OutputSpec& o) {
     std::error_code ec;
     if (fs::is_directory(o.path, ec))
         fail(o, "'" + name + "' is a directory", "give a file name inside it");
+    // A FIFO or device (a symlink to a pipe, /dev/stdout onto a terminal) would be replaced by a
+    // regular file, not written to.
+    if (core::isSpecialFile(o.path))
+        fail(o, "'" + name + "' is a FIFO, socket or device, not a file",
+             "give a regular file (redirect to a file, not to a pipe)");
+    const fs::path written = resolveOutput(o.path);
     // A name the file system cannot hold fails only at the end of the work otherwise.
-    const long nameMax = ::pathconf(directoryOf(o.path).c_str(), _PC_NAME_MAX);
+    const long nameMax = ::pathconf(directoryOf(written).c_str(), _PC_NAME_MAX);
     const std::size_t nameBytes = o.path.filename().string().size();
     if (nameMax > 0 && nameBytes > std::size_t(nameMax))
         fail(o,
@@ -69,7 +96,7 @@ void checkOne(const OutputSpec& o) {
                  " bytes long, more than the " + std::to_string(nameMax) +
                  " its file system allows",
              "give a shorter name");
-    const fs::path dir = directoryOf(o.path);
+    const fs::path dir = directoryOf(written);
     const fs::file_status st = fs::status(dir, ec);
     if (!fs::exists(st))
         fail(o, "directory '" + dir.string() + "' does not exist", "create it first");
@@ -123,24 +150,17 @@ OutputFiles::~OutputFiles() {
 void OutputFiles::write(const fs::path& target, const std::string& option,
                         const std::function<void(const fs::path&)>& writer) {
     // Unique per process and output; hidden, short (a target's name may be near the file system's
-    // limit) and ending in the target's extensions (writers that pick the format by extension
-    // still do: "a.nii.gz" → ".nii.gz").
+    // limit) and ending in the target's format suffix (formatSuffix).
     static std::atomic<int> counter{0};
-    const std::string name = target.filename().string();
-    const std::size_t dot = name.find('.', 1);
-    // A symlink to a file is written through (the file it names is replaced, the link stays).
-    std::error_code linkError;
-    const fs::path file = fs::is_symlink(fs::symlink_status(target, linkError)) &&
-                                  fs::is_regular_file(fs::status(target, linkError))
-                              ? fs::canonical(target, linkError)
-                              : target;
-    const fs::path dir = directoryOf(linkError ? target : file);
-    const fs::path temporary =
-        dir / (kTemporaryPrefix + std::to_string(::getpid()) + "-" + std::to_string(counter++) +
-               (dot == std::string::npos ? "" : name.substr(dot)));
-    entries_.push_back({temporary, linkError ? target : file, option, target});
+    const fs::path file = resolveOutput(target);
+    const fs::path dir = directoryOf(file);
+    const fs::path temporary = dir / (kTemporaryPrefix + std::to_string(::getpid()) + "-" +
+                                      std::to_string(counter++) + formatSuffix(target));
+    entries_.push_back({temporary, file, option, target});
     try {
         writer(temporary);
+    } catch (const CancelledError&) {
+        throw;  // Ctrl-C is Ctrl-C, full disk or not
     } catch (const InputError& e) {
         // A full disk explains the writer's own message (which may name its temporaries).
         if (core::fileSystemFull(dir)) throw core::noSpaceLeft(target.string());
@@ -157,52 +177,63 @@ void OutputFiles::write(const fs::path& target, const std::string& option,
 
 void OutputFiles::commit() {
     // All or nothing, and a target that existed before keeps its old content unless the whole
-    // commit succeeds: each is first renamed aside (a target that cannot be renamed — immutable,
-    // on a read-only mount — fails there, before anything of it changed), then the new file takes
-    // its place; a failure moves every old file back.
-    struct Moved {
-        fs::path target, aside;  ///< aside empty: there was no old file
+    // commit succeeds. Each old target is first kept under a second name — a hard link, so that
+    // the target itself never goes missing and the new file replaces it in one atomic rename
+    // (renamed aside where the file system refuses the link) — and a failure moves every kept
+    // file back. A target that cannot be replaced (immutable: link(2) and rename(2) refuse it, a
+    // read-only mount) fails before anything of it changed.
+    struct Kept {
+        fs::path target, old;  ///< old empty: there was no old file
+        bool linked = false;   ///< old is a second link (the target still exists)
     };
-    std::vector<Moved> moved;
-    auto rollback = [&] {
-        for (auto m = moved.rbegin(); m != moved.rend(); ++m) {
-            std::error_code ignored;
-            if (m->aside.empty())
-                fs::remove(m->target, ignored);
-            else
-                fs::rename(m->aside, m->target, ignored);
-        }
+    std::vector<Kept> done;
+    auto restore = [](const Kept& k) {
+        std::error_code ignored;
+        if (k.old.empty())
+            fs::remove(k.target, ignored);
+        else
+            fs::rename(k.old, k.target, ignored);
     };
     for (const Entry& e : entries_) {
         std::error_code ec, statusError;  // status sets its error code for a missing file too
-        Moved m{e.target, {}};
-        if (fs::exists(fs::symlink_status(e.target, statusError))) {
-            m.aside = e.temporary.string() + ".old";
-            fs::rename(e.target, m.aside, ec);
-        }
-        // The new file keeps the old one's permission bits (a private 0600 output stays so).
-        if (!ec && !m.aside.empty()) {
-            std::error_code ignored;
-            fs::permissions(e.temporary, fs::status(m.aside, ignored).permissions(), ignored);
+        Kept k{e.target, {}};
+        const fs::file_status old = fs::symlink_status(e.target, statusError);
+        if (fs::exists(old)) {
+            k.old = e.temporary.string() + ".old";
+            fs::create_hard_link(e.target, k.old, ec);
+            k.linked = !ec;
+            if (ec) {  // no hard links here (vfat says EPERM, as for an immutable file)
+                ec.clear();
+                fs::rename(e.target, k.old, ec);
+            }
+            // The new file keeps a regular old file's permission bits (a private 0600 output
+            // stays so; never set-id or sticky bits, never a dangling link's "unknown").
+            if (!ec && fs::is_regular_file(old)) {
+                std::error_code ignored;
+                fs::permissions(e.temporary, old.permissions() & fs::perms::all, ignored);
+            }
         }
         if (!ec) fs::rename(e.temporary, e.target, ec);
-        if (ec && !m.aside.empty()) {
-            std::error_code ignored;
-            if (fs::exists(m.aside, ignored)) fs::rename(m.aside, e.target, ignored);
-        }
         if (ec) {
-            rollback();
+            if (!k.old.empty() && (k.linked || !fs::exists(e.target, statusError))) {
+                std::error_code ignored;
+                if (k.linked)
+                    fs::remove(k.old, ignored);  // the target was never touched
+                else
+                    fs::rename(k.old, e.target, ignored);
+            }
+            for (auto d = done.rbegin(); d != done.rend(); ++d) restore(*d);
             throw InputError("command line", e.option,
                              "cannot move the written file into place as '" + e.shown.string() +
                                  "': " + ec.message(),
                              "check the file's and the directory's permissions and free space");
         }
-        moved.push_back(m);
+        done.push_back(k);
     }
-    for (const Moved& m : moved)
-        if (!m.aside.empty()) {
+    for (const Kept& k : done)
+        if (!k.old.empty()) {
             std::error_code ignored;
-            fs::remove(m.aside, ignored);
+            fs::remove(k.old, ignored);
         }
     entries_.clear();
 }

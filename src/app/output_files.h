@@ -10,17 +10,18 @@
 //
 // OutputFiles::write() runs a writer on a temporary file in the target's directory (same file
 // system, so the final rename is atomic; the temporary's name is short and ends in the target's
-// extensions, so writers that pick the format by extension still do). A writer that returns while
+// format suffix — ".png", ".nii.gz" — so writers that pick the format by extension still do). A writer that returns while
 // the disk is full failed, whatever it says (libraries that ignore a failed write leave a short
 // file and report success): that is an error naming the target. commit() renames every temporary
-// into place only after all were written, each old target first renamed aside and removed only
-// when the whole commit succeeded. Destroying an OutputFiles before commit() (an error or Ctrl-C
+// into place only after all were written, each old target first kept under a second name (a hard
+// link: the target never goes missing, and each replacement is one atomic rename) and removed
+// only when the whole commit succeeded. Destroying an OutputFiles before commit() (an error or Ctrl-C
 // unwinding) removes every temporary; a rename failing during commit() moves back every old file
 // this commit replaced and removes the new ones, so a run leaves all of its outputs or none of
 // them, and a failed run leaves the files that were there as they were. Errors name the option and
 // the target, with the system's reason (never the temporary's name, never "Success"). A target
-// that is a symlink to a file is written through (the file is replaced, the link stays); a
-// replaced file keeps its permission bits.
+// that is a symlink to a file is written through (the file is replaced, the link stays), one that
+// is a FIFO or device is refused; a replaced regular file keeps its permission bits.
 #include <filesystem>
 #include <functional>
 #include <string>

@@ -257,24 +257,24 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
         }
     }
     const mod::Api& api = imageModule(file);
+    const std::filesystem::path dir =
+        path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
     // libjpeg ends the process (exit(1)) when its output fails, as on a full disk: no error comes
-    // back to refuse. A JPEG is never larger than its raw pixels plus headers, so with that much
-    // free the write cannot run out of space.
+    // back to refuse. A rendered image's JPEG is far below its raw pixels; twice them plus the
+    // headers is a bound with room (noise at quality 100 comes near the raw size, not past 2×).
     constexpr std::int64_t kJpegHeaderBytes = 1 << 16;
-    if ((ext == ".jpg" || ext == ".jpeg")) {
-        const std::int64_t free = core::freeBytes(
-            path.has_parent_path() ? path.parent_path() : std::filesystem::path("."));
-        if (free >= 0 && free < std::int64_t(w) * h * channels + kJpegHeaderBytes)
+    const bool jpeg = ext == ".jpg" || ext == ".jpeg";
+    if (jpeg) {
+        const std::int64_t free = core::freeBytes(dir);
+        if (free >= 0 && free < 2 * std::int64_t(w) * h * channels + kJpegHeaderBytes)
             throw core::noSpaceLeft(file);
     }
 
-    // Temporary name in the same directory, same extension (OpenImageIO picks the format from it).
+    // A short temporary name in the same directory (the target's may be near the file system's
+    // limit), same extension (OpenImageIO picks the format from it).
     static std::atomic<int> counter{0};
-    const std::filesystem::path dir =
-        path.has_parent_path() ? path.parent_path() : std::filesystem::path(".");
-    const std::filesystem::path tmp =
-        dir / (path.stem().string() + ".tmp" + std::to_string(::getpid()) + "_" +
-               std::to_string(counter++) + path.extension().string());
+    const std::filesystem::path tmp = dir / (".voxlight-image-" + std::to_string(::getpid()) + "-" +
+                                             std::to_string(counter++) + path.extension().string());
     const std::string tmpName = tmp.string();
     mod::WriteRequest request;
     request.path = tmpName.c_str();
@@ -296,6 +296,26 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
         if (full) throw core::noSpaceLeft(file);
         throw InputError(file, "file", "cannot write image: " + result.message,
                          "check that the directory exists and is writable");
+    }
+    // OpenImageIO's PNG and BMP writers also report success over a short file when a write
+    // fails for another reason (a disk quota, the file size limit): such a file does not read
+    // back. 8-bit images are small; reading one costs a few ms.
+    if (eightBit && !jpeg) {
+        bool whole = false;
+        try {
+            ImageReadInfo info;
+            const ImageRGBA back = readImage(tmp, info);
+            whole = back.width == w && back.height == h;
+        } catch (const InputError&) {
+        }
+        if (!whole) {
+            std::error_code ec;
+            std::filesystem::remove(tmp, ec);
+            throw InputError(file, "file",
+                             "was not written whole: it does not read back (a write error the "
+                             "image library did not report)",
+                             "check free space, disk quotas and the file size limit (ulimit -f)");
+        }
     }
     std::error_code ec;
     std::filesystem::rename(tmp, path, ec);

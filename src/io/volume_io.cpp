@@ -2454,20 +2454,26 @@ void detail::writeVolumeWithVtk(const Volume& v, const fs::path& path) {
         w->SetInputData(img);
         w->SetFileName(tmp.c_str());
         w->SetCompression(true);
+        // MetaIO reports a failed write only on std::cerr ("file stream is fail after write"),
+        // with GetErrorCode() 0: what it prints there is the failure, said in our one line.
+        std::ostringstream metaIo;
         {
-            // MetaIO prints its write failures to std::cerr (a second line beside ours); the
-            // full-disk check below reports them.
-            std::ostringstream metaIo;
-            std::streambuf* const cerr = std::cerr.rdbuf(metaIo.rdbuf());
+            struct CerrTo {
+                std::streambuf* saved;
+                explicit CerrTo(std::streambuf* b) : saved(std::cerr.rdbuf(b)) {}
+                ~CerrTo() { std::cerr.rdbuf(saved); }
+            } hold(metaIo.rdbuf());
             w->Write();
-            std::cerr.rdbuf(cerr);
         }
         if (w->GetErrorCode() != 0) fail("VTK MetaImage writer failed");
+        if (std::string said = metaIo.str(); !said.empty())
+            fail("MetaIO: " + said.substr(0, said.find('\n')));
     }
     for (auto& m : captureWindow().take())
         if (m.find("ERROR") != std::string::npos) fail(cleanVtkMessage(m));
-    // The MetaImage writer reports success over a short file when the disk fills.
-    if (core::fileSystemFull(dir)) fail("");
+    // A writer that reported success over a short file (none known here since MetaIO's line is
+    // read above; kept for the others).
+    if (core::fileSystemFull(dir)) fail("the disk is full");
     std::error_code ec;
     fs::rename(tmp, path, ec);
     if (ec) fail("rename from temporary file failed: " + ec.message());

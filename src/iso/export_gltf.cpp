@@ -4,8 +4,11 @@
 #include <tiny_gltf.h>
 
 #include <cerrno>
+#include <cstdio>
 #include <cstring>
 #include <limits>
+#include <sstream>
+#include <string>
 
 #include "core/error.h"
 #include "iso/export.h"
@@ -127,13 +130,28 @@ void writeGlb(const Mesh& mesh, const std::filesystem::path& path, const ExportI
     model.scenes.push_back(scene);
     model.defaultScene = 0;
 
+    // Serialised in memory, then written here with every write checked: tinygltf's file writer
+    // reports success over a short file when a write fails (a full disk gave a 12-KB .glb).
     tinygltf::TinyGLTF writer;
-    errno = 0;
-    if (!writer.WriteGltfSceneToFile(&model, path.string(), true, true, false, true))
+    std::ostringstream bytes;
+    if (!writer.WriteGltfSceneToStream(&model, bytes, false, true))
+        throw InputError(path.string(), "output", "cannot serialise the glTF model",
+                         "report this with the mesh's size");
+    const std::string data = bytes.str();
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f)
         throw InputError(path.string(), "output",
-                         std::string("cannot write the glTF file") +
-                             (errno ? std::string(": ") + std::strerror(errno) : std::string()),
+                         std::string("cannot write the glTF file: ") + std::strerror(errno),
                          "check free space and permissions");
+    const bool written =
+        std::fwrite(data.data(), 1, data.size(), f) == data.size() && std::fflush(f) == 0;
+    const int writeErrno = errno;
+    const bool closed = std::fclose(f) == 0;
+    if (!written || !closed)
+        throw InputError(path.string(), "output",
+                         std::string("cannot write the glTF file: ") +
+                             std::strerror(!written ? writeErrno : errno),
+                         "check free space, disk quotas and permissions");
 }
 
 }  // namespace voxlight::iso::detail

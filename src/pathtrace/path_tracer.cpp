@@ -1425,6 +1425,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     int done = 0;
     double error = 0.0;
     bool reached = false;
+    // The stage's clock starts here (a progress line's elapsed time and estimate count from the
+    // first report), not after the first pass.
+    progress.report("pathtrace", 0.0, "0 spp");
     // Under a time cap, passes after the first shrink to the samples per pixel that fit in the
     // time left at the last pass's seconds per sample per pixel (an adaptive pass costs more
     // than a uniform one: the rate follows the passes), and the render stops when not even half

@@ -194,6 +194,11 @@ TEST(WriteFailures, ANameTheFileSystemCannotHoldIsRefusedBeforeTheWork) {
     const Result phantom =
         run("phantom sphere --size 16 -q -o " + std::string(243, 'p') + ".nii.gz", tmp.path());
     EXPECT_EQ(phantom.code, 0) << phantom.err;
+    // A long name with an early dot: the temporary had kept everything from the first dot.
+    const std::string dotted = "a." + std::string(244, 'c') + ".png";
+    const Result early = run(render + "-o " + dotted, tmp.path());
+    EXPECT_EQ(early.code, 0) << early.err;
+    EXPECT_TRUE(fs::exists(tmp / dotted));
     EXPECT_TRUE(temporariesIn(tmp.path()).empty()) << temporariesIn(tmp.path()).front();
 }
 
@@ -245,4 +250,65 @@ TEST(WriteFailures, AReplacedOutputKeepsItsModeAndASymlinkIsWrittenThrough) {
     EXPECT_EQ(fs::status(tmp / "s.json").permissions() & fs::perms::all,
               fs::perms::owner_read | fs::perms::owner_write);
     EXPECT_TRUE(temporariesIn(tmp.path()).empty()) << temporariesIn(tmp.path()).front();
+}
+
+TEST(WriteFailures, AWriteErrorTheImageLibraryDoesNotReportIsCaughtByReadingBack) {
+    // A file size limit (as a disk quota) leaves free space: OpenImageIO's PNG and BMP writers
+    // reported success over a short file, VTK's MetaImage printed a line and reported success.
+    test::TempDir tmp;
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o v.nii.gz", tmp.path()).code, 0);
+    std::ofstream(tmp / "big.png") << kOld;
+    for (const std::string command :
+         {"render v.nii.gz -q --set image.width=256 --set image.height=256 -o big.png",
+          "render v.nii.gz -q --set image.width=256 --set image.height=256 -o big.bmp",
+          "phantom torso --size 64 -q -o big.mha"}) {
+        // ulimit -f 2: 2 KiB per file; SIGXFSZ ignored, so a write past it fails with EFBIG.
+        const Result r =
+            test::runShell("cd " + quoted(tmp.path()) + " && trap '' XFSZ && ulimit -f 2 && " +
+                               VOXLIGHT_BINARY + " " + command,
+                           tmp.path());
+        EXPECT_EQ(r.code, 2) << command << ": " << r.err;
+        EXPECT_EQ(lineCount(r.err), 1u) << command << ": " << r.err;
+        EXPECT_EQ(r.err.find(".voxlight"), std::string::npos) << command << ": " << r.err;
+    }
+    EXPECT_EQ(contents(tmp / "big.png"), kOld);
+    EXPECT_FALSE(fs::exists(tmp / "big.bmp"));
+    EXPECT_FALSE(fs::exists(tmp / "big.mha"));
+    EXPECT_TRUE(temporariesIn(tmp.path()).empty()) << temporariesIn(tmp.path()).front();
+}
+
+TEST(WriteFailures, AFifoOrADanglingLinkAsAnOutput) {
+    test::TempDir tmp;
+    ASSERT_EQ(run("phantom sphere --size 16 -q -o v.nii.gz", tmp.path()).code, 0);
+    const std::string render = "render v.nii.gz -q --set image.width=16 --set image.height=16 ";
+    // A FIFO was replaced by a regular file (nothing reached the reader): refused.
+    ASSERT_EQ(test::runShell("mkfifo " + quoted(tmp / "f.png"), tmp.path()).code, 0);
+    const Result fifo = run(render + "-o f.png", tmp.path());
+    EXPECT_EQ(fifo.code, 2) << fifo.err;
+    EXPECT_NE(fifo.err.find("FIFO"), std::string::npos) << fifo.err;
+    // A dangling link is replaced by the file, with ordinary permissions (its "unknown" mode had
+    // been copied: 07777, set-id bits and all).
+    fs::create_symlink("/nonexistent/x.png", tmp / "d.png");
+    const Result dangling = run(render + "-o d.png", tmp.path());
+    EXPECT_EQ(dangling.code, 0) << dangling.err;
+    EXPECT_TRUE(fs::is_regular_file(fs::symlink_status(tmp / "d.png")));
+    const fs::perms p = fs::status(tmp / "d.png").permissions();
+    EXPECT_EQ(p & (fs::perms::set_uid | fs::perms::set_gid | fs::perms::sticky_bit |
+                   fs::perms::others_write),
+              fs::perms::none);
+}
+
+TEST(WriteFailures, AFileSystemThatCountsNoBlocksIsNeverFull) {
+    // An unlimited tmpfs (size=0) reports 0 blocks in all: every output there failed "no space
+    // left" for one commit.
+    test::TempDir tmp;
+    SmallDisk disk(tmp / "unlimited", 0);
+    if (!disk.mounted()) GTEST_SKIP() << "needs root to mount a tmpfs";
+    const Result r = run("phantom sphere --size 16 -q -o unlimited/v.nii.gz", tmp.path());
+    EXPECT_EQ(r.code, 0) << r.err;
+    const Result png =
+        run("render unlimited/v.nii.gz -q --set image.width=16 "
+            "--set image.height=16 -o unlimited/a.png",
+            tmp.path());
+    EXPECT_EQ(png.code, 0) << png.err;
 }
