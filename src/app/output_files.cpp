@@ -239,20 +239,7 @@ void OutputFiles::commit() {
 }
 
 void writeTextFile(const fs::path& path, const std::string& text) {
-    const std::string name = path.string();
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (!f)
-        throw InputError(name, "", std::string("cannot be created: ") + std::strerror(errno),
-                         "check the directory's permissions");
-    const bool written = std::fwrite(text.data(), 1, text.size(), f) == text.size() &&
-                         std::fputc('\n', f) != EOF && std::fflush(f) == 0;
-    const int writeErrno = errno;
-    const bool closed = std::fclose(f) == 0;
-    if (!written || !closed)
-        throw InputError(
-            name, "",
-            std::string("cannot be written: ") + std::strerror(!written ? writeErrno : errno),
-            "check free disk space");
+    core::writeWholeFile(path, text + "\n");
 }
 
 }  // namespace voxlight::app

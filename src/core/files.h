@@ -7,10 +7,14 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <cerrno>
 #include <climits>
 #include <cstdint>
+#include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <string>
+#include <string_view>
 
 #include "core/error.h"
 
@@ -55,6 +59,26 @@ inline bool fileSystemFull(const std::filesystem::path& dir) { return freeBytes(
 inline InputError noSpaceLeft(const std::string& file) {
     return InputError(file, "", "cannot be written: no space left on the device (the disk is full)",
                       "free disk space, or write it to another disk");
+}
+
+/// Writes `data` to `path` (created or truncated) with every write checked; InputError naming
+/// `path` with the system's reason when it cannot be created or written whole (a library's own
+/// file writer may report success over a short file: serialise to memory, then write here).
+inline void writeWholeFile(const std::filesystem::path& path, std::string_view data) {
+    std::FILE* f = std::fopen(path.c_str(), "wb");
+    if (!f)
+        throw InputError(path.string(), "",
+                         std::string("cannot be created: ") + std::strerror(errno),
+                         "check the directory's permissions");
+    const bool written =
+        std::fwrite(data.data(), 1, data.size(), f) == data.size() && std::fflush(f) == 0;
+    const int writeErrno = errno;
+    const bool closed = std::fclose(f) == 0;
+    if (!written || !closed)
+        throw InputError(
+            path.string(), "",
+            std::string("cannot be written: ") + std::strerror(!written ? writeErrno : errno),
+            "check free disk space, disk quotas and permissions");
 }
 
 }  // namespace voxlight::core

@@ -3,14 +3,12 @@
 // here). The layout and the node matrix are documented in export.h.
 #include <tiny_gltf.h>
 
-#include <cerrno>
-#include <cstdio>
-#include <cstring>
 #include <limits>
 #include <sstream>
 #include <string>
 
 #include "core/error.h"
+#include "core/files.h"
 #include "iso/export.h"
 
 namespace voxlight::iso::detail {
@@ -137,21 +135,7 @@ void writeGlb(const Mesh& mesh, const std::filesystem::path& path, const ExportI
     if (!writer.WriteGltfSceneToStream(&model, bytes, false, true))
         throw InputError(path.string(), "output", "cannot serialise the glTF model",
                          "report this with the mesh's size");
-    const std::string data = bytes.str();
-    std::FILE* f = std::fopen(path.c_str(), "wb");
-    if (!f)
-        throw InputError(path.string(), "output",
-                         std::string("cannot write the glTF file: ") + std::strerror(errno),
-                         "check free space and permissions");
-    const bool written =
-        std::fwrite(data.data(), 1, data.size(), f) == data.size() && std::fflush(f) == 0;
-    const int writeErrno = errno;
-    const bool closed = std::fclose(f) == 0;
-    if (!written || !closed)
-        throw InputError(path.string(), "output",
-                         std::string("cannot write the glTF file: ") +
-                             std::strerror(!written ? writeErrno : errno),
-                         "check free space, disk quotas and permissions");
+    core::writeWholeFile(path, bytes.str());
 }
 
 }  // namespace voxlight::iso::detail
