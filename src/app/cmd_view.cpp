@@ -8,7 +8,9 @@
 // radiance as `render --exr` writes it (.exr) (temporary file, then rename).
 // --script runs UI steps (viewer/view_state.h ScriptStep) through the mouse's code paths;
 // --record writes the exploration as a session (`voxlight replay` re-renders it) on exit.
+#include <cctype>
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <optional>
 
@@ -67,14 +69,18 @@ Command addViewCommand(CLI::App& app) {
     c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");
     c.run = [=] {
+        // The files the run reads: --record over --script replaced the script with the session.
+        std::vector<std::pair<std::string, std::filesystem::path>> inputs = {{"INPUT", *input},
+                                                                             {"--script", *script}};
+        const std::vector<OutputSpec> outputs = {{"--screenshot", *screenshot, {".png", ".exr"}},
+                                                 {"--record", *record, {".json"}}};
+        checkOutputs(outputs, inputs);
         if (!screenshot->empty()) {
-            checkOutputs({{"--screenshot", *screenshot, {".png", ".exr"}}});
             if (input->empty())
                 throw InputError("command line", "--screenshot", "needs a scene or volume",
                                  "give SCENE.json or a volume before --screenshot");
         }
         if (!record->empty()) {
-            checkOutputs({{"--record", *record, {".json"}}}, {{"INPUT", *input}});
             if (input->empty())
                 throw InputError("command line", "--record", "needs a scene or volume",
                                  "give SCENE.json or a volume before --record");
@@ -82,8 +88,20 @@ Command addViewCommand(CLI::App& app) {
         std::vector<viewer::ScriptStep> steps;
         if (!script->empty()) steps = viewer::parseScript(io::readJsonFile(*script), *script);
         std::optional<viewer::LoadedScene> initial;
-        if (!input->empty())
-            initial = viewer::prepareScene(loadInput(*input, *sets), terminalProgress(*quiet));
+        if (!input->empty()) {
+            io::Scene scene = loadInput(*input, *sets);
+            for (auto& in : sceneFileInputs(scene)) inputs.push_back(std::move(in));
+            checkOutputs(outputs, inputs);  // the scene's volume and maps
+            initial = viewer::prepareScene(std::move(scene), terminalProgress(*quiet));
+        }
+        // A session written under Ctrl-C is said to be there (runGuarded would say nothing was).
+        std::error_code ec;
+        const auto recordTime = [&] {
+            return record->empty() || !std::filesystem::exists(*record, ec)
+                       ? std::filesystem::file_time_type::min()
+                       : std::filesystem::last_write_time(*record, ec);
+        };
+        const auto recordBefore = recordTime();
         viewer::ViewerOptions options;
         options.screenshot = *screenshot;
         options.frames = *frames;
@@ -103,6 +121,11 @@ Command addViewCommand(CLI::App& app) {
             files.commit();
         };
         std::optional<core::ImageRGBA> shot = viewer::runViewer(options, std::move(initial));
+        if (cancelFlag().load() && recordTime() != recordBefore) {
+            std::fprintf(stderr, "\nvoxlight: cancelled; the session so far is in %s\n",
+                         record->c_str());
+            return kExitCancelled;
+        }
         throwIfCancelled();
         if (!screenshot->empty()) {
             if (!shot)
@@ -112,7 +135,10 @@ Command addViewCommand(CLI::App& app) {
             files.write(*screenshot, "--screenshot",
                         [&](const std::filesystem::path& p) { io::writeImage(*shot, p); });
             files.commit();
-            if (!*quiet && shot->width > viewer::kPanelWidth)
+            // A PNG is the window (panel at the right); an EXR the image area's linear radiance.
+            std::string ext = std::filesystem::path(*screenshot).extension().string();
+            for (char& ch : ext) ch = char(std::tolower(static_cast<unsigned char>(ch)));
+            if (!*quiet && ext != ".exr" && shot->width > viewer::kPanelWidth)
                 std::fprintf(stderr, "wrote %s (%dx%d, image area %dx%d at the left)\n",
                              screenshot->c_str(), shot->width, shot->height,
                              shot->width - viewer::kPanelWidth, shot->height);

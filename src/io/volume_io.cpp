@@ -2233,8 +2233,9 @@ void applyNonFinitePolicy(Volume& v, const fs::path& path, NonFinitePolicy polic
         throw InputError(path.string(), "voxels",
                          std::to_string(bad) + " of " + std::to_string(v.voxelCount()) +
                              " voxels are NaN, infinite or beyond float's range (±3.4e38)",
-                         "pass --nonfinite=min to replace them by the lowest finite value, or "
-                         "rescale data that overflows float");
+                         "replace them by the lowest finite value with --set volume.nonfinite=min "
+                         "(\"nonfinite\": \"min\" in the scene's volume; `info` takes "
+                         "--nonfinite=min), or rescale data that overflows float");
     const float lo = float((v.mapping.slope >= 0 ? v.physicalRange()[0] : v.physicalRange()[1]) -
                            v.mapping.intercept) /
                      float(v.mapping.slope);

@@ -226,6 +226,15 @@ TEST(WriteFailures, OutputsOverACommandsOwnInputsAreRefused) {
     EXPECT_EQ(sw.code, 2) << sw.err;
     EXPECT_NE(sw.err.find("replaces the sweep file"), std::string::npos) << sw.err;
     EXPECT_EQ(contents(tmp / "sw" / "reference.json"), sweep);
+    // view --record over its own --script replaced the script with the session (refused before
+    // any window opens: no display needed).
+    const std::string steps = R"([{"orbit": [30, 0]}])";
+    std::ofstream(tmp / "steps.json") << steps;
+    const Result view =
+        run("view scene.json --script steps.json --record steps.json -q", tmp.path());
+    EXPECT_EQ(view.code, 2) << view.err;
+    EXPECT_NE(view.err.find("--script"), std::string::npos) << view.err;
+    EXPECT_EQ(contents(tmp / "steps.json"), steps);
 }
 
 TEST(WriteFailures, AReplacedOutputKeepsItsModeAndASymlinkIsWrittenThrough) {
