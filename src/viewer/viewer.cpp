@@ -251,6 +251,8 @@ class Viewer {
     void checkIndex(const ScriptStep& st, std::size_t count, const char* what) const;
     /// Runs the next script step when the full image of the current state is shown.
     void runScript();
+    /// An error the view raises after script steps ran, named by the last step (scriptNext_ > 0).
+    InputError scriptStepError(const std::string& what) const;
     void recordState(const io::Scene& scene);
     // "Render this view with the path tracer": a second worker, its image shown in place of the
     // live one while the view is unchanged.
@@ -1054,6 +1056,15 @@ void Viewer::checkIndex(const ScriptStep& st, std::size_t count, const char* wha
                      "there is no " + std::string(what) + " " + std::to_string(st.index) +
                          " (the view has " + std::to_string(count) + ")",
                      "indices count from 0 in the order the planes and lights were added");
+}
+
+InputError Viewer::scriptStepError(const std::string& what) const {
+    // The scene the script's steps made (a zoom of 300 notches puts the eye on the target, a
+    // window drag of 5000 pixels a width past 10⁹) is the last step's doing: named, not the
+    // screenshot or the scene file whose key it changed.
+    const ScriptStep& last = options_.script[scriptNext_ - 1];
+    return InputError(last.source, last.field, "leaves a view that cannot be rendered: " + what,
+                      "use a smaller value");
 }
 
 void Viewer::runScript() {
@@ -1901,7 +1912,13 @@ std::optional<core::ImageRGBA> Viewer::run() {
         handleKeys();
         handleImageMouse();
         updateRenderer();
-        runScript();
+        try {
+            runScript();
+        } catch (const InputError& e) {
+            // A step's own error (an index past the planes) names the script already.
+            if (scriptNext_ == 0 || e.source() == options_.script[scriptNext_ - 1].source) throw;
+            throw scriptStepError(e.what());
+        }
         const double tInput = work.seconds();
         drawImage();
         const double tImage = work.seconds();
@@ -1989,8 +2006,10 @@ std::optional<core::ImageRGBA> Viewer::run() {
         logTimes();
         if (shot) break;
         if (scripted) {
-            if (!renderError_.empty())
+            if (!renderError_.empty()) {
+                if (scriptNext_ > 0) throw scriptStepError(renderError_);
                 throw InputError(options_.screenshot, "render", renderError_);
+            }
             if (sinceStart.seconds() > options_.screenshotTimeoutSeconds)
                 throw InputError("view", "--screenshot",
                                  "the full-resolution image was not ready within " +

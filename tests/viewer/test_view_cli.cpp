@@ -1128,3 +1128,22 @@ TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
     }
     EXPECT_FALSE(fs::exists(tmp / "x.png"));
 }
+
+TEST(ViewCli, AStepThatLeavesAViewTheSceneRefusesIsNamedByTheScript) {
+    // {"zoom": 300} (1.1³⁰⁰ closer) put the eye on the target: the error named the screenshot
+    // and `scene.json: camera.eye`, a key the file does not have.
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "method": "gradient", "image": {"width": 64, "height": 48}})";
+    std::ofstream(tmp / "steps.json") << R"([{"orbit": [10, 0]}, {"zoom": 300}])";
+    const Result r = runScriptedView(*display, tmp);
+    if (r.code != 0 && r.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << r.err;
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_NE(r.err.find("steps.json: [1].zoom: leaves a view that cannot be rendered"),
+              std::string::npos)
+        << r.err;
+    EXPECT_FALSE(fs::exists(tmp / "shot.png"));
+}
