@@ -299,7 +299,7 @@ void writeImage(const ImageRGBA& image, const std::filesystem::path& path,
     }
     // OpenImageIO's PNG and BMP writers also report success over a short file when a write
     // fails for another reason (a disk quota, the file size limit): such a file does not read
-    // back. 8-bit images are small; reading one costs a few ms.
+    // back. One decode of the file just written (8-bit images; not timed separately).
     if (eightBit && !jpeg) {
         bool whole = false;
         try {
