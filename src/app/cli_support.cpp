@@ -56,8 +56,8 @@ core::Progress terminalProgress(bool quiet) {
         int lastTenth = -1;
         int lastPercent = -1;
         long long lastSecond = -1;
-        std::size_t lastWidth =
-            0;  ///< characters of the bar's last line, to blank what a shorter one leaves
+        /// Characters of the bar's last line, to blank what a shorter one leaves.
+        std::size_t lastWidth = 0;
     };
     // Work that finishes within kQuietSeconds shows nothing: progress is for long work, and a quick
     // failure stays one line on stderr.

@@ -150,6 +150,11 @@ Command addSweepCommand(CLI::App& app) {
         // find it); the others wait for it, and stop when it failed.
         bool ok = true;
         std::exception_ptr failure;
+        // Bad input only the reference's stages find, or a Ctrl-C there: what this run added goes.
+        auto undo = [&] {
+            ok = false;
+            for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
+        };
         if (lead) try {
                 fs::create_directories(dir, ec);
                 if (!*noImages) {
@@ -213,14 +218,12 @@ Command addSweepCommand(CLI::App& app) {
                         p, refJson.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
                 });
             } catch (const InputError&) {
-                ok = false;
                 failure = std::current_exception();
-                for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
+                undo();
             } catch (const CancelledError&) {
                 // Ctrl-C before the first variant: as if never run ("nothing was written").
-                ok = false;
                 failure = std::current_exception();
-                for (auto p = added.rbegin(); p != added.rend(); ++p) fs::remove_all(*p, ec);
+                undo();
             } catch (...) {
                 ok = false;
                 failure = std::current_exception();

@@ -817,3 +817,22 @@ TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
     EXPECT_EQ(ref1["ranks"], 1);
     EXPECT_EQ(ref3["ranks"], 3);
 }
+
+TEST(Cli, ThePathTracersProgressShowsItsSamplesAndTimes) {
+    // Its stage was named by its spp and error, new every pass: the 1-s quiet rule of the
+    // progress sink restarted each pass and no line was ever printed. In a log (not a terminal)
+    // a line per tenth: "pathtrace: 50% (12 spp, error 20.1%, 1 s, ≈ 1 s left)".
+    test::TempDir tmp;
+    const std::string volume = "'" + (tmp / "v.nii.gz").string() + "'";
+    ASSERT_EQ(run("phantom sphere --size 32 -q -o " + volume, tmp.path()).code, 0);
+    const Result r = run("render " + volume +
+                             " --set method.name=pathtrace --set method.params.seconds=2.5 --set "
+                             "method.params.spp=100000 --set image.width=64 --set "
+                             "image.height=64 -o '" +
+                             (tmp / "pt.png").string() + "'",
+                         tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_NE(r.err.find("pathtrace: "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(" spp, error "), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find(" left)"), std::string::npos) << r.err;
+}
