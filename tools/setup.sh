@@ -6,7 +6,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config git
   libvtk9-dev libgdcm-dev libgdcm-tools libvtkgdcm-dev
-  libcgal-dev libopenmesh-dev libglfw3-dev libglm-dev libopenimageio-dev openimageio-tools
+  libcgal-dev libopenmesh-dev libglfw3-dev libx11-dev libglm-dev libopenimageio-dev openimageio-tools
   libtbb-dev libeigen3-dev zlib1g-dev nlohmann-json3-dev libcli11-dev libimgui-dev libstb-dev
   libtinygltf-dev libopenmpi-dev openmpi-bin
   libgtest-dev libgmock-dev libbenchmark-dev clang-format

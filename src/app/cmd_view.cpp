@@ -18,6 +18,7 @@
 #include "app/output_files.h"
 #include "io/image.h"
 #include "io/scene.h"
+#include "session/session.h"
 #include "viewer/viewer.h"
 
 namespace voxlight::app {
@@ -112,12 +113,35 @@ Command addViewCommand(CLI::App& app) {
         options.record = *record;
         options.quit = &cancelFlag();
         options.openInput = [](const std::string& path) { return loadInput(path, {}); };
-        options.saveScreenshot = [](const core::ImageRGBA& image, const std::string& path) {
-            checkOutputs(
-                {{"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr"}}});
+        // A path typed in the panel replaces no file the run reads: the command line's inputs and
+        // the files of the scene on screen (which may have been opened since).
+        const auto checkPanelOutput = [inputs](const OutputSpec& out, const io::Scene& current) {
+            auto all = inputs;
+            all.emplace_back("the scene file", current.source);
+            for (auto& in : sceneFileInputs(current)) all.push_back(std::move(in));
+            checkOutputs({out}, all);
+        };
+        options.saveScreenshot = [checkPanelOutput](const core::ImageRGBA& image,
+                                                    const std::string& path,
+                                                    const io::Scene& current) {
+            checkPanelOutput(
+                {"screenshot", path, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr"}},
+                current);
             OutputFiles files;
             files.write(path, "screenshot",
                         [&](const std::filesystem::path& p) { io::writeImage(image, p); });
+            files.commit();
+        };
+        // --record and the panel's Save: the same checked, atomic write as every output.
+        options.saveSession = [checkPanelOutput, record = *record](const session::Session& s,
+                                                                   const std::string& path,
+                                                                   const io::Scene& current) {
+            const std::string option = path == record ? "--record" : "session";
+            checkPanelOutput({option, path, {".json"}}, current);
+            OutputFiles files;
+            files.write(path, option, [&](const std::filesystem::path& p) {
+                writeTextFile(p, session::sessionText(s));
+            });
             files.commit();
         };
         std::optional<core::ImageRGBA> shot = viewer::runViewer(options, std::move(initial));

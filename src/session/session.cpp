@@ -484,9 +484,12 @@ json sessionDocument(const Session& s) {
     return d;
 }
 
+std::string sessionText(const Session& session) {
+    return sessionDocument(session).dump(2, ' ', false, json::error_handler_t::replace);
+}
+
 void writeSession(const Session& session, const fs::path& path) {
-    writeAtomically(
-        path, sessionDocument(session).dump(2, ' ', false, json::error_handler_t::replace) + "\n");
+    writeAtomically(path, sessionText(session) + "\n");
 }
 
 Recorder::Recorder(const io::Scene& scene, std::string description) : scene_(scene) {

@@ -132,6 +132,8 @@ Session loadSession(const std::filesystem::path& path);
 
 /// The session as a document in the file format (parseSession reads it back).
 nlohmann::json sessionDocument(const Session& session);
+/// The session file's text as writeSession writes it, without the final newline.
+std::string sessionText(const Session& session);
 /// Writes the session to `path` atomically: a temporary file beside it, renamed into place once
 /// complete (a failure leaves the previous file, or none, never half of one). InputError naming
 /// the path, with the system's reason, when it cannot be written.

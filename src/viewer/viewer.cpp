@@ -26,7 +26,9 @@
 
 #include "core/error.h"
 #include "core/timing.h"
+#include "render/ray_caster.h"
 #include "session/session.h"
+#include "viewer/display_loss.h"
 #include "viewer/gl_ray_caster.h"
 #include "viewer/render_worker.h"
 #include "viewer/tf_editor.h"
@@ -260,6 +262,13 @@ class Viewer {
     void receivePathTrace();
     bool pathTraceShown() const { return ptReady_ && ptGen_ == generation_ && ptShow_; }
     std::string saveRecording(const std::string& path);
+
+  public:
+    /// The display connection is gone (DisplayLossGuard): saves --record's session (the panel's
+    /// own recording is not written anywhere unasked) and says on stderr what was kept.
+    void displayLost();
+
+  private:
     void submit(bool interacting);
     /// The current view as a scene of w × h pixels (the document's method unless `method` is set).
     io::Scene sceneAt(int w, int h, const json& method = json()) const;
@@ -1324,9 +1333,32 @@ void Viewer::recordState(const io::Scene& scene) {
 
 std::string Viewer::saveRecording(const std::string& path) {
     if (!recorder_) throw InputError("viewer", "session", "nothing is being recorded");
-    recorder_->save(path);
+    if (options_.saveSession && loaded_ && !recorder_->session().keyframes.empty())
+        options_.saveSession(recorder_->session(), path, loaded_->scene);
+    else
+        recorder_->save(path);  // (its error when there is no keyframe yet)
     return "wrote " + path + " (" + std::to_string(recorder_->session().keyframes.size()) +
            " keyframes)";
+}
+
+void Viewer::displayLost() {
+    std::string kept;
+    if (!options_.record.empty() && recorder_) {
+        try {
+            saveRecording(options_.record);
+            kept = "; the session so far is in " + options_.record;
+        } catch (const std::exception& e) {
+            kept = std::string("; the session could not be saved: ") + e.what();
+        }
+    } else if (recorder_) {
+        kept = "; the panel's recording (" + std::to_string(recorder_->session().keyframes.size()) +
+               " keyframes) was not saved (view --record SESSION.json saves it on any exit)";
+    }
+    if (!options_.screenshot.empty()) kept += "; no screenshot was written";
+    std::fprintf(stderr,
+                 "\nvoxlight: error: display: the connection to the X server was lost (the "
+                 "server quit or the connection dropped)%s\n",
+                 kept.c_str());
 }
 
 void Viewer::handleKeys() {
@@ -1957,19 +1989,20 @@ std::optional<core::ImageRGBA> Viewer::run() {
             // Read back here (the frame is in the back buffer); encode and write on a thread.
             shotRequested_ = false;
             shotMessage_ = "writing " + shotPath_ + " ...";
-            saving_ = std::async(std::launch::async,
-                                 [save = options_.saveScreenshot, image = screenshotFor(shotPath_),
-                                  path = shotPath_]() -> std::string {
-                                     try {
-                                         if (image.width < 1)
-                                             return "nothing to save yet: no full-resolution "
-                                                    "image is shown";
-                                         save(image, path);
-                                         return "wrote " + path;
-                                     } catch (const std::exception& e) {
-                                         return e.what();
-                                     }
-                                 });
+            saving_ = std::async(
+                std::launch::async,
+                [save = options_.saveScreenshot, image = screenshotFor(shotPath_), path = shotPath_,
+                 scene = loaded_ ? loaded_->scene : io::Scene{}]() -> std::string {
+                    try {
+                        if (image.width < 1)
+                            return "nothing to save yet: no full-resolution "
+                                   "image is shown";
+                        save(image, path, scene);
+                        return "wrote " + path;
+                    } catch (const std::exception& e) {
+                        return e.what();
+                    }
+                });
         }
         if (saving_.valid() &&
             saving_.wait_for(std::chrono::seconds(0)) == std::future_status::ready)
@@ -2030,15 +2063,9 @@ std::optional<core::ImageRGBA> Viewer::run() {
                      coarseTimes_.max(), std::size_t(fullTimes_.count), fullTimes_.min(),
                      fullTimes_.max());
     if (!options_.record.empty() && recorder_) {
-        // Scripted: an error is the run's; interactive: said on stderr, the window is gone.
-        try {
-            const std::string m = saveRecording(options_.record);
-            if (options_.log) std::fprintf(stderr, "view: %s\n", m.c_str());
-        } catch (const InputError&) {
-            if (scripted) throw;
-            std::fprintf(stderr, "voxlight view: the session could not be saved to %s\n",
-                         options_.record.c_str());
-        }
+        // A session that cannot be saved is the run's error, with its reason (the window is gone).
+        const std::string m = saveRecording(options_.record);
+        if (options_.log) std::fprintf(stderr, "view: %s\n", m.c_str());
     }
     return shot;
 }
@@ -2049,6 +2076,18 @@ const char* helpText() { return kHelp; }
 
 std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
                                          std::optional<LoadedScene> initial) {
+    // A scripted screenshot the renderer will refuse is refused before a window opens (a
+    // 16384² one failed after a minute or more of coarse frames, naming the screenshot file).
+    if (!options.screenshot.empty() && initial) {
+        const io::Scene& s = initial->scene;
+        if (std::uint64_t(s.image.width) * std::uint64_t(s.image.height) > render::kMaxPixels)
+            throw InputError(s.source, "image.width",
+                             "a screenshot of " + std::to_string(s.image.width) + "x" +
+                                 std::to_string(s.image.height) +
+                                 " pixels is larger than the renderer's limit (" +
+                                 std::to_string(render::kMaxPixels) + " pixels)",
+                             "take a smaller screenshot");
+    }
     if (!glfwInit())
         throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
                          "run on a desktop, or headless under xvfb-run -a");
@@ -2084,6 +2123,7 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     try {
         // The viewer (its texture, its worker) goes before the context it was made in.
         Viewer viewer(options, window);
+        const DisplayLossGuard guard([&viewer] { viewer.displayLost(); }, kExitDisplayLost);
         if (initial) viewer.adopt(std::move(*initial));
         shot = viewer.run();
     } catch (...) {

@@ -26,6 +26,7 @@
 
 #include "core/image.h"
 #include "io/scene.h"
+#include "session/session.h"
 #include "viewer/gl_support.h"
 #include "viewer/loaded_scene.h"
 #include "viewer/view_state.h"
@@ -38,6 +39,10 @@ inline constexpr int kPanelWidth = 380;
 /// ViewerOptions::glSliceSeconds by default: half the UI frame's 50 ms budget.
 inline constexpr double kDefaultGlSliceSeconds = 0.025;
 
+/// The exit code when the display connection is lost mid-run (app's kExitBadInput: the display
+/// is the run's environment, as when no window can be opened).
+inline constexpr int kExitDisplayLost = 2;
+
 struct ViewerOptions {
     /// Non-empty: scripted run that returns a screenshot (the caller writes the file; .exr: the
     /// image's linear radiance, see above).
@@ -49,8 +54,15 @@ struct ViewerOptions {
     /// a volume or a DICOM folder); throws InputError.
     std::function<io::Scene(const std::string&)> openInput;
     /// Writes a screenshot the user asks for (F12 or the panel's button) to a path; throws
-    /// InputError (shown in the panel). Unset: the button is hidden.
-    std::function<void(const core::ImageRGBA&, const std::string&)> saveScreenshot;
+    /// InputError (shown in the panel). `current`: the scene on screen (its files are inputs a
+    /// path typed in the panel must not replace). Unset: the button is hidden.
+    std::function<void(const core::ImageRGBA&, const std::string&, const io::Scene& current)>
+        saveScreenshot;
+    /// Writes the recorded session to a path (the panel's Save, and `record` when the viewer
+    /// closes or loses its display); throws InputError. `current` as for saveScreenshot. Unset:
+    /// session::writeSession.
+    std::function<void(const session::Session&, const std::string&, const io::Scene& current)>
+        saveSession;
     /// Steps run one per frame, each once the full image of the state before it is shown, through
     /// the code paths of the mouse and keys (view_state.h ScriptStep); a scripted screenshot is
     /// taken after the last.

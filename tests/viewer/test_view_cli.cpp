@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "io/image.h"
+#include "session/session.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -1103,7 +1104,14 @@ TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
     std::ofstream(tmp / "corrupt.json") << R"({"volume": {"phantom": "torso"}, "camera": )";
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [1, 2]}, {"spin": 3}])";
     std::ofstream(tmp / "clip-steps.json") << R"([{"clip_move": {"index": 0}}])";
+    std::ofstream(tmp / "tiny.json") << R"({"volume": {"phantom": "torso", "size": 16}})";
     const std::vector<std::pair<std::string, std::string>> cases = {
+        // A screenshot the renderer refuses, before any window (it failed after a minute or
+        // more, naming the screenshot file and not the --set that made the size).
+        {"view " + quoted(tmp / "tiny.json") +
+             " --set image.width=16384 --set image.height=16384 --screenshot " +
+             quoted(tmp / "x.png"),
+         "--set image.width=16384"},
         {"view " + quoted(tmp / "missing-volume.json"), "nowhere.nii.gz"},
         {"view " + quoted(tmp / "corrupt.json"), "corrupt.json"},
         {"view " + quoted(tmp / "absent.json"), "absent.json"},
@@ -1146,4 +1154,70 @@ TEST(ViewCli, AStepThatLeavesAViewTheSceneRefusesIsNamedByTheScript) {
               std::string::npos)
         << r.err;
     EXPECT_FALSE(fs::exists(tmp / "shot.png"));
+}
+
+TEST(ViewCli, ALostDisplaySavesTheRecordingAndSaysSo) {
+    // The X server going away (an SSH tunnel or VNC session dropping) ended the viewer inside
+    // Xlib with exit code 1 and "XIO: fatal IO error"; the session being recorded was lost.
+    if (!onPath("Xvfb")) GTEST_SKIP() << "no Xvfb here (tools/setup.sh installs xvfb)";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 32}, "transfer_function": "ct-bone",
+        "method": "gradient", "image": {"width": 160, "height": 120}})";
+    // A server of its own (-displayfd picks a free display), killed once the viewer has shown
+    // its first full image (--log's "render full" line: the first keyframe is recorded then).
+    // Both waits are bounded, so a server or viewer that never comes up fails, not hangs.
+    std::ofstream(tmp / "lose.sh")
+        << "cd " << quoted(tmp.path()) << "\n"
+        << "Xvfb -displayfd 3 -screen 0 1024x768x24 3>disp.txt 2>/dev/null &\n"
+        << "x=$!\n"
+        << "for i in $(seq 100); do [ -s disp.txt ] && break; sleep 0.1; done\n"
+        << "(DISPLAY=:$(cat disp.txt) " << VOXLIGHT_BINARY
+        << " view -q --log --renderer cpu scene.json --record rec.json 2>err.txt;"
+        << " echo $? >rc.txt) &\n"
+        << "for i in $(seq 600); do grep -q 'render full' err.txt 2>/dev/null && break; "
+        << "sleep 0.1; done\n"
+        << "kill $x\n"
+        << "wait\n";
+    ASSERT_EQ(std::system(("sh " + quoted(tmp / "lose.sh")).c_str()), 0);
+    std::ifstream rf(tmp / "rc.txt"), ef(tmp / "err.txt");
+    int code = -1;
+    ASSERT_TRUE(rf >> code) << "the viewer did not end";
+    const std::string err((std::istreambuf_iterator<char>(ef)), {});
+    EXPECT_EQ(code, 2) << err;
+    EXPECT_NE(err.find("the connection to the X server was lost"), std::string::npos) << err;
+    EXPECT_NE(err.find("the session so far is in rec.json"), std::string::npos) << err;
+    EXPECT_EQ(err.find("XIO"), std::string::npos) << err;
+    // A whole session, which replay reads; no temporary beside it.
+    const session::Session s = session::loadSession(tmp / "rec.json");
+    EXPECT_GE(s.keyframes.size(), 1u);
+    for (const auto& e : fs::directory_iterator(tmp.path()))
+        EXPECT_EQ(e.path().filename().string().rfind(".voxlight", 0), std::string::npos)
+            << e.path();
+}
+
+TEST(ViewCli, TheRecordedSessionIsWrittenAsEveryOutputIs) {
+    // --record went through the session library's own writer: a symlink given as --record was
+    // replaced by a regular file of mode 0644 (every other output writes through a link and
+    // keeps a replaced file's mode), and an interactive run whose save failed said only "could
+    // not be saved", with exit code 0.
+    const std::optional<std::string> display = displayPrefix();
+    if (!display) GTEST_SKIP() << "no DISPLAY and no xvfb-run: cannot open an OpenGL window here";
+    test::TempDir tmp;
+    std::ofstream(tmp / "scene.json") << R"({
+        "volume": {"phantom": "torso", "size": 32}, "transfer_function": "ct-bone",
+        "method": "gradient", "image": {"width": 96, "height": 80}})";
+    std::ofstream(tmp / "steps.json") << R"([{"orbit": [30, 0]}])";
+    fs::create_directory(tmp / "kept");
+    std::ofstream(tmp / "kept" / "session.json") << "old";
+    fs::permissions(tmp / "kept" / "session.json", fs::perms(0640));
+    fs::create_symlink(tmp / "kept" / "session.json", tmp / "rec.json");
+    const Result view = runScriptedView(*display, tmp);
+    if (view.code != 0 && view.err.find("OpenGL 4.5 window") != std::string::npos)
+        GTEST_SKIP() << "no OpenGL 4.5 window on this machine: " << view.err;
+    ASSERT_EQ(view.code, 0) << view.err;
+    EXPECT_TRUE(fs::is_symlink(tmp / "rec.json"));
+    EXPECT_EQ(fs::status(tmp / "kept" / "session.json").permissions() & fs::perms::all,
+              fs::perms(0640));
+    EXPECT_EQ(session::loadSession(tmp / "kept" / "session.json").keyframes.size(), 2u);
 }

@@ -1,0 +1,39 @@
+// SPDX-License-Identifier: MIT
+#include "viewer/display_loss.h"
+
+#include <X11/Xlib.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <utility>
+
+namespace voxlight::viewer {
+
+namespace {
+// One guard at a time (one viewer window per process); Xlib's handler is process-wide.
+std::function<void()> gOnLost;
+int gExitCode = 1;
+XIOErrorHandler gPrevious = nullptr;
+
+int onIoError(Display*) {
+    if (gOnLost) gOnLost();
+    std::fflush(stdout);
+    std::fflush(stderr);
+    // Not exit(): static destructors and atexit handlers would run with other threads still
+    // rendering and the GL context half torn down. The files the function wrote are complete.
+    std::_Exit(gExitCode);
+}
+}  // namespace
+
+DisplayLossGuard::DisplayLossGuard(std::function<void()> onLost, int exitCode) {
+    gOnLost = std::move(onLost);
+    gExitCode = exitCode;
+    gPrevious = XSetIOErrorHandler(onIoError);
+}
+
+DisplayLossGuard::~DisplayLossGuard() {
+    XSetIOErrorHandler(gPrevious);
+    gOnLost = nullptr;
+}
+
+}  // namespace voxlight::viewer

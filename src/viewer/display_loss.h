@@ -1,0 +1,23 @@
+// SPDX-License-Identifier: MIT
+// What the viewer does when its display goes away (the X server quits, an SSH tunnel or a VNC
+// session drops): Xlib's default ends the process at once with exit code 1 and its own "XIO: fatal
+// IO error" line, and a session being recorded was lost with it. While a DisplayLossGuard lives,
+// Xlib calls its function first — on the thread whose X call failed, which is the UI thread: no
+// other thread of the viewer talks to X — and the process then ends with `exitCode`. The function
+// must not touch the display (it is gone) and must not throw; it may write files. Kept in its own
+// file so that Xlib's macros (None, Bool, Status, …) stay out of the viewer's code.
+#pragma once
+
+#include <functional>
+
+namespace voxlight::viewer {
+
+class DisplayLossGuard {
+  public:
+    DisplayLossGuard(std::function<void()> onLost, int exitCode);
+    ~DisplayLossGuard();  ///< puts back the handler that was set before
+    DisplayLossGuard(const DisplayLossGuard&) = delete;
+    DisplayLossGuard& operator=(const DisplayLossGuard&) = delete;
+};
+
+}  // namespace voxlight::viewer
