@@ -1213,9 +1213,22 @@ void Viewer::runScript() {
         case ScriptStep::Kind::Gizmo:
             showGizmo_ = st.a != 0.0;
             break;
-        case ScriptStep::Kind::Shading:
+        case ScriptStep::Kind::Shading: {
+            // The panel's local/global switch, which only the SH methods have (the step did
+            // nothing on any other, silently).
+            const json m = doc_.value("method", json());
+            const std::string name = m.is_object()   ? m.value("name", "")
+                                     : m.is_string() ? m.get<std::string>()
+                                                     : loaded_->scene.method.name;
+            if (name != "sh-local" && name != "sh-global")
+                throw InputError(
+                    st.source, st.field,
+                    "switches sh-local and sh-global; the view's method is '" + name + "'",
+                    "set the scene's method to sh-local or sh-global, or leave the "
+                    "step out");
             setShVisibility(st.view == "global");
             break;
+        }
         case ScriptStep::Kind::Drop: {
             // GLFW's drop callback itself; the next frame's events open the last path.
             std::vector<const char*> paths;

@@ -1154,6 +1154,15 @@ TEST(ViewCli, AStepThatLeavesAViewTheSceneRefusesIsNamedByTheScript) {
               std::string::npos)
         << r.err;
     EXPECT_FALSE(fs::exists(tmp / "shot.png"));
+    // The local/global switch on a method without it did nothing, silently.
+    std::ofstream(tmp / "steps.json") << R"([{"orbit": [10, 0]}, {"shading": "global"}])";
+    const Result s = runScriptedView(*display, tmp);
+    EXPECT_EQ(s.code, 2) << s.err;
+    EXPECT_NE(s.err.find("steps.json: [1].shading: switches sh-local and sh-global; the view's "
+                         "method is 'gradient'"),
+              std::string::npos)
+        << s.err;
+    EXPECT_FALSE(fs::exists(tmp / "shot.png"));
 }
 
 TEST(ViewCli, ALostDisplaySavesTheRecordingAndSaysSo) {
