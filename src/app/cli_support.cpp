@@ -31,6 +31,9 @@ extern "C" void onSignal(int) { cancelFlag().store(true); }
 void installSignalHandlers() {
     std::signal(SIGINT, onSignal);
     std::signal(SIGTERM, onSignal);
+    // A closed terminal or a dropped SSH connection cancels as Ctrl-C does (temporaries removed,
+    // the viewer's --record session saved) — unless the run was started to ignore it (nohup).
+    if (std::signal(SIGHUP, onSignal) == SIG_IGN) std::signal(SIGHUP, SIG_IGN);
 }
 
 void throwIfCancelled() {

@@ -20,7 +20,8 @@ namespace voxlight::app {
 
 inline constexpr int kExitOk = 0, kExitInternal = 1, kExitBadInput = 2, kExitCancelled = 130;
 
-/// Cancel flag raised by SIGINT/SIGTERM (installed by installSignalHandlers()).
+/// Cancel flag raised by SIGINT/SIGTERM/SIGHUP (installed by installSignalHandlers(); SIGHUP not
+/// where the run ignores it, as under nohup).
 std::atomic<bool>& cancelFlag();
 void installSignalHandlers();
 /// Throws CancelledError when the cancel flag is raised: for steps between long calls that take no

@@ -11,23 +11,25 @@ namespace voxlight::viewer {
 
 namespace {
 // One guard at a time (one viewer window per process); Xlib's handler is process-wide.
-std::function<void()> gOnLost;
-int gExitCode = 1;
+std::function<int()> gOnLost;
 XIOErrorHandler gPrevious = nullptr;
 
 int onIoError(Display*) {
-    if (gOnLost) gOnLost();
+    int code = 1;  // Xlib's own
+    try {
+        if (gOnLost) code = gOnLost();
+    } catch (...) {
+    }
     std::fflush(stdout);
     std::fflush(stderr);
     // Not exit(): static destructors and atexit handlers would run with other threads still
     // rendering and the GL context half torn down. The files the function wrote are complete.
-    std::_Exit(gExitCode);
+    std::_Exit(code);
 }
 }  // namespace
 
-DisplayLossGuard::DisplayLossGuard(std::function<void()> onLost, int exitCode) {
+DisplayLossGuard::DisplayLossGuard(std::function<int()> onLost) {
     gOnLost = std::move(onLost);
-    gExitCode = exitCode;
     gPrevious = XSetIOErrorHandler(onIoError);
 }
 

@@ -64,6 +64,9 @@ constexpr int kMeasureFrames = 3;
 /// small beside it). A 2048² CPU frame of 7.6 s timed three times cost 23 s of a 62-s scripted
 /// screenshot on llvmpipe.
 constexpr double kMeasureOnceSeconds = 1.0;
+/// How long a lost display waits for a screenshot the panel is writing (encoding a large PNG
+/// takes a few seconds) before the process ends.
+constexpr int kScreenshotFinishSeconds = 10;
 /// The GL path's timing stops when the GL time spent on its probe (the central quarter of the
 /// image, ×4) or on a frame is already this many times the CPU's median: on a software
 /// rasteriser a GL frame can take seconds, and there is no need to finish one.
@@ -266,11 +269,15 @@ class Viewer {
     void receivePathTrace();
     bool pathTraceShown() const { return ptReady_ && ptGen_ == generation_ && ptShow_; }
     std::string saveRecording(const std::string& path);
+    /// The scene the view shows now, for the files it reads (see the definition).
+    io::Scene sceneOnScreen() const;
 
   public:
     /// The display connection is gone (DisplayLossGuard): saves --record's session (the panel's
-    /// own recording is not written anywhere unasked) and says on stderr what was kept.
-    void displayLost();
+    /// own recording is not written anywhere unasked), lets a panel screenshot being written
+    /// finish, says on stderr what was kept and returns the exit code (cancelled when the
+    /// display went with a Ctrl-C).
+    int displayLost();
 
   private:
     void submit(bool interacting);
@@ -381,6 +388,8 @@ class Viewer {
     std::string shotPath_ = "voxlight-view.png", shotMessage_;
     bool shotRequested_ = false;
     std::future<std::string> saving_;  ///< a screenshot being written: its message when done
+    /// The last full CPU image's frame (its Frame stages, not the run's one-time stages).
+    double lastFullFrameSeconds_ = 0.0;
 
     // Recording the exploration as a session.
     std::optional<session::Recorder> recorder_;
@@ -536,6 +545,7 @@ void Viewer::receive() {
     }
     if (gpu_) return;  // a CPU image of a state asked before the switch
     (r->coarse ? coarseTimes_ : fullTimes_).add(r->seconds);
+    if (!r->coarse) lastFullFrameSeconds_ = r->frameSeconds;
     if (options_.log)
         std::fprintf(stderr, "view: render %s %dx%d in %.3f s (state %llu)%s\n",
                      r->coarse ? "coarse" : "full", r->width, r->height, r->seconds,
@@ -801,7 +811,7 @@ void Viewer::updateRenderer() {
             // The CPU's frame: the same state rendered kMeasureFrames times, median (once when
             // the full image just shown took kMeasureOnceSeconds or more).
             RenderRequest request{sceneAt(w, h), generation_, false};
-            request.frames = fullTimes_.last() >= kMeasureOnceSeconds ? 1 : kMeasureFrames;
+            request.frames = lastFullFrameSeconds_ >= kMeasureOnceSeconds ? 1 : kMeasureFrames;
             worker_.submit(std::move(request));
             measure_ = Measure::CpuFrames;
             return;
@@ -1349,34 +1359,62 @@ void Viewer::recordState(const io::Scene& scene) {
     }
 }
 
+io::Scene Viewer::sceneOnScreen() const {
+    // The edited document (lights added in the panel, maps included); the scene as opened where
+    // the document is a state the scene refuses (a script step's error, shown in the panel).
+    try {
+        return sceneAt(std::max(imageW_, 1), std::max(imageH_, 1));
+    } catch (const std::exception&) {
+        return loaded_->scene;
+    }
+}
+
 std::string Viewer::saveRecording(const std::string& path) {
     if (!recorder_) throw InputError("viewer", "session", "nothing is being recorded");
     if (options_.saveSession && loaded_ && !recorder_->session().keyframes.empty())
-        options_.saveSession(recorder_->session(), path, loaded_->scene);
+        options_.saveSession(recorder_->session(), path, sceneOnScreen());
     else
         recorder_->save(path);  // (its error when there is no keyframe yet)
     return "wrote " + path + " (" + std::to_string(recorder_->session().keyframes.size()) +
            " keyframes)";
 }
 
-void Viewer::displayLost() {
+int Viewer::displayLost() {
+    // Ctrl-C under xvfb-run reaches the X server too: the display goes because of the cancel.
+    const bool cancelled = options_.quit && options_.quit->load();
     std::string kept;
-    if (!options_.record.empty() && recorder_) {
+    const std::size_t keyframes = recorder_ ? recorder_->session().keyframes.size() : 0;
+    if (!options_.record.empty() && recorder_ && keyframes == 0) {
+        kept = "; nothing was recorded yet (" + options_.record + " not written)";
+    } else if (!options_.record.empty() && recorder_) {
         try {
             saveRecording(options_.record);
             kept = "; the session so far is in " + options_.record;
         } catch (const std::exception& e) {
             kept = std::string("; the session could not be saved: ") + e.what();
         }
-    } else if (recorder_) {
-        kept = "; the panel's recording (" + std::to_string(recorder_->session().keyframes.size()) +
+    } else if (keyframes > 0) {
+        kept = "; the panel's recording (" + std::to_string(keyframes) +
                " keyframes) was not saved (view --record SESSION.json saves it on any exit)";
     }
+    // A screenshot the panel is writing (on its own thread, no X): finished, or said to be cut.
+    if (saving_.valid()) {
+        if (saving_.wait_for(std::chrono::seconds(kScreenshotFinishSeconds)) ==
+            std::future_status::ready)
+            kept += "; " + saving_.get();
+        else
+            kept += "; the screenshot being written (" + shotPath_ + ") was cut off";
+    }
     if (!options_.screenshot.empty()) kept += "; no screenshot was written";
+    if (cancelled) {
+        std::fprintf(stderr, "\nvoxlight: cancelled%s\n", kept.c_str());
+        return kExitViewerCancelled;
+    }
     std::fprintf(stderr,
                  "\nvoxlight: error: display: the connection to the X server was lost (the "
                  "server quit or the connection dropped)%s\n",
                  kept.c_str());
+    return kExitDisplayLost;
 }
 
 void Viewer::handleKeys() {
@@ -2010,7 +2048,7 @@ std::optional<core::ImageRGBA> Viewer::run() {
             saving_ = std::async(
                 std::launch::async,
                 [save = options_.saveScreenshot, image = screenshotFor(shotPath_), path = shotPath_,
-                 scene = loaded_ ? loaded_->scene : io::Scene{}]() -> std::string {
+                 scene = loaded_ ? sceneOnScreen() : io::Scene{}]() -> std::string {
                     try {
                         if (image.width < 1)
                             return "nothing to save yet: no full-resolution "
@@ -2080,7 +2118,11 @@ std::optional<core::ImageRGBA> Viewer::run() {
                      frameWork_.mean() * 1e3, std::size_t(coarseTimes_.count), coarseTimes_.min(),
                      coarseTimes_.max(), std::size_t(fullTimes_.count), fullTimes_.min(),
                      fullTimes_.max());
-    if (!options_.record.empty() && recorder_) {
+    if (!options_.record.empty() && recorder_ && recorder_->session().keyframes.empty()) {
+        // Closed before the first state was asked for: nothing to replay.
+        std::fprintf(stderr, "voxlight view: nothing was recorded; %s was not written\n",
+                     options_.record.c_str());
+    } else if (!options_.record.empty() && recorder_) {
         // A session that cannot be saved is the run's error, with its reason (the window is gone).
         const std::string m = saveRecording(options_.record);
         if (options_.log) std::fprintf(stderr, "view: %s\n", m.c_str());
@@ -2109,6 +2151,23 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     if (!glfwInit())
         throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
                          "run on a desktop, or headless under xvfb-run -a");
+    // From here to the end (window creation, the run, teardown) a lost display ends the process
+    // through the viewer while it runs (its session, its messages), else with one line (a
+    // --record session is saved before teardown).
+    Viewer* live = nullptr;
+    const DisplayLossGuard guard([&live, &options]() -> int {
+        if (live) return live->displayLost();
+        const bool cancelled = options.quit && options.quit->load();
+        const char* shot = options.screenshot.empty() ? "" : "; no screenshot was written";
+        if (cancelled) {
+            std::fprintf(stderr, "\nvoxlight: cancelled%s\n", shot);
+            return kExitViewerCancelled;
+        }
+        std::fprintf(stderr,
+                     "\nvoxlight: error: display: the connection to the X server was lost%s\n",
+                     shot);
+        return kExitDisplayLost;
+    });
     struct Terminate {
         ~Terminate() { glfwTerminate(); }
     } terminate;
@@ -2141,7 +2200,10 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     try {
         // The viewer (its texture, its worker) goes before the context it was made in.
         Viewer viewer(options, window);
-        const DisplayLossGuard guard([&viewer] { viewer.displayLost(); }, kExitDisplayLost);
+        struct Live {  // the guard's way to the viewer, until it is destroyed
+            Viewer*& to;
+            ~Live() { to = nullptr; }
+        } alive{live = &viewer};
         if (initial) viewer.adopt(std::move(*initial));
         shot = viewer.run();
     } catch (...) {

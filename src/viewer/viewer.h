@@ -42,6 +42,9 @@ inline constexpr double kDefaultGlSliceSeconds = 0.025;
 /// The exit code when the display connection is lost mid-run (app's kExitBadInput: the display
 /// is the run's environment, as when no window can be opened).
 inline constexpr int kExitDisplayLost = 2;
+/// The exit code when the display goes with a Ctrl-C (app's kExitCancelled: under xvfb-run the
+/// interrupt reaches the X server too).
+inline constexpr int kExitViewerCancelled = 130;
 
 struct ViewerOptions {
     /// Non-empty: scripted run that returns a screenshot (the caller writes the file; .exr: the
