@@ -118,6 +118,24 @@ void checkSpacing(const Geometry& g) {
         }
 }
 
+/// A volume whose voxels lie more than kMaxOriginSpacings of its finest spacing from the world
+/// origin is refused: rendered there, its images are wrong without a sign (volume.h).
+void checkOrigin(const Geometry& g) {
+    const glm::dvec3 far = g.indexToWorld(glm::dvec3(g.dims - 1));
+    double reach = 0.0;
+    for (int a = 0; a < 3; ++a) reach = std::max({reach, std::abs(g.origin[a]), std::abs(far[a])});
+    if (!(reach <= kMaxOriginSpacings * minComponent(g.spacing))) {
+        std::ostringstream os;
+        os << "the voxels lie up to " << reach << " mm from the coordinate origin, more than "
+           << kMaxOriginSpacings << " voxel spacings (" << minComponent(g.spacing)
+           << " mm): single-precision positions there lose the voxel's fraction (origin "
+           << g.origin.x << ", " << g.origin.y << ", " << g.origin.z << " mm)";
+        throw InputError("volume", "origin", os.str(),
+                         "move the origin nearer 0 in the file's header (its origin, offset or "
+                         "position field)");
+    }
+}
+
 /// A direction matrix that is not a rotation (a damaged sform/qform or space directions, found by
 /// fuzz_nifti_gz) is bad input, not an internal fault: readers name the file when they rethrow.
 void checkOrientation(const Geometry& g) {
@@ -135,6 +153,7 @@ Volume::Volume(const Geometry& geometry, VoxelType type) : geometry_(geometry), 
     checkVolumeSize(geometry);
     checkSpacing(geometry);
     checkOrientation(geometry);
+    checkOrigin(geometry);
     geometry_.validate();
     data_ = std::shared_ptr<std::byte>(new std::byte[sizeBytes()](),
                                        std::default_delete<std::byte[]>());
@@ -145,6 +164,7 @@ Volume::Volume(const Geometry& geometry, VoxelType type, std::shared_ptr<std::by
     checkVolumeSize(geometry);
     checkSpacing(geometry);
     checkOrientation(geometry);
+    checkOrigin(geometry);
     geometry_.validate();
     VL_CHECK(data_ != nullptr);
 }

@@ -524,6 +524,29 @@ struct IlluminationLattice::Tracer {
     /// p (index) moved onto the trilinear isosurface at iso by Newton steps along the gradient
     /// (central differences of a quarter voxel), each at most half a voxel, to within 1e-4 voxel;
     /// false when the gradient vanishes or the point would move more than maxVoxels.
+    /// Where the isosurface has no point near p because the matter runs into the volume's box
+    /// (a bone cut by the scan's field of view, a slab on a face: the ray caster shows a cap
+    /// there, the box face over values ≥ iso): the nearest face point within maxVoxels whose
+    /// value is ≥ iso, and that face's outward world normal. False when there is none.
+    bool capPoint(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out,
+                  glm::dvec3& normal) const {
+        double best = maxVoxels;
+        bool found = false;
+        for (int a = 0; a < 3; ++a)
+            for (int side = 0; side < 2; ++side) {
+                const double face = side ? double(n[a] - 1) : 0.0;
+                const double dist = std::abs(p[a] - face);
+                if (!(dist <= best)) continue;
+                glm::dvec3 q = glm::clamp(p, glm::dvec3(0.0), glm::dvec3(n - 1));
+                q[a] = face;
+                if (!(value(q) >= iso)) continue;
+                best = dist, found = true;
+                out = q;
+                normal = glm::normalize(geo.direction[a]) * (side ? 1.0 : -1.0);
+            }
+        return found;
+    }
+
     bool project(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out) const {
         constexpr double h = 0.25, kTol = 1e-4, kMaxStep = 0.5;
         constexpr int kIterations = 32;
@@ -928,6 +951,14 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
                         const glm::dvec3 nrm = tracer_->smoothNormal(xs);
                         float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
                         for (int a = 0; a < 3; ++a) d[fpt - 3 + std::size_t(a)] = float(nrm[a]);
+                    } else if (glm::dvec3 nrm;
+                               tracer_->capPoint(xt, o.surfaceIso, kMaxProjectionVoxels, xs, nrm)) {
+                        // Matter cut by the box: the cap the ray caster shows, lit as a surface
+                        // with the face's normal (it was left out, and read as black).
+                        estimate(xs, o.surfaceIso, linear(t), o.samples, true, sums, prebuilt.get(),
+                                 &nrm);
+                        float* d = blockFor(t)->data.data() + std::size_t(inBlock(t)) * fpt;
+                        for (int a = 0; a < 3; ++a) d[fpt - 3 + std::size_t(a)] = float(nrm[a]);
                     } else {  // no point of the surface near: left out of reads
                         sums.E = glm::dvec3(0.0);
                         std::fill(sums.T.begin(), sums.T.end(), glm::dvec3(0.0));
@@ -974,7 +1005,8 @@ LatticeStats IlluminationLattice::computeTexels(std::vector<glm::ivec3> needed,
 }
 
 void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples,
-                                   bool sharedIso, PathSums& out, const SkipField* given) const {
+                                   bool sharedIso, PathSums& out, const SkipField* given,
+                                   const glm::dvec3* cap) const {
     const Tracer& tr = *tracer_;
     const std::shared_ptr<const SkipField> held = sharedIso && !given ? skipFor(iso) : nullptr;
     const SkipField* skip = given ? given : held.get();
@@ -1001,9 +1033,10 @@ void IlluminationLattice::estimate(const glm::dvec3& xt, double iso, std::uint64
         return e;
     };
     const glm::dvec3 albedo = glm::clamp(glm::dvec3(tf_.eval(float(iso)).albedo), 0.0, 1.0);
-    glm::dvec3 n0 = tr.smoothNormal(xt);
+    glm::dvec3 n0 = cap ? *cap : tr.smoothNormal(xt);
     glm::dvec3 x0 = xt;
-    if (n0 != glm::dvec3(0.0) && !tr.startPoint(xt, n0, iso, x0)) n0 = glm::dvec3(0.0);
+    // (A cap's paths start on the box face: every direction of its hemisphere leaves the volume.)
+    if (!cap && n0 != glm::dvec3(0.0) && !tr.startPoint(xt, n0, iso, x0)) n0 = glm::dvec3(0.0);
     out.plateau = n0 == glm::dvec3(0.0);
     if (out.plateau) x0 = xt;
     glm::dvec3 E(0.0);  // Σ over paths of what follows the first direction

@@ -240,8 +240,12 @@ class IlluminationLattice {
     /// its skip distances are worth building (Tracer::skipFor); false for Wyman's own-isosurface
     /// texels, each with its own isovalue.
     /// `given`: the skip distances for iso the caller holds (then none is looked up).
+    /// `cap`: xt lies on a cap — matter cut by the volume's box face, whose outward world normal
+    /// this is (Tracer::capPoint): the paths start there, around it, not from the field's normal
+    /// (zero on the plateau inside the cut).
     void estimate(const glm::dvec3& xt, double iso, std::uint64_t key, int samples, bool sharedIso,
-                  PathSums& out, const SkipField* given = nullptr) const;
+                  PathSums& out, const SkipField* given = nullptr,
+                  const glm::dvec3* cap = nullptr) const;
     /// The texels irradiance(world, surfaceIso) reads (the preferred group, header) and their
     /// normalised weights; returns how many.
     int surfaceStencil(const glm::dvec3& world, double surfaceIso, glm::ivec3 texel[8],

@@ -128,3 +128,31 @@ TEST(Volume, ASkewedOrientationIsBadInputNotAnInternalFault) {
         EXPECT_EQ(e.field(), "orientation");
     }
 }
+
+TEST(Volume, AVolumeTooFarFromTheOriginForSinglePrecisionIsRefused) {
+    // A 16³ sphere at 1 mm with its origin at 1e8–1e9 mm rendered black (pvrt, iso-lattice) or
+    // unlit (the SH methods) with exit code 0: the methods' float positions lose the voxel there.
+    auto make = [](glm::dvec3 origin, double spacing) {
+        core::Geometry g;
+        g.dims = {16, 16, 16};
+        g.spacing = glm::dvec3(spacing);
+        g.origin = origin;
+        return core::Volume(g, core::VoxelType::Float32);
+    };
+    EXPECT_NO_THROW(make(glm::dvec3(-1e5, 0, 0), 1.0));        // 1e5 spacings: ≤ 0.1 % (volume.h)
+    EXPECT_NO_THROW(make(glm::dvec3(-250, -250, 1200), 0.5));  // a CT's patient coordinates
+    for (const auto& [origin, spacing] :
+         {std::pair{glm::dvec3(1e7, 1e7, 1e7), 1.0}, std::pair{glm::dvec3(0, 0, -2e5), 1.0},
+          std::pair{glm::dvec3(20, 0, 0), 1e-4}}) {
+        try {
+            make(origin, spacing);
+            ADD_FAILURE() << "origin " << origin.x << ", " << origin.y << ", " << origin.z << " at "
+                          << spacing << " mm must be refused";
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "origin");
+            EXPECT_NE(std::string(e.what()).find("nearer 0"), std::string::npos) << e.what();
+        }
+    }
+    // The far corner counts too (the origin near 0, the voxels running away from it).
+    EXPECT_THROW(make(glm::dvec3(131070, 0, 0), 1.0), InputError);
+}

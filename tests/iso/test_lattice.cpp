@@ -493,5 +493,32 @@ TEST(Lattice, BadOptionsAndLightsNameTheirField) {
     EXPECT_EQ(lat.texelsStored(), 0u);
 }
 
+// Matter cut by the volume's box (a bone cut by the scan's field of view, a slab on a face) shows
+// a cap in the ray caster, but the isosurface has no point there: the on-surface lattice left
+// those texels out and `iso-lattice` painted every cap black. A cap sees its whole hemisphere
+// open (every direction leaves the box at once), so under a uniform sky of radiance L its
+// irradiance is π·L with no noise at all (albedo 0: no bounce adds to it).
+TEST(Lattice, CapsWhereTheBoxCutsTheMatterAreLitAsOpenSurfaces) {
+    constexpr double kCapTolerance = 1e-5;  // float texels; every path escapes exactly
+    const float L = 0.7f;
+    const core::Geometry g = cube(24);  // index 0 … 23 at world −11.5 … 11.5
+    // Solid below z = 0 (value 1, a one-voxel ramp to 0 above): the slab fills the box's bottom
+    // face and the lower halves of its four side faces.
+    auto vol = share(test::fieldVolume(
+        g, [](const glm::dvec3& p) { return std::clamp(0.5 - p.z, 0.0, 1.0); }, "slab"));
+    LatticeOptions on = opts(64, 1);
+    on.placement = TexelPlacement::OnSurface;
+    on.surfaceIso = 0.5;
+    IlluminationLattice lat(vol, albedoTf(0.f, 0.f, 1.f), {sky(L)}, on);
+    const std::vector<glm::dvec3> caps = {{0.0, 0.0, -11.5},   // the bottom face
+                                          {3.2, -4.7, -11.5},  // between texels
+                                          {11.5, 0.0, -5.0},   // a side face
+                                          {-2.0, -11.5, -7.3}};
+    lat.require(caps, 0.5);
+    for (const glm::dvec3& p : caps)
+        EXPECT_NEAR(lat.irradiance(p, 0.5).x, kPi * L, kCapTolerance * kPi * L)
+            << p.x << " " << p.y << " " << p.z;
+}
+
 }  // namespace
 }  // namespace voxlight::iso
