@@ -121,9 +121,13 @@ void checkSpacing(const Geometry& g) {
 /// A volume whose voxels lie more than kMaxOriginSpacings of its finest spacing from the world
 /// origin is refused: rendered there, its images are wrong without a sign (volume.h).
 void checkOrigin(const Geometry& g) {
-    const glm::dvec3 far = g.indexToWorld(glm::dvec3(g.dims - 1));
-    double reach = 0.0;
-    for (int a = 0; a < 3; ++a) reach = std::max({reach, std::abs(g.origin[a]), std::abs(far[a])});
+    double reach = 0.0;  // the largest |coordinate| of the box's eight corner voxels
+    for (int c = 0; c < 8; ++c) {
+        const glm::dvec3 ijk((c & 1) ? g.dims.x - 1 : 0, (c & 2) ? g.dims.y - 1 : 0,
+                             (c & 4) ? g.dims.z - 1 : 0);
+        const glm::dvec3 corner = g.indexToWorld(ijk);
+        for (int a = 0; a < 3; ++a) reach = std::max(reach, std::abs(corner[a]));
+    }
     if (!(reach <= kMaxOriginSpacings * minComponent(g.spacing))) {
         std::ostringstream os;
         os << "the voxels lie up to " << reach << " mm from the coordinate origin, more than "

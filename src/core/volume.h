@@ -70,7 +70,7 @@ inline constexpr double kMaxSpacingMm = 1e4;
 /// methods keep positions in single precision, whose step is 2⁻²⁴ of the coordinate — at 2¹⁷
 /// spacings ¹⁄₁₂₈ of a voxel. Measured on a 16³ sphere at 1 mm moved away from 0 (RMS image
 /// difference against the sphere at 0, relative): 1e5 mm ≤ 0.1 % for sh-local, ritschel, pvrt and
-/// iso-lattice, 1e6 mm 1–1.2 %, 1e7 mm 5–25 %, and at 1e9 mm pvrt and iso-lattice were black — with
+/// iso-lattice, 1e6 mm 0.1–1.2 %, 1e7 mm 5–25 %, and at 1e9 mm pvrt and iso-lattice were black — with
 /// exit code 0 and no warning. A scanner's patient coordinates are within 10⁴ spacings.
 inline constexpr double kMaxOriginSpacings = 131072.0;
 

@@ -524,29 +524,6 @@ struct IlluminationLattice::Tracer {
     /// p (index) moved onto the trilinear isosurface at iso by Newton steps along the gradient
     /// (central differences of a quarter voxel), each at most half a voxel, to within 1e-4 voxel;
     /// false when the gradient vanishes or the point would move more than maxVoxels.
-    /// Where the isosurface has no point near p because the matter runs into the volume's box
-    /// (a bone cut by the scan's field of view, a slab on a face: the ray caster shows a cap
-    /// there, the box face over values ≥ iso): the nearest face point within maxVoxels whose
-    /// value is ≥ iso, and that face's outward world normal. False when there is none.
-    bool capPoint(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out,
-                  glm::dvec3& normal) const {
-        double best = maxVoxels;
-        bool found = false;
-        for (int a = 0; a < 3; ++a)
-            for (int side = 0; side < 2; ++side) {
-                const double face = side ? double(n[a] - 1) : 0.0;
-                const double dist = std::abs(p[a] - face);
-                if (!(dist <= best)) continue;
-                glm::dvec3 q = glm::clamp(p, glm::dvec3(0.0), glm::dvec3(n - 1));
-                q[a] = face;
-                if (!(value(q) >= iso)) continue;
-                best = dist, found = true;
-                out = q;
-                normal = glm::normalize(geo.direction[a]) * (side ? 1.0 : -1.0);
-            }
-        return found;
-    }
-
     bool project(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out) const {
         constexpr double h = 0.25, kTol = 1e-4, kMaxStep = 0.5;
         constexpr int kIterations = 32;
@@ -572,6 +549,29 @@ struct IlluminationLattice::Tracer {
             if (glm::length(x - p) > maxVoxels + kMaxStep) return false;
         }
         return false;
+    }
+
+    /// Where the isosurface has no point near p because the matter runs into the volume's box
+    /// (a bone cut by the scan's field of view, a slab on a face: the ray caster shows a cap
+    /// there, the box face over values ≥ iso): the nearest face point within maxVoxels whose
+    /// value is ≥ iso, and that face's outward world normal. False when there is none.
+    bool capPoint(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out,
+                  glm::dvec3& normal) const {
+        double best = maxVoxels;
+        bool found = false;
+        for (int a = 0; a < 3; ++a)
+            for (int side = 0; side < 2; ++side) {
+                const double face = side ? double(n[a] - 1) : 0.0;
+                const double dist = std::abs(p[a] - face);
+                if (!(dist <= best)) continue;
+                glm::dvec3 q = glm::clamp(p, glm::dvec3(0.0), glm::dvec3(n - 1));
+                q[a] = face;
+                if (!(value(q) >= iso)) continue;
+                best = dist, found = true;
+                out = q;
+                normal = glm::normalize(geo.direction[a]) * (side ? 1.0 : -1.0);
+            }
+        return found;
     }
 
     /// A start point for paths leaving a surface point p (index) along world normal nrm: p moved

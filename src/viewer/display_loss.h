@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
-// What the viewer does when its display goes away (the X server quits, an SSH tunnel or a VNC
-// session drops): Xlib's default ends the process at once with exit code 1 and its own "XIO: fatal
+// What the viewer does when its display goes away (the X server quits, or the connection to it
+// drops): Xlib's default ends the process at once with exit code 1 and its own "XIO: fatal
 // IO error" line, and a session being recorded was lost with it. While a DisplayLossGuard lives,
 // Xlib calls its function instead — on the thread whose X call failed, which is the UI thread: no
 // other thread of the viewer talks to X — and the process then ends with the exit code the

@@ -1359,6 +1359,20 @@ void Viewer::recordState(const io::Scene& scene) {
     }
 }
 
+/// The one line of a lost display (`kept`: "; …" clauses of what was kept or not) and its exit
+/// code: a cancel when the display went with a Ctrl-C (under xvfb-run the X server gets it too).
+int reportDisplayLoss(bool cancelled, const std::string& kept) {
+    if (cancelled) {
+        std::fprintf(stderr, "\nvoxlight: cancelled%s\n", kept.c_str());
+        return kExitViewerCancelled;
+    }
+    std::fprintf(stderr,
+                 "\nvoxlight: error: display: the connection to the X server was lost (the "
+                 "server quit or the connection dropped)%s\n",
+                 kept.c_str());
+    return kExitDisplayLost;
+}
+
 io::Scene Viewer::sceneOnScreen() const {
     // The edited document (lights added in the panel, maps included); the scene as opened where
     // the document is a state the scene refuses (a script step's error, shown in the panel).
@@ -1406,15 +1420,7 @@ int Viewer::displayLost() {
             kept += "; the screenshot being written (" + shotPath_ + ") was cut off";
     }
     if (!options_.screenshot.empty()) kept += "; no screenshot was written";
-    if (cancelled) {
-        std::fprintf(stderr, "\nvoxlight: cancelled%s\n", kept.c_str());
-        return kExitViewerCancelled;
-    }
-    std::fprintf(stderr,
-                 "\nvoxlight: error: display: the connection to the X server was lost (the "
-                 "server quit or the connection dropped)%s\n",
-                 kept.c_str());
-    return kExitDisplayLost;
+    return reportDisplayLoss(cancelled, kept);
 }
 
 void Viewer::handleKeys() {
@@ -2157,16 +2163,8 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     Viewer* live = nullptr;
     const DisplayLossGuard guard([&live, &options]() -> int {
         if (live) return live->displayLost();
-        const bool cancelled = options.quit && options.quit->load();
-        const char* shot = options.screenshot.empty() ? "" : "; no screenshot was written";
-        if (cancelled) {
-            std::fprintf(stderr, "\nvoxlight: cancelled%s\n", shot);
-            return kExitViewerCancelled;
-        }
-        std::fprintf(stderr,
-                     "\nvoxlight: error: display: the connection to the X server was lost%s\n",
-                     shot);
-        return kExitDisplayLost;
+        return reportDisplayLoss(options.quit && options.quit->load(),
+                                 options.screenshot.empty() ? "" : "; no screenshot was written");
     });
     struct Terminate {
         ~Terminate() { glfwTerminate(); }
