@@ -574,6 +574,15 @@ std::unique_ptr<ShadingModel> makeBuiltinModel(const RayCaster& caster, const Ca
     throw InternalError("unknown render mode");
 }
 
+void checkImageSize(int width, int height) {
+    if (std::uint64_t(width) * std::uint64_t(height) > kMaxPixels)
+        throw InputError("render options", "image size",
+                         "image of " + std::to_string(width) + "x" + std::to_string(height) +
+                             " pixels is larger than the renderer's limit (" +
+                             std::to_string(kMaxPixels) + " pixels)",
+                         "render a smaller image");
+}
+
 core::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& progress,
                                   RenderStats* stats) const {
     const auto model = makeBuiltinModel(*this, camera);
@@ -583,12 +592,7 @@ core::ImageRGBA RayCaster::render(const Camera& camera, const core::Progress& pr
 core::ImageRGBA RayCaster::render(const Camera& camera, const ShadingModel& model,
                                   const core::Progress& progress, RenderStats* stats) const {
     const int W = camera.width(), H = camera.height();
-    if (std::uint64_t(W) * std::uint64_t(H) > kMaxPixels)
-        throw InputError("render options", "image size",
-                         "image of " + std::to_string(W) + "x" + std::to_string(H) +
-                             " pixels is larger than the renderer's limit (" +
-                             std::to_string(kMaxPixels) + " pixels)",
-                         "render a smaller image");
+    checkImageSize(W, H);
     core::ImageRGBA film(W, H);
     const int ts = options_.tileSize;
     const int tilesX = (W + ts - 1) / ts, tilesY = (H + ts - 1) / ts;

@@ -84,6 +84,9 @@ inline constexpr float kWeakGradientFraction = 0.01f;
 inline constexpr int kSkipCellVoxels = 4;
 /// Largest image the renderer accepts (pixels): 16384 × 8192 RGBA float is 2 GiB.
 inline constexpr std::uint64_t kMaxPixels = std::uint64_t(16384) * 8192;
+/// InputError ("render options", "image size") for an image past kMaxPixels: what render()
+/// refuses, for callers that check before their own work (the viewer, before a window opens).
+void checkImageSize(int width, int height);
 
 /// Which central-difference table the gradient mode uses.
 enum class GradientTable {

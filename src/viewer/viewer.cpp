@@ -2146,13 +2146,11 @@ std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
     // 16384² one failed after a minute or more of coarse frames, naming the screenshot file).
     if (!options.screenshot.empty() && initial) {
         const io::Scene& s = initial->scene;
-        if (std::uint64_t(s.image.width) * std::uint64_t(s.image.height) > render::kMaxPixels)
-            throw InputError(s.source, "image.width",
-                             "a screenshot of " + std::to_string(s.image.width) + "x" +
-                                 std::to_string(s.image.height) +
-                                 " pixels is larger than the renderer's limit (" +
-                                 std::to_string(render::kMaxPixels) + " pixels)",
-                             "take a smaller screenshot");
+        try {
+            render::checkImageSize(s.image.width, s.image.height);
+        } catch (const InputError& e) {  // named by the scene's key, as render names it
+            throw InputError(s.source, "image.width", e.problem(), e.fix());
+        }
     }
     if (!glfwInit())
         throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),

@@ -1208,7 +1208,10 @@ TEST(ViewCli, ALostDisplaySavesTheRecordingAndSaysSo) {
         const char* says;
     } cases[] = {
         {"kill $x", 2, "voxlight: error: display: the connection to the X server was lost"},
-        {"kill -INT $v; kill $x", 130, "voxlight: cancelled"},
+        // The interrupt held until the server is gone, so that the viewer's next X call fails
+        // with its cancel flag already up (the race xvfb-run's Ctrl-C makes, made certain).
+        {"kill -STOP $v; kill -INT $v; kill $x; wait $x; kill -CONT $v", 130,
+         "voxlight: cancelled"},
         {"kill -HUP $v", 130, "voxlight: cancelled"},
     };
     for (const auto& c : cases) {
