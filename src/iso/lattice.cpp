@@ -521,21 +521,29 @@ struct IlluminationLattice::Tracer {
         return false;
     }
 
+    /// The trilinear field's gradient at x (index, per voxel): central differences of a quarter
+    /// voxel.
+    glm::dvec3 indexGradient(const glm::dvec3& x) const {
+        constexpr double h = 0.25;
+        glm::dvec3 g;
+        for (int a = 0; a < 3; ++a) {
+            glm::dvec3 e(0.0);
+            e[a] = h;
+            g[a] = (value(x + e) - value(x - e)) / (2.0 * h);
+        }
+        return g;
+    }
+
     /// p (index) moved onto the trilinear isosurface at iso by Newton steps along the gradient
     /// (central differences of a quarter voxel), each at most half a voxel, to within 1e-4 voxel;
     /// false when the gradient vanishes or the point would move more than maxVoxels.
     bool project(const glm::dvec3& p, double iso, double maxVoxels, glm::dvec3& out) const {
-        constexpr double h = 0.25, kTol = 1e-4, kMaxStep = 0.5;
+        constexpr double kTol = 1e-4, kMaxStep = 0.5;
         constexpr int kIterations = 32;
         glm::dvec3 x = p;
         for (int it = 0; it < kIterations; ++it) {
             const double f = value(x) - iso;
-            glm::dvec3 g;
-            for (int a = 0; a < 3; ++a) {
-                glm::dvec3 e(0.0);
-                e[a] = h;
-                g[a] = (value(x + e) - value(x - e)) / (2.0 * h);
-            }
+            const glm::dvec3 g = indexGradient(x);
             const double g2 = glm::dot(g, g);
             if (!(g2 > 0.0) || !std::isfinite(g2)) return false;
             glm::dvec3 step = -f / g2 * g;
@@ -572,6 +580,27 @@ struct IlluminationLattice::Tracer {
                 normal = glm::normalize(geo.direction[a]) * (side ? 1.0 : -1.0);
             }
         return found;
+    }
+
+    /// A render's surface point x (index) on the isosurface at iso: its world normal and the point
+    /// paths leave from. On a cap — x on the box face over a value ≥ iso (kCapFaceVoxels) and not
+    /// on the isosurface itself (farther than that from it by the field's first-order distance
+    /// |f − iso| / |∇f|: a crossing that meets the face, the rim, keeps its own normal) — the
+    /// face's outward normal and x itself (every direction of its hemisphere leaves the volume);
+    /// elsewhere the smoothed normal and startPoint. False when there is no normal (a plateau) or,
+    /// with `needStart`, no start point outside.
+    bool surfaceFrame(const glm::dvec3& x, double iso, bool needStart, glm::dvec3& nrm,
+                      glm::dvec3& start, bool* cap = nullptr) const {
+        glm::dvec3 onFace;
+        const bool onCap =
+            capPoint(x, iso, kCapFaceVoxels, onFace, nrm) &&
+            !(std::abs(value(x) - iso) <= kCapFaceVoxels * glm::length(indexGradient(x)));
+        if (cap) *cap = onCap;
+        start = x;
+        if (onCap) return true;
+        nrm = smoothNormal(x);
+        if (nrm == glm::dvec3(0.0)) return false;
+        return !needStart || startPoint(x, nrm, iso, start);
     }
 
     /// A start point for paths leaving a surface point p (index) along world normal nrm: p moved
@@ -1109,7 +1138,11 @@ glm::vec3 IlluminationLattice::pointIrradiance(const glm::dvec3& world, double i
                                                std::uint64_t key) const {
     VL_CHECK(options_.mode == LatticeMode::Irradiance && samples > 0);
     PathSums sums(options_.shOrder * options_.shOrder);
-    estimate(volume_->geometry().worldToIndex(world), iso, key, samples, true, sums);
+    const glm::dvec3 x = volume_->geometry().worldToIndex(world);
+    glm::dvec3 nrm, start;
+    bool cap = false;
+    tracer_->surfaceFrame(x, iso, false, nrm, start, &cap);
+    estimate(x, iso, key, samples, true, sums, nullptr, cap ? &nrm : nullptr);
     return glm::vec3(sums.E);
 }
 
@@ -1117,10 +1150,8 @@ glm::vec3 IlluminationLattice::directIrradiance(const glm::dvec3& world, double 
                                                 bool shadows) const {
     const Tracer& tr = *tracer_;
     const glm::dvec3 x = volume_->geometry().worldToIndex(world);
-    const glm::dvec3 nrm = tr.smoothNormal(x);
-    if (nrm == glm::dvec3(0.0)) return glm::vec3(0.f);
-    glm::dvec3 start = x;
-    if (shadows && !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
+    glm::dvec3 nrm, start;
+    if (!tr.surfaceFrame(x, iso, shadows, nrm, start)) return glm::vec3(0.f);
     glm::dvec3 e(0.0);
     const std::shared_ptr<const SkipField> held = shadows ? skipFor(iso) : nullptr;
     const SkipField* skip = held.get();
@@ -1143,9 +1174,8 @@ glm::vec3 IlluminationLattice::vicinityIrradiance(const glm::dvec3& world, doubl
     VL_CHECK(samples > 0 && radiusMm > 0.0);
     const Tracer& tr = *tracer_;
     const glm::dvec3 x = volume_->geometry().worldToIndex(world);
-    const glm::dvec3 nrm = tr.smoothNormal(x);
-    glm::dvec3 start;
-    if (nrm == glm::dvec3(0.0) || !tr.startPoint(x, nrm, iso, start)) return glm::vec3(0.f);
+    glm::dvec3 nrm, start;
+    if (!tr.surfaceFrame(x, iso, true, nrm, start)) return glm::vec3(0.f);
     const std::shared_ptr<const SkipField> held = skipFor(iso);
     const SkipField* skip = held.get();
     bool sky = true;  // no environment or area light: a white sky of radiance 1

@@ -89,6 +89,11 @@ inline constexpr double kStartOffsetVoxels = 0.05;
 /// Largest further walk along the normal to get outside (texels where the smoothed normal and the
 /// trilinear field disagree), voxels; beyond it the texel is a plateau and uses the full sphere.
 inline constexpr double kMaxStartWalkVoxels = 1.0;
+/// A point of a render's isosurface hit this close to the volume's box face (voxels), over a face
+/// value ≥ the isovalue, is a cap (the ray caster's hit where matter runs into the box): far above
+/// the float rounding of a hit's world position (≈ 1e-4 voxel for a 0.1-mm voxel 500 mm from the
+/// origin), far below the voxel a true crossing's normal varies over.
+inline constexpr double kCapFaceVoxels = 0.01;
 /// Texels per lazy-allocation block edge (8³ texels per block).
 inline constexpr int kLatticeBlock = 8;
 
@@ -176,13 +181,15 @@ class IlluminationLattice {
 
     /// The reference the lattice approximates (Wyman's per-pixel path tracing, Fig. 11): the
     /// irradiance at a surface point itself — its own position on the isosurface at `iso`, the
-    /// smoothed normal there — by `samples` paths with the lattice's lights and bounces, no texels
+    /// smoothed normal there (on a cap, where matter runs into the volume's box, the face's
+    /// outward normal: kCapFaceVoxels) — by `samples` paths with the lattice's lights and bounces, no texels
     /// and no interpolation. Irradiance mode only. `key` seeds its random numbers.
     glm::vec3 pointIrradiance(const glm::dvec3& world, double iso, int samples,
                               std::uint64_t key) const;
 
     /// Wyman's baselines (Figs. 8–10), at a surface point on the isosurface at `iso` (its smoothed
-    /// normal n there, as estimate() uses; zero irradiance where there is none):
+    /// normal n there, as estimate() uses, or a cap's face normal; zero irradiance where there is
+    /// none):
     /// Lambert (shadows false): Σ over the delta lights (directional, point) of E_l · max(0, n·l);
     /// Lambert + hard shadows (true): each term times the visibility of one shadow ray against
     /// the trilinear isosurface. Environment and area lights are not part of these baselines.

@@ -520,5 +520,36 @@ TEST(Lattice, CapsWhereTheBoxCutsTheMatterAreLitAsOpenSurfaces) {
             << p.x << " " << p.y << " " << p.z;
 }
 
+// The render's shading modes other than the lattice (paths, Lambert, shadows, vicinity) take the
+// hit point itself; on a cap the field's normal is that of the plateau inside the cut (zero, or
+// any direction where the matter varies): the face's normal lights it.
+TEST(Lattice, CapsAreLitByEveryPointShading) {
+    constexpr double kCapTolerance = 1e-6;  // every path and shadow ray escapes: exact sums
+    const float L = 0.7f, E = 1.5f;
+    const core::Geometry g = cube(24);
+    // Solid below z = 0 with a gentle ramp inside (the gradient there points along x, not out of
+    // the bottom face): the cap's normal must come from the face.
+    auto vol = share(test::fieldVolume(
+        g,
+        [](const glm::dvec3& p) {
+            return p.z < 0.0 ? 1.0 + 0.01 * p.x : std::clamp(0.5 - p.z, 0.0, 1.0);
+        },
+        "slab"));
+    // A light below, 60° off the bottom face's normal (0, 0, −1).
+    const glm::vec3 toLight(std::sin(1.0471976f), 0.f, -std::cos(1.0471976f));
+    auto below = std::make_shared<lights::DirectionalLight>(glm::vec3(E), toLight);
+    IlluminationLattice lit(vol, albedoTf(0.f, 0.f, 1.f), {sky(L)}, opts(64, 1));
+    IlluminationLattice direct(vol, albedoTf(0.f, 0.f, 1.f), {below}, opts(64, 1));
+    const std::vector<glm::dvec3> caps = {{0.0, 0.0, -11.5}, {3.2, -4.7, -11.5}};
+    for (std::size_t i = 0; i < caps.size(); ++i) {
+        const glm::dvec3& p = caps[i];
+        SCOPED_TRACE(testing::Message() << p.x << " " << p.y << " " << p.z);
+        EXPECT_NEAR(lit.pointIrradiance(p, 0.5, 32, i).x, kPi * L, kCapTolerance * kPi * L);
+        EXPECT_NEAR(lit.vicinityIrradiance(p, 0.5, 6.0, 32, i).x, kPi * L, kCapTolerance * kPi * L);
+        for (const bool shadows : {false, true})
+            EXPECT_NEAR(direct.directIrradiance(p, 0.5, shadows).x, 0.5 * E, kCapTolerance * E);
+    }
+}
+
 }  // namespace
 }  // namespace voxlight::iso
