@@ -682,8 +682,11 @@ constexpr float kBackgroundGrey = 0.02f;
 /// The grey window of a MIP (MinIP) whose scene sets none: the TF's own window when the data's
 /// low (high) end — a MIP's (MinIP's) background — maps to black (white) and the other end reaches
 /// past mid-grey, else the data's robust range. (A CT preset on a head angio stored 0..4095 put
-/// its background at 21 % grey: a grey box.)
+/// its background at 21 % grey: a grey box.) A flat volume's one value at mid-grey: the TF's window
+/// lies past it (the generic TF shows [v + ½, v + 1]), and a black box is no picture of it.
 optics::Window extremumWindow(Kind kind, const optics::Window& w, const core::Volume& volume) {
+    const auto range = volume.physicalRange();
+    if (!(range[0] < range[1])) return {float(range[0]), 1.f};
     const auto [lo, hi] = optics::robustRange(volume);
     // Where the data's robust ends land on the window's grey ramp (0 black, 1 white).
     const float atLo = (lo - w.lo()) / w.width, atHi = (hi - w.lo()) / w.width;

@@ -482,8 +482,10 @@ class ExtremumModel final : public ShadingModel {
                         continue;
                     }
                     ++stats.rays;
-                    // Grey through the window, as displayed (the film is linear, so decode).
-                    const float grey = srgbToLinear(std::clamp((m - w.lo()) / w.width, 0.f, 1.f));
+                    // Grey through the window: a display value, as TF colours are (the default
+                    // `clinical` display shows it straight — the window's linear ramp every
+                    // viewer of a MIP shows; decoding it as sRGB put the window's centre at 21 %).
+                    const float grey = std::clamp((m - w.lo()) / w.width, 0.f, 1.f);
                     px[0] = px[1] = px[2] = finiteOr0(grey);
                     px[3] = 1.f;
                 }

@@ -224,6 +224,24 @@ TEST(ExtremumWindow, MipUsesTheDataRangeWhenThePresetWindowWouldGreyTheBackgroun
                                                                      "this data";
 }
 
+TEST(ExtremumWindow, AFlatVolumesMipShowsItsOneValueInMidGrey) {
+    // Every voxel 100: the generic TF's window lies just above it, which put the MIP's one value
+    // at black — an opaque black box.
+    test::TempDir tmp;
+    core::Volume v(core::Geometry{.dims = {12, 12, 12}}, core::VoxelType::Float32);
+    std::fill_n(v.dataAs<float>(), 12 * 12 * 12, 100.f);
+    const fs::path p = tmp / "flat.nii.gz";
+    io::writeVolume(v, p);
+    constexpr float kMidGreyTolerance = 0.002f;  // half an 8-bit level
+    for (const char* method : {"mip", "minip"}) {
+        json d = {
+            {"volume", p.string()}, {"method", method}, {"image", {{"width", 24}, {"height", 24}}}};
+        const RunResult r = Session().run(scene(d));
+        EXPECT_EQ(r.details["transfer_function"]["window"]["level"], 100.0) << method;
+        EXPECT_NEAR(r.image.at(12, 12)[0], 0.5f, kMidGreyTolerance) << method;
+    }
+}
+
 TEST(Hounsfield, ACtPresetOnValuesWithoutAirWarnsWithTheFix) {
     test::TempDir tmp;
     const fs::path p = shiftedTorso(tmp, 1100.0);
