@@ -76,6 +76,7 @@
 #include <sstream>
 
 #include "core/hash.h"
+#include "core/rng.h"
 #include "core/timing.h"
 #include "grid/brick_grid.h"
 #include "grid/brick_traversal.h"
@@ -567,6 +568,11 @@ struct LatticeArtifact {
 /// accuracy tables count — or this many spp. A study that needs less noise sets target_error.
 constexpr double kReferenceTargetError = 0.01;
 constexpr int kReferenceMaxSpp = 1 << 14;
+/// A reference traces its own stream of random numbers, not the scene seed's: a path-traced
+/// variant with the same seed shares its first samples, and measured against it showed half its
+/// true error (a sweep's 256-spp variant at 0.025 NRMSE against a 368-spp reference, 0.046 with
+/// another seed) and errors that rose with more samples.
+constexpr std::uint64_t kReferenceStream = 0x7265666572656e63ull;  // "referenc"
 
 /// The denoiser's settings from method.params `denoise` / `denoise_target`; nullopt = off.
 /// Reference mode never denoises: `denoise: true` there is an error, and an absent key stays out
@@ -648,7 +654,7 @@ pathtrace::Options parsePathTraceOptions(const io::Scene& scene, const render::R
     if (reference && t.adaptive)
         p.fail("adaptive", "is true but a reference render samples every pixel alike (unbiased)",
                "remove adaptive or set it to false (or set reference to false)");
-    t.seed = o.seed;
+    t.seed = reference ? core::hashCounters(o.seed, kReferenceStream) : o.seed;
     t.threads = o.threads;
     t.background = o.background;
     t.clipPlanes = o.clipPlanes;
@@ -792,8 +798,9 @@ const Codec& tracedImageCodec() {
     // so a disk cache from before does not hand back an image a fresh render would not give.
     // 3: the target-error stop reads the RGB error (more samples on coloured scenes), and the
     // details carry expected_nrmse and the empty-image warnings.
+    // 4: references trace their own random stream (kReferenceStream), not the scene seed's.
     static const Codec c{
-        3,
+        4,
         [](const Artifact& a, ByteWriter& w) {
             const auto& t = *a.as<TracedImage>();
             w.pod(std::int32_t(t.image.width));
