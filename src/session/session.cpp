@@ -324,9 +324,19 @@ std::vector<double> frameTimes(const Session& session, double fps) {
                          number(fps) + " frames per second over " + number(duration) +
                              " s make more than " + std::to_string(kMaxFrames) + " frames",
                          "choose a lower frame rate");
+    // A frame within that tolerance (a millionth of a frame) of a keyframe takes the keyframe's
+    // own time: t0 + i/fps rounds (0.1 + 7/10 = 0.7999…), and a frame a rounding short of a
+    // keyframe interpolates towards it instead of showing its state (a cut to a new method or
+    // TF at the last keyframe never appeared).
+    const double snap = 1e-6 / fps;
     std::vector<double> times;
-    for (std::size_t i = 0; i < std::size_t(count); ++i)
-        times.push_back(std::min(session.startTime() + double(i) / fps, session.endTime()));
+    std::size_t k = 0;  // the first keyframe not before the previous frame
+    for (std::size_t i = 0; i < std::size_t(count); ++i) {
+        double t = std::min(session.startTime() + double(i) / fps, session.endTime());
+        while (k + 1 < session.keyframes.size() && session.keyframes[k].time < t - snap) ++k;
+        if (std::abs(session.keyframes[k].time - t) <= snap) t = session.keyframes[k].time;
+        times.push_back(t);
+    }
     return times;
 }
 

@@ -118,7 +118,8 @@ inline constexpr std::size_t kMaxFrames = 100000;
 
 /// The times of the frames at `fps` frames per second: startTime() + i / fps for every i whose
 /// time is at most endTime() (a frame at the start, then every 1/fps seconds; the last keyframe
-/// is a frame when the duration is a whole number of frames). InputError (source "--fps") when
+/// is a frame when the duration is a whole number of frames; a frame that falls on a keyframe,
+/// to within a millionth of a frame, has that keyframe's exact time). InputError (source "--fps") when
 /// fps is not a finite number in (0, 1000] or the frames would exceed kMaxFrames.
 std::vector<double> frameTimes(const Session& session, double fps);
 

@@ -294,6 +294,18 @@ TEST(Session, FrameTimesCoverTheTimelineAtTheRate) {
     EXPECT_THROW(session::frameTimes(s, 0.0), InputError);
     EXPECT_THROW(session::frameTimes(s, std::nan("")), InputError);
     EXPECT_THROW(session::frameTimes(s, -3.0), InputError);
+    // Keyframes at 0.1, 0.4 and 0.8 s at 10 fps: 0.1 + 7/10 rounds to 0.7999…; the frames on
+    // keyframes carry their exact times (bit for bit the keyframe's state).
+    json d = orbitSession();
+    d["keyframes"] = json::array();
+    for (double kt : {0.1, 0.4, 0.8})
+        d["keyframes"].push_back({{"time", kt}, {"camera", {{"azimuth", 100.0 * kt}}}});
+    const session::Session late = session::parseSession(d, "s.json", fs::current_path());
+    const std::vector<double> lt = session::frameTimes(late, 10.0);
+    ASSERT_EQ(lt.size(), 8u);
+    EXPECT_EQ(lt[0], 0.1);
+    EXPECT_EQ(lt[3], 0.4);
+    EXPECT_EQ(lt[7], 0.8);
 }
 
 TEST(Session, RecorderWritesChangedPartsAndReadsBackTheSameStates) {
