@@ -103,8 +103,10 @@ Command addIsoCommand(CLI::App& app) {
         ->add_option("--keep-largest", cleanup->keepLargest,
                      "Keep only the K largest connected components")
         ->check(CLI::Range(1, 1 << 30));
-    c.sub->add_option("--min-component-faces", cleanup->minComponentFaces,
-                      "Drop connected components with fewer faces");
+    c.sub
+        ->add_option("--min-component-faces", cleanup->minComponentFaces,
+                     "Drop connected components with fewer faces")
+        ->check(CLI::Range(std::size_t(0), std::size_t(1) << 40));
     c.sub
         ->add_option("--smooth", cleanup->smoothIterations,
                      "Smooth with N iterations of Taubin lambda|mu smoothing (does not shrink)")
@@ -157,6 +159,19 @@ Command addIsoCommand(CLI::App& app) {
                 if (sub->count(o) > 0)
                     throw InputError("command line", o, "takes effect only with --bake",
                                      std::string("add --bake, or leave out ") + o);
+        // Options of the lattice do nothing for the vertex bake, and the SH order nothing for
+        // irradiance: said, not ignored.
+        if (*bakeFrom != "lattice")
+            for (const char* o : {"--lattice-resolution", "--lattice-texels", "--sh-order"})
+                if (sub->count(o) > 0)
+                    throw InputError("command line", o,
+                                     "takes effect only with --bake-from lattice (the default "
+                                     "bake traces paths from each vertex)",
+                                     std::string("add --bake-from lattice, or leave out ") + o);
+        if (*latticeMode != "sh" && sub->count("--sh-order") > 0)
+            throw InputError("command line", "--sh-order",
+                             "takes effect only with --lattice-mode sh",
+                             "add --lattice-mode sh, or leave out --sh-order");
         checkOutputs({{"--output", *out, iso::meshExtensions()}, {"--stats", *stats, {".json"}}},
                      {{"INPUT", *scene}});
         if (*exportSh) {

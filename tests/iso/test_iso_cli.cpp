@@ -327,6 +327,23 @@ TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
                        "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
                            (tmp / "m.ply").string() + "' " + option,
                        "takes effect only with --bake", {"scene.json"});
+    // Lattice options with the vertex bake (the default), and an SH order for irradiance: the
+    // mesh came out byte-identical to a plain --bake.
+    for (const char* option :
+         {"--lattice-resolution 4", "--lattice-texels own", "--bake-from vertices --sh-order 3"})
+        expectBadInput(tmp,
+                       "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                           (tmp / "m.ply").string() + "' --bake " + option,
+                       "takes effect only with --bake-from lattice", {"scene.json"});
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.ply").string() + "' --bake --bake-from lattice --sh-order 3",
+                   "takes effect only with --lattice-mode sh", {"scene.json"});
+    // A negative minimum wrapped to a huge one: "the clean-up removed every face".
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.ply").string() + "' --min-component-faces -1",
+                   "--min-component-faces", {"scene.json"});
 }
 
 }  // namespace
