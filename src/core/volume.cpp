@@ -108,9 +108,13 @@ void checkVolumeSize(const Geometry& geometry) {
 }
 
 /// A spacing outside [kMinSpacingMm, kMaxSpacingMm] is bad input (a damaged header), not a volume.
+/// The limits themselves pass as a float32 header stores them (1e-4 reads back as 9.99999974e-5:
+/// refused as "0.0001 is outside 0.0001..10000" before), so they carry a float's rounding.
 void checkSpacing(const Geometry& g) {
+    constexpr double kFloatRounding = 1e-7;  // above float32's half-ulp, 6e-8 relative
     for (int a = 0; a < 3; ++a)
-        if (!(g.spacing[a] >= kMinSpacingMm && g.spacing[a] <= kMaxSpacingMm)) {
+        if (!(g.spacing[a] >= kMinSpacingMm * (1.0 - kFloatRounding) &&
+              g.spacing[a] <= kMaxSpacingMm * (1.0 + kFloatRounding))) {
             std::ostringstream os;
             os << "voxel spacing " << g.spacing.x << " x " << g.spacing.y << " x " << g.spacing.z
                << " mm is outside " << kMinSpacingMm << ".." << kMaxSpacingMm << " mm";

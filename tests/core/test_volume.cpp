@@ -129,6 +129,21 @@ TEST(Volume, ASkewedOrientationIsBadInputNotAnInternalFault) {
     }
 }
 
+TEST(Volume, TheSpacingLimitsPassAsAFloatHeaderStoresThem) {
+    // NIfTI's pixdim is float32: 1e-4 reads back as 9.99999974e-5 and was refused as "0.0001 is
+    // outside 0.0001..10000 mm".
+    auto make = [](double spacing) {
+        core::Geometry g;
+        g.dims = {4, 4, 4};
+        g.spacing = glm::dvec3(spacing);
+        return core::Volume(g, core::VoxelType::Float32);
+    };
+    EXPECT_NO_THROW(make(double(float(core::kMinSpacingMm))));
+    EXPECT_NO_THROW(make(double(float(core::kMaxSpacingMm))));
+    EXPECT_THROW(make(0.99 * core::kMinSpacingMm), InputError);
+    EXPECT_THROW(make(1.01 * core::kMaxSpacingMm), InputError);
+}
+
 TEST(Volume, AVolumeTooFarFromTheOriginForSinglePrecisionIsRefused) {
     // A 16³ sphere at 1 mm with its origin at 1e8–1e9 mm rendered black (pvrt, iso-lattice) or
     // unlit (the SH methods) with exit code 0: the methods' float positions lose the voxel there.
