@@ -285,6 +285,7 @@ TEST(PvrtMethod, ParamsAndLightsAreCheckedWithTheFieldNamed) {
     fails(cloudScene("pvrt", {{"basis", "dsf"}, {"directions", 100}}, true),
           "method.params.directions");
     fails(cloudScene("pvrt", {{"order", 7}}, true), "method.params.order");
+    fails(cloudScene("pvrt", {{"resolution", 1}}, true), "method.params.resolution");
     fails(cloudScene("pvrt", {{"clusters", 0}, {"components", 2}}, true),
           "method.params.components");
     fails(cloudScene("pvrt", {{"max_bounces", 4}}, false), "method.params.max_bounces");
