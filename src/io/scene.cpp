@@ -369,6 +369,23 @@ std::vector<std::string> keyParts(const std::string& key) {
     }
 }
 
+/// A key as errors print it ("lights[0].intensity") in the dotted form --set reads
+/// ("lights.0.intensity"): only an all-digit index in brackets right after a name is rewritten.
+std::string dottedKey(const std::string& key) {
+    std::string out;
+    for (std::size_t i = 0; i < key.size(); ++i) {
+        const std::size_t close = key[i] == '[' ? key.find(']', i) : std::string::npos;
+        if (close != std::string::npos && close > i + 1 && !out.empty() && out.back() != '.' &&
+            std::all_of(key.begin() + long(i) + 1, key.begin() + long(close), ::isdigit)) {
+            out += '.' + key.substr(i + 1, close - i - 1);
+            i = close;
+            continue;
+        }
+        out += key[i];
+    }
+    return out;
+}
+
 bool isIndexPart(const std::string& part) {
     return !part.empty() && std::all_of(part.begin(), part.end(), ::isdigit);
 }
@@ -460,7 +477,7 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
         throw InputError("--set", printable(assignment), "is not valid UTF-8",
                          "give keys and values as UTF-8 text");
     }
-    const std::string key = assignment.substr(0, eq), text = assignment.substr(eq + 1);
+    const std::string key = dottedKey(assignment.substr(0, eq)), text = assignment.substr(eq + 1);
     if (tooDeepAt(text) != std::string_view::npos)
         throw InputError(
             "--set", key,
@@ -697,7 +714,7 @@ std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::str
     std::vector<OverrideRecord> records;
     for (const auto& o : overrides) {
         records.push_back(applyOverride(doc, o));
-        const std::string key = o.substr(0, o.find('='));
+        const std::string key = dottedKey(o.substr(0, o.find('=')));
         if (!isPathKey(key)) continue;
         // Walks to the value without creating anything: a removed key (null) stays removed.
         json* node = &doc;

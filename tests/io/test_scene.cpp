@@ -151,6 +151,13 @@ TEST(Scene, OverridesApplyBeforeValidation) {
     EXPECT_EQ(s.method.params["rays"], 64);
     EXPECT_DOUBLE_EQ(s.lights[0].intensity, 2.5);
     EXPECT_DOUBLE_EQ(s.lights[0].color.y, 0.5);
+    // The form errors print the key in ("lights[0].intensity") sets it too: it was read as a key
+    // "lights[0]" of the scene, "unknown key".
+    io::applyOverride(j, "lights[0].intensity=3.5");
+    io::applyOverride(j, "transfer_function={\"points\": [{\"value\": 0}]}");
+    io::applyOverride(j, "transfer_function.points[0].value=7");
+    EXPECT_DOUBLE_EQ(parse(j).lights[0].intensity, 3.5);
+    EXPECT_EQ(j["transfer_function"]["points"][0]["value"], 7);
     // A bad override is caught by the same validation, naming the key.
     io::applyOverride(j, "camera.azimuth=left");
     expectBad(j, "camera.azimuth", {"must be a number"});
@@ -224,10 +231,10 @@ TEST(Scene, AnErrorAnOverrideCausesNamesTheOverrideNotTheSceneFile) {
     EXPECT_EQ(sourceOf({"method.name=null"}), (tmp / "s.json").string() + " | method");
 
     // A key the override added under an object whose error names the object; a key spelled
-    // with brackets (not index syntax) as the error spells it.
+    // with brackets as errors spell it is the dotted index (nothing there to index here).
     std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "torso"}})";
     EXPECT_EQ(sourceOf({"volume.path=b.nii"}), "--set volume.path=b.nii | volume");
-    EXPECT_EQ(sourceOf({"image.width[0]=5"}), "--set image.width[0]=5 | image.width[0]");
+    EXPECT_EQ(sourceOf({"image.width[0]=5"}), "--set image.width[0]=5 | image.width.0");
 
     // Removing a path key leaves it removed (the absolute-path pass once put it back as null).
     std::ofstream(tmp / "s.json") << R"({"volume": {"phantom": "torso", "path": "a.nii"}})";
