@@ -109,8 +109,9 @@ Command addIsoCommand(CLI::App& app) {
         ->check(CLI::Range(std::size_t(0), std::size_t(1) << 40));
     c.sub
         ->add_option("--smooth", cleanup->smoothIterations,
-                     "Smooth with N iterations of Taubin lambda|mu smoothing (does not shrink)")
-        ->check(CLI::Range(0, 1000));
+                     "Smooth with N iterations of Taubin lambda|mu smoothing, 0-50 (closed "
+                     "parts keep their volume; 10 removes the voxel staircase)")
+        ->check(CLI::Range(0, iso::kMaxSmoothIterations));
     c.sub
         ->add_option("--decimate", cleanup->targetFaces,
                      "Decimate (edge collapse) to about this many faces")

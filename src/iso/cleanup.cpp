@@ -84,11 +84,74 @@ Mesh fromCgal(const SurfaceMesh& sm) {
     return mesh;
 }
 
+/// Per closed component (by face component ids): six times its signed volume, and twice the rate
+/// at which its area-weighted vertex normals (`unit`, filled here) sweep volume — twice the area
+/// where the surface is smooth, less at sharp corners (an octahedron's vertex normal meets its
+/// faces at 55°: the area alone made each pass restore 58 % of what was lost). Zero when open.
+struct ComponentSizes {
+    std::vector<double> volume6, sweep2;
+};
+
+ComponentSizes componentSizes(const SurfaceMesh& sm, const std::vector<std::size_t>& faceComp,
+                              const std::vector<char>& closed,
+                              std::vector<Kernel::Vector_3>& unit) {
+    auto faceCross = [&](SurfaceMesh::Face_index f, std::array<SurfaceMesh::Vertex_index, 3>& t) {
+        int i = 0;
+        for (const auto v : CGAL::vertices_around_face(sm.halfedge(f), sm)) t[i++] = v;
+        return CGAL::cross_product(sm.point(t[1]) - sm.point(t[0]),
+                                   sm.point(t[2]) - sm.point(t[0]));
+    };
+    std::array<SurfaceMesh::Vertex_index, 3> t;
+    unit.assign(sm.num_vertices(), Kernel::Vector_3(0, 0, 0));
+    for (const auto f : sm.faces()) {
+        if (!closed[faceComp[f.idx()]]) continue;
+        const Kernel::Vector_3 n = faceCross(f, t);
+        for (const auto v : t) unit[v.idx()] = unit[v.idx()] + n;
+    }
+    for (auto& n : unit) {
+        const double len = std::sqrt(n.squared_length());
+        if (len > 0.0) n = n / len;
+    }
+    ComponentSizes c;
+    c.volume6.assign(closed.size(), 0.0);
+    c.sweep2.assign(closed.size(), 0.0);
+    for (const auto f : sm.faces()) {
+        const std::size_t k = faceComp[f.idx()];
+        if (!closed[k]) continue;
+        const Kernel::Vector_3 n = faceCross(f, t);
+        c.volume6[k] +=
+            CGAL::determinant(sm.point(t[0]) - CGAL::ORIGIN, sm.point(t[1]) - CGAL::ORIGIN,
+                              sm.point(t[2]) - CGAL::ORIGIN);
+        for (const auto v : t) c.sweep2[k] += unit[v.idx()] * n / 3.0;
+    }
+    return c;
+}
+
 /// Taubin λ|μ smoothing (cleanup.h): each iteration moves every interior vertex by λ, then by μ,
 /// times (mean of its neighbours − itself). Boundary vertices (open cuts, the volume's faces) stay.
+/// Then every vertex of a closed component moves along its normal by the distance that returns the
+/// component's volume before smoothing (lost volume / area): a small component's size is a high
+/// frequency of the filter's — a one-voxel blob (an octahedron) lost a quarter of its size per
+/// iteration and shrank to a point in 50, a calcification gone without a word.
 void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progress) {
+    constexpr int kVolumePasses = 4;  // the second for a blob's δ², a small part of the first
     std::vector<Kernel::Point_3> next(sm.num_vertices());
+    auto compMap = sm.add_property_map<SurfaceMesh::Face_index, std::size_t>("f:smooth_cc").first;
+    const std::size_t components = PMP::connected_components(sm, compMap);
+    std::vector<std::size_t> faceComp(sm.num_faces(), 0), vertexComp(sm.num_vertices(), 0);
+    std::vector<char> closed(components, 1);
+    for (const auto f : sm.faces()) {
+        faceComp[f.idx()] = compMap[f];
+        for (const auto h : CGAL::halfedges_around_face(sm.halfedge(f), sm)) {
+            vertexComp[sm.target(h).idx()] = compMap[f];
+            if (sm.is_border(sm.opposite(h))) closed[compMap[f]] = 0;
+        }
+    }
+    sm.remove_property_map(compMap);
+    std::vector<Kernel::Vector_3> normal;
+    const std::vector<double> volume6 = componentSizes(sm, faceComp, closed, normal).volume6;
     for (int it = 0; it < iterations; ++it) {
+        progress.checkCancel();
         progress.report("mesh clean-up: smoothing", double(it) / double(iterations));
         for (const double f : {kTaubinLambda, kTaubinMu}) {
             for (const auto v : sm.vertices()) {
@@ -107,6 +170,18 @@ void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progres
                                     p.z() + f * (sz / n - p.z()));
             }
             for (const auto v : sm.vertices()) sm.point(v) = next[v.idx()];
+        }
+        // The volume back: every vertex of a closed component along its normal by δ = lost
+        // volume / sweep rate (first order in δ: a few passes where a small blob lost much).
+        for (int pass = 0; pass < kVolumePasses; ++pass) {
+            const ComponentSizes now = componentSizes(sm, faceComp, closed, normal);
+            for (const auto v : sm.vertices()) {
+                if (sm.is_isolated(v)) continue;
+                const std::size_t k = vertexComp[v.idx()];
+                if (!closed[k] || !(now.sweep2[k] > 0.0)) continue;
+                const double delta = (volume6[k] - now.volume6[k]) / 3.0 / now.sweep2[k];
+                sm.point(v) = sm.point(v) + delta * normal[v.idx()];
+            }
         }
     }
 }

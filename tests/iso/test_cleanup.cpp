@@ -106,5 +106,35 @@ TEST(Cleanup, TaubinSmoothingMovesVerticesButDoesNotShrinkASphere) {
     EXPECT_GT(moved, 1e-3);
 }
 
+// The limit of --smooth on shapes large and small: a small blob's size is a high frequency of the
+// filter (a one-voxel blob shrank to a point in 50 iterations). Closed components keep their volume
+// to first order per iteration (cleanup.cpp): within kLongSmoothingVolumeTol.
+constexpr double kLongSmoothingVolumeTol = 0.01;
+
+TEST(Cleanup, LongSmoothingKeepsLargeAndSmallShapesTheirVolume) {
+    Ball big, small;
+    const core::Volume v = twoBalls(big, small);
+    Extraction ex = extractIsosurface(v, test::at(0.0));
+    const MeshReport before = reportMesh(ex.mesh, false);
+    CleanupOptions o;
+    o.smoothIterations = kMaxSmoothIterations;
+    cleanUp(ex.mesh, o);
+    const MeshReport after = reportMesh(ex.mesh, true);
+    EXPECT_NEAR(after.volumeMm3 / before.volumeMm3, 1.0, kLongSmoothingVolumeTol);
+    EXPECT_EQ(after.selfIntersections, 0);
+    // A single voxel above the isovalue: an octahedron.
+    core::Geometry g;
+    g.dims = {5, 5, 5};
+    core::Volume blob(g, core::VoxelType::Float32);
+    blob.dataAs<float>()[blob.linearIndex(2, 2, 2)] = 1.f;
+    Extraction b = extractIsosurface(blob, test::at(0.5));
+    const MeshReport b0 = reportMesh(b.mesh, false);
+    ASSERT_TRUE(b0.closed);
+    cleanUp(b.mesh, o);
+    const MeshReport b1 = reportMesh(b.mesh, false);
+    EXPECT_NEAR(b1.volumeMm3 / b0.volumeMm3, 1.0, kLongSmoothingVolumeTol);
+    EXPECT_GT(b1.areaMm2, 0.5 * b0.areaMm2);
+}
+
 }  // namespace
 }  // namespace voxlight::iso
