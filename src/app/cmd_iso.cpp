@@ -127,8 +127,8 @@ Command addIsoCommand(CLI::App& app) {
         ->check(CLI::Range(0, 16));
     c.sub
         ->add_option("--lattice-resolution", lattice->resolution,
-                     "--bake: lattice texels per voxel along each axis, 0.125…8 (1)")
-        ->check(CLI::Range(0.125, 8.0));
+                     "--bake: lattice texels per voxel along each axis, 0.5…8 (1)")
+        ->check(CLI::Range(iso::kMinLatticeResolution, 8.0));
     c.sub
         ->add_option("--bake-from", *bakeFrom,
                      "--bake: vertices (paths from each vertex: accurate, the default) or lattice "

@@ -58,9 +58,9 @@ void checkOptions(const LatticeOptions& o) {
     if (o.bounces < 0 || o.bounces > 16)
         throw InputError("lattice", "bounces", "must be 0…16, got " + std::to_string(o.bounces),
                          "give e.g. 1");
-    if (!(o.resolution >= 1.0 / 8.0 - 1e-12 && o.resolution <= 8.0 + 1e-12))
+    if (!(o.resolution >= kMinLatticeResolution - 1e-12 && o.resolution <= 8.0 + 1e-12))
         throw InputError("lattice", "resolution",
-                         "must be 1/8…8 texels per voxel, got " + number(o.resolution),
+                         "must be 1/2…8 texels per voxel, got " + number(o.resolution),
                          "give 1 (the volume's own resolution), 0.5 or 2");
     if (o.shOrder < 1 || o.shOrder > 5)
         throw InputError("lattice", "sh_order",

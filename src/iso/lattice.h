@@ -81,6 +81,11 @@ enum class TexelPlacement {
 /// crosses lies within √3 voxels of it (the cell's diagonal); beyond that margin it reads no
 /// surface point and is left out.
 inline constexpr double kMaxProjectionVoxels = 2.0;
+/// Coarsest lattice (texels per voxel): a coarser texel lies where the field is flat (Newton finds
+/// no gradient to follow onto the surface) and is left out, and a vertex whose texels all are
+/// reads black — at 0.125 a fifth of a smooth-edged sphere's vertices, at 0.25 11 % of a binary
+/// (mask) sphere's; at 0.5 none (Lattice.TheCoarsestLatticeReachesTheSurfaceFromEveryTexel).
+inline constexpr double kMinLatticeResolution = 0.5;
 
 /// Start offset along the normal, voxels (Wyman: "slightly"): far enough that float rounding of the
 /// start point and the trilinear-vs-B-spline normal mismatch leave the point outside its own

@@ -528,7 +528,7 @@ IsoLatticeParams parseIsoLatticeParams(const io::Scene& scene, ParamReader& p) {
     q.lattice.samples = q.shading.samples;
     if (gi) q.lattice.bounces = p.integer("bounces", 1, 0, 16);
     if (lat) {
-        q.lattice.resolution = p.number("lattice_resolution", 1.0, 0.125, 8.0);
+        q.lattice.resolution = p.number("lattice_resolution", 1.0, iso::kMinLatticeResolution, 8.0);
         q.lattice.mode = p.choice("lattice_mode", "irradiance", {"irradiance", "sh"}) == "sh"
                              ? iso::LatticeMode::ShTransfer
                              : iso::LatticeMode::Irradiance;

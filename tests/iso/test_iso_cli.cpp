@@ -210,10 +210,13 @@ TEST(IsoCli, BakedLightUnderTheDefaultSkyLeavesAConvexSurfaceItsAlbedo) {
     auto linear = [](double c) {
         return c <= 0.04045 ? c / 12.92 : std::pow((c + 0.055) / 1.055, 2.4);
     };
-    for (const std::string from : {"vertices", "lattice"}) {
-        SCOPED_TRACE(from);
+    // (The coarsest lattice too: at 1/8 texel per voxel, once allowed, a fifth of a sphere's
+    // vertices were baked black.)
+    for (const std::string variant : {"vertices", "lattice", "lattice --lattice-resolution 0.5"}) {
+        SCOPED_TRACE(variant);
+        const std::string from = variant.substr(0, variant.find(' '));
         const Result r =
-            run(base + (tmp / "lit.obj").string() + "' --bake --samples 16 --bake-from " + from +
+            run(base + (tmp / "lit.obj").string() + "' --bake --samples 16 --bake-from " + variant +
                     " --stats '" + (tmp / "st.json").string() + "'",
                 tmp.path());
         ASSERT_EQ(r.code, 0) << r.err;
@@ -339,6 +342,12 @@ TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
                    "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
                        (tmp / "m.ply").string() + "' --bake --bake-from lattice --sh-order 3",
                    "takes effect only with --lattice-mode sh", {"scene.json"});
+    // Texels too coarse to reach the surface (kMinLatticeResolution).
+    expectBadInput(tmp,
+                   "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                       (tmp / "m.ply").string() +
+                       "' --bake --bake-from lattice --lattice-resolution 0.25",
+                   "--lattice-resolution", {"scene.json"});
     // A negative minimum wrapped to a huge one: "the clean-up removed every face".
     expectBadInput(tmp,
                    "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +

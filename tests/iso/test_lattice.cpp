@@ -463,6 +463,8 @@ TEST(Lattice, BadOptionsAndLightsNameTheirField) {
     o = opts(10, 1);
     o.resolution = 16;
     EXPECT_EQ(field(o, {sky(1)}), "resolution");
+    o.resolution = 0.5 * kMinLatticeResolution;
+    EXPECT_EQ(field(o, {sky(1)}), "resolution");
     o = opts(10, 1, LatticeMode::ShTransfer);
     o.shOrder = 6;
     EXPECT_EQ(field(o, {sky(1)}), "sh_order");
@@ -549,6 +551,27 @@ TEST(Lattice, CapsAreLitByEveryPointShading) {
         for (const bool shadows : {false, true})
             EXPECT_NEAR(direct.directIrradiance(p, 0.5, shadows).x, 0.5 * E, kCapTolerance * E);
     }
+}
+
+// The coarsest lattice (kMinLatticeResolution: texels 2 voxels apart) on a binary-edged sphere (a
+// mask): every vertex reads a texel on the surface. At 0.25, which was allowed, 945 of the 8376
+// vertices read none and were baked black.
+TEST(Lattice, TheCoarsestLatticeReachesTheSurfaceFromEveryTexel) {
+    core::Geometry g;
+    g.dims = {64, 64, 64};
+    auto vol = share(test::fieldVolume(g, [](const glm::dvec3& p) {
+        return glm::length(p - glm::dvec3(31.5)) <= 21.0 ? 1.0 : 0.0;
+    }));
+    Extraction ex = extractIsosurface(*vol, test::at(0.5));
+    LatticeOptions o = opts(4, 0);
+    o.placement = TexelPlacement::OnSurface;
+    o.surfaceIso = 0.5;
+    o.resolution = kMinLatticeResolution;
+    IlluminationLattice lat(vol, albedoTf(1.f, 0.f, 1.f), {sky(1.f)}, o);
+    bakeVertexColours(ex.mesh, lat, 0.5, glm::vec3(1.f), 1.f, BakeSource::Lattice);
+    std::size_t black = 0;
+    for (const auto v : ex.mesh.vertices()) black += !(ex.mesh.color(v)[0] > 0.f);
+    EXPECT_EQ(black, 0u) << "of " << ex.mesh.n_vertices();
 }
 
 }  // namespace
