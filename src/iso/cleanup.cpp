@@ -31,6 +31,20 @@ using Normal = std::array<double, 3>;
 namespace PMP = CGAL::Polygon_mesh_processing;
 namespace SMS = CGAL::Surface_mesh_simplification;
 
+/// The mesh's points, read through a check of the cancel flag (reportMesh).
+struct CancellablePoints {
+    using key_type = SurfaceMesh::Vertex_index;
+    using value_type = Kernel::Point_3;
+    using reference = const Kernel::Point_3&;
+    using category = boost::readable_property_map_tag;
+    const SurfaceMesh* mesh;
+    const core::Progress* progress;
+    friend reference get(const CancellablePoints& m, key_type v) {
+        m.progress->checkCancel();
+        return m.mesh->point(v);
+    }
+};
+
 SurfaceMesh toCgal(const Mesh& mesh) {
     SurfaceMesh sm;
     sm.reserve(SurfaceMesh::size_type(mesh.n_vertices()), SurfaceMesh::size_type(mesh.n_edges()),
@@ -256,7 +270,12 @@ MeshReport reportMesh(const Mesh& mesh, bool checkSelfIntersections,
     if (checkSelfIntersections) {
         progress.report("mesh report: self-intersections", 0.5);
         std::vector<std::pair<SurfaceMesh::Face_index, SurfaceMesh::Face_index>> pairs;
-        PMP::self_intersections(sm, std::back_inserter(pairs));
+        // Every triangle CGAL builds reads its corners through this map: Ctrl-C ends the count
+        // at once (CGAL's own does_self_intersect leaves the search by an exception the same
+        // way) — it took 25 s to act on a 6.5-M-face mesh, whose count runs 31 s.
+        PMP::self_intersections(
+            sm, std::back_inserter(pairs),
+            CGAL::parameters::vertex_point_map(CancellablePoints{&sm, &progress}));
         r.selfIntersections = static_cast<long long>(pairs.size());
     }
     r.seconds = sw.seconds();
