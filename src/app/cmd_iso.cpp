@@ -77,6 +77,7 @@ Command addIsoCommand(CLI::App& app) {
     auto isovalue = std::make_shared<double>(0.0);
     auto cleanup = std::make_shared<iso::CleanupOptions>();
     auto noSelfIntersections = std::make_shared<bool>(false);
+    auto maxMemoryMiB = std::make_shared<double>(8192.0);
     auto quiet = std::make_shared<bool>(false);
     auto bake = std::make_shared<bool>(false);
     auto lattice = std::make_shared<iso::LatticeOptions>();
@@ -116,6 +117,13 @@ Command addIsoCommand(CLI::App& app) {
         ->add_option("--decimate", cleanup->targetFaces,
                      "Decimate (edge collapse) to about this many faces")
         ->check(CLI::Range(std::size_t(4), std::size_t(1) << 40));
+    c.sub
+        ->add_option(
+            "--max-memory-mb", *maxMemoryMiB,
+            "Refuse before extracting when the surface promises a larger peak (about " +
+                std::to_string(int(iso::kTrianglesPerCrossedEdge * iso::kPeakBytesPerTriangle)) +
+                " bytes per voxel edge it crosses; 8192)")
+        ->check(CLI::Range(1.0, double(1 << 30)));
     c.sub->add_flag("--no-self-intersections", *noSelfIntersections,
                     "Skip the self-intersection count of the report (its costly part)");
     c.sub->add_flag("--bake", *bake,
@@ -213,6 +221,7 @@ Command addIsoCommand(CLI::App& app) {
         }
         options.color = tf.eval(float(options.isovalue)).albedo;
         options.cap = *cap;
+        options.maxMemoryMiB = *maxMemoryMiB;
         for (const auto& p : s.clipPlanes)
             options.keep.push_back({p.point, glm::normalize(p.normal)});
         if (s.cropBox)
@@ -224,6 +233,8 @@ Command addIsoCommand(CLI::App& app) {
         try {
             ex = iso::extractIsosurface(volume, options, progress);
         } catch (const InputError& e) {
+            if (e.source() == "isosurface" && e.field() == "memory")
+                throw InputError("command line", "--max-memory-mb", e.problem(), e.fix());
             if (e.source() != "isosurface" || (e.field() != "volume" && e.field() != "isovalue"))
                 throw;
             if (e.field() == "volume") throw InputError(s.source, "volume", e.problem(), e.fix());

@@ -318,6 +318,46 @@ void capSoup(Soup& soup, const core::HalfSpace& h, const std::vector<std::uint32
 
 }  // namespace
 
+namespace {
+/// Voxel edges whose two ends lie on either side of `stored` (the mesh's vertices, one per such
+/// edge) at voxels within a voxel diagonal of every half-space of `keep`: what the surface's size
+/// scales with.
+std::uint64_t crossedEdges(const core::Volume& volume, double stored,
+                           const std::vector<core::HalfSpace>& keep,
+                           const core::Progress& progress) {
+    const glm::ivec3 n = volume.dims();
+    const core::Geometry& geo = volume.geometry();
+    const double margin = glm::length(geo.spacing);
+    std::vector<std::uint64_t> perSlice(std::size_t(n.z), 0);
+    volume.visit([&](const auto& v) {
+        tbb::parallel_for(0, n.z, [&](int k) {
+            if (progress.cancelled()) return;
+            std::uint64_t count = 0;
+            for (int j = 0; j < n.y; ++j)
+                for (int i = 0; i < n.x; ++i) {
+                    const std::size_t at =
+                        std::size_t(i) + v.sy * std::size_t(j) + v.sz * std::size_t(k);
+                    const bool above = double(v.data[at]) > stored;
+                    int crossed = 0;
+                    if (i + 1 < n.x) crossed += (double(v.data[at + 1]) > stored) != above;
+                    if (j + 1 < n.y) crossed += (double(v.data[at + v.sy]) > stored) != above;
+                    if (k + 1 < n.z) crossed += (double(v.data[at + v.sz]) > stored) != above;
+                    if (crossed == 0) continue;
+                    const glm::dvec3 c = geo.indexToWorld(glm::dvec3(i, j, k));
+                    bool kept = true;
+                    for (const core::HalfSpace& h : keep) kept = kept && h.distance(c) >= -margin;
+                    if (kept) count += std::uint64_t(crossed);
+                }
+            perSlice[std::size_t(k)] = count;
+        });
+    });
+    progress.checkCancel();
+    std::uint64_t total = 0;
+    for (const std::uint64_t c : perSlice) total += c;
+    return total;
+}
+}  // namespace
+
 Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& options,
                              const core::Progress& progress) {
     Extraction result;
@@ -358,6 +398,21 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
                                  number(hi) + ", not equal to " + number(lo) + " up to rounding");
     }
     st.storedIsovalue = stored;
+    if (options.maxMemoryMiB > 0.0) {
+        const std::uint64_t edges = crossedEdges(volume, stored, options.keep, progress);
+        const double triangles = kTrianglesPerCrossedEdge * double(edges);
+        const double mib = triangles * kPeakBytesPerTriangle / (1024.0 * 1024.0);
+        if (mib > options.maxMemoryMiB)
+            throw InputError("isosurface", "memory",
+                             "the isosurface at " + number(options.isovalue) + " crosses " +
+                                 std::to_string(edges) + " voxel edges: about " +
+                                 number(std::round(triangles / 1e6)) + " M triangles, " +
+                                 number(std::round(mib / 1024.0 * 10.0) / 10.0) +
+                                 " GiB at the peak, over the budget of " +
+                                 number(options.maxMemoryMiB) + " MiB",
+                             "choose an isovalue above the noise, keep less of the volume "
+                             "(crop_box, clip_planes), or raise the budget");
+    }
 
     // Flying edges, index space → world mm.
     core::Stopwatch sw;

@@ -31,6 +31,46 @@ constexpr double kRadiusTol = 0.03;
 /// direction: central differences of |x − c| over 2h at R ≥ 14 h/1.3 deviate < 1°.
 constexpr double kNormalCosTol = 0.999;
 
+// A noisy isovalue on a large volume asked for tens of GB without a word (a 256³ noise volume: 53 M
+// triangles, 9.5 GB, 70–400 s; 512³ would need ≈ 75 GB). The estimate counts the voxel edges the
+// surface crosses — one mesh vertex each, so exactly the vertex count without cuts — and refuses
+// before extracting; a crop box counts only what it keeps.
+TEST(Extract, AnIsosurfaceOverTheMemoryBudgetIsRefusedBeforeExtraction) {
+    core::Geometry g;
+    g.dims = {24, 20, 16};
+    const core::Volume v = test::fieldVolume(g, [](const glm::dvec3& p) {
+        const auto h = std::uint32_t(p.x * 73856093.0) ^ std::uint32_t(p.y * 19349663.0) ^
+                       std::uint32_t(p.z * 83492791.0);
+        return double((h * 2654435761u) >> 8) / double(1u << 24);
+    });
+    ExtractOptions o = test::at(0.5);
+    const std::size_t vertices = extractIsosurface(v, o).mesh.n_vertices();
+    ASSERT_GT(vertices, 1000u);
+    auto refusal = [&](const ExtractOptions& opts) {
+        try {
+            extractIsosurface(v, opts);
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "memory");
+            return std::string(e.what());
+        }
+        return std::string("no error");
+    };
+    o.maxMemoryMiB = 1e-6;
+    EXPECT_NE(refusal(o).find(std::to_string(vertices) + " voxel edges"), std::string::npos)
+        << refusal(o);
+    // Kept: half of the volume along x — about half the edges.
+    o.keep = core::boxHalfSpaces({-1, -1, -1}, {11.5, 100, 100});
+    const std::string half = refusal(o);
+    const std::size_t at = half.find(" crosses ");
+    ASSERT_NE(at, std::string::npos) << half;
+    const double kept = std::stod(half.substr(at + 9));
+    EXPECT_NEAR(kept / double(vertices), 0.5, 0.1);
+    // Within the budget: extracted.
+    o.keep.clear();
+    o.maxMemoryMiB = 1024;
+    EXPECT_EQ(extractIsosurface(v, o).mesh.n_vertices(), vertices);
+}
+
 TEST(Extract, SpherePhantomIsClosedManifoldWithAnalyticAreaAndVolume) {
     const core::Volume v = core::makePhantom("sphere", {.size = kSpherePhantomSize});
     const core::SphereFacts s = core::spherePhantomFacts(v.geometry());
