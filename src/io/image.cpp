@@ -179,24 +179,28 @@ ImageRGBA readImage(const std::filesystem::path& path, ImageReadInfo& info) {
                              "image is " + std::to_string(w) + "×" + std::to_string(h) +
                                  ", larger than the 2^28-pixel limit",
                              "downsample the image");
+        case mod::Status::NoColour:
+            throw InputError(file, "channels",
+                             "has no colour channel (R, G, B or Y); its channels are " + r.message,
+                             "write the image's colour into R, G and B (or Y)");
         default:
             throw InputError(file, "pixels", "pixel data cannot be decoded: " + r.message,
                              "the file is probably truncated or corrupt; re-export it");
     }
-    const int used = std::min(nc, 4);
-    VL_CHECK(r.pixels.size() == std::size_t(w) * h * used);
+    const int used = r.used;
+    VL_CHECK(used >= 1 && used <= 4 && r.pixels.size() == std::size_t(w) * h * used);
 
     // Promote to RGBA: grey → (v, v, v), missing alpha → 1.
     ImageRGBA img(w, h);
     for (std::size_t p = 0; p < std::size_t(w) * h; ++p) {
         const float* s = &r.pixels[p * used];
         float* d = &img.pixels[p * 4];
-        if (nc <= 2) {
+        if (used <= 2) {
             d[0] = d[1] = d[2] = s[0];
-            d[3] = nc == 2 ? s[1] : 1.0f;
+            d[3] = used == 2 ? s[1] : 1.0f;
         } else {
             d[0] = s[0], d[1] = s[1], d[2] = s[2];
-            d[3] = nc >= 4 ? s[3] : 1.0f;
+            d[3] = used == 4 ? s[3] : 1.0f;
         }
     }
     return img;

@@ -20,7 +20,7 @@
 namespace voxlight::io::image_module {
 
 /// Bumped whenever Api, ReadResult or WriteRequest change layout or meaning.
-inline constexpr int kAbiVersion = 1;
+inline constexpr int kAbiVersion = 2;  // 2: Status::NoColour, EXR channels chosen by name
 /// The module's file name (looked up beside the executable, then in the build tree).
 inline constexpr const char* kFileName = "libvoxlight_image_oiio.so";
 /// The one symbol the module exports: `const void* voxlight_image_module()` returning an Api.
@@ -35,15 +35,20 @@ enum class Status : int {
     NoWriter,      ///< no OpenImageIO writer for the extension
     WriteFailed,   ///< open/write/close of the output failed
     Exception,     ///< a C++ exception inside the module (message: what())
+    NoColour,      ///< an EXR with no R, G, B or Y channel (message: the channels it has)
 };
 
 struct ReadResult {
     Status status = Status::Ok;
     std::string message;                      ///< OpenImageIO's error text when status != Ok
     int width = 0, height = 0, channels = 0;  ///< as stored in the file
-    bool floatingPoint = false;               ///< half/float/double pixels
-    std::string format;                       ///< OpenImageIO's format name ("openexr", "png" …)
-    /// width·height·min(channels, 4) floats, interleaved: only the channels image.cpp uses are
+    /// Channels decoded into `pixels` (1 grey, 2 grey + alpha, 3 RGB, 4 RGBA): the first four, or
+    /// an EXR's chosen by name (R, G, B, A or Y, A — a depth channel Z after RGB was read as
+    /// alpha, a Z-only file as grey).
+    int used = 0;
+    bool floatingPoint = false;  ///< half/float/double pixels
+    std::string format;          ///< OpenImageIO's format name ("openexr", "png" …)
+    /// width·height·used floats, interleaved: only the channels image.cpp uses are
     /// decoded (a many-channel EXR would otherwise allocate all of them).
     std::vector<float> pixels;
 };

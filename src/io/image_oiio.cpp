@@ -5,6 +5,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <array>
 #include <exception>
 #include <string>
 
@@ -59,12 +60,42 @@ void readImpl(const char* path, std::uint64_t maxPixels, ReadResult& out) {
         out.status = Status::TooLarge;
         return;
     }
-    const int used = std::min(out.channels, 4);
+    // The channels read, in order: the first (up to) four, or an EXR's colour channels by name.
+    std::array<int, 4> source = {0, 1, 2, 3};
+    int used = std::min(out.channels, 4);
+    if (out.format == "openexr") {
+        auto find = [&](const char* name) {
+            for (int c = 0; c < spec.nchannels; ++c)
+                if (spec.channel_name(c) == name) return c;
+            return -1;
+        };
+        const int r = find("R"), g = find("G"), b = find("B"), a = find("A"), y = find("Y");
+        if (r >= 0 && g >= 0 && b >= 0) {
+            source = {r, g, b, a}, used = a >= 0 ? 4 : 3;
+        } else if (y >= 0) {
+            source = {y, a, -1, -1}, used = a >= 0 ? 2 : 1;
+        } else if (r >= 0 || g >= 0 || b >= 0 || a >= 0) {
+            // Part of a colour set (R alone, R and G): by position, as other formats.
+        } else {
+            out.status = Status::NoColour;
+            for (int c = 0; c < spec.nchannels; ++c)
+                out.message += (c ? ", " : "") + std::string(spec.channel_name(c));
+            return;
+        }
+    }
+    out.used = used;
     out.pixels.resize(std::size_t(out.width) * out.height * used);
-    if (!in->read_image(0, 0, 0, used, OIIO::TypeDesc::FLOAT, out.pixels.data())) {
-        out.status = Status::DecodeFailed, out.message = oiioError(in->geterror());
-        out.pixels.clear();
-        return;
+    const OIIO::stride_t pixelBytes = OIIO::stride_t(used * sizeof(float));
+    bool inOrder = true;  // the file's first `used` channels: one read
+    for (int k = 0; k < used; ++k) inOrder = inOrder && source[std::size_t(k)] == k;
+    for (int k = 0; k < (inOrder ? 1 : used); ++k) {
+        const int first = source[std::size_t(k)], last = inOrder ? used : first + 1;
+        if (!in->read_image(0, 0, first, last, OIIO::TypeDesc::FLOAT, out.pixels.data() + k,
+                            pixelBytes)) {
+            out.status = Status::DecodeFailed, out.message = oiioError(in->geterror());
+            out.pixels.clear();
+            return;
+        }
     }
     in->close();
     out.status = Status::Ok;

@@ -134,6 +134,41 @@ TEST(Image, ManyChannelsKeepTheFirstFour) {
             EXPECT_EQ(img.pixels[4 * p + c], data[p * kChannels + c]) << p << "," << c;
 }
 
+// An EXR's colour is its R, G, B (A) or Y channels by name: a renderer's depth channel Z after
+// RGB was read as alpha (its NaN background refused as "channel A is NaN"), and a file holding
+// only Z compared equal to any grey image of its values.
+TEST(Image, ExrChannelsAreChosenByName) {
+    test::TempDir tmp;
+    auto write = [&](const std::string& name, const std::vector<std::string>& channels) {
+        const auto path = (tmp / name).string();
+        auto out = OIIO::ImageOutput::create(path);
+        OIIO::ImageSpec spec(3, 2, int(channels.size()), OIIO::TypeDesc::FLOAT);
+        spec.channelnames = channels;
+        std::vector<float> data(3 * 2 * channels.size());
+        for (std::size_t i = 0; i < data.size(); ++i)
+            data[i] = channels[i % channels.size()] == "Z" ? NAN : float(i);
+        EXPECT_TRUE(out->open(path, spec) && out->write_image(OIIO::TypeDesc::FLOAT, data.data()) &&
+                    out->close());
+        return std::pair{path, data};
+    };
+    // OpenEXR stores channels sorted by name: B, G, R, Z on disk.
+    const auto [rgbz, d] = write("rgbz.exr", {"R", "G", "B", "Z"});
+    const auto img = io::readImage(rgbz);
+    EXPECT_EQ(img.at(1, 1)[3], 1.0f) << "no alpha channel: opaque";
+    const auto [rgba, d4] = write("rgba.exr", {"R", "G", "B", "A"});
+    const auto ref = io::readImage(rgba);
+    for (int c = 0; c < 3; ++c) EXPECT_EQ(img.at(1, 1)[c], ref.at(1, 1)[c]) << c;
+    EXPECT_EQ(ref.at(1, 1)[3], d4[4 * 4 + 3]);
+    const auto [zonly, dz] = write("z.exr", {"Z"});
+    try {
+        io::readImage(zonly);
+        ADD_FAILURE() << "a depth-only EXR has no colour";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "channels");
+        EXPECT_NE(std::string(e.what()).find("Z"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Image, BadFilesNameTheFile) {
     test::TempDir tmp;
     try {
