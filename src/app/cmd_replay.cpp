@@ -220,7 +220,19 @@ Command addReplayCommand(CLI::App& app) {
         if (!cacheDir->empty()) pipe.cache().setDirectory(*cacheDir);
         // An error the session's frame i raises, named by the --set that set its field, else by
         // the keyframe that did (errors of other files name those files).
-        const auto frameError = [&](const InputError& e, std::size_t i) {
+        const auto frameError = [&](const InputError& raw, std::size_t i) {
+            // An environment map of the frame's that does not read: its own message, named by
+            // the keyframe (or --set) that set the light's path.
+            InputError e = raw;
+            const auto& lights = scenes[i].lights;
+            for (std::size_t k = 0; k < lights.size() && raw.source() != ses.source; ++k)
+                if (!lights[k].path.empty() && fs::path(raw.source()).lexically_normal() ==
+                                                   lights[k].path.lexically_normal()) {
+                    e = InputError(ses.source, "lights[" + std::to_string(k) + "].path",
+                                   "'" + raw.source() + "' " + raw.field() + ": " + raw.problem(),
+                                   raw.fix());
+                    break;
+                }
             if (e.source() != ses.source) return e;
             if (io::blamedOverride(scenes[i].overrides, e.field()))
                 return io::blameOverride(e, ses.source, scenes[i].overrides);

@@ -221,7 +221,8 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         {q(tmp / "good.json") + " --fps -2", "--fps"},
         {q(tmp / "good.json") + " --fps 0", "--fps"},
         {q(tmp / "good.json") + " --video v.gif", "--video"},
-        {q(tmp / "bad-map.json"), "sky.hdr"},
+        {q(tmp / "bad-map.json"), "keyframes[2].lights[0].path: '"},  // and the file itself
+        {q(tmp / "bad-map.json"), "sky.hdr' file: cannot be read"},
         {q(tmp / "bad-iso.json"), "keyframes[2].method.params.iso_value"},
     };
     for (const Case& c : cases) {
