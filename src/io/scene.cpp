@@ -357,7 +357,7 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 
 namespace {
 /// A dotted key's parts, empty ones kept ("lights..x" → "lights", "", "x"): the one place an
-/// override's key is split.
+/// override's key is split (after dottedKey has written its bracket indices as dotted ones).
 std::vector<std::string> keyParts(const std::string& key) {
     std::vector<std::string> parts;
     std::size_t start = 0;
@@ -369,19 +369,30 @@ std::vector<std::string> keyParts(const std::string& key) {
     }
 }
 
-/// A key as errors print it ("lights[0].intensity") in the dotted form --set reads
-/// ("lights.0.intensity"): only an all-digit index in brackets right after a name is rewritten.
-std::string dottedKey(const std::string& key) {
+/// A key as errors print it ("lights[0].intensity") in the dotted form the parts are split from
+/// ("lights.0.intensity"): an index is digits in brackets after a name or another index, followed
+/// by a dot, another index or the end. Any other bracket is refused (read as part of a name, it
+/// was an "unknown key" of the scene file's).
+std::string dottedKey(const std::string& key, const std::string& said) {
     std::string out;
     for (std::size_t i = 0; i < key.size(); ++i) {
-        const std::size_t close = key[i] == '[' ? key.find(']', i) : std::string::npos;
-        if (close != std::string::npos && close > i + 1 && !out.empty() && out.back() != '.' &&
-            std::all_of(key.begin() + long(i) + 1, key.begin() + long(close), ::isdigit)) {
-            out += '.' + key.substr(i + 1, close - i - 1);
-            i = close;
+        if (key[i] != '[' && key[i] != ']') {
+            out += key[i];
             continue;
         }
-        out += key[i];
+        const std::size_t close = key[i] == '[' ? key.find(']', i) : std::string::npos;
+        const bool afterName = !out.empty() && out.back() != '.';
+        const bool digits =
+            close != std::string::npos && close > i + 1 &&
+            std::all_of(key.begin() + long(i) + 1, key.begin() + long(close), ::isdigit);
+        const bool thenEnds =
+            close != std::string::npos &&
+            (close + 1 == key.size() || key[close + 1] == '.' || key[close + 1] == '[');
+        if (!(afterName && digits && thenEnds))
+            throw InputError(said, key, "has a bracket that is not a list index",
+                             "write an index as lights[0].intensity or lights.0.intensity");
+        out += '.' + key.substr(i + 1, close - i - 1);
+        i = close;
     }
     return out;
 }
@@ -477,7 +488,8 @@ OverrideRecord applyOverride(json& doc, const std::string& assignment) {
         throw InputError("--set", printable(assignment), "is not valid UTF-8",
                          "give keys and values as UTF-8 text");
     }
-    const std::string key = dottedKey(assignment.substr(0, eq)), text = assignment.substr(eq + 1);
+    const std::string key = dottedKey(assignment.substr(0, eq), "--set " + assignment),
+                      text = assignment.substr(eq + 1);
     if (tooDeepAt(text) != std::string_view::npos)
         throw InputError(
             "--set", key,
@@ -714,7 +726,7 @@ std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::str
     std::vector<OverrideRecord> records;
     for (const auto& o : overrides) {
         records.push_back(applyOverride(doc, o));
-        const std::string key = dottedKey(o.substr(0, o.find('=')));
+        const std::string key = dottedKey(o.substr(0, o.find('=')), "--set " + o);
         if (!isPathKey(key)) continue;
         // Walks to the value without creating anything: a removed key (null) stays removed.
         json* node = &doc;

@@ -158,6 +158,19 @@ TEST(Scene, OverridesApplyBeforeValidation) {
     io::applyOverride(j, "transfer_function.points[0].value=7");
     EXPECT_DOUBLE_EQ(parse(j).lights[0].intensity, 3.5);
     EXPECT_EQ(j["transfer_function"]["points"][0]["value"], 7);
+    // Any other bracket is the override's error, not an unknown key of the scene's.
+    for (const char* bad :
+         {"lights[x].intensity=2", "lights[-1].intensity=2", "lights[0]intensity=2",
+          "lights.[0].intensity=2", "[0]=1", "a[0=1", "a]=1"}) {
+        try {
+            io::applyOverride(j, bad);
+            ADD_FAILURE() << bad;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.source(), std::string("--set ") + bad);
+            EXPECT_NE(std::string(e.what()).find("not a list index"), std::string::npos)
+                << e.what();
+        }
+    }
     // A bad override is caught by the same validation, naming the key.
     io::applyOverride(j, "camera.azimuth=left");
     expectBad(j, "camera.azimuth", {"must be a number"});
