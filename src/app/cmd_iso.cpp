@@ -111,7 +111,7 @@ Command addIsoCommand(CLI::App& app) {
     c.sub
         ->add_option("--smooth", cleanup->smoothIterations,
                      "Smooth with N iterations of Taubin lambda|mu smoothing, 0-50 (closed "
-                     "parts keep their volume; 10 removes the voxel staircase)")
+                     "parts keep their volume)")
         ->check(CLI::Range(0, iso::kMaxSmoothIterations));
     c.sub
         ->add_option("--decimate", cleanup->targetFaces,

@@ -19,6 +19,7 @@
 #include <ostream>
 #include <vector>
 
+#include "core/error.h"
 #include "core/timing.h"
 
 namespace voxlight::iso {
@@ -144,11 +145,14 @@ ComponentSizes componentSizes(const SurfaceMesh& sm, const std::vector<std::size
 /// Taubin λ|μ smoothing (cleanup.h): each iteration moves every interior vertex by λ, then by μ,
 /// times (mean of its neighbours − itself). Boundary vertices (open cuts, the volume's faces) stay.
 /// Then every vertex of a closed component moves along its normal by the distance that returns the
-/// component's volume before smoothing (lost volume / area): a small component's size is a high
+/// component's volume before smoothing (lost volume / the rate its vertex normals sweep volume,
+/// componentSizes): a small component's size is a high
 /// frequency of the filter's — a one-voxel blob (an octahedron) lost a quarter of its size per
 /// iteration and shrank to a point in 50, a calcification gone without a word.
 void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progress) {
-    constexpr int kVolumePasses = 4;  // the second for a blob's δ², a small part of the first
+    // Newton passes: one is exact to first order in δ; the blob (an octahedron, whose volume is far
+    // from linear in δ) measured 1.6 % over after two, within 1e-6 after four.
+    constexpr int kVolumePasses = 4;
     std::vector<Kernel::Point_3> next(sm.num_vertices());
     auto compMap = sm.add_property_map<SurfaceMesh::Face_index, std::size_t>("f:smooth_cc").first;
     const std::size_t components = PMP::connected_components(sm, compMap);
@@ -203,6 +207,11 @@ void taubinSmooth(SurfaceMesh& sm, int iterations, const core::Progress& progres
 }  // namespace
 
 CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Progress& progress) {
+    if (options.smoothIterations > kMaxSmoothIterations || options.smoothIterations < 0)
+        throw InputError("cleanup", "smooth",
+                         "takes 0…" + std::to_string(kMaxSmoothIterations) + " iterations, got " +
+                             std::to_string(options.smoothIterations),
+                         "the pass band's gain compounds beyond that (cleanup.h)");
     CleanupStats st;
     st.facesBefore = st.facesAfter = mesh.n_faces();
     if (!options.any()) return st;

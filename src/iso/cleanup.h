@@ -38,8 +38,7 @@ namespace voxlight::iso {
 /// thousands of times (probe). A smaller pass band (0.01) gains less but erodes what is thinner
 /// than about 60 edges (the ribs: −15 % volume at 100 iterations).
 inline constexpr double kTaubinLambda = 0.5, kTaubinMu = -0.53;
-/// Most iterations --smooth takes: the pass band's gain compounds to at most 4.3 % (1.00085^50),
-/// and the staircase of marching cubes is gone after about 10.
+/// Most iterations --smooth takes: the pass band's gain compounds to at most 4.3 % (1.00085^50).
 inline constexpr int kMaxSmoothIterations = 50;
 
 struct CleanupOptions {
