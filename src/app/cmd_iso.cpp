@@ -122,8 +122,8 @@ Command addIsoCommand(CLI::App& app) {
             "--max-memory-mb", *maxMemoryMiB,
             "Refuse before extracting when the surface promises a larger peak (about " +
                 std::to_string(int(iso::kTrianglesPerCrossedEdge * iso::kPeakBytesPerTriangle)) +
-                " bytes per voxel edge it crosses; 8192)")
-        ->check(CLI::Range(1.0, double(1 << 30)));
+                " bytes per voxel edge it crosses; 8192; 0: no limit)")
+        ->check(CLI::Range(0.0, double(1 << 30)));
     c.sub->add_flag("--no-self-intersections", *noSelfIntersections,
                     "Skip the self-intersection count of the report (its costly part)");
     c.sub->add_flag("--bake", *bake,

@@ -406,7 +406,7 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
             throw InputError("isosurface", "memory",
                              "the isosurface at " + number(options.isovalue) + " crosses " +
                                  std::to_string(edges) + " voxel edges: about " +
-                                 number(std::round(triangles / 1e6)) + " M triangles, " +
+                                 number(std::round(triangles / 1e5) / 10.0) + " M triangles, " +
                                  number(std::round(mib / 1024.0 * 10.0) / 10.0) +
                                  " GiB at the peak, over the budget of " +
                                  number(options.maxMemoryMiB) + " MiB",

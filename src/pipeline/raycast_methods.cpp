@@ -692,7 +692,10 @@ constexpr float kBackgroundGrey = 0.02f;
 /// lies past it (the generic TF shows [v + ½, v + 1]), and a black box is no picture of it.
 optics::Window extremumWindow(Kind kind, const optics::Window& w, const core::Volume& volume) {
     const auto range = volume.physicalRange();
-    if (!(range[0] < range[1])) return {float(range[0]), 1.f};
+    // (Wide enough that the window's ends survive float rounding far from 0: at 1e8 a float
+    // steps by 8.)
+    if (!(range[0] < range[1]))
+        return {float(range[0]), float(std::max(1.0, 1e-4 * std::abs(range[0])))};
     const auto [lo, hi] = optics::robustRange(volume);
     // Where the data's robust ends land on the window's grey ramp (0 black, 1 white).
     const float atLo = (lo - w.lo()) / w.width, atHi = (hi - w.lo()) / w.width;

@@ -6,7 +6,8 @@
 //             3D Slicer show TF colours (their colours are display values, not radiance), so
 //             voxlight's images read like the ones clinicians compare them to. Equal radiance
 //             maps to equal grey everywhere. A MIP's/MinIP's grey (the window's ramp) is such a
-//             display value too: the default shows the window as every PACS does.
+//             display value too: the default shows the window as every PACS does (under srgb and
+//             filmic it is encoded as any colour: the window's centre at 73.5 % grey in srgb).
 //   Srgb      clamp, then the sRGB transfer curve (IEC 61966-2-1): physically right for a linear
 //             film on an sRGB monitor, but flat and washed out next to VTK for TF-coloured DVR.
 //   Filmic    the ACES filmic curve (Narkowicz's fit of the RRT+ODT), then sRGB: highlights roll
