@@ -24,6 +24,8 @@
 // line names the range), a flat volume (no isosurface exists), clip planes / crop box that remove
 // the whole surface, an output path that cannot be written or whose extension is not .ply, .obj or
 // .glb.
+#include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -46,6 +48,10 @@
 namespace voxlight::app {
 
 namespace {
+/// Mean thickness (2·volume / area, voxels) below which a capped mesh is the two caps of one plane
+/// lying on each other: caps are nudged kCapPlaneNudge (1e-4 voxel) off their planes, and a slab
+/// a hundredth of a voxel thin holds no voxel sample.
+constexpr double kMinCappedThicknessVoxels = 1e-2;
 namespace fs = std::filesystem;
 using nlohmann::json;
 
@@ -268,6 +274,31 @@ Command addIsoCommand(CLI::App& app) {
                              "the clip planes and crop box remove the whole isosurface (" +
                                  std::to_string(es.flyingEdgesTriangles) + " triangles)",
                              "move them so that part of the surface is kept");
+        if (options.cap && !options.keep.empty() &&
+            std::none_of(ex.mesh.edges().begin(), ex.mesh.edges().end(),
+                         [&](const auto e) { return ex.mesh.is_boundary(e); })) {
+            // Caps close what the cuts keep; planes that keep a region of no thickness (two
+            // opposite planes through one point) leave two coincident caps: a closed mesh of
+            // zero volume, written as "one clean closed part" (probe). Mean thickness 2V/A.
+            double volume6 = 0.0, area2 = 0.0;
+            for (const auto f : ex.mesh.faces()) {
+                std::array<glm::dvec3, 3> t;
+                int k = 0;
+                for (const auto v : ex.mesh.fv_range(f)) {
+                    const auto& p = ex.mesh.point(v);
+                    t[k++] = glm::dvec3(p[0], p[1], p[2]);
+                }
+                volume6 += glm::dot(t[0], glm::cross(t[1], t[2]));
+                area2 += glm::length(glm::cross(t[1] - t[0], t[2] - t[0]));
+            }
+            const double thickness = area2 > 0.0 ? 2.0 * (volume6 / 6.0) / (area2 / 2.0) : 0.0;
+            if (std::abs(thickness) <
+                kMinCappedThicknessVoxels * core::minComponent(volume.geometry().spacing))
+                throw InputError(s.source, s.cropBox ? "crop_box" : "clip_planes",
+                                 "the clip planes and crop box keep a region of no thickness: "
+                                 "the caps would lie on each other",
+                                 "move them so that a slab of the volume is kept");
+        }
 
         sw.restart();
         const iso::CleanupStats cs = iso::cleanUp(ex.mesh, *cleanup, progress);

@@ -481,11 +481,17 @@ Command addReplayCommand(CLI::App& app) {
         throwIfCancelled();
         files.commit();
         if (!videoNote.empty()) std::fprintf(stderr, "voxlight: %s\n", videoNote.c_str());
-        if (!*quiet)
+        if (!*quiet) {
+            // Every method the frames used, in order of first use (a keyframe may switch it).
+            std::string methods;
+            for (const io::Scene& sc : scenes)
+                if (("," + methods + ",").find("," + sc.method.name + ",") == std::string::npos)
+                    methods += (methods.empty() ? "" : ",") + sc.method.name;
             std::fprintf(stderr, "wrote %zu frames to %s%s (%s, total %.2f s)\n", scenes.size(),
                          outDir->c_str(),
                          !video->empty() && videoNote.empty() ? (" and " + *video).c_str() : "",
-                         scenes.front().method.name.c_str(), total.seconds());
+                         methods.c_str(), total.seconds());
+        }
         return kExitOk;
     };
     return c;

@@ -151,6 +151,15 @@ TEST(IsoCli, ClipPlanesThatRemoveEverythingAreAnError) {
                             R"(, "clip_planes": [{"point": [1e4, 0, 0], "normal": [1, 0, 0]}]})");
     expectBadInput(tmp, "iso -q '" + scene.string() + "' -o '" + (tmp / "m.obj").string() + "'",
                    "remove the whole isosurface", {"scene.json"});
+    // Two opposite planes through one point keep a plane: with --cap, two caps on each other (a
+    // closed mesh of no volume, written as one clean part).
+    const fs::path flat =
+        writeScene(tmp, std::string(kSphere) +
+                            R"(, "clip_planes": [{"point": [0, 0, 0], "normal": [1, 0, 0]},
+                                      {"point": [0, 0, 0], "normal": [-1, 0, 0]}]})");
+    expectBadInput(tmp,
+                   "iso -q '" + flat.string() + "' --cap -o '" + (tmp / "m.obj").string() + "'",
+                   "no thickness", {"scene.json"});
 }
 
 // --cap: a crop box through the sphere phantom leaves a watertight piece, the stats say what the
