@@ -356,6 +356,9 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
 }  // namespace
 
 namespace {
+/// An ASCII digit (std::isdigit of a negative char — a UTF-8 byte of a key — is undefined).
+bool asciiDigit(char c) { return c >= '0' && c <= '9'; }
+
 /// A dotted key's parts, empty ones kept ("lights..x" → "lights", "", "x"): the one place an
 /// override's key is split (after dottedKey has written its bracket indices as dotted ones).
 std::vector<std::string> keyParts(const std::string& key) {
@@ -384,7 +387,7 @@ std::string dottedKey(const std::string& key, const std::string& said) {
         const bool afterName = !out.empty() && out.back() != '.';
         const bool digits =
             close != std::string::npos && close > i + 1 &&
-            std::all_of(key.begin() + long(i) + 1, key.begin() + long(close), ::isdigit);
+            std::all_of(key.begin() + long(i) + 1, key.begin() + long(close), asciiDigit);
         const bool thenEnds =
             close != std::string::npos &&
             (close + 1 == key.size() || key[close + 1] == '.' || key[close + 1] == '[');
@@ -398,7 +401,7 @@ std::string dottedKey(const std::string& key, const std::string& said) {
 }
 
 bool isIndexPart(const std::string& part) {
-    return !part.empty() && std::all_of(part.begin(), part.end(), ::isdigit);
+    return !part.empty() && std::all_of(part.begin(), part.end(), asciiDigit);
 }
 
 /// An all-digit part as an array index; an index no array can reach (past std::size_t) is the
@@ -719,7 +722,7 @@ bool isPathKey(const std::string& key) {
     if (key.rfind("lights.", 0) != 0) return false;
     const auto dot = key.find('.', 7);
     return dot != std::string::npos && dot > 7 && key.substr(dot) == ".path" &&
-           std::all_of(key.begin() + 7, key.begin() + long(dot), ::isdigit);
+           std::all_of(key.begin() + 7, key.begin() + long(dot), asciiDigit);
 }
 
 std::vector<OverrideRecord> applyOverrides(json& doc, const std::vector<std::string>& overrides) {

@@ -161,7 +161,7 @@ TEST(Scene, OverridesApplyBeforeValidation) {
     // Any other bracket is the override's error, not an unknown key of the scene's.
     for (const char* bad :
          {"lights[x].intensity=2", "lights[-1].intensity=2", "lights[0]intensity=2",
-          "lights.[0].intensity=2", "[0]=1", "a[0=1", "a]=1"}) {
+          "lights.[0].intensity=2", "[0]=1", "a[0=1", "a]=1", "lights[\u00e9].intensity=2"}) {
         try {
             io::applyOverride(j, bad);
             ADD_FAILURE() << bad;
