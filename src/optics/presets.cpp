@@ -41,7 +41,19 @@ std::array<float, 2> robustRange(const core::Volume& volume, float loFraction, f
         return values[k];
     };
     float lo = quantile(loFraction), hi = quantile(hiFraction);
-    if (!(hi > lo)) hi = lo + 1.f;
+    // A relative preset's points, a fraction of the range apart (≥ 0.1), need float steps between them:
+    // a range of a few steps (a constant volume; values a float step apart, which at 1e8 are 8
+    // apart) collapses them — a constant volume at 1e8 was refused for a window of width 0 (lo + 1
+    // rounds to lo), values one step apart rendered nothing. Such a range becomes
+    // kMinRangeFloatSteps steps of its magnitude from lo; a constant volume's at least 1 (its
+    // range since the first release).
+    constexpr float kMinRangeFloatSteps = 64.f;
+    const float mag = std::max(std::abs(lo), std::abs(hi));
+    const float span = kMinRangeFloatSteps * (std::nextafter(mag, HUGE_VALF) - mag);
+    if (!(hi > lo))
+        hi = lo + (std::isfinite(span) ? std::max(1.f, span) : 1.f);
+    else if (hi - lo < span && std::isfinite(lo + span))
+        hi = lo + span;
     return {lo, hi};
 }
 

@@ -207,6 +207,33 @@ TEST(Presets, RobustRangeOfTheTorsoCoversAirToBone) {
     EXPECT_EQ(optics::defaultPresetName(v), "ct-bone");
 }
 
+TEST(Presets, ARangeOfAFewFloatStepsKeepsTheRelativePresetsPointsApart) {
+    // A constant volume at 1e8 was refused (lo + 1 rounds to lo: a window of width 0); values one
+    // float step apart (8 at 1e8) collapsed 'generic' onto one value. A range fewer than 64 float
+    // steps wide becomes 64 steps; a constant one at least 1 wide; a narrow range of many steps
+    // (0.05 at 1000: 819 steps) stays as it is.
+    const auto range = [](float inside, float outside) {
+        core::Volume v(core::Geometry{.dims = {8, 8, 8}}, core::VoxelType::Float32);
+        float* d = v.dataAs<float>();
+        for (int i = 0; i < 512; ++i) d[i] = (i % 8 >= 2 && i % 8 < 6) ? inside : outside;
+        return optics::robustRange(v);
+    };
+    const float big = 1e8f, bigNext = std::nextafter(big, 2e8f);
+    for (const auto& r : {range(big, big), range(bigNext, big)}) {
+        EXPECT_EQ(r[0], big);
+        EXPECT_FLOAT_EQ(r[1] - r[0], 64.f * (bigNext - big));
+        const TransferFunction tf = optics::makePreset("generic", r);
+        for (std::size_t k = 1; k < tf.points().size(); ++k)
+            EXPECT_GT(tf.points()[k].value, tf.points()[k - 1].value) << k;
+    }
+    const auto flat = range(5.f, 5.f);
+    EXPECT_EQ(flat[0], 5.f);
+    EXPECT_EQ(flat[1], 6.f);
+    const auto narrow = range(1000.05f, 1000.f);
+    EXPECT_EQ(narrow[0], 1000.f);
+    EXPECT_EQ(narrow[1], 1000.05f);
+}
+
 TEST(TfTable, ExtinctionChangeCoversEveryValueWhoseSigmaDiffers) {
     // Brute force: σt through the tables at 200 001 values from far below to far above the range;
     // every value where the two differ lies in the interval, and a colour-only edit gives none.
