@@ -40,6 +40,10 @@ static_assert(kRouletteTransmittance == 0.1, "kRouletteDepth is −ln kRouletteT
 constexpr int kNullCollisionBudget = 4096;
 /// Samples per progressive pass (the stop criteria are checked between passes).
 constexpr int kSamplesPerPass = 4;
+/// Samples per pixel of the first pass under a time cap: the fewest whose spread gives each
+/// pixel a variance — the error estimate, the denoiser's strength and adaptive sampling's weights
+/// read it (after one sample every pixel's variance reads 0: "error 0 %", nothing denoised).
+constexpr int kFirstCappedPassSamples = 2;
 /// Autofocus marches the centre ray at this many voxels (of the smallest spacing) per step.
 constexpr double kAutofocusStepVoxels = 0.25;
 /// The guides' quadrature step (voxels of the smallest spacing) and the transmittance where it
@@ -1428,15 +1432,20 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
     // The stage's clock starts here (a progress line's elapsed time and estimate count from the
     // first report), not after the first pass.
     progress.report("pathtrace", 0.0, "0 spp");
-    // Under a time cap, passes after the first shrink to the samples per pixel that fit in the
-    // time left at the last pass's seconds per sample per pixel (an adaptive pass costs more
-    // than a uniform one: the rate follows the passes), and the render stops when not even half
-    // of one fits — so it ends within about one sample per pixel of the cap, not a whole pass.
+    // Under a time cap the first pass is kFirstCappedPassSamples per pixel (a 4-spp first pass
+    // ran 10.7 s under a 2-s cap with one global majorant), the passes after
+    // it shrink to the samples per pixel that fit in the time left at the last pass's seconds
+    // per sample per pixel (an adaptive pass costs more than a uniform one: the rate follows the
+    // passes), and the render stops when not even half of one fits — so it ends within about
+    // one sample per pixel of the cap, not a whole pass. The uniform warm-up still ends at
+    // exactly kAdaptiveWarmupSamples, so the samples drawn are those of an uncapped render.
     double lastPassSeconds = 0.0;
     int lastPassSamples = 0;
     while (done < options_.samplesPerPixel) {
         int pass = kSamplesPerPass;
-        if (options_.maxSeconds > 0.0 && lastPassSamples > 0) {
+        if (options_.maxSeconds > 0.0 && lastPassSamples == 0) {
+            pass = kFirstCappedPassSamples;
+        } else if (options_.maxSeconds > 0.0) {
             const double perSample = lastPassSeconds / lastPassSamples;
             const double fits = (options_.maxSeconds - clock.seconds()) / perSample;
             if (!(fits >= 0.5)) break;
@@ -1446,6 +1455,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             // samples go to the covered pixels) than the rate just measured: one sample per
             // pixel, whose own rate then sizes the passes after it.
             if (options_.adaptive && done == kAdaptiveWarmupSamples) pass = 1;
+            if (options_.adaptive && done < kAdaptiveWarmupSamples)
+                pass = std::min(pass, kAdaptiveWarmupSamples - done);
         }
         const int s1 = std::min(options_.samplesPerPixel, done + pass);
         const double passStart = clock.seconds();

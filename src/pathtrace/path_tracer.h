@@ -90,8 +90,9 @@ enum class Scattering { Phase, Brdf, Hybrid };
 
 struct Options {
     int samplesPerPixel = 64;  ///< the most samples per pixel (a target error may stop sooner)
-    /// > 0: a time cap: passes shrink to what fits in the time left and the render stops within
-    /// about one sample per pixel of it (at least one pass runs).
+    /// > 0: a time cap: the first pass is two samples per pixel (it always runs), the passes after
+    /// it shrink to what fits in the time left, and the render stops within about one sample per
+    /// pixel of the cap.
     double maxSeconds = 0.0;
     /// > 0: stop after the pass whose estimated relative error (Stats::relativeStdError) is at
     /// most this, once kMinSamplesForErrorStop samples are in.

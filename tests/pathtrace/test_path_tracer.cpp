@@ -260,6 +260,47 @@ TEST(PathTracer, TheImageIsTheSameForAnyThreadCount) {
     EXPECT_GT(sum, 0.0) << "something is lit";
 }
 
+TEST(PathTracer, ATimeCapShorterThanOnePassStopsAfterTwoSamplesPerPixel) {
+    // Whatever the machine's speed, a cap of a nanosecond is over before the first pass ends:
+    // that pass is two samples per pixel, the fewest that give a variance (it was 4, which under
+    // one global majorant ran 10.7 s past a 2-s cap), for uniform and adaptive sampling alike.
+    const Medium s = test::torsoMedium(32);
+    const auto b = s.volume->geometry().worldBounds();
+    const render::Camera cam(render::CameraSpec{}, b[0], b[1], 20, 16);
+    for (bool adaptive : {false, true}) {
+        pathtrace::Options o;
+        o.samplesPerPixel = 64;
+        o.maxSeconds = 1e-9;
+        o.adaptive = adaptive;
+        pathtrace::Stats st;
+        const core::ImageRGBA img = s.tracer(o).render(cam, core::Progress::none(), &st);
+        EXPECT_EQ(st.samplesPerPixel, 2) << "adaptive " << adaptive;
+        EXPECT_EQ(st.minPixelSamples, 2);
+        EXPECT_EQ(st.maxPixelSamples, 2);
+        EXPECT_GT(st.relativeStdError, 0.0);
+        for (float v : img.pixels) ASSERT_TRUE(std::isfinite(v));
+    }
+}
+
+TEST(PathTracer, ATimeCappedRenderDrawsTheSamplesOfAnUncappedOneOfItsCount) {
+    // The passes a cap sizes change where the render stops, not which samples it draws: the
+    // capped image equals the uncapped render of the samples per pixel it reached.
+    const Medium s = test::torsoMedium(32);
+    const auto b = s.volume->geometry().worldBounds();
+    const render::Camera cam(render::CameraSpec{}, b[0], b[1], 20, 16);
+    pathtrace::Options o;
+    o.samplesPerPixel = 1 << 20;
+    o.maxSeconds = 0.05;
+    pathtrace::Stats capped;
+    const core::ImageRGBA a = s.tracer(o).render(cam, core::Progress::none(), &capped);
+    ASSERT_GE(capped.samplesPerPixel, 1);
+    EXPECT_LT(capped.samplesPerPixel, 1 << 20);
+    o.maxSeconds = 0.0;
+    o.samplesPerPixel = capped.samplesPerPixel;
+    const core::ImageRGBA u = s.tracer(o).render(cam, core::Progress::none());
+    EXPECT_EQ(a.pixels, u.pixels) << capped.samplesPerPixel << " spp";
+}
+
 TEST(PathTracer, HardCasesGiveNoNaNOrInfinity) {
     // σt up to 10⁶/mm, a point light inside the volume (and exactly on a voxel), the camera inside,
     // strongly forward scattering, many bounces.
