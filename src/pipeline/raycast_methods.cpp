@@ -729,8 +729,9 @@ bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf, const gri
 constexpr float kVisibleAlpha = 0.5f / 255.f;
 
 /// Why an image shows nothing, and what to do: the TF (or isovalue) leaves every skip cell empty
-/// (`anyCellVisible` false), or no camera ray meets what it shows.
-std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible,
+/// (`anyCellVisible` false), what rays met is too faint (`maxAlpha`, the film's largest coverage,
+/// above 0), or no camera ray meets what it shows.
+std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible, float maxAlpha,
                              const optics::TransferFunction& tf, const grid::BrickGrid& grid) {
     const std::string& method = run.scene().method.name;
     if (!anyCellVisible) {
@@ -754,16 +755,32 @@ std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible,
         }
         return os.str();
     }
+    if (maxAlpha > 0.f) {
+        // Rays met matter, too thin or faint for its extinction (per mm) to reach one display
+        // level anywhere: a volume 0.0055 mm across (spacing 1e-4 mm) under 'generic' — said as
+        // the camera looking past it until 7 December.
+        const core::Geometry& g = run.get<LoadedVolume>("load_volume")->volume.geometry();
+        std::ostringstream os;
+        os << "the image is empty: what '" << method << "' shows is too faint, at most "
+           << 100.0 * maxAlpha << " % opaque on any pixel (the volume is "
+           << glm::length(glm::dvec3(g.dims) * g.spacing) << " mm across and '" << tf.name()
+           << "' absorbs at most " << tf.maxExtinction() << " per mm: check the voxel spacing, "
+           << g.spacing.x << " x " << g.spacing.y << " x " << g.spacing.z
+           << " mm, or raise the TF's opacity)";
+        return os.str();
+    }
     return "the image is empty: no camera ray meets what '" + method +
            "' shows here (the camera looks past it, or clip_planes/crop_box remove it; "
            "check camera.target, camera.eye/azimuth/elevation, clip_planes and crop_box)";
 }
 
-bool filmShowsAnything(const core::ImageRGBA& film) {
-    for (std::size_t i = 3; i < film.pixels.size(); i += 4)
-        if (film.pixels[i] > kVisibleAlpha) return true;
-    return false;
+float maxAlpha(const core::ImageRGBA& film) {
+    float m = 0.f;
+    for (std::size_t i = 3; i < film.pixels.size(); i += 4) m = std::max(m, film.pixels[i]);
+    return m;
 }
+
+bool filmShowsAnything(const core::ImageRGBA& film) { return maxAlpha(film) > kVisibleAlpha; }
 
 /// Never a black image without a word: says why nothing shows and what to do.
 void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
@@ -774,7 +791,7 @@ void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
     if (stats.skipCellsVisible != 0 && stats.rays != 0 &&
         (kind == Kind::Mip || kind == Kind::MinIp))
         return;
-    run.warn(emptyImageReason(run, kind, stats.skipCellsVisible != 0, tf, grid));
+    run.warn(emptyImageReason(run, kind, stats.skipCellsVisible != 0, maxAlpha(film), tf, grid));
 }
 
 std::string dims(const glm::ivec3& d) {
@@ -920,9 +937,10 @@ std::shared_ptr<const TracedImage> tracePath(
         const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
         if (!warnIfNotHounsfield(run, tfa->tf, bricks, &out->warnings) &&
             !filmShowsAnything(out->image))
-            out->warnings.push_back(emptyImageReason(
-                run, Kind::PathTrace,
-                run.get<grid::BrickMajorants>("skip_cells")->nonEmptyCount() > 0, tfa->tf, bricks));
+            out->warnings.push_back(
+                emptyImageReason(run, Kind::PathTrace,
+                                 run.get<grid::BrickMajorants>("skip_cells")->nonEmptyCount() > 0,
+                                 maxAlpha(out->image), tfa->tf, bricks));
     }
     const render::Camera& cam = *camera;
     d["camera"] = {{"eye", {cam.eye().x, cam.eye().y, cam.eye().z}},

@@ -555,6 +555,23 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     // A normal view: no warning.
     d.erase("camera");
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+    // Matter too thin for the TF to show (spacing 1e-3 mm): not the camera — the faintness, the
+    // size and the spacing (the camera was blamed until 7 December).
+    test::TempDir tmp;
+    core::Geometry g{.dims = {12, 12, 12}};
+    g.spacing = glm::dvec3(1e-3);
+    core::Volume v(g, core::VoxelType::Float32);
+    std::fill_n(v.dataAs<float>(), 12 * 12 * 12, 1.f);
+    io::writeVolume(v, tmp / "thin.nii.gz");
+    d["volume"] = (tmp / "thin.nii.gz").string();
+    for (const char* method : {"gradient", "sh-local"}) {
+        d["method"] = method;
+        r = session.run(scene(d));
+        ASSERT_EQ(r.warnings.size(), 1u) << method;
+        EXPECT_NE(r.warnings[0].find("too faint"), std::string::npos) << r.warnings[0];
+        EXPECT_NE(r.warnings[0].find("0.001 x 0.001 x 0.001 mm"), std::string::npos)
+            << r.warnings[0];
+    }
 }
 
 TEST(Pipeline, ACachedVolumeRepeatsItsLoaderWarningInEveryRun) {
