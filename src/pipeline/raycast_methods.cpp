@@ -732,8 +732,17 @@ constexpr float kVisibleAlpha = 0.5f / 255.f;
 /// (`anyCellVisible` false), what rays met is too faint (`maxAlpha`, the film's largest coverage,
 /// above 0), or no camera ray meets what it shows.
 std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible, float maxAlpha,
-                             const optics::TransferFunction& tf, const grid::BrickGrid& grid) {
+                             const optics::TransferFunction& tf, const grid::BrickGrid& grid,
+                             float isoValue = NAN) {
     const std::string& method = run.scene().method.name;
+    const bool iso = kind == Kind::Iso || kind == Kind::IsoLattice;
+    // What the TF (or isovalue) shows exists in the data, yet no cell holds it: the clip planes
+    // and crop box removed it (iso-lattice blamed the TF).
+    const bool shownInData = iso ? isoValue >= grid.valueLo() && isoValue <= grid.valueHi()
+                                 : !tf.transparentOver(grid.valueLo(), grid.valueHi());
+    if (!anyCellVisible && shownInData && (!run.scene().clipPlanes.empty() || run.scene().cropBox))
+        return "the image is empty: clip_planes and crop_box remove everything '" + method +
+               "' shows (move them so that part of it is kept)";
     if (!anyCellVisible) {
         // The TF (or isovalue) leaves every cell empty: compare what it shows with what is there.
         float lo = INFINITY, hi = -INFINITY;
@@ -741,7 +750,7 @@ std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible, flo
             if (p.extinction > 0.f) lo = std::min(lo, p.value), hi = std::max(hi, p.value);
         std::ostringstream os;
         os << "the image is empty: ";
-        if (kind == Kind::Iso) {
+        if (iso) {
             os << "the isovalue lies outside this volume's values [" << grid.valueLo() << ", "
                << grid.valueHi() << "] (set method.params.iso_value inside them)";
         } else {
@@ -785,13 +794,14 @@ bool filmShowsAnything(const core::ImageRGBA& film) { return maxAlpha(film) > kV
 /// Never a black image without a word: says why nothing shows and what to do.
 void warnIfNothingShows(Run& run, Kind kind, const core::ImageRGBA& film,
                         const render::RenderStats& stats, const optics::TransferFunction& tf,
-                        const grid::BrickGrid& grid) {
+                        const grid::BrickGrid& grid, float isoValue) {
     if (filmShowsAnything(film)) return;
     // A MIP/MinIP whose rays ran shows the background's grey on purpose.
     if (stats.skipCellsVisible != 0 && stats.rays != 0 &&
         (kind == Kind::Mip || kind == Kind::MinIp))
         return;
-    run.warn(emptyImageReason(run, kind, stats.skipCellsVisible != 0, maxAlpha(film), tf, grid));
+    run.warn(emptyImageReason(run, kind, stats.skipCellsVisible != 0, maxAlpha(film), tf, grid,
+                              isoValue));
 }
 
 std::string dims(const glm::ivec3& d) {
@@ -2627,7 +2637,7 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
             // One line about the TF: the unit mismatch explains an empty image too.
             if (!warnIfNotHounsfield(run, tfn, bricks))
-                warnIfNothingShows(run, kind, *film, stats, tfn, bricks);
+                warnIfNothingShows(run, kind, *film, stats, tfn, bricks, caster.isoValue());
             const std::size_t bytes = film->pixels.size() * sizeof(float);
             return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
         } catch (const InputError& e) {

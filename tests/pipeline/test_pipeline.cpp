@@ -555,6 +555,16 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     // A normal view: no warning.
     d.erase("camera");
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+    // Clip planes that remove the whole isosurface: iso-lattice blamed the TF.
+    d["method"] = "iso-lattice";
+    d["clip_planes"] = json::array({{{"point", {100, 0, 0}}, {"normal", {1, 0, 0}}}});
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("clip_planes and crop_box remove everything 'iso-lattice'"),
+              std::string::npos)
+        << r.warnings[0];
+    d.erase("clip_planes");
+    d.erase("method");
     // Matter too thin for the TF to show (spacing 1e-3 mm): not the camera — the faintness, the
     // size and the spacing (the camera was blamed until 7 December).
     test::TempDir tmp;
