@@ -356,9 +356,14 @@ const SweepReference& SweepRunner::reference(std::size_t index, const core::Prog
     ref.linear = std::move(r.image);
     ref.display = displayOf(ref.linear, s);
     const json& pt = r.details.contains("pathtrace") ? r.details["pathtrace"] : json::object();
-    ref.relativeStdError = pt.value("relative_std_error", std::numeric_limits<double>::quiet_NaN());
-    // A reference cached before 7 December has no expected_nrmse: nan, not a floor in other units.
-    ref.expectedNrmse = pt.value("expected_nrmse", std::numeric_limits<double>::quiet_NaN());
+    // Null (one sample per pixel: unknown) or absent (a reference cached before 7 December has
+    // no expected_nrmse): nan, not a floor in other units.
+    const auto number = [&](const char* key) {
+        return pt.contains(key) && pt[key].is_number() ? pt[key].get<double>()
+                                                       : std::numeric_limits<double>::quiet_NaN();
+    };
+    ref.relativeStdError = number("relative_std_error");
+    ref.expectedNrmse = number("expected_nrmse");
     ref.spp = pt.value("spp", 0LL);
     for (const auto& st : r.stages)
         if (st.ran && st.kind != pipeline::StageKind::Input) ref.seconds += st.seconds;

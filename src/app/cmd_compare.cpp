@@ -96,7 +96,9 @@ Command addCompareCommand(CLI::App& app) {
             "PEAK"));
     c.sub
         ->add_option("--mask", *mask,
-                     "Pixels averaged: all (none), or those covered in either image's alpha")
+                     "Pixels averaged: all (none), or those covered in either image's alpha "
+                     "(either way a PNG "
+                     "with alpha is compared as seen over black: colours times alpha)")
         ->check(CLI::IsMember({"none", "alpha"}));
     c.run = [=] {
         checkOutputs({{"--map", *map, {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp"}}},

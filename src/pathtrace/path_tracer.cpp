@@ -1486,7 +1486,8 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         });
         lastPassSamples = s1 - done;
         done = s1;
-        error = relativeError();
+        // One sample per pixel has no spread to estimate its error from: unknown, not 0 %.
+        error = done >= 2 ? relativeError() : std::numeric_limits<double>::quiet_NaN();
         lastPassSeconds = clock.seconds() - passStart;
         // Progress: the largest of the spp fraction, the error's (error ∝ 1/√n, so the target
         // needs about n·(error/target)² samples) and the time cap's.
@@ -1497,7 +1498,10 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         if (options_.maxSeconds > 0.0)
             fraction = std::max(fraction, std::min(1.0, clock.seconds() / options_.maxSeconds));
         char text[96];
-        std::snprintf(text, sizeof text, "%d spp, error %.2f%%", done, 100.0 * error);
+        if (std::isnan(error))
+            std::snprintf(text, sizeof text, "%d spp, error unknown", done);
+        else
+            std::snprintf(text, sizeof text, "%d spp, error %.2f%%", done, 100.0 * error);
         progress.report("pathtrace", fraction, text);
         if (options_.targetError > 0.0 && done >= kMinSamplesForErrorStop &&
             error <= options_.targetError) {
@@ -1541,7 +1545,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
         // ErrorStats::nrmse's normalisation (the reference's RMS, not its mean) over the same
         // covered pixels and channels: what a perfect image's nrmse against this one would be.
         const CoveredSums t = coveredSums();
-        stats->expectedNrmse = t.square > 0.0 ? std::sqrt(t.var / t.square) : 0.0;
+        stats->expectedNrmse = std::isnan(error) ? error
+                               : t.square > 0.0  ? std::sqrt(t.var / t.square)
+                                                 : 0.0;
         stats->targetReached = reached;
         stats->focusMm = lens ? focus : 0.0;
         stats->autofocused = lens && !(options_.focusMm > 0.0);

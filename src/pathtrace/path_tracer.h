@@ -145,7 +145,8 @@ struct Stats {
     /// The image's estimated relative error: √(mean over covered pixels and R, G, B of the
     /// variance of the pixel's mean) / (mean covered RGB value) — the NRMS error against the
     /// converged image that the samples predict (noise only; the estimator has no bias), in the
-    /// convergence benchmark's terms. 0 for a black image. (Until 7 December it was the
+    /// convergence benchmark's terms. 0 for a black image; NaN (unknown: JSON null) after one
+    /// sample per pixel, which has no spread (it read 0). (Until 7 December it was the
     /// luminance's: on coloured multiple-scattering images 15–24 % under the RGB error measured.)
     double relativeStdError = 0.0;
     /// The same noise in analysis::ErrorStats::nrmse's terms (normalised by the image's RMS value

@@ -936,7 +936,7 @@ std::shared_ptr<const TracedImage> tracePath(
         out->warnings.push_back(
             std::to_string(st.majorantViolations) +
             " samples exceeded their cell's majorant: the image may be biased (please report)");
-    if (pt.targetError > 0.0 && !st.targetReached)
+    if (pt.targetError > 0.0 && !st.targetReached && std::isfinite(st.relativeStdError))
         out->warnings.push_back(
             "the path tracer stopped at " + std::to_string(st.samplesPerPixel) +
             " spp with an estimated error of " + std::to_string(100.0 * st.relativeStdError) +
@@ -2540,8 +2540,12 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         ref.describe = [](const Run&, const Artifact& a) {
             const auto& t = *a.as<TracedImage>();
             std::ostringstream os;
-            os << t.details["pathtrace"].value("spp", 0) << " spp, estimated error "
-               << 100.0 * t.details["pathtrace"].value("relative_std_error", 0.0) << " %";
+            const json& e = t.details["pathtrace"]["relative_std_error"];
+            os << t.details["pathtrace"].value("spp", 0) << " spp, estimated error ";
+            if (e.is_number())
+                os << 100.0 * e.get<double>() << " %";
+            else
+                os << "unknown";  // one sample per pixel (null)
             return os.str();
         };
         plan.stages.push_back(ref);

@@ -282,6 +282,23 @@ TEST(PathTracer, ATimeCapShorterThanOnePassStopsAfterTwoSamplesPerPixel) {
     }
 }
 
+TEST(PathTracer, OneSamplePerPixelHasAnUnknownErrorNotZero) {
+    // One sample has no spread: the error read 0 % ("converged") after one sample per pixel.
+    const Medium s = test::torsoMedium(32);
+    const auto b = s.volume->geometry().worldBounds();
+    const render::Camera cam(render::CameraSpec{}, b[0], b[1], 20, 16);
+    pathtrace::Options o;
+    o.samplesPerPixel = 1;
+    pathtrace::Stats st;
+    s.tracer(o).render(cam, core::Progress::none(), &st);
+    EXPECT_TRUE(std::isnan(st.relativeStdError));
+    EXPECT_TRUE(std::isnan(st.expectedNrmse));
+    o.samplesPerPixel = 2;
+    s.tracer(o).render(cam, core::Progress::none(), &st);
+    EXPECT_GT(st.relativeStdError, 0.0);
+    EXPECT_GT(st.expectedNrmse, 0.0);
+}
+
 TEST(PathTracer, ATimeCappedRenderDrawsTheSamplesOfAnUncappedOneOfItsCount) {
     // The passes a cap sizes change where the render stops, not which samples it draws: the
     // capped image equals the uncapped render of the samples per pixel it reached.
