@@ -61,8 +61,10 @@
 // Clip-aware field (clipAwareHierarchicalVisibility; io/scene.h `shadows_from_removed: false`):
 // the matter outside a kept region (the intersection of half-spaces: the clip planes and crop box
 // that remove matter for the light too) is gone for the light. It is removed where Ritschel's
-// method sees matter, at the pyramid's base (OpacityPyramid::withRemoved): σt = 0 at every voxel
-// whose centre lies outside some half-space, and every coarser cell above such a voxel (one with
+// method sees matter, at the pyramid's base (OpacityPyramid::withRemoved): every voxel's σt times
+// the fraction of its box each half-space keeps (½ + the centre's distance over the box's width
+// across the plane, clamped: 0 for a voxel wholly outside, σt falling continuously as a plane
+// moves through a voxel), and every coarser cell above a changed voxel (one with
 // σt > 0) minified again — the other cells are copied — so all levels, and every ray that reads
 // them, see it gone. A coarse cell that straddles a cut face mixes kept matter with the emptied
 // part as it mixes matter with any gap beside it. Unlike sh-local's radius-bounded rays
@@ -108,10 +110,10 @@ class OpacityPyramid {
                                 const optics::TfTable& table,
                                 const core::Progress& progress = core::Progress::none());
     /// This pyramid with the matter outside `kept` (world half-spaces; their intersection is kept)
-    /// removed: σt = 0 at every voxel whose centre lies outside some half-space, and the coarser
-    /// cells above a voxel that changed (σt > 0 before) minified again, the rest copied (see the
-    /// header comment). `voxelsChanged`/`cellsChanged` (optional) count the zeroed voxels and the
-    /// re-minified cells of levels ≥ 1. With no half-spaces: a copy.
+    /// removed: σt scaled by the fraction of each voxel the half-spaces keep (0 wholly outside),
+    /// and the coarser cells above a voxel that changed (σt > 0 before) minified again, the rest
+    /// copied (see the header comment). `voxelsChanged`/`cellsChanged` (optional) count the
+    /// zeroed voxels and the re-minified cells of levels ≥ 1. With no half-spaces: a copy.
     OpacityPyramid withRemoved(std::span<const core::HalfSpace> kept,
                                std::uint64_t* voxelsChanged = nullptr,
                                std::uint64_t* cellsChanged = nullptr) const;
