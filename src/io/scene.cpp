@@ -132,11 +132,15 @@ VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
         f.fail("is required", "add \"volume\": \"path/to/volume\" or {\"phantom\": \"torso\"}");
     if (f.isString()) {
         v.path = pathOf(f, baseDir);
+        v.written = f.string(), v.key = "volume";
         return v;
     }
     f.allowOnly({"path", "phantom", "size", "series", "nonfinite", "strict_geometry"});
     if (f.has("path") == f.has("phantom")) f.fail("needs exactly one of 'path' or 'phantom'");
-    if (f.has("path")) v.path = pathOf(f.child("path"), baseDir);
+    if (f.has("path")) {
+        v.path = pathOf(f.child("path"), baseDir);
+        v.written = f.child("path").string(), v.key = "volume.path";
+    }
     if (f.has("phantom")) {
         // Named here, with the scene's key (makePhantom's own refusal names no file).
         std::vector<std::string> names;

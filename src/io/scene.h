@@ -74,6 +74,8 @@ namespace voxlight::io {
 struct VolumeSource {
     std::filesystem::path
         path;             ///< resolved against the scene file's directory; empty when a phantom
+    std::string written;  ///< the path as the scene wrote it (for errors)
+    std::string key;      ///< where: "volume" or "volume.path"
     std::string phantom;  ///< phantom name; empty when a path
     int phantomSize = 0;  ///< 0 = phantom default
     ReadOptions readOptions;

@@ -66,6 +66,17 @@ core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progr
         o.size = src.phantomSize;
         return core::makePhantom(src.phantom, o, progress);
     }
+    // Named by the scene's file and key, with where a relative path was looked for (the reader
+    // alone said "relative to the current directory" of a path taken from the scene's).
+    std::error_code ec;
+    if (!src.written.empty() && !std::filesystem::exists(src.path, ec))
+        throw InputError(
+            scene.source, src.key,
+            "'" + src.written + "' does not exist" +
+                (src.path.string() != src.written ? " (looked for " + src.path.string() + ")"
+                                                  : std::string()),
+            "a scene file's relative paths are taken from its directory, --set "
+            "and command-line paths from the current one");
     return io::readVolume(src.path, src.readOptions, progress);
 }
 

@@ -222,15 +222,19 @@ OpacityPyramid OpacityPyramid::withRemoved(std::span<const core::HalfSpace> kept
     if (!kept.empty()) {
         const std::vector<IndexFace> faces = indexFaces(geometry_, kept);
         // Level 0: each voxel's σt times the fraction of it each half-space keeps — the voxel's
-        // box as a slab across the plane's normal, kept = ½ + distance / width, clamped — so a
-        // moving plane thins a voxel continuously. (All or nothing by the centre made a cut face
-        // jump ≈ 10 % in brightness each time the plane crossed a voxel centre: probe.) A voxel
-        // any plane touches reads its σt, not its value (NaN); fully removed ones are counted.
+        // box (±½ voxel, cut to the volume's box [0, dims − 1], where the rays end: a plane on
+        // the outermost centres keeps everything) as a slab across the plane's normal, kept =
+        // ½ + distance of the box's centre / its width, clamped — so a moving plane thins a voxel
+        // continuously. (All or nothing by the centre made a cut face jump ≈ 10 % in brightness
+        // each time the plane crossed a voxel centre: probe.) A voxel any plane touches reads
+        // its σt, not its value (NaN); fully removed ones are counted.
         const glm::ivec3 d0 = dims_[0];
         std::vector<std::uint8_t> changed(o.data_[0].size(), 0);
-        std::vector<double> width;  // mm, each face's normal across one voxel's box
-        for (const IndexFace& f : faces)
-            width.push_back(std::abs(f.grad.x) + std::abs(f.grad.y) + std::abs(f.grad.z));
+        // The voxel's box along one axis: its centre and half-width (index units).
+        const auto span = [](int i, int n) {
+            const double lo = std::max(i - 0.5, 0.0), hi = std::min(i + 0.5, n - 1.0);
+            return glm::dvec2(0.5 * (lo + hi), 0.5 * (hi - lo));
+        };
         std::atomic<std::uint64_t> zeroed{0};
         tbb::parallel_for(tbb::blocked_range<int>(0, d0.z), [&](const auto& range) {
             std::uint64_t n = 0;
@@ -240,10 +244,15 @@ OpacityPyramid OpacityPyramid::withRemoved(std::span<const core::HalfSpace> kept
                         const std::size_t i =
                             std::size_t(x) + std::size_t(d0.x) * (y + std::size_t(d0.y) * z);
                         if (o.data_[0][i] == 0.f) continue;
-                        const glm::dvec3 p(x, y, z);
+                        const glm::dvec2 sx = span(x, d0.x), sy = span(y, d0.y), sz = span(z, d0.z);
+                        const glm::dvec3 c(sx[0], sy[0], sz[0]), half(sx[1], sy[1], sz[1]);
                         double keep = 1.0;
-                        for (std::size_t k = 0; k < faces.size() && keep > 0.0; ++k)
-                            keep *= std::clamp(0.5 + faces[k].distance(p) / width[k], 0.0, 1.0);
+                        for (std::size_t k = 0; k < faces.size() && keep > 0.0; ++k) {
+                            const IndexFace& f = faces[k];
+                            const double d = f.distance(c),
+                                         w = 2.0 * glm::dot(glm::abs(f.grad), half);
+                            keep *= w > 0.0 ? std::clamp(0.5 + d / w, 0.0, 1.0) : d >= 0.0;
+                        }
                         if (keep >= 1.0) continue;
                         o.data_[0][i] = keep > 0.0 ? float(keep * o.data_[0][i]) : 0.f;
                         o.values_[i] = NAN;

@@ -62,9 +62,10 @@
 // the matter outside a kept region (the intersection of half-spaces: the clip planes and crop box
 // that remove matter for the light too) is gone for the light. It is removed where Ritschel's
 // method sees matter, at the pyramid's base (OpacityPyramid::withRemoved): every voxel's σt times
-// the fraction of its box each half-space keeps (½ + the centre's distance over the box's width
-// across the plane, clamped: 0 for a voxel wholly outside, σt falling continuously as a plane
-// moves through a voxel), and every coarser cell above a changed voxel (one with
+// the fraction of its box (±½ voxel cut to the volume's box) each half-space keeps (½ + the box
+// centre's distance over its width across the plane, clamped: 0 for a voxel wholly outside, σt
+// falling continuously as a plane moves through a voxel), and every coarser cell above a changed
+// voxel (one with
 // σt > 0) minified again — the other cells are copied — so all levels, and every ray that reads
 // them, see it gone. A coarse cell that straddles a cut face mixes kept matter with the emptied
 // part as it mixes matter with any gap beside it. Unlike sh-local's radius-bounded rays
