@@ -883,7 +883,9 @@ std::string listSeries(const std::map<std::string, std::vector<SliceHeader>>& gr
         if (!out.empty()) out += "; ";
         out += uidLabel(uid) + " \"" + slices.front().description + "\" (" +
                std::to_string(slices.size()) + (slices.size() == 1 ? " slice" : " slices");
-        if (uid.empty()) out += std::string(", select with --series ") + kNoUidSelector;
+        if (uid.empty())
+            out +=
+                std::string(", select with --series ") + kNoUidSelector + " (scene: volume.series)";
         out += ")";
     }
     return out;
@@ -1029,7 +1031,8 @@ StackLayout sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceA
         if (strict)
             throw InputError(src, "ImagePositionPatient",
                              "gantry tilt of " + formatNumber(driftAngle, 3) +
-                                 " degrees is refused under --strict-geometry; the slice "
+                                 " degrees is refused under --strict-geometry (scene: "
+                                 "volume.strict_geometry); the slice "
                                  "positions drift " +
                                  formatNumber(maxDrift, 4) + " mm sideways over " +
                                  formatNumber(std::abs(driftAlong), 4) +
@@ -1076,15 +1079,16 @@ StackLayout sortAndCheckPositions(std::vector<SliceHeader>& slices, const SliceA
     if (worst > kMaxGridOffset * spacing) {
         const auto [lo, hi] = std::minmax_element(gaps.begin(), gaps.end());
         if (strict)
-            throw InputError(
-                src, "ImagePositionPatient",
-                "variable slice spacing is refused under --strict-geometry: gaps between slices "
-                "range from " +
-                    formatNumber(*lo, 4) + " to " + formatNumber(*hi, 4) + " mm; the slice at " +
-                    where(slices[worstSlice]) + " is " + formatNumber(worst, 3) +
-                    " mm off a uniform grid of " + formatNumber(spacing, 5) + " mm (tolerance " +
-                    formatNumber(kMaxGridOffset * 100) + " % of the spacing)",
-                strictFix);
+            throw InputError(src, "ImagePositionPatient",
+                             "variable slice spacing is refused under --strict-geometry (scene: "
+                             "volume.strict_geometry): gaps between slices "
+                             "range from " +
+                                 formatNumber(*lo, 4) + " to " + formatNumber(*hi, 4) +
+                                 " mm; the slice at " + where(slices[worstSlice]) + " is " +
+                                 formatNumber(worst, 3) + " mm off a uniform grid of " +
+                                 formatNumber(spacing, 5) + " mm (tolerance " +
+                                 formatNumber(kMaxGridOffset * 100) + " % of the spacing)",
+                             strictFix);
         layout.irregularity += std::string(layout.regular ? "" : " and ") +
                                "slice spacing varying from " + formatNumber(*lo, 4) + " to " +
                                formatNumber(*hi, 4) + " mm";
@@ -1326,7 +1330,8 @@ dicom_module::SeriesResult readDicomSeriesWithGdcm(const std::filesystem::path& 
                              "series " + options.dicomSeriesUid +
                                  " is not in the folder, which holds " +
                                  std::to_string(groups.size()) + " series: " + listSeries(groups),
-                             "choose one of the listed UIDs with --series UID");
+                             "choose one of the listed UIDs with --series UID (in a scene: "
+                             "\"volume\": {\"path\": …, \"series\": UID})");
     } else if (pathUidKnown) {
         chosen = pathUid;  // a file was given: read the series it belongs to
     } else if (!isDir) {
@@ -1336,7 +1341,8 @@ dicom_module::SeriesResult readDicomSeriesWithGdcm(const std::filesystem::path& 
         throw InputError(
             str(dir), "SeriesInstanceUID",
             "the folder holds " + std::to_string(groups.size()) + " series: " + listSeries(groups),
-            "choose one with --series UID");
+            "choose one with --series UID (in a scene: \"volume\": {\"path\": …, \"series\": "
+            "UID})");
     } else {
         chosen = groups.begin()->first;
     }

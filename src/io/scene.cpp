@@ -148,7 +148,13 @@ VolumeSource parseVolume(const Field& f, const fs::path& baseDir) {
         v.phantom = f.child("phantom").oneOf(names);
     }
     f.get("size", v.phantomSize, 8, 1024);
-    if (f.has("series")) v.readOptions.dicomSeriesUid = f.child("series").string();
+    if (f.has("series")) {
+        v.readOptions.dicomSeriesUid = f.child("series").string();
+        if (v.readOptions.dicomSeriesUid.empty())
+            f.child("series").fail("is empty (it read as no series given)",
+                                   "give a SeriesInstanceUID, \"none\" for files without one, or "
+                                   "remove the key");
+    }
     f.get("strict_geometry", v.readOptions.strictGeometry,
           "write true (refuse a gantry-tilted or variably spaced DICOM series) or false (resample "
           "it with a warning), without quotes");

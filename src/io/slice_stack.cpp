@@ -99,7 +99,9 @@ SliceStackGrid sliceStackGrid(const core::Geometry& stack, const std::vector<glm
                              " times is resampled): the slice positions drift or jump far "
                              "more than a gantry tilt or a variable spacing does",
                          "check the files' ImagePositionPatient (the series looks damaged), or "
-                         "pass --strict-geometry to see the irregularity refused by name");
+                         "pass --strict-geometry (scene: volume.strict_geometry) to see the "
+                         "irregularity refused "
+                         "by name");
     if (nx > core::kMaxDim || ny > core::kMaxDim || nz > core::kMaxDim ||
         nx * ny * nz > double(core::kMaxVoxels))
         throw InputError(source, "ImagePositionPatient",

@@ -2270,8 +2270,18 @@ Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& option
         throw InputError(path.string(), "path", "does not exist",
                          "check the path (relative to the current directory)");
     core::refuseSpecialFile(path);
+    // A series UID picks a series of a DICOM folder; on any other file it chose nothing, silently.
+    const auto refuseSeries = [&](const std::string& format) {
+        if (!options.dicomSeriesUid.empty())
+            throw InputError(path.string(), "series",
+                             "a DICOM series UID ('" + options.dicomSeriesUid +
+                                 "') was given for a " + format + " file",
+                             "remove --series (scene: volume.series): it picks one series of a "
+                             "DICOM folder");
+    };
     Volume v;
     if (options.raw) {
+        refuseSeries("raw");
         if (fs::is_directory(path))
             throw InputError(path.string(), "path", "is a directory, not a raw file");
         v = readRaw(path, *options.raw);
@@ -2306,6 +2316,7 @@ Volume detail::readVolumeWithVtk(const fs::path& path, const ReadOptions& option
             throw InputError(
                 path.string(), "format", "is not a volume voxlight can read (tried " + tried + ")",
                 "use NIfTI, NRRD, MetaImage, VTI, a DICOM folder, or raw with --dims/--type");
+        if (chosen->name != "DICOM series") refuseSeries(chosen->name);
         v = chosen->read(path, options, progress);
         v.format = chosen->name;
     }

@@ -100,6 +100,8 @@ TEST(Scene, ErrorsNameTheKeyPath) {
         "crop_box.min", {"below"});
     expectBad(json::parse(R"({"volume": {"path": "a.nii", "phantom": "torso"}})"), "volume",
               {"exactly one"});
+    expectBad(json::parse(R"({"volume": {"path": "a.nii", "series": ""}})"), "volume.series",
+              {"empty"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": [7]})"), "effects[0]", {"string"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": "specular"})"), "effects", {"array"});
 }

@@ -57,6 +57,28 @@ TEST(VolumeIo, RoundTripThroughEveryWritableFormat) {
     }
 }
 
+TEST(VolumeIo, ADicomSeriesUidOnAnyOtherFileIsRefused) {
+    // --series / volume.series picks one series of a DICOM folder; given for a NIfTI or raw file
+    // it was ignored without a word (probe).
+    test::TempDir tmp;
+    io::writeVolume(smallTorso(), tmp / "t.nii.gz");
+    io::ReadOptions o;
+    o.dicomSeriesUid = "1.2.3";
+    for (const bool raw : {false, true}) {
+        if (raw)
+            o.raw = io::RawLayout{{2, 2, 1}, core::VoxelType::UInt8, {1.0, 1.0, 1.0}, false, 0};
+        try {
+            (void)io::readVolume(tmp / "t.nii.gz", o);
+            ADD_FAILURE() << "read with a series UID, raw " << raw;
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "series");
+            EXPECT_NE(std::string(e.what()).find(raw ? "raw file" : "NIfTI file"),
+                      std::string::npos)
+                << e.what();
+        }
+    }
+}
+
 TEST(VolumeIo, NiftiKeepsObliqueOrientationAndRescale) {
     test::TempDir tmp;
     core::Volume v = smallTorso();
