@@ -35,9 +35,11 @@
 // P·f_brdf·|n·wi| + (1 − P)·a·p, each estimated with its own light sampling and MIS exactly as the
 // phase function is. A BRDF event's colour is the BRDF's (diffuse a, specular F0): it does not
 // multiply by a again. A zero (or non-finite) gradient has no normal: phase, whatever the mode.
-// Unlike a phase event, a BRDF event that ends the path (single scattering, or the last bounce)
-// still draws one BRDF direction toward the area and environment lights, MIS-weighted with its
-// light samples (power heuristic): glossy lobes under an environment map need it.
+// A BRDF or phase event that ends the path (single scattering, or the last bounce) still draws
+// one direction from its BRDF or phase function toward the area and environment lights,
+// MIS-weighted with its light samples (power heuristic): glossy lobes under an environment map
+// and large area lights need it (phase events since 7 December; none is drawn under delta lights
+// alone).
 //   phase   never the BRDF (the default: the optical model of ARCHITECTURE.md §1 that every
 //           other method approximates, so the reference stays comparable)
 //   brdf    always the BRDF where the gradient is non-zero

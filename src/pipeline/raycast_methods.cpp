@@ -829,8 +829,10 @@ const Codec& tracedImageCodec() {
     // 3: the target-error stop reads the RGB error (more samples on coloured scenes), and the
     // details carry expected_nrmse and the empty-image warnings.
     // 4: references trace their own random stream (kReferenceStream), not the scene seed's.
+    // 5: a phase event that ends a path also samples the phase function toward area and
+    // environment lights (MIS): other samples under such lights; and a 1-spp error is null.
     static const Codec c{
-        4,
+        5,
         [](const Artifact& a, ByteWriter& w) {
             const auto& t = *a.as<TracedImage>();
             w.pod(std::int32_t(t.image.width));
