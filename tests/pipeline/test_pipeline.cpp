@@ -584,6 +584,26 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     }
 }
 
+TEST(Pipeline, APointLightInsideTheVolumeWarnsThatTheShFieldsSeePastIt) {
+    // The SH methods' visibility runs past a point light (matter behind it shadows it: 4× too
+    // dark in a probe); the path tracer's shadow rays end at the light: no warning there.
+    Session session;
+    json d = {{"volume", {{"phantom", "sphere"}, {"size", 16}}},
+              {"transfer_function", "phantom-step"},
+              {"lights", json::array({{{"type", "point"}, {"position", {0, 0, 0}}}})},
+              {"image", {{"width", 16}, {"height", 16}}}};
+    for (const char* method : {"sh-local", "sh-global", "ritschel"}) {
+        d["method"] = method;
+        RunResult r = session.run(scene(d));
+        ASSERT_EQ(r.warnings.size(), 1u) << method;
+        EXPECT_NE(r.warnings[0].find("lights[0] is a point light inside the volume"),
+                  std::string::npos)
+            << r.warnings[0];
+    }
+    d["lights"][0]["position"] = {0, 0, 500};
+    EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+}
+
 TEST(Pipeline, ACachedVolumeRepeatsItsLoaderWarningInEveryRun) {
     // A tilted DICOM series loads with one warning (resampled). A session that serves the volume
     // from its memory cache must still say so for each render it makes from it: the warning is
