@@ -337,8 +337,15 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
     std::vector<std::string> allowed = {"type", "color", "intensity"};
     if (l.type == "directional") allowed.insert(allowed.end(), {"direction"});
     if (l.type == "point") allowed.insert(allowed.end(), {"position", "min_distance"});
-    if (l.type == "area")
-        allowed.insert(allowed.end(), {"shape", "position", "normal", "radius", "size"});
+    if (l.type == "area") {
+        // Each shape's own keys: a sphere's 'size' or a rect's 'radius' was ignored unsaid.
+        const std::string shape =
+            f.has("shape") ? f.child("shape").oneOf({"sphere", "rect", "disk"}) : "sphere";
+        allowed.insert(allowed.end(), {"shape", "position"});
+        if (shape == "sphere") allowed.insert(allowed.end(), {"radius"});
+        if (shape == "rect") allowed.insert(allowed.end(), {"normal", "size"});
+        if (shape == "disk") allowed.insert(allowed.end(), {"normal", "radius"});
+    }
     if (l.type == "environment") allowed.insert(allowed.end(), {"path", "rotation", "layout"});
     f.allowOnly(allowed);
     f.get("color", l.color, 0.0, 1e9);

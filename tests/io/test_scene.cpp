@@ -102,6 +102,15 @@ TEST(Scene, ErrorsNameTheKeyPath) {
               {"exactly one"});
     expectBad(json::parse(R"({"volume": {"path": "a.nii", "series": ""}})"), "volume.series",
               {"empty"});
+    // Another shape's keys (they were ignored without a word).
+    expectBad(
+        json::parse(
+            R"({"volume": "a.nii", "lights": [{"type": "area", "shape": "sphere", "size": [5, 5]}]})"),
+        "lights[0].size", {"radius"});
+    expectBad(
+        json::parse(
+            R"({"volume": "a.nii", "lights": [{"type": "area", "shape": "rect", "radius": 5}]})"),
+        "lights[0].radius", {"size"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": [7]})"), "effects[0]", {"string"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": "specular"})"), "effects", {"array"});
 }

@@ -309,9 +309,11 @@ TEST(Pipeline, AreaLightsShadeAsTheirEquivalentPointLights) {
                                     {"shape", shape},
                                     {"position", {0, -300, 100}},
                                     {"normal", {0, 1, -0.3}},
-                                    {"size", {20, 20}},
-                                    {"radius", 10},
                                     {"intensity", 50}}});
+        if (std::string(shape) == "rect")
+            d["lights"][0]["size"] = {20, 20};
+        else
+            d["lights"][0]["radius"] = 10;
         const RunResult a = session.run(scene(d));
         d["lights"][0]["normal"] = {0, -1, 0.3};  // facing away: only ambient remains
         const RunResult away = session.run(scene(d));
