@@ -32,8 +32,10 @@
 //                          pathtrace, other methods warn), "focus_distance": mm along the view
 //                          or "auto" (the first visible surface at the image centre)},
 //   "lights": [{"type": "directional", "direction": [x,y,z] (the direction the light travels),
-//               "color": [r,g,b], "intensity": W/m²},
-//              {"type": "point", "position": [x,y,z], "color": ..., "intensity": W/sr,
+//               "color": [r,g,b], "intensity": irradiance E (radiance units × sr)},
+//              {"type": "point", "position": [x,y,z], "color": ..., "intensity": I, irradiance
+//               I / d² at d mm — so I = 10⁶ matches a directional intensity of 1 at 1 m (the
+//               units were given as W/m² and W/sr, 10⁶ apart with distances in mm),
 //               "min_distance": mm},
 //              {"type": "area", "shape": "sphere"|"rect"|"disk", "position": ..., "normal": ...,
 //               "radius": mm, "size": [w,h]},
