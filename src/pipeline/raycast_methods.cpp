@@ -2567,7 +2567,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
     plan.casterSetup = [options, kind, clipped](const Run& run) {
         return casterSetupOf(run, options, kind, clipped);
     };
-    frame.compute = [options, kind, clipped, isoLattice, pvrtParams](Run& run) {
+    frame.compute = [options, kind, clipped, isoLattice, pvrtParams,
+                     globalAsked = shParams.global.resolution](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -2614,6 +2615,13 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
             // A resolved default is a parameter as used (pipeline.h: "params_resolved").
             if (kind == Kind::Iso || kind == Kind::IsoLattice)
                 d["params_resolved"]["iso_value"] = caster.isoValue();
+            // The global grid is capped at the multiresolution grid's points per axis: the
+            // stats said 1024 where 64³ ran (probe).
+            if (kind == Kind::ShGlobal && setup.sh.global) {
+                const glm::ivec3 r = setup.sh.global->resolution();
+                if (std::max({r.x, r.y, r.z}) != globalAsked)
+                    d["params_resolved"]["global_resolution"] = {r.x, r.y, r.z};
+            }
             const optics::TransferFunction& tfn = tfa->tf;
             json points = json::array();
             for (const auto& p : tfn.points())
