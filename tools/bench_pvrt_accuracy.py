@@ -170,7 +170,10 @@ def main():
                 row(label, params)
         if not args.no_extras:
             row("pictures", dict(defaults))
-            row("single", dict(defaults, max_bounces=1), ["global_shadows"])
+            # The photon pass's settings are refused under single scattering (they change nothing).
+            single = {k: v for k, v in defaults.items()
+                      if k not in ("photons", "kernel_radius", "estimator")}
+            row("single", dict(single, max_bounces=1), ["global_shadows"])
             row("sh-global", {}, ["global_shadows"], "sh-global")
             pictures.append(name)
     with open(os.path.join(args.work, "results.csv"), "w", newline="") as f:

@@ -290,6 +290,10 @@ TEST(PvrtMethod, ParamsAndLightsAreCheckedWithTheFieldNamed) {
           "method.params.components");
     fails(cloudScene("pvrt", {{"max_bounces", 4}}, false), "method.params.max_bounces");
     fails(cloudScene("pvrt", {{"estimator", "collisions"}}, true), "method.params.estimator");
+    // The photon pass's settings under single scattering (accepted and unused until 7 December).
+    for (const char* key : {"photons", "kernel_radius"})
+        fails(cloudScene("pvrt", {{key, 2}}, false), std::string("method.params.") + key);
+    fails(cloudScene("pvrt", {{"estimator", "collision"}}, false), "method.params.estimator");
     fails(cloudScene("pvrt", {{"basis", "dsf"}, {"directions", 642}, {"quadrature", 162}}, true),
           "method.params.quadrature");
     json point = cloudScene("pvrt", json::object(), true);
