@@ -938,12 +938,15 @@ std::shared_ptr<const TracedImage> tracePath(
         out->warnings.push_back(
             std::to_string(st.majorantViolations) +
             " samples exceeded their cell's majorant: the image may be biased (please report)");
-    if (pt.targetError > 0.0 && !st.targetReached && std::isfinite(st.relativeStdError))
-        out->warnings.push_back(
-            "the path tracer stopped at " + std::to_string(st.samplesPerPixel) +
-            " spp with an estimated error of " + std::to_string(100.0 * st.relativeStdError) +
-            " % above method.params.target_error (" + std::to_string(100.0 * pt.targetError) +
-            " %): raise method.params.spp or method.params.seconds");
+    if (pt.targetError > 0.0 && !st.targetReached && std::isfinite(st.relativeStdError)) {
+        // %g: a target of 1e-9 printed as "0.000000 %" (probe).
+        std::ostringstream os;
+        os << "the path tracer stopped at " << st.samplesPerPixel
+           << " spp with an estimated error of " << 100.0 * st.relativeStdError
+           << " % above method.params.target_error (" << 100.0 * pt.targetError
+           << " %): raise method.params.spp or method.params.seconds";
+        out->warnings.push_back(os.str());
+    }
     if (run.has("brick_grid")) {
         // As the ray caster's methods say it (the warnings travel with a cached reference).
         const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
