@@ -2345,6 +2345,19 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         const std::size_t bytes = lightBytes(*l);
         return Artifact::of<LightList>(std::move(l), bytes);
     };
+    // Lights that all emit nothing: a black picture said nothing (probe: an environment map at
+    // intensity 0).
+    const bool allDark =
+        !scene.lights.empty() &&
+        std::all_of(scene.lights.begin(), scene.lights.end(), [](const io::LightDesc& l) {
+            return l.intensity == 0.0 || l.color == glm::dvec3(0.0);
+        });
+    if (allDark && isLit(kind))
+        lightsStage.warnings = [](const Artifact&) {
+            return std::vector<std::string>{
+                "every light in the scene has intensity or color 0: only emission (and any "
+                "ambient term) shows (raise lights[i].intensity)"};
+        };
     const bool whiteSkyWhenNone =
         kind == Kind::IsoLattice && isoShadingTraces(isoLattice.shading.shading);
     lightsStage.describe = [whiteSkyWhenNone](const Run&, const Artifact& a) {

@@ -586,7 +586,7 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     }
 }
 
-TEST(Pipeline, APointLightInsideTheVolumeWarnsThatTheShFieldsSeePastIt) {
+TEST(Pipeline, APointLightInsideTheVolumeUnderShAndDarkLightsWarn) {
     // The SH methods' visibility runs past a point light (matter behind it shadows it: 4× too
     // dark in a probe); the path tracer's shadow rays end at the light: no warning there.
     Session session;
@@ -604,6 +604,16 @@ TEST(Pipeline, APointLightInsideTheVolumeWarnsThatTheShFieldsSeePastIt) {
     }
     d["lights"][0]["position"] = {0, 0, 500};
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+    // Every light dark: a black picture said nothing (probe).
+    d["lights"][0]["intensity"] = 0;
+    for (const char* method : {"gradient", "sh-local"}) {
+        d["method"] = method;
+        const RunResult r = session.run(scene(d));
+        ASSERT_EQ(r.warnings.size(), 1u) << method;
+        EXPECT_NE(r.warnings[0].find("every light in the scene has intensity or color 0"),
+                  std::string::npos)
+            << r.warnings[0];
+    }
 }
 
 TEST(Pipeline, ACachedVolumeRepeatsItsLoaderWarningInEveryRun) {
