@@ -1287,9 +1287,9 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             if (!continues) {
                 // A phase event that ends the path draws one phase direction toward the area and
                 // environment lights too (MIS with the light samples above): a large area light
-                // is what sampling its area estimates worst — under a 1e4-mm rect light the
-                // single-scattered image read 3× too dark at 64 spp with a relative error of 39
-                // (probe, 7 December). Only where such a light exists, so that renders under
+                // is what sampling its area estimates worst — under rect lights of 1e4–1e6 mm
+                // the single-scattered image read 4–50× too dark at 64 spp, relative error up to
+                // 39 (probe, 7 December). Only where such a light exists, so that renders under
                 // delta lights draw the same random numbers as before.
                 if (!surface && anyHittable) {
                     const glm::dvec3 next =

@@ -356,6 +356,11 @@ TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility)
               (std::set<std::string>{"global_visibility", "camera", "render"}));
     // Kronander's grid-only field: a different global_visibility (rerun alone) and image.
     const RunResult split = session.run(scene(d));
+    // The default 64 is capped at the 32³ torso's grid points, and the params say what ran (they
+    // said 64); 8, within the grid, stays as asked.
+    ASSERT_TRUE(global.params["global_resolution"].is_array()) << global.params.dump();
+    EXPECT_LT(global.params["global_resolution"][0].get<int>(), 64);
+    EXPECT_EQ(split.params["global_resolution"], 8);
     d["method"]["params"]["global_near"] = "grid";
     const RunResult gridOnly = session.run(scene(d));
     EXPECT_EQ(ranStages(gridOnly),
