@@ -1285,50 +1285,43 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
                 L += c;
             }
             if (!continues) {
-                // A phase event that ends the path draws one phase direction toward the area and
-                // environment lights too (MIS with the light samples above): a large area light
-                // is what sampling its area estimates worst — under rect lights of 1e4–1e6 mm
-                // the single-scattered image read 4–50× too dark at 64 spp, relative error up to
-                // 39 (probe, 7 December). Only where such a light exists, so that renders under
-                // delta lights draw the same random numbers as before.
-                if (!surface && anyHittable) {
-                    const glm::dvec3 next =
-                        sampleHenyeyGreenstein(ray.direction, gHere, rng.uniform(), rng.uniform());
-                    const double pdf =
-                        henyeyGreenstein(float(glm::dot(ray.direction, next)), gHere);
-                    const glm::vec3 wi(next);
+                // Where the path ends, one direction drawn from the event's own lobe toward the
+                // area and environment lights (MIS with the light samples above), weight w =
+                // f·cos/pdf; the ray sees the transmittance the shadow rays see (ratio tracking
+                // over lightInterval).
+                auto lobeTowardLights = [&](const glm::dvec3& dir, double pdf,
+                                            const glm::dvec3& w) {
+                    const glm::vec3 wi(dir);
                     double T = -1.0;  // traced on first need
                     for (const auto& light : lightList) {
                         if (light->isDelta()) continue;
                         const glm::dvec3 le(light->radiance(x3, wi));
                         if (le == glm::dvec3(0.0)) continue;
-                        if (T < 0.0) T = transmittance(next, INFINITY);
+                        if (T < 0.0) T = transmittance(dir, INFINITY);
                         if (!(T > 0.0)) break;
-                        // f/pdf = 1: HG sampled exactly.
-                        L += beta * le * (T * powerHeuristic(pdf, light->pdf(x3, wi)));
+                        L += w * le * (T * powerHeuristic(pdf, light->pdf(x3, wi)));
                     }
+                };
+                // A phase event: a large area light is what sampling its area estimates worst —
+                // under rect lights of 1e4–1e6 mm the single-scattered image read 4–50× too dark
+                // at 64 spp, relative error up to 39 (probe, 7 December). Only where such a light
+                // exists, so that renders under delta lights draw the same random numbers as
+                // before. HG is sampled exactly: f/pdf = 1.
+                if (!surface && anyHittable) {
+                    const glm::dvec3 next =
+                        sampleHenyeyGreenstein(ray.direction, gHere, rng.uniform(), rng.uniform());
+                    lobeTowardLights(
+                        next, henyeyGreenstein(float(glm::dot(ray.direction, next)), gHere), beta);
                 }
-                // A BRDF event that ends the path still samples its lobe toward the area and
-                // environment lights (MIS with the light samples above): a glossy lobe under an
-                // environment map is what light sampling alone estimates worst. The ray sees the
-                // transmittance the shadow rays see (ratio tracking over lightInterval).
+                // A BRDF event: a glossy lobe under an environment map is what light sampling
+                // alone estimates worst.
                 if (surface) {
                     const double u0 = rng.uniformDouble(), u1 = rng.uniformDouble(),
                                  u2 = rng.uniformDouble();
                     const BrdfSample bs = sampleBrdf(mat, nrm, wo, u0, u1, u2);
-                    if (bs.pdf > 0.0) {
-                        const glm::dvec3 w = beta * bs.f * (glm::dot(nrm, bs.wi) / bs.pdf);
-                        const glm::vec3 wi(bs.wi);
-                        double T = -1.0;  // traced on first need
-                        for (const auto& light : lightList) {
-                            if (light->isDelta()) continue;
-                            const glm::dvec3 le(light->radiance(x3, wi));
-                            if (le == glm::dvec3(0.0)) continue;
-                            if (T < 0.0) T = transmittance(bs.wi, INFINITY);
-                            if (!(T > 0.0)) break;
-                            L += w * le * (T * powerHeuristic(bs.pdf, light->pdf(x3, wi)));
-                        }
-                    }
+                    if (bs.pdf > 0.0)
+                        lobeTowardLights(bs.wi, bs.pdf,
+                                         beta * bs.f * (glm::dot(nrm, bs.wi) / bs.pdf));
                 }
                 break;
             }
