@@ -80,8 +80,9 @@ struct EquirectLayout {
     double phiStep = 0.0;
 };
 
-/// Projects `rgb` (row-major, width·height entries, layout above) onto bands 0..L: the midpoint
-/// rule with the exact solid angle |phiStep|·(cos θ_r − cos θ_{r+1}) of each pixel.
+/// Projects `rgb` (row-major, width·height entries, layout above) onto bands 0..L, each pixel a
+/// constant over its patch: exact in φ, Gauss–Legendre in θ with nodes enough for band L, so
+/// that a map of a few pixels projects as exactly as a large one.
 std::vector<glm::vec3> projectEquirect(int maxBand, const EquirectLayout& layout,
                                        std::span<const glm::vec3> rgb);
 
