@@ -49,6 +49,9 @@ Command addSceneCommand(CLI::App& app) {
                                  "check the path (relative to the scene file's folder)");
             core::refuseSpecialFile(s.volume.path);
         }
+        // ... and its lights build: an environment map that is missing, 8-bit or too small is
+        // refused here as render refuses it (the map is read and projected: a second or so).
+        (void)pipeline::buildLights(s);
         if (!*init) {
             std::cout << jsonForStdout(s.document, *path) << "\n";
             std::cerr << s.source << ": valid (method " << plan.method << ", " << s.lights.size()

@@ -276,6 +276,27 @@ TEST(Cli, HostileSceneFilesAreOneLineAndExitCodeTwo) {
     EXPECT_FALSE(fs::exists(tmp / "x.png"));
 }
 
+TEST(Cli, SceneRefusesAnEnvironmentMapThatRenderRefuses) {
+    // `scene` said "valid" for a sky that is missing, not an image or 8-bit; render refused it.
+    test::TempDir tmp;
+    std::ofstream(tmp / "junk.hdr") << "not an image";
+    const std::vector<std::pair<std::string, std::string>> skies = {{"nowhere.exr", "nowhere.exr"},
+                                                                    {"junk.hdr", "junk.hdr"}};
+    for (const auto& [sky, word] : skies) {
+        std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+            "lights": [{"type": "environment", "path": ")" +
+                                                 sky + R"("}]})";
+        for (const char* cmd : {"scene ", "render -q "}) {
+            const std::string out = std::string(cmd) == "scene " ? "" : " -o " + q(tmp / "a.png");
+            const Result r = run(cmd + q(tmp / "scene.json") + out, tmp.path());
+            EXPECT_EQ(r.code, 2) << cmd << sky << "\n" << r.err;
+            EXPECT_EQ(lineCount(r.err), 1u) << r.err;
+            EXPECT_NE(r.err.find(word), std::string::npos) << cmd << r.err;
+        }
+    }
+    EXPECT_FALSE(fs::exists(tmp / "a.png"));
+}
+
 TEST(Cli, OutputsAreCheckedBeforeRenderingAndNothingIsWritten) {
     test::TempDir tmp;
     const fs::path out = tmp / "out";
