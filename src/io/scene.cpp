@@ -308,6 +308,10 @@ CameraDesc parseCamera(const Field& f) {
     f.get("distance", c.distance, 0.0, kMaxCoord);
     f.get("fov_y", c.fovYDeg, 1.0, 170.0);
     f.get("ortho_height", c.orthoHeight, 0.0, kMaxCoord);
+    if (c.orthoHeight > 0.0 && c.orthoHeight < kMinOrthoHeightMm)
+        f.child("ortho_height")
+            .fail("is below a micrometre (0.001 mm)",
+                  "give 0 to fit the view to the volume, or a height of at least a micrometre");
     f.get("margin", c.margin, 0.0, 0.45);
     f.get("aperture", c.apertureMm, 0.0, kMaxCoord);
     if (f.has("focus_distance")) {

@@ -112,13 +112,17 @@ struct NamedView {
 const std::vector<NamedView>& namedViews();
 const NamedView* findView(const std::string& name);  ///< nullptr when unknown
 
+/// Smallest orthographic view height (mm) a scene takes besides 0 (fit): a micrometre, far below
+/// any medical voxel; smaller heights (a viewer zoomed 10⁴⁰-fold) show one flat colour.
+inline constexpr double kMinOrthoHeightMm = 1e-3;
+
 struct CameraDesc {
     std::string projection = "perspective";  ///< "perspective" | "orthographic"
     std::string view;  ///< a named view (sets azimuth, elevation, up); empty = none
     double azimuthDeg = 30.0, elevationDeg = 20.0, rollDeg = 0.0;
-    double distance = 0.0;             ///< mm from target; 0 = fit the volume in view
-    double fovYDeg = 30.0;             ///< perspective vertical field of view
-    double orthoHeight = 0.0;          ///< orthographic view height, mm; 0 = fit
+    double distance = 0.0;     ///< mm from target; 0 = fit the volume in view
+    double fovYDeg = 30.0;     ///< perspective vertical field of view
+    double orthoHeight = 0.0;  ///< orthographic view height, mm; 0 = fit, else ≥ kMinOrthoHeightMm
     std::optional<glm::dvec3> target;  ///< default: volume centre
     std::optional<glm::dvec3> eye;  ///< set → explicit look-at (azimuth/elevation/distance ignored)
     glm::dvec3 up{0.0, 0.0, 1.0};   ///< LPS +z = superior

@@ -79,12 +79,22 @@ void pan(LookAt& c, double dx, double dy, int viewportHeight) {
     c.target += shift;
 }
 
-void zoom(LookAt& c, double factor) {
-    if (!(factor > 0.0)) return;
-    if (c.perspective)
-        c.eye = c.target + (c.eye - c.target) / factor;
-    else
-        c.orthoHeight /= factor;
+bool zoom(LookAt& c, double factor) {
+    constexpr double kMaxMm = 1e6, kMinEyeDistanceMm = 1e-6;  // the scene's bounds (io/scene.cpp)
+    if (!(factor > 0.0) || !std::isfinite(factor)) return false;
+    if (c.perspective) {
+        const glm::dvec3 offset = (c.eye - c.target) / factor;
+        const double d = glm::length(offset);
+        const glm::dvec3 eye = c.target + offset;
+        const glm::dvec3 a = glm::abs(eye);
+        if (!(d >= kMinEyeDistanceMm) || !(std::max({a.x, a.y, a.z}) <= kMaxMm)) return false;
+        c.eye = eye;
+        return true;
+    }
+    const double h = c.orthoHeight / factor;
+    if (!(h >= io::kMinOrthoHeightMm && h <= kMaxMm)) return false;
+    c.orthoHeight = h;
+    return true;
 }
 
 json cameraJson(const LookAt& c, const json& previous) {

@@ -48,8 +48,11 @@ void orbit(LookAt& c, double yawDeg, double pitchDeg);
 /// the cursor at the target's depth follows the cursor.
 void pan(LookAt& c, double dx, double dy, int viewportHeight);
 /// Zoom by `factor` (> 1 = closer / larger): perspective moves the eye toward the target,
-/// orthographic shrinks the view height.
-void zoom(LookAt& c, double factor);
+/// orthographic shrinks the view height. False (and `c` unchanged) when the factor is not a
+/// positive finite number or the view would leave what a scene can render (an orthographic height
+/// outside [io::kMinOrthoHeightMm, 10⁶ mm], the eye within a nanometre of the target or a coordinate past
+/// 10⁶ mm): a factor of ∞ once made the height 0, which the scene reads as "fit".
+bool zoom(LookAt& c, double factor);
 /// camera JSON of the scene schema for `c` (keeps `previous`'s aperture and focus_distance).
 nlohmann::json cameraJson(const LookAt& c, const nlohmann::json& previous);
 /// camera JSON of a named view, fitted (keeps previous's projection, fov_y, margin, aperture).

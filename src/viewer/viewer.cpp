@@ -199,6 +199,10 @@ class Viewer {
 
     void adopt(LoadedScene scene);
     std::optional<core::ImageRGBA> run();
+    std::optional<core::ImageRGBA> runFrames();
+    /// --record's session so far saved when the run ends early (a lost display, a script step's
+    /// error): what became of it, as a clause to append to the run's last line.
+    std::string keepRecording();
 
   private:
     // Scene edits: every change bumps the generation and asks the worker for a new picture.
@@ -223,7 +227,7 @@ class Viewer {
     // What the gestures do (the mouse, the keys and a script call the same).
     void orbitBy(double dx, double dy);
     void panBy(double dx, double dy);
-    void zoomBy(double notches);
+    bool zoomBy(double notches);
     void windowDrag(const optics::TransferFunction& start, double dx, double dy);
     // Lights and clip planes: the panel, the mouse and the script call these.
     void setLights() {
@@ -1061,10 +1065,12 @@ void Viewer::panBy(double dx, double dy) {
     setCamera(cameraJson(*lookAt_, doc_["camera"]));
 }
 
-void Viewer::zoomBy(double notches) {
-    if (!ensureLookAt()) return;
-    zoom(*lookAt_, std::pow(kZoomPerNotch, notches));
+bool Viewer::zoomBy(double notches) {
+    if (!ensureLookAt()) return true;
+    // A zoom past what a scene renders leaves the view as it was (the wheel: nothing happens).
+    if (!zoom(*lookAt_, std::pow(kZoomPerNotch, notches))) return false;
     setCamera(cameraJson(*lookAt_, doc_["camera"]));
+    return true;
 }
 
 void Viewer::windowDrag(const optics::TransferFunction& start, double dx, double dy) {
@@ -1083,8 +1089,7 @@ void Viewer::checkIndex(const ScriptStep& st, std::size_t count, const char* wha
 }
 
 InputError Viewer::scriptStepError(const std::string& what) const {
-    // The scene the script's steps made (a zoom of 300 notches puts the eye on the target, a
-    // window drag of 5000 pixels a width past 10⁹) is the last step's doing: named, not the
+    // The scene the script's steps made (a window drag of 5000 pixels a width past 10⁹) is the last step's doing: named, not the
     // screenshot or the scene file whose key it changed.
     const ScriptStep& last = options_.script[scriptNext_ - 1];
     return InputError(last.source, last.field, "leaves a view that cannot be rendered: " + what,
@@ -1128,7 +1133,11 @@ void Viewer::runScript() {
             panBy(st.a, st.b);
             break;
         case ScriptStep::Kind::Zoom:
-            zoomBy(st.a);
+            if (!zoomBy(st.a))
+                throw InputError(st.source, st.field,
+                                 "leaves a view that cannot be rendered (the eye on the target, "
+                                 "or a view height under a micrometre or past a kilometre)",
+                                 "use a smaller value");
             break;
         case ScriptStep::Kind::Window:
             windowDrag(tf_, st.a, st.b);
@@ -1405,7 +1414,7 @@ std::string Viewer::saveRecording(const std::string& path) {
            " keyframes)";
 }
 
-int Viewer::displayLost() {
+std::string Viewer::keepRecording() {
     std::string kept;
     const std::size_t keyframes = recorder_ ? recorder_->session().keyframes.size() : 0;
     if (!options_.record.empty() && recorder_ && keyframes == 0) {
@@ -1421,6 +1430,11 @@ int Viewer::displayLost() {
         kept = "; the panel's recording (" + std::to_string(keyframes) +
                " keyframes) was not saved (view --record SESSION.json saves it on any exit)";
     }
+    return kept;
+}
+
+int Viewer::displayLost() {
+    std::string kept = keepRecording();
     // A screenshot the panel is writing (on its own thread, no X): finished, or said to be cut.
     if (saving_.valid()) {
         if (saving_.wait_for(std::chrono::seconds(kScreenshotFinishSeconds)) ==
@@ -1499,8 +1513,8 @@ void Viewer::handleKeys() {
             case GLFW_KEY_KP_SUBTRACT:
                 if (loaded_ && ensureLookAt()) {
                     const bool in = key == GLFW_KEY_EQUAL || key == GLFW_KEY_KP_ADD;
-                    zoom(*lookAt_, in ? kZoomPerNotch : 1.0 / kZoomPerNotch);
-                    setCamera(cameraJson(*lookAt_, doc_["camera"]));
+                    if (zoom(*lookAt_, in ? kZoomPerNotch : 1.0 / kZoomPerNotch))
+                        setCamera(cameraJson(*lookAt_, doc_["camera"]));
                 }
                 break;
             default:
@@ -1985,6 +1999,18 @@ void Viewer::logTimes() {
 }
 
 std::optional<core::ImageRGBA> Viewer::run() {
+    try {
+        return runFrames();
+    } catch (const InputError& e) {
+        // A script step's error (or a screenshot that never came) ends the run: the --record
+        // session so far is saved as on any other exit, and the line says so.
+        const std::string kept = keepRecording();
+        if (kept.empty()) throw;
+        throw InputError(e.source(), e.field(), e.problem() + kept, e.fix());
+    }
+}
+
+std::optional<core::ImageRGBA> Viewer::runFrames() {
     const bool scripted = !options_.screenshot.empty();
     core::Stopwatch sinceStart, frameClock;
     std::optional<core::ImageRGBA> shot;

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -1153,6 +1154,24 @@ TEST(ViewCli, AStepThatLeavesAViewTheSceneRefusesIsNamedByTheScript) {
     EXPECT_NE(r.err.find("steps.json: [1].zoom: leaves a view that cannot be rendered"),
               std::string::npos)
         << r.err;
+    EXPECT_FALSE(fs::exists(tmp / "shot.png"));
+    // --record keeps the states shown before the failing step (it was lost without a word) and
+    // the one line says where.
+    EXPECT_NE(r.err.find("the session so far is in"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    ASSERT_TRUE(fs::exists(tmp / "rec.json"));
+    EXPECT_GE(nlohmann::json::parse(std::ifstream(tmp / "rec.json"))["keyframes"].size(), 2u);
+    fs::remove(tmp / "rec.json");
+    // Orthographic: 1.1^100000 made the height 0 — read as "fit", the whole volume again, exit 0.
+    std::ofstream(tmp / "steps.json") << R"([{"zoom": 100000}])";
+    std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
+        "method": "gradient", "image": {"width": 64, "height": 48},
+        "camera": {"projection": "orthographic"}})";
+    const Result o = runScriptedView(*display, tmp);
+    EXPECT_EQ(o.code, 2) << o.err;
+    EXPECT_NE(o.err.find("steps.json: [0].zoom: leaves a view that cannot be rendered"),
+              std::string::npos)
+        << o.err;
     EXPECT_FALSE(fs::exists(tmp / "shot.png"));
     // The local/global switch on a method without it did nothing, silently.
     std::ofstream(tmp / "steps.json") << R"([{"orbit": [10, 0]}, {"shading": "global"}])";

@@ -78,8 +78,37 @@ TEST(ViewState, PanMovesEyeAndTargetTogetherAndZoomKeepsTheTarget) {
     EXPECT_EQ(c.eye - c.target, before);
     // 100 of 400 pixels = a quarter of the view height at the target, 2·400·tan 15°.
     EXPECT_NEAR(std::abs(c.target.x), 0.25 * 2.0 * 400.0 * std::tan(M_PI / 12.0), 1e-9);
-    viewer::zoom(c, 2.0);
+    EXPECT_TRUE(viewer::zoom(c, 2.0));
     EXPECT_NEAR(glm::length(c.eye - c.target), 200.0, 1e-9);
+}
+
+TEST(ViewState, AZoomPastWhatASceneRendersLeavesTheViewAsItWas) {
+    // Orthographic: a factor of ∞ (1.1^100000) made the height 0 — "fit" to the scene, the whole
+    // volume again — and 1.1^1000 a height of 1e-40 mm (one flat colour); a factor of 0 was
+    // dropped silently while a smaller zoom-out was refused by the scene.
+    viewer::LookAt o;
+    o.perspective = false;
+    o.eye = {0.0, -400.0, 0.0};
+    o.orthoHeight = 200.0;
+    for (const double factor : {std::pow(1.1, 100000.0), std::pow(1.1, 1000.0), 0.0,
+                                std::pow(1.1, -1e9), 1e6, 1e-5, std::nan("")}) {
+        EXPECT_FALSE(viewer::zoom(o, factor)) << factor;
+        EXPECT_EQ(o.orthoHeight, 200.0) << factor;
+    }
+    EXPECT_TRUE(viewer::zoom(o, 1e5));  // 2 µm: still a view
+    EXPECT_NEAR(o.orthoHeight, 2e-3, 1e-15);
+    viewer::LookAt p;
+    p.eye = {0.0, -400.0, 0.0};
+    for (const double factor : {std::pow(1.1, 300.0), 1e-4, std::pow(1.1, 1e6)}) {
+        EXPECT_FALSE(viewer::zoom(p, factor)) << factor;
+        EXPECT_EQ(p.eye, glm::dvec3(0.0, -400.0, 0.0)) << factor;
+    }
+    // Every accepted view is one the scene takes.
+    json doc = torsoDoc(32, 32);
+    doc["camera"] = viewer::cameraJson(o, json());
+    EXPECT_NO_THROW(io::parseScene(doc, "test", "/"));
+    doc["camera"]["ortho_height"] = 1e-40;
+    EXPECT_THROW(io::parseScene(doc, "test", "/"), InputError);
 }
 
 TEST(ViewState, WindowDragAndTfJsonRoundTrip) {
