@@ -1709,7 +1709,20 @@ std::string addPvrtStages(Plan& plan, const PvrtParams& params, const render::Re
                << " points × " << basis.size() << " basis lights";
             if (params.exitance > 1) os << " × " << params.exitance << " exitance coefficients";
             os << " × RGB), over memory_mb " << params.memoryMb;
-            throw InputError(run.scene().source, "method.params.resolution", os.str(),
+            // Named by the setting the scene (or a --set) lowered or raised: memory_mb under its
+            // default, else the first of the sizes it gives (a --set memory_mb=1 was blamed on
+            // the scene file's resolution).
+            const json& given = run.scene().method.params;
+            std::string field = "resolution";
+            if (given.contains("memory_mb") && params.memoryMb < kDefaultPvrtMemoryMb)
+                field = "memory_mb";
+            else
+                for (const char* k : {"resolution", "exitance_coefficients", "order", "directions"})
+                    if (given.contains(k)) {
+                        field = k;
+                        break;
+                    }
+            throw InputError(run.scene().source, "method.params." + field, os.str(),
                              "lower resolution, use fewer basis lights (order, directions) or "
                              "exitance_coefficients, or raise method.params.memory_mb");
         }
@@ -2690,9 +2703,24 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 }
             }
             const grid::BrickGrid& bricks = *run.get<grid::BrickGrid>("brick_grid");
-            // One line about the TF: the unit mismatch explains an empty image too.
-            if (!warnIfNotHounsfield(run, tfn, bricks))
+            // One line about the TF: the unit mismatch explains an empty image too — except under
+            // the iso methods, whose surface the isovalue places (the TF only colours it): an
+            // empty iso image says why as well (a plane removing everything showed only the HU
+            // line).
+            const bool iso = kind == Kind::Iso || kind == Kind::IsoLattice;
+            if (!warnIfNotHounsfield(run, tfn, bricks) || iso)
                 warnIfNothingShows(run, kind, *film, stats, tfn, bricks, caster.isoValue());
+            // At or below every value the whole volume is inside the surface: its box, drawn
+            // without a word (`voxlight iso` refuses such an isovalue).
+            if (iso && caster.isoValue() <= bricks.valueLo()) {
+                std::ostringstream os;
+                os << "method.params.iso_value " << caster.isoValue()
+                   << " is at or below every value of this volume [" << bricks.valueLo() << ", "
+                   << bricks.valueHi()
+                   << "]: the whole volume is inside the surface, drawn as its box (set "
+                      "method.params.iso_value inside the values)";
+                run.warn(os.str());
+            }
             const std::size_t bytes = film->pixels.size() * sizeof(float);
             return Artifact::of<core::ImageRGBA>(std::move(film), bytes);
         } catch (const InputError& e) {

@@ -565,7 +565,23 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     EXPECT_NE(r.warnings[0].find("clip_planes and crop_box remove everything 'iso-lattice'"),
               std::string::npos)
         << r.warnings[0];
+    // Under 'iso' the TF only colours the surface: an empty image under a CT preset said only
+    // "expects Hounsfield units", nothing of the plane that removed everything (probe).
+    d["method"] = {{"name", "iso"}, {"params", {{"iso_value", 0.5}}}};
+    d["transfer_function"] = "ct-bone";
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 2u);
+    EXPECT_NE(r.warnings[0].find("expects Hounsfield units"), std::string::npos) << r.warnings[0];
+    EXPECT_NE(r.warnings[1].find("the image is empty"), std::string::npos) << r.warnings[1];
+    d["transfer_function"] = "phantom-step";
     d.erase("clip_planes");
+    // An isovalue at or below every value: the whole box drawn, without a word (probe: -5000 on
+    // a CT; +5000 said the isovalue lies outside the values).
+    d["method"]["params"]["iso_value"] = -1.0;
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("is at or below every value of this volume"), std::string::npos)
+        << r.warnings[0];
     d.erase("method");
     // Matter too thin for the TF to show (spacing 1e-3 mm): not the camera — the faintness, the
     // size and the spacing (the camera was blamed until 7 December).
