@@ -13,7 +13,7 @@
 //                                     fair surface design"): per iteration a Laplacian step of
 //                                     λ = 0.5, then one of μ = −0.53 (uniform weights). Low-pass
 //                                     without the shrinking of plain Laplacian smoothing; boundary
-//                                     vertices stay put. Written here on CGAL's mesh: CGAL's own
+//                                     vertices and capped cuts' stay put. Written here on CGAL's mesh: CGAL's own
 //                                     smooth_shape (mean curvature flow) rippled and thinned the
 //                                     torso's ribs (area −26 % after 3 steps) and cost 10 s there.
 //   5. decimation                     SMS::edge_collapse with Lindstrom–Turk cost and placement
@@ -25,7 +25,9 @@
 // (extract.h's setGradientNormals).
 #include <cstddef>
 #include <iosfwd>
+#include <vector>
 
+#include "core/half_space.h"
 #include "core/progress.h"
 #include "iso/mesh.h"
 
@@ -38,6 +40,9 @@ namespace voxlight::iso {
 /// thousands of times (probe). A smaller pass band (0.01) gains less but erodes what is thinner
 /// than about 60 edges (the ribs: −15 % volume at 100 iterations).
 inline constexpr double kTaubinLambda = 0.5, kTaubinMu = -0.53;
+/// A vertex this close to a held plane (mm) is on it: cut points are computed on the plane to
+/// ~1e-13 mm; a nanometre is far below any voxel.
+inline constexpr double kOnCapPlaneMm = 1e-6;
 /// Most iterations --smooth takes: the pass band's gain compounds to at most 4.3 % (1.00085^50).
 inline constexpr int kMaxSmoothIterations = 50;
 
@@ -47,6 +52,11 @@ struct CleanupOptions {
     std::size_t minComponentFaces = 0;  ///< drop components with fewer faces; 0 = drop none
     int smoothIterations = 0;           ///< Taubin λ|μ iterations; 0 = no smoothing
     std::size_t targetFaces = 0;        ///< decimate to about this many faces; 0 = no decimation
+    /// Capped cuts: smoothing holds the vertices on these planes (within kOnCapPlaneMm), as it
+    /// holds an open cut's boundary — a cap is a fan of rim-to-rim triangles, and averaging over
+    /// those long edges dragged rim vertices across it (hundreds of self-intersections on a capped
+    /// sphere, rim moved 1.9 mm in one iteration; probe).
+    std::vector<core::HalfSpace> heldPlanes;
 
     bool any() const {
         return removeDegenerate || keepLargest > 0 || minComponentFaces > 0 ||

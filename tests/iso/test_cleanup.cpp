@@ -107,6 +107,37 @@ TEST(Cleanup, TaubinSmoothingMovesVerticesButDoesNotShrinkASphere) {
     EXPECT_GT(moved, 1e-3);
 }
 
+TEST(Cleanup, SmoothingACappedCutKeepsTheCapFlatAndTheMeshFreeOfSelfIntersections) {
+    // A cap is a fan of rim-to-rim triangles: smoothing averaged rim vertices over those long
+    // edges and dragged them across the cap (probe: 237 self-intersecting pairs after one
+    // iteration on a capped sphere, 68 after 20; the mesh 0.12 mm past the plane). With the cut's
+    // plane held, the rim stays on it and the mesh stays clean.
+    Ball big, small;
+    const core::Volume v = twoBalls(big, small);
+    ExtractOptions e = test::at(0.0);
+    e.cap = true;
+    const core::HalfSpace plane{{big.centre.x + 4.3, 0.0, 0.0}, {1.0, 0.0, 0.0}};
+    e.keep = {plane};
+    for (const int iterations : {1, 5, 20}) {
+        Extraction ex = extractIsosurface(v, e);
+        ASSERT_EQ(reportMesh(ex.mesh, true).selfIntersections, 0);
+        CleanupOptions o;
+        o.smoothIterations = iterations;
+        o.heldPlanes = e.keep;
+        cleanUp(ex.mesh, o);
+        const MeshReport r = reportMesh(ex.mesh, true);
+        EXPECT_TRUE(r.closed) << iterations;
+        EXPECT_EQ(r.selfIntersections, 0) << iterations;
+        std::size_t onPlane = 0;
+        for (const auto vh : ex.mesh.vertices()) {
+            const double d = plane.distance(toGlm(ex.mesh.point(vh)));
+            ASSERT_GE(d, -kOnCapPlaneMm) << iterations;
+            onPlane += std::abs(d) <= kOnCapPlaneMm;
+        }
+        EXPECT_GT(onPlane, 20u) << iterations;
+    }
+}
+
 // The limit of --smooth on shapes large and small: a small blob's size is a high frequency of the
 // filter (a one-voxel blob shrank to a point in 50 iterations). Closed components keep their volume
 // (cleanup.cpp: δ = lost volume / sweep rate, a few Newton passes per iteration): each ball on its
