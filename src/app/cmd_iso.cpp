@@ -301,7 +301,7 @@ Command addIsoCommand(CLI::App& app) {
         }
 
         sw.restart();
-        if (options.cap) cleanup->heldPlanes = options.keep;  // a cap's rim stays on its plane
+        if (options.cap) cleanup->heldPlanes = ex.planes;  // a cap's rim stays on its plane
         const iso::CleanupStats cs = iso::cleanUp(ex.mesh, *cleanup, progress);
         if (cs.verticesMoved) iso::setGradientNormals(ex.mesh, volume);
         stages.push_back(stage("cleanup", cleanup->any(),

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <mutex>
 #include <optional>
 #include <string>
@@ -139,10 +140,13 @@ struct Soup {
 
 /// Cuts `soup` by one half-space, keeping dot(x − p, n) ≥ 0 (header comment: open cut). The points
 /// on the plane (made by the cut, or lying on it), as indices after the cut.
-std::vector<std::uint32_t> clipSoup(Soup& soup, const core::HalfSpace& h) {
+std::vector<std::uint32_t> clipSoup(Soup& soup, const core::HalfSpace& h, double snap) {
     const std::size_t np = soup.points.size();
     std::vector<double> d(np);
-    for (std::size_t i = 0; i < np; ++i) d[i] = h.distance(soup.points[i]);
+    for (std::size_t i = 0; i < np; ++i) {
+        d[i] = h.distance(soup.points[i]);
+        if (std::abs(d[i]) <= snap) d[i] = 0.0;  // on the plane: no sliver (kClipSnapVoxels)
+    }
     // The point where edge (a in, b out) crosses the plane, made once per edge.
     std::unordered_map<std::uint64_t, std::uint32_t> cuts;
     const bool caps = !soup.capNormal.empty();
@@ -429,15 +433,23 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
     soup.triangles = std::move(fe.triangles);
     fe.points = {};
     const glm::dvec3& sp = volume.geometry().spacing;
-    const double nudge = kCapPlaneNudge * std::min({sp.x, sp.y, sp.z});
+    double largest = 0.0;
+    for (const glm::dvec3& p : soup.points)
+        largest = std::max({largest, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+    const double snap =
+        std::max(kClipSnapVoxels * std::min({sp.x, sp.y, sp.z}),
+                 kClipSnapFloatSteps * double(std::numeric_limits<float>::epsilon()) * largest);
+    const double nudge = std::max(kCapPlaneNudge * std::min({sp.x, sp.y, sp.z}), 4.0 * snap);
     for (core::HalfSpace h : options.keep) {
         progress.checkCancel();
         // A capped plane through mesh vertices would pinch the cap's contours there (two loops
         // meeting at one vertex: a non-manifold cap); moved off them into the removed side.
-        if (options.cap && std::any_of(soup.points.begin(), soup.points.end(),
-                                       [&](const glm::dvec3& p) { return h.distance(p) == 0.0; }))
+        if (options.cap &&
+            std::any_of(soup.points.begin(), soup.points.end(),
+                        [&](const glm::dvec3& p) { return std::abs(h.distance(p)) <= snap; }))
             h.point -= nudge * h.normal;
-        const std::vector<std::uint32_t> onPlane = clipSoup(soup, h);
+        result.planes.push_back(h);
+        const std::vector<std::uint32_t> onPlane = clipSoup(soup, h, snap);
         // Each cap is cut by the planes after it, so the caps meet along their lines.
         if (options.cap) capSoup(soup, h, onPlane, st);
     }

@@ -53,11 +53,17 @@ namespace voxlight::iso {
 /// stay ≥ ½/(value range) of an edge away from grid points.
 inline constexpr double kIntegerIsoNudge = 0.5;
 
-/// Voxels (of the smallest spacing) a capped plane that passes exactly through mesh vertices is
-/// moved toward the removed side: such vertices would pinch the cap's contours (two loops meeting
-/// at one vertex, a non-manifold cap; the torso cut at x = 0 had one). 10⁻⁴ voxel is far below
-/// anything visible and far above float rounding of the vertices' distances.
+/// Voxels (of the smallest spacing) a capped plane that passes through mesh vertices (within the
+/// snap below) is moved toward the removed side: such vertices would pinch the cap's contours (two
+/// loops meeting at one vertex, a non-manifold cap; the torso cut at x = 0 had one). 10⁻⁴ voxel is
+/// far below anything visible and far above float rounding of the vertices' distances; at least
+/// 4 snaps.
 inline constexpr double kCapPlaneNudge = 1e-4;
+/// A vertex this close to a cutting plane lies on it (the cut passes through it): a plane a hair
+/// off a voxel plane (1e-7 mm, an OBJ's 6 decimals) cut slivers whose new points rounded onto the
+/// old ones in the float32 files — 803 zero-area faces on the abdominal CT (probe). The larger of
+/// 10⁻⁵ voxel and 16 float steps of the mesh's largest coordinate.
+inline constexpr double kClipSnapVoxels = 1e-5, kClipSnapFloatSteps = 16.0;
 
 /// Peak memory per triangle of an extraction and its report (measured: 6.56 M triangles of a 128³
 /// noise volume, 1.22 GB peak; 53 M of a 256³ one, 9.5 GB — VTK's soup, the OpenMesh mesh, CGAL's
@@ -98,6 +104,9 @@ struct ExtractStats {
 struct Extraction {
     Mesh mesh;
     ExtractStats stats;
+    /// ExtractOptions::keep as cut: a capped plane through vertices moved kCapPlaneNudge toward
+    /// its removed side (its cap's vertices lie on this one; clean-up holds them: cleanup.h).
+    std::vector<core::HalfSpace> planes;
 };
 
 /// Extracts the isosurface. Throws InputError (source "isosurface") with field "volume" when the

@@ -123,7 +123,7 @@ TEST(Cleanup, SmoothingACappedCutKeepsTheCapFlatAndTheMeshFreeOfSelfIntersection
         ASSERT_EQ(reportMesh(ex.mesh, true).selfIntersections, 0);
         CleanupOptions o;
         o.smoothIterations = iterations;
-        o.heldPlanes = e.keep;
+        o.heldPlanes = ex.planes;
         cleanUp(ex.mesh, o);
         const MeshReport r = reportMesh(ex.mesh, true);
         EXPECT_TRUE(r.closed) << iterations;
