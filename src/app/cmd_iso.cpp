@@ -59,6 +59,10 @@ json stage(const std::string& name, bool ran, const std::string& reason, double 
     return {{"name", name}, {"ran", ran}, {"reason", reason}, {"seconds", seconds}};
 }
 
+/// Self-intersecting face pairs per face above which decimation's folds get a warning: the torso's
+/// bone at 100 k faces has 6 pairs (README), the abdominal CT at 5000 faces had 2736.
+constexpr double kFoldedShare = 0.01;
+
 json reportJson(const iso::MeshReport& r) {
     return {{"vertices", r.vertices},
             {"faces", r.faces},
@@ -445,6 +449,17 @@ Command addIsoCommand(CLI::App& app) {
                          "voxlight: warning: the cap of %zu plane(s) could not be filled whole: "
                          "the mesh may have holes there\n",
                          es.capFailures);
+        // Decimation far below the surface's detail folds it (probe: the abdominal CT to 5000 faces,
+        // 2736 self-intersecting pairs, area +22 %), said only by the report's count until now.
+        if (cleanup->targetFaces > 0 && report.selfIntersections > 0 &&
+            double(report.selfIntersections) > kFoldedShare * double(ex.mesh.n_faces()))
+            std::fprintf(
+                stderr,
+                "voxlight: warning: --decimate %zu folded the mesh: %lld self-intersecting "
+                "face pairs on %zu faces (decimate less, or drop small parts first with "
+                "--min-component-faces)\n",
+                cleanup->targetFaces, (long long)report.selfIntersections,
+                std::size_t(ex.mesh.n_faces()));
         if (es.rejectedFaces)
             std::fprintf(stderr,
                          "voxlight: warning: %zu triangle(s) left out: they would have made an "

@@ -338,6 +338,24 @@ TEST(PvrtMethod, ATransferOverTheMemoryBudgetIsAClearError) {
     }
 }
 
+TEST(PvrtMethod, MoreClustersThanPointsWarnsInEveryRun) {
+    // Capped at the points without a word (probe: 30000 clusters on 23 840 points, 17.6 s of CPCA
+    // into 22 MB for a 4.5 MB transfer); the warning comes with cached runs too.
+    Session session;
+    json d = cloudScene("pvrt", {{"resolution", 8}, {"photons", 2}, {"clusters", 4096}}, true);
+    for (int run = 0; run < 2; ++run) {
+        d["camera"] = {{"azimuth", 10 * run}};
+        const RunResult r = session.run(scene(d));
+        EXPECT_EQ(r.stage("pvrt_cpca").ran, run == 0);
+        ASSERT_EQ(r.warnings.size(), 1u) << run;
+        EXPECT_NE(r.warnings[0].find("method.params.clusters 4096 is more than the transfer's"),
+                  std::string::npos)
+            << r.warnings[0];
+    }
+    d["method"]["params"]["clusters"] = 4;
+    EXPECT_TRUE(session.run(scene(d)).warnings.empty());
+}
+
 TEST(PvrtMethod, EmptyAndOpaqueTransferFunctionsStayFinite) {
     for (double sigma : {0.0, 1e6}) {
         json d = cloudScene("pvrt", {{"resolution", 16}, {"photons", 2}, {"clusters", 4}}, true);

@@ -237,7 +237,7 @@ TEST(HardCases, AVolumeOverTheMemoryBudget) {
     const std::vector<Over> overs = {
         {"pvrt",
          {{"resolution", 24}, {"order", 4}, {"photons", 1}, {"clusters", 0}, {"memory_mb", 1}},
-         "method.params.resolution",
+         "method.params.memory_mb",  // the budget the scene lowered (as iso-lattice's)
          "memory_mb"},
         {"iso-lattice",
          {{"samples", 1},
