@@ -727,6 +727,10 @@ bool warnIfNotHounsfield(Run& run, const optics::TransferFunction& tf, const gri
 
 /// Coverage (alpha) below which a pixel shows nothing: under one 8-bit display level.
 constexpr float kVisibleAlpha = 0.5f / 255.f;
+/// A thin lens whose rays spread more than this off each pixel's line (half-aperture over focus
+/// distance) is named as the cause of an empty path-traced image: a real depth of field stays
+/// within a few degrees (a 10 mm aperture focused at 300 mm: 0.95°).
+constexpr double kMaxUnblamedLensSpreadDeg = 30.0;
 
 /// Why an image shows nothing, and what to do: the TF (or isovalue) leaves every skip cell empty
 /// (`anyCellVisible` false), what rays met is too faint (`maxAlpha`, the film's largest coverage,
@@ -777,6 +781,22 @@ std::string emptyImageReason(const Run& run, Kind kind, bool anyCellVisible, flo
            << g.spacing.x << " x " << g.spacing.y << " x " << g.spacing.z
            << " mm, or raise the TF's opacity)";
         return os.str();
+    }
+    const io::CameraDesc& cam = run.scene().camera;
+    if (kind == Kind::PathTrace && cam.apertureMm > 0.0 && cam.focusMm) {
+        // A lens focused a hair from the eye spreads each pixel's rays sideways past everything
+        // (aperture 20 mm at focus_distance 0.001 mm: 89.99°) — blamed on the aim until 7 December.
+        const double spread = glm::degrees(std::atan(0.5 * cam.apertureMm / *cam.focusMm));
+        if (spread > kMaxUnblamedLensSpreadDeg) {
+            std::ostringstream os;
+            os << "the image is empty: camera.aperture " << cam.apertureMm
+               << " mm focused at focus_distance " << *cam.focusMm
+               << " mm spreads each pixel's rays up to " << spread << "° off its line, past what '"
+               << method
+               << "' shows (set focus_distance to the distance of the anatomy, or \"auto\", or "
+                  "a smaller aperture)";
+            return os.str();
+        }
     }
     return "the image is empty: no camera ray meets what '" + method +
            "' shows here (the camera looks past it, or clip_planes/crop_box remove it; "

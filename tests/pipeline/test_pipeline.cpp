@@ -554,6 +554,16 @@ TEST(Pipeline, AnEmptyImageAlwaysComesWithAWarningThatSaysWhy) {
     r = session.run(scene(d));
     ASSERT_EQ(r.warnings.size(), 1u);
     EXPECT_NE(r.warnings[0].find("camera looks past it"), std::string::npos) << r.warnings[0];
+    // A lens focused a hair from the eye spreads the path tracer's rays past everything: the
+    // aim was blamed (probe: aperture 20 mm, focus_distance 0.001 mm).
+    d["camera"] = {{"aperture", 20}, {"focus_distance", 0.001}};
+    d["method"] = {{"name", "pathtrace"}, {"params", {{"spp", 2}}}};
+    r = session.run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    EXPECT_NE(r.warnings[0].find("camera.aperture 20 mm focused at focus_distance 0.001 mm"),
+              std::string::npos)
+        << r.warnings[0];
+    d.erase("method");
     // A normal view: no warning.
     d.erase("camera");
     EXPECT_TRUE(session.run(scene(d)).warnings.empty());
