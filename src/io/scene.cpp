@@ -351,6 +351,27 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
         if (shape == "disk") allowed.insert(allowed.end(), {"normal", "radius"});
     }
     if (l.type == "environment") allowed.insert(allowed.end(), {"path", "rotation", "layout"});
+    // A key of another light type or shape is named as such ("unknown key" for a sphere's 'size'
+    // sent users looking for a typo).
+    static const std::vector<std::pair<std::string, std::string>> owners = {
+        {"direction", "directional lights"},
+        {"position", "point and area lights"},
+        {"min_distance", "point lights"},
+        {"shape", "area lights"},
+        {"radius", "sphere and disk area lights"},
+        {"normal", "rect and disk area lights"},
+        {"size", "rect area lights"},
+        {"path", "environment lights"},
+        {"rotation", "environment lights"},
+        {"layout", "environment lights"}};
+    const std::string what =
+        l.type == "area" ? (f.has("shape") ? f.child("shape").raw().get<std::string>() : "sphere") +
+                               " area light"
+                         : l.type + " light";
+    for (const auto& [key, owner] : owners)
+        if (f.has(key) && std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+            f.child(key).fail("applies to " + owner + ", not to a " + what,
+                              "remove it, or change the light's type or shape");
     f.allowOnly(allowed);
     f.get("color", l.color, 0.0, 1e9);
     f.get("intensity", l.intensity, 0.0, 1e12);

@@ -80,7 +80,7 @@ TEST(Scene, ErrorsNameTheKeyPath) {
         "lights[0].direction", {"non-zero"});
     expectBad(json::parse(
                   R"({"volume": "a.nii", "lights": [{"type": "point", "direction": [0, 0, 1]}]})"),
-              "lights[0].direction", {"unknown key"});
+              "lights[0].direction", {"applies to directional lights, not to a point light"});
     expectBad(
         json::parse(
             R"({"volume": "a.nii", "transfer_function": {"points": [{"value": 300}, {"value": 100}]}})"),
@@ -106,11 +106,11 @@ TEST(Scene, ErrorsNameTheKeyPath) {
     expectBad(
         json::parse(
             R"({"volume": "a.nii", "lights": [{"type": "area", "shape": "sphere", "size": [5, 5]}]})"),
-        "lights[0].size", {"radius"});
+        "lights[0].size", {"applies to rect area lights, not to a sphere area light"});
     expectBad(
         json::parse(
             R"({"volume": "a.nii", "lights": [{"type": "area", "shape": "rect", "radius": 5}]})"),
-        "lights[0].radius", {"size"});
+        "lights[0].radius", {"applies to sphere and disk area lights, not to a rect area light"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": [7]})"), "effects[0]", {"string"});
     expectBad(json::parse(R"({"volume": "a.nii", "effects": "specular"})"), "effects", {"array"});
 }
