@@ -30,6 +30,30 @@ float luminance(const float* px) {
 
 }  // namespace
 
+core::ImageRGBA neighbourhoodStdError(const core::ImageRGBA& mean) {
+    const int w = mean.width, h = mean.height;
+    core::ImageRGBA se(w, h);
+    tbb::parallel_for(0, h, [&](int y) {
+        for (int x = 0; x < w; ++x) {
+            for (int c = 0; c < 3; ++c) {
+                double s = 0.0, s2 = 0.0;
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dx = -1; dx <= 1; ++dx) {
+                        const int qx = std::clamp(x + dx, 0, w - 1),
+                                  qy = std::clamp(y + dy, 0, h - 1);
+                        const double v = mean.pixels[(std::size_t(qy) * w + qx) * 4 + c];
+                        s += v, s2 += v * v;
+                    }
+                const double m = s / 9.0;
+                se.pixels[(std::size_t(y) * w + x) * 4 + c] =
+                    float(std::sqrt(std::max(0.0, (s2 - 9.0 * m * m) / 8.0)));
+            }
+            se.pixels[(std::size_t(y) * w + x) * 4 + 3] = 1.f;
+        }
+    });
+    return se;
+}
+
 core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdError,
                         const Guides& guides, const DenoiseOptions& o, DenoiseStats* stats) {
     core::Stopwatch clock;

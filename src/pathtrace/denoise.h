@@ -83,6 +83,12 @@ struct DenoiseStats {
     double seconds = 0.0;
 };
 
+/// A stand-in for the per-pixel standard error of a 1-spp film, whose own is unknown (one sample
+/// has no variance; the tracer reports 0, and the filter left the noisiest image untouched): per
+/// pixel and channel the standard deviation of the 3×3 neighbourhood (edge pixels clamped) — one
+/// sample's spread where the image is flat, an overestimate at edges, which the guides keep.
+core::ImageRGBA neighbourhoodStdError(const core::ImageRGBA& mean);
+
 /// Denoises `mean` (linear RGBA, the path tracer's film) with its per-pixel standard error
 /// `stdError` (RGB used) and `guides`, all of one size (VL_CHECK). See the header comment.
 core::ImageRGBA denoise(const core::ImageRGBA& mean, const core::ImageRGBA& stdError,

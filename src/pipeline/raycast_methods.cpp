@@ -910,15 +910,23 @@ std::shared_ptr<const TracedImage> tracePath(
             const pathtrace::Guides guides = tracer.guides(*camera);
             const double guideSeconds = guideClock.seconds();
             pathtrace::DenoiseStats ds;
-            out->denoised = pathtrace::denoise(out->image, out->stdError, guides, *denoise, &ds);
-            out->details["denoise"] = {{"applied", true},
-                                       {"target_error", denoise->targetError},
-                                       {"mean_strength", ds.meanStrength},
-                                       {"filtered_fraction", ds.filteredFraction},
-                                       {"full_strength_fraction", ds.fullFraction},
-                                       {"iterations", denoise->iterations},
-                                       {"guide_seconds", guideSeconds},
-                                       {"filter_seconds", ds.seconds}};
+            // One sample per pixel has no variance of its own (reported 0: the filter left the
+            // noisiest image untouched): the neighbourhood's spread stands in for it.
+            const bool oneSample = st.samplesPerPixel == 1;
+            out->denoised = pathtrace::denoise(
+                out->image,
+                oneSample ? pathtrace::neighbourhoodStdError(out->image) : out->stdError, guides,
+                *denoise, &ds);
+            out->details["denoise"] = {
+                {"applied", true},
+                {"variance", oneSample ? "3x3 neighbourhood (1 spp)" : "per pixel"},
+                {"target_error", denoise->targetError},
+                {"mean_strength", ds.meanStrength},
+                {"filtered_fraction", ds.filteredFraction},
+                {"full_strength_fraction", ds.fullFraction},
+                {"iterations", denoise->iterations},
+                {"guide_seconds", guideSeconds},
+                {"filter_seconds", ds.seconds}};
         } else {
             out->details["denoise"] = {{"applied", false},
                                        {"reason", "method.params.denoise is false"}};

@@ -216,4 +216,14 @@ TEST(Denoise, AtLowSppItIsCloserToTheConvergedTorsoThanTheRawEstimate) {
             << spp << " spp: raw " << eRaw << ", denoised " << eDen;
         std::printf("%d spp: NRMSE raw %.4f, denoised %.4f\n", spp, eRaw, eDen);
     }
+    // 1 spp: no variance of its own (the tracer reports 0, and the filter returned the raw
+    // image); with the neighbourhood's spread standing in, it denoises like the others.
+    o.samplesPerPixel = 1;
+    core::ImageRGBA se;
+    const core::ImageRGBA raw = s.tracer(o).render(cam, core::Progress::none(), nullptr, &se);
+    EXPECT_EQ(denoise(raw, se, g, {}).pixels, raw.pixels);  // why the stand-in is needed
+    const core::ImageRGBA den = denoise(raw, pathtrace::neighbourhoodStdError(raw), g, {});
+    const double eRaw = nrmse(raw, converged), eDen = nrmse(den, converged);
+    EXPECT_LT(eDen, kImprovement * eRaw) << "1 spp: raw " << eRaw << ", denoised " << eDen;
+    std::printf("1 spp (neighbourhood variance): NRMSE raw %.4f, denoised %.4f\n", eRaw, eDen);
 }
