@@ -102,6 +102,14 @@ SweepReferenceSpec parseReference(const io::Field& r) {
         if (ref.method != "pathtrace") ref.params = json::object(), ref.effects.reset();
     }
     if (r.has("params")) ref.params = object(r.child("params"));
+    // The path tracer's reference is its reference mode (no denoise, no clamping, to a target
+    // error, cached): "reference": false made it an ordinary render, accepted without a word.
+    if (ref.method == "pathtrace" && ref.params.contains("reference") &&
+        ref.params["reference"] != true)
+        r.child("params")
+            .child("reference")
+            .fail("must be true: the sweep's path-traced reference is the tracer's reference mode",
+                  "remove it (a plain path-traced render is a run: {\"method\": \"pathtrace\"})");
     if (r.has("effects")) ref.effects = strings(r.child("effects"), kEffectsExample);
     return ref;
 }
@@ -365,6 +373,7 @@ const SweepReference& SweepRunner::reference(std::size_t index, const core::Prog
     ref.relativeStdError = number("relative_std_error");
     ref.expectedNrmse = number("expected_nrmse");
     ref.spp = pt.value("spp", 0LL);
+    ref.warnings = r.warnings;
     for (const auto& st : r.stages)
         if (st.ran && st.kind != pipeline::StageKind::Input) ref.seconds += st.seconds;
     // Served from the cache: the reference stage (params "reference": true) did not run.

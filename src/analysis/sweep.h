@@ -144,6 +144,9 @@ struct SweepReference {
     long long spp = 0;
     double seconds = 0;  ///< what it took now (0 when served from the cache)
     bool cached = false;
+    /// The reference render's warnings (e.g. stopped above its target error): every row is
+    /// measured against it, so the sweep repeats them (they were dropped without a word).
+    std::vector<std::string> warnings;
 };
 
 struct SweepRow {

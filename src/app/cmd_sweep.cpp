@@ -168,6 +168,10 @@ Command addSweepCommand(CLI::App& app) {
                 // then the runs' own (reference-N.png).
                 std::set<std::size_t> needed = {0};
                 for (const auto& it : items) needed.insert(it.reference);
+                // Every reference rendered before any is written: a Ctrl-C or bad input while a
+                // run's own reference renders left an earlier sweep's reference.png replaced
+                // under its old results (probe).
+                for (const std::size_t k : needed) (void)runner.reference(k, progress);
                 nlohmann::json refJson;
                 for (const std::size_t k : needed) {
                     const analysis::SweepReference& ref = runner.reference(k, progress);
@@ -191,7 +195,8 @@ Command addSweepCommand(CLI::App& app) {
                                                ? nlohmann::json(ref.expectedNrmse)
                                                : nlohmann::json()},
                         {"seconds", ref.seconds},
-                        {"cached", ref.cached}};
+                        {"cached", ref.cached},
+                        {"warnings", ref.warnings}};
                     if (k == 0) {
                         refJson = j;
                         refJson["sweep"] = spec.name;
@@ -212,6 +217,9 @@ Command addSweepCommand(CLI::App& app) {
                                       .c_str()
                                 : rs.params.dump().c_str(),
                             ref.cached ? "cached" : (std::to_string(ref.seconds) + " s").c_str());
+                    for (const std::string& w : ref.warnings)
+                        std::fprintf(stderr, "voxlight: warning: %s: reference %zu: %s\n",
+                                     spec.name.c_str(), k, w.c_str());
                 }
                 writeAtomically(dir / "reference.json", [&](const fs::path& p) {
                     writeTextFile(

@@ -112,6 +112,12 @@ TEST(Sweep, BadSweepsNameTheirKey) {
          "runs[0].effects[0]"},
         {"reference params not an object", [](json& d) { d["reference"]["params"] = 1; },
          "reference.params"},
+        // An ordinary render as the reference was accepted without a word (probe).
+        {"reference mode off",
+         [](json& d) {
+             d["reference"]["params"] = {{"reference", false}};
+         },
+         "reference.params.reference"},
         {"bad override", [](json& d) { d["overrides"] = {"image.width"}; }, "overrides"},
         // A scene error is the scene's or its override's, not the first reference's parsed.
         {"override with a bad value", [](json& d) { d["overrides"] = {"image.width=abc"}; },
@@ -173,6 +179,19 @@ TEST(Sweep, OneAtATimeVariesEachAxisFromTheBaseAndGridTakesEveryCombination) {
     EXPECT_EQ(gridParams.size(), 6u);  // every combination, each once
     EXPECT_EQ(items.back().id, "gradient");
     EXPECT_TRUE(items.back().params.empty());
+}
+
+TEST(Sweep, AReferenceThatMissesItsTargetErrorCarriesTheWarning) {
+    // Every row is measured against it: a reference stopped at its spp cap above its target
+    // error said only "estimated error 12 %" (probe); the render's warning is the sweep's too.
+    json d = tinySweep(json::parse(R"([{"method": "gradient"}])"));
+    d["reference"]["params"] = {{"reference", true}, {"target_error", 0.001}, {"spp", 4}};
+    const SweepSpec spec = parse(d);
+    pipeline::Session variants, references;
+    SweepRunner runner(spec, variants, references);
+    const SweepReference& ref = runner.reference();
+    ASSERT_EQ(ref.warnings.size(), 1u);
+    EXPECT_NE(ref.warnings[0].find("target_error"), std::string::npos) << ref.warnings[0];
 }
 
 TEST(Sweep, TheReferenceAgainstItselfHasNoErrorAndOtherMethodsSome) {

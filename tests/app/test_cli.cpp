@@ -775,6 +775,23 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
         run("sweep " + q(tmp / "badsky.json") + " --out " + q(tmp / "mine"), tmp.path());
     EXPECT_EQ(r.code, 2) << r.err;
     EXPECT_EQ(listing(tmp / "mine"), std::vector<std::string>{"keep.txt"});
+    // A run's own reference that fails in its stages (a lattice over its budget) after the
+    // sweep's reference rendered: an earlier sweep's reference.png was replaced under its old
+    // results (probe). References are all rendered before any is written.
+    std::ofstream(tmp / "mine" / "reference.png") << "an earlier sweep's";
+    std::ofstream(tmp / "runref.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16}},
+      "reference": {"params": {"spp": 4}},
+      "runs": [{"method": "iso-lattice", "params": {"samples": 1},
+                "reference": {"method": "iso-lattice",
+                              "params": {"samples": 1, "lattice_resolution": 8,
+                                         "lattice_mode": "sh", "sh_order": 5,
+                                         "lattice_memory_mb": 1}}}]})";
+    const Result own =
+        run("sweep " + q(tmp / "runref.json") + " --out " + q(tmp / "mine"), tmp.path());
+    EXPECT_EQ(own.code, 2) << own.err;
+    std::ifstream kept(tmp / "mine" / "reference.png");
+    EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "an earlier sweep's");
 }
 
 TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
