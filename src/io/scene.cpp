@@ -294,10 +294,13 @@ CameraDesc parseCamera(const Field& f) {
         std::vector<std::string> names;
         for (const NamedView& v : namedViews()) names.push_back(v.name);
         f.get("view", c.view, names);
+        // Named on the placement key: a `--set camera.azimuth=30` on a scene from `scene --init`
+        // (which writes "view": "auto") was blamed on the scene file's camera.view.
         for (const char* other : {"azimuth", "elevation", "eye", "up"})
             if (f.has(other))
-                f.child("view").fail(std::string("conflicts with camera.") + other,
-                                     "give either a named view or azimuth/elevation/eye/up");
+                f.child(other).fail("conflicts with camera.view '" + c.view + "'",
+                                    "give either a named view or azimuth/elevation/eye/up "
+                                    "(--set camera.view=null drops the view)");
         const NamedView* v = findView(c.view);
         c.azimuthDeg = v->azimuthDeg, c.elevationDeg = v->elevationDeg, c.up = v->up;
     }

@@ -279,6 +279,15 @@ std::shared_ptr<const lights::Light> whiteSky() {
 std::vector<std::shared_ptr<const lights::Light>> buildLights(const io::Scene& scene) {
     std::vector<std::shared_ptr<const lights::Light>> out;
     for (std::size_t i = 0; i < scene.lights.size(); ++i) {
+        // A missing map named only the file ("./courtyrd.hdr: file: does not exist"): the scene
+        // and its key, as a missing volume is.
+        const io::LightDesc& l = scene.lights[i];
+        std::error_code ec;
+        if (l.type == "environment" && !std::filesystem::exists(l.path, ec))
+            throw InputError(scene.source, "lights[" + std::to_string(i) + "].path",
+                             "names '" + l.path.string() + "', which does not exist",
+                             "check the path (a scene file's relative paths are taken from its "
+                             "folder, --set's from the current one)");
         try {
             out.push_back(buildLight(scene.lights[i]));
         } catch (const InputError& e) {

@@ -153,6 +153,21 @@ TEST(Cli, SceneOverridesAreValidated) {
         run("scene '" + (tmp / "scene.json").string() + "' --set camera.fov_y=35", tmp.path());
     ASSERT_EQ(r.code, 0) << r.err;
     EXPECT_EQ(nlohmann::json::parse(r.out)["camera"]["fov_y"], 35);
+    // A scene from `scene --init` has "view": "auto": an azimuth --set conflicts with it, and the
+    // error named the scene file's camera.view (probe) — now the override, and how to drop it.
+    std::ofstream(tmp / "init.json")
+        << R"({"volume": {"phantom": "torso"}, "camera": {"view": "auto"}})";
+    const std::string init = "scene '" + (tmp / "init.json").string() + "'";
+    const Result c = run(init + " --set camera.azimuth=30", tmp.path());
+    EXPECT_EQ(c.code, 2) << c.err;
+    EXPECT_EQ(
+        c.err.rfind("voxlight: error: --set camera.azimuth=30: camera.azimuth: conflicts with "
+                    "camera.view 'auto'",
+                    0),
+        0u)
+        << c.err;
+    EXPECT_NE(c.err.find("--set camera.view=null"), std::string::npos) << c.err;
+    EXPECT_EQ(run(init + " --set camera.view=null --set camera.azimuth=30", tmp.path()).code, 0);
 }
 
 TEST(Cli, TwoProcessesShareOneCacheDirectoryAndExplainMatchesTheRun) {
@@ -280,8 +295,8 @@ TEST(Cli, SceneRefusesAnEnvironmentMapThatRenderRefuses) {
     // `scene` said "valid" for a sky that is missing, not an image or 8-bit; render refused it.
     test::TempDir tmp;
     std::ofstream(tmp / "junk.hdr") << "not an image";
-    const std::vector<std::pair<std::string, std::string>> skies = {{"nowhere.exr", "nowhere.exr"},
-                                                                    {"junk.hdr", "junk.hdr"}};
+    const std::vector<std::pair<std::string, std::string>> skies = {
+        {"nowhere.exr", "scene.json: lights[0].path: names"}, {"junk.hdr", "junk.hdr"}};
     for (const auto& [sky, word] : skies) {
         std::ofstream(tmp / "scene.json") << R"({"volume": {"phantom": "sphere", "size": 16},
             "lights": [{"type": "environment", "path": ")" +
