@@ -760,11 +760,18 @@ void checkNiftiHeader(const fs::path& named) {
                              std::to_string(datatype) + " (" + std::to_string(it->second) +
                              " bits)",
                          "repair the header");
+    // Without an sform, pixdim is the voxel size (and the qform's scale): 0 is no size — VTK
+    // reads it as 1 mm without a word (probe). With an sform the matrix gives the size.
+    const int sformCode = v1 ? i16(254) : i32(348, swap);
     for (int a = 1; a <= 3; ++a) {
         const double sp = v1 ? f32(76 + 4 * a) : f64(104 + 8 * a);
         if (!std::isfinite(sp))
             throw InputError(path.string(), "pixdim[" + std::to_string(a) + "]",
                              "voxel spacing is NaN or infinite", "repair the header");
+        if (sp == 0.0 && sformCode <= 0)
+            throw InputError(path.string(), "pixdim[" + std::to_string(a) + "]",
+                             "voxel spacing is 0 and no sform gives it",
+                             "repair the header (e.g. with nibabel: set the zooms)");
     }
     // dim[0] outside 1..7 is how VTK detects a byte-swapped header: with sizeof_hdr saying
     // otherwise it reads every field swapped and crashes on the result.
@@ -824,6 +831,10 @@ void checkNiftiHeader(const fs::path& named) {
     }
 }
 
+/// Relative disagreement between an sform's column length and pixdim above which the sform's
+/// scale is taken: float32 headers that agree differ by ~1e-7.
+constexpr double kSformScaleTol = 1e-5;
+
 Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress& progress) {
     refuseSpecialCompanion(path);
     checkNiftiHeader(path);
@@ -857,14 +868,23 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
             t[c] = m->GetElement(c, 3);
         }
         const glm::dmat3 rasToLps(glm::dvec3(-1, 0, 0), glm::dvec3(0, -1, 0), glm::dvec3(0, 0, 1));
-        // VTK folds the scale into spacing; normalise columns in case the matrix carries any
-        // residual scale.
+        // VTK divides the matrix by pixdim's spacing: an sform whose scale disagrees with
+        // pixdim leaves that ratio in the columns. The sform is the truth (nibabel, ITK): the
+        // spacing takes the column's length (an identity sform with pixdim 1, 2, 3 was read as
+        // 1 × 2 × 3 mm instead of 1 × 1 × 1; probe). A qform's columns are unit.
         glm::dmat3 d = rasToLps * rot;
         for (int c = 0; c < 3; ++c) {
             const double len = glm::length(d[c]);
             if (len > 0) d[c] /= len;
+            // (Float rounding of a consistent header leaves |len − 1| ~1e-7: kept as it was.)
+            if (std::abs(len - 1.0) > kSformScaleTol && std::isfinite(len)) g.spacing[c] *= len;
             if (sp[c] < 0) d[c] = -d[c];
         }
+        for (int c = 0; c < 3; ++c)
+            if (!std::isfinite(g.spacing[c]) || !(g.spacing[c] > 0.0))
+                throw InputError(
+                    path.string(), "sform", "gives voxel column " + std::to_string(c) + " no size",
+                    "repair the header's sform (e.g. with nibabel) or set its code to 0");
         const char* field = h->GetSFormCode() > 0 ? "sform" : "qform";
         checkDirection(d, path, field);
         g.direction = d;

@@ -713,6 +713,34 @@ TEST(BadInput, NiftiWithAnUnknownDatatypeOrNanSpacingIsRefusedBeforeVtk) {
     expectInputError(tmp / "p.nii", "pixdim[2]", {"NaN"});
 }
 
+TEST(BadInput, NiftiSpacingIsTheSformsAndAZeroPixdimWithoutOneIsRefused) {
+    // Probe: pixdim 0 without an sform was read as 1 mm without a word (VTK); and an sform whose
+    // scale disagrees with pixdim was read at pixdim's (nibabel and ITK take the sform's).
+    test::TempDir tmp;
+    core::PhantomOptions o;
+    o.size = 16;
+    const core::Volume ref = core::makePhantom("sphere", o);
+    io::writeVolume(ref, tmp / "s.nii");
+    const float two = 2.f, zero = 0.f;
+    patchBytes(tmp / "s.nii", 76 + 4 * 2, &two, sizeof two);  // pixdim[2] = 2, the sform says 1
+    std::int16_t sformCode = 0;
+    {
+        std::ifstream f(tmp / "s.nii", std::ios::binary);
+        f.seekg(kNiftiSformCode);
+        f.read(reinterpret_cast<char*>(&sformCode), sizeof sformCode);
+    }
+    ASSERT_GT(sformCode, 0) << "the writer stores an sform";
+    const core::Volume v = io::readVolume(tmp / "s.nii");
+    EXPECT_NEAR(v.geometry().spacing.y, ref.geometry().spacing.y, 1e-6);
+    EXPECT_NEAR(v.geometry().spacing.x, ref.geometry().spacing.x, 1e-6);
+    // With the sform switched off, pixdim is the size: 0 is refused, 2 is taken.
+    const std::int16_t off = 0;
+    patchBytes(tmp / "s.nii", kNiftiSformCode, &off, sizeof off);
+    EXPECT_NEAR(io::readVolume(tmp / "s.nii").geometry().spacing.y, 2.0, 1e-6);
+    patchBytes(tmp / "s.nii", 76 + 4 * 2, &zero, sizeof zero);
+    expectInputError(tmp / "s.nii", "pixdim[2]", {"is 0", "no sform"});
+}
+
 namespace {
 std::string readAll(const fs::path& p) {
     std::ifstream f(p, std::ios::binary);
