@@ -35,6 +35,7 @@
 
 #include "app/cli_support.h"
 #include "app/output_files.h"
+#include "app/volume_options.h"
 #include "core/half_space.h"
 #include "core/timing.h"
 #include "io/scene.h"
@@ -105,6 +106,7 @@ Command addIsoCommand(CLI::App& app) {
     c.sub->add_option("--stats", *stats, "Write stages, timings and the mesh report as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set crop_box.min=[0,0,0]")
         ->allow_extra_args(false);
+    auto shorthands = addVolumeShorthands(*c.sub);
     c.sub->add_flag("--cap", *cap,
                     "Close the cuts of clip planes and crop box with flat caps (a closed surface "
                     "stays watertight)");
@@ -203,7 +205,7 @@ Command addIsoCommand(CLI::App& app) {
                                  "per-vertex SH transfer is written to PLY only",
                                  "write the mesh to a .ply file");
         }
-        const io::Scene s = loadInput(*scene, *sets);
+        const io::Scene s = loadInput(*scene, shorthands->overrides(*sets));
         pipeline::Session().plan(s);  // the scene is valid as `render` reads it
         const core::Progress progress = terminalProgress(*quiet);
         json stages = json::array();

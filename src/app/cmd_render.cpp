@@ -15,6 +15,7 @@
 #include "app/cli_support.h"
 #include "app/output_files.h"
 #include "app/render_output.h"
+#include "app/volume_options.h"
 #include "core/timing.h"
 #include "io/image.h"
 #include "io/scene.h"
@@ -82,6 +83,7 @@ Command addRenderCommand(CLI::App& app) {
     c.sub->add_option("--stats", *stats, "Write stages, timings and parameters as JSON");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
+    auto shorthands = addVolumeShorthands(*c.sub);
     c.sub
         ->add_option("--frames", *frames,
                      "Render the frame N times; stats report the median and every frame's time")
@@ -98,7 +100,7 @@ Command addRenderCommand(CLI::App& app) {
         pipeline::Session session;
         if (!cacheDir->empty()) session.cache().setDirectory(*cacheDir);
         if (*explain) {
-            const io::Scene s = loadInput(*scene, *sets, *view);
+            const io::Scene s = loadInput(*scene, shorthands->overrides(*sets), *view);
             std::vector<pipeline::StageRecord> plan = session.explain(s);
             plan.push_back(outputRecord("write_image", *out, "-o"));
             plan.push_back(outputRecord("write_exr", *exr, "--exr"));
@@ -130,7 +132,7 @@ Command addRenderCommand(CLI::App& app) {
                       {"--display-exr", *displayExr, {".exr"}},
                       {"--stats", *stats, {".json"}}},
                      {{"INPUT", *scene}});
-        const io::Scene s = loadInput(*scene, *sets, *view);
+        const io::Scene s = loadInput(*scene, shorthands->overrides(*sets), *view);
         {
             // The files the scene reads: an environment map written over by -o or --exr.
             std::vector<std::pair<std::string, std::filesystem::path>> inputs = sceneFileInputs(s);

@@ -10,6 +10,7 @@
 #include <memory>
 
 #include "app/cli_support.h"
+#include "app/volume_options.h"
 #include "core/files.h"
 #include "io/scene.h"
 #include "optics/presets.h"
@@ -30,13 +31,14 @@ Command addSceneCommand(CLI::App& app) {
     c.sub->add_option("INPUT", *path, "Scene JSON, or a volume file / DICOM folder")->required();
     c.sub->add_option("--set", *sets, "Override a key by dotted path, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
+    auto shorthands = addVolumeShorthands(*c.sub);
     c.sub->add_option("--view", *view, "Look from this side of the patient")
         ->check(CLI::IsMember(viewNames()));
     c.sub->add_flag("--init", *init,
                     "Print a complete scene with every key at its default (reads the volume to "
                     "choose the transfer function): voxlight scene --init ct.nii.gz > scene.json");
     c.run = [=] {
-        const io::Scene s = loadInput(*path, *sets, *view);
+        const io::Scene s = loadInput(*path, shorthands->overrides(*sets), *view);
         // Everything `render` checks before loading the volume (method, params, effects, preset),
         // so that "valid" here means the scene renders.
         const pipeline::Plan plan = pipeline::Session().plan(s);

@@ -16,6 +16,7 @@
 
 #include "app/cli_support.h"
 #include "app/output_files.h"
+#include "app/volume_options.h"
 #include "io/image.h"
 #include "io/scene.h"
 #include "session/session.h"
@@ -40,6 +41,7 @@ Command addViewCommand(CLI::App& app) {
                       "Scene JSON, or a volume file / DICOM folder to view with defaults");
     c.sub->add_option("--set", *sets, "Override a scene key, e.g. --set camera.azimuth=45")
         ->allow_extra_args(false);
+    auto shorthands = addVolumeShorthands(*c.sub);
     c.sub->add_option("--screenshot", *screenshot,
                       "Scripted run: write the window (.png) or the image's linear radiance "
                       "(.exr) once the full-resolution image shows, then exit");
@@ -90,7 +92,7 @@ Command addViewCommand(CLI::App& app) {
         if (!script->empty()) steps = viewer::parseScript(io::readJsonFile(*script), *script);
         std::optional<viewer::LoadedScene> initial;
         if (!input->empty()) {
-            io::Scene scene = loadInput(*input, *sets);
+            io::Scene scene = loadInput(*input, shorthands->overrides(*sets));
             for (auto& in : sceneFileInputs(scene)) inputs.push_back(std::move(in));
             checkOutputs(outputs, inputs);  // the scene's volume and maps
             initial = viewer::prepareScene(std::move(scene), terminalProgress(*quiet));

@@ -31,6 +31,31 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
     return o;
 }
 
+std::shared_ptr<VolumeShorthands> addVolumeShorthands(CLI::App& sub) {
+    auto o = std::make_shared<VolumeShorthands>();
+    auto* g = sub.add_option_group("reading", "How to read the volume (scene keys volume.*)");
+    g->add_option("--series", o->series,
+                  "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
+                  "files without one); --set volume.series=UID");
+    g->add_flag("--strict-geometry", o->strictGeometry,
+                "DICOM: refuse a gantry-tilted or variably spaced series instead of resampling it; "
+                "--set volume.strict_geometry=true");
+    g->add_option("--nonfinite", o->nonFinite,
+                  "NaN/Inf voxels: reject (default) or replace by the minimum; --set "
+                  "volume.nonfinite=min")
+        ->check(CLI::IsMember({"reject", "min"}));
+    return o;
+}
+
+std::vector<std::string> VolumeShorthands::overrides(const std::vector<std::string>& sets) const {
+    std::vector<std::string> all;
+    if (!series.empty()) all.push_back("volume.series=" + series);
+    if (strictGeometry) all.push_back("volume.strict_geometry=true");
+    if (!nonFinite.empty()) all.push_back("volume.nonfinite=" + nonFinite);
+    all.insert(all.end(), sets.begin(), sets.end());
+    return all;
+}
+
 io::ReadOptions VolumeOptions::readOptions() const {
     io::ReadOptions r;
     r.dicomSeriesUid = series;

@@ -29,4 +29,16 @@ class VolumeOptions {
 
 std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub);
 
+/// The scene-keyed reading options as flags of the commands that take a scene or a volume
+/// (render, scene, iso, view): --series, --strict-geometry and --nonfinite, each the --set of its
+/// volume key, placed before the command's own --set. The loaders' messages name them ("select
+/// with --series none"), and render refused them (probe).
+struct VolumeShorthands {
+    std::string series, nonFinite;
+    bool strictGeometry = false;
+    /// `sets` with the shorthands' overrides in front.
+    std::vector<std::string> overrides(const std::vector<std::string>& sets) const;
+};
+std::shared_ptr<VolumeShorthands> addVolumeShorthands(CLI::App& sub);
+
 }  // namespace voxlight::app

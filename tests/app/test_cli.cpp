@@ -312,6 +312,23 @@ TEST(Cli, SceneRefusesAnEnvironmentMapThatRenderRefuses) {
     EXPECT_FALSE(fs::exists(tmp / "a.png"));
 }
 
+TEST(Cli, RenderTakesTheReadingOptionsTheLoadersMessagesName) {
+    // "select with --series none", "use --strict-geometry": render refused both options (probe).
+    test::TempDir tmp;
+    test::writeTiltedCtSeries(tmp / "ct");
+    const std::string render = "render -q " + q(tmp / "ct") + " -o " + q(tmp / "a.png") +
+                               " --set image.width=16 --set image.height=16";
+    const Result plain = run(render, tmp.path());
+    EXPECT_EQ(plain.code, 0) << plain.err;
+    const Result strict = run(render + " --strict-geometry", tmp.path());
+    EXPECT_EQ(strict.code, 2) << strict.err;
+    EXPECT_NE(strict.err.find("tilt"), std::string::npos) << strict.err;
+    const Result series = run(render + " --series 1.2.3.4", tmp.path());
+    EXPECT_EQ(series.code, 2) << series.err;
+    EXPECT_NE(series.err.find("1.2.3.4"), std::string::npos) << series.err;
+    EXPECT_EQ(run("scene " + q(tmp / "ct") + " --nonfinite min", tmp.path()).code, 0);
+}
+
 TEST(Cli, OutputsAreCheckedBeforeRenderingAndNothingIsWritten) {
     test::TempDir tmp;
     const fs::path out = tmp / "out";
