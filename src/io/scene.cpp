@@ -182,7 +182,12 @@ TransferFunctionDesc parseTransferFunction(const Field& f) {
         return tf;
     }
     f.allowOnly({"preset", "points", "extinction_scale", "window"});
-    if (f.has("preset") == f.has("points")) f.fail("needs exactly one of 'preset' or 'points'");
+    // Neither: the automatic preset for the volume's modality (what a scene without the key
+    // shows), with this window or extinction scale — `--set transfer_function.window.level=…`
+    // on such a scene was refused as "needs exactly one of 'preset' or 'points'" (probe).
+    if (f.has("preset") && f.has("points"))
+        f.fail("takes one of 'preset' or 'points', not both",
+               "remove one (without either, the modality's preset is chosen)");
     if (f.has("preset")) tf.preset = presetName(f.child("preset"));
     f.get("extinction_scale", tf.extinctionScale, 0.0, 1e6);
     if (f.has("window")) {

@@ -58,6 +58,20 @@ TEST(Scene, FullDocumentParses) {
     EXPECT_EQ(s.render.seed, 7u);
 }
 
+TEST(Scene, AWindowWithoutAPresetWindowsTheModalitysPreset) {
+    // `--set transfer_function.window.level=… --set …width=…` on a scene without a TF: refused as
+    // "needs exactly one of 'preset' or 'points'" (probe). The automatic preset, windowed.
+    const io::Scene s = parse(json::parse(
+        R"({"volume": "a.nii", "transfer_function": {"window": {"level": 100, "width": 200}}})"));
+    EXPECT_TRUE(s.transferFunction.preset.empty());
+    EXPECT_TRUE(s.transferFunction.points.empty());
+    ASSERT_TRUE(s.transferFunction.window);
+    EXPECT_EQ(*s.transferFunction.window, glm::dvec2(100, 200));
+    expectBad(json::parse(R"({"volume": "a.nii", "transfer_function": {"preset": "generic",
+                 "points": [{"value": 0}]}})"),
+              "transfer_function", {"not both"});
+}
+
 TEST(Scene, RelativeVolumePathResolvesAgainstSceneDirectory) {
     const io::Scene s = parse(json::parse(R"({"volume": "ct/head.nii.gz"})"));
     EXPECT_EQ(s.volume.path, std::filesystem::path("/data/ct/head.nii.gz"));
