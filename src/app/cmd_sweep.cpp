@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <memory>
 #include <optional>
 #include <set>
@@ -45,10 +46,46 @@ void writeAtomically(const fs::path& target, const std::function<void(const fs::
     files.commit();
 }
 
-void writeCsv(const fs::path& path, const std::vector<analysis::SweepRow>& rows) {
+/// `rows` and the `kept` lines of an earlier run (index, line), in sweep order.
+void writeCsv(const fs::path& path, const std::vector<analysis::SweepRow>& rows,
+              const std::vector<std::pair<std::size_t, std::string>>& kept = {}) {
+    std::vector<std::pair<std::size_t, std::string>> lines = kept;
+    for (const auto& r : rows) lines.emplace_back(r.item.index, analysis::sweepCsvRow(r));
+    std::stable_sort(lines.begin(), lines.end(),
+                     [](const auto& a, const auto& b) { return a.first < b.first; });
     std::string text = analysis::sweepCsvHeader();
-    for (const auto& r : rows) text += "\n" + analysis::sweepCsvRow(r);
+    for (const auto& l : lines) text += "\n" + l.second;
     writeAtomically(path, [&](const fs::path& p) { writeTextFile(p, text); });
+}
+
+/// --only into a folder holding an earlier results.csv of the same sweep (same scene in its
+/// reference.json, same header): the rows of the runs not chosen now, to keep (they were dropped,
+/// their images left in images/ without rows; probe). A row is kept when its index and id are
+/// that item's in this sweep's expansion.
+std::vector<std::pair<std::size_t, std::string>> rowsToKeep(
+    const fs::path& dir, const analysis::SweepSpec& spec,
+    const std::vector<analysis::SweepItem>& all, const std::vector<std::string>& only) {
+    std::vector<std::pair<std::size_t, std::string>> kept;
+    try {
+        std::ifstream ref(dir / "reference.json");
+        if (!ref || nlohmann::json::parse(ref).value("scene", nlohmann::json()) != spec.scene)
+            return kept;
+    } catch (const std::exception&) {
+        return kept;
+    }
+    std::ifstream in(dir / "results.csv");
+    std::string line;
+    if (!in || !std::getline(in, line) || line != analysis::sweepCsvHeader()) return kept;
+    while (std::getline(in, line)) {
+        char* end = nullptr;
+        const std::size_t index = std::strtoull(line.c_str(), &end, 10);
+        if (end == line.c_str() || index >= all.size()) continue;
+        const analysis::SweepItem& it = all[index];
+        if (std::find(only.begin(), only.end(), it.label) != only.end()) continue;
+        if (line.rfind(std::to_string(index) + "," + it.id + ",", 0) == 0)
+            kept.emplace_back(index, line);
+    }
+    return kept;
 }
 
 std::string describe(const analysis::SweepItem& it) {
@@ -100,6 +137,8 @@ Command addSweepCommand(CLI::App& app) {
                                  "move the sweep file out of the folder, or give another --out");
         const analysis::SweepSpec spec = analysis::loadSweep(*sweepPath);
         std::vector<analysis::SweepItem> items = analysis::expandSweep(spec);
+        std::vector<std::pair<std::size_t, std::string>> kept;
+        if (!only->empty() && ranks.size() == 1) kept = rowsToKeep(dir, spec, items, *only);
         if (!only->empty()) {
             std::set<std::string> labels;
             for (const auto& r : spec.runs) labels.insert(r.label);
@@ -275,7 +314,7 @@ Command addSweepCommand(CLI::App& app) {
                             i + 1, items.size(), describe(row.item).c_str(), row.precomputeSeconds,
                             row.frameSeconds, row.nrmse, row.flip, row.ssim);
                     rows.push_back(std::move(row));
-                    if (ranks.size() == 1) writeCsv(dir / "results.csv", rows);
+                    if (ranks.size() == 1) writeCsv(dir / "results.csv", rows, kept);
                 }
             });
         } catch (const CancelledError&) {

@@ -826,6 +826,29 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
     EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "an earlier sweep's");
 }
 
+TEST(Cli, SweepOnlyIntoAnEarlierFolderKeepsTheOtherRunsRows) {
+    // --only rewrote results.csv with its own rows alone: the other runs' rows were gone while
+    // their images stayed (probe).
+    test::TempDir tmp;
+    std::ofstream(tmp / "sweep.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16}},
+      "reference": {"params": {"spp": 4}},
+      "runs": [{"method": "gradient"}, {"method": "mip"}]})";
+    const std::string sweep = "sweep -q " + q(tmp / "sweep.json") + " --out " + q(tmp / "out");
+    ASSERT_EQ(run(sweep, tmp.path()).code, 0);
+    const auto csv = [&] {
+        std::ifstream f(tmp / "out" / "results.csv");
+        std::vector<std::string> lines;
+        for (std::string l; std::getline(f, l);) lines.push_back(l.substr(0, l.find(',', 2)));
+        return lines;
+    };
+    const std::vector<std::string> before = csv();
+    ASSERT_EQ(before.size(), 3u);
+    const Result r = run(sweep + " --only mip", tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    EXPECT_EQ(csv(), before);
+}
+
 TEST(Cli, SweepOverMpiRanksWritesTheSameRowsAsOneProcess) {
     const fs::path module = fs::path(VOXLIGHT_BINARY).parent_path() / "libvoxlight_mpi.so";
     if (!fs::exists(module) || runShell("command -v mpirun", ".").code != 0)

@@ -152,8 +152,9 @@ TEST(Views, NamedViewsLookFromThatSideAndConflictWithExplicitAngles) {
         scene(d);
         FAIL() << "view and azimuth together must be refused";
     } catch (const InputError& e) {
-        EXPECT_EQ(e.field(), "camera.view");
-        EXPECT_NE(std::string(e.what()).find("azimuth"), std::string::npos) << e.what();
+        // Named on the placement key (a --set of it is then the one blamed), saying the view.
+        EXPECT_EQ(e.field(), "camera.azimuth");
+        EXPECT_NE(std::string(e.what()).find("camera.view 'left'"), std::string::npos) << e.what();
     }
 }
 
