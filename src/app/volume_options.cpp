@@ -5,6 +5,25 @@
 
 namespace voxlight::app {
 
+namespace {
+/// --series, --strict-geometry and --nonfinite into `g`; `keys` adds the scene key each sets.
+void addReadingChoices(CLI::Option_group& g, std::string& series, bool& strict,
+                       std::string& nonFinite, bool keys) {
+    g.add_option("--series", series,
+                 std::string("DICOM: SeriesInstanceUID to read when a folder holds several "
+                             "(\"none\" for files without one)") +
+                     (keys ? "; --set volume.series=UID" : ""));
+    g.add_flag("--strict-geometry", strict,
+               std::string("DICOM: refuse a gantry-tilted or variably spaced series instead of "
+                           "resampling it onto a regular grid (with a warning)") +
+                   (keys ? "; --set volume.strict_geometry=true" : ""));
+    g.add_option("--nonfinite", nonFinite,
+                 std::string("NaN/Inf voxels: reject (default) or replace by the minimum") +
+                     (keys ? "; --set volume.nonfinite=min" : ""))
+        ->check(CLI::IsMember({"reject", "min"}));
+}
+}  // namespace
+
 std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
     auto o = std::make_shared<VolumeOptions>();
     auto* g = sub.add_option_group("reading", "How to read the volume");
@@ -19,31 +38,14 @@ std::shared_ptr<VolumeOptions> addVolumeOptions(CLI::App& sub) {
     g->add_flag("--big-endian", o->bigEndian, "Raw file: big-endian voxels");
     g->add_option("--header-bytes", o->headerBytes, "Raw file: bytes to skip before the data")
         ->check(wholeNumber());
-    g->add_option("--series", o->series,
-                  "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
-                  "files without one)");
-    g->add_flag("--strict-geometry", o->strictGeometry,
-                "DICOM: refuse a gantry-tilted or variably spaced series instead of resampling it "
-                "onto a regular grid (with a warning)");
-    g->add_option("--nonfinite", o->nonFinite,
-                  "NaN/Inf voxels: reject (default) or replace by the minimum")
-        ->check(CLI::IsMember({"reject", "min"}));
+    addReadingChoices(*g, o->series, o->strictGeometry, o->nonFinite, false);
     return o;
 }
 
 std::shared_ptr<VolumeShorthands> addVolumeShorthands(CLI::App& sub) {
     auto o = std::make_shared<VolumeShorthands>();
     auto* g = sub.add_option_group("reading", "How to read the volume (scene keys volume.*)");
-    g->add_option("--series", o->series,
-                  "DICOM: SeriesInstanceUID to read when a folder holds several (\"none\" for "
-                  "files without one); --set volume.series=UID");
-    g->add_flag("--strict-geometry", o->strictGeometry,
-                "DICOM: refuse a gantry-tilted or variably spaced series instead of resampling it; "
-                "--set volume.strict_geometry=true");
-    g->add_option("--nonfinite", o->nonFinite,
-                  "NaN/Inf voxels: reject (default) or replace by the minimum; --set "
-                  "volume.nonfinite=min")
-        ->check(CLI::IsMember({"reject", "min"}));
+    addReadingChoices(*g, o->series, o->strictGeometry, o->nonFinite, true);
     return o;
 }
 
