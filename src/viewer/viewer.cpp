@@ -1089,8 +1089,8 @@ void Viewer::checkIndex(const ScriptStep& st, std::size_t count, const char* wha
 }
 
 InputError Viewer::scriptStepError(const std::string& what) const {
-    // The scene the script's steps made (a window drag of 5000 pixels a width past 10⁹) is the last step's doing: named, not the
-    // screenshot or the scene file whose key it changed.
+    // The scene the script's steps made (a window drag of 5000 pixels a width past 10⁹) is the
+    // last step's doing: named, not the screenshot or the scene file whose key it changed.
     const ScriptStep& last = options_.script[scriptNext_ - 1];
     return InputError(last.source, last.field, "leaves a view that cannot be rendered: " + what,
                       "use a smaller value");
