@@ -378,7 +378,8 @@ LightDesc parseLight(const Field& f, const fs::path& baseDir) {
                          : l.type + " light";
     for (const auto& [key, owner] : owners)
         if (f.has(key) && std::find(allowed.begin(), allowed.end(), key) == allowed.end())
-            f.child(key).fail("applies to " + owner + ", not to a " + what,
+            f.child(key).fail("applies to " + owner + ", not to " +
+                                  (what.find_first_of("aeiou") == 0 ? "an " : "a ") + what,
                               "remove it, or change the light's type or shape");
     f.allowOnly(allowed);
     f.get("color", l.color, 0.0, 1e9);

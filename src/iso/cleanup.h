@@ -13,9 +13,10 @@
 //                                     fair surface design"): per iteration a Laplacian step of
 //                                     λ = 0.5, then one of μ = −0.53 (uniform weights). Low-pass
 //                                     without the shrinking of plain Laplacian smoothing; boundary
-//                                     vertices and capped cuts' stay put. Written here on CGAL's mesh: CGAL's own
-//                                     smooth_shape (mean curvature flow) rippled and thinned the
-//                                     torso's ribs (area −26 % after 3 steps) and cost 10 s there.
+//                                     vertices and those on capped planes stay put. Written here
+//                                     on CGAL's mesh: CGAL's own smooth_shape (mean curvature
+//                                     flow) rippled and thinned the torso's ribs (area −26 % after
+//                                     3 steps) and cost 10 s there.
 //   5. decimation                     SMS::edge_collapse with Lindstrom–Turk cost and placement
 //                                     and a Bounded_normal_change_filter (no face turned over),
 //                                     stopping at about `targetFaces` faces (CGAL 5.5 stops on an
