@@ -103,10 +103,17 @@ def point_label(r):
     return "base" if r["id"].endswith("-base") else ""
 
 
+def ref_of(r):
+    """Which reference a row was measured against: "0" (the sweep's) or a run's own N."""
+    return (r.get("reference") or "0").strip()
+
+
 def pareto(rows, metric):
-    """Rows on the Pareto front of (total seconds, error): no other is both faster and better."""
-    pts = sorted((r for r in rows if math.isfinite(r[metric])), key=lambda r: (r["total_s"],
-                                                                             r[metric]))
+    """Rows on the Pareto front of (total seconds, error): no other is both faster and better.
+    Only rows measured against the sweep's own reference compete: an error against a run's own
+    reference (another method's image) is not the same measure."""
+    pts = sorted((r for r in rows if math.isfinite(r[metric]) and ref_of(r) == "0"),
+                 key=lambda r: (r["total_s"], r[metric]))
     front, best = [], math.inf
     for r in pts:
         if r[metric] < best:
@@ -130,30 +137,43 @@ def plot_accuracy(rows, ref, metric, out):
             for axis, g in groups.items():
                 g = sorted(base + g, key=lambda r: number(r["value"]) if r["value"] else 0)
                 ax.plot([r[x] for r in g], [r[metric] for r in g], "-", color=c, alpha=0.35)
+            own = ref_of(rs[0]) != "0"
             for r in rs:
-                ax.plot(r[x], r[metric], "o", color=c, ms=5, label=label if first else None)
+                ax.plot(r[x], r[metric], "s" if own else "o", color=c, ms=5,
+                        label=(label + (" (vs reference-%s)" % ref_of(rs[0]) if own else ""))
+                        if first else None)
                 first = False
                 t = point_label(r)
                 if t and x == "precompute_s":
                     ax.annotate(t, (r[x], r[metric]), fontsize=6, xytext=(3, 2),
                                 textcoords="offset points", color=c)
-    # The reference's noise in nrmse's own terms (absent from sweeps run before 7 December, whose
-    # relative_std_error is normalised by the mean, not the RMS: no floor drawn for them).
-    floor = ref.get("expected_nrmse") or 0
+    # Each reference's noise in nrmse's own terms (the rows' reference_error; absent from sweeps
+    # run before 7 December, whose relative_std_error is normalised by the mean, not the RMS: no
+    # floor drawn for them). A run with its own reference has its own floor: one line per
+    # reference, named (reference 0's alone made a run's rows against another reference look as
+    # if they had reached it).
+    floors = {}
+    for r in rows:
+        if math.isfinite(r["reference_error"]) and r["reference_error"] > 0:
+            floors[ref_of(r)] = r["reference_error"]
     for ax, x in zip(axes, ("precompute seconds (what a TF change costs)", "frame seconds")):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_xlabel(x)
         ax.grid(True, which="both", alpha=0.25)
-        if metric == "nrmse" and floor > 0:
-            ax.axhline(floor, ls=":", color="grey")
-            ax.text(ax.get_xlim()[0], floor, " reference's own error", fontsize=7, va="bottom",
-                    color="grey")
+        if metric == "nrmse":
+            for k, floor in sorted(floors.items()):
+                ax.axhline(floor, ls=":", color="grey" if k == "0" else "silver")
+                ax.text(ax.get_xlim()[0], floor,
+                        " reference's own error" if k == "0" else
+                        " reference-%s's own error" % k, fontsize=7, va="bottom", color="grey")
     axes[0].set_ylabel(METRICS[metric])
     axes[0].legend(fontsize=8)
     what = ("the path-traced reference (%d spp)" % ref.get("spp", 0)
             if ref.get("method", "pathtrace") == "pathtrace" else "the %s reference (%s)" %
             (ref["method"], json.dumps(ref.get("params", {}))))
+    if any(ref_of(r) != "0" for r in rows):
+        what += "; squares: against their run's own reference"
     fig.suptitle("%s: %s against %s" % (ref.get("sweep", ""), METRICS[metric], what), fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
@@ -178,8 +198,10 @@ def plot_pareto(rows, ref, metric, out):
     ax.set_ylabel(METRICS[metric])
     ax.grid(True, which="both", alpha=0.25)
     ax.legend(fontsize=8)
-    ax.set_title("%s: which method is best for the time spent" % ref.get("sweep", ""),
-                 fontsize=10)
+    title = "%s: which method is best for the time spent" % ref.get("sweep", "")
+    if any(ref_of(r) != "0" for r in rows):
+        title += "\n(front over the rows measured against the sweep's reference)"
+    ax.set_title(title, fontsize=10)
     fig.tight_layout()
     fig.savefig(out, dpi=110)
     plt.close(fig)
@@ -244,7 +266,9 @@ def section(d, name, rows, ref, metric, prefix):
     s += ["", "![accuracy against time](%saccuracy-vs-time.png)" % prefix, "",
           "![Pareto front](%spareto.png)" % prefix, "",
           "![reference and the most accurate variant of each run](%ssheet.png)" % prefix, "",
-          "◆ = on the Pareto front of (precompute + one frame, %s)." % metric, "",
+          "◆ = on the Pareto front of (precompute + one frame, %s) among the rows measured against "
+          "the sweep's reference; rows against a run's own reference are not ranked with them."
+          % metric, "",
           table(rows, metric), ""]
     front = pareto(rows, metric)
     if front:
