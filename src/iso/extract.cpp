@@ -145,7 +145,9 @@ std::vector<std::uint32_t> clipSoup(Soup& soup, const core::HalfSpace& h, double
     std::vector<double> d(np);
     for (std::size_t i = 0; i < np; ++i) {
         d[i] = h.distance(soup.points[i]);
-        if (std::abs(d[i]) <= snap) d[i] = 0.0;  // on the plane: no sliver (kClipSnapVoxels)
+        // On the plane: no sliver (kClipSnapVoxels), and moved onto it (≤ the snap), so that a
+        // cap's vertices all lie on its plane — what clean-up's hold tests (cleanup.h).
+        if (std::abs(d[i]) <= snap) soup.points[i] -= d[i] * h.normal, d[i] = 0.0;
     }
     // The point where edge (a in, b out) crosses the plane, made once per edge.
     std::unordered_map<std::uint64_t, std::uint32_t> cuts;

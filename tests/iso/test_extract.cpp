@@ -192,6 +192,12 @@ TEST(Extract, APlaneAHairOffAVoxelPlaneCutsNoSlivers) {
                 flat += glm::length(glm::cross(t[1] - t[0], t[2] - t[0])) == 0.0;
             }
             EXPECT_EQ(flat, 0u) << "off " << off << (cap ? " capped" : " open");
+            // The vertices the cut passes through were moved onto the (possibly nudged) plane:
+            // nothing is left a hair off it.
+            for (const auto vh : ex.mesh.vertices()) {
+                const double d = ex.planes.at(0).distance(toGlm(ex.mesh.point(vh)));
+                if (std::abs(d) < 1e-5) ASSERT_LT(std::abs(d), 1e-9) << "off " << off << cap;
+            }
             const MeshReport r = reportMesh(ex.mesh, true);
             EXPECT_EQ(r.selfIntersections, 0) << "off " << off << (cap ? " capped" : " open");
             if (cap) {
