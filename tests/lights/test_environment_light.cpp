@@ -12,7 +12,7 @@
 #include "lights/environment_light.h"
 #include "sh/sh_basis.h"
 #include "sh/sh_rotation.h"
-#include "sh/sphere_samples.h"
+#include "support/equirect_patches.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -69,33 +69,16 @@ glm::dmat3 rotationZyz(double a, double b, double g) {
 }
 
 // Brute-force SH projection over every pixel of the light's grid (per-pixel recurrence, not the
-// separable path), each pixel a constant over its patch as the projection takes it: ∫ Y over the
-// rotated patch by a 6×6 Gauss–Legendre rule in (θ, φ) with sin θ.
+// separable path), each pixel a constant over its patch as the projection takes it (6² points).
 std::vector<glm::dvec3> bruteForceSh(const EnvironmentLight& env, int band) {
-    const int w = env.width(), h = env.height();
     std::vector<glm::dvec3> c(sh::shCount(band), glm::dvec3(0.0));
-    std::vector<double> y(c.size());
-    constexpr int kPatchNodes = 6;
-    std::vector<double> x, wx;
-    sh::gaussLegendre(kPatchNodes, x, wx);
-    for (int r = 0; r < h; ++r) {
-        const double t0 = kPi * r / h, t1 = kPi * (r + 1) / h;
-        for (int col = 0; col < w; ++col) {
-            const double p0 = kPi - 2 * kPi * col / w, p1 = kPi - 2 * kPi * (col + 1) / w;
-            for (int i = 0; i < kPatchNodes; ++i)
-                for (int j = 0; j < kPatchNodes; ++j) {
-                    const double theta = 0.5 * (t0 + t1) + 0.5 * (t1 - t0) * x[i];
-                    const double phi = 0.5 * (p0 + p1) + 0.5 * (p1 - p0) * x[j];
-                    const double omega =
-                        0.25 * (t1 - t0) * (p0 - p1) * wx[i] * wx[j] * std::sin(theta);
-                    sh::evalShUnitDouble(band,
-                                         env.rotation() * sh::sphericalToDirection(theta, phi), y);
-                    const glm::dvec3 v =
-                        glm::dvec3(env.texels()[std::size_t(r) * w + col]) * (omega * env.scale());
-                    for (std::size_t k = 0; k < c.size(); ++k) c[k] += v * y[k];
-                }
-        }
-    }
+    test::forEachEquirectPatchSh(
+        band, env.width(), env.height(), env.rotation(), 6,
+        [&](int row, int col, const std::vector<double>& y) {
+            const glm::dvec3 v = glm::dvec3(env.texels()[std::size_t(row) * env.width() + col]) *
+                                 double(env.scale());
+            for (std::size_t k = 0; k < c.size(); ++k) c[k] += v * y[k];
+        });
     return c;
 }
 

@@ -24,6 +24,7 @@
 #include "sh/sh_projection.h"
 #include "sh/sh_rotation.h"
 #include "stability/hard_cases_util.h"
+#include "support/equirect_patches.h"
 #include "support/test_support.h"
 
 using namespace voxlight;
@@ -122,31 +123,14 @@ core::ImageRGBA sunAndSky() {
 /// lights/environment_light.h: θ_r = π(r + ½)/H, φ_c = π − 2π(c + ½)/W), in long double. Equal to
 /// rotating the midpoint-rule projection, because each band is closed under rotation.
 std::vector<long double> bruteForceSh(const core::ImageRGBA& im, const glm::dmat3& r) {
+    // Each pixel a constant over its patch (the projection's model): 8² Gauss–Legendre points per
+    // patch — exact to ~1e-12 for band 8 on patches of 11°.
     std::vector<long double> c(sh::shCount(kBand), 0.0L);
-    std::vector<double> y(sh::shCount(kBand));
-    const int w = im.width, h = im.height;
-    // Each pixel a constant over its patch (the projection's model): ∫ Y over the rotated patch by
-    // a kPatchNodes² Gauss–Legendre rule in (θ, φ) with sin θ — exact to ~1e-12 for band 8 on
-    // patches of 11°.
-    constexpr int kPatchNodes = 8;
-    std::vector<double> x, wx;
-    sh::gaussLegendre(kPatchNodes, x, wx);
-    for (int row = 0; row < h; ++row) {
-        const double t0 = kPi * row / h, t1 = kPi * (row + 1) / h;
-        for (int col = 0; col < w; ++col) {
-            const double p0 = kPi - 2.0 * kPi * col / w, p1 = kPi - 2.0 * kPi * (col + 1) / w;
-            for (int i = 0; i < kPatchNodes; ++i)
-                for (int j = 0; j < kPatchNodes; ++j) {
-                    const double theta = 0.5 * (t0 + t1) + 0.5 * (t1 - t0) * x[i];
-                    const double phi = 0.5 * (p0 + p1) + 0.5 * (p1 - p0) * x[j];
-                    const double omega =
-                        0.25 * (t1 - t0) * (p0 - p1) * wx[i] * wx[j] * std::sin(theta);
-                    sh::evalShUnitDouble(kBand, r * sh::sphericalToDirection(theta, phi), y);
-                    const long double lw = (long double)(im.at(col, row)[0]) * omega;
-                    for (std::size_t k = 0; k < c.size(); ++k) c[k] += lw * y[k];
-                }
-        }
-    }
+    test::forEachEquirectPatchSh(kBand, im.width, im.height, r, 8,
+                                 [&](int row, int col, const std::vector<double>& y) {
+                                     const long double v = im.at(col, row)[0];
+                                     for (std::size_t k = 0; k < c.size(); ++k) c[k] += v * y[k];
+                                 });
     return c;
 }
 
