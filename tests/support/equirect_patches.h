@@ -17,8 +17,8 @@ namespace voxlight::test {
 /// Calls add(row, col, y) with y[i] = ∫ over the pixel's patch of Y_i(rotation · ω) dω, for
 /// every pixel of a width × height map, band ≤ `band`, nodes² points per patch.
 template <class Add>
-void forEachEquirectPatchSh(int band, int width, int height, const glm::dmat3& rotation,
-                            int nodes, Add&& add) {
+void forEachEquirectPatchSh(int band, int width, int height, const glm::dmat3& rotation, int nodes,
+                            Add&& add) {
     constexpr double kPi = std::numbers::pi;
     std::vector<double> x, wx;
     sh::gaussLegendre(nodes, x, wx);
@@ -26,7 +26,8 @@ void forEachEquirectPatchSh(int band, int width, int height, const glm::dmat3& r
     for (int row = 0; row < height; ++row) {
         const double t0 = kPi * row / height, t1 = kPi * (row + 1) / height;
         for (int col = 0; col < width; ++col) {
-            const double p0 = kPi - 2.0 * kPi * col / width, p1 = kPi - 2.0 * kPi * (col + 1) / width;
+            const double p0 = kPi - 2.0 * kPi * col / width,
+                         p1 = kPi - 2.0 * kPi * (col + 1) / width;
             std::fill(patch.begin(), patch.end(), 0.0);
             for (int i = 0; i < nodes; ++i)
                 for (int j = 0; j < nodes; ++j) {
