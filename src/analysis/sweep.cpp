@@ -214,6 +214,13 @@ SweepSpec parseSweep(const json& doc, const std::string& source, const fs::path&
                 if (!values.is_array() || values.empty())
                     axes.child(key).fail("must be a non-empty array of values",
                                          "e.g. [16, 64, 256]");
+                // A value given twice rendered and measured twice, two rows of one variant.
+                for (std::size_t i = 0; i < values.size(); ++i)
+                    for (std::size_t j = 0; j < i; ++j)
+                        if (values[i] == values[j])
+                            axes.child(key).at(i).fail(values[i].dump() + " is already " + key +
+                                                           "[" + std::to_string(j) + "]",
+                                                       "give each value once");
                 run.axes.emplace_back(key, std::vector<json>(values.begin(), values.end()));
             }
         }

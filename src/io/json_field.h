@@ -24,6 +24,10 @@ std::string shortDump(const nlohmann::json& j);
 /// A number as written (the shortest text that reads back as it: "got 170" for 170.0000001 hid
 /// why it was refused); a non-finite one (built in code) as "nan"/"inf", not JSON's "null".
 std::string numberAsWritten(const nlohmann::json& j);
+/// "a string \"abc\"", "an array [1,2]", "null": what a value is, for "got …" in messages.
+inline std::string described(const nlohmann::json& j) {
+    return j.is_null() ? "null" : typeName(j) + " " + shortDump(j);
+}
 /// Levenshtein distance, for "did you mean" suggestions.
 std::size_t editDistance(const std::string& a, const std::string& b);
 
@@ -43,7 +47,7 @@ class Field {
     bool isArray() const { return j_.is_array(); }
 
     void expectObject() const {
-        if (!j_.is_object()) fail("must be an object, got " + typeName(j_) + " " + shortDump(j_));
+        if (!j_.is_object()) fail("must be an object, got " + described(j_));
     }
     /// Rejects keys not in `allowed`, suggesting the nearest one.
     void allowOnly(const std::vector<std::string>& allowed) const {
@@ -71,7 +75,7 @@ class Field {
     std::size_t size() const { return j_.size(); }
 
     double number(double lo = -HUGE_VAL, double hi = HUGE_VAL) const {
-        if (!j_.is_number()) fail("must be a number, got " + typeName(j_) + " " + shortDump(j_));
+        if (!j_.is_number()) fail("must be a number, got " + described(j_));
         const double v = j_.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
             std::ostringstream os;
@@ -81,8 +85,18 @@ class Field {
         return v;
     }
     int integer(int lo, int hi) const {
+        // A whole number written as 1e9 or 16.0 is an integer (JSON has one number type); its
+        // range says whether it fits.
+        if (j_.is_number_float() && std::isfinite(j_.get<double>()) &&
+            j_.get<double>() == std::floor(j_.get<double>())) {
+            const double v = j_.get<double>();
+            if (v < lo || v > hi)
+                fail("must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) +
+                     "], got " + numberAsWritten(j_));
+            return int(v);
+        }
         if (!j_.is_number_integer() && !j_.is_number_unsigned())
-            fail("must be an integer, got " + typeName(j_) + " " + shortDump(j_));
+            fail("must be an integer, got " + described(j_));
         // Unsigned values beyond long long (up to 2^64-1) would wrap to negatives in the message.
         if (j_.is_number_unsigned() &&
             j_.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max()))
@@ -95,12 +109,11 @@ class Field {
         return int(v);
     }
     std::string string() const {
-        if (!j_.is_string()) fail("must be a string, got " + typeName(j_) + " " + shortDump(j_));
+        if (!j_.is_string()) fail("must be a string, got " + described(j_));
         return j_.get<std::string>();
     }
     bool boolean(const std::string& fix = "write true or false, without quotes") const {
-        if (!j_.is_boolean())
-            fail("must be true or false, got " + typeName(j_) + " " + shortDump(j_), fix);
+        if (!j_.is_boolean()) fail("must be true or false, got " + described(j_), fix);
         return j_.get<bool>();
     }
     std::string oneOf(const std::vector<std::string>& allowed) const {
@@ -111,7 +124,7 @@ class Field {
     }
     glm::dvec3 vec3(double lo = -HUGE_VAL, double hi = HUGE_VAL) const {
         if (!j_.is_array() || j_.size() != 3)
-            fail("must be an array of 3 numbers, got " + typeName(j_) + " " + shortDump(j_));
+            fail("must be an array of 3 numbers, got " + described(j_));
         glm::dvec3 v;
         for (int i = 0; i < 3; ++i) v[i] = at(std::size_t(i)).number(lo, hi);
         return v;

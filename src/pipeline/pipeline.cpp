@@ -2,10 +2,13 @@
 #include "pipeline/pipeline.h"
 
 #include <algorithm>
+#include <cmath>
+#include <sstream>
 
 #include "core/hash.h"
 #include "core/timing.h"
 #include "pipeline/registry.h"
+#include "render/tonemap.h"
 
 namespace voxlight::pipeline {
 
@@ -193,6 +196,38 @@ std::vector<StageRecord> Session::explain(const io::Scene& scene) {
     return out;
 }
 
+namespace {
+
+/// Coverage from which a pixel shows the volume (under one 8-bit level below it shows nothing, as
+/// the ray caster's empty-image check says).
+constexpr float kShownAlpha = 0.5f / 255.f;
+/// Share of the pixels showing the volume that may be white before the image is called washed
+/// out. A flat plate under a point light is white over 40 % of what shows and reads well
+/// (datasets/scenes/kronander.json); a T1 head under an HDR environment at intensity 1 is white
+/// over 88 %, every fold lost — said nowhere until 7 December.
+constexpr double kWashedOutFraction = 0.5;
+
+/// "the image is washed out: …" when the display turns most of what shows white; empty otherwise.
+/// MIP and MinIP show the window's ramp, white on purpose where the data pass the window.
+std::string washedOutWarning(const std::string& method, const core::ImageRGBA& film,
+                             const io::Scene& scene) {
+    if (method == "mip" || method == "minip") return {};
+    const render::DisplayClipping c =
+        render::displayClipping(film, float(scene.image.exposureStops),
+                                render::displayFromString(scene.image.display), kShownAlpha);
+    if (c.shown == 0 || double(c.white) <= kWashedOutFraction * double(c.shown)) return {};
+    std::ostringstream os;
+    os << "the image is washed out: " << std::lround(100.0 * double(c.white) / double(c.shown))
+       << " % of the pixels that show the volume are white on the '" << scene.image.display
+       << "' display, their detail lost (set image.exposure to " << c.exposureToFit
+       << ", lower the lights' intensity";
+    if (scene.image.display != "filmic") os << ", or set image.display to \"filmic\"";
+    os << ")";
+    return os.str();
+}
+
+}  // namespace
+
 RunResult Session::run(const io::Scene& scene, const RunOptions& options,
                        const core::Progress& progress) {
     if (options.frames < 1 || options.frames > kMaxFrames)
@@ -211,6 +246,11 @@ RunResult Session::run(const io::Scene& scene, const RunOptions& options,
     res.imageStage = plan.imageStage;
     for (const auto& [name, image] : run.images_) res.images[name] = *image;
     res.details = run.details();
+    const auto denoised = res.images.find("denoised");
+    if (const std::string w = washedOutWarning(
+            plan.method, denoised != res.images.end() ? denoised->second : res.image, scene);
+        !w.empty())
+        run.warn(w);
     for (const auto& w : run.warnings())  // a Frame stage may warn once per frame
         if (std::find(res.warnings.begin(), res.warnings.end(), w) == res.warnings.end())
             res.warnings.push_back(w);

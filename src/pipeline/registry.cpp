@@ -31,8 +31,7 @@ double ParamReader::number(const std::string& k, double def, double lo, double h
     double v = def;
     if (params_.contains(k)) {
         const json& j = params_[k];
-        if (!j.is_number())
-            fail(k, "must be a number, got " + io::typeName(j) + " " + io::shortDump(j));
+        if (!j.is_number()) fail(k, "must be a number, got " + io::described(j));
         v = j.get<double>();
         if (!std::isfinite(v) || v < lo || v > hi) {
             std::ostringstream os;
@@ -50,8 +49,16 @@ int ParamReader::integer(const std::string& k, int def, int lo, int hi) {
         const json& j = params_[k];
         const std::string range =
             "must be an integer in [" + std::to_string(lo) + ", " + std::to_string(hi) + "], got ";
-        if (!j.is_number_integer() && !j.is_number_unsigned())
-            fail(k, range + io::typeName(j) + " " + io::shortDump(j));
+        // A whole number written as 64.0 or 1e3 is an integer (JSON has one number type).
+        const bool whole = j.is_number_float() && std::isfinite(j.get<double>()) &&
+                           j.get<double>() == std::floor(j.get<double>());
+        if (whole && (j.get<double>() < lo || j.get<double>() > hi))
+            fail(k, range + io::numberAsWritten(j));
+        if (whole) {
+            used[k] = v = int(j.get<double>());
+            return v;
+        }
+        if (!j.is_number_integer() && !j.is_number_unsigned()) fail(k, range + io::described(j));
         // Unsigned values past long long's range wrapped to negatives.
         if (j.is_number_unsigned() &&
             j.get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max()))

@@ -33,4 +33,16 @@ float acesFilmic(float linear);
 core::ImageRGBA toDisplay(const core::ImageRGBA& linear, float exposureStops = 0.f,
                           Display display = Display::Srgb);
 
+/// How much of what an image shows its display turns white. A display channel counts as white
+/// when it rounds to the top 8-bit level (≥ 254.5/255).
+struct DisplayClipping {
+    std::size_t shown = 0;  ///< pixels whose coverage (alpha) is at least `minAlpha`
+    std::size_t white = 0;  ///< of them, those with all three channels white
+    /// The exposure (stops) at which the 95th percentile of the shown pixels' largest channel just
+    /// reaches white, rounded down to 0.1 stop (the exposure given when nothing shows).
+    float exposureToFit = 0.f;
+};
+DisplayClipping displayClipping(const core::ImageRGBA& linear, float exposureStops, Display display,
+                                float minAlpha);
+
 }  // namespace voxlight::render

@@ -44,6 +44,7 @@ constexpr double kNearlyParallelCos = 0.9995;
 /// Directions this close to opposite have no unique slerp: the part is held instead.
 constexpr double kOppositeCos = -0.999999;
 
+using io::described;
 using io::shortDump;
 using io::typeName;
 
@@ -364,14 +365,18 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
              "a session file starts {\"format\": \"voxlight-session\", \"version\": 2, ...}");
     if (!doc.contains("version") || !doc["version"].is_number_integer())
         fail("version",
-             doc.contains("version") ? "must be an integer, got " + typeName(doc["version"]) + " " +
-                                           shortDump(doc["version"])
+             doc.contains("version") ? "must be an integer, got " + described(doc["version"])
                                      : "is required",
              "\"version\": 2");
-    const long long version = doc["version"].get<long long>();
+    // An unsigned version past long long's range read as -1 ("must be 1 or 2, got -1").
+    const long long version = doc["version"].is_number_unsigned() &&
+                                      doc["version"].get<std::uint64_t>() >
+                                          std::uint64_t(std::numeric_limits<long long>::max())
+                                  ? std::numeric_limits<long long>::max()
+                                  : doc["version"].get<long long>();
     if (version > kFormatVersion)
         fail("version",
-             "is " + std::to_string(version) + ", written by a newer voxlight (this one reads " +
+             "is " + shortDump(doc["version"]) + ", written by a newer voxlight (this one reads " +
                  std::to_string(kFormatVersion) + ")",
              "replay it with a newer voxlight");
     if (version < 1)
@@ -421,8 +426,7 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
         fail("keyframes", "is required", "add \"keyframes\": [{\"time\": 0}, ...]");
     const json& kfs = doc["keyframes"];
     if (!kfs.is_array() || kfs.empty())
-        fail("keyframes",
-             "must be a non-empty array of keyframes, got " + typeName(kfs) + " " + shortDump(kfs),
+        fail("keyframes", "must be a non-empty array of keyframes, got " + described(kfs),
              "e.g. \"keyframes\": [{\"time\": 0}, {\"time\": 2, \"camera\": {\"azimuth\": 90}}]");
     std::vector<std::string> allowed = {"time", "note"};
     for (const auto& p : stateParts()) allowed.push_back(p);
@@ -430,7 +434,7 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
         const std::string at = "keyframes[" + std::to_string(i) + "]";
         const json& k = kfs[i];
         if (!k.is_object())
-            fail(at, "must be an object, got " + typeName(k) + " " + shortDump(k),
+            fail(at, "must be an object, got " + described(k),
                  "e.g. {\"time\": 1.5, \"camera\": {...}}");
         Keyframe kf;
         for (auto it = k.begin(); it != k.end(); ++it) {
@@ -445,8 +449,7 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
             fail(at + ".time", "is required", "the keyframe's time in seconds, e.g. \"time\": 1.5");
         const json& t = k["time"];
         if (!t.is_number())
-            fail(at + ".time",
-                 "must be a number of seconds, got " + typeName(t) + " " + shortDump(t),
+            fail(at + ".time", "must be a number of seconds, got " + described(t),
                  "e.g. \"time\": 1.5, without quotes or units");
         kf.time = t.get<double>();
         if (!std::isfinite(kf.time) || kf.time < 0.0)

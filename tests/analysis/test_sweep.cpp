@@ -100,6 +100,12 @@ TEST(Sweep, BadSweepsNameTheirKey) {
              d["runs"][0]["axes"] = {{"rays", json::array()}};
          },
          "runs[0].axes.rays"},
+        // A value given twice rendered twice: two rows of one variant (32 and 32.0 are one value).
+        {"axis value twice",
+         [](json& d) {
+             d["runs"][0]["axes"] = {{"rays", {16, 32, 32.0}}};
+         },
+         "runs[0].axes.rays[2]"},
         {"bad combine", [](json& d) { d["runs"][0]["combine"] = "all"; }, "runs[0].combine"},
         {"same label twice",
          [](json& d) {

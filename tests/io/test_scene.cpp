@@ -431,6 +431,29 @@ TEST(Scene, HostileFilesAreInputErrorsNamingTheFile) {
     EXPECT_THROW(io::loadScene(tmp.path()), InputError);  // a directory
 }
 
+TEST(Scene, AWholeNumberWrittenAsAFloatIsAnIntegerAndNullIsSaidOnce) {
+    // JSON has one number type: 256.0 and 2.56e2 are the integer 256 (refused as "an integer"
+    // until 7 December); 1e9 is out of range as written, 256.5 is not an integer.
+    const io::Scene s =
+        io::parseScene(json{{"volume", "a.nii"}, {"image", {{"width", 256.0}, {"height", 2.56e2}}}},
+                       "t.json", ".");
+    EXPECT_EQ(s.image.width, 256);
+    EXPECT_EQ(s.image.height, 256);
+    expectBad(json{{"volume", "a.nii"}, {"image", {{"width", 1e9}}}}, "image.width",
+              {"[1, 16384]", "got 1000000000"});
+    expectBad(json{{"volume", "a.nii"}, {"image", {{"width", 256.5}}}}, "image.width",
+              {"must be an integer, got a number 256.5"});
+    // "got null", not "got null null".
+    try {
+        io::parseScene(json{{"volume", "a.nii"}, {"image", {{"width", nullptr}}}}, "t.json", ".");
+        ADD_FAILURE() << "accepted width null";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "image.width");
+        EXPECT_NE(std::string(e.what()).find("got null"), std::string::npos) << e.what();
+        EXPECT_EQ(std::string(e.what()).find("null null"), std::string::npos) << e.what();
+    }
+}
+
 TEST(Scene, HugeUnsignedIntegerIsReportedAsGiven) {
     expectBad(json{{"volume", "a.nii"}, {"image", {{"width", 18446744073709551615ull}}}},
               "image.width", {"18446744073709551615"});

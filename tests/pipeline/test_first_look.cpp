@@ -313,3 +313,40 @@ TEST(VolumeScene, TheCompleteDocumentDescribesTheSameRender) {
     // And writing it again gives the same document (every key already there).
     EXPECT_EQ(io::sceneDocument(full), io::sceneDocument(s));
 }
+
+TEST(WashedOut, AnImageMostlyWhiteOnTheDisplaySaysSoWithAnExposureThatFits) {
+    // A sphere under a directional light 16 times the default: the lit side all white.
+    json d = phantomDoc("sphere", "generic");
+    d["lights"] = {{{"type", "directional"}, {"direction", {0, 0, -1}}, {"intensity", 16.0}}};
+    const RunResult r = Session().run(scene(d));
+    ASSERT_EQ(r.warnings.size(), 1u);
+    const std::string& w = r.warnings[0];
+    EXPECT_NE(w.find("the image is washed out"), std::string::npos) << w;
+    EXPECT_NE(w.find("'clinical' display"), std::string::npos) << w;
+    EXPECT_NE(w.find("\"filmic\""), std::string::npos) << w;
+    const std::size_t at = w.find("image.exposure to ");
+    ASSERT_NE(at, std::string::npos) << w;
+    const double stops = std::stod(w.substr(at + 18));
+    EXPECT_LT(stops, -2.0) << w;  // 16 times the light: about four stops down
+    // The exposure it names brings the image back; at the default intensity nothing is said.
+    json fitted = d;
+    fitted["image"]["exposure"] = stops;
+    EXPECT_TRUE(Session().run(scene(fitted)).warnings.empty());
+    d["lights"][0]["intensity"] = 1.0;
+    EXPECT_TRUE(Session().run(scene(d)).warnings.empty());
+    // Under filmic the line does not offer filmic.
+    d["lights"][0]["intensity"] = 1000.0;
+    d["image"]["display"] = "filmic";
+    const RunResult f = Session().run(scene(d));
+    ASSERT_EQ(f.warnings.size(), 1u);
+    EXPECT_EQ(f.warnings[0].find("\"filmic\""), std::string::npos) << f.warnings[0];
+}
+
+TEST(WashedOut, AMipWhiteWhereTheDataPassTheWindowSaysNothing) {
+    json d = phantomDoc("sphere", "generic");
+    d["method"] = "mip";
+    d["transfer_function"] = {{"window", {{"level", 0.0}, {"width", 1.0}}}};
+    const RunResult r = Session().run(scene(d));
+    EXPECT_GT(r.image.at(48, 48)[0], 0.99f) << "the window leaves the sphere white";
+    EXPECT_TRUE(r.warnings.empty()) << r.warnings.at(0);
+}

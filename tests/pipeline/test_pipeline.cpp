@@ -279,6 +279,24 @@ TEST(Pipeline, EffectsAreCheckedAgainstTheMethodAndTurnOffWhatIsNotAsked) {
     expectBad(d, "method.params.specular", "effects");
 }
 
+TEST(Pipeline, AWholeNumberWrittenAsAFloatIsAnIntegerParameter) {
+    // JSON has one number type: "rays": 64.0 is 64 (refused as "not an integer" until 7 December).
+    Session session;
+    json d = gradientScene();
+    d["method"] = {{"name", "sh-local"}, {"params", {{"rays", 64.0}}}};
+    EXPECT_EQ(session.plan(scene(d)).params["rays"], 64);
+    for (const json& bad : {json(64.5), json(1e12), json(nullptr)}) {
+        d["method"]["params"]["rays"] = bad;
+        try {
+            session.plan(scene(d));
+            ADD_FAILURE() << "accepted rays " << bad.dump();
+        } catch (const InputError& e) {
+            EXPECT_EQ(e.field(), "method.params.rays") << e.what();
+            EXPECT_EQ(std::string(e.what()).find("null null"), std::string::npos) << e.what();
+        }
+    }
+}
+
 TEST(Pipeline, AreaLightsShadeAsTheirEquivalentPointLights) {
     // A sphere light of radiance L and radius r gives exactly the irradiance of a point light of
     // intensity L·π r² (facing it, outside it); the gradient mode treats it so, clamped at r.

@@ -3,6 +3,7 @@
 // non-finite radiance never reaching the display as anything but black.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 
@@ -81,4 +82,33 @@ TEST(Tonemap, UnknownDisplayNamesAreAnInputErrorListingTheChoices) {
     } catch (const InputError& e) {
         EXPECT_NE(std::string(e.what()).find("clinical, srgb, filmic"), std::string::npos);
     }
+}
+
+TEST(Tonemap, ClippingCountsWhitePixelsOfWhatShowsAndTheExposureThatFitsThem) {
+    // Five pixels at alpha 0.5, one more that shows nothing (alpha 0, a NaN radiance).
+    core::ImageRGBA im = film({2.f, 2.f, 2.f, 0.5f, 0.999f});
+    core::ImageRGBA withHidden(6, 1);
+    for (int i = 0; i < 5; ++i) std::copy_n(im.at(i, 0), 4, withHidden.at(i, 0));
+    withHidden.at(5, 0)[0] = std::numeric_limits<float>::quiet_NaN();
+    constexpr float kMinAlpha = 0.5f / 255.f;
+    const auto c = render::displayClipping(withHidden, 0.f, Display::Clinical, kMinAlpha);
+    EXPECT_EQ(c.shown, 5u);
+    EXPECT_EQ(c.white, 4u) << "0.999 rounds to 255 (from 254.5/255 = 0.99804), 0.5 does not";
+    // The 95th percentile's largest channel, 2, reaches white (0.998) at log2(0.998/2) = −1.003
+    // stops, rounded down to a tenth: −1.1.
+    EXPECT_FLOAT_EQ(c.exposureToFit, -1.1f);
+    // Exposure applies first, and one channel under white keeps a pixel from counting.
+    EXPECT_EQ(render::displayClipping(withHidden, -1.1f, Display::Clinical, kMinAlpha).white, 0u);
+    im.at(0, 0)[2] = 0.9f;
+    EXPECT_EQ(render::displayClipping(im, 0.f, Display::Clinical, kMinAlpha).white, 3u);
+    // Filmic reaches white only near 7.9 (three stops up): 2 is not white there.
+    const auto f = render::displayClipping(withHidden, 0.f, Display::Filmic, kMinAlpha);
+    EXPECT_EQ(f.white, 0u);
+    EXPECT_GT(f.exposureToFit, 1.5f);
+    EXPECT_EQ(render::displayClipping(withHidden, 3.f, Display::Filmic, kMinAlpha).white, 4u)
+        << "16 and 7.99 past its white point, 4 not";
+    // Nothing shows: nothing white, the exposure as given.
+    const auto none = render::displayClipping(withHidden, 0.7f, Display::Srgb, 1.f);
+    EXPECT_EQ(none.shown, 0u);
+    EXPECT_FLOAT_EQ(none.exposureToFit, 0.7f);
 }
