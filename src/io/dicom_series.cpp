@@ -75,6 +75,8 @@ const gdcm::Tag kTagModality(0x0008, 0x0060);
 const gdcm::Tag kTagSeriesDescription(0x0008, 0x103e);
 const gdcm::Tag kTagSliceThickness(0x0018, 0x0050);
 const gdcm::Tag kTagSeriesUid(0x0020, 0x000e);
+const gdcm::Tag kTagSeriesNumber(0x0020, 0x0011);
+const gdcm::Tag kTagFrameOfReferenceUid(0x0020, 0x0052);
 const gdcm::Tag kTagInstanceNumber(0x0020, 0x0013);
 const gdcm::Tag kTagPosition(0x0020, 0x0032);
 const gdcm::Tag kTagOrientation(0x0020, 0x0037);
@@ -149,7 +151,7 @@ std::vector<double> parseNumbers(const std::string& value, const fs::path& file,
 /// Header fields of one slice file, as read by the scan.
 struct SliceHeader {
     fs::path file;
-    std::string seriesUid, description, modality;
+    std::string seriesUid, description, modality, seriesNumber, frameOfReference;
     int rows = 0, columns = 0, bitsAllocated = 0, pixelRepresentation = 0, samplesPerPixel = 1,
         frames = 1;
     bool hasPosition = false, hasOrientation = false, hasPixelSpacing = false;
@@ -755,10 +757,10 @@ std::vector<fs::path> listFiles(const fs::path& dir) {
 std::vector<SliceHeader> scanHeaders(const std::vector<fs::path>& candidates) {
     gdcm::Scanner scanner;
     for (const gdcm::Tag& t :
-         {kTagModality, kTagSeriesDescription, kTagSliceThickness, kTagSeriesUid,
-          kTagInstanceNumber, kTagPosition, kTagOrientation, kTagSamplesPerPixel,
-          kTagNumberOfFrames, kTagRows, kTagColumns, kTagPixelSpacing, kTagBitsAllocated,
-          kTagPixelRepresentation, kTagRescaleIntercept, kTagRescaleSlope})
+         {kTagModality, kTagSeriesDescription, kTagSliceThickness, kTagSeriesUid, kTagSeriesNumber,
+          kTagFrameOfReferenceUid, kTagInstanceNumber, kTagPosition, kTagOrientation,
+          kTagSamplesPerPixel, kTagNumberOfFrames, kTagRows, kTagColumns, kTagPixelSpacing,
+          kTagBitsAllocated, kTagPixelRepresentation, kTagRescaleIntercept, kTagRescaleSlope})
         scanner.AddTag(t);
     std::vector<std::string> names;
     names.reserve(candidates.size());
@@ -807,6 +809,8 @@ std::vector<SliceHeader> scanHeaders(const std::vector<fs::path>& candidates) {
         h.seriesUid = get(kTagSeriesUid).value_or("");
         h.description = get(kTagSeriesDescription).value_or("");
         h.modality = get(kTagModality).value_or("");
+        h.seriesNumber = get(kTagSeriesNumber).value_or("");
+        h.frameOfReference = get(kTagFrameOfReferenceUid).value_or("");
         h.bitsAllocated = getInt(kTagBitsAllocated, "BitsAllocated", 0);
         h.pixelRepresentation = getInt(kTagPixelRepresentation, "PixelRepresentation", 0);
         h.samplesPerPixel = getInt(kTagSamplesPerPixel, "SamplesPerPixel", 1);
@@ -913,7 +917,42 @@ void checkConsistency(const std::vector<SliceHeader>& slices) {
                 " of the same series",
             "all slices of a series must share it; remove the odd file or choose another series");
     };
+    // Files without a Series Instance UID are grouped as one series (anonymised data often blanks
+    // it): what else identifies a series must then agree, or two series were stacked into one
+    // volume (a CT and an MR, labelled by whichever sorted first — until 7 December).
+    const bool noUid = ref.seriesUid.empty();
+    const auto identity = [&](const SliceHeader& h, const char* field, const std::string& mine,
+                              const std::string& theirs) {
+        if (mine == theirs) return;
+        const auto shown = [](const std::string& v) {
+            return v.empty() ? "absent" : '"' + v + '"';
+        };
+        throw InputError(
+            str(h.file), field,
+            "is " + shown(mine) + " but " + shown(theirs) + " in " + ref.file.filename().string() +
+                (noUid ? ": the folder holds more than one series, and its files carry no "
+                         "SeriesInstanceUID to tell them apart"
+                       : " of the same series"),
+            noUid ? "put each series in its own folder and load that folder"
+                  : "the series is damaged; remove the odd file or re-export the series");
+    };
     for (const SliceHeader& h : slices) {
+        identity(h, "Modality", h.modality, ref.modality);
+        identity(h, "FrameOfReferenceUID", h.frameOfReference, ref.frameOfReference);
+        if (noUid) {
+            identity(h, "SeriesNumber", h.seriesNumber, ref.seriesNumber);
+            identity(h, "SeriesDescription", h.description, ref.description);
+        }
+        // A multi-frame file among single-frame slices (only the first file's count was checked:
+        // "the decoded image is 512x512 but the header says 512x512").
+        if (h.frames != ref.frames)
+            throw InputError(
+                str(h.file), "NumberOfFrames",
+                "is " + std::to_string(h.frames) + " but " + std::to_string(ref.frames) + " in " +
+                    ref.file.filename().string() +
+                    (h.frames > 1 ? ": a multi-frame file among single-frame slices" : ""),
+                "remove the odd file, or convert the series to NIfTI with dcm2niix "
+                "and load that");
         if (h.rows != ref.rows)
             throw differ(h, "Rows", std::to_string(h.rows), std::to_string(ref.rows));
         if (h.columns != ref.columns)
@@ -942,11 +981,15 @@ void checkConsistency(const std::vector<SliceHeader>& slices) {
                     "choose a series whose slices share one orientation");
         if (h.hasPixelSpacing != ref.hasPixelSpacing ||
             !nearlyEqual(h.pixelSpacing[0], ref.pixelSpacing[0], kPixelSpacingMatchRel) ||
-            !nearlyEqual(h.pixelSpacing[1], ref.pixelSpacing[1], kPixelSpacingMatchRel))
-            throw differ(
-                h, "PixelSpacing",
-                formatNumber(h.pixelSpacing[0]) + "\\" + formatNumber(h.pixelSpacing[1]),
-                formatNumber(ref.pixelSpacing[0]) + "\\" + formatNumber(ref.pixelSpacing[1]));
+            !nearlyEqual(h.pixelSpacing[1], ref.pixelSpacing[1], kPixelSpacingMatchRel)) {
+            // A slice without the tag was said to hold the assumed 1\\1 (probe).
+            const auto spacing = [](const SliceHeader& x) {
+                return x.hasPixelSpacing ? formatNumber(x.pixelSpacing[0]) + "\\" +
+                                               formatNumber(x.pixelSpacing[1])
+                                         : std::string("absent");
+            };
+            throw differ(h, "PixelSpacing", spacing(h), spacing(ref));
+        }
     }
 }
 

@@ -399,6 +399,52 @@ TEST(DicomSeries, InconsistentColumnsRefused) {
     expectInputError([&] { read(tmp.path()); }, {"odd.dcm", "Columns", "256", "512"});
 }
 
+TEST(DicomSeries, SeriesWithoutAUidThatDifferInWhatElseNamesASeriesAreRefused) {
+    // The anonymised CT carries no Series Instance UID; files of another series without one were
+    // stacked into the same volume, labelled by whichever sorted first (probe: CT + MR slices read
+    // as one 25-slice "MR" volume). Each field that names a series must agree.
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    const auto files = dicomFiles(ct);
+    const struct {
+        gdcm::Tag tag;
+        gdcm::VR vr;
+        const char* value;
+        std::vector<const char*> words;
+    } cases[] = {
+        {gdcm::Tag(0x0008, 0x0060),
+         gdcm::VR::CS,
+         "MR",
+         {"odd.dcm", "Modality", "\"MR\" but \"CT\"", "carry no SeriesInstanceUID",
+          "put each series in its own folder"}},
+        {gdcm::Tag(0x0008, 0x103e),
+         gdcm::VR::LO,
+         "T2 FLAIR",
+         {"odd.dcm", "SeriesDescription", "T2 FLAIR", "carry no SeriesInstanceUID"}},
+        {gdcm::Tag(0x0020, 0x0052),
+         gdcm::VR::UI,
+         "1.2.3.4.5",
+         {"odd.dcm", "FrameOfReferenceUID", "1.2.3.4.5"}},
+        // A multi-frame file among single-frame slices: was "the decoded image is 512x512 but the
+        // header says 512x512".
+        {gdcm::Tag(0x0028, 0x0008),
+         gdcm::VR::IS,
+         "2",
+         {"odd.dcm", "NumberOfFrames", "is 2 but 1", "multi-frame file among single-frame"}},
+    };
+    for (const auto& c : cases) {
+        TempDir tmp;
+        for (std::size_t i = 0; i < 4; ++i) fs::copy_file(files[i], tmp / files[i].filename());
+        writeWithTag(files[4], tmp / "odd.dcm", c.tag, c.value, c.vr);
+        try {
+            read(tmp.path());
+            ADD_FAILURE() << c.words[1] << ": accepted";
+        } catch (const InputError& e) {
+            for (const char* w : c.words)
+                EXPECT_NE(std::string(e.what()).find(w), std::string::npos) << e.what();
+        }
+    }
+}
+
 /// Writes copies of the first `positions.size()` CT slices with the given positions.
 void writeStack(const fs::path& ct, const fs::path& out, const std::vector<glm::dvec3>& positions) {
     const auto files = dicomFiles(ct);
