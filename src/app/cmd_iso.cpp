@@ -309,7 +309,8 @@ Command addIsoCommand(CLI::App& app) {
         sw.restart();
         if (options.cap) cleanup->heldPlanes = ex.planes;  // a cap's rim stays on its plane
         const iso::CleanupStats cs = iso::cleanUp(ex.mesh, *cleanup, progress);
-        if (cs.verticesMoved) iso::setGradientNormals(ex.mesh, volume);
+        if (cs.verticesMoved)
+            iso::setGradientNormals(ex.mesh, volume, cleanup->heldPlanes, iso::kOnCapPlaneMm);
         stages.push_back(stage("cleanup", cleanup->any(),
                                cleanup->any() ? "computed: " + std::to_string(cs.facesBefore) +
                                                     " → " + std::to_string(cs.facesAfter) + " faces"

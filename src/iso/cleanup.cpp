@@ -264,9 +264,27 @@ CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Prog
     if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {
         progress.report("mesh clean-up: decimation", 0.0);
         SMS::Count_stop_predicate<SurfaceMesh> stop(3 * options.targetFaces / 2);
+        // A capped cut stays as cut: no edge at a vertex on a capped plane collapses, so those
+        // vertices never move (the cap bent 0.01 mm off its plane and its rim shaded edge-on).
+        auto constrained =
+            sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:on_cap", false).first;
+        if (!options.heldPlanes.empty()) {
+            std::vector<char> onCap(sm.num_vertices(), 0);
+            for (const auto v : sm.vertices()) {
+                const Kernel::Point_3& p = sm.point(v);
+                const glm::dvec3 x(p.x(), p.y(), p.z());
+                onCap[v.idx()] = std::any_of(
+                    options.heldPlanes.begin(), options.heldPlanes.end(),
+                    [&](const auto& h) { return std::abs(h.distance(x)) <= kOnCapPlaneMm; });
+            }
+            for (const auto e : sm.edges())
+                constrained[e] = onCap[sm.vertex(e, 0).idx()] || onCap[sm.vertex(e, 1).idx()];
+        }
         // Refuse collapses that would turn a face over (a source of self-intersections).
         SMS::edge_collapse(sm, stop,
-                           CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>()));
+                           CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>())
+                               .edge_is_constrained_map(constrained));
+        sm.remove_property_map(constrained);
         sm.collect_garbage();
         st.verticesMoved = true;
     }

@@ -57,6 +57,7 @@ struct CleanupOptions {
     /// holds an open cut's boundary — a cap is a fan of rim-to-rim triangles, and averaging over
     /// those long edges dragged rim vertices across it (hundreds of self-intersections on a capped
     /// sphere, rim moved 1.9 mm in one iteration; probe).
+    /// Decimation collapses no edge at a vertex on these planes (the cap stays as cut).
     std::vector<core::HalfSpace> heldPlanes;
 
     bool any() const {

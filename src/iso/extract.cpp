@@ -514,13 +514,36 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
     return result;
 }
 
-void setGradientNormals(Mesh& mesh, const core::Volume& volume) {
+void setGradientNormals(Mesh& mesh, const core::Volume& volume,
+                        const std::vector<core::HalfSpace>& capPlanes, double onPlaneMm) {
     std::vector<glm::dvec3> points(mesh.n_vertices());
     for (const auto v : mesh.vertices()) {
         const Mesh::Point& p = mesh.point(v);
         points[v.idx()] = {p[0], p[1], p[2]};
     }
-    applyNormals(mesh, gradientNormals(points, volume));
+    std::vector<glm::vec3> normals = gradientNormals(points, volume);
+    if (!capPlanes.empty()) {
+        // The outward normal of the caps through each vertex (as capSoup sums them), zero off
+        // every capped plane.
+        std::vector<glm::dvec3> cap(points.size(), glm::dvec3(0.0));
+        for (std::size_t i = 0; i < points.size(); ++i)
+            for (const core::HalfSpace& h : capPlanes)
+                if (std::abs(h.distance(points[i])) <= onPlaneMm) cap[i] -= h.normal;
+        for (const auto v : mesh.vertices()) {
+            const std::size_t i = std::size_t(v.idx());
+            if (cap[i] == glm::dvec3(0.0)) continue;
+            // A cap's own vertex: every face around it lies on capped planes.
+            bool offSurface = true;
+            for (const auto f : mesh.vf_range(v))
+                for (const auto w : mesh.fv_range(f))
+                    offSurface = offSurface && cap[std::size_t(w.idx())] != glm::dvec3(0.0);
+            const glm::dvec3 c = glm::normalize(cap[i]);
+            normals[i] = offSurface || normals[i] == glm::vec3(0.f)
+                             ? glm::vec3(c)
+                             : glm::vec3(glm::normalize(glm::dvec3(normals[i]) + c));
+        }
+    }
+    applyNormals(mesh, normals);
 }
 
 }  // namespace voxlight::iso

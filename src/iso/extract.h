@@ -122,7 +122,12 @@ Extraction extractIsosurface(const core::Volume& volume, const ExtractOptions& o
 /// Sets every vertex normal to −∇s/|∇s| at the vertex (∇s: trilinear interpolation of the voxels'
 /// central-difference gradients, one-sided at the border, taken to world mm through spacing and
 /// direction). Where the gradient vanishes the normal is the mesh's own (area-weighted faces).
-/// Used by extraction and again after clean-up moved vertices.
-void setGradientNormals(Mesh& mesh, const core::Volume& volume);
+/// Used by extraction and again after clean-up moved vertices. A vertex on one of `capPlanes`
+/// (within `onPlaneMm`) is shaded as extraction shades caps: a cap's own vertex (its faces all on
+/// capped planes) takes the cap's normal, a rim vertex the bisector of the gradient's and the
+/// cap's (the rim normals were gradients after --smooth or --decimate: every cap face's vertex
+/// normals turned away from it, the cap shaded edge-on).
+void setGradientNormals(Mesh& mesh, const core::Volume& volume,
+                        const std::vector<core::HalfSpace>& capPlanes = {}, double onPlaneMm = 0.0);
 
 }  // namespace voxlight::iso

@@ -138,6 +138,53 @@ TEST(Cleanup, SmoothingACappedCutKeepsTheCapFlatAndTheMeshFreeOfSelfIntersection
     }
 }
 
+TEST(Cleanup, ACappedCutSmoothedOrDecimatedKeepsItsCapFlatAndShadedFromItsSide) {
+    // After --smooth or --decimate the normals were all gradients again: the rim's bisector lost,
+    // every cap face's vertex normals turned away from it (probe: 334 of 334 cap faces, the cap
+    // shaded edge-on), and decimation bent the cap 0.01 mm off its plane.
+    Ball big, small;
+    const core::Volume v = twoBalls(big, small);
+    ExtractOptions e = test::at(0.0);
+    e.cap = true;
+    const core::HalfSpace plane{{big.centre.x + 4.3, 0.0, 0.0}, {1.0, 0.0, 0.0}};
+    e.keep = {plane};
+    for (const bool decimate : {false, true}) {
+        SCOPED_TRACE(decimate ? "decimated" : "smoothed");
+        Extraction ex = extractIsosurface(v, e);
+        CleanupOptions o;
+        if (decimate)
+            o.targetFaces = ex.mesh.n_faces() / 4;
+        else
+            o.smoothIterations = 10;
+        o.heldPlanes = ex.planes;
+        cleanUp(ex.mesh, o);
+        setGradientNormals(ex.mesh, v, ex.planes, kOnCapPlaneMm);
+        std::size_t capFaces = 0;
+        for (const auto f : ex.mesh.faces()) {
+            std::array<glm::dvec3, 3> p;
+            bool onCap = true;
+            int k = 0;
+            for (const auto w : ex.mesh.fv_range(f)) {
+                p[k] = toGlm(ex.mesh.point(w));
+                onCap = onCap && std::abs(plane.distance(p[k])) <= kOnCapPlaneMm;
+                ++k;
+            }
+            if (!onCap) continue;
+            ++capFaces;
+            const glm::dvec3 n = glm::normalize(glm::cross(p[1] - p[0], p[2] - p[0]));
+            EXPECT_NEAR(glm::dot(n, -plane.normal), 1.0, 1e-6) << "a cap face faces the cut";
+            for (const auto w : ex.mesh.fv_range(f))
+                EXPECT_GT(glm::dot(toGlm(ex.mesh.normal(w)), n), 0.5)
+                    << "vertex normals within 60° of the cap's (the bisector: 45° at a "
+                       "right-angled rim)";
+        }
+        EXPECT_GT(capFaces, 10u);
+        // Nothing past the plane: the cap stayed where it was cut.
+        for (const auto vh : ex.mesh.vertices())
+            ASSERT_GE(plane.distance(toGlm(ex.mesh.point(vh))), -kOnCapPlaneMm);
+    }
+}
+
 // The limit of --smooth on shapes large and small: a small blob's size is a high frequency of the
 // filter (a one-voxel blob shrank to a point in 50 iterations). Closed components keep their volume
 // (cleanup.cpp: δ = lost volume / sweep rate, a few Newton passes per iteration): each ball on its
