@@ -338,6 +338,13 @@ Command addIsoCommand(CLI::App& app) {
             lo.placement = *latticeTexels == "own" ? iso::TexelPlacement::OwnIsosurface
                                                    : iso::TexelPlacement::OnSurface;
             if (lo.placement == iso::TexelPlacement::OnSurface) lo.surfaceIso = physicalIso;
+            // What the cuts remove is gone for the light too unless shadows_from_removed (the
+            // planes as cut: a capped plane through vertices was nudged, and its cap lies on it).
+            for (std::size_t i = 0; i < s.clipPlanes.size(); ++i)
+                if (!s.clipPlanes[i].shadowsFromRemoved) lo.keep.push_back(ex.planes.at(i));
+            if (s.cropBox && !s.cropBox->shadowsFromRemoved)
+                for (std::size_t i = s.clipPlanes.size(); i < ex.planes.size(); ++i)
+                    lo.keep.push_back(ex.planes[i]);
             std::vector<std::shared_ptr<const lights::Light>> ls0 = pipeline::buildLights(s);
             if (ls0.empty()) {
                 ls0.push_back(pipeline::whiteSky());

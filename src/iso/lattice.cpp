@@ -131,6 +131,11 @@ glm::dvec3 sphereSample(double u1, double u2) {
 /// cell, a breadth-first pass) and lets rays cross soft tissue and air in jumps instead of testing
 /// cell by cell (the 8³ bricks alone left most cells around bone to the cell test, about half the
 /// lattice's time).
+/// A point this close to the removed side of a kept plane is on it (mm): mesh vertices on a cut
+/// are stored in float (1e-5 mm at 100 mm from the origin); a thousandth of a millimetre is far
+/// below any voxel.
+constexpr double kOnKeptPlaneMm = 1e-3;
+
 struct IlluminationLattice::SkipField {
     double iso;
     std::vector<std::uint8_t> distance;  ///< per cell, at Tracer::skipIndex
@@ -334,8 +339,57 @@ struct IlluminationLattice::Tracer {
     /// volume (or passes tMax) first. `skip`: skipFor(iso)'s distances, used by rays that start
     /// below iso (nullptr: the bricks alone); the same crossings either way, since the cells it
     /// jumps over cannot hold one.
+    /// Kept half-spaces in index space (LatticeOptions::keep): signed distance (mm) at index
+    /// point i is dot(i, grad) + offset, ≥ 0 kept.
+    struct KeptPlane {
+        glm::dvec3 grad;
+        double offset;
+    };
+    std::vector<KeptPlane> kept;
+
+    void keepOnly(const std::vector<core::HalfSpace>& planes) {
+        for (const core::HalfSpace& h : planes) {
+            const glm::dvec3 grad = geo.spacing * (glm::transpose(geo.direction) * h.normal);
+            kept.push_back({grad, glm::dot(geo.origin - h.point, h.normal)});
+        }
+    }
+
+    /// hitInVolume() with only the kept region's matter (the intersection of half-spaces, convex:
+    /// a ray meets it in one interval). A ray entering it inside matter meets the cut face there
+    /// (the cap of a capped mesh); matter outside it is gone for the light (shadows_from_removed
+    /// false: until 7 December the bake and the lattice traced the whole volume, the removed
+    /// bone's shadows kept).
     bool hit(const glm::dvec3& origin, const glm::dvec3& omega, double iso, double tMax,
              double* tHit = nullptr, const SkipField* skip = nullptr) const {
+        if (kept.empty()) return hitInVolume(origin, omega, iso, tMax, tHit, skip);
+        const glm::dvec3 d = worldToIdx * omega;
+        double tEnter = 0.0, tLeave = tMax;
+        for (const KeptPlane& k : kept) {
+            const double dist = glm::dot(origin, k.grad) + k.offset;
+            const double rate = glm::dot(d, k.grad);  // mm of distance per mm along the ray
+            // A vertex on a capped plane sits on it to rounding: inside.
+            if (dist >= -kOnKeptPlaneMm) {
+                if (rate < 0.0) tLeave = std::min(tLeave, std::max(dist, 0.0) / -rate);
+            } else {
+                if (!(rate > 0.0)) return false;  // outside, moving away (or along)
+                tEnter = std::max(tEnter, -dist / rate);
+            }
+        }
+        if (!(tLeave > tEnter)) return false;
+        if (tEnter == 0.0) return hitInVolume(origin, omega, iso, tLeave, tHit, skip);
+        const glm::dvec3 entry = origin + tEnter * d;
+        if (value(entry) - iso > 0.0) {  // enters through the cut face of the matter
+            if (tHit) *tHit = tEnter;
+            return true;
+        }
+        double t = 0.0;
+        if (!hitInVolume(entry, omega, iso, tLeave - tEnter, &t, skip)) return false;
+        if (tHit) *tHit = tEnter + t;
+        return true;
+    }
+
+    bool hitInVolume(const glm::dvec3& origin, const glm::dvec3& omega, double iso, double tMax,
+                     double* tHit = nullptr, const SkipField* skip = nullptr) const {
         const glm::dvec3 d = worldToIdx * omega;  // index units per mm
         // Which side the origin is on: −1 below iso (the outside; also exactly at iso, as on a
         // plateau, so that only values above it stop the ray), +1 above.
@@ -650,6 +704,7 @@ IlluminationLattice::IlluminationLattice(std::shared_ptr<const core::Volume> vol
     for (int a = 0; a < 3; ++a) dims_[a] = int(std::floor((n[a] - 1) * res_ + 1e-9)) + 1;
     blocks_ = (dims_ + kLatticeBlock - 1) / kLatticeBlock;
     tracer_ = std::make_unique<Tracer>(*volume_);
+    tracer_->keepOnly(options_.keep);
     redot();
 }
 

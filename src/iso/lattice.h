@@ -54,6 +54,7 @@
 #include <unordered_map>
 #include <vector>
 
+#include "core/half_space.h"
 #include "core/progress.h"
 #include "core/volume.h"
 #include "iso/mesh.h"
@@ -117,6 +118,10 @@ struct LatticeOptions {
     /// bake from vertices, the baselines): the same crossings, fewer cells tested. Off only to
     /// measure what they save (bench_lattice).
     bool skipDistances = true;
+    /// Matter outside the intersection of these half-spaces is gone for the light (the scene's
+    /// clip planes and crop box with shadows_from_removed false); a path that enters the kept
+    /// region inside matter meets the cut face. Empty: the whole volume.
+    std::vector<core::HalfSpace> keep;
 };
 
 /// What one `require` call did.

@@ -2008,7 +2008,9 @@ Stage illuminationLatticeStage(const IsoLatticeParams& q, const render::RenderOp
         {"memory_mib", q.lattice.memoryBudgetMiB},
         {"texels", q.lattice.placement == iso::TexelPlacement::OnSurface ? "surface" : "own"},
         // the default isovalue is the TF's (its stage is in the key)
-        {"iso_value", options.isoValue ? json(*options.isoValue) : json()}};
+        {"iso_value", options.isoValue ? json(*options.isoValue) : json()},
+        // What the cuts remove is gone for the light (shadows_from_removed false).
+        {"light_cuts", lightCuts(options).key}};
     st.key = [latticeKey, sh](const Run& run) {
         KeyBuilder k(run, "illumination_lattice");
         k.stage("load_volume").stage("transfer_function").json(latticeKey);
@@ -2022,6 +2024,7 @@ Stage illuminationLatticeStage(const IsoLatticeParams& q, const render::RenderOp
         auto a = std::make_shared<LatticeArtifact>();
         const optics::TransferFunction& tf = run.get<TfArtifact>("transfer_function")->tf;
         iso::LatticeOptions lo = q.lattice;
+        lo.keep = lightCuts(options).kept;
         try {
             if (lo.placement == iso::TexelPlacement::OnSurface)
                 lo.surfaceIso = render::resolveIsoValue(tf, options);

@@ -373,6 +373,42 @@ TEST(Lattice, ADirectionalLightCastsAShadow) {
     EXPECT_NEAR(lat.irradiance(pts[1]).x, E, 1e-3 * E);  // open floor, light straight above
 }
 
+TEST(Lattice, MatterACutRemovesCastsNoShadowAndWhatItKeepsStillDoes) {
+    // The floor and ball of the test above, cut by a plane keeping z ≤ h: the bake and the
+    // lattice traced the whole volume (probe: the removed ball's shadow kept, 0 where 0.9/π·n·l
+    // belonged). At h = 8 the whole ball (z 8…20) is gone; at h = 14 its lower half stays and
+    // still shadows the floor below it.
+    core::Geometry g;
+    g.dims = {48, 48, 32};
+    g.origin = {-24.0, -24.0, -4.0};
+    const auto volume = share(test::fieldVolume(g, [](const glm::dvec3& p) {
+        return -std::min(p.z, glm::length(p - glm::dvec3(0, 0, 14)) - 6.0);
+    }));
+    const float E = 2.f;
+    auto light = std::make_shared<lights::DirectionalLight>(glm::vec3(E), glm::vec3(0, 0, 1));
+    const std::vector<glm::dvec3> pts{{0, 0, 0}, {18, 0, 0}};
+    for (const double h : {8.0, 14.0}) {
+        SCOPED_TRACE(h);
+        LatticeOptions o = opts(4, 0);
+        o.keep = {core::HalfSpace{{0, 0, h}, {0, 0, -1}}};
+        IlluminationLattice lat(volume, albedoTf(0.f, -40, 40), {light}, o);
+        const double under = h < 10.0 ? E : 0.0;
+        EXPECT_NEAR(lat.directIrradiance(pts[0], 0.0, true).x, under, 1e-3 * E);
+        EXPECT_NEAR(lat.directIrradiance(pts[1], 0.0, true).x, E, 1e-3 * E);
+        lat.require(pts);
+        EXPECT_NEAR(lat.irradiance(pts[0]).x, under, 1e-3 * E);
+        EXPECT_NEAR(lat.irradiance(pts[1]).x, E, 1e-3 * E);
+    }
+    // A ray that enters the kept region inside matter meets the cut face: under a light from
+    // below (−z), a point above the cut (z = 17, in the removed half of the ball) looks down into
+    // the kept half's cut face at z = 14.
+    LatticeOptions o = opts(4, 0);
+    o.keep = {core::HalfSpace{{0, 0, 14}, {0, 0, -1}}};
+    auto below = std::make_shared<lights::DirectionalLight>(glm::vec3(E), glm::vec3(0, 0, -1));
+    IlluminationLattice lat(volume, albedoTf(0.f, -40, 40), {below}, o);
+    EXPECT_NEAR(lat.directIrradiance({0, 0, 17}, 0.0, true).x, 0.0, 1e-6);
+}
+
 // SH transfer: a uniform sky is exact in band 0 (E = π·L on a convex surface, as the irradiance
 // lattice); turning a directional light re-dots without tracing and equals a lattice computed
 // for the turned light from the start.
