@@ -152,6 +152,11 @@ void OutputFiles::write(const fs::path& target, const std::string& option,
     // Unique per process and output; hidden, short (a target's name may be near the file system's
     // limit) and ending in the target's format suffix (formatSuffix).
     static std::atomic<int> counter{0};
+    // A directory where the file goes would be moved aside by commit() (a replay frame's name
+    // taken by a folder: the folder renamed to a hidden name, exit 0; probe).
+    if (std::error_code ec; fs::is_directory(target, ec))
+        throw InputError("command line", option, "'" + target.string() + "' is a directory",
+                         "remove it, or write elsewhere");
     const fs::path file = resolveOutput(target);
     const fs::path dir = directoryOf(file);
     const fs::path temporary = dir / (kTemporaryPrefix + std::to_string(::getpid()) + "-" +

@@ -247,6 +247,16 @@ TEST(Replay, BadInputIsOneLineExitTwoAndLeavesOutAsItWas) {
         run("replay -q " + q(tmp / "good.json") + " --out " + q(tmp / "a-file"), tmp.path());
     EXPECT_EQ(r.code, 2);
     EXPECT_NE(r.err.find("--out"), std::string::npos) << r.err;
+    // A folder where a frame goes was renamed to a hidden name, exit 0 (probe): refused, kept.
+    const fs::path taken = tmp / "taken";
+    fs::create_directories(taken / "frame_00001.png");
+    std::ofstream(taken / "frame_00001.png" / "important.txt") << "mine";
+    const Result d = run("replay -q " + q(tmp / "good.json") + " --out " + q(taken), tmp.path());
+    EXPECT_EQ(d.code, 2) << d.err;
+    EXPECT_EQ(nonEmptyLines(d.err), 1u) << d.err;
+    EXPECT_NE(d.err.find("frame_00001.png' is a directory"), std::string::npos) << d.err;
+    EXPECT_EQ(listing(taken), std::vector<std::string>{"frame_00001.png"});
+    EXPECT_TRUE(fs::exists(taken / "frame_00001.png" / "important.txt"));
 }
 
 TEST(Replay, VideoWithoutFfmpegIsSkippedWithAMessage) {
