@@ -897,6 +897,21 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
         g.origin = glm::dvec3(org[0], org[1], org[2]);
     }
     Volume v = fromImageData(img, path, g);
+    // VTK reverses the slices of a file whose qfac is −1 (its K = nk − 1 − k, so that the indices
+    // are right-handed) and places them correctly above. Undone, so that the grid is the file's:
+    // `info` said LAI for an LAS file and (−19, 0, 117) for its origin (−19, 0, 0) (probe), and
+    // voxel (i, j, k) was not the (i, j, k) another tool shows.
+    if (r->GetQFac() < 0.0 && v.dims().z > 1) {
+        Geometry& vg = v.geometry();
+        const std::size_t slice =
+            std::size_t(vg.dims.x) * std::size_t(vg.dims.y) * core::voxelBytes(v.type());
+        auto* bytes = static_cast<std::byte*>(v.data());
+        for (int k = 0, l = vg.dims.z - 1; k < l; ++k, --l)
+            std::swap_ranges(bytes + std::size_t(k) * slice, bytes + std::size_t(k + 1) * slice,
+                             bytes + std::size_t(l) * slice);
+        vg.origin += vg.direction[2] * (vg.spacing.z * double(vg.dims.z - 1));
+        vg.direction[2] = glm::dvec3(0.0) - vg.direction[2];  // no "-0" in `info`
+    }
     const double slope = r->GetRescaleSlope(), inter = r->GetRescaleIntercept();
     if (std::isfinite(slope) && slope != 0.0) {
         v.mapping.slope = slope;

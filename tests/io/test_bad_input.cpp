@@ -741,6 +741,35 @@ TEST(BadInput, NiftiSpacingIsTheSformsAndAZeroPixdimWithoutOneIsRefused) {
     expectInputError(tmp / "s.nii", "pixdim[2]", {"is 0", "no sform"});
 }
 
+TEST(BadInput, NiftiWithQfacMinusOneKeepsTheFilesSliceOrder) {
+    // VTK reverses the slices of a file whose qfac (pixdim[0]) is −1: an LAS file read as LAI,
+    // origin at its last slice, voxel (i, j, k) another tool's (i, j, nk − 1 − k) (probe).
+    test::TempDir tmp;
+    core::Geometry g;
+    g.dims = {6, 5, 4};
+    core::Volume ramp(g, core::VoxelType::Float32);
+    for (int k = 0; k < 4; ++k)
+        for (int j = 0; j < 5; ++j)
+            for (int i = 0; i < 6; ++i)
+                ramp.dataAs<float>()[ramp.linearIndex(i, j, k)] = float(100 * k + 10 * j + i);
+    io::writeVolume(ramp, tmp / "las.nii");
+    // sform only (code 1), RAS rows diag(−1, 1, 1) with offset (19, 0, 0): L, A, S; qfac −1.
+    const std::int16_t sform = 1, qform = 0;
+    patchBytes(tmp / "las.nii", kNiftiSformCode, &sform, sizeof sform);
+    patchBytes(tmp / "las.nii", kNiftiSformCode - 2, &qform, sizeof qform);
+    const float rows[12] = {-1.f, 0.f, 0.f, 19.f, 0.f, 1.f, 0.f, 0.f, 0.f, 0.f, 1.f, 0.f};
+    patchBytes(tmp / "las.nii", kNiftiSrowX, rows, sizeof rows);
+    const float qfac = -1.f;
+    patchBytes(tmp / "las.nii", 76, &qfac, sizeof qfac);
+    const core::Volume v = io::readVolume(tmp / "las.nii");
+    EXPECT_EQ(v.geometry().orientationCode(), "LAS");
+    // RAS (19, 0, 0) is LPS (−19, 0, 0); k runs toward S (+z in LPS).
+    EXPECT_NEAR(glm::length(v.geometry().origin - glm::dvec3(-19, 0, 0)), 0.0, 1e-9);
+    EXPECT_NEAR(v.geometry().direction[2].z, 1.0, 1e-12);
+    for (int k = 0; k < 4; ++k)
+        EXPECT_EQ(v.dataAs<float>()[v.linearIndex(2, 3, k)], float(100 * k + 32)) << k;
+}
+
 namespace {
 std::string readAll(const fs::path& p) {
     std::ifstream f(p, std::ios::binary);
