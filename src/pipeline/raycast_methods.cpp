@@ -384,7 +384,8 @@ ShParams parseShParams(Kind kind, const io::Scene& scene, ParamReader& p) {
     else
         s.dataReduction = p.number("data_reduction", s.dataReduction, 1.0, 1e6);
     if (kind == Kind::ShGlobal) {
-        s.global.resolution = p.integer("global_resolution", 64, 1, 1024);
+        // One point has nothing to interpolate between (a 1³ grid shaded everything alike).
+        s.global.resolution = p.integer("global_resolution", 64, 2, 1024);
         s.global.nearFromLocal = p.choice("global_near", "local", {"local", "grid"}) == "local";
         s.global.integration =
             p.choice("global_integration", "recursive", {"recursive", "piecewise"}) == "recursive"
@@ -2655,7 +2656,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         return casterSetupOf(run, options, kind, clipped);
     };
     frame.compute = [options, kind, clipped, isoLattice, pvrtParams,
-                     globalAsked = shParams.global.resolution](Run& run) {
+                     globalAsked = shParams.global.resolution,
+                     radiusVoxels = shParams.visibility.radiusVoxels](Run& run) {
         const io::Scene& s = run.scene();
         const auto loaded = run.get<LoadedVolume>("load_volume");
         const auto tfa = run.get<TfArtifact>("transfer_function");
@@ -2708,6 +2710,24 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                 const glm::ivec3 r = setup.sh.global->resolution();
                 if (std::max({r.x, r.y, r.z}) != globalAsked)
                     d["params_resolved"]["global_resolution"] = {r.x, r.y, r.z};
+                // Eq. 11 chains local visibility in steps of its radius between grid points:
+                // points farther apart than that leave the far field between them unsampled (a
+                // 1³ grid darkened the bonsai by a third, without a word; probe).
+                const glm::ivec3 n = loaded->volume.dims();
+                double gap = 0.0;
+                for (int a = 0; a < 3; ++a)
+                    if (r[a] > 1) gap = std::max(gap, double(n[a] - 1) / double(r[a] - 1));
+                if (gap > radiusVoxels) {
+                    std::ostringstream os;
+                    os << "method.params.global_resolution " << globalAsked
+                       << " puts the global grid's points " << gap
+                       << " voxels apart, farther than the local visibility's radius ("
+                       << radiusVoxels << " voxels): the far field between them is guessed "
+                       << "(raise global_resolution to "
+                       << int(std::ceil(double(std::max({n.x, n.y, n.z}) - 1) / radiusVoxels)) + 1
+                       << " or more)";
+                    run.warn(os.str());
+                }
             }
             const optics::TransferFunction& tfn = tfa->tf;
             json points = json::array();

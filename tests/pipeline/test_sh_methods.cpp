@@ -386,6 +386,29 @@ TEST(ShGlobal, SwitchingLocalAndGlobalRecomputesNothingAndLightsRunNoVisibility)
     EXPECT_THROW(session.run(scene(d)), InputError);
 }
 
+TEST(ShGlobal, AGlobalGridCoarserThanTheLocalRadiusSaysSoAndOnePointIsRefused) {
+    // A 1³ grid was accepted and darkened the bonsai by a third without a word (probe).
+    json d = shScene();
+    d["method"] = {{"name", "sh-global"},
+                   {"params", {{"rays", 24}, {"data_reduction", 2}, {"radius", 4}}}};
+    d["method"]["params"]["global_resolution"] = 4;  // 31 voxels / 3 gaps: 10.3 apart
+    const RunResult coarse = Session().run(scene(d));
+    ASSERT_EQ(coarse.warnings.size(), 1u);
+    EXPECT_NE(coarse.warnings[0].find("10.3333 voxels apart"), std::string::npos)
+        << coarse.warnings[0];
+    EXPECT_NE(coarse.warnings[0].find("raise global_resolution to 9 or more"), std::string::npos)
+        << coarse.warnings[0];
+    d["method"]["params"]["global_resolution"] = 9;  // 31 / 8 = 3.9 apart
+    EXPECT_TRUE(Session().run(scene(d)).warnings.empty());
+    d["method"]["params"]["global_resolution"] = 1;
+    try {
+        Session().plan(scene(d));
+        ADD_FAILURE() << "a 1³ global grid accepted";
+    } catch (const InputError& e) {
+        EXPECT_EQ(e.field(), "method.params.global_resolution") << e.what();
+    }
+}
+
 TEST(ShLocal, TurningAnEnvironmentMapRunsNoVisibilityStage) {
     VL_REQUIRE_SHARED(env, "env/courtyard.hdr");
     Session session;
