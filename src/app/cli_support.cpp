@@ -8,6 +8,7 @@
 #include <cctype>
 #include <charconv>
 #include <chrono>
+#include <cmath>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -219,6 +220,18 @@ CLI::Validator wholeNumber() {
             return {};
         },
         "UINT");
+}
+
+CLI::Validator finiteNumber() {
+    return CLI::Validator(
+        [](std::string& text) -> std::string {
+            char* end = nullptr;
+            const double v = std::strtod(text.c_str(), &end);
+            if (!text.empty() && end == text.c_str() + text.size() && !std::isfinite(v))
+                return "'" + text + "' is not a finite number";
+            return {};  // anything else is the option's own parser's to refuse
+        },
+        "");
 }
 
 std::string jsonForStdout(const nlohmann::json& doc, const std::string& input) {

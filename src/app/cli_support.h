@@ -56,6 +56,9 @@ InputError blameLoadedOverrides(const InputError& e);
 /// For unsigned options: the text must be decimal digits that fit 64 bits. CLI11 read "-1" and
 /// numbers past 2^64 as 2^64 − 1 without a word (a seed, a header size).
 CLI::Validator wholeNumber();
+/// For floating-point options, before their CLI::Range: NaN and infinities refused (a range's
+/// comparisons are false for NaN, so "--max-memory-mb nan" turned the guard off).
+CLI::Validator finiteNumber();
 /// The option `e` refuses because it was given more than once on the command line `argv`
 /// (main's Throw policy), or "" for any other parse error.
 std::string repeatedOption(const CLI::ParseError& e, const CLI::App& app, int argc,

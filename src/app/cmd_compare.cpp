@@ -74,10 +74,12 @@ Command addCompareCommand(CLI::App& app) {
                       "as a display image (.png, .jpg, .tif, .bmp)");
     c.sub->add_flag("--json", *json, "Print JSON instead of text");
     c.sub->add_option("--ppd", *ppd, "FLIP: pixels per degree of visual angle")
+        ->check(finiteNumber())
         ->check(CLI::Range(1.0, 1000.0));
     c.sub
         ->add_option("--threshold", *threshold,
                      "detect: FLIP value above which a pixel's difference counts as detected")
+        ->check(finiteNumber())
         ->check(CLI::Range(0.0, 0.999));
     // Bounded: a peak near DBL_MAX squared to ∞ (psnr "inf dB"), and CLI::PositiveNumber's
     // message printed DBL_MAX in 309 digits.

@@ -135,19 +135,24 @@ Command addIsoCommand(CLI::App& app) {
             "Refuse before extracting when the surface promises a larger peak (about " +
                 std::to_string(int(iso::kTrianglesPerCrossedEdge * iso::kPeakBytesPerTriangle)) +
                 " bytes per voxel edge it crosses; 8192; 0: no limit)")
+        ->check(finiteNumber())
         ->check(CLI::Range(0.0, double(1 << 30)));
     c.sub->add_flag("--no-self-intersections", *noSelfIntersections,
                     "Skip the self-intersection count of the report (its costly part)");
     c.sub->add_flag("--bake", *bake,
                     "Bake the scene's lights (shadows, sky, interreflections) into the vertex "
-                    "colours through an illumination lattice (Wyman 2006)");
-    c.sub->add_option("--samples", lattice->samples, "--bake: paths per lattice texel (100)")
+                    "colours: paths traced from each vertex, or Wyman's illumination lattice "
+                    "(--bake-from)");
+    c.sub
+        ->add_option("--samples", lattice->samples,
+                     "--bake: paths per vertex (or per lattice texel) (100)")
         ->check(CLI::Range(1, 1000000));
     c.sub->add_option("--bounces", lattice->bounces, "--bake: diffuse interreflections (1)")
         ->check(CLI::Range(0, 16));
     c.sub
         ->add_option("--lattice-resolution", lattice->resolution,
                      "--bake: lattice texels per voxel along each axis, 0.5…8 (1)")
+        ->check(finiteNumber())
         ->check(CLI::Range(iso::kMinLatticeResolution, 8.0));
     c.sub
         ->add_option("--bake-from", *bakeFrom,
@@ -376,6 +381,14 @@ Command addIsoCommand(CLI::App& app) {
                     {"memory", "--lattice-resolution"}};
                 const auto it = option.find(e.field());
                 if (it == option.end()) throw InputError(s.source, e.field(), e.problem(), e.fix());
+                // iso has no option for the budget: the lattice's "or raise the budget" named a
+                // fix that does not exist here (probe).
+                if (e.field() == "memory")
+                    throw InputError("command line", it->second, e.problem(),
+                                     lo.mode == iso::LatticeMode::ShTransfer
+                                         ? "lower --lattice-resolution or --sh-order"
+                                         : "lower --lattice-resolution, or bake from the "
+                                           "vertices (the default)");
                 throw InputError("command line", it->second, e.problem(), e.fix());
             }
         }

@@ -68,6 +68,7 @@ Command addViewCommand(CLI::App& app) {
         ->add_option("--gl-slice-ms", *glSliceMs,
                      "GLSL path: GL time per UI frame; a longer frame is rendered in slices of "
                      "rows over several UI frames (0: whole frames, the UI waits for each)")
+        ->check(finiteNumber())
         ->check(CLI::Range(0.0, 10000.0));
     c.sub->add_flag("--log", *log, "Log UI frame times and render times on stderr");
     c.sub->add_flag("-q,--quiet", *quiet, "No progress output while loading");

@@ -357,6 +357,14 @@ TEST(IsoCli, BakeOptionsThatCannotWorkAreRefused) {
                        (tmp / "m.ply").string() +
                        "' --bake --bake-from lattice --lattice-resolution 0.25",
                    "--lattice-resolution", {"scene.json"});
+    // NaN passed every range check: --max-memory-mb nan turned the size guard off (probe).
+    for (const char* option :
+         {"--max-memory-mb nan", "--bake --bake-from lattice --lattice-resolution nan",
+          "--max-memory-mb inf"})
+        expectBadInput(tmp,
+                       "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
+                           (tmp / "m.ply").string() + "' " + option,
+                       "is not a finite number", {"scene.json"});
     // A negative minimum wrapped to a huge one: "the clean-up removed every face".
     expectBadInput(tmp,
                    "iso -q '" + scene.string() + "' --isovalue 0.5 -o '" +
