@@ -11,6 +11,7 @@
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
 #include <limits>
+#include <mutex>
 #include <optional>
 #include <sstream>
 
@@ -239,11 +240,27 @@ void writeAtomically(const fs::path& path, const std::string& text) {
 
 }  // namespace
 
+struct Session::DocumentCache {
+    std::mutex mutex;
+    const Keyframe* keyframes = nullptr;  ///< the storage the document was formed from
+    std::size_t k = 0;                    ///< keyframes 0..k applied
+    json scene, doc;
+};
+
 json Session::documentAt(std::size_t k) const {
     VL_CHECK_LT(k, keyframes.size());
-    json doc = scene;
-    for (std::size_t i = 0; i <= k; ++i) applyParts(doc, keyframes[i].parts);
-    return doc;
+    if (!cache_) cache_ = std::make_shared<DocumentCache>();
+    DocumentCache& c = *cache_;
+    std::lock_guard lock(c.mutex);
+    if (c.keyframes != keyframes.data() || c.k > k || c.scene != scene) {
+        c.keyframes = keyframes.data();
+        c.scene = scene;
+        c.doc = scene;
+        c.k = 0;
+        applyParts(c.doc, keyframes[0].parts);
+    }
+    for (; c.k < k; ++c.k) applyParts(c.doc, keyframes[c.k + 1].parts);
+    return c.doc;
 }
 
 json Session::documentAtTime(double t) const {

@@ -50,6 +50,7 @@
 // ("keyframes[2].time", "scene.volume", "keyframes[3].camera.azimuth") and the fix.
 #include <cstddef>
 #include <filesystem>
+#include <memory>
 #include <nlohmann/json.hpp>
 #include <string>
 #include <vector>
@@ -111,6 +112,14 @@ struct Session {
     std::string fieldAt(std::size_t k, const std::string& field) const;
     /// The same for the keyframe in force at time t.
     std::string fieldAtTime(double t, const std::string& field) const;
+
+  private:
+    /// The last document documentAt() formed: keyframes are appended, never edited, so the
+    /// document at k + j is this one with j more keyframes applied (each call rebuilt 0..k: 8,000
+    /// keyframes took 5 s to load and as long again to replay; probe). Shared by copies, which
+    /// tell theirs apart by the keyframes' storage and the scene (compared on use).
+    struct DocumentCache;
+    mutable std::shared_ptr<DocumentCache> cache_;
 };
 
 /// Most frames one replay may ask for (keyframes, or duration × fps + 1).
