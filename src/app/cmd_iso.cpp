@@ -64,6 +64,35 @@ json stage(const std::string& name, bool ran, const std::string& reason, double 
 /// bone at 100 k faces has 6 pairs (README), the abdominal CT at 5000 faces had 2736.
 constexpr double kFoldedShare = 0.01;
 
+/// Share of the vertices whose baked colour may pass white (clamped to 1 in every export) before
+/// the bake says so: a few highlights are normal, a quarter of the mesh white is lost detail
+/// (probe: courtyard.hdr at intensity 1 clamped 24 % of the vertices without a word).
+constexpr double kClampedShare = 0.1;
+
+/// "N % of the vertices …" when more than kClampedShare of the baked colours pass white, with the
+/// exposure at which the 95th percentile of their largest channel is white; empty otherwise.
+std::string clampedBakeWarning(const iso::Mesh& mesh, double exposureStops) {
+    std::vector<float> largest;
+    largest.reserve(mesh.n_vertices());
+    std::size_t over = 0;
+    for (const auto v : mesh.vertices()) {
+        const auto& c = mesh.color(v);
+        const float m = std::max({c[0], c[1], c[2]});
+        over += m > 1.f;
+        largest.push_back(m);
+    }
+    if (largest.empty() || double(over) <= kClampedShare * double(largest.size())) return {};
+    const auto p95 = largest.begin() + std::ptrdiff_t(0.95 * double(largest.size() - 1));
+    std::nth_element(largest.begin(), p95, largest.end());
+    std::ostringstream os;
+    os << std::lround(100.0 * double(over) / double(largest.size()))
+       << " % of the vertices bake brighter than white and are clamped to it in the export, their "
+          "detail lost (set image.exposure to "
+       << std::floor(10.0 * (exposureStops - std::log2(double(*p95)))) / 10.0
+       << ", or lower the lights' intensity)";
+    return os.str();
+}
+
 json reportJson(const iso::MeshReport& r) {
     return {{"vertices", r.vertices},
             {"faces", r.faces},
@@ -332,7 +361,7 @@ Command addIsoCommand(CLI::App& app) {
         // Baked light (the lattice's texels at the vertices only).
         sw.restart();
         iso::LatticeStats ls;
-        std::string lightsUsed;
+        std::string lightsUsed, bakeWarning;
         iso::VertexTransfer transfer;
         if (*bake) {
             iso::LatticeOptions lo = *lattice;
@@ -370,6 +399,7 @@ Command addIsoCommand(CLI::App& app) {
                     *bakeFrom == "lattice" ? iso::BakeSource::Lattice : iso::BakeSource::Vertices,
                     progress, *exportSh ? &transfer.values : nullptr);
                 if (*exportSh) transfer.order = lo.shOrder;
+                bakeWarning = clampedBakeWarning(ex.mesh, s.image.exposureStops);
             } catch (const InputError& e) {
                 if (e.source() != "lattice") throw;
                 static const std::map<std::string, std::string> option = {
@@ -483,6 +513,8 @@ Command addIsoCommand(CLI::App& app) {
                 "--min-component-faces)\n",
                 cleanup->targetFaces, (long long)report.selfIntersections,
                 std::size_t(ex.mesh.n_faces()));
+        if (!bakeWarning.empty())
+            std::fprintf(stderr, "voxlight: warning: %s\n", bakeWarning.c_str());
         if (es.rejectedFaces)
             std::fprintf(stderr,
                          "voxlight: warning: %zu triangle(s) left out: they would have made an "

@@ -12,6 +12,7 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "io/image.h"
 #include "io/volume_io.h"
 #include "iso_test_util.h"
 #include "sh/sh_basis.h"
@@ -257,6 +258,32 @@ TEST(IsoCli, BakedLightUnderTheDefaultSkyLeavesAConvexSurfaceItsAlbedo) {
             EXPECT_EQ(bake["paths"].get<std::size_t>(), 16 * lit.size());
         }
     }
+}
+
+TEST(IsoCli, ABakeMostlyBrighterThanWhiteSaysSoWithAnExposureThatFits) {
+    // A sky of radiance 4 bakes the convex sphere at 4 × its albedo: every vertex clamped to white
+    // in the export, which was said nowhere (probe: courtyard.hdr clamped 24 % of the vertices).
+    test::TempDir tmp;
+    core::ImageRGBA sky(16, 8);
+    for (std::size_t i = 0; i < sky.pixels.size(); ++i) sky.pixels[i] = 4.f;
+    io::writeImage(sky, tmp / "sky.exr");
+    const fs::path scene =
+        writeScene(tmp, std::string(kSphere) + R"(, "lights": [{"type": "environment", "path": ")" +
+                            (tmp / "sky.exr").string() + R"("}]})");
+    const std::string base = "iso -q '" + scene.string() + "' --isovalue 0.5 --bake --samples 4 ";
+    const Result r = run(base + "-o '" + (tmp / "m.ply").string() + "'", tmp.path());
+    ASSERT_EQ(r.code, 0) << r.err;
+    const std::size_t at = r.err.find("bake brighter than white");
+    ASSERT_NE(at, std::string::npos) << r.err;
+    const std::size_t e = r.err.find("image.exposure to ");
+    ASSERT_NE(e, std::string::npos) << r.err;
+    const double stops = std::stod(r.err.substr(e + 18));
+    EXPECT_LT(stops, -1.0) << r.err;  // the albedo × 4: about two stops down
+    const Result fitted = run(base + "--set image.exposure=" + std::to_string(stops) + " -o '" +
+                                  (tmp / "m.ply").string() + "'",
+                              tmp.path());
+    ASSERT_EQ(fitted.code, 0) << fitted.err;
+    EXPECT_EQ(fitted.err.find("brighter than white"), std::string::npos) << fitted.err;
 }
 
 // --export-sh: each vertex's SH irradiance transfer T in the PLY (read back by hand from the file,
