@@ -699,9 +699,15 @@ IlluminationLattice::IlluminationLattice(std::shared_ptr<const core::Volume> vol
                              number(r[0]) + ", " + number(r[1]) + "], got " +
                              number(options_.surfaceIso),
                          "choose an isovalue the volume crosses");
-    res_ = options_.resolution;
+    // Texels from the first voxel to the last, at most 1/resolution apart: the floor of
+    // (n − 1)·resolution stopped short of the last voxel where that was not whole (64 voxels at
+    // 0.5: texels at 0, 2, …, 62, the vertices past 62 extrapolated and 25 % too bright; probe).
     const glm::ivec3 n = volume_->dims();
-    for (int a = 0; a < 3; ++a) dims_[a] = int(std::floor((n[a] - 1) * res_ + 1e-9)) + 1;
+    for (int a = 0; a < 3; ++a) {
+        dims_[a] = int(std::ceil((n[a] - 1) * options_.resolution - 1e-9)) + 1;
+        step_[a] =
+            dims_[a] > 1 ? double(n[a] - 1) / double(dims_[a] - 1) : 1.0 / options_.resolution;
+    }
     blocks_ = (dims_ + kLatticeBlock - 1) / kLatticeBlock;
     tracer_ = std::make_unique<Tracer>(*volume_);
     tracer_->keepOnly(options_.keep);
@@ -774,7 +780,7 @@ glm::vec3 IlluminationLattice::irradiance(const glm::dvec3& world) const {
 
 int IlluminationLattice::stencil(const glm::dvec3& world, glm::ivec3 texel[8],
                                  double weight[8]) const {
-    const glm::dvec3 q = volume_->geometry().worldToIndex(world) * res_;
+    const glm::dvec3 q = volume_->geometry().worldToIndex(world) / step_;
     glm::ivec3 i0;
     glm::dvec3 f;
     for (int a = 0; a < 3; ++a) {
@@ -943,8 +949,9 @@ LatticeStats IlluminationLattice::requireIsosurface(double isovalue,
                 glm::ivec3 a, b;
                 const glm::ivec3 c(i, j, k);
                 for (int ax = 0; ax < 3; ++ax) {
-                    a[ax] = std::clamp(int(std::floor(c[ax] * res_ + 1e-9)), 0, dims_[ax] - 1);
-                    b[ax] = std::clamp(int(std::ceil((c[ax] + 1) * res_ - 1e-9)), 0, dims_[ax] - 1);
+                    a[ax] = std::clamp(int(std::floor(c[ax] / step_[ax] + 1e-9)), 0, dims_[ax] - 1);
+                    b[ax] = std::clamp(int(std::ceil((c[ax] + 1) / step_[ax] - 1e-9)), 0,
+                                       dims_[ax] - 1);
                 }
                 for (int z = a.z; z <= b.z; ++z)
                     for (int y = a.y; y <= b.y; ++y)

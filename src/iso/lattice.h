@@ -217,8 +217,10 @@ class IlluminationLattice {
     void setLights(std::vector<std::shared_ptr<const lights::Light>> lights);
 
     const glm::ivec3& dims() const { return dims_; }  ///< texels per axis
-    /// Texel (i, j, k)'s voxel-index position.
-    glm::dvec3 texelIndexPosition(const glm::ivec3& t) const { return glm::dvec3(t) / res_; }
+    /// Texel (i, j, k)'s voxel-index position: the texels span the volume's first to last voxel
+    /// on every axis, about 1/resolution voxels apart (exactly, when that fits a whole number of
+    /// times).
+    glm::dvec3 texelIndexPosition(const glm::ivec3& t) const { return glm::dvec3(t) * step_; }
     const LatticeOptions& options() const { return options_; }
     std::uint64_t texelsStored() const { return stored_; }
     /// Isovalues whose skip distances the tracer holds (LatticeOptions::skipDistances; at most 2:
@@ -280,7 +282,7 @@ class IlluminationLattice {
     std::vector<std::shared_ptr<const lights::Light>> lights_;
     LatticeOptions options_;
     std::unique_ptr<Tracer> tracer_;
-    double res_;
+    glm::dvec3 step_;  ///< voxels between texels per axis (texelIndexPosition)
     glm::ivec3 dims_, blocks_;
     std::unordered_map<std::uint64_t, std::unique_ptr<Block>> blockMap_;
     std::uint64_t stored_ = 0;

@@ -373,6 +373,27 @@ TEST(Lattice, ADirectionalLightCastsAShadow) {
     EXPECT_NEAR(lat.irradiance(pts[1]).x, E, 1e-3 * E);  // open floor, light straight above
 }
 
+TEST(Lattice, TexelsSpanTheVolumeToItsLastVoxelAtEveryResolution) {
+    // 64 voxels at 0.5 texels per voxel: texels at 0, 2, …, 62 left voxel 63 to extrapolation
+    // (probe: vertices there baked 25 % too bright). Now they span 0…63, as evenly as fits.
+    core::Geometry g = cube(64);
+    g.dims = {64, 33, 2};
+    const auto volume = share(test::fieldVolume(g, [](const glm::dvec3& p) { return -p.z; }));
+    auto light = std::make_shared<lights::DirectionalLight>(glm::vec3(1.f), glm::vec3(0, 0, 1));
+    for (const double res : {0.5, 1.0, 2.0, 3.0}) {
+        SCOPED_TRACE(res);
+        LatticeOptions o = opts(1, 0);
+        o.resolution = res;
+        IlluminationLattice lat(volume, albedoTf(0.f, -40, 40), {light}, o);
+        const glm::ivec3 last = lat.dims() - 1;
+        const glm::dvec3 end = lat.texelIndexPosition(last);
+        for (int a = 0; a < 3; ++a) EXPECT_NEAR(end[a], g.dims[a] - 1, 1e-9) << a;
+        for (int a = 0; a < 3; ++a)
+            if (g.dims[a] > 1)
+                EXPECT_LE(lat.texelIndexPosition(glm::ivec3(1))[a], 1.0 / res + 1e-12) << a;
+    }
+}
+
 TEST(Lattice, MatterACutRemovesCastsNoShadowAndWhatItKeepsStillDoes) {
     // The floor and ball of the test above, cut by a plane keeping z ≤ h: the bake and the
     // lattice traced the whole volume (probe: the removed ball's shadow kept, 0 where 0.9/π·n·l
