@@ -63,6 +63,10 @@ constexpr double kMaxShearPixels = 0.2;
 /// spans metres) is damaged data: such positions made the slice geometry overflow (a position of
 /// 1e300 mm gave NaN gaps and grid sizes no integer holds).
 constexpr double kMaxPatientCoordinateMm = 1e5;
+/// Largest magnitude the rescale may give a stored value (bits allocated at its extreme): 1e15 is
+/// far past any physical quantity a scanner stores (HU, MR units, PET Bq/ml) yet leaves a 32-bit
+/// PET slope of 1e5 alone.
+constexpr double kMaxRescaledMagnitude = 1e15;
 /// Rescale slope/intercept count as identical across slices to this relative accuracy.
 constexpr double kRescaleMatchRel = 1e-9;
 
@@ -870,6 +874,23 @@ std::vector<SliceHeader> scanHeaders(const std::vector<fs::path>& candidates) {
                 throw InputError(str(f), "RescaleIntercept", "\"" + *v + "\" is not one number",
                                  "the file is damaged; re-export the series");
             h.intercept = s[0];
+        }
+        // The rescale's reach over the stored type: a slope of 1e30 took a CT to 2.9e33 "HU"
+        // without a word (probe). No physical quantity a scanner stores comes near it.
+        if (h.bitsAllocated > 0 && h.bitsAllocated <= 64) {
+            const double stored =
+                std::ldexp(1.0, h.bitsAllocated - (h.pixelRepresentation ? 1 : 0));
+            const double reach = std::abs(h.slope) * stored + std::abs(h.intercept);
+            if (!(reach <= kMaxRescaledMagnitude))
+                throw InputError(str(f),
+                                 std::abs(h.intercept) > kMaxRescaledMagnitude / 2
+                                     ? "RescaleIntercept"
+                                     : "RescaleSlope",
+                                 "slope " + formatNumber(h.slope) + " and intercept " +
+                                     formatNumber(h.intercept) + " take " +
+                                     std::to_string(h.bitsAllocated) + "-bit values up to " +
+                                     formatNumber(reach) + ", beyond any physical quantity",
+                                 "the file is damaged; re-export the series");
         }
         headers.push_back(std::move(h));
     }

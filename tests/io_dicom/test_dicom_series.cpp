@@ -445,6 +445,17 @@ TEST(DicomSeries, SeriesWithoutAUidThatDifferInWhatElseNamesASeriesAreRefused) {
     }
 }
 
+TEST(DicomSeries, ARescaleBeyondAnyPhysicalQuantityIsRefused) {
+    // RescaleSlope 1e30 read the CT as -1024 … 2.9e33 HU, exit 0 (probe).
+    VL_REQUIRE_SHARED(ct, "ct/abdomen-totalseg/dicom");
+    const auto files = dicomFiles(ct);
+    TempDir tmp;
+    for (std::size_t i = 0; i < 4; ++i)
+        writeWithTag(files[i], tmp / files[i].filename(), gdcm::Tag(0x0028, 0x1053), "1e30");
+    expectInputError([&] { read(tmp.path()); },
+                     {"RescaleSlope", "1e+30", "beyond any physical quantity"});
+}
+
 /// Writes copies of the first `positions.size()` CT slices with the given positions.
 void writeStack(const fs::path& ct, const fs::path& out, const std::vector<glm::dvec3>& positions) {
     const auto files = dicomFiles(ct);
