@@ -897,6 +897,13 @@ Volume readNifti(const fs::path& path, const ReadOptions&, const core::Progress&
         g.origin = glm::dvec3(org[0], org[1], org[2]);
     }
     Volume v = fromImageData(img, path, g);
+    // Neither form: NIfTI's "method 1" leaves the orientation unknown (info said "patient LPS"
+    // as if the file did). Axes as stored, named so that left and right are checked.
+    if (!m)
+        v.warnings.push_back(path.filename().string() +
+                             " has no sform or qform: its orientation is unknown, read with i, j "
+                             "and k toward the patient's left, posterior and superior (check the "
+                             "sides against the anatomy, or add an sform, e.g. with nibabel)");
     // VTK reverses the slices of a file whose qfac is −1 (its K = nk − 1 − k, so that the indices
     // are right-handed) and places them correctly above. Undone, so that the grid is the file's:
     // `info` said LAI for an LAS file and (−19, 0, 117) for its origin (−19, 0, 0) (probe), and

@@ -768,6 +768,14 @@ TEST(BadInput, NiftiWithQfacMinusOneKeepsTheFilesSliceOrder) {
     EXPECT_NEAR(v.geometry().direction[2].z, 1.0, 1e-12);
     for (int k = 0; k < 4; ++k)
         EXPECT_EQ(v.dataAs<float>()[v.linearIndex(2, 3, k)], float(100 * k + 32)) << k;
+    EXPECT_TRUE(v.warnings.empty());
+    // Neither sform nor qform: the orientation is unknown, and said so (info claimed LPS).
+    const std::int16_t off = 0;
+    patchBytes(tmp / "las.nii", kNiftiSformCode, &off, sizeof off);
+    const core::Volume unknown = io::readVolume(tmp / "las.nii");
+    ASSERT_EQ(unknown.warnings.size(), 1u);
+    EXPECT_NE(unknown.warnings[0].find("las.nii has no sform or qform"), std::string::npos)
+        << unknown.warnings[0];
 }
 
 namespace {
