@@ -132,6 +132,35 @@ Plan Session::plan(const io::Scene& scene) const {
                                   : "use " + providers + ", or remove it");
         }
     }
+    // Shadows are what the visibility methods compute, not a stage they can leave out: a list
+    // that asks for fewer was accepted and ignored (sh-global with ["local_shadows"] still cast
+    // shadows from across the volume). The path tracer's and PVRT's shadows are whole; their
+    // lists choose multiple scattering ([] and ["global_shadows"]: single scattering).
+    if (scene.effectsGiven) {
+        const bool local = wantsEffect(scene, "local_shadows"),
+                   global = wantsEffect(scene, "global_shadows");
+        const std::string& n = m->name;
+        if (n == "sh-local" && !local)
+            throw InputError(scene.source, "effects",
+                             "method 'sh-local' simulates local_shadows, which this list leaves "
+                             "out",
+                             "add \"local_shadows\", or use gradient for shading without shadows");
+        if ((n == "sh-global" || n == "ritschel") && !global)
+            throw InputError(scene.source, "effects",
+                             "method '" + n +
+                                 "' always simulates global_shadows (its visibility reaches the "
+                                 "volume's boundary), which this list leaves out",
+                             local ? "use sh-local for local shadows only, or add "
+                                     "\"global_shadows\""
+                                   : "add \"global_shadows\", or use gradient for shading "
+                                     "without shadows");
+        if ((n == "pathtrace" || n == "pvrt") && local && !global)
+            throw InputError(scene.source, "effects",
+                             "method '" + n +
+                                 "' casts every shadow: local_shadows cannot be had without "
+                                 "global_shadows",
+                             "add \"global_shadows\", or leave both out");
+    }
     ParamReader reader(scene, m->params);
     Plan p = m->plan(scene, reader);
     p.method = m->name;

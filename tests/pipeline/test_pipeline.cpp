@@ -277,6 +277,32 @@ TEST(Pipeline, EffectsAreCheckedAgainstTheMethodAndTurnOffWhatIsNotAsked) {
     d["effects"] = json::array();
     d["method"] = {{"name", "gradient"}, {"params", {{"specular", 0.5}}}};
     expectBad(d, "method.params.specular", "effects");
+    // Shadows a visibility method always casts: a list leaving them out was accepted and
+    // ignored (sh-global with ["local_shadows"] still shadowed from across the volume).
+    d["method"] = "sh-global";
+    d["effects"] = {"local_shadows"};
+    expectBad(d, "effects", "use sh-local for local shadows only");
+    d["method"] = "ritschel";
+    d["effects"] = json::array();
+    expectBad(d, "effects", "always simulates global_shadows");
+    d["method"] = "sh-local";
+    expectBad(d, "effects", "leaves out");
+    d["method"] = "pathtrace";
+    d["effects"] = {"local_shadows"};
+    expectBad(d, "effects", "cannot be had without global_shadows");
+    // What each method does cast is accepted; the path tracer's [] is single scattering.
+    for (const auto& [method, effects] : std::vector<std::pair<std::string, json>>{
+             {"sh-local", {"local_shadows"}},
+             {"sh-global", {"global_shadows"}},
+             {"ritschel", {"local_shadows", "global_shadows"}},
+             {"pathtrace", json::array()},
+             {"pvrt", {"global_shadows"}}}) {
+        d["method"] = method;
+        if (method == "pvrt")  // distant lights only
+            d["lights"] = {{{"type", "directional"}, {"direction", {0, 1, 0}}}};
+        d["effects"] = effects;
+        EXPECT_NO_THROW(session.plan(scene(d))) << method;
+    }
 }
 
 TEST(Pipeline, AWholeNumberWrittenAsAFloatIsAnIntegerParameter) {
