@@ -359,7 +359,31 @@ bool switchShVisibility(nlohmann::json& doc, bool global, nlohmann::json& stash)
         }
     }
     m["name"] = global ? "sh-global" : "sh-local";
+    // An effects list follows the method: sh-global casts global_shadows, sh-local cannot (each
+    // refuses the other's list).
+    if (doc.contains("effects") && doc["effects"].is_array()) {
+        nlohmann::json effects = nlohmann::json::array();
+        for (const auto& e : doc["effects"])
+            if (e != "global_shadows" && e != "local_shadows") effects.push_back(e);
+        effects.push_back("local_shadows");
+        if (global) effects.push_back("global_shadows");
+        doc["effects"] = effects;
+    }
     return true;
+}
+
+nlohmann::json pathTraceEffects(const nlohmann::json& effects) {
+    if (!effects.is_array()) return effects;
+    nlohmann::json out = nlohmann::json::array();
+    bool shadows = false;
+    for (const auto& e : effects) {
+        if (e == "local_shadows" || e == "global_shadows")
+            shadows = true;
+        else if (e == "multiple_scattering")
+            out.push_back(e);
+    }
+    if (shadows) out.push_back("global_shadows");
+    return out;
 }
 
 std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string& source) {

@@ -204,7 +204,13 @@ std::vector<ScriptStep> parseScript(const nlohmann::json& doc, const std::string
 /// ones (rays, coefficients, radius, LOD, window, ambient) stay, so both name the same local
 /// field and the pipeline recomputes nothing it has (visibility/ keys). False (doc unchanged)
 /// when the method is neither, or already the one asked for.
+/// An effects list, when the document has one, follows: local_shadows, plus global_shadows for
+/// sh-global.
 bool switchShVisibility(nlohmann::json& doc, bool global, nlohmann::json& stash);
+/// A scene's effects list as the path tracer takes it ("render this view" from any method):
+/// multiple_scattering kept, any shadow effect as global_shadows (it casts every shadow), the
+/// rest (specular, which the path tracer refuses) dropped; not a list: unchanged.
+nlohmann::json pathTraceEffects(const nlohmann::json& effects);
 
 /// Parses an edited scene document (paths absolute, as io::sceneDocument writes them); `source`
 /// names it in errors.

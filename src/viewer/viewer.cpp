@@ -500,7 +500,10 @@ io::Scene Viewer::sceneAt(int w, int h, const json& method) const {
     json doc = doc_;
     doc["image"]["width"] = w;
     doc["image"]["height"] = h;
-    if (!method.is_null()) doc["method"] = method;
+    if (!method.is_null()) {
+        doc["method"] = method;  // the path tracer's "render this view"
+        if (doc.contains("effects")) doc["effects"] = pathTraceEffects(doc["effects"]);
+    }
     return sceneFromDocument(doc, loaded_->scene.source);
 }
 

@@ -243,6 +243,26 @@ TEST(ViewState, ShVisibilitySwitchKeepsTheLocalFieldsParams) {
     EXPECT_THROW(viewer::parseScript(json::parse(R"([{"shading": "far"}])"), "s.json"), InputError);
 }
 
+// An effects list follows the switch (sh-local refuses global_shadows, sh-global needs it), and
+// the path tracer's "render this view" takes any method's list as it can.
+TEST(ViewState, EffectsFollowTheShSwitchAndThePathTracersView) {
+    json doc = {{"method", "sh-local"}, {"effects", {"local_shadows"}}};
+    json stash;
+    ASSERT_TRUE(viewer::switchShVisibility(doc, true, stash));
+    EXPECT_EQ(doc["effects"], json({"local_shadows", "global_shadows"}));
+    ASSERT_TRUE(viewer::switchShVisibility(doc, false, stash));
+    EXPECT_EQ(doc["effects"], json({"local_shadows"}));
+    json none = {{"method", "sh-local"}};
+    ASSERT_TRUE(viewer::switchShVisibility(none, true, stash));
+    EXPECT_FALSE(none.contains("effects")) << "no list: the methods' defaults";
+    EXPECT_EQ(viewer::pathTraceEffects(json({"specular"})), json::array());
+    EXPECT_EQ(viewer::pathTraceEffects(json({"local_shadows"})), json({"global_shadows"}));
+    EXPECT_EQ(
+        viewer::pathTraceEffects(json({"multiple_scattering", "local_shadows", "global_shadows"})),
+        json({"multiple_scattering", "global_shadows"}));
+    EXPECT_TRUE(viewer::pathTraceEffects(json()).is_null());
+}
+
 TEST(ViewScript, ClipPlaneAndLightStepsParse) {
     const auto steps = viewer::parseScript(json::parse(R"([
         {"clip_add": {"normal": [0, 2, 0], "offset": -5, "shadows_from_removed": true}},
