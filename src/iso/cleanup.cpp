@@ -11,7 +11,10 @@
 #include <CGAL/Polygon_mesh_processing/self_intersections.h>
 #include <CGAL/Surface_mesh.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Bounded_normal_change_filter.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Constrained_placement.h>
 #include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/Count_stop_predicate.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_cost.h>
+#include <CGAL/Surface_mesh_simplification/Policies/Edge_collapse/LindstromTurk_placement.h>
 #include <CGAL/Surface_mesh_simplification/edge_collapse.h>
 
 #include <algorithm>
@@ -264,9 +267,13 @@ CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Prog
     if (options.targetFaces > 0 && sm.number_of_faces() > options.targetFaces) {
         progress.report("mesh clean-up: decimation", 0.0);
         SMS::Count_stop_predicate<SurfaceMesh> stop(3 * options.targetFaces / 2);
-        // A capped cut stays as cut: no edge at a vertex on a capped plane collapses, so those
-        // vertices never move (the cap bent 0.01 mm off its plane and its rim shaded edge-on).
-        auto constrained =
+        // A capped cut stays as cut: the cap's own edges and its rim (both ends on a capped
+        // plane) never collapse, and a collapse next to them keeps their vertex where it is
+        // (Constrained_placement), so the cap stays flat (it bent 0.01 mm off its plane, and its
+        // rim shaded edge-on). Freezing every edge at the rim left the budget to the rest of the
+        // surface, which folded (the angio torso to 5000 faces: 136 self-intersecting pairs).
+        using ConstrainedMap = SurfaceMesh::Property_map<SurfaceMesh::Edge_index, bool>;
+        ConstrainedMap constrained =
             sm.add_property_map<SurfaceMesh::Edge_index, bool>("e:on_cap", false).first;
         if (!options.heldPlanes.empty()) {
             std::vector<char> onCap(sm.num_vertices(), 0);
@@ -278,12 +285,16 @@ CleanupStats cleanUp(Mesh& mesh, const CleanupOptions& options, const core::Prog
                     [&](const auto& h) { return std::abs(h.distance(x)) <= kOnCapPlaneMm; });
             }
             for (const auto e : sm.edges())
-                constrained[e] = onCap[sm.vertex(e, 0).idx()] || onCap[sm.vertex(e, 1).idx()];
+                constrained[e] = onCap[sm.vertex(e, 0).idx()] && onCap[sm.vertex(e, 1).idx()];
         }
         // Refuse collapses that would turn a face over (a source of self-intersections).
-        SMS::edge_collapse(sm, stop,
-                           CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>())
-                               .edge_is_constrained_map(constrained));
+        SMS::edge_collapse(
+            sm, stop,
+            CGAL::parameters::filter(SMS::Bounded_normal_change_filter<>())
+                .edge_is_constrained_map(constrained)
+                .get_cost(SMS::LindstromTurk_cost<SurfaceMesh>())
+                .get_placement(SMS::Constrained_placement<SMS::LindstromTurk_placement<SurfaceMesh>,
+                                                          ConstrainedMap>(constrained)));
         sm.remove_property_map(constrained);
         sm.collect_garbage();
         st.verticesMoved = true;

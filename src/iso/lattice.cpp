@@ -378,6 +378,11 @@ struct IlluminationLattice::Tracer {
         if (!(tLeave > tEnter)) return false;
         if (tEnter == 0.0) return hitInVolume(origin, omega, iso, tLeave, tHit, skip);
         const glm::dvec3 entry = origin + tEnter * d;
+        // Past the volume's box before reaching the kept region: nothing to meet (the box is
+        // convex too; value() would clamp to a border voxel and call it a cut face).
+        constexpr double kBoxSlack = 1e-9;
+        for (int a = 0; a < 3; ++a)
+            if (entry[a] < -kBoxSlack || entry[a] > double(n[a] - 1) + kBoxSlack) return false;
         if (value(entry) - iso > 0.0) {  // enters through the cut face of the matter
             if (tHit) *tHit = tEnter;
             return true;

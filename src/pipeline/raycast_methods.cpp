@@ -2712,20 +2712,25 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
                     d["params_resolved"]["global_resolution"] = {r.x, r.y, r.z};
                 // Eq. 11 chains local visibility in steps of its radius between grid points:
                 // points farther apart than that leave the far field between them unsampled (a
-                // 1³ grid darkened the bonsai by a third, without a word; probe).
-                const glm::ivec3 n = loaded->volume.dims();
-                double gap = 0.0;
-                for (int a = 0; a < 3; ++a)
-                    if (r[a] > 1) gap = std::max(gap, double(n[a] - 1) / double(r[a] - 1));
-                if (gap > radiusVoxels) {
+                // 1³ grid darkened the bonsai by a third, without a word; probe). In mm: the
+                // radius counts the smallest spacing, a grid point spans dims/res voxels.
+                const core::Geometry& g = loaded->volume.geometry();
+                const double radiusMm = radiusVoxels * core::minComponent(g.spacing);
+                double gapMm = 0.0;
+                int fits = 2;
+                for (int a = 0; a < 3; ++a) {
+                    gapMm = std::max(gapMm, double(g.dims[a]) / double(r[a]) * g.spacing[a]);
+                    fits =
+                        std::max(fits, int(std::ceil(double(g.dims[a]) * g.spacing[a] / radiusMm)));
+                }
+                if (gapMm > radiusMm * (1.0 + 1e-9)) {
                     std::ostringstream os;
                     os << "method.params.global_resolution " << globalAsked
-                       << " puts the global grid's points " << gap
-                       << " voxels apart, farther than the local visibility's radius ("
-                       << radiusVoxels << " voxels): the far field between them is guessed "
-                       << "(raise global_resolution to "
-                       << int(std::ceil(double(std::max({n.x, n.y, n.z}) - 1) / radiusVoxels)) + 1
-                       << " or more)";
+                       << " puts the global grid's points up to " << gapMm
+                       << " mm apart, farther than the local visibility's radius (" << radiusMm
+                       << " mm): the far field between them is guessed (raise global_resolution "
+                          "to "
+                       << fits << " or more)";
                     run.warn(os.str());
                 }
             }

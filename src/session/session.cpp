@@ -245,14 +245,24 @@ struct Session::DocumentCache {
     const Keyframe* keyframes = nullptr;  ///< the storage the document was formed from
     std::size_t k = 0;                    ///< keyframes 0..k applied
     json scene, doc;
+    /// Keyframe k as applied: the recorder replaces the last keyframe in place (same storage).
+    double time = 0.0;
+    json parts;
 };
+
+Session::CacheHolder::CacheHolder() : cache(std::make_shared<DocumentCache>()) {}
+Session::CacheHolder::CacheHolder(const CacheHolder&) : CacheHolder() {}
+Session::CacheHolder& Session::CacheHolder::operator=(const CacheHolder&) {
+    cache = std::make_shared<DocumentCache>();  // a copy's keyframes are its own
+    return *this;
+}
 
 json Session::documentAt(std::size_t k) const {
     VL_CHECK_LT(k, keyframes.size());
-    if (!cache_) cache_ = std::make_shared<DocumentCache>();
-    DocumentCache& c = *cache_;
+    DocumentCache& c = *cache_.cache;
     std::lock_guard lock(c.mutex);
-    if (c.keyframes != keyframes.data() || c.k > k || c.scene != scene) {
+    if (c.keyframes != keyframes.data() || c.k > k || c.scene != scene ||
+        c.time != keyframes[c.k].time || c.parts != keyframes[c.k].parts) {
         c.keyframes = keyframes.data();
         c.scene = scene;
         c.doc = scene;
@@ -260,6 +270,8 @@ json Session::documentAt(std::size_t k) const {
         applyParts(c.doc, keyframes[0].parts);
     }
     for (; c.k < k; ++c.k) applyParts(c.doc, keyframes[c.k + 1].parts);
+    c.time = keyframes[c.k].time;
+    c.parts = keyframes[c.k].parts;
     return c.doc;
 }
 
@@ -272,7 +284,8 @@ json Session::documentAtTime(double t) const {
     json doc = documentAt(k);
     if (keyframes[k].time == t || k + 1 == keyframes.size()) return doc;
     const double s = (t - keyframes[k].time) / (keyframes[k + 1].time - keyframes[k].time);
-    const json next = documentAt(k + 1);
+    json next = doc;  // not documentAt(k + 1): the next frame asks for k again
+    applyParts(next, keyframes[k + 1].parts);
     const io::Scene a = io::parseScene(doc, source, baseDir);
     const io::Scene b = io::parseScene(next, source, baseDir);
     auto same = [&](const char* part) {
@@ -380,17 +393,21 @@ Session parseSession(const json& doc, const std::string& source, const fs::path&
                  ? "must be \"voxlight-session\", got " + shortDump(doc["format"])
                  : "is required",
              "a session file starts {\"format\": \"voxlight-session\", \"version\": 2, ...}");
-    if (!doc.contains("version") || !doc["version"].is_number_integer())
-        fail("version",
-             doc.contains("version") ? "must be an integer, got " + described(doc["version"])
-                                     : "is required",
+    // A whole number written as 2.0 is the version 2 (JSON has one number type).
+    const json* v = doc.contains("version") ? &doc["version"] : nullptr;
+    const bool whole = v && v->is_number_float() && std::isfinite(v->get<double>()) &&
+                       v->get<double>() == std::floor(v->get<double>());
+    if (!v || (!v->is_number_integer() && !whole))
+        fail("version", v ? "must be an integer, got " + described(*v) : "is required",
              "\"version\": 2");
     // An unsigned version past long long's range read as -1 ("must be 1 or 2, got -1").
-    const long long version = doc["version"].is_number_unsigned() &&
-                                      doc["version"].get<std::uint64_t>() >
-                                          std::uint64_t(std::numeric_limits<long long>::max())
-                                  ? std::numeric_limits<long long>::max()
-                                  : doc["version"].get<long long>();
+    const long long version =
+        whole ? (std::abs(v->get<double>()) < 1e18 ? static_cast<long long>(v->get<double>())
+                                                   : std::numeric_limits<long long>::max())
+        : v->is_number_unsigned() &&
+                v->get<std::uint64_t>() > std::uint64_t(std::numeric_limits<long long>::max())
+            ? std::numeric_limits<long long>::max()
+            : v->get<long long>();
     if (version > kFormatVersion)
         fail("version",
              "is " + shortDump(doc["version"]) + ", written by a newer voxlight (this one reads " +

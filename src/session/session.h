@@ -114,12 +114,19 @@ struct Session {
     std::string fieldAtTime(double t, const std::string& field) const;
 
   private:
-    /// The last document documentAt() formed: keyframes are appended, never edited, so the
-    /// document at k + j is this one with j more keyframes applied (each call rebuilt 0..k: 8,000
-    /// keyframes took 5 s to load and as long again to replay; probe). Shared by copies, which
-    /// tell theirs apart by the keyframes' storage and the scene (compared on use).
+    /// The last document documentAt() formed: the document at k + j is this one with j more
+    /// keyframes applied (each call rebuilt 0..k: 8,000 keyframes took 5 s to load and as long
+    /// again to replay; probe). Valid while the keyframes' storage, the scene and keyframe k (the
+    /// recorder replaces the last one in place) are as they were; keyframes before k are never
+    /// edited. Made with the session (no unguarded lazy creation), one per copy.
     struct DocumentCache;
-    mutable std::shared_ptr<DocumentCache> cache_;
+    struct CacheHolder {
+        std::shared_ptr<DocumentCache> cache;
+        CacheHolder();
+        CacheHolder(const CacheHolder&);
+        CacheHolder& operator=(const CacheHolder&);
+    };
+    CacheHolder cache_;
 };
 
 /// Most frames one replay may ask for (keyframes, or duration × fps + 1).

@@ -391,14 +391,22 @@ TEST(ShGlobal, AGlobalGridCoarserThanTheLocalRadiusSaysSoAndOnePointIsRefused) {
     json d = shScene();
     d["method"] = {{"name", "sh-global"},
                    {"params", {{"rays", 24}, {"data_reduction", 2}, {"radius", 4}}}};
-    d["method"]["params"]["global_resolution"] = 4;  // 31 voxels / 3 gaps: 10.3 apart
+    // The torso phantom: 32 voxels a side; radius 4 voxels of the smallest spacing.
+    const core::Geometry g = core::makePhantom("torso", {.size = 32}).geometry();
+    const double h = core::minComponent(g.spacing);
+    double widest = 0.0;
+    for (int a = 0; a < 3; ++a) widest = std::max(widest, g.dims[a] * g.spacing[a]);
+    d["method"]["params"]["global_resolution"] = 4;  // a point per 8 voxels: twice the radius
     const RunResult coarse = Session().run(scene(d));
     ASSERT_EQ(coarse.warnings.size(), 1u);
-    EXPECT_NE(coarse.warnings[0].find("10.3333 voxels apart"), std::string::npos)
+    EXPECT_NE(coarse.warnings[0].find("farther than the local visibility's radius"),
+              std::string::npos)
         << coarse.warnings[0];
-    EXPECT_NE(coarse.warnings[0].find("raise global_resolution to 9 or more"), std::string::npos)
+    const int fits = int(std::ceil(widest / (4.0 * h)));
+    EXPECT_NE(coarse.warnings[0].find("raise global_resolution to " + std::to_string(fits)),
+              std::string::npos)
         << coarse.warnings[0];
-    d["method"]["params"]["global_resolution"] = 9;  // 31 / 8 = 3.9 apart
+    d["method"]["params"]["global_resolution"] = fits;
     EXPECT_TRUE(Session().run(scene(d)).warnings.empty());
     d["method"]["params"]["global_resolution"] = 1;
     try {
