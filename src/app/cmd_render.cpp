@@ -7,6 +7,7 @@
 // modality's preset, an anterior view fitted to what it shows, a headlight). --explain prints the
 // plan and what each stage would do, and renders nothing.
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
@@ -180,6 +181,12 @@ Command addRenderCommand(CLI::App& app) {
                 throw InternalError("method '" + r.method + "' made no std_error image");
             files.write(*stdErr, "--std-error",
                         [&](const fs::path& p) { io::writeImage(it->second, p); });
+            const auto& px = it->second.pixels;
+            if (std::any_of(px.begin(), px.end(), [](float v) { return std::isnan(v); }))
+                std::fprintf(stderr,
+                             "voxlight: warning: --std-error: pixels with one sample have no "
+                             "error estimate and are written as NaN (raise method.params.spp to "
+                             "2 or more)\n");
         }
         r.stages.push_back(outputRecord("write_std_error", *stdErr, "--std-error"));
         r.stages.back().seconds = sw.seconds();

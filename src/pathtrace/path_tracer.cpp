@@ -1541,7 +1541,11 @@ core::ImageRGBA PathTracer::render(const render::Camera& pinhole, const core::Pr
             const double var =
                 std::max(0.0, sumSq[p * 3 + c] / n - mean * mean) / std::max(1.0, n - 1.0);
             out[c] = float(mean);
-            if (stdError) stdError->pixels[p * 4 + c] = float(std::sqrt(var));
+            // One sample has no spread: its error is unknown (NaN), not the 1e-11 of rounding
+            // that read as "exact" (probe; the stats said null).
+            if (stdError)
+                stdError->pixels[p * 4 + c] =
+                    n >= 2.0 ? float(std::sqrt(var)) : std::numeric_limits<float>::quiet_NaN();
         }
         out[3] = float(alpha[p] / n);
         if (stdError) stdError->pixels[p * 4 + 3] = 1.f;

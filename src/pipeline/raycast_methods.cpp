@@ -2186,7 +2186,8 @@ Plan planRayCaster(Kind kind, const io::Scene& scene, ParamReader& reader) {
         for (std::size_t i = 0; i < scene.lights.size(); ++i)
             if (scene.lights[i].type != "directional" && scene.lights[i].type != "environment")
                 throw InputError(scene.source, "lights[" + std::to_string(i) + "].type",
-                                 "a " + scene.lights[i].type +
+                                 std::string(scene.lights[i].type == "area" ? "an " : "a ") +
+                                     scene.lights[i].type +
                                      " light is not distant: method 'pvrt' precomputes transfer "
                                      "for distant lighting only",
                                  "use directional or environment lights, or method 'sh-global' "

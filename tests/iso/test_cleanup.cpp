@@ -107,17 +107,29 @@ TEST(Cleanup, TaubinSmoothingMovesVerticesButDoesNotShrinkASphere) {
     EXPECT_GT(moved, 1e-3);
 }
 
+/// The larger of twoBalls() cut 4.3 voxels past its centre, capped: what the capped-cut tests
+/// smooth and decimate.
+struct CappedBall {
+    Ball big, small;
+    core::Volume v;
+    core::HalfSpace plane;
+    ExtractOptions e;
+    CappedBall() : v(twoBalls(big, small)), e(test::at(0.0)) {
+        e.cap = true;
+        plane = {{big.centre.x + 4.3, 0.0, 0.0}, {1.0, 0.0, 0.0}};
+        e.keep = {plane};
+    }
+};
+
 TEST(Cleanup, SmoothingACappedCutKeepsTheCapFlatAndTheMeshFreeOfSelfIntersections) {
     // A cap is a fan of rim-to-rim triangles: smoothing averaged rim vertices over those long
     // edges and dragged them across the cap (probe: 237 self-intersecting pairs after one
     // iteration on a capped sphere, 68 after 20; the mesh 0.12 mm past the plane). With the cut's
     // plane held, the rim stays on it and the mesh stays clean.
-    Ball big, small;
-    const core::Volume v = twoBalls(big, small);
-    ExtractOptions e = test::at(0.0);
-    e.cap = true;
-    const core::HalfSpace plane{{big.centre.x + 4.3, 0.0, 0.0}, {1.0, 0.0, 0.0}};
-    e.keep = {plane};
+    const CappedBall c;
+    const core::Volume& v = c.v;
+    const ExtractOptions& e = c.e;
+    const core::HalfSpace& plane = c.plane;
     for (const int iterations : {1, 5, 20}) {
         Extraction ex = extractIsosurface(v, e);
         ASSERT_EQ(reportMesh(ex.mesh, true).selfIntersections, 0);
@@ -142,12 +154,10 @@ TEST(Cleanup, ACappedCutSmoothedOrDecimatedKeepsItsCapFlatAndShadedFromItsSide) 
     // After --smooth or --decimate the normals were all gradients again: the rim's bisector lost,
     // every cap face's vertex normals turned away from it (probe: 334 of 334 cap faces, the cap
     // shaded edge-on), and decimation bent the cap 0.01 mm off its plane.
-    Ball big, small;
-    const core::Volume v = twoBalls(big, small);
-    ExtractOptions e = test::at(0.0);
-    e.cap = true;
-    const core::HalfSpace plane{{big.centre.x + 4.3, 0.0, 0.0}, {1.0, 0.0, 0.0}};
-    e.keep = {plane};
+    const CappedBall c;
+    const core::Volume& v = c.v;
+    const ExtractOptions& e = c.e;
+    const core::HalfSpace& plane = c.plane;
     for (const bool decimate : {false, true}) {
         SCOPED_TRACE(decimate ? "decimated" : "smoothed");
         Extraction ex = extractIsosurface(v, e);

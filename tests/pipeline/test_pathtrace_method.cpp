@@ -170,6 +170,21 @@ TEST(PathTraceMethod, StopsAtTheTargetErrorAndSaysWhenItDoesNot) {
     EXPECT_NE(s.warnings[0].find("method.params.spp"), std::string::npos) << s.warnings[0];
 }
 
+TEST(PathTraceMethod, OneSampleHasNoErrorEstimateNotAZeroOne) {
+    // At 1 spp the error image held rounding noise (mean 5e-11) that read as "exact", while the
+    // stats said null (probe): unknown is NaN, and 2 spp gives finite errors again.
+    json d = tracedScene();
+    d["method"]["params"] = {{"spp", 1}, {"denoise", false}};
+    const RunResult one = Session().run(scene(d));
+    const json& e = one.details["pathtrace"]["relative_std_error"];
+    EXPECT_TRUE(e.is_null() || std::isnan(e.get<double>())) << e;  // null in the stats file
+    for (std::size_t i = 0; i < one.images.at("std_error").pixels.size(); i += 4)
+        ASSERT_TRUE(std::isnan(one.images.at("std_error").pixels[i])) << i;
+    d["method"]["params"]["spp"] = 2;
+    const RunResult two = Session().run(scene(d));
+    for (float v : two.images.at("std_error").pixels) ASSERT_TRUE(std::isfinite(v));
+}
+
 TEST(PathTraceMethod, ReferenceModeIsACachedStageThatKeepsItsStatsAndErrorImage) {
     json d = tracedScene();
     d["effects"] = {"global_shadows"};
