@@ -124,6 +124,11 @@ glm::dvec3 sphereSample(double u1, double u2) {
 
 }  // namespace
 
+/// A point this close to the removed side of a kept plane is on it (mm): mesh vertices on a cut
+/// are stored in float (1e-5 mm at 100 mm from the origin); a thousandth of a millimetre is far
+/// below any voxel.
+constexpr double kOnKeptPlaneMm = 1e-3;
+
 /// Empty-space skipping for one isovalue: per trilinear cell, the Chebyshev distance (cells) to
 /// the nearest cell with a corner above the isovalue (or NaN) — the only cells in which a ray
 /// starting below it can cross it — capped at 255. Every texel of the on-surface lattice and every
@@ -131,11 +136,6 @@ glm::dvec3 sphereSample(double u1, double u2) {
 /// cell, a breadth-first pass) and lets rays cross soft tissue and air in jumps instead of testing
 /// cell by cell (the 8³ bricks alone left most cells around bone to the cell test, about half the
 /// lattice's time).
-/// A point this close to the removed side of a kept plane is on it (mm): mesh vertices on a cut
-/// are stored in float (1e-5 mm at 100 mm from the origin); a thousandth of a millimetre is far
-/// below any voxel.
-constexpr double kOnKeptPlaneMm = 1e-3;
-
 struct IlluminationLattice::SkipField {
     double iso;
     std::vector<std::uint8_t> distance;  ///< per cell, at Tracer::skipIndex
@@ -334,11 +334,6 @@ struct IlluminationLattice::Tracer {
         return len > 0.0 && std::isfinite(len) ? -gw / len : glm::dvec3(0.0);
     }
 
-    /// First t ∈ (0, tMax] (mm) where the trilinear field along origin + t·ω (index origin, world
-    /// unit ω) crosses `iso` from the side the origin is on. Returns false when the ray leaves the
-    /// volume (or passes tMax) first. `skip`: skipFor(iso)'s distances, used by rays that start
-    /// below iso (nullptr: the bricks alone); the same crossings either way, since the cells it
-    /// jumps over cannot hold one.
     /// Kept half-spaces in index space (LatticeOptions::keep): signed distance (mm) at index
     /// point i is dot(i, grad) + offset, ≥ 0 kept.
     struct KeptPlane {
@@ -393,6 +388,11 @@ struct IlluminationLattice::Tracer {
         return true;
     }
 
+    /// First t ∈ (0, tMax] (mm) where the trilinear field along origin + t·ω (index origin, world
+    /// unit ω) crosses `iso` from the side the origin is on. Returns false when the ray leaves the
+    /// volume (or passes tMax) first. `skip`: skipFor(iso)'s distances, used by rays that start
+    /// below iso (nullptr: the bricks alone); the same crossings either way, since the cells it
+    /// jumps over cannot hold one.
     bool hitInVolume(const glm::dvec3& origin, const glm::dvec3& omega, double iso, double tMax,
                      double* tHit = nullptr, const SkipField* skip = nullptr) const {
         const glm::dvec3 d = worldToIdx * omega;  // index units per mm

@@ -430,6 +430,25 @@ TEST(Lattice, MatterACutRemovesCastsNoShadowAndWhatItKeepsStillDoes) {
     EXPECT_NEAR(lat.directIrradiance({0, 0, 17}, 0.0, true).x, 0.0, 1e-6);
 }
 
+TEST(Lattice, APathLeavingTheBoxBeforeTheKeptRegionMeetsNothing) {
+    // A floor (z ≤ 0) and a slab under the volume's top face (z ≥ 20, x ≤ 12); the cut keeps
+    // x ≤ 10. From the removed floor at x = 20 a path toward the light (up, slightly −x) leaves
+    // the box at x ≈ 17.3, long before it could enter the kept region: it was tested at the border
+    // voxel its entry clamped to, (10, 0, 27), inside the slab, and called a cut face (review).
+    core::Geometry g;
+    g.dims = {48, 48, 32};
+    g.origin = {-24.0, -24.0, -4.0};
+    const auto volume = share(test::fieldVolume(
+        g, [](const glm::dvec3& p) { return std::max(-p.z, std::min(p.z - 20.0, 12.0 - p.x)); }));
+    const float E = 2.f;
+    const glm::vec3 toLight = glm::normalize(glm::vec3(-0.1f, 0.f, 1.f));
+    auto light = std::make_shared<lights::DirectionalLight>(glm::vec3(E), toLight);
+    LatticeOptions o = opts(4, 0);
+    o.keep = {core::HalfSpace{{10, 0, 0}, {-1, 0, 0}}};
+    IlluminationLattice lat(volume, albedoTf(0.f, -40, 40), {light}, o);
+    EXPECT_NEAR(lat.directIrradiance({20, 0, 0}, 0.0, true).x, E * toLight.z, 1e-3 * E);
+}
+
 // SH transfer: a uniform sky is exact in band 0 (E = π·L on a convex surface, as the irradiance
 // lattice); turning a directional light re-dots without tracing and equals a lattice computed
 // for the turned light from the start.
