@@ -4,6 +4,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <limits>
 #include <ostream>
@@ -368,28 +369,94 @@ MultiresGrid::MultiresGrid(std::shared_ptr<const BlockPyramid> pyramid, LodSelec
     levelData_.assign(selection_.level.size(), nullptr);
     for (std::size_t b = 0; b < levelData_.size(); ++b)
         if (selection_.level[b] != kNone) levelData_[b] = pyramid_->data(b, selection_.level[b]);
-    // Ramp widths: the finest spacing among a block and its stored neighbours.
-    // Isolated blocks: neither they nor a neighbour are stored.
-    ramp_.assign(selection_.level.size(), 1.f);
-    isolated_.assign(selection_.level.size(), 1);
-    for (std::size_t b = 0; b < ramp_.size(); ++b) {
+    // Ramp lengths per face (header comment): g = (s_b + s_c)/2 toward the stored face
+    // neighbour c (s_b where it is not stored), and per diagonal neighbour n on that side the
+    // limit (s_b + s_n)/2 where it is shorter. Isolated blocks: neither they nor a neighbour are
+    // stored.
+    const std::size_t count = selection_.level.size();
+    ramp_.assign(count * 6, 1.f);
+    invRamp_.assign(count * 6, 1.f);
+    diagonalRamp_.assign(count * 6 * 8, 0.f);
+    limited_.assign(count * 6, 0);
+    isolated_.assign(count, 1);
+    auto spacingAt = [&](const glm::ivec3& n) {  // 0: outside the volume or not stored
+        if (glm::any(glm::lessThan(n, glm::ivec3(0))) || glm::any(glm::greaterThanEqual(n, nb)))
+            return 0;
+        const int l = selection_.level[pyramid_->blockIndex(n.x, n.y, n.z)];
+        return l == kNone ? 0 : levelSpacing(l);
+    };
+    for (std::size_t b = 0; b < count; ++b) {
         const glm::ivec3 c = pyramid_->blockCoord(b);
-        const bool stored = selection_.level[b] != kNone;
-        int w = stored ? levelSpacing(selection_.level[b]) : 0;
-        for (int dz = -1; dz <= 1; ++dz)
+        for (int dz = -1; dz <= 1 && isolated_[b]; ++dz)
             for (int dy = -1; dy <= 1; ++dy)
-                for (int dx = -1; dx <= 1; ++dx) {
-                    const glm::ivec3 n = c + glm::ivec3(dx, dy, dz);
-                    if (glm::any(glm::lessThan(n, glm::ivec3(0))) ||
-                        glm::any(glm::greaterThanEqual(n, nb)))
-                        continue;
-                    const int l = selection_.level[pyramid_->blockIndex(n.x, n.y, n.z)];
-                    if (l == kNone) continue;
-                    isolated_[b] = 0;
-                    if (stored) w = std::min(w, levelSpacing(l));
-                }
-        if (stored) ramp_[b] = float(w);
+                for (int dx = -1; dx <= 1; ++dx)
+                    if (spacingAt(c + glm::ivec3(dx, dy, dz)) > 0) isolated_[b] = 0;
+        if (selection_.level[b] == kNone) continue;
+        const int sb = levelSpacing(selection_.level[b]);
+        for (int face = 0; face < 6; ++face) {
+            const int a = face / 2, a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+            glm::ivec3 d(0);
+            d[a] = face % 2 ? 1 : -1;
+            const int sc = spacingAt(c + d);
+            const float g = sc > 0 ? 0.5f * float(sb + sc) : float(sb);
+            ramp_[b * 6 + std::size_t(face)] = g;
+            invRamp_[b * 6 + std::size_t(face)] = 1.f / g;
+            for (int k = 0; k < 8; ++k) {
+                const glm::ivec2 o = diagonalOffset(k);
+                d[a1] = o.x;
+                d[a2] = o.y;
+                const int sn = spacingAt(c + d);
+                const float limit = sn > 0 ? 0.5f * float(sb + sn) : g;
+                diagonalRamp_[(b * 6 + std::size_t(face)) * 8 + std::size_t(k)] = limit;
+                if (limit < g) limited_[b * 6 + std::size_t(face)] |= std::uint8_t(1u << k);
+            }
+        }
     }
+    // Per face: can a diagonal neighbour n across it reach into the block's sample box on that
+    // axis? Only where n's own ramp back across the axis, g_n toward m = n's neighbour in this
+    // block's slab, exceeds (s_n + s_b)/2 (m coarser than b, or not stored): n's limit from b
+    // fades in only past n's box on the other axes.
+    reachesIn_.assign(count * 6, 0);
+    for (std::size_t b = 0; b < count; ++b) {
+        if (selection_.level[b] == kNone) continue;
+        const glm::ivec3 c = pyramid_->blockCoord(b);
+        const int sb = levelSpacing(selection_.level[b]);
+        for (int face = 0; face < 6; ++face) {
+            const int a = face / 2, a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+            const int side = face % 2 ? 1 : -1;
+            for (int k = 0; k < 8 && !reachesIn_[b * 6 + std::size_t(face)]; ++k) {
+                const glm::ivec2 o = diagonalOffset(k);
+                glm::ivec3 m = c;
+                m[a1] += o.x;
+                m[a2] += o.y;
+                glm::ivec3 n = m;
+                n[a] += side;
+                const int sn = spacingAt(n), sm = spacingAt(m);
+                if (sn == 0) continue;
+                const float gn = sm > 0 ? 0.5f * float(sn + sm) : float(sn);
+                if (gn > 0.5f * float(sn + sb)) reachesIn_[b * 6 + std::size_t(face)] = 1;
+            }
+        }
+    }
+}
+
+float MultiresGrid::rampLength(std::size_t block, int face, const glm::vec3& pastBox) const {
+    const std::size_t f = block * 6 + std::size_t(face);
+    const float g = ramp_[f];
+    const int a = face / 2, a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+    float length = g;
+    for (unsigned mask = limited_[f]; mask != 0; mask &= mask - 1) {
+        const int k = std::countr_zero(mask);
+        const float limit = diagonalRamp_[f * 8 + std::size_t(k)];
+        // How far p lies toward n on n's other axes, over the gap to n's box there: 0 within the
+        // block's box on such an axis, 1 from n's box on (product over the axes n is off on).
+        const glm::ivec2 o = diagonalOffset(k);
+        float t = 1.f;
+        if (o.x != 0) t *= std::min(1.f, std::max(0.f, float(o.x) * pastBox[a1]) / limit);
+        if (o.y != 0) t *= std::min(1.f, std::max(0.f, float(o.y) * pastBox[a2]) / limit);
+        length = std::min(length, g + t * (limit - g));
+    }
+    return length;
 }
 
 glm::vec3 MultiresGrid::samplePosition(std::size_t block, int level, int i, int j, int k) const {
@@ -408,10 +475,10 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
     const glm::ivec3 oc = ownerCoord(p);
     const std::size_t owner = indexOf(oc);
     if (isolated_[owner]) return;
-    // Per axis: is p inside the owner's sample box? A neighbour across that axis then has weight
-    // exactly 0 (its ramp ends w_c/2 ≤ s_owner/2 past its face, where the box starts; in floats
-    // too: past/ramp rounds to ≥ ½), so its column is not visited. Inside on every axis only the
-    // owner contributes: the fast path.
+    // Inside the owner's sample box on every axis only the owner contributes (header comment):
+    // the fast path. Inside it on one axis, the blocks across that axis contribute only where
+    // reachesIn_ says a diagonal one can (its ramp toward the owner's neighbour in the owner's
+    // slab reaches past the owner's box face); otherwise their column is not visited.
     bool inside[3] = {false, false, false};
     if (const int l = selection_.level[owner]; l != kNone) {
         glm::vec3 lo, hi;
@@ -426,14 +493,16 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
             return;
         }
     }
-    // Candidates: per axis the owner's column and, unless p is inside the owner's box on that
-    // axis, the neighbouring column on p's side of the owner's centre (no ramp reaches farther
-    // than 8 voxels past its block's face).
+    // Candidates: per axis the owner's column and, unless pruned above, the neighbouring column
+    // on p's side of the owner's centre (no ramp reaches farther than 8 voxels past its block's
+    // face).
     int col[3][2];
     for (int a = 0; a < 3; ++a) {
         col[a][0] = oc[a];
         const int other = p[a] < float(oc[a] * kBlockSize) + 7.5f ? oc[a] - 1 : oc[a] + 1;
-        col[a][1] = !inside[a] && other >= 0 && other < nb[a] ? other : -1;
+        const bool reaches =
+            !inside[a] || reachesIn_[owner * 6 + std::size_t(2 * a + (other > oc[a]))];
+        col[a][1] = reaches && other >= 0 && other < nb[a] ? other : -1;
     }
     float sum = 0.f;
     for (int c = 0; c < 8; ++c) {
@@ -442,14 +511,33 @@ void MultiresGrid::weights(const glm::vec3& pIn, BlockWeights& out) const {
         const std::size_t idx = pyramid_->blockIndex(x, y, z);
         const int l = selection_.level[idx];
         if (l == kNone) continue;
-        const glm::vec3 lo = glm::vec3(x, y, z) * float(kBlockSize) - 0.5f;
-        const glm::vec3 past = glm::max(lo - p, p - (lo + float(kBlockSize)));  // < 0 inside
-        const glm::vec3 psi = glm::clamp(0.5f - past / ramp_[idx], glm::vec3(0.f), glm::vec3(1.f));
-        const float w = psi.x * psi.y * psi.z;
+        // Signed voxels past the sample box per axis (+ past the top, − below the bottom, 0
+        // inside); the faces with a fixed ramp length first (one multiply each), so a block out
+        // of reach is left before any limited face's length is worked out.
+        const float s = float(levelSpacing(l));
+        const glm::vec3 boxLo = glm::vec3(x, y, z) * float(kBlockSize) + (0.5f * s - 0.5f);
+        const glm::vec3 boxHi = boxLo + (float(kBlockSize) - s);
+        glm::vec3 past;
+        for (int a = 0; a < 3; ++a)
+            past[a] = p[a] > boxHi[a] ? p[a] - boxHi[a] : p[a] < boxLo[a] ? p[a] - boxLo[a] : 0.f;
+        float w = 1.f;
+        int limitedAxes = 0;
+        for (int a = 0; a < 3; ++a) {
+            if (past[a] == 0.f) continue;
+            const std::size_t f = idx * 6 + std::size_t(2 * a + (past[a] > 0.f));
+            if (limited_[f])
+                limitedAxes |= 1 << a;
+            else
+                w *= std::max(0.f, 1.f - std::abs(past[a]) * invRamp_[f]);
+        }
+        for (int a = 0; a < 3 && limitedAxes != 0 && w > 0.f; ++a)
+            if (limitedAxes & (1 << a))
+                w *= std::max(
+                    0.f, 1.f - std::abs(past[a]) / rampLength(idx, 2 * a + (past[a] > 0.f), past));
         if (!(w > 0.f)) continue;
         const int n = levelResolution(l);
-        const float s = float(levelSpacing(l));
-        glm::vec3 u = (p - lo) / s - 0.5f;
+        glm::vec3 u =
+            (p - boxLo) * levelInvSpacing(l);  // sample coordinates: the box is [0, n − 1]
         u = glm::min(glm::max(u, glm::vec3(0.f)), glm::vec3(float(n - 1)));
         const int k = out.count++;
         out.block[k] = std::uint32_t(idx);

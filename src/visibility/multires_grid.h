@@ -39,19 +39,40 @@
 // Sampling across blocks (MultiresGrid::weights), after Ljung 2006's idea of sampling each block
 // only from its own data, clamped to its "sample box" [16·b + s/2 − ½, 16·b + 16 − s/2 − ½] (the
 // hull of its samples), and blending blocks near their faces with normalised weights:
-//   f(p) = Σ_b ω_b(p) · f_b(clamp(p, box_b)) / Σ_b ω_b(p),   ω_b = Π_axes ψ_b,a(p_a),
-//   ψ_b,a = clamp(½ − x_a / w_b, 0, 1),  x_a = signed distance of p_a past b's owned extent
-//                                              [16·b − ½, 16·b + 15½] (negative inside),
-// a linear ramp of width w_b centred on each face of the block, where w_b = the smallest sample
-// spacing s among b and its 26 neighbours (stored ones). Properties (tested):
-//   * each ω_b depends on p and b only and is continuous, so f is continuous wherever Σ ω > 0;
-//     the owner of p always has ψ ≥ ½ per axis, so Σ ω ≥ 1/8 wherever the owner is stored;
-//   * inside a block's sample box only that block contributes (its ramps end w_b/2 ≤ s_b/2 inside
-//     its faces, and a neighbour's ramp reaches w_c/2 ≤ s_b/2 past its own face), so a fine block
-//     is never blurred by a coarse neighbour inside its box;
+//   f(p) = Σ_b ω_b(p) · f_b(clamp(p, box_b)) / Σ_b ω_b(p),   ω_b = Π_axes ψ_b,a(p),
+//   ψ_b,a = clamp(1 − d_a / g_b,f(p), 0, 1),  d_a = how far p_a lies past b's box on axis a (0
+//                                              inside), f = the face of b on that side,
+// a linear ramp from b's box out across the gap to the neighbours' samples. Its length:
+//   g_b,f = (s_b + s_c)/2 toward the stored face neighbour c across f (s_b where c is not stored):
+//     the gap between b's outermost samples and c's, so where nothing else intervenes the two
+//     ramps sum to 1 and f is exactly linear between b's last sample and c's first — the two
+//     blocks' own samples, whatever their levels;
+//   shortened near a finer diagonal neighbour n across f (one of the other 8 blocks on that side,
+//     off b on one or both other axes): g(p) = min over such n of g + t_n(p)·(ℓ_n − g) where
+//     ℓ_n = (s_b + s_n)/2 < g and t_n = Π over n's other axes of clamp(d'/ℓ_n, 0, 1), d' how far
+//     p lies past b's box toward n on that axis — 0 within b's box there, 1 where n's box begins,
+//     so b's ramp ends at n's box inside it.
+// Until 7 December the ramp was centred on b's face with one width for the block, the finest
+// spacing among b and all 26 neighbours: one finer block diagonally past a face squeezed the
+// blend between two coarser blocks across it into one voxel, and the step between their samples
+// two voxels apart showed as a line along every such face (the T1 MRI's scalp at 1:8: 1.7× the
+// interior's error within half a voxel of a face; tests/visibility LineSweep.NoLargerErrorAt…).
+// Properties (tested):
+//   * each ω_b depends on p and b only and is continuous (g is, and g ≥ 1), so f is continuous
+//     wherever Σ ω > 0; the owner of p always has ψ ≥ 1/(s + 1) per axis (d ≤ s/2 inside its
+//     extent, g ≥ (s + 1)/2), so Σ ω > 0 wherever the owner is stored;
+//   * inside a block's sample box only that block contributes: any other block n differs from it
+//     on some axis, and there n's ramp toward it ends at its box (its face neighbour's g, or its
+//     limit faded fully in: p lies past n's box on n's other axes by at least ℓ). So a fine block
+//     is never blurred by a coarse neighbour inside its box. (Per axis this need not hold: inside
+//     the box on one axis a diagonal block can reach in — weights() visits its column then,
+//     MultiresGrid::reachesIn_);
 //   * where b and its neighbours share one level, the ramps of two neighbours sum to 1 and span
 //     the gap between their boxes: exactly trilinear interpolation on that level's lattice, and at
 //     level 0 everywhere exactly trilinear interpolation of the voxels.
+// What remains at faces where the levels differ by two or more (1:3, 0:2: a gap of 5 or 2.5
+// voxels): the linear blend across the gap misses V's curvature there, 10–20 % dark on the
+// MRI's scalp along such faces (a selection keeping neighbours within one level would remove it).
 // Blocks at kNone hold no data and get weight 0. Where no stored block contributes (inside a
 // transparent block, away from stored ones) weights() returns no block and callers use their
 // empty-space value; such points are never shaded (the TF is transparent over the whole block).
@@ -359,14 +380,29 @@ class MultiresGrid {
     /// Voxel coordinate of sample (i, j, k) of a block at a level.
     glm::vec3 samplePosition(std::size_t block, int level, int i, int j, int k) const;
 
-    /// Ramp width w_b of a block (voxels; see the header comment).
-    float rampWidth(std::size_t block) const { return ramp_[block]; }
+    /// Ramp length of a stored block toward its face f = 2·axis + side (voxels; header comment)
+    /// at a point `pastBox` voxels past the block's sample box per axis (signed: + past its top,
+    /// − below its bottom, 0 inside).
+    float rampLength(std::size_t block, int face, const glm::vec3& pastBox) const;
+    /// The k-th (0..7) offset on the two other axes of a face ((axis + 1) % 3, (axis + 2) % 3) of
+    /// the diagonal neighbours across it: every pair in {−1, 0, 1}² but (0, 0).
+    static glm::ivec2 diagonalOffset(int k) {
+        const int m = k < 4 ? k : k + 1;  // skip (0, 0), the face neighbour
+        return {m % 3 - 1, m / 3 - 1};
+    }
 
   private:
     float sampleBlend(const glm::vec3& p, float empty) const;
     std::shared_ptr<const BlockPyramid> pyramid_;
     LodSelection selection_;
-    std::vector<float> ramp_;
+    std::vector<float> ramp_;  ///< per block × 6 faces (2·axis + side): g toward the face neighbour
+    std::vector<float> invRamp_;       ///< 1 / ramp_
+    std::vector<float> diagonalRamp_;  ///< per block × 6 faces × 8 diagonal offsets: the limits
+    /// Per block × 6 faces: bit k set where diagonal neighbour k's limit is below g.
+    std::vector<std::uint8_t> limited_;
+    /// Per block × 6 faces: a diagonal neighbour across it may weigh inside the block's sample
+    /// box on that axis (weights()' candidate pruning).
+    std::vector<std::uint8_t> reachesIn_;
     /// 1 where a block and its 26 neighbours are all unstored: no stored block contributes
     /// anywhere in it (ramps reach at most 8 voxels past a block's face), so weights() returns
     /// count 0 at once there — most of a transparent TF's volume.

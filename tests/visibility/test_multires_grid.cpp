@@ -156,11 +156,12 @@ TEST(MultiresGrid, NoSeamsBetweenBlocksOfDifferentLevels) {
     sel.level[pyr->blockIndex(1, 1, 1)] = 0;  // a 16³ block …
     sel.level[pyr->blockIndex(2, 1, 1)] = 3;  // … next to a 2³ block
     const MultiresGrid g(pyr, sel);
-    // Lipschitz bound of the blend: ramps rise at most 1 per voxel (widths ≥ 1), Σ ω ≥ 1/8 (the
-    // owner's ψ ≥ ½ per axis), and each block's clamped data changes by ≤ √3·R per voxel of path,
-    // so |df/du| ≤ √3·R·(8·8 + 1) with R ≤ 700 the values' spread: successive samples δ apart
-    // differ by less than kSeamTol. A seam (a jump) would not shrink with δ; a continuous blend's
-    // largest step shrinks ~10× when δ does (checked below with a factor-5 margin).
+    // A cap on the step between successive samples δ apart: √3·R·(8·8 + 1)·δ with R ≤ 700 the
+    // values' spread — the Lipschitz bound of the blend before 7 December (ramps rising ≤ 1 per
+    // voxel, Σ ω ≥ 1/8), which the per-face ramps meet on this grid too; their own bound is
+    // looser (Σ ω ≥ (1/17)³ in the worst corner), so the check that tells a seam is the next
+    // one: a jump does not shrink with δ, a continuous blend's largest step shrinks ~10× when δ
+    // does (checked with a factor-5 margin).
     constexpr float kDelta = 1e-3f;
     const float kSeamTol = std::sqrt(3.f) * 700.f * 65.f * kDelta;
     auto seamless = [&](const glm::vec3& p) { return g.sample(p); };
@@ -213,15 +214,18 @@ TEST(MultiresGrid, InsideItsSampleBoxABlockIsInterpolatedAlone) {
     EXPECT_EQ(w.block[0], 0u);
     EXPECT_EQ(w.weight[0], 1.f);
     EXPECT_EQ(w.local[0], glm::vec3(0.f, 1.375f, 3.f));
-    // Block 1 (level 0) makes every ramp width 1: past the box block 0 is clamped, and the two
-    // blocks blend only within half a voxel of their face at x = 15.5.
-    g.weights({14.9f, 7.f, 7.f}, w);
-    ASSERT_EQ(w.count, 1);
-    EXPECT_EQ(w.local[0].x, 3.f);
-    g.weights({15.7f, 7.f, 7.f}, w);
-    ASSERT_EQ(w.count, 2);
-    EXPECT_NEAR(w.weight[0] + w.weight[1], 1.f, 1e-6f);
-    EXPECT_NEAR(std::min(w.weight[0], w.weight[1]), 0.3f, 1e-5f);
+    // Between block 0's last sample (x = 13.5) and block 1's first (level 0: x = 16) the two
+    // blend linearly over the whole gap: no diagonal neighbour on either side is finer than the
+    // other one across the face (block 7, level 0, lies diagonally past block 0's +x face, but
+    // its limit (4 + 1)/2 equals the face's ramp), and block 4 (level 0), diagonal to block 1's
+    // −x face, limits that ramp only toward z past block 1's box.
+    for (float x : {14.9f, 15.7f}) {
+        g.weights({x, 7.f, 7.f}, w);
+        ASSERT_EQ(w.count, 2);
+        const float w1 = w.block[0] == 1u ? w.weight[0] : w.weight[1];
+        EXPECT_NEAR(w1, (x - 13.5f) / 2.5f, 1e-5f);
+        EXPECT_NEAR(w.weight[0] + w.weight[1], 1.f, 1e-6f);
+    }
 }
 
 // weights() visits only the candidate blocks its geometry allows (the owner's column per axis,
@@ -241,14 +245,42 @@ TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
     }
     sel.significance.assign(sel.level.size(), 0.f);
     const MultiresGrid g(pyr, sel);
-    auto ramp = [&](const glm::ivec3& c) {  // smallest spacing among c and its stored neighbours
-        int w = 1 << 30;
-        for (std::size_t b = 0; b < sel.level.size(); ++b) {
-            const glm::ivec3 d = glm::abs(pyr->blockCoord(b) - c);
-            if (std::max({d.x, d.y, d.z}) <= 1 && sel.level[b] != kNone)
-                w = std::min(w, levelSpacing(sel.level[b]));
-        }
-        return double(w);
+    auto spacing = [&](const glm::ivec3& c) {  // 0: outside the volume or not stored
+        for (int a = 0; a < 3; ++a)
+            if (c[a] < 0 || c[a] >= nb[a]) return 0.0;
+        const int l = sel.level[pyr->blockIndex(c.x, c.y, c.z)];
+        return l == kNone ? 0.0 : double(levelSpacing(l));
+    };
+    // The ramp length of block c toward side `side` of axis a at q (header comment, in double):
+    // g toward the face neighbour, each diagonal neighbour n on that side shortening it toward
+    // (s_c + s_n)/2 by t = Π over n's other axes of how far q lies past c's box toward n over
+    // that length.
+    auto rampLength = [&](const glm::ivec3& c, int a, int side, const glm::dvec3& q) {
+        const double sc = spacing(c);
+        glm::ivec3 f = c;
+        f[a] += side;
+        const double g = spacing(f) > 0.0 ? 0.5 * (sc + spacing(f)) : sc;
+        double length = g;
+        for (int d1 = -1; d1 <= 1; ++d1)
+            for (int d2 = -1; d2 <= 1; ++d2) {
+                if (d1 == 0 && d2 == 0) continue;
+                glm::ivec3 n = f;
+                const int a1 = (a + 1) % 3, a2 = (a + 2) % 3;
+                n[a1] += d1;
+                n[a2] += d2;
+                if (spacing(n) == 0.0) continue;
+                const double limit = 0.5 * (sc + spacing(n));
+                double t = 1.0;
+                for (auto [axis, dir] : {std::pair{a1, d1}, std::pair{a2, d2}}) {
+                    if (dir == 0) continue;
+                    const double lo = 16.0 * c[axis] + 0.5 * sc - 0.5;
+                    const double hi = 16.0 * c[axis] + 16.0 - 0.5 * sc - 0.5;
+                    const double past = dir > 0 ? q[axis] - hi : lo - q[axis];
+                    t *= std::clamp(past / limit, 0.0, 1.0);
+                }
+                length = std::min(length, g + t * (limit - g));
+            }
+        return length;
     };
     std::size_t checked = 0, blended = 0;
     for (std::uint64_t n = 0; n < 20000; ++n) {
@@ -268,10 +300,15 @@ TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
                     const std::size_t b = pyr->blockIndex(x, y, z);
                     if (sel.level[b] == kNone) continue;
                     double w = 1.0;
+                    const glm::ivec3 c(x, y, z);
+                    const double sc = spacing(c);
                     for (int a = 0; a < 3; ++a) {
-                        const double lo = 16.0 * glm::ivec3(x, y, z)[a] - 0.5;
-                        const double past = std::max(lo - q[a], q[a] - (lo + 16.0));
-                        w *= std::clamp(0.5 - past / ramp({x, y, z}), 0.0, 1.0);
+                        const double lo = 16.0 * c[a] + 0.5 * sc - 0.5;  // the sample box
+                        const double hi = 16.0 * c[a] + 16.0 - 0.5 * sc - 0.5;
+                        if (q[a] > hi)
+                            w *= std::max(0.0, 1.0 - (q[a] - hi) / rampLength(c, a, 1, q));
+                        else if (q[a] < lo)
+                            w *= std::max(0.0, 1.0 - (lo - q[a]) / rampLength(c, a, -1, q));
                     }
                     expected[b] = w;
                     sum += w;
