@@ -12,7 +12,8 @@
 //
 // Every variant is validated and planned before the reference renders, so a bad sweep fails at
 // once with one line and writes nothing. Files are written atomically as they are made, and
-// results.csv is rewritten after every variant: a Ctrl-C keeps every row finished so far.
+// results.csv is rewritten once the reference is written (the rows --only keeps, or just the header)
+// and after every variant: a Ctrl-C keeps every row finished so far.
 #include <fcntl.h>
 #include <unistd.h>
 
@@ -264,6 +265,10 @@ Command addSweepCommand(CLI::App& app) {
                     writeTextFile(
                         p, refJson.dump(2, ' ', false, nlohmann::json::error_handler_t::replace));
                 });
+                // The folder's results.csv now belongs to this reference: the rows --only keeps
+                // and nothing else. An earlier sweep's rows, measured against the reference just
+                // replaced, stayed beside it when this run stopped before its first row (probe).
+                writeCsv(dir / "results.csv", {}, kept);
             } catch (const InputError&) {
                 failure = std::current_exception();
                 undo();

@@ -19,6 +19,7 @@
 #include "app/volume_options.h"
 #include "io/image.h"
 #include "io/scene.h"
+#include "pipeline/scene_inputs.h"
 #include "session/session.h"
 #include "viewer/viewer.h"
 
@@ -96,6 +97,11 @@ Command addViewCommand(CLI::App& app) {
             io::Scene scene = loadInput(*input, shorthands->overrides(*sets));
             for (auto& in : sceneFileInputs(scene)) inputs.push_back(std::move(in));
             checkOutputs(outputs, inputs);  // the scene's volume and maps
+            // What is cheap to refuse first, then the display: before a load that may take
+            // minutes (a missing display was said only after it; probe).
+            if (!screenshot->empty()) viewer::checkScreenshotSize(scene);
+            pipeline::checkSceneVolumeExists(scene);
+            viewer::requireDisplay();
             initial = viewer::prepareScene(std::move(scene), terminalProgress(*quiet));
         }
         // A session written under Ctrl-C is said to be there (runGuarded would say nothing was).

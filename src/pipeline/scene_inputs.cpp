@@ -59,17 +59,12 @@ fs::path detachedDataFile(const fs::path& header) {
 }
 }  // namespace
 
-core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progress) {
+void checkSceneVolumeExists(const io::Scene& scene) {
     const io::VolumeSource& src = scene.volume;
-    if (!src.phantom.empty()) {
-        core::PhantomOptions o;
-        o.size = src.phantomSize;
-        return core::makePhantom(src.phantom, o, progress);
-    }
     // Named by the scene's file and key, with where a relative path was looked for (the reader
     // alone said "relative to the current directory" of a path taken from the scene's).
     std::error_code ec;
-    if (!src.written.empty() && !std::filesystem::exists(src.path, ec))
+    if (src.phantom.empty() && !src.written.empty() && !std::filesystem::exists(src.path, ec))
         throw InputError(
             scene.source, src.key,
             "'" + src.written + "' does not exist" +
@@ -77,6 +72,16 @@ core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progr
                                                   : std::string()),
             "a scene file's relative paths are taken from its directory, --set "
             "and command-line paths from the current one");
+}
+
+core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progress) {
+    const io::VolumeSource& src = scene.volume;
+    if (!src.phantom.empty()) {
+        core::PhantomOptions o;
+        o.size = src.phantomSize;
+        return core::makePhantom(src.phantom, o, progress);
+    }
+    checkSceneVolumeExists(scene);
     return io::readVolume(src.path, src.readOptions, progress);
 }
 

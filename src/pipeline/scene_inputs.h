@@ -33,6 +33,9 @@ namespace voxlight::pipeline {
 
 /// Loads the scene's volume (phantom or file).
 core::Volume loadSceneVolume(const io::Scene& scene, const core::Progress& progress);
+/// loadSceneVolume's first check, alone (cheap: before a command's slower checks): a volume
+/// file or folder the scene names that does not exist is an InputError naming the scene's key.
+void checkSceneVolumeExists(const io::Scene& scene);
 /// What identifies the volume's source without reading it: a phantom's name and size, or the
 /// file's (or DICOM directory's files') path, size and modification time, plus the read options.
 /// A changed file gets a new identity; the content hash decides what is really new.

@@ -2180,18 +2180,24 @@ std::optional<core::ImageRGBA> Viewer::runFrames() {
 
 const char* helpText() { return kHelp; }
 
+void checkScreenshotSize(const io::Scene& s) {
+    try {
+        render::checkImageSize(s.image.width, s.image.height);
+    } catch (const InputError& e) {  // named by the scene's key, as render names it
+        throw InputError(s.source, "image.width", e.problem(), e.fix());
+    }
+}
+
+void requireDisplay() {
+    if (!glfwInit())
+        throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
+                         "run on a desktop, or headless under xvfb-run -a");
+    glfwTerminate();
+}
+
 std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,
                                          std::optional<LoadedScene> initial) {
-    // A scripted screenshot the renderer will refuse is refused before a window opens (a
-    // 16384² one failed after a minute or more of coarse frames, naming the screenshot file).
-    if (!options.screenshot.empty() && initial) {
-        const io::Scene& s = initial->scene;
-        try {
-            render::checkImageSize(s.image.width, s.image.height);
-        } catch (const InputError& e) {  // named by the scene's key, as render names it
-            throw InputError(s.source, "image.width", e.problem(), e.fix());
-        }
-    }
+    if (!options.screenshot.empty() && initial) checkScreenshotSize(initial->scene);
     if (!glfwInit())
         throw InputError("display", "OpenGL 4.5 window", "cannot be opened: " + glfwErrorText(),
                          "run on a desktop, or headless under xvfb-run -a");

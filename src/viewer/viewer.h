@@ -93,6 +93,16 @@ struct ViewerOptions {
 /// The keyboard shortcuts, one per line ("key  action").
 const char* helpText();
 
+/// A scripted screenshot of `scene` the renderer will refuse (its image size) is refused before
+/// a window opens or a volume loads (a 16384² one failed after a minute or more of coarse
+/// frames, naming the screenshot file): InputError naming the scene's image.width.
+void checkScreenshotSize(const io::Scene& scene);
+
+/// Throws runViewer's InputError (source "display") when no display can be reached, at once:
+/// a command checks this before it loads a volume (a missing display was said only after the
+/// load, seconds to minutes on a large series; probe).
+void requireDisplay();
+
 /// Opens the window and runs until it is closed (or, scripted, until the screenshot). Throws
 /// InputError (source "display") when no OpenGL 4.5 window can be opened, with GLFW's reason.
 std::optional<core::ImageRGBA> runViewer(const ViewerOptions& options,

@@ -826,6 +826,31 @@ TEST(Cli, ABadSweepIsOneLineExitCodeTwoAndWritesNothing) {
     EXPECT_EQ(std::string(std::istreambuf_iterator<char>(kept), {}), "an earlier sweep's");
 }
 
+TEST(Cli, ASweepStoppedBeforeItsFirstRowLeavesNoEarlierRowsBesideItsReference) {
+    // The reference is written, then the first variant fails in its stages (a lattice over its
+    // budget; a Ctrl-C there did the same): an earlier sweep's results.csv, measured against the
+    // reference just replaced, stayed in the folder and sweep_report.py plotted it under the new
+    // reference (probe). It now holds the header alone once the reference is written.
+    test::TempDir tmp;
+    fs::create_directories(tmp / "out");
+    std::ofstream(tmp / "out" / "results.csv")
+        << "index,id,label\n0,earlier,an earlier sweep's row\n";
+    std::ofstream(tmp / "sweep.json") << R"({
+      "scene": {"volume": {"phantom": "sphere", "size": 16}, "image": {"width": 16, "height": 16}},
+      "reference": {"params": {"spp": 4}},
+      "runs": [{"method": "iso-lattice",
+                "params": {"samples": 1, "lattice_resolution": 8, "lattice_mode": "sh",
+                           "sh_order": 5, "lattice_memory_mb": 1}}]})";
+    const Result r =
+        run("sweep -q " + q(tmp / "sweep.json") + " --out " + q(tmp / "out"), tmp.path());
+    EXPECT_EQ(r.code, 2) << r.err;
+    ASSERT_TRUE(fs::exists(tmp / "out" / "reference.json")) << r.err;
+    std::ifstream csv(tmp / "out" / "results.csv");
+    const std::string text(std::istreambuf_iterator<char>(csv), {});
+    EXPECT_EQ(text.find("earlier"), std::string::npos) << text;
+    EXPECT_EQ(text.substr(0, 14), "index,id,label") << text;
+}
+
 TEST(Cli, SweepOnlyIntoAnEarlierFolderKeepsTheOtherRunsRows) {
     // --only rewrote results.csv with its own rows alone: the other runs' rows were gone while
     // their images stayed (probe).

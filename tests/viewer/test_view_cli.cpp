@@ -1136,6 +1136,17 @@ TEST(ViewCli, BadInputIsOneLineAndExitCodeTwo) {
         EXPECT_NE(r.err.find(word), std::string::npos) << args << "\n" << r.err;
     }
     EXPECT_FALSE(fs::exists(tmp / "x.png"));
+    // No display is said before the volume loads (it was said after: seconds to minutes on a
+    // large series; probe): a volume that would fail to read is not read.
+    std::ofstream(tmp / "bad.nii") << "not a NIfTI file";
+    std::ofstream(tmp / "bad.json") << R"({"volume": "bad.nii"})";
+    const Result r = runShell("env -u DISPLAY -u WAYLAND_DISPLAY " + std::string(VOXLIGHT_BINARY) +
+                                  " view " + quoted(tmp / "bad.json"),
+                              tmp.path());
+    EXPECT_EQ(r.code, 2) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_NE(r.err.find("xvfb-run"), std::string::npos) << r.err;
+    EXPECT_EQ(r.err.find("bad.nii"), std::string::npos) << r.err;
 }
 
 TEST(ViewCli, AStepThatLeavesAViewTheSceneRefusesIsNamedByTheScript) {
