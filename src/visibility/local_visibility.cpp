@@ -2289,15 +2289,17 @@ void LocalVisibility::locate(const glm::vec3& p, FieldLookup& at) const {
         at.spacing = 1.f;
         return;
     }
-    // The power mean (q = 4) of the levels' spacings, not the plain weighted mean: with the
-    // per-face ramps (multires_grid.h) a coarse block's weight fades over the whole gap to a
-    // finer neighbour's samples, and the plain mean shortened the near shadow's trace there
-    // while the value still leaned on the coarse samples (torso ribs at 1:8, PSNR against 1:1:
-    // 34.8 dB with the plain mean, 36.1 with this; the largest spacing read, which is not
-    // continuous, 36.6). Continuous like the weights; s itself where one level is read.
-    float mean = 0.f;  // Σ w·s⁴
-    for (int k = 0; k < w.count; ++k) mean += w.weight[k] * float(1 << (4 * w.level[k]));
-    at.spacing = std::sqrt(std::sqrt(mean));
+    // The quadratic mean of the levels' spacings, not the plain weighted mean: with the per-face
+    // ramps (multires_grid.h) a coarse block's weight fades over the whole gap to a finer
+    // neighbour's samples, and the plain mean shortened the near shadow's trace there while the
+    // value still leaned on the coarse samples (torso ribs at 1:8, PSNR against 1:1: 34.8 dB with
+    // the plain mean, 35.2 with this; the 4th-power mean gave 36.1 but bent the spacing between
+    // the viewer's resampled grid points so that the GLSL image left the CPU's by 0.2 % of
+    // channels over 2 levels — ViewCli.GlslShShadingAgreesWithTheCpuRayCaster). Continuous like
+    // the weights; s itself where one level is read.
+    float mean = 0.f;  // Σ w·s²
+    for (int k = 0; k < w.count; ++k) mean += w.weight[k] * float(1 << (2 * w.level[k]));
+    at.spacing = std::sqrt(mean);
 }
 
 void LocalVisibility::read(const FieldLookup& at, const glm::vec3& p, float* out) const {

@@ -342,7 +342,7 @@ class LocalVisibility {
     /// space's value (√(4π), 0, …) where no stored block contributes.
     void sample(const glm::vec3& p, float* out) const;
     /// The same, and in `spacing` the sample spacing (voxels) of the levels read, blended with
-    /// the interpolation's weights — their power mean (Σ w·s⁴)^¼, locate's comment says why — (1
+    /// the interpolation's weights — their quadratic mean (Σ w·s²)^½, locate's comment says why — (1
     /// where no stored block contributes): how far apart the points the value came from lie.
     void sample(const glm::vec3& p, float* out, float* spacing) const;
     /// sample() in two steps, for a caller that decides from the spacing whether it needs the

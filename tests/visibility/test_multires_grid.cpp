@@ -229,7 +229,8 @@ TEST(MultiresGrid, InsideItsSampleBoxABlockIsInterpolatedAlone) {
 }
 
 // weights() visits only the candidate blocks its geometry allows (the owner's column per axis,
-// the neighbour's only where p is outside the owner's sample box on that axis): checked against
+// the neighbour's where p is outside the owner's sample box on that axis or a diagonal block
+// across it can reach in: MultiresGrid::reachesIn_): checked against
 // the header's formula evaluated over every block of a mixed-level grid with unstored blocks, the
 // ramp widths recomputed here from their definition.
 TEST(MultiresGrid, WeightsAreTheHeaderFormulaOverEveryBlock) {
