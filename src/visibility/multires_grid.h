@@ -71,8 +71,9 @@
 //     the gap between their boxes: exactly trilinear interpolation on that level's lattice, and at
 //     level 0 everywhere exactly trilinear interpolation of the voxels.
 // What remains at faces where the levels differ by two or more (1:3, 0:2: a gap of 5 or 2.5
-// voxels): the linear blend across the gap misses V's curvature there, 10–20 % dark on the
-// MRI's scalp along such faces (a selection keeping neighbours within one level would remove it).
+// voxels): the linear blend across the gap misses V's curvature there — on the MRI's scalp V_0
+// is 0.13–0.20 low within a voxel of 1:3 faces (README; a selection keeping neighbours within one
+// level would remove it).
 // Blocks at kNone hold no data and get weight 0. Where no stored block contributes (inside a
 // transparent block, away from stored ones) weights() returns no block and callers use their
 // empty-space value; such points are never shaded (the TF is transparent over the whole block).
